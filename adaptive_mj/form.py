@@ -1,0 +1,63 @@
+"""The known structure of a plant, as the lecture writes it:
+
+    d * y^(n) = f(x) + phi(x) . p + h(x) * u,     x = [y, y', ..., y^(n-1)]
+
+d (the leading coefficient) and p are unknown; f, phi and h are known
+functions of the state. The parameter vector of a law is
+theta = [d, p_1, ..., p_m] with names ``(d_name, *p_names)``; when
+``d_name`` is None the leading coefficient is known to be 1 (the lecture's
+first-order form x' = f + phi p + u) and theta = p.
+
+Pure numpy: no mujoco here, so laws can import it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+
+def _zero(x: np.ndarray) -> float:
+    return 0.0
+
+
+def _one(x: np.ndarray) -> float:
+    return 1.0
+
+
+@dataclass(frozen=True)
+class ModelForm:
+    """d*y^(n) = f(x) + phi(x).p + h(x)*u.
+
+    order: n >= 1.
+    p_names: names of the entries of p, in the order phi returns them.
+    phi: x (n,) -> (len(p_names),) regressor.
+    f: x (n,) -> float, known drift (default 0).
+    h: x (n,) -> float, known, non-zero input gain (default 1).
+    d_name: name of the unknown leading coefficient, or None when d = 1 is known.
+    """
+
+    order: int
+    p_names: tuple[str, ...]
+    phi: Callable[[np.ndarray], np.ndarray]
+    f: Callable[[np.ndarray], float] = _zero
+    h: Callable[[np.ndarray], float] = _one
+    d_name: str | None = "d"
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of theta, in order: (d_name, *p_names) or p_names."""
+        return self.p_names if self.d_name is None else (self.d_name, *self.p_names)
+
+    def split(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
+        """theta (..., n_theta) -> (d, p): d is 1.0 when the form has no unknown d."""
+        theta = np.asarray(theta, dtype=float)
+        if self.d_name is None:
+            return 1.0, theta
+        return theta[..., 0], theta[..., 1:]
+
+    def highest_derivative(self, x: np.ndarray, u: float, theta: np.ndarray) -> float:
+        """y^(n) from the true equation, for the analytic twin."""
+        d, p = self.split(theta)
+        return (self.f(x) + float(self.phi(x) @ p) + self.h(x) * u) / d

@@ -1,0 +1,53 @@
+"""Adaptive control of a first-order system (lecture 7, first part).
+
+    x' = f(x) + phi(x) p + u,          x̃ = x_d - x
+    u  = x_d' - f(x) - phi(x) p̂ + k x̃
+    p̂' = -phi(x)^T x̃ / gamma
+    V  = ½ x̃² + ½ gamma p̃^T p̃,   p̃ = p̂ - p,    V' = -k x̃²
+
+This is the n = 1 sliding law with d = 1 known and s = x̃; it is kept as its
+own class because it is the lecture's first example, written in its notation.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from adaptive_mj.form import ModelForm
+from adaptive_mj.laws.common import DeadZone, LawStep, as_gamma
+
+
+class FirstOrderAdaptiveLaw:
+    """form: order-1 ModelForm with d_name=None (h is honoured; the lecture has h = 1).
+
+    k: gain on x̃ [u per unit of x]; gamma: scalar or (n_p,).
+    """
+
+    def __init__(self, form: ModelForm, *, k: float, gamma, dead_zone: DeadZone | None = None):
+        if form.order != 1 or form.d_name is not None:
+            raise ValueError("FirstOrderAdaptiveLaw needs an order-1 form with d known (d_name=None)")
+        if not (math.isfinite(k) and k >= 0):
+            raise ValueError(f"k must be finite and >= 0, got {k}")
+        self.form = form
+        self.order = 1
+        self.names = form.names
+        self.k = float(k)
+        self.gamma = as_gamma(gamma, len(self.names))
+        self.dead_zone = dead_zone
+
+    def __call__(self, t, x, ref, theta_hat) -> LawStep:
+        form = self.form
+        x_tilde = float(ref[0] - x[0])
+        phi = form.phi(x)
+        u = (ref[1] - form.f(x) - float(phi @ theta_hat) + self.k * x_tilde) / form.h(x)
+        if self.dead_zone is None or self.dead_zone.adapting(x_tilde, x_tilde):
+            rate = -phi * x_tilde / self.gamma
+        else:
+            rate = np.zeros(len(self.names))
+        return LawStep(u, rate, x_tilde, float(ref[1]))
+
+    def lyapunov(self, s, theta_hat, theta) -> np.ndarray:
+        """V = ½ x̃² + ½ sum_i gamma_i p̃_i²."""
+        err = np.asarray(theta_hat, dtype=float) - np.asarray(theta, dtype=float)
+        return 0.5 * np.asarray(s, dtype=float) ** 2 + 0.5 * np.sum(self.gamma * err**2, axis=-1)

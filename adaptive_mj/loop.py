@@ -1,0 +1,180 @@
+"""The closed loop: the law runs on plant state at every evaluation of the
+dynamics (inside MuJoCo's control callback for MuJoCo plants), and the
+estimates advance exactly once per physics step.
+
+How the estimates are integrated. MuJoCo calls the control callback once
+per step with Euler/implicit integrators and four times with RK4, at the
+stage states of the classic Runge-Kutta tableau. The controller counts the
+calls since the step began and gives the law the matching stage estimate:
+    RK4:   θ̂_1 = θ̂_k,  θ̂_2 = θ̂_k + h/2 k_1,  θ̂_3 = θ̂_k + h/2 k_2,  θ̂_4 = θ̂_k + h k_3
+           θ̂_{k+1} = θ̂_k + h/6 (k_1 + 2 k_2 + 2 k_3 + k_4)
+    Euler: θ̂_{k+1} = θ̂_k + h k_1
+(k_i: the law's θ̂' at stage i). So plant and estimates are integrated
+together as one ODE by the same method, and the estimates advance exactly
+once per physics step. Calls past the last stage (an extra mj_forward) see
+θ̂_k and change nothing.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from adaptive_mj.trajectory import Trajectory
+
+
+@dataclass(frozen=True)
+class Event:
+    """At time t [s] (first step with t_k >= t), call apply(plant). label: text for logs."""
+
+    t: float
+    label: str
+    apply: Callable[[object], None]
+
+
+# Stage increments a_i (θ̂_i = θ̂_k + h a_i k_{i-1}) and weights b_i per stage count.
+_TABLEAU = {
+    1: ((0.0,), (1.0,)),
+    4: ((0.0, 0.5, 0.5, 1.0), (1 / 6, 1 / 3, 1 / 3, 1 / 6)),
+}
+
+
+class _Controller:
+    """The policy the plant calls at every stage: the law on (noisy) measured
+    state with the stage's estimate; see the module docstring."""
+
+    def __init__(self, law, reference, theta_hat0, ctrl_range, order: int, stages: int, dt: float):
+        self.law = law
+        self.reference = reference
+        self.order = order
+        self.theta_hat = np.array(theta_hat0, dtype=float)
+        self.lo, self.hi = ctrl_range if ctrl_range is not None else (-math.inf, math.inf)
+        self.noise = np.zeros(order)
+        self.inc, self.weights = _TABLEAU[stages]
+        self.h = dt
+        self.stage = len(self.inc)
+        self.prev_rate = None
+        self.rate_sum = np.zeros_like(self.theta_hat)
+        self.step_out = None
+        self.step_ref = None
+        self.step_u = 0.0
+
+    def arm(self, noise: np.ndarray | None) -> None:
+        """Mark the start of a physics step."""
+        if noise is not None:
+            self.noise = noise
+        self.stage = 0
+        self.rate_sum = np.zeros_like(self.theta_hat)
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        i = self.stage
+        ref = self.reference(t, self.order)
+        if i == 0 or i >= len(self.inc):
+            theta_i = self.theta_hat
+        else:
+            theta_i = self.theta_hat + (self.h * self.inc[i]) * self.prev_rate
+        out = self.law(t, x + self.noise, ref, theta_i)
+        u = min(max(out.u, self.lo), self.hi)
+        if i < len(self.inc):
+            self.prev_rate = out.theta_hat_dot
+            self.rate_sum = self.rate_sum + self.weights[i] * out.theta_hat_dot
+            if i == 0:
+                self.step_out, self.step_ref, self.step_u = out, ref, u
+            self.stage = i + 1
+        return u
+
+    def finish_step(self) -> None:
+        """Advance the estimates once, with the stages' weighted rates."""
+        if self.stage != len(self.inc):
+            raise RuntimeError(f"the plant called the controller {self.stage} times in a step, "
+                               f"expected {len(self.inc)}")
+        self.theta_hat = self.theta_hat + self.h * self.rate_sum
+
+
+def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
+        noise_std: Sequence[float] | None = None, rng: np.random.Generator | None = None,
+        events: Sequence[Event] = (), state_bound: float = math.inf) -> Trajectory:
+    """Run plant under law tracking reference for `duration` seconds.
+
+    theta_hat0: (n_theta,) initial estimates (the nominal values for baselines).
+    noise_std: (n,) std of Gaussian noise added to each measured state
+    component the law sees (drawn once per physics step from rng).
+    events: applied at the first step whose start time is >= event.t.
+    state_bound: |x_i| above this counts as divergence.
+
+    Returns a Trajectory with one row per physics step (the state at the step's
+    start and what was applied during it). A run that diverges stops at that
+    step and comes back with status "diverged" and the reason.
+    """
+    order = plant.form.order
+    if order != law.order:
+        raise ValueError(f"law of order {law.order} on a plant of order {order}")
+    names = tuple(law.names)
+    n_theta = len(names)
+    theta_hat0 = np.asarray(theta_hat0, dtype=float)
+    if theta_hat0.shape != (n_theta,):
+        raise ValueError(f"theta_hat0 must have {n_theta} entries {names}, got {theta_hat0.shape}")
+    dt = plant.dt
+    n_steps = int(round(duration / dt))
+    if noise_std is not None:
+        noise_std = np.asarray(noise_std, dtype=float)
+        if rng is None:
+            raise ValueError("noise_std needs an rng (np.random.Generator)")
+
+    t = np.empty(n_steps)
+    x = np.empty((n_steps, order))
+    u = np.empty(n_steps)
+    s = np.empty(n_steps)
+    ref = np.empty((n_steps, order + 1))
+    theta_hat = np.empty((n_steps, n_theta))
+    theta = np.empty((n_steps, n_theta))
+
+    ctrl = _Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, dt)
+    pending = sorted(events, key=lambda e: e.t)
+    status, reason, k = "ok", "", 0
+    with plant.controlled_by(ctrl):
+        for k in range(n_steps):
+            t_k = plant.time
+            while pending and t_k >= pending[0].t - 0.5 * dt:
+                pending.pop(0).apply(plant)
+            t[k] = t_k
+            x[k] = plant.observe()
+            theta[k] = plant.true_theta()
+            theta_hat[k] = ctrl.theta_hat
+            noise = rng.normal(0.0, noise_std) if noise_std is not None else None
+            ctrl.arm(noise)
+            plant.step()
+            out = ctrl.step_out
+            u[k] = ctrl.step_u
+            s[k] = out.s
+            ref[k] = ctrl.step_ref
+            ctrl.finish_step()
+            reason = _divergence(plant, x[k], u[k], ctrl.theta_hat, state_bound)
+            if reason:
+                status = "diverged"
+                k += 1
+                break
+        else:
+            k = n_steps
+    keep = slice(0, k)
+    V = law.lyapunov(s[keep], theta_hat[keep], theta[keep])
+    return Trajectory(t=t[keep], x=x[keep], u=u[keep], s=s[keep], ref=ref[keep],
+                      theta_hat=theta_hat[keep], theta=theta[keep], V=V, names=names,
+                      status=status, reason=reason, meta={"dt": dt, "order": order})
+
+
+def _divergence(plant, x_k, u_k, theta_hat, bound) -> str:
+    """Text naming the first sign of divergence after a step, or ''."""
+    x_next = plant.observe()
+    if not np.all(np.isfinite(x_next)):
+        return f"non-finite state {x_next.tolist()}"
+    if not math.isfinite(u_k):
+        return f"non-finite control {u_k}"
+    if not np.all(np.isfinite(theta_hat)):
+        return f"non-finite estimate {theta_hat.tolist()}"
+    if np.any(np.abs(x_next) > bound):
+        return f"state {x_next.tolist()} beyond the bound {bound}"
+    warning = plant.instability()
+    return warning or ""

@@ -1,0 +1,173 @@
+"""A 1-DOF arm: one actuated hinge, any orientation of the hinge axis.
+
+    J q'' = -b q' - g_sin sin q - g_cos cos q + gear*u
+
+theta = (J, b, g_sin, g_cos), read from the compiled model:
+  J      moment of inertia of everything the hinge moves, about the hinge
+         axis, plus joint armature                            [kg*m²]
+  b      viscous joint damping                                [N*m*s/rad]
+  g_sin, g_cos  gravity torque amplitudes                     [N*m]
+         With r the centre of mass of each moving body relative to the hinge
+         anchor at q = 0, r_perp its part normal to the axis a, and
+         F = m (1 - gravcomp) g_vec its weight:
+         g_cos = -sum a.(r_perp x F),  g_sin = -sum a.((a x r_perp) x F).
+Because gravity enters through both sin q and cos q, the model's choice of
+q = 0 (hanging, horizontal, anything) does not matter.
+
+The regressor: phi(x) = [-q', -sin q, -cos q], p = (b, g_sin, g_cos), f = 0,
+h = actuator gear. The payload's mass and inertia are the unknowns.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from adaptive_mj.errors import ModelError
+from adaptive_mj.form import ModelForm
+from adaptive_mj.plants.mujoco_plant import MujocoPlant, compile_xml_path, find_joint_and_actuator
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+MODEL_PATH = MODELS / "pendulum_arm.xml"
+PAYLOADS = MODELS / "payloads"
+THETA_NAMES = ("J", "b", "g_sin", "g_cos")
+
+
+def _moved_bodies(model, joint_id: int) -> list[int]:
+    """Bodies whose pose depends on the joint: the joint's body and its descendants."""
+    root = int(model.jnt_bodyid[joint_id])
+    out = []
+    for i in range(model.nbody):
+        j = i
+        while j != 0 and j != root:
+            j = int(model.body_parentid[j])
+        if j == root:
+            out.append(i)
+    return out
+
+
+def true_theta(model: mujoco.MjModel, joint_id: int = 0) -> np.ndarray:
+    """(4,) true [J, b, g_sin, g_cos] from masses, inertias and kinematics at q = 0."""
+    data = mujoco.MjData(model)
+    data.qpos[:] = 0.0
+    mujoco.mj_kinematics(model, data)
+    a = data.xaxis[joint_id].copy()
+    anchor = data.xanchor[joint_id]
+    J = float(model.dof_armature[model.jnt_dofadr[joint_id]])
+    g_sin = g_cos = 0.0
+    for i in _moved_bodies(model, joint_id):
+        m = float(model.body_mass[i])
+        R = data.ximat[i].reshape(3, 3)
+        a_body = R.T @ a
+        r = data.xipos[i] - anchor
+        r_perp = r - (a @ r) * a
+        J += float(a_body @ (model.body_inertia[i] * a_body)) + m * float(r_perp @ r_perp)
+        F = m * (1.0 - float(model.body_gravcomp[i])) * model.opt.gravity
+        g_cos -= float(a @ np.cross(r_perp, F))
+        g_sin -= float(a @ np.cross(np.cross(a, r_perp), F))
+    b = float(model.dof_damping[model.jnt_dofadr[joint_id]])
+    return np.array([J, b, g_sin, g_cos])
+
+
+def arm_form(gear: float = 1.0) -> ModelForm:
+    """Regressor for J q'' = -b q' - g_sin sin q - g_cos cos q + gear*u."""
+
+    def phi(x):
+        q = x[0]
+        return np.array([-x[1], -np.sin(q), -np.cos(q)])
+
+    return ModelForm(order=2, p_names=("b", "g_sin", "g_cos"), phi=phi, h=lambda x: gear, d_name="J")
+
+
+def build_arm_xml(*, arm: str | Path = MODEL_PATH, payload: str | Path | None = "sphere",
+                  payload_mass: float | None = None, site: str = "tip") -> tuple[str, dict]:
+    """Attach a payload MJCF at `site` with dm_control's PyMJCF; return (xml, assets).
+
+    payload: a name in models/payloads/ (without .xml), a path, or None.
+    payload_mass: total payload mass [kg]; the payload's geom masses are scaled
+    to it (inertia scales with them). The payload's names get the prefix "payload/".
+    """
+    os.environ.setdefault("MUJOCO_GL", "egl")  # dm_control probes a GL backend on import
+    from dm_control import mjcf
+
+    arm = Path(arm)
+    if not arm.is_file():
+        raise ModelError(f"{arm}: model file not found")
+    try:
+        root = mjcf.from_path(str(arm))
+    except Exception as exc:  # PyMJCF raises several types for bad XML
+        raise ModelError(f"{arm}: could not parse the MJCF: {exc}") from None
+    if payload is not None:
+        ppath = Path(payload) if Path(payload).suffix == ".xml" else PAYLOADS / f"{payload}.xml"
+        if not ppath.is_file():
+            choices = sorted(p.stem for p in PAYLOADS.glob("*.xml"))
+            raise ModelError(f"{ppath}: payload file not found (bundled payloads: {choices})")
+        load = mjcf.from_path(str(ppath))
+        load.model = "payload"
+        if payload_mass is not None:
+            geoms = load.find_all("geom")
+            if not geoms or any(g.mass is None for g in geoms):
+                raise ModelError(f"{ppath}: every payload geom needs a mass attribute to scale it")
+            total = sum(float(g.mass) for g in geoms)
+            for g in geoms:
+                g.mass = float(g.mass) * payload_mass / total
+        tip = root.find("site", site)
+        if tip is None:
+            raise ModelError(f"{arm}: no site named {site!r} to attach the payload to")
+        tip.attach(load)
+    return root.to_xml_string(), root.get_assets()
+
+
+def compile_arm(**kwargs) -> mujoco.MjModel:
+    """build_arm_xml(...) compiled to an MjModel."""
+    xml, assets = build_arm_xml(**kwargs)
+    try:
+        return mujoco.MjModel.from_xml_string(xml, assets)
+    except ValueError as exc:
+        raise ModelError(f"{kwargs.get('arm', MODEL_PATH)}: MuJoCo could not compile the model: "
+                         f"{str(exc).strip()}") from None
+
+
+class ArmPlant(MujocoPlant):
+    """The MuJoCo arm. Body masses may change mid-run (payload swap)."""
+
+    def __init__(self, model: mujoco.MjModel, *, joint: str | None = None,
+                 actuator: str | None = None, where: str = "arm model"):
+        j, a = find_joint_and_actuator(model, joint=joint, actuator=actuator,
+                                       joint_type=mujoco.mjtJoint.mjJNT_HINGE, where=where)
+        super().__init__(model, joint_id=j, actuator_id=a,
+                         form=arm_form(float(model.actuator_gear[a, 0])),
+                         theta_fn=lambda m: true_theta(m, j), where=where)
+
+    def body_id(self, name: str) -> int:
+        idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if idx < 0:
+            raise ModelError(f"{self.where}: no body named {name!r}")
+        return idx
+
+    def set_body_mass(self, name: str, mass: float) -> None:
+        """Set a body's mass [kg], scaling its inertia with it (same shape, denser).
+
+        mj_setConst runs on a scratch MjData afterwards, so "simple" bodies
+        (whose inertia is otherwise a compile-time constant) update too.
+        """
+        b = self.body_id(name)
+        scale = mass / self.model.body_mass[b]
+        self.model.body_mass[b] = mass
+        self.model.body_inertia[b] *= scale
+        mujoco.mj_setConst(self.model, mujoco.MjData(self.model))
+        self.model_changed()
+
+
+def load(path: str | Path = MODEL_PATH, *, payload: str | Path | None = "sphere",
+         payload_mass: float | None = None, site: str = "tip", **kwargs) -> ArmPlant:
+    """The bundled arm (or a user's MJCF) with a payload attached at `site`."""
+    model = compile_arm(arm=path, payload=payload, payload_mass=payload_mass, site=site)
+    return ArmPlant(model, where=str(path), **kwargs)
+
+
+def load_bare(path: str | Path, **kwargs) -> ArmPlant:
+    """A user's arm MJCF as it is, with no payload attached."""
+    return ArmPlant(compile_xml_path(path), where=str(path), **kwargs)

@@ -1,0 +1,109 @@
+"""The heave vehicle (models/heave_vehicle.xml): the lecture's underwater vehicle
+
+    d y'' + b y'|y'| + c g = u
+
+on a slide joint along world z, where (all read from the compiled model)
+  d = body mass + joint armature (added mass)              [kg]
+  b = ½ rho * sum_i A_i a_i²  (inertia-box quadratic drag)  [kg/m]
+      A_i: area of the equivalent box face normal to principal axis i,
+      a_i: joint axis in the principal frame (A_z = bx*by for motion along z)
+  c = body mass * (1 - gravcomp)  (net weight / g; gravcomp = rho V / m)  [kg]
+  g = gravity along the joint axis                          [m/s²]
+
+The regressor: phi(x) = [-y'|y'|, -g], p = (b, c), f = 0, h = actuator gear.
+MuJoCo's fluid model also has a viscous term 3*pi*viscosity*mean(box)*v that
+this regressor does not model; ``unmodelled_linear_drag`` reports it.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from adaptive_mj.errors import ModelError
+from adaptive_mj.form import ModelForm
+from adaptive_mj.plants.mujoco_plant import MujocoPlant, compile_xml_path, find_joint_and_actuator
+
+MODEL_PATH = Path(__file__).resolve().parents[2] / "models" / "heave_vehicle.xml"
+THETA_NAMES = ("d", "b", "c")
+
+
+def _vehicle(model, joint_id: int) -> tuple[int, np.ndarray, np.ndarray]:
+    """(body id, joint axis in the body's principal-inertia frame (3,), equivalent box sides (3,) [m])."""
+    body = int(model.jnt_bodyid[joint_id])
+    scratch = mujoco.MjData(model)
+    scratch.qpos[:] = 0
+    mujoco.mj_kinematics(model, scratch)
+    axis_local = scratch.ximat[body].reshape(3, 3).T @ scratch.xaxis[joint_id]
+    m = model.body_mass[body]
+    Ix, Iy, Iz = model.body_inertia[body]
+    sides = np.sqrt(np.maximum(0.0, 6.0 / m * np.array([Iy + Iz - Ix, Ix + Iz - Iy, Ix + Iy - Iz])))
+    return body, axis_local, sides
+
+
+def gravity_along_axis(model, joint_id: int) -> float:
+    """g [m/s²] as it enters c*g: minus gravity projected on the (upward) joint axis."""
+    scratch = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, scratch)
+    return float(-model.opt.gravity @ scratch.xaxis[joint_id])
+
+
+def true_theta(model: mujoco.MjModel, joint_id: int = 0) -> np.ndarray:
+    """(3,) true [d, b, c] from the compiled model: d [kg], b [kg/m], c [kg]."""
+    body, a, box = _vehicle(model, joint_id)
+    m = float(model.body_mass[body])
+    d = m + float(model.dof_armature[model.jnt_dofadr[joint_id]])
+    faces = np.array([box[1] * box[2], box[0] * box[2], box[0] * box[1]])
+    b = 0.5 * float(model.opt.density) * float(faces @ a**2)
+    c = m * (1.0 - float(model.body_gravcomp[body]))
+    return np.array([d, b, c])
+
+
+def unmodelled_linear_drag(model: mujoco.MjModel, joint_id: int = 0) -> float:
+    """Viscous drag coefficient 3*pi*viscosity*mean(box sides) [N*s/m] (not in the regressor)."""
+    _, _, box = _vehicle(model, joint_id)
+    return 3.0 * np.pi * float(model.opt.viscosity) * float(np.mean(box))
+
+
+def heave_form(g: float, gear: float = 1.0) -> ModelForm:
+    """The lecture's regressor for d y'' = -b y'|y'| - c g + gear*u."""
+
+    def phi(x):
+        return np.array([-x[1] * abs(x[1]), -g])
+
+    return ModelForm(order=2, p_names=("b", "c"), phi=phi, h=lambda x: gear, d_name="d")
+
+
+class HeavePlant(MujocoPlant):
+    """The MuJoCo heave vehicle. Fluid density changes keep buoyancy consistent."""
+
+    def __init__(self, model: mujoco.MjModel, *, joint: str | None = None,
+                 actuator: str | None = None, where: str = "heave model"):
+        j, a = find_joint_and_actuator(model, joint=joint, actuator=actuator,
+                                       joint_type=mujoco.mjtJoint.mjJNT_SLIDE, where=where)
+        g = gravity_along_axis(model, j)
+        if g <= 0:
+            raise ModelError(f"{where}: the slide joint must point up against gravity "
+                             f"(gravity along the axis is {-g} m/s²)")
+        body = int(model.jnt_bodyid[j])
+        if model.opt.density <= 0:
+            raise ModelError(f"{where}: option density must be > 0 for fluid drag, got {model.opt.density}")
+        # displaced volume, derived once from the buoyancy written in the model
+        self.volume = float(model.body_gravcomp[body] * model.body_mass[body] / model.opt.density)
+        self.body_id = body
+        super().__init__(model, joint_id=j, actuator_id=a,
+                         form=heave_form(g, float(model.actuator_gear[a, 0])),
+                         theta_fn=lambda m: true_theta(m, j), where=where)
+
+    def set_fluid_density(self, rho: float) -> None:
+        """New water density [kg/m³]: changes drag b and buoyancy (gravcomp = rho V / m), hence c."""
+        m = self.model
+        m.opt.density = rho
+        m.body_gravcomp[self.body_id] = rho * self.volume / m.body_mass[self.body_id]
+        self.model_changed()
+
+
+def load(path: str | Path = MODEL_PATH, **kwargs) -> HeavePlant:
+    """Compile an MJCF heave model and wrap it (joint/actuator by name or the only one)."""
+    return HeavePlant(compile_xml_path(path), where=str(path), **kwargs)

@@ -1,0 +1,173 @@
+"""What every MuJoCo plant shares: compile, find the joint and actuator, run
+the policy inside MuJoCo's control callback, step, detect instability.
+
+MuJoCo's control callback is one C global for the whole process, so it is
+installed only inside ``control_callback`` and the previous one is restored
+afterwards, even on error. Models are compiled before it is installed.
+"""
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+from typing import Callable, Iterator
+
+import mujoco
+import numpy as np
+
+from adaptive_mj.errors import ModelError
+
+Policy = Callable[[float, np.ndarray], float]
+
+
+@contextlib.contextmanager
+def control_callback(fn) -> Iterator[None]:
+    """Install fn as mjcb_control for the duration of the block, then restore the previous one."""
+    previous = mujoco.get_mjcb_control()
+    mujoco.set_mjcb_control(fn)
+    try:
+        yield
+    finally:
+        mujoco.set_mjcb_control(previous)
+
+
+def compile_xml_path(path: str | Path) -> mujoco.MjModel:
+    """Compile an MJCF file, turning MuJoCo's errors into a ModelError naming the file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelError(f"{path}: model file not found")
+    try:
+        return mujoco.MjModel.from_xml_path(str(path))
+    except ValueError as exc:  # MuJoCo raises ValueError with its own message
+        raise ModelError(f"{path}: MuJoCo could not compile the model: {str(exc).strip()}") from None
+
+
+def _find(model, objtype, kind: str, name: str | None, count: int, where: str) -> int:
+    if name is not None:
+        idx = mujoco.mj_name2id(model, objtype, name)
+        if idx < 0:
+            names = [mujoco.mj_id2name(model, objtype, i) for i in range(count)]
+            raise ModelError(f"{where}: no {kind} named {name!r} (the model has {names})")
+        return idx
+    if count != 1:
+        raise ModelError(f"{where}: the model has {count} {kind}s; name the one to use")
+    return 0
+
+
+def find_joint_and_actuator(model, *, joint: str | None, actuator: str | None,
+                            joint_type: mujoco.mjtJoint, where: str) -> tuple[int, int]:
+    """Joint and actuator ids by name, or automatically when the model has only one.
+
+    Checks: the joint has the wanted type and is the model's only degree of
+    freedom, and the actuator is a direct-drive motor (gain fixed, no bias, no
+    activation dynamics) on that joint.
+    """
+    j = _find(model, mujoco.mjtObj.mjOBJ_JOINT, "joint", joint, model.njnt, where)
+    a = _find(model, mujoco.mjtObj.mjOBJ_ACTUATOR, "actuator", actuator, model.nu, where)
+    jname = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+    if model.jnt_type[j] != joint_type:
+        raise ModelError(f"{where}: joint {jname!r} must be of type {joint_type.name}, "
+                         f"got {mujoco.mjtJoint(model.jnt_type[j]).name}")
+    if model.nv != 1:
+        raise ModelError(f"{where}: the plant needs exactly 1 degree of freedom, got nv={model.nv}")
+    aname = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
+    if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT or model.actuator_trnid[a, 0] != j:
+        raise ModelError(f"{where}: actuator {aname!r} must drive joint {jname!r}")
+    if (model.actuator_gaintype[a] != mujoco.mjtGain.mjGAIN_FIXED
+            or model.actuator_biastype[a] != mujoco.mjtBias.mjBIAS_NONE
+            or model.actuator_dyntype[a] != mujoco.mjtDyn.mjDYN_NONE):
+        raise ModelError(f"{where}: actuator {aname!r} must be a <motor> (fixed gain, no bias, no dynamics)")
+    if model.jnt_stiffness[j] != 0 or model.dof_frictionloss[model.jnt_dofadr[j]] != 0:
+        raise ModelError(f"{where}: joint {jname!r} has stiffness or frictionloss, "
+                         "which the regressor does not cover; set them to 0")
+    return j, a
+
+
+class MujocoPlant:
+    """A 1-DOF MuJoCo model driven through one actuator (see adaptive_mj.plants).
+
+    The specific plants (heave, arm) give the form and the true-parameter
+    function; this class owns MjData, stepping and the control callback.
+    """
+
+    def __init__(self, model: mujoco.MjModel, *, joint_id: int, actuator_id: int, form,
+                 theta_fn: Callable[[mujoco.MjModel], np.ndarray], where: str):
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.form = form
+        self.where = where
+        self._theta_fn = theta_fn
+        self._qadr = int(model.jnt_qposadr[joint_id])
+        self._dadr = int(model.jnt_dofadr[joint_id])
+        self._act = int(actuator_id)
+        self.joint_id = joint_id
+        self.actuator_id = actuator_id
+        self.dt = float(model.opt.timestep)
+        # control-callback calls per mj_step: 4 under RK4, else 1
+        self.stages = 4 if model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 else 1
+        if model.actuator_ctrllimited[self._act]:
+            lo, hi = model.actuator_ctrlrange[self._act]
+            self.ctrl_range = (float(lo), float(hi))
+        else:
+            self.ctrl_range = None
+        self._theta = None
+        self._warnings0 = self._warning_counts()
+        self._warning_total0 = int(self._warnings0.sum())
+
+    # --- state -------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        return float(self.data.time)
+
+    def set_state(self, x0) -> None:
+        """x0: (2,) [q, q'] initial joint position [m or rad] and velocity."""
+        mujoco.mj_resetData(self.model, self.data)
+        self._warnings0 = self._warning_counts()
+        self._warning_total0 = int(self._warnings0.sum())
+        self.data.qpos[self._qadr] = x0[0]
+        self.data.qvel[self._dadr] = x0[1]
+
+    def observe(self) -> np.ndarray:
+        """(2,) [q, q'] from MjData."""
+        d = self.data
+        return np.array([d.qpos[self._qadr], d.qvel[self._dadr]])
+
+    def true_theta(self) -> np.ndarray:
+        """True theta from the compiled model (cached until the model is changed)."""
+        if self._theta is None:
+            self._theta = np.asarray(self._theta_fn(self.model), dtype=float)
+        return self._theta
+
+    def model_changed(self) -> None:
+        """Call after editing MjModel fields at run time: true theta is recomputed."""
+        self._theta = None
+
+    # --- stepping ----------------------------------------------------------
+    @contextlib.contextmanager
+    def controlled_by(self, policy: Policy) -> Iterator[None]:
+        """Run policy(t, x) -> u inside MuJoCo's control callback (each RK4 stage too)."""
+        qadr, dadr, act = self._qadr, self._dadr, self._act
+        x = np.empty(2)
+
+        def callback(m, d):
+            x[0] = d.qpos[qadr]
+            x[1] = d.qvel[dadr]
+            d.ctrl[act] = policy(d.time, x)
+
+        with control_callback(callback):
+            yield
+
+    def step(self) -> None:
+        mujoco.mj_step(self.model, self.data)
+
+    def _warning_counts(self) -> np.ndarray:
+        return self.data.warning.number.copy()
+
+    def instability(self) -> str | None:
+        """A MuJoCo warning raised since the plant was made, as text, or None."""
+        if int(self.data.warning.number.sum()) == self._warning_total0:
+            return None
+        counts = self._warning_counts()
+        new = np.nonzero(counts > self._warnings0)[0]
+        if new.size == 0:
+            return None
+        return "MuJoCo warning " + ", ".join(mujoco.mjtWarning(int(i)).name for i in new)

@@ -1,0 +1,125 @@
+"""The analytic twin: the same equation d y^(n) = f + phi p + h u integrated
+without MuJoCo, with the same true parameters and the same law object.
+
+Integrators mirror MuJoCo's so a twin and its MuJoCo plant can be compared
+step for step:
+  "rk4":   classic Runge-Kutta 4; the policy is evaluated at t, t+h/2,
+           t+h/2, t+h exactly like MuJoCo's control callback under RK4.
+  "euler": semi-implicit Euler like MuJoCo's (highest derivative first,
+           then each lower one with the freshly updated value). MuJoCo's
+           Euler also treats joint damping implicitly; the twin does not.
+
+It also hosts the lecture's first-order example x' = sin x - a x + b x² + u.
+"""
+from __future__ import annotations
+
+import contextlib
+import enum
+from typing import Iterator
+
+import numpy as np
+
+from adaptive_mj.form import ModelForm
+
+
+class Integrator(enum.Enum):
+    RK4 = "rk4"
+    EULER = "euler"
+
+
+class TwinPlant:
+    """form: the plant's structure; theta: (n_theta,) true parameters;
+    dt: step [s]; ctrl_range: (lo, hi) or None; x0: (n,) initial state."""
+
+    def __init__(self, form: ModelForm, theta, *, dt: float, integrator: Integrator = Integrator.RK4,
+                 ctrl_range: tuple[float, float] | None = None, x0=None):
+        self.form = form
+        self._theta = np.array(theta, dtype=float)
+        self.dt = float(dt)
+        self.integrator = Integrator(integrator)
+        self.stages = 4 if self.integrator is Integrator.RK4 else 1
+        self.ctrl_range = ctrl_range
+        self.x = np.zeros(form.order) if x0 is None else np.array(x0, dtype=float)
+        self._t = 0.0
+        self._step_index = 0
+        self._policy = None
+
+    @property
+    def time(self) -> float:
+        return self._t
+
+    def set_state(self, x0) -> None:
+        self.x = np.array(x0, dtype=float)
+        self._t = 0.0
+        self._step_index = 0
+
+    def observe(self) -> np.ndarray:
+        return self.x.copy()
+
+    def true_theta(self) -> np.ndarray:
+        return self._theta
+
+    def set_true_theta(self, theta) -> None:
+        """Change the true parameters (an event on the twin)."""
+        self._theta = np.array(theta, dtype=float)
+
+    def instability(self) -> str | None:
+        return None
+
+    @contextlib.contextmanager
+    def controlled_by(self, policy) -> Iterator[None]:
+        self._policy = policy
+        try:
+            yield
+        finally:
+            self._policy = None
+
+    def _rate(self, t: float, x: np.ndarray) -> np.ndarray:
+        u = self._policy(t, x)
+        if self.ctrl_range is not None:
+            u = min(max(u, self.ctrl_range[0]), self.ctrl_range[1])
+        dx = np.empty_like(x)
+        dx[:-1] = x[1:]
+        dx[-1] = self.form.highest_derivative(x, u, self._theta)
+        return dx
+
+    def step(self) -> None:
+        h, t, x = self.dt, self._t, self.x
+        if self.integrator is Integrator.RK4:
+            k1 = self._rate(t, x)
+            k2 = self._rate(t + h / 2, x + h / 2 * k1)
+            k3 = self._rate(t + h / 2, x + h / 2 * k2)
+            k4 = self._rate(t + h, x + h * k3)
+            self.x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        else:
+            dx = self._rate(t, x)
+            new = x.copy()
+            new[-1] = x[-1] + h * dx[-1]
+            for i in range(len(x) - 2, -1, -1):
+                new[i] = x[i] + h * new[i + 1]
+            self.x = new
+        # time as MuJoCo keeps it: one addition of h per step
+        self._t = t + h
+        self._step_index += 1
+
+
+def lecture_first_order_form() -> ModelForm:
+    """x' = sin x + [-x, x²] . [a, b] + u  (lecture: x' = sin x - a x + b x² + u)."""
+    return ModelForm(
+        order=1,
+        p_names=("a", "b"),
+        phi=lambda x: np.array([-x[0], x[0] * x[0]]),
+        f=lambda x: float(np.sin(x[0])),
+        d_name=None,
+    )
+
+
+def twin_of(plant, *, integrator: Integrator | None = None) -> TwinPlant:
+    """A twin with the MuJoCo plant's form, true theta, timestep, limits and state."""
+    import mujoco  # only the bridge from a MuJoCo plant needs it
+
+    if integrator is None:
+        rk4 = plant.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
+        integrator = Integrator.RK4 if rk4 else Integrator.EULER
+    return TwinPlant(plant.form, plant.true_theta().copy(), dt=plant.dt, integrator=integrator,
+                     ctrl_range=plant.ctrl_range, x0=plant.observe())
