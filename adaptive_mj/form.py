@@ -57,7 +57,7 @@ class ModelForm:
             return 1.0, theta
         return theta[..., 0], theta[..., 1:]
 
-    def highest_derivative(self, x: np.ndarray, u: float, theta: np.ndarray) -> float:
-        """y^(n) from the true equation, for the analytic twin."""
+    def highest_derivative(self, x: np.ndarray, u: float, theta: np.ndarray, external: float = 0.0) -> float:
+        """y^(n) from the true equation (plus an external force), for the analytic twin."""
         d, p = self.split(theta)
-        return (self.f(x) + float(self.phi(x) @ p) + self.h(x) * u) / d
+        return (self.f(x) + float(self.phi(x) @ p) + self.h(x) * u + external) / d

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
@@ -93,9 +93,18 @@ class _Controller:
         self.theta_hat = self.theta_hat + self.h * self.rate_sum
 
 
+class Sink(Protocol):
+    """Where rows go while a run is going (the MCAP recorder): in blocks, in order."""
+
+    def write_rows(self, k0: int, t, x, u, s, ref, theta_hat, theta, V) -> None: ...
+
+    def write_event(self, t: float, label: str) -> None: ...
+
+
 def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
         noise_std: Sequence[float] | None = None, rng: np.random.Generator | None = None,
-        events: Sequence[Event] = (), state_bound: float = math.inf) -> Trajectory:
+        events: Sequence[Event] = (), state_bound: float = math.inf,
+        sink: Sink | None = None, sink_every: int = 1000) -> Trajectory:
     """Run plant under law tracking reference for `duration` seconds.
 
     theta_hat0: (n_theta,) initial estimates (the nominal values for baselines).
@@ -103,6 +112,8 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
     component the law sees (drawn once per physics step from rng).
     events: applied at the first step whose start time is >= event.t.
     state_bound: |x_i| above this counts as divergence.
+    sink: receives the rows every `sink_every` steps and at the end, and each
+    event as it is applied, so a killed run loses at most one block.
 
     Returns a Trajectory with one row per physics step (the state at the step's
     start and what was applied during it). A run that diverges stops at that
@@ -133,12 +144,28 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
 
     ctrl = _Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, dt)
     pending = sorted(events, key=lambda e: e.t)
+    applied: list[tuple[float, str]] = []
     status, reason, k = "ok", "", 0
+    flushed = 0
+
+    def flush(upto: int) -> None:
+        nonlocal flushed
+        if sink is not None and upto > flushed:
+            rows = slice(flushed, upto)
+            V = law.lyapunov(s[rows], theta_hat[rows], theta[rows])
+            sink.write_rows(flushed, t[rows], x[rows], u[rows], s[rows], ref[rows],
+                            theta_hat[rows], theta[rows], V)
+        flushed = upto
+
     with plant.controlled_by(ctrl):
         for k in range(n_steps):
             t_k = plant.time
             while pending and t_k >= pending[0].t - 0.5 * dt:
-                pending.pop(0).apply(plant)
+                event = pending.pop(0)
+                event.apply(plant)
+                applied.append((t_k, event.label))
+                if sink is not None:
+                    sink.write_event(t_k, event.label)
             t[k] = t_k
             x[k] = plant.observe()
             theta[k] = plant.true_theta()
@@ -156,13 +183,16 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
                 status = "diverged"
                 k += 1
                 break
+            if (k + 1) % sink_every == 0:
+                flush(k + 1)
         else:
             k = n_steps
+    flush(k)
     keep = slice(0, k)
     V = law.lyapunov(s[keep], theta_hat[keep], theta[keep])
     return Trajectory(t=t[keep], x=x[keep], u=u[keep], s=s[keep], ref=ref[keep],
                       theta_hat=theta_hat[keep], theta=theta[keep], V=V, names=names,
-                      status=status, reason=reason, meta={"dt": dt, "order": order})
+                      status=status, reason=reason, meta={"dt": dt, "order": order, "events": applied})
 
 
 def _divergence(plant, x_k, u_k, theta_hat, bound) -> str:

@@ -110,6 +110,8 @@ class MujocoPlant:
         else:
             self.ctrl_range = None
         self._theta = None
+        self.force_offset = 0.0  # constant external generalized force [N or N*m]
+        self.disturbance = None  # t -> external force, evaluated at each step's start
         self._warnings0 = self._warning_counts()
         self._warning_total0 = int(self._warnings0.sum())
 
@@ -157,7 +159,13 @@ class MujocoPlant:
             yield
 
     def step(self) -> None:
-        mujoco.mj_step(self.model, self.data)
+        """One mj_step; the external force (offset + disturbance(t)) is held over the step."""
+        d = self.data
+        force = self.force_offset
+        if self.disturbance is not None:
+            force += self.disturbance(d.time)
+        d.qfrc_applied[self._dadr] = force
+        mujoco.mj_step(self.model, d)
 
     def _warning_counts(self) -> np.ndarray:
         return self.data.warning.number.copy()
@@ -171,3 +179,13 @@ class MujocoPlant:
         if new.size == 0:
             return None
         return "MuJoCo warning " + ", ".join(mujoco.mjtWarning(int(i)).name for i in new)
+
+
+def saved_xml(model: mujoco.MjModel) -> str:
+    """The compiled model as MJCF text (mj_saveLastXML): what a log attaches as model.xml."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "model.xml"
+        mujoco.mj_saveLastXML(str(path), model)
+        return path.read_text(encoding="utf-8")

@@ -43,6 +43,9 @@ class TwinPlant:
         self._t = 0.0
         self._step_index = 0
         self._policy = None
+        self.force_offset = 0.0  # constant external force, enters like h*u [N or N*m]
+        self.disturbance = None  # t -> external force, evaluated at each step's start
+        self._force = 0.0
 
     @property
     def time(self) -> float:
@@ -80,11 +83,12 @@ class TwinPlant:
             u = min(max(u, self.ctrl_range[0]), self.ctrl_range[1])
         dx = np.empty_like(x)
         dx[:-1] = x[1:]
-        dx[-1] = self.form.highest_derivative(x, u, self._theta)
+        dx[-1] = self.form.highest_derivative(x, u, self._theta, external=self._force)
         return dx
 
     def step(self) -> None:
         h, t, x = self.dt, self._t, self.x
+        self._force = self.force_offset + (self.disturbance(t) if self.disturbance is not None else 0.0)
         if self.integrator is Integrator.RK4:
             k1 = self._rate(t, x)
             k2 = self._rate(t + h / 2, x + h / 2 * k1)

@@ -1,0 +1,158 @@
+"""The command line: adaptive-mj list | run | replay.
+
+Exit codes: 0 success; 1 the run failed (diverged) or a verify mismatch;
+2 bad input (a bad scenario, model or log, a bad option). A user mistake
+prints one line on stderr; a traceback only with --debug.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from adaptive_mj.errors import AdaptiveMJError
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse's own errors: one line, exit 2
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="adaptive-mj", description="Adaptive control on MuJoCo physics (lecture 7).")
+    p.add_argument("--debug", action="store_true", help="show tracebacks")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    sub.add_parser("list", help="the bundled scenarios, one line each")
+
+    r = sub.add_parser("run", help="run a scenario headless and write an MCAP log")
+    r.add_argument("scenario", help="a scenario file, or the name of a bundled one")
+    r.add_argument("-o", "--output", type=Path, help="log file (default: a new file under logs/)")
+    r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scenario key, e.g. --set law.k=50 (repeatable)")
+    r.add_argument("--seed", type=int, help="noise seed (overrides noise.seed)")
+    r.add_argument("--json", action="store_true", help="print the summary object as JSON")
+    r.add_argument("--force", action="store_true", help="overwrite -o FILE if it exists")
+    r.add_argument("--plot", type=Path, metavar="FILE.png", help="also draw the run")
+
+    rp = sub.add_parser("replay", help="read a log: summary, plot, bit-identical re-simulation")
+    rp.add_argument("log", type=Path)
+    rp.add_argument("--json", action="store_true", help="print the summary object as JSON")
+    rp.add_argument("--plot", type=Path, metavar="FILE.png", help="draw tracking, error, u and s, estimates, V")
+    rp.add_argument("--verify", action="store_true",
+                    help="re-simulate from the log's scenario and model; report whether bit-identical")
+    return p
+
+
+def _scenario_path(arg: str) -> Path:
+    from adaptive_mj.scenario import SCENARIOS_DIR
+
+    path = Path(arg)
+    if not path.exists() and "/" not in arg:
+        bundled = SCENARIOS_DIR / (arg if arg.endswith(".toml") else f"{arg}.toml")
+        if bundled.exists():
+            return bundled
+    return path
+
+
+def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, note: str = "") -> None:
+    if as_json:
+        print(json.dumps(summary, sort_keys=False))
+        return
+    m = summary["metrics"]
+    print(f"{summary['scenario']}: {summary['status']}"
+          + (f" ({summary['reason']})" if summary.get("reason") else "")
+          + f", {summary['duration']:.3f} s simulated, {summary['steps']} steps")
+
+    def f(v):
+        return "n/a" if v is None else f"{v:.3g}"
+
+    print(f"  tracking error rms {f(m['rms_tracking_error'])}, tail rms {f(m['rms_tracking_error_tail'])}, "
+          f"tail max {f(m['max_abs_tracking_error_tail'])}")
+    print(f"  control rms {f(m['control_rms'])}, total variation {f(m['control_total_variation'])}")
+    final = summary["final"]
+    parts = [f"{n} {f(final['theta_hat'][n])} (true {f(final['theta'][n])})" for n in final["theta_hat"]]
+    print("  estimates: " + ", ".join(parts))
+    if note:
+        print(f"  {note}")
+    if log is not None:
+        print(f"  log: {log}")
+
+
+def cmd_list(args) -> int:
+    from adaptive_mj import scenario as sc
+
+    for path in sc.bundled():
+        try:
+            s = sc.load(path)
+            print(f"{s.name:28s} {s.plant.kind}/{s.plant.backend:6s} {s.description}")
+        except AdaptiveMJError as exc:
+            print(f"{path.stem:28s} INVALID: {exc}")
+    return EXIT_OK
+
+
+def cmd_run(args) -> int:
+    from adaptive_mj import scenario as sc
+    from adaptive_mj.runner import execute, reserve_log_path
+
+    scn = sc.load(_scenario_path(args.scenario), overrides=args.overrides, seed=args.seed)
+    log = reserve_log_path(scn, out=args.output, force=args.force)
+    try:
+        result = execute(scn, log_path=log)
+    except AdaptiveMJError:
+        log.unlink(missing_ok=True)  # a run that never started leaves no file that looks like a log
+        raise
+    if args.plot:
+        from adaptive_mj.plot import plot_run
+
+        plot_run(result.trajectory, args.plot, title=scn.name)
+    _print_summary(result.summary, as_json=args.json, log=None if args.json else log)
+    if args.json:
+        print(f"log: {log}", file=sys.stderr)
+    return EXIT_OK if result.summary["status"] == "ok" else EXIT_FAILED
+
+
+def cmd_replay(args) -> int:
+    from adaptive_mj.metrics import clean_json, summary as make_summary
+    from adaptive_mj.replay import read_log
+
+    logged = read_log(args.log)
+    summary = logged.summary
+    if summary is None:  # truncated: summarise what was recovered
+        summary = clean_json(make_summary(logged.header.get("scenario_name", args.log.stem), logged.trajectory))
+        summary["status"] = logged.status
+    _print_summary(summary, as_json=args.json, note=logged.note)
+    if args.plot:
+        from adaptive_mj.plot import plot_run
+
+        plot_run(logged.trajectory, args.plot, title=f"{summary['scenario']} (replay)")
+    code = EXIT_OK if summary["status"] == "ok" else EXIT_FAILED
+    if args.verify:
+        from adaptive_mj.verify import verify
+
+        ok, message = verify(logged)
+        print(message, file=sys.stderr if args.json else sys.stdout)
+        if not ok:
+            code = EXIT_FAILED
+    return code
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        return {"list": cmd_list, "run": cmd_run, "replay": cmd_replay}[args.command](args)
+    except AdaptiveMJError as exc:
+        if args.debug:
+            raise
+        print(f"adaptive-mj: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("adaptive-mj: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

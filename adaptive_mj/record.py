@@ -1,0 +1,477 @@
+"""The run log: one MCAP file per run, written while the run goes.
+
+A `Recorder` is the loop's `Sink`. It keeps every `log_every`-th physics step
+(global step index k with k % log_every == 0) and writes each kept row as six
+JSON messages, one per topic, stamped with the simulation time:
+
+    /state        {t, y, y_dot[, y_ddot, ...]}            n entries
+    /reference    {t, y_d, y_d_dot, y_d_ddot[, ...]}      n+1 entries
+    /control      {t, u, s, y_tilde}
+    /estimates    {t, <param>: θ̂_i, ...}
+    /true_params  {t, <param>: θ_i, ...}
+    /lyapunov     {t, V}
+    /events       {t, label, ...detail}                   one per event
+    /summary      {...summary, status, reason}            once, at close()
+
+Every payload carries the exact float `t` (JSON floats are written with
+repr, which round-trips), so replay rebuilds the arrays bit for bit. The
+full layout is in docs/LOG_FORMAT.md; `adaptive_mj.replay.read_log` reads it.
+
+Bounded loss: each `write_rows` call ends by closing the chunk in progress
+and flushing the file, so a run killed at any instant leaves a readable file
+that holds every row of every completed `write_rows` call. The loop calls
+`write_rows` once per simulated second by default.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
+
+LOG_FORMAT_VERSION = 1
+
+#: Statuses a run can be closed with (replay adds "truncated" for a log that was never closed).
+CLOSE_STATUSES = ("ok", "diverged", "interrupted", "failed")
+
+#: Topics that make up one logged row, in the order they are written.
+ROW_TOPICS = ("/state", "/reference", "/control", "/estimates", "/true_params", "/lyapunov")
+EVENT_TOPIC = "/events"
+SUMMARY_TOPIC = "/summary"
+
+#: Key of the optional payload object that carries non-finite values ("inf", "-inf", "nan")
+#: for fields written as JSON null.
+NONFINITE_KEY = "nonfinite"
+
+HEADER_METADATA = "adaptive_mj"
+SCENARIO_METADATA = "scenario"
+STATUS_METADATA = "status"
+MODEL_XML_ATTACHMENT = "model.xml"
+MODEL_SOURCE_ATTACHMENT = "model_source.xml"
+ASSET_ATTACHMENT_PREFIX = "asset/"
+VERSION_KEY_PREFIX = "version."
+
+_NS_PER_S = 1_000_000_000
+
+
+def derivative_name(base: str, j: int) -> str:
+    """Field name of the j-th time derivative of `base`: y, y_dot, y_ddot, y_dddot, ..."""
+    return base if j == 0 else f"{base}_{'d' * j}ot"
+
+
+def state_fields(order: int) -> tuple[str, ...]:
+    """/state field names for a plant of order n: (y, y_dot, ..., y^(n-1))."""
+    return tuple(derivative_name("y", j) for j in range(order))
+
+
+def reference_fields(order: int) -> tuple[str, ...]:
+    """/reference field names for order n: (y_d, y_d_dot, ..., y_d^(n))."""
+    return tuple(derivative_name("y_d", j) for j in range(order + 1))
+
+
+CONTROL_FIELDS = ("u", "s", "y_tilde")
+LYAPUNOV_FIELDS = ("V",)
+
+
+@dataclass(frozen=True)
+class LogHeader:
+    """What a log records about its run before the first row.
+
+    scenario_text: the TOML text of the scenario file as given.
+    scenario_source: where it came from (a path string), informational.
+    overrides: the --set expressions applied on top of the text.
+    log_rate_hz: requested logging rate [Hz]; dt: physics step [s].
+    order: n, the state is [y, y', ..., y^(n-1)] and the reference has n+1 entries.
+    param_names: names of θ, e.g. ("d", "b", "c").
+    model_xml: mujoco.mj_saveLastXML of the compiled model (None without MJCF).
+    model_source: the exact XML string that was compiled; model_assets: its assets.
+    versions: {"adaptive_mj": ..., "mujoco": ..., ...}.
+    created_unix: wall-clock creation time [s since the epoch], metadata only.
+    """
+
+    scenario_name: str
+    scenario_text: str
+    scenario_source: str
+    overrides: tuple[str, ...]
+    seed: int
+    log_rate_hz: float
+    dt: float
+    order: int
+    param_names: tuple[str, ...]
+    model_xml: str | None
+    model_source: str | None
+    model_assets: dict[str, bytes] = field(default_factory=dict)
+    versions: dict[str, str] = field(default_factory=dict)
+    created_unix: float = 0.0
+
+    @property
+    def log_every(self) -> int:
+        """Physics steps per logged row: max(1, round(1 / (log_rate_hz * dt)))."""
+        return max(1, round(1.0 / (self.log_rate_hz * self.dt)))
+
+
+def _check_header(header: LogHeader) -> None:
+    if not (isinstance(header.dt, (int, float)) and math.isfinite(header.dt) and header.dt > 0):
+        raise ValueError(f"LogHeader.dt must be a finite number > 0 [s], got {header.dt!r}")
+    if not (isinstance(header.log_rate_hz, (int, float)) and math.isfinite(header.log_rate_hz)
+            and header.log_rate_hz > 0):
+        raise ValueError(f"LogHeader.log_rate_hz must be a finite number > 0 [Hz], "
+                         f"got {header.log_rate_hz!r}")
+    if not (isinstance(header.order, (int, np.integer)) and not isinstance(header.order, bool)
+            and header.order >= 1):
+        raise ValueError(f"LogHeader.order must be an int >= 1, got {header.order!r}")
+    names = tuple(header.param_names)
+    reserved = {"t", NONFINITE_KEY}
+    if (len(set(names)) != len(names) or any(not isinstance(n, str) or not n for n in names)
+            or reserved & set(names)):
+        raise ValueError(f"LogHeader.param_names must be distinct non-empty strings other than "
+                         f"{sorted(reserved)}, got {names!r}")
+    for key, value in header.versions.items():
+        if not isinstance(key, str) or not isinstance(value, str):
+            raise ValueError(f"LogHeader.versions must map str to str, got {key!r}: {value!r}")
+    for name, data in header.model_assets.items():
+        if not isinstance(name, str) or not isinstance(data, (bytes, bytearray)):
+            raise ValueError(f"LogHeader.model_assets must map str to bytes, got {name!r}")
+
+
+def _number_property(description: str) -> dict:
+    # null stands for a non-finite value; its exact value is in the "nonfinite" object.
+    return {"type": ["number", "null"], "description": description}
+
+
+def _row_schema(title: str, description: str, fields: Mapping[str, str]) -> dict:
+    properties = {"t": {"type": "number", "description": "simulation time [s]"}}
+    properties.update({name: _number_property(text) for name, text in fields.items()})
+    properties[NONFINITE_KEY] = {
+        "type": "object",
+        "description": "present only when a field is null: its value, 'inf', '-inf' or 'nan'",
+        "additionalProperties": {"type": "string", "enum": ["inf", "-inf", "nan"]},
+    }
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": title,
+        "description": description,
+        "type": "object",
+        "properties": properties,
+        "required": ["t", *fields],
+        "additionalProperties": False,
+    }
+
+
+def _schemas(order: int, names: tuple[str, ...]) -> dict[str, tuple[str, dict]]:
+    """topic -> (schema name, JSON Schema)."""
+    state = {n: f"output derivative {j} (y in m or rad)" for j, n in enumerate(state_fields(order))}
+    ref = {n: f"reference derivative {j}" for j, n in enumerate(reference_fields(order))}
+    return {
+        "/state": ("adaptive_mj.State", _row_schema(
+            "State", "true plant state [y, y', ..., y^(n-1)] at the start of the step", state)),
+        "/reference": ("adaptive_mj.Reference", _row_schema(
+            "Reference", "reference [y_d, ..., y_d^(n)] at the start of the step", ref)),
+        "/control": ("adaptive_mj.Control", _row_schema(
+            "Control", "control applied over the step and the law's signals", {
+                "u": "applied control after saturation [N or N*m]",
+                "s": "sliding variable (first order: the tracking error)",
+                "y_tilde": "tracking error y_d - y",
+            })),
+        "/estimates": ("adaptive_mj.Estimates", _row_schema(
+            "Estimates", "parameter estimates theta_hat", {n: f"estimate of {n}" for n in names})),
+        "/true_params": ("adaptive_mj.TrueParams", _row_schema(
+            "TrueParams", "true parameters theta", {n: f"true value of {n}" for n in names})),
+        "/lyapunov": ("adaptive_mj.Lyapunov", _row_schema(
+            "Lyapunov", "the law's Lyapunov function", {"V": "Lyapunov function value"})),
+        EVENT_TOPIC: ("adaptive_mj.Event", {
+            "$schema": "https://json-schema.org/draft/2020-12/schema",
+            "title": "Event",
+            "description": "a scheduled event applied at the start of a step, with its details",
+            "type": "object",
+            "properties": {"t": {"type": "number", "description": "simulation time [s]"},
+                           "label": {"type": "string"}},
+            "required": ["t", "label"],
+            "additionalProperties": True,
+        }),
+        SUMMARY_TOPIC: ("adaptive_mj.Summary", {
+            "$schema": "https://json-schema.org/draft/2020-12/schema",
+            "title": "Summary",
+            "description": "the run's summary metrics, with its final status and reason",
+            "type": "object",
+            "properties": {"status": {"type": "string", "enum": list(CLOSE_STATUSES)},
+                           "reason": {"type": "string"}},
+            "required": ["status", "reason"],
+            "additionalProperties": True,
+        }),
+    }
+
+
+def _template(fields: tuple[str, ...]) -> str:
+    """A %-format string for a payload {t, fields...} of finite Python floats (%r = repr)."""
+    keys = ("t", *fields)
+    return "{" + ",".join(f"{json.dumps(k)}:%r" for k in keys) + "}"
+
+
+def _slow_payload(fields: tuple[str, ...], values: list[float]) -> bytes:
+    """Payload of a row with non-finite values: those become null, listed in "nonfinite"."""
+    payload: dict[str, Any] = {"t": values[0]}
+    nonfinite = {}
+    for name, v in zip(fields, values[1:]):
+        if math.isfinite(v):
+            payload[name] = v
+        else:
+            payload[name] = None
+            nonfinite[name] = "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")
+    payload[NONFINITE_KEY] = nonfinite
+    return json.dumps(payload, allow_nan=False).encode()
+
+
+def jsonable(value: Any, where: str = "value") -> Any:
+    """`value` as plain JSON data: numpy scalars and arrays become numbers and lists,
+    tuples become lists, non-finite floats become None. Raises ValueError naming
+    `where` for anything else (sets, objects, non-string keys)."""
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, (np.bool_,)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist(), where)
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    if isinstance(value, Mapping):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise ValueError(f"{where} has a non-string key {k!r}; JSON needs string keys")
+            out[k] = jsonable(v, f"{where}[{k!r}]")
+        return out
+    raise ValueError(f"{where} is a {type(value).__name__} ({value!r}), "
+                     f"expected a number, string, bool, None, list or dict")
+
+
+def _ns(t: float) -> int:
+    """Simulation time [s] -> MCAP log time [ns] (uint64)."""
+    if not (math.isfinite(t) and t >= 0):
+        raise ValueError(f"log times must be finite and >= 0 s, got t={t!r}")
+    return round(t * _NS_PER_S)
+
+
+class Recorder:
+    """Writes one run to an MCAP file at `path`; implements `loop.Sink`.
+
+    path: the log's file; it must not exist yet (a log is never overwritten).
+    header: what the run is (see LogHeader); written first and flushed, so even
+    a run killed before its first row leaves a readable log.
+    flush_every_rows: besides the flush at the end of every write_rows call,
+    also flush after every this many logged rows inside a call (bounds the loss
+    for callers that pass long blocks). None: only at the end of each call.
+
+    Use as a context manager: leaving the block closes the log, with status
+    "interrupted" after a KeyboardInterrupt, "failed" after any other
+    exception, and "ok" otherwise; call close() yourself to record the
+    run's real status and summary.
+    """
+
+    def __init__(self, path: str | os.PathLike, header: LogHeader, *,
+                 flush_every_rows: int | None = None):
+        _check_header(header)
+        if flush_every_rows is not None and (not isinstance(flush_every_rows, int)
+                                             or flush_every_rows < 1):
+            raise ValueError(f"flush_every_rows must be an int >= 1 or None, got {flush_every_rows!r}")
+        self.path = os.fspath(path)
+        self.header = header
+        self.log_every = header.log_every
+        self.order = int(header.order)
+        self.names = tuple(header.param_names)
+        self._flush_every = flush_every_rows
+        self._next_k = 0          # first global step index not yet seen
+        self._rows = 0            # logged rows written
+        self._t_last = 0.0        # latest simulation time written [s]
+        self._closed = False
+
+        self._file = open(self.path, "xb")
+        try:
+            self._writer = Writer(self._file, compression=CompressionType.ZSTD)
+            self._writer.start(library=f"adaptive_mj log format {LOG_FORMAT_VERSION}; "
+                                       f"{LIBRARY_IDENTIFIER}")
+            self._write_header()
+            self._writer.flush()
+        except BaseException:
+            self._file.close()
+            raise
+
+    # -- header -------------------------------------------------------------
+
+    def _write_header(self) -> None:
+        h = self.header
+        self._channels: dict[str, int] = {}
+        for topic, (name, schema) in _schemas(self.order, self.names).items():
+            schema_id = self._writer.register_schema(
+                name, "jsonschema", json.dumps(schema, separators=(",", ":")).encode())
+            self._channels[topic] = self._writer.register_channel(topic, "json", schema_id)
+        row_fields = {
+            "/state": state_fields(self.order),
+            "/reference": reference_fields(self.order),
+            "/control": CONTROL_FIELDS,
+            "/estimates": self.names,
+            "/true_params": self.names,
+            "/lyapunov": LYAPUNOV_FIELDS,
+        }
+        self._row_fields = [(self._channels[topic], row_fields[topic]) for topic in ROW_TOPICS]
+        self._templates = [_template(fields) for _, fields in self._row_fields]
+
+        meta = {
+            "log_format_version": str(LOG_FORMAT_VERSION),
+            "scenario_name": h.scenario_name,
+            "scenario_source": h.scenario_source,
+            "seed": str(int(h.seed)),
+            "log_rate_hz": repr(float(h.log_rate_hz)),
+            "log_every": str(self.log_every),
+            "dt": repr(float(h.dt)),
+            "order": str(self.order),
+            "param_names": json.dumps(list(self.names)),
+            "overrides": json.dumps(list(h.overrides)),
+            "created_unix": repr(float(h.created_unix)),
+        }
+        meta.update({VERSION_KEY_PREFIX + k: v for k, v in sorted(h.versions.items())})
+        self._writer.add_metadata(HEADER_METADATA, meta)
+        self._writer.add_metadata(SCENARIO_METADATA, {"text": h.scenario_text})
+        if h.model_xml is not None:
+            self._writer.add_attachment(0, 0, MODEL_XML_ATTACHMENT, "application/xml",
+                                        h.model_xml.encode())
+        if h.model_source is not None:
+            self._writer.add_attachment(0, 0, MODEL_SOURCE_ATTACHMENT, "application/xml",
+                                        h.model_source.encode())
+        for name, data in sorted(h.model_assets.items()):
+            self._writer.add_attachment(0, 0, ASSET_ATTACHMENT_PREFIX + name,
+                                        "application/octet-stream", bytes(data))
+
+    # -- loop.Sink ------------------------------------------------------------
+
+    def write_rows(self, k0, t, x, u, s, ref, theta_hat, theta, V) -> None:
+        """Log the kept rows of a block of consecutive physics steps k0, k0+1, ...
+
+        t: (N,) [s]; x: (N, n); u, s: (N,); ref: (N, n+1);
+        theta_hat, theta: (N, n_theta); V: (N,). Rows with k % log_every == 0
+        are written; the file is flushed before returning.
+        """
+        self._check_open()
+        k0 = int(k0)
+        if k0 < self._next_k:
+            raise ValueError(f"write_rows: rows must come in order; got k0={k0} after "
+                             f"step {self._next_k - 1} was written")
+        t = np.asarray(t, dtype=float)
+        n = t.shape[0] if t.ndim == 1 else -1
+        cols = {"x": (x, (n, self.order)), "u": (u, (n,)), "s": (s, (n,)),
+                "ref": (ref, (n, self.order + 1)), "theta_hat": (theta_hat, (n, len(self.names))),
+                "theta": (theta, (n, len(self.names))), "V": (V, (n,))}
+        arrays = {}
+        for name, (value, shape) in cols.items():
+            a = np.asarray(value, dtype=float)
+            if n < 0 or a.shape != shape:
+                raise ValueError(f"write_rows: {name} has shape {a.shape}, expected {shape} "
+                                 f"(t has shape {t.shape}, order {self.order}, "
+                                 f"params {self.names})")
+            arrays[name] = a
+        self._next_k = k0 + n
+        keep = slice((-k0) % self.log_every, n, self.log_every)
+        tk = t[keep]
+        if tk.size:
+            if not (np.all(np.isfinite(tk)) and tk.min() >= 0):
+                raise ValueError("write_rows: times must be finite and >= 0 s")
+            x, ref = arrays["x"][keep], arrays["ref"][keep]
+            u, s = arrays["u"][keep], arrays["s"][keep]
+            blocks = [x, ref, np.column_stack([u, s, ref[:, 0] - x[:, 0]]),
+                      arrays["theta_hat"][keep], arrays["theta"][keep], arrays["V"][keep, None]]
+            self._write_block(tk, blocks)
+        self._writer.flush()
+
+    def _write_block(self, tk: np.ndarray, blocks: list[np.ndarray]) -> None:
+        log_ns = np.rint(tk * _NS_PER_S).astype(np.int64).tolist()
+        t_list = tk.tolist()
+        rows = [b.tolist() for b in blocks]
+        finite = [np.isfinite(b).all(axis=1).tolist() for b in blocks]
+        add = self._writer.add_message
+        channels = self._row_fields
+        templates = self._templates
+        for i, (ti, ns) in enumerate(zip(t_list, log_ns)):
+            for j, (channel_id, fields) in enumerate(channels):
+                values = rows[j][i]
+                if finite[j][i]:
+                    data = (templates[j] % (ti, *values)).encode()
+                else:
+                    data = _slow_payload(fields, [ti, *values])
+                add(channel_id, ns, data, ns)
+            self._rows += 1
+            if self._flush_every is not None and self._rows % self._flush_every == 0:
+                self._writer.flush()
+        self._t_last = max(self._t_last, t_list[-1])
+
+    def write_event(self, t: float, label: str, **detail) -> None:
+        """Log an event applied at simulation time t [s]; detail: extra JSON-able fields.
+        Written with the next flush (the end of the next write_rows call, or close)."""
+        self._check_open()
+        t = float(t)
+        ns = _ns(t)
+        payload = {"t": t, "label": str(label)}
+        payload.update(jsonable(detail, "write_event detail"))
+        self._writer.add_message(self._channels[EVENT_TOPIC], ns,
+                                 json.dumps(payload, allow_nan=False).encode(), ns)
+        self._t_last = max(self._t_last, t)
+
+    # -- closing --------------------------------------------------------------
+
+    def close(self, status: str, reason: str = "", summary: Mapping[str, Any] | None = None) -> None:
+        """Write /summary ({...summary, status, reason}) and the "status" metadata,
+        then finish the file (summary section and footer). status: one of CLOSE_STATUSES."""
+        self._check_open()
+        if status not in CLOSE_STATUSES:
+            raise ValueError(f"close: status must be one of {CLOSE_STATUSES}, got {status!r}")
+        payload = jsonable(dict(summary or {}), "close summary")
+        for key, value in (("status", status), ("reason", str(reason))):
+            if key in payload and payload[key] != value:
+                raise ValueError(f"close: summary[{key!r}] = {payload[key]!r} disagrees with "
+                                 f"the {key} argument {value!r}")
+            payload[key] = value
+        ns = _ns(self._t_last)
+        self._writer.add_message(self._channels[SUMMARY_TOPIC], ns,
+                                 json.dumps(payload, allow_nan=False).encode(), ns)
+        self._writer.flush()
+        self._writer.add_metadata(STATUS_METADATA, {"status": status, "reason": str(reason)})
+        self._writer.finish()
+        self._closed = True
+        self._file.close()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    @property
+    def rows_written(self) -> int:
+        """Logged rows written so far."""
+        return self._rows
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise RuntimeError(f"{self.path}: the log is already closed")
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self._closed:
+            return
+        if exc_type is None:
+            self.close("ok", "", {})
+            return
+        status = "interrupted" if issubclass(exc_type, KeyboardInterrupt) else "failed"
+        try:
+            self.close(status, f"{exc_type.__name__}: {exc}", {})
+        except Exception:
+            # The original exception matters more; the file keeps its flushed prefix.
+            self._file.close()

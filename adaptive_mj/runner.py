@@ -1,0 +1,103 @@
+"""Run a scenario end to end: build, simulate with the MCAP recorder attached,
+summarise. Also where log file names are chosen (never overwriting)."""
+from __future__ import annotations
+
+import platform
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+from adaptive_mj import __version__
+from adaptive_mj.build import ModelSource, build
+from adaptive_mj.errors import AdaptiveMJError
+from adaptive_mj.loop import run
+from adaptive_mj.metrics import clean_json, summary as make_summary
+from adaptive_mj.scenario import Scenario
+from adaptive_mj.trajectory import Trajectory
+
+LOGS_DIR = Path(__file__).resolve().parents[1] / "logs"
+
+
+@dataclass(frozen=True)
+class RunResult:
+    trajectory: Trajectory
+    summary: dict
+    log_path: Path | None
+
+
+def versions() -> dict[str, str]:
+    import mcap
+    import mujoco
+    from importlib.metadata import version
+
+    return {"adaptive_mj": __version__, "mujoco": mujoco.__version__, "dm_control": version("dm-control"),
+            "mcap": getattr(mcap, "__version__", version("mcap")), "python": platform.python_version()}
+
+
+def reserve_log_path(scn: Scenario, *, out: Path | None = None, directory: Path | None = None,
+                     force: bool = False) -> Path:
+    """The log's path, created empty so no later run can take it.
+
+    out: an explicit file; refused if it exists unless force.
+    Otherwise <directory>/<scenario>-<UTC time>-seed<N>[-i].mcap, never an existing name.
+    """
+    if out is not None:
+        out = Path(out)
+        if out.exists() and not force:
+            raise AdaptiveMJError(f"{out}: file exists; pass --force to overwrite it")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_bytes(b"")
+        return out
+    directory = Path(directory) if directory is not None else LOGS_DIR
+    directory.mkdir(parents=True, exist_ok=True)
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    stem = f"{scn.name}-{stamp}-seed{scn.noise.seed}"
+    for i in range(10_000):
+        path = directory / (f"{stem}.mcap" if i == 0 else f"{stem}-{i}.mcap")
+        try:
+            with open(path, "xb"):
+                return path
+        except FileExistsError:
+            continue
+    raise AdaptiveMJError(f"{directory}: could not find a free log name for {stem}")
+
+
+def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None) -> RunResult:
+    """Build and run one scenario; stream it to log_path (MCAP) when given."""
+    setup = build(scn, source=source)
+    plant = setup.plant
+    sink_every = max(1, round(1.0 / plant.dt))  # flush about once per simulated second
+    kwargs = dict(duration=scn.simulation.duration, theta_hat0=setup.theta_hat0, noise_std=setup.noise_std,
+                  rng=setup.rng, events=setup.events, state_bound=scn.simulation.state_bound,
+                  sink_every=sink_every)
+    if log_path is None:
+        traj = run(plant, setup.law, setup.reference, **kwargs)
+        return RunResult(traj, clean_json(make_summary(scn.name, traj)), None)
+
+    from adaptive_mj.record import LogHeader, Recorder
+
+    model_xml = None
+    if hasattr(plant, "model"):
+        from adaptive_mj.plants.mujoco_plant import saved_xml
+
+        model_xml = saved_xml(plant.model)
+    header = LogHeader(
+        scenario_name=scn.name, scenario_text=scn.text, scenario_source=scn.source, overrides=scn.overrides,
+        seed=scn.noise.seed, log_rate_hz=scn.log_rate_hz, dt=plant.dt, order=plant.form.order,
+        param_names=tuple(setup.law.names), model_xml=model_xml,
+        model_source=setup.source.xml if setup.source else None,
+        model_assets=dict(setup.source.assets) if setup.source else {},
+        versions=versions(), created_unix=time.time())
+    recorder = Recorder(log_path, header)
+    try:
+        traj = run(plant, setup.law, setup.reference, sink=recorder, **kwargs)
+    except KeyboardInterrupt:
+        recorder.close("interrupted", "interrupted by the user (SIGINT)", {})
+        raise
+    except BaseException as exc:
+        recorder.close("failed", f"{type(exc).__name__}: {exc}", {})
+        raise
+    result = clean_json(make_summary(scn.name, traj))
+    recorder.close(traj.status, traj.reason, result)
+    return RunResult(traj, result, log_path)

@@ -1,0 +1,531 @@
+"""Scenario files (scenarios/*.toml) loaded into frozen dataclasses.
+
+Validation is strict and happens once, before any simulation: unknown keys,
+wrong types, non-finite numbers and out-of-range values are rejected with a
+ScenarioError whose message names the file, the key, what was expected and
+what came, e.g.  ``scenarios/x.toml: law.gamma must be > 0, got -1``.
+The full key reference is docs/SCENARIOS.md.
+"""
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from adaptive_mj.errors import ScenarioError
+
+SCHEMA_VERSION = 1
+REPO = Path(__file__).resolve().parents[1]
+MODELS_DIR = REPO / "models"
+SCENARIOS_DIR = REPO / "scenarios"
+
+PLANT_KINDS = ("heave", "arm", "first_order")
+BACKENDS = ("mujoco", "twin")
+INTEGRATORS = ("rk4", "euler", "implicitfast", "implicit")
+REFERENCE_KINDS = ("constant", "cosine", "sine", "sum_of_sines", "smooth_step")
+LAW_KINDS = ("sliding_adaptive", "first_order_adaptive", "fixed_nominal", "robust_sliding")
+DEAD_ZONE_ON = ("s", "tracking_error")
+DISTURBANCE_KINDS = ("none", "constant", "step", "sine")
+EVENT_KINDS = ("payload_mass", "fluid_density_scale", "constant_force")
+DEFAULT_MODEL = {"heave": "heave_vehicle", "arm": "pendulum_arm"}
+STATE_SIGNALS = ("y", "y_dot", "y_ddot")
+
+
+# --------------------------------------------------------------------------
+# frozen result types
+@dataclass(frozen=True)
+class PlantSpec:
+    kind: str
+    backend: str
+    model: Path | None
+    joint: str | None
+    actuator: str | None
+    payload: str | None
+    payload_mass: float | None
+    site: str
+    theta: dict[str, float] | None
+    g: float
+    density: float | None
+    viscosity: float | None
+    ctrl_range: tuple[float, float] | None
+
+
+@dataclass(frozen=True)
+class SimulationSpec:
+    integrator: str
+    timestep: float | None
+    duration: float
+    initial_state: tuple[float, ...] | str | None  # or "reference"
+    state_bound: float
+
+
+@dataclass(frozen=True)
+class ReferenceSpec:
+    kind: str
+    params: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class DeadZoneSpec:
+    width: float
+    on: str
+
+
+@dataclass(frozen=True)
+class LawSpec:
+    kind: str
+    order: int | None
+    lam: float | None
+    k: float
+    gamma: float | dict[str, float] | None
+    dead_zone: DeadZoneSpec | None
+    initial_estimates: dict[str, float] | str | None  # or "model": true theta at t = 0
+    nominal: dict[str, float] | str | None
+    K: float | None
+    boundary_layer: float | None
+
+
+@dataclass(frozen=True)
+class NoiseSpec:
+    std: dict[str, float]
+    seed: int
+
+
+@dataclass(frozen=True)
+class DisturbanceSpec:
+    kind: str
+    magnitude: float
+    t0: float
+    omega: float
+    phase: float
+
+
+@dataclass(frozen=True)
+class EventSpec:
+    t: float
+    kind: str
+    value: float
+    body: str
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario. `source` is the file (or "<string>"), `text` its TOML."""
+
+    name: str
+    description: str
+    plant: PlantSpec
+    simulation: SimulationSpec
+    reference: ReferenceSpec
+    law: LawSpec
+    noise: NoiseSpec
+    disturbance: DisturbanceSpec
+    events: tuple[EventSpec, ...]
+    log_rate_hz: float
+    source: str
+    text: str
+    overrides: tuple[str, ...] = field(default=())
+
+
+# --------------------------------------------------------------------------
+# a small strict reader over the parsed TOML tables
+_MISSING = object()
+
+
+class _Table:
+    """Typed, range-checked access to one TOML table; reports unknown keys."""
+
+    def __init__(self, data: dict, prefix: str, where: str):
+        self.data, self.prefix, self.where = data, prefix, where
+        self.used: set[str] = set()
+
+    def key(self, name: str) -> str:
+        return f"{self.prefix}{name}"
+
+    def fail(self, name: str, expected: str, got: Any) -> ScenarioError:
+        return ScenarioError(f"{self.where}: {self.key(name)} must be {expected}, got {_show(got)}")
+
+    def get(self, name: str, default: Any = _MISSING) -> Any:
+        self.used.add(name)
+        if name not in self.data:
+            if default is _MISSING:
+                raise ScenarioError(f"{self.where}: {self.key(name)} is required but missing")
+            return default
+        return self.data[name]
+
+    def number(self, name, default=_MISSING, *, gt=None, ge=None, allow_inf=False) -> float | None:
+        if name not in self.data:
+            return self.get(name, default)
+        v = self.get(name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.fail(name, "a number", v)
+        v = float(v)
+        if math.isnan(v) or (math.isinf(v) and not allow_inf):
+            raise self.fail(name, "a finite number", v)
+        if gt is not None and not v > gt:
+            raise self.fail(name, f"> {gt}", v)
+        if ge is not None and not v >= ge:
+            raise self.fail(name, f">= {ge}", v)
+        return v
+
+    def integer(self, name, default=_MISSING, *, ge=None) -> int | None:
+        if name not in self.data:
+            return self.get(name, default)
+        v = self.get(name)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.fail(name, "an integer", v)
+        if ge is not None and v < ge:
+            raise self.fail(name, f"an integer >= {ge}", v)
+        return v
+
+    def string(self, name, default=_MISSING, *, choices=None) -> str | None:
+        if name not in self.data:
+            return self.get(name, default)
+        v = self.get(name)
+        if not isinstance(v, str):
+            raise self.fail(name, "a string", v)
+        if choices is not None and v not in choices:
+            raise self.fail(name, "one of " + ", ".join(repr(c) for c in choices), v)
+        return v
+
+    def table(self, name, default=_MISSING) -> "_Table | None":
+        if name not in self.data:
+            v = self.get(name, default)
+            return None if v is None else _Table(v, self.key(name) + ".", self.where)
+        v = self.get(name)
+        if not isinstance(v, dict):
+            raise self.fail(name, "a table", v)
+        return _Table(v, self.key(name) + ".", self.where)
+
+    def numbers(self, name, default=_MISSING, *, length=None) -> tuple[float, ...] | None:
+        if name not in self.data:
+            return self.get(name, default)
+        v = self.get(name)
+        if not isinstance(v, list):
+            raise self.fail(name, "an array of numbers", v)
+        if length is not None and len(v) != length:
+            raise self.fail(name, f"an array of {length} numbers", v)
+        out = []
+        for i, item in enumerate(v):
+            if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
+                raise self.fail(f"{name}[{i}]", "a finite number", item)
+            out.append(float(item))
+        return tuple(out)
+
+    def named_numbers(self, name, default=_MISSING, *, gt=None) -> dict[str, float] | None:
+        sub = self.table(name, default)
+        if sub is None:
+            return None
+        out = {}
+        for key in sub.data:
+            out[key] = sub.number(key, gt=gt)
+        return out
+
+    def finish(self, allowed_extra: tuple[str, ...] = ()) -> None:
+        for name in self.data:
+            if name not in self.used and name not in allowed_extra:
+                raise ScenarioError(f"{self.where}: unknown key {self.key(name)!r}"
+                                    + _suggest(name, self.used))
+
+
+def _show(v: Any) -> str:
+    if isinstance(v, float):
+        return repr(v)
+    if isinstance(v, dict):
+        return "a table"
+    if isinstance(v, list):
+        return f"an array {v!r}" if len(repr(v)) < 60 else "an array"
+    return f"{type(v).__name__} {v!r}" if not isinstance(v, (int, str)) or isinstance(v, bool) else repr(v)
+
+
+def _suggest(name: str, known: set[str]) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(name, sorted(known), n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+# --------------------------------------------------------------------------
+def load(path: str | Path, *, overrides: list[str] | tuple[str, ...] = (), seed: int | None = None) -> Scenario:
+    """Read, override (``key=value`` dotted paths) and validate a scenario file."""
+    path = Path(path)
+    where = str(path)
+    if not path.is_file():
+        raise ScenarioError(f"{where}: scenario file not found")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"{where}: cannot read the scenario file: {exc}") from None
+    return loads(text, where=where, base_dir=path.parent, default_name=path.stem,
+                 overrides=overrides, seed=seed)
+
+
+def loads(text: str, *, where: str = "<string>", base_dir: Path | None = None, default_name: str = "scenario",
+          overrides: list[str] | tuple[str, ...] = (), seed: int | None = None) -> Scenario:
+    """Validate scenario TOML text (see `load`)."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{where}: TOML syntax error: {exc}") from None
+    for expr in overrides:
+        apply_override(doc, expr, where=where)
+    if seed is not None:
+        doc.setdefault("noise", {})
+        if not isinstance(doc["noise"], dict):
+            raise ScenarioError(f"{where}: noise must be a table, got {_show(doc['noise'])}")
+        doc["noise"]["seed"] = seed
+    return _validate(doc, where=where, base_dir=base_dir or Path.cwd(), default_name=default_name,
+                     text=text, overrides=tuple(overrides))
+
+
+_KEY_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
+
+
+def parse_value(raw: str, *, what: str) -> Any:
+    """A TOML value (number, bool, string, array, inline table); a bare word is a string."""
+    try:
+        return tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_./-]*", raw):
+            return raw
+        raise ScenarioError(f"{what}: value {raw!r} is not a TOML value "
+                            "(expected a number, true/false, a string, an array or an inline table)") from None
+
+
+def apply_override(doc: dict, expr: str, *, where: str) -> None:
+    """Apply ``section.key=value`` to the parsed document (before validation)."""
+    what = f"--set {expr!r}"
+    if "=" not in expr:
+        raise ScenarioError(f"{what}: expected key=value, e.g. law.k=50")
+    key, raw = (part.strip() for part in expr.split("=", 1))
+    if not _KEY_RE.match(key):
+        raise ScenarioError(f"{what}: key {key!r} must be a dotted path like law.gamma")
+    value = parse_value(raw, what=what)
+    *parents, last = key.split(".")
+    node = doc
+    for i, part in enumerate(parents):
+        nxt = node.setdefault(part, {})
+        if not isinstance(nxt, dict):
+            raise ScenarioError(f"{what}: {'.'.join(parents[:i + 1])} is not a table in {where}")
+        node = nxt
+    node[last] = value
+
+
+def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text: str,
+              overrides: tuple[str, ...]) -> Scenario:
+    top = _Table(doc, "", where)
+    version = top.integer("schema_version")
+    if version != SCHEMA_VERSION:
+        raise top.fail("schema_version", f"{SCHEMA_VERSION} (this adaptive-mj reads version {SCHEMA_VERSION})", version)
+    name = top.string("name", default_name)
+    description = top.string("description", "")
+
+    plant = _plant(top.table("plant"), base_dir)
+    sim = _simulation(top.table("simulation"), plant)
+    order = 1 if plant.kind == "first_order" else 2
+    reference = _reference(top.table("reference"))
+    law = _law(top.table("law"), plant, order)
+    noise = _noise(top.table("noise", {}), order)
+    disturbance = _disturbance(top.table("disturbance", {}))
+    events = _events(top.get("events", []), top, plant, sim)
+    log = top.table("log", {})
+    log_rate = log.number("rate_hz", 100.0, gt=0)
+    log.finish()
+    top.finish()
+    return Scenario(name=name, description=description, plant=plant, simulation=sim, reference=reference,
+                    law=law, noise=noise, disturbance=disturbance, events=events, log_rate_hz=log_rate,
+                    source=where, text=text, overrides=overrides)
+
+
+def _resolve_model(name: str, base_dir: Path) -> Path:
+    """A bundled model name ("heave_vehicle") or a path relative to the scenario file."""
+    if "/" not in name and not name.endswith(".xml"):
+        return MODELS_DIR / f"{name}.xml"
+    p = Path(name)
+    return p if p.is_absolute() else (base_dir / p)
+
+
+def _plant(t: _Table, base_dir: Path) -> PlantSpec:
+    kind = t.string("kind", choices=PLANT_KINDS)
+    backend = t.string("backend", "mujoco", choices=BACKENDS)
+    if kind == "first_order" and backend != "twin":
+        raise t.fail("backend", "'twin' for plant.kind = 'first_order' (it is not a mechanical system)", backend)
+    model_name = t.string("model", DEFAULT_MODEL.get(kind))
+    model = None if model_name is None else _resolve_model(model_name, base_dir)
+    if kind == "first_order" and "model" in t.data:
+        raise t.fail("model", "absent for plant.kind = 'first_order'", model_name)
+    joint = t.string("joint", None)
+    actuator = t.string("actuator", None)
+    payload = t.string("payload", "sphere" if kind == "arm" else None)
+    if payload == "none":
+        payload = None
+    payload_mass = t.number("payload_mass", None, gt=0)
+    site = t.string("site", "tip")
+    if kind != "arm":
+        for key in ("payload", "payload_mass", "site"):
+            if key in t.data:
+                raise t.fail(key, "absent unless plant.kind = 'arm'", t.data[key])
+    theta = t.named_numbers("theta", None)
+    if theta is not None and backend != "twin":
+        raise t.fail("theta", "absent for backend 'mujoco' (true parameters come from the compiled model)", theta)
+    if kind == "first_order" and theta is None:
+        raise ScenarioError(f"{t.where}: plant.theta is required for plant.kind = 'first_order' (e.g. {{a = 2, b = 1.5}})")
+    if theta is not None:
+        expected = {"heave": ("d", "b", "c"), "arm": ("J", "b", "g_sin", "g_cos"), "first_order": ("a", "b")}[kind]
+        if tuple(theta) != expected:
+            raise t.fail("theta", f"a table with keys {', '.join(expected)} in that order", list(theta))
+        if kind != "first_order" and theta[expected[0]] <= 0:
+            raise t.fail(f"theta.{expected[0]}", "> 0", theta[expected[0]])
+    g = t.number("g", 9.81, gt=0)
+    density = t.number("density", None, ge=0)
+    viscosity = t.number("viscosity", None, ge=0)
+    ctrl = t.numbers("ctrl_range", None, length=2)
+    if ctrl is not None and not ctrl[0] < ctrl[1]:
+        raise t.fail("ctrl_range", "[lo, hi] with lo < hi", list(ctrl))
+    t.finish()
+    return PlantSpec(kind=kind, backend=backend, model=model, joint=joint, actuator=actuator, payload=payload,
+                     payload_mass=payload_mass, site=site, theta=theta, g=g, density=density,
+                     viscosity=viscosity, ctrl_range=ctrl)
+
+
+def _simulation(t: _Table, plant: PlantSpec) -> SimulationSpec:
+    allowed = INTEGRATORS if plant.backend == "mujoco" else ("rk4", "euler")
+    integrator = t.string("integrator", "rk4", choices=allowed)
+    timestep = t.number("timestep", 0.001 if plant.model is None else None, gt=0)
+    duration = t.number("duration", gt=0)
+    if timestep is not None and timestep > duration:
+        raise t.fail("timestep", f"<= simulation.duration ({duration})", timestep)
+    order = 1 if plant.kind == "first_order" else 2
+    if t.data.get("initial_state") == "reference":
+        x0 = t.string("initial_state")  # start on the reference: x0 = [y_d(0), ..., y_d^(n-1)(0)]
+    else:
+        x0 = t.numbers("initial_state", None, length=order)
+    bound = t.number("state_bound", math.inf, gt=0, allow_inf=True)
+    t.finish()
+    return SimulationSpec(integrator=integrator, timestep=timestep, duration=duration, initial_state=x0,
+                          state_bound=bound)
+
+
+_REFERENCE_KEYS = {
+    "constant": {"value": 0.0},
+    "cosine": {"amplitude": 1.0, "omega": 1.0, "phase": 0.0, "offset": 0.0},
+    "sine": {"amplitude": 1.0, "omega": 1.0, "phase": 0.0, "offset": 0.0},
+    "sum_of_sines": {"amplitudes": None, "omegas": None, "phases": None, "offset": 0.0},
+    "smooth_step": {"start": 0.0, "end": 1.0, "t0": 1.0, "rise_time": 2.0},
+}
+
+
+def _reference(t: _Table) -> ReferenceSpec:
+    kind = t.string("kind", choices=REFERENCE_KINDS)
+    params: dict[str, Any] = {}
+    for key, default in _REFERENCE_KEYS[kind].items():
+        if key in ("amplitudes", "omegas", "phases"):
+            params[key] = t.numbers(key, None if key == "phases" else _MISSING)
+        else:
+            params[key] = t.number(key, default, gt=0 if key in ("omega", "rise_time") else None)
+    if kind == "sum_of_sines":
+        n = len(params["amplitudes"])
+        if params["phases"] is None:
+            params["phases"] = (0.0,) * n
+        if not (len(params["omegas"]) == len(params["phases"]) == n) or n == 0:
+            raise t.fail("omegas", f"as many entries as reference.amplitudes ({n})", list(params["omegas"]))
+    t.finish()
+    return ReferenceSpec(kind=kind, params=params)
+
+
+def _gamma(t: _Table):
+    v = t.get("gamma", None)
+    if v is None:
+        return None
+    if isinstance(v, dict):
+        return t.named_numbers("gamma", gt=0)
+    return t.number("gamma", gt=0)
+
+
+def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
+    default_kind = "first_order_adaptive" if plant.kind == "first_order" else "sliding_adaptive"
+    kind = t.string("kind", default_kind, choices=LAW_KINDS)
+    if (kind == "first_order_adaptive") != (plant.kind == "first_order"):
+        raise t.fail("kind", "'first_order_adaptive' exactly when plant.kind = 'first_order'", kind)
+    law_order = t.integer("order", order, ge=1)
+    if law_order != order:
+        raise t.fail("order", f"{order} for plant.kind = {plant.kind!r}", law_order)
+    lam = None if kind == "first_order_adaptive" else t.number("lambda", gt=0)
+    k = t.number("k", ge=0)
+    gamma = _gamma(t)
+    if gamma is None and kind in ("sliding_adaptive", "first_order_adaptive"):
+        raise ScenarioError(f"{t.where}: law.gamma is required for law.kind = {kind!r}")
+    dz = t.table("dead_zone", None)
+    dead_zone = None
+    if dz is not None:
+        dead_zone = DeadZoneSpec(width=dz.number("width", ge=0), on=dz.string("on", "s", choices=DEAD_ZONE_ON))
+        dz.finish()
+    initial = _estimate_table(t, "initial_estimates")
+    nominal = _estimate_table(t, "nominal")
+    if kind in ("fixed_nominal", "robust_sliding") and nominal is None:
+        raise ScenarioError(f"{t.where}: law.nominal is required for law.kind = {kind!r}")
+    K = t.number("K", None, ge=0) if kind == "robust_sliding" else None
+    phi = t.number("boundary_layer", None, gt=0) if kind == "robust_sliding" else None
+    if kind == "robust_sliding" and (K is None or phi is None):
+        raise ScenarioError(f"{t.where}: law.K and law.boundary_layer are required for law.kind = 'robust_sliding'")
+    t.finish()
+    return LawSpec(kind=kind, order=law_order, lam=lam, k=k, gamma=gamma, dead_zone=dead_zone,
+                   initial_estimates=initial, nominal=nominal, K=K, boundary_layer=phi)
+
+
+def _estimate_table(t: _Table, name: str):
+    """A table {name = value}, or the string "model": the true values of the compiled model at t = 0."""
+    if isinstance(t.data.get(name), str):
+        return t.string(name, choices=("model",))
+    return t.named_numbers(name, None)
+
+
+def _noise(t: _Table, order: int) -> NoiseSpec:
+    std = t.named_numbers("std", None) or {}
+    signals = STATE_SIGNALS[:order]
+    for key, value in std.items():
+        if key not in signals:
+            raise ScenarioError(f"{t.where}: unknown key 'noise.std.{key}' (measured signals: {', '.join(signals)})")
+        if value < 0:
+            raise t.fail(f"std.{key}", ">= 0", value)
+    seed = t.integer("seed", 0, ge=0)
+    t.finish()
+    return NoiseSpec(std=std, seed=seed)
+
+
+def _disturbance(t: _Table) -> DisturbanceSpec:
+    kind = t.string("kind", "none", choices=DISTURBANCE_KINDS)
+    spec = DisturbanceSpec(kind=kind, magnitude=t.number("magnitude", 0.0), t0=t.number("t0", 0.0, ge=0),
+                           omega=t.number("omega", 1.0, gt=0), phase=t.number("phase", 0.0))
+    t.finish()
+    return spec
+
+
+def _events(raw, top: _Table, plant: PlantSpec, sim: SimulationSpec) -> tuple[EventSpec, ...]:
+    if not isinstance(raw, list):
+        raise top.fail("events", "an array of tables ([[events]])", raw)
+    out = []
+    for i, item in enumerate(raw):
+        if not isinstance(item, dict):
+            raise top.fail(f"events[{i}]", "a table", item)
+        t = _Table(item, f"events[{i}].", top.where)
+        time = t.number("t", ge=0)
+        if time > sim.duration:
+            raise t.fail("t", f"<= simulation.duration ({sim.duration})", time)
+        kind = t.string("kind", choices=EVENT_KINDS)
+        value = t.number("value", gt=0 if kind != "constant_force" else None)
+        body = t.string("body", "payload/body")
+        needs = {"payload_mass": ("arm", "mujoco"), "fluid_density_scale": ("heave", "mujoco")}.get(kind)
+        if needs and (plant.kind, plant.backend) != needs:
+            raise t.fail("kind", f"used only with plant.kind = {needs[0]!r} on backend {needs[1]!r}", kind)
+        t.finish()
+        out.append(EventSpec(t=time, kind=kind, value=value, body=body))
+    return tuple(sorted(out, key=lambda e: e.t))
+
+
+def bundled() -> list[Path]:
+    """The bundled scenario files, sorted by name."""
+    return sorted(SCENARIOS_DIR.glob("*.toml"))

@@ -1,0 +1,91 @@
+"""Shared fixtures for the adaptive-mj test suite.
+
+Conventions used throughout:
+  * every MuJoCo model is compiled *before* any control callback is installed
+    (MuJoCo refuses to compile while a Python callback is installed);
+  * the autouse fixture below fails a test that leaves mjcb_control installed,
+    so one broken test cannot poison the compiles of the next ones;
+  * tests that expose a bug in adaptive_mj carry the ``source_bug`` marker
+    (deselect them with ``-m "not source_bug"``); they are expected to fail
+    until the source is fixed.
+"""
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from adaptive_mj.plants import heave
+from adaptive_mj.plants.mujoco_plant import compile_xml_path
+
+# Gains named in the issue (lecture 7 laws on the MuJoCo heave vehicle and arm).
+HEAVE_GAINS = dict(lam=5.0, k=200.0, gamma=[0.0025, 0.002, 0.5])
+ARM_GAINS = dict(lam=10.0, k=5.0, gamma=[0.16, 0.07, 0.025, 0.075])
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers",
+        "source_bug: exposes a bug in adaptive_mj; expected to fail until the source is fixed",
+    )
+
+
+@pytest.fixture(autouse=True)
+def _no_leaked_control_callback():
+    """Every test starts and ends with no MuJoCo control callback installed."""
+    before = mujoco.get_mjcb_control()
+    if before is not None:  # repair so later tests can still compile, then complain
+        mujoco.set_mjcb_control(None)
+        pytest.fail(f"mjcb_control was left installed before this test: {before!r}")
+    yield
+    after = mujoco.get_mjcb_control()
+    if after is not None:
+        mujoco.set_mjcb_control(None)
+        pytest.fail(f"this test left mjcb_control installed: {after!r}")
+
+
+@pytest.fixture
+def heave_gains() -> dict:
+    return dict(HEAVE_GAINS)
+
+
+@pytest.fixture
+def arm_gains() -> dict:
+    return dict(ARM_GAINS)
+
+
+@pytest.fixture
+def make_heave():
+    """Factory: a fresh MuJoCo heave plant; model options are set *before* the
+    plant is built (the plant reads the integrator when it is constructed).
+
+    make_heave(viscosity=None, integrator=None, x0=None) -> HeavePlant
+    """
+
+    def _make(*, viscosity: float | None = None, integrator=None, x0=None):
+        model = compile_xml_path(heave.MODEL_PATH)
+        if viscosity is not None:
+            model.opt.viscosity = viscosity
+        if integrator is not None:
+            model.opt.integrator = integrator
+        plant = heave.HeavePlant(model)
+        if x0 is not None:
+            plant.set_state(x0)
+        return plant
+
+    return _make
+
+
+@pytest.fixture
+def tail_rms():
+    """tail_rms(traj, seconds, t_end=None): RMS of the tracking error y_d - y over
+    the last `seconds` before t_end (default: the end of the run)."""
+
+    def _tail(traj, seconds: float, t_end: float | None = None) -> float:
+        dt = traj.meta["dt"]
+        end = traj.t[-1] + dt if t_end is None else t_end
+        sel = (traj.t >= end - seconds - 0.5 * dt) & (traj.t < end - 0.5 * dt)
+        assert sel.sum() >= int(round(seconds / dt)) - 1, "window not fully inside the run"
+        return float(np.sqrt(np.mean(traj.y_tilde[sel] ** 2)))
+
+    return _tail
