@@ -10,20 +10,21 @@ y_d = cos t it sets ddy_d = cos t; the correct value, used here, is -cos t.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 
 def _harmonic(t, amplitude, omega, phase, order, base):
-    """Derivatives of amplitude*base(omega*t + phase), base in {cos, sin}.
+    """Derivatives 0..order of amplitude*base(omega*t + phase), base in {np.cos, np.sin}.
 
-    d^k/dt^k cos(wt+p) = w^k cos(wt + p + k*pi/2), likewise for sin.
+    Exact cycle: cos -> -sin -> -cos -> sin (and sin -> cos -> -sin -> -cos),
+    times omega^k.
     """
-    t = np.asarray(t, dtype=float)
-    k = np.arange(order + 1).reshape((-1,) + (1,) * t.ndim)
-    return amplitude * omega**k * base(omega * t + phase + k * (math.pi / 2))
+    arg = omega * np.asarray(t, dtype=float) + phase
+    c, s = np.cos(arg), np.sin(arg)
+    cycle = (c, -s, -c, s) if base is np.cos else (s, c, -s, -c)
+    return np.array([amplitude * omega**k * cycle[k % 4] for k in range(order + 1)])
 
 
 @dataclass(frozen=True)

@@ -5,9 +5,6 @@ Conventions used throughout:
     (MuJoCo refuses to compile while a Python callback is installed);
   * the autouse fixture below fails a test that leaves mjcb_control installed,
     so one broken test cannot poison the compiles of the next ones;
-  * tests that expose a bug in adaptive_mj carry the ``source_bug`` marker
-    (deselect them with ``-m "not source_bug"``); they are expected to fail
-    until the source is fixed.
 """
 from __future__ import annotations
 
@@ -21,13 +18,6 @@ from adaptive_mj.plants.mujoco_plant import compile_xml_path
 # Gains named in the issue (lecture 7 laws on the MuJoCo heave vehicle and arm).
 HEAVE_GAINS = dict(lam=5.0, k=200.0, gamma=[0.0025, 0.002, 0.5])
 ARM_GAINS = dict(lam=10.0, k=5.0, gamma=[0.16, 0.07, 0.025, 0.075])
-
-
-def pytest_configure(config):
-    config.addinivalue_line(
-        "markers",
-        "source_bug: exposes a bug in adaptive_mj; expected to fail until the source is fixed",
-    )
 
 
 @pytest.fixture(autouse=True)

@@ -108,10 +108,9 @@ OBLIQUE_HULL_XML = """
 """
 
 
-@pytest.mark.source_bug
 def test_heave_true_theta_with_hull_not_aligned_to_the_joint(tmp_path):
-    """SOURCE BUG (adaptive_mj/plants/heave.py, true_theta): the drag coefficient
-    is computed as b = ½ rho sum_i A_i a_i², but MuJoCo's inertia-box drag acts
+    """Regression (was a bug in heave.true_theta): the drag coefficient
+    was computed as b = ½ rho sum_i A_i a_i², but MuJoCo's inertia-box drag acts
     per principal axis (F_i = -½ rho A_i |v_i| v_i), so along the joint
     b = ½ rho sum_i A_i |a_i|³. The two agree only when the joint is along a
     principal axis of the hull; a user's heave MJCF with a rotated hull gets a

@@ -4,9 +4,11 @@
 
 on a slide joint along world z, where (all read from the compiled model)
   d = body mass + joint armature (added mass)              [kg]
-  b = ½ rho * sum_i A_i a_i²  (inertia-box quadratic drag)  [kg/m]
+  b = ½ rho * sum_i A_i |a_i|³  (inertia-box quadratic drag)  [kg/m]
       A_i: area of the equivalent box face normal to principal axis i,
-      a_i: joint axis in the principal frame (A_z = bx*by for motion along z)
+      a_i: joint axis in the principal frame (A_z = bx*by for motion along z).
+      MuJoCo's drag acts per box axis, F_i = -½ rho A_i |v_i| v_i, and
+      v_i = a_i v, so along the joint F = -½ rho sum_i A_i |a_i|³ |v| v.
   c = body mass * (1 - gravcomp)  (net weight / g; gravcomp = rho V / m)  [kg]
   g = gravity along the joint axis                          [m/s²]
 
@@ -55,7 +57,7 @@ def true_theta(model: mujoco.MjModel, joint_id: int = 0) -> np.ndarray:
     m = float(model.body_mass[body])
     d = m + float(model.dof_armature[model.jnt_dofadr[joint_id]])
     faces = np.array([box[1] * box[2], box[0] * box[2], box[0] * box[1]])
-    b = 0.5 * float(model.opt.density) * float(faces @ a**2)
+    b = 0.5 * float(model.opt.density) * float(faces @ np.abs(a) ** 3)
     c = m * (1.0 - float(model.body_gravcomp[body]))
     return np.array([d, b, c])
 

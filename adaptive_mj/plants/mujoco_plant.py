@@ -101,9 +101,6 @@ class MujocoPlant:
         self._act = int(actuator_id)
         self.joint_id = joint_id
         self.actuator_id = actuator_id
-        self.dt = float(model.opt.timestep)
-        # control-callback calls per mj_step: 4 under RK4, else 1
-        self.stages = 4 if model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 else 1
         if model.actuator_ctrllimited[self._act]:
             lo, hi = model.actuator_ctrlrange[self._act]
             self.ctrl_range = (float(lo), float(hi))
@@ -116,6 +113,16 @@ class MujocoPlant:
         self._warning_total0 = int(self._warnings0.sum())
 
     # --- state -------------------------------------------------------------
+    @property
+    def dt(self) -> float:
+        """Physics step [s], read from the model (it may be edited after the plant is made)."""
+        return float(self.model.opt.timestep)
+
+    @property
+    def stages(self) -> int:
+        """Control-callback calls per mj_step: 4 under RK4, else 1."""
+        return 4 if self.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 else 1
+
     @property
     def time(self) -> float:
         return float(self.data.time)

@@ -37,7 +37,6 @@ class TwinPlant:
         self._theta = np.array(theta, dtype=float)
         self.dt = float(dt)
         self.integrator = Integrator(integrator)
-        self.stages = 4 if self.integrator is Integrator.RK4 else 1
         self.ctrl_range = ctrl_range
         self.x = np.zeros(form.order) if x0 is None else np.array(x0, dtype=float)
         self._t = 0.0
@@ -46,6 +45,11 @@ class TwinPlant:
         self.force_offset = 0.0  # constant external force, enters like h*u [N or N*m]
         self.disturbance = None  # t -> external force, evaluated at each step's start
         self._force = 0.0
+
+    @property
+    def stages(self) -> int:
+        """Policy calls per step: 4 under RK4, else 1."""
+        return 4 if self.integrator is Integrator.RK4 else 1
 
     @property
     def time(self) -> float:
