@@ -40,6 +40,7 @@ class Setup:
     rng: np.random.Generator
     events: list[Event]
     source: ModelSource | None
+    model_xml: str | None = None  # the compiled model as MJCF (the log's model.xml)
 
 
 def model_source(scn: Scenario) -> ModelSource | None:
@@ -62,7 +63,7 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     if source is None:
         source = model_source(scn)
     reference = _reference(scn)
-    plant = _plant(scn, source, reference)
+    plant, model_xml = _plant(scn, source, reference)
     for e in scn.events:
         if e.kind == "payload_mass":
             plant.body_id(e.body)  # a missing body fails now, not mid-run
@@ -76,16 +77,24 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     rng = np.random.default_rng(scn.noise.seed)
     plant.disturbance = _disturbance(scn)
     return Setup(plant=plant, law=law, reference=reference, theta_hat0=theta_hat0, noise_std=std,
-                 rng=rng, events=[_event(e) for e in scn.events], source=source)
+                 rng=rng, events=[_event(e) for e in scn.events], source=source, model_xml=model_xml)
 
 
 def _compile(scn: Scenario, source: ModelSource):
+    """(model, compiled MJCF text). A thruster lag turns the actuator into a first-order filter."""
     import mujoco
 
-    try:
-        model = mujoco.MjModel.from_xml_string(source.xml, source.assets or None)
-    except ValueError as exc:
-        raise ModelError(f"{scn.plant.model}: MuJoCo could not compile the model: {str(exc).strip()}") from None
+    from adaptive_mj.plants.mujoco_plant import compile_spec
+
+    lag = scn.plant.thruster_time_constant
+
+    def edit(spec):
+        if lag is not None:
+            for act in spec.actuators:
+                act.dyntype = mujoco.mjtDyn.mjDYN_FILTER
+                act.dynprm[0] = lag
+
+    model, xml = compile_spec(source.xml, source.assets, where=str(scn.plant.model), edit=edit)
     sim = scn.simulation
     model.opt.integrator = {
         "rk4": mujoco.mjtIntegrator.mjINT_RK4,
@@ -100,7 +109,7 @@ def _compile(scn: Scenario, source: ModelSource):
                             f"simulation.duration {sim.duration}")
     if scn.plant.viscosity is not None:
         model.opt.viscosity = scn.plant.viscosity
-    return model
+    return model, xml
 
 
 def _plant(scn: Scenario, source: ModelSource | None, reference):
@@ -109,8 +118,9 @@ def _plant(scn: Scenario, source: ModelSource | None, reference):
     p, sim = scn.plant, scn.simulation
     dt = sim.timestep if sim.timestep is not None else 0.001
     integrator = twin.Integrator.RK4 if sim.integrator == "rk4" else twin.Integrator.EULER
+    model_xml = None
     if p.kind == "first_order":
-        form = twin.lecture_first_order_form()
+        form = twin.sin_squared_form() if p.regressor == "sin_squared" else twin.lecture_first_order_form()
         plant = twin.TwinPlant(form, list(p.theta.values()), dt=dt, integrator=integrator, ctrl_range=p.ctrl_range)
     elif p.backend == "twin" and p.theta is not None:
         if p.kind == "heave":
@@ -123,12 +133,13 @@ def _plant(scn: Scenario, source: ModelSource | None, reference):
             form = arm_form()
         plant = twin.TwinPlant(form, list(p.theta.values()), dt=dt, integrator=integrator, ctrl_range=p.ctrl_range)
     else:
-        model = _compile(scn, source)
+        model, model_xml = _compile(scn, source)
         where = str(p.model)
         if p.kind == "heave":
             from adaptive_mj.plants.heave import HeavePlant
 
-            plant = HeavePlant(model, joint=p.joint, actuator=p.actuator, where=where)
+            plant = HeavePlant(model, joint=p.joint, actuator=p.actuator, where=where,
+                               order=scn.law.order or 2)
             if p.density is not None:
                 plant.set_fluid_density(p.density)
         else:
@@ -145,7 +156,7 @@ def _plant(scn: Scenario, source: ModelSource | None, reference):
     else:
         x0 = sim.initial_state if sim.initial_state is not None else (0.0,) * n
     plant.set_state(x0)
-    return plant
+    return plant, model_xml
 
 
 def _named(scn: Scenario, key: str, values, names: tuple[str, ...], plant=None) -> np.ndarray:

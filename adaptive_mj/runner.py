@@ -77,11 +77,7 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
 
     from adaptive_mj.record import LogHeader, Recorder
 
-    model_xml = None
-    if hasattr(plant, "model"):
-        from adaptive_mj.plants.mujoco_plant import saved_xml
-
-        model_xml = saved_xml(plant.model)
+    model_xml = setup.model_xml
     header = LogHeader(
         scenario_name=scn.name, scenario_text=scn.text, scenario_source=scn.source, overrides=scn.overrides,
         seed=scn.noise.seed, log_rate_hz=scn.log_rate_hz, dt=plant.dt, order=plant.form.order,

@@ -32,6 +32,8 @@ DISTURBANCE_KINDS = ("none", "constant", "step", "sine")
 EVENT_KINDS = ("payload_mass", "fluid_density_scale", "constant_force")
 DEFAULT_MODEL = {"heave": "heave_vehicle", "arm": "pendulum_arm"}
 STATE_SIGNALS = ("y", "y_dot", "y_ddot")
+REGRESSORS = ("lecture", "sin_squared")
+FIRST_ORDER_PARAMS = {"lecture": ("a", "b"), "sin_squared": ("p",)}
 
 
 # --------------------------------------------------------------------------
@@ -51,6 +53,8 @@ class PlantSpec:
     density: float | None
     viscosity: float | None
     ctrl_range: tuple[float, float] | None
+    thruster_time_constant: float | None = None  # heave: first-order thruster lag tau [s]
+    regressor: str = "lecture"  # first_order: "lecture" (sin x - a x + b x²) or "sin_squared"
 
 
 @dataclass(frozen=True)
@@ -324,8 +328,8 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
     description = top.string("description", "")
 
     plant = _plant(top.table("plant"), base_dir)
-    sim = _simulation(top.table("simulation"), plant)
-    order = 1 if plant.kind == "first_order" else 2
+    order = _order(doc, plant, where)
+    sim = _simulation(top.table("simulation"), plant, order)
     reference = _reference(top.table("reference"))
     law = _law(top.table("law"), plant, order)
     noise = _noise(top.table("noise", {}), order)
@@ -374,7 +378,9 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:
     if kind == "first_order" and theta is None:
         raise ScenarioError(f"{t.where}: plant.theta is required for plant.kind = 'first_order' (e.g. {{a = 2, b = 1.5}})")
     if theta is not None:
-        expected = {"heave": ("d", "b", "c"), "arm": ("J", "b", "g_sin", "g_cos"), "first_order": ("a", "b")}[kind]
+        regressor = t.data.get("regressor", "lecture")
+        expected = {"heave": ("d", "b", "c"), "arm": ("J", "b", "g_sin", "g_cos"),
+                    "first_order": FIRST_ORDER_PARAMS.get(regressor, ("a", "b"))}[kind]
         if tuple(theta) != expected:
             raise t.fail("theta", f"a table with keys {', '.join(expected)} in that order", list(theta))
         if kind != "first_order" and theta[expected[0]] <= 0:
@@ -385,20 +391,36 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:
     ctrl = t.numbers("ctrl_range", None, length=2)
     if ctrl is not None and not ctrl[0] < ctrl[1]:
         raise t.fail("ctrl_range", "[lo, hi] with lo < hi", list(ctrl))
+    lag = t.number("thruster_time_constant", None, gt=0)
+    if lag is not None and (kind != "heave" or theta is not None):
+        raise t.fail("thruster_time_constant", "absent unless plant.kind = 'heave' built from a model", lag)
+    regressor = t.string("regressor", "lecture", choices=REGRESSORS)
+    if "regressor" in t.data and kind != "first_order":
+        raise t.fail("regressor", "absent unless plant.kind = 'first_order'", regressor)
     t.finish()
     return PlantSpec(kind=kind, backend=backend, model=model, joint=joint, actuator=actuator, payload=payload,
                      payload_mass=payload_mass, site=site, theta=theta, g=g, density=density,
-                     viscosity=viscosity, ctrl_range=ctrl)
+                     viscosity=viscosity, ctrl_range=ctrl, thruster_time_constant=lag, regressor=regressor)
 
 
-def _simulation(t: _Table, plant: PlantSpec) -> SimulationSpec:
+def _order(doc: dict, plant: PlantSpec, where: str) -> int:
+    """n: 1 for first_order; 2, or 3 for a heave vehicle with a thruster lag and law.order = 3."""
+    if plant.kind == "first_order":
+        return 1
+    law = doc.get("law")
+    order = law.get("order", 2) if isinstance(law, dict) else 2
+    if order == 3 and plant.thruster_time_constant is not None:
+        return 3
+    return 2
+
+
+def _simulation(t: _Table, plant: PlantSpec, order: int) -> SimulationSpec:
     allowed = INTEGRATORS if plant.backend == "mujoco" else ("rk4", "euler")
     integrator = t.string("integrator", "rk4", choices=allowed)
     timestep = t.number("timestep", 0.001 if plant.model is None else None, gt=0)
     duration = t.number("duration", gt=0)
     if timestep is not None and timestep > duration:
         raise t.fail("timestep", f"<= simulation.duration ({duration})", timestep)
-    order = 1 if plant.kind == "first_order" else 2
     if t.data.get("initial_state") == "reference":
         x0 = t.string("initial_state")  # start on the reference: x0 = [y_d(0), ..., y_d^(n-1)(0)]
     else:
@@ -452,7 +474,8 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
         raise t.fail("kind", "'first_order_adaptive' exactly when plant.kind = 'first_order'", kind)
     law_order = t.integer("order", order, ge=1)
     if law_order != order:
-        raise t.fail("order", f"{order} for plant.kind = {plant.kind!r}", law_order)
+        allowed = "2, or 3 with plant.thruster_time_constant" if plant.kind == "heave" else str(order)
+        raise t.fail("order", f"{allowed} for plant.kind = {plant.kind!r}", law_order)
     lam = None if kind == "first_order_adaptive" else t.number("lambda", gt=0)
     k = t.number("k", ge=0)
     gamma = _gamma(t)

@@ -15,6 +15,17 @@ on a slide joint along world z, where (all read from the compiled model)
 The regressor: phi(x) = [-y'|y'|, -g], p = (b, c), f = 0, h = actuator gear.
 MuJoCo's fluid model also has a viscous term 3*pi*viscosity*mean(box)*v that
 this regressor does not model; ``unmodelled_linear_drag`` reports it.
+
+With a first-order thruster lag (actuator dyntype "filter", time constant tau:
+tau F' = gear*u - F) the plant has order 3. Differentiating
+d y'' = -b y'|y'| - c g + F and substituting F gives
+
+    tau d y^(3) = -2 tau b |y'| y'' - d y'' - b y'|y'| - c g + gear*u
+
+so theta = (tau_d, tau_b, d, b, c) and phi = [-2|y'|y'', -y'', -y'|y'|, -g].
+The order-3 plant measures y'' as a perfect accelerometer would: from the
+current thrust, passive, bias and applied forces (MuJoCo's qacc is one step
+stale inside the control callback).
 """
 from __future__ import annotations
 
@@ -29,6 +40,7 @@ from adaptive_mj.plants.mujoco_plant import MujocoPlant, compile_xml_path, find_
 
 MODEL_PATH = Path(__file__).resolve().parents[2] / "models" / "heave_vehicle.xml"
 THETA_NAMES = ("d", "b", "c")
+THETA_NAMES_LAG = ("tau_d", "tau_b", "d", "b", "c")
 
 
 def _vehicle(model, joint_id: int) -> tuple[int, np.ndarray, np.ndarray]:
@@ -49,6 +61,20 @@ def gravity_along_axis(model, joint_id: int) -> float:
     scratch = mujoco.MjData(model)
     mujoco.mj_kinematics(model, scratch)
     return float(-model.opt.gravity @ scratch.xaxis[joint_id])
+
+
+def thruster_time_constant(model: mujoco.MjModel, actuator_id: int = 0) -> float:
+    """tau [s] of a filter actuator; 0 for a direct-drive motor."""
+    if model.actuator_dyntype[actuator_id] == mujoco.mjtDyn.mjDYN_FILTER:
+        return float(model.actuator_dynprm[actuator_id, 0])
+    return 0.0
+
+
+def true_theta_lag(model: mujoco.MjModel, joint_id: int = 0, actuator_id: int = 0) -> np.ndarray:
+    """(5,) true [tau*d, tau*b, d, b, c] of the order-3 plant with thruster lag tau [s]."""
+    d, b, c = true_theta(model, joint_id)
+    tau = thruster_time_constant(model, actuator_id)
+    return np.array([tau * d, tau * b, d, b, c])
 
 
 def true_theta(model: mujoco.MjModel, joint_id: int = 0) -> np.ndarray:
@@ -77,13 +103,32 @@ def heave_form(g: float, gear: float = 1.0) -> ModelForm:
     return ModelForm(order=2, p_names=("b", "c"), phi=phi, h=lambda x: gear, d_name="d")
 
 
+def heave_lag_form(g: float, gear: float = 1.0) -> ModelForm:
+    """Order-3 regressor of the vehicle with thruster lag (see the module docstring)."""
+
+    def phi(x):
+        v, a = x[1], x[2]
+        return np.array([-2.0 * abs(v) * a, -a, -v * abs(v), -g])
+
+    return ModelForm(order=3, p_names=("tau_b", "d", "b", "c"), phi=phi, h=lambda x: gear, d_name="tau_d")
+
+
 class HeavePlant(MujocoPlant):
-    """The MuJoCo heave vehicle. Fluid density changes keep buoyancy consistent."""
+    """The MuJoCo heave vehicle. Fluid density changes keep buoyancy consistent.
+
+    order: 2 (the lecture's plant; a thruster lag, if the actuator has one, is
+    then unmodelled) or 3 (needs a filter actuator; state [y, y', y''])."""
 
     def __init__(self, model: mujoco.MjModel, *, joint: str | None = None,
-                 actuator: str | None = None, where: str = "heave model"):
+                 actuator: str | None = None, where: str = "heave model", order: int = 2):
         j, a = find_joint_and_actuator(model, joint=joint, actuator=actuator,
-                                       joint_type=mujoco.mjtJoint.mjJNT_SLIDE, where=where)
+                                       joint_type=mujoco.mjtJoint.mjJNT_SLIDE, where=where, allow_filter=True)
+        self.lag = thruster_time_constant(model, a)
+        if order not in (2, 3):
+            raise ModelError(f"{where}: the heave plant has order 2 or 3, got {order}")
+        if order == 3 and self.lag <= 0:
+            raise ModelError(f"{where}: an order-3 heave plant needs a thruster lag "
+                             "(plant.thruster_time_constant > 0)")
         g = gravity_along_axis(model, j)
         if g <= 0:
             raise ModelError(f"{where}: the slide joint must point up against gravity "
@@ -94,9 +139,38 @@ class HeavePlant(MujocoPlant):
         # displaced volume, derived once from the buoyancy written in the model
         self.volume = float(model.body_gravcomp[body] * model.body_mass[body] / model.opt.density)
         self.body_id = body
-        super().__init__(model, joint_id=j, actuator_id=a,
-                         form=heave_form(g, float(model.actuator_gear[a, 0])),
-                         theta_fn=lambda m: true_theta(m, j), where=where)
+        self.g = g
+        gear = float(model.actuator_gear[a, 0])
+        if order == 3:
+            form, theta_fn = heave_lag_form(g, gear), (lambda m: true_theta_lag(m, j, a))
+        else:
+            form, theta_fn = heave_form(g, gear), (lambda m: true_theta(m, j))
+        self._act_adr = int(model.actuator_actadr[a]) if self.lag > 0 else -1
+        super().__init__(model, joint_id=j, actuator_id=a, form=form, theta_fn=theta_fn, where=where)
+
+    def _thrust_per_act(self) -> float:
+        m, a = self.model, self.actuator_id
+        return float(m.actuator_gear[a, 0] * m.actuator_gainprm[a, 0])
+
+    def measure(self, d, x) -> None:
+        """[y, y'] or, for order 3, [y, y', y''] with y'' from the current forces."""
+        super().measure(d, x)
+        if x.size == 3:
+            m, dof = self.model, self._dadr
+            force = (self._thrust_per_act() * d.act[self._act_adr] + d.qfrc_passive[dof]
+                     - d.qfrc_bias[dof] + d.qfrc_applied[dof])
+            x[2] = force / (m.body_mass[self.body_id] + m.dof_armature[dof])
+
+    def set_state(self, x0) -> None:
+        """x0: [y, y'] or [y, y', y''] (order 3). With a thruster lag the thrust
+        starts at the value that gives y'' (0 when not given): d y'' + b y'|y'| + c g."""
+        super().set_state(x0)
+        if self._act_adr >= 0:
+            d, b, c = true_theta(self.model, self.joint_id)
+            v = float(x0[1])
+            acc = float(x0[2]) if len(x0) > 2 else 0.0
+            thrust = d * acc + b * v * abs(v) + c * self.g - self.force_offset
+            self.data.act[self._act_adr] = thrust / self._thrust_per_act()
 
     def set_fluid_density(self, rho: float) -> None:
         """New water density [kg/m³]: changes drag b and buoyancy (gravcomp = rho V / m), hence c."""

@@ -54,12 +54,13 @@ def _find(model, objtype, kind: str, name: str | None, count: int, where: str) -
 
 
 def find_joint_and_actuator(model, *, joint: str | None, actuator: str | None,
-                            joint_type: mujoco.mjtJoint, where: str) -> tuple[int, int]:
+                            joint_type: mujoco.mjtJoint, where: str,
+                            allow_filter: bool = False) -> tuple[int, int]:
     """Joint and actuator ids by name, or automatically when the model has only one.
 
     Checks: the joint has the wanted type and is the model's only degree of
     freedom, and the actuator is a direct-drive motor (gain fixed, no bias, no
-    activation dynamics) on that joint.
+    activation dynamics, or a first-order filter when allow_filter) on that joint.
     """
     j = _find(model, mujoco.mjtObj.mjOBJ_JOINT, "joint", joint, model.njnt, where)
     a = _find(model, mujoco.mjtObj.mjOBJ_ACTUATOR, "actuator", actuator, model.nu, where)
@@ -72,9 +73,10 @@ def find_joint_and_actuator(model, *, joint: str | None, actuator: str | None,
     aname = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
     if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT or model.actuator_trnid[a, 0] != j:
         raise ModelError(f"{where}: actuator {aname!r} must drive joint {jname!r}")
+    dyn_ok = [int(mujoco.mjtDyn.mjDYN_NONE)] + ([int(mujoco.mjtDyn.mjDYN_FILTER)] if allow_filter else [])
     if (model.actuator_gaintype[a] != mujoco.mjtGain.mjGAIN_FIXED
             or model.actuator_biastype[a] != mujoco.mjtBias.mjBIAS_NONE
-            or model.actuator_dyntype[a] != mujoco.mjtDyn.mjDYN_NONE):
+            or int(model.actuator_dyntype[a]) not in dyn_ok):
         raise ModelError(f"{where}: actuator {aname!r} must be a <motor> (fixed gain, no bias, no dynamics)")
     if model.jnt_stiffness[j] != 0 or model.dof_frictionloss[model.jnt_dofadr[j]] != 0:
         raise ModelError(f"{where}: joint {jname!r} has stiffness or frictionloss, "
@@ -135,10 +137,23 @@ class MujocoPlant:
         self.data.qpos[self._qadr] = x0[0]
         self.data.qvel[self._dadr] = x0[1]
 
+    def measure(self, d: mujoco.MjData, x: np.ndarray) -> None:
+        """Fill x (n,) with the law's state from MjData: here [q, q'].
+
+        Called inside the control callback, where position- and velocity-
+        dependent quantities are current. Plants of higher order override it.
+        """
+        x[0] = d.qpos[self._qadr]
+        x[1] = d.qvel[self._dadr]
+
     def observe(self) -> np.ndarray:
-        """(2,) [q, q'] from MjData."""
-        d = self.data
-        return np.array([d.qpos[self._qadr], d.qvel[self._dadr]])
+        """(n,) the law's state now, computed as the control callback would see it."""
+        x = np.empty(self.form.order)
+        if x.size > 2:  # needs forces at the current state, without firing the control callback
+            mujoco.mj_fwdPosition(self.model, self.data)
+            mujoco.mj_fwdVelocity(self.model, self.data)
+        self.measure(self.data, x)
+        return x
 
     def true_theta(self) -> np.ndarray:
         """True theta from the compiled model (cached until the model is changed)."""
@@ -154,12 +169,11 @@ class MujocoPlant:
     @contextlib.contextmanager
     def controlled_by(self, policy: Policy) -> Iterator[None]:
         """Run policy(t, x) -> u inside MuJoCo's control callback (each RK4 stage too)."""
-        qadr, dadr, act = self._qadr, self._dadr, self._act
-        x = np.empty(2)
+        act, measure = self._act, self.measure
+        x = np.empty(self.form.order)
 
         def callback(m, d):
-            x[0] = d.qpos[qadr]
-            x[1] = d.qvel[dadr]
+            measure(d, x)
             d.ctrl[act] = policy(d.time, x)
 
         with control_callback(callback):
@@ -188,11 +202,18 @@ class MujocoPlant:
         return "MuJoCo warning " + ", ".join(mujoco.mjtWarning(int(i)).name for i in new)
 
 
-def saved_xml(model: mujoco.MjModel) -> str:
-    """The compiled model as MJCF text (mj_saveLastXML): what a log attaches as model.xml."""
-    import tempfile
+def compile_spec(xml: str, assets: dict | None = None, *, where: str, edit=None) -> tuple[mujoco.MjModel, str]:
+    """Compile MJCF text through MjSpec, optionally editing the spec first.
 
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "model.xml"
-        mujoco.mj_saveLastXML(str(path), model)
-        return path.read_text(encoding="utf-8")
+    Returns the model and the compiled model as MJCF text (the log's model.xml).
+    MuJoCo's own message is passed on in a ModelError naming `where`.
+    """
+    try:
+        spec = mujoco.MjSpec.from_string(xml, assets=assets or None)
+        if edit is not None:
+            edit(spec)
+        model = spec.compile()
+    except ValueError as exc:
+        raise ModelError(f"{where}: MuJoCo could not compile the model: {str(exc).strip()}") from None
+    return model, spec.to_xml()
+

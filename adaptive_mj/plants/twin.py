@@ -122,6 +122,11 @@ def lecture_first_order_form() -> ModelForm:
     )
 
 
+def sin_squared_form() -> ModelForm:
+    """The lecture's phase-space example: x' = sin²(x) p + u (one unknown p, f = 0)."""
+    return ModelForm(order=1, p_names=("p",), phi=lambda x: np.array([np.sin(x[0]) ** 2]), d_name=None)
+
+
 def twin_of(plant, *, integrator: Integrator | None = None) -> TwinPlant:
     """A twin with the MuJoCo plant's form, true theta, timestep, limits and state."""
     import mujoco  # only the bridge from a MuJoCo plant needs it

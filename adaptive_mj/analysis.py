@@ -1,0 +1,121 @@
+"""Analyses the bench reports beyond the summary metrics: pure functions of a
+full-rate Trajectory and the run's Setup (its law and scenario events).
+Each is defined, with its formula, in docs/METRICS.md.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from adaptive_mj.trajectory import Trajectory
+
+RELATIVE_PARAM_TOLERANCE = 0.10  # "converged": every |θ̂_i − θ_i| <= 10 % of |θ_i| (or of max|θ|)
+
+
+def desired_regressor(traj: Trajectory, form) -> np.ndarray:
+    """(N, n_theta) rows [y_d^(n), phi(x_d)] (d column only when d is unknown), along the reference."""
+    n = form.order
+    xd = traj.ref[:, :n]
+    phi = np.array([form.phi(row) for row in xd])
+    if form.d_name is None:
+        return phi
+    return np.column_stack([traj.ref[:, n], phi])
+
+
+def excitation(traj: Trajectory, form, *, window: float | None = None) -> float:
+    """Excitation index: lambda_min of the normalised information matrix of the desired regressor.
+
+    M = (1/T) * integral over the last `window` seconds (default: the whole run) of psi psi^T dt,
+    normalised to a correlation matrix C = D^-1/2 M D^-1/2 (D = diag M), so the index lies in
+    [0, 1] whatever the units: 0 = some parameter direction is never excited, 1 = orthogonal columns.
+    """
+    rows = np.ones(len(traj), dtype=bool) if window is None else traj.t >= traj.t[-1] - window
+    psi = desired_regressor(traj, form)[rows]
+    M = psi.T @ psi / max(1, len(psi))
+    dg = np.sqrt(np.diag(M))
+    if np.any(dg == 0):
+        return 0.0
+    C = M / np.outer(dg, dg)
+    return float(max(0.0, np.linalg.eigvalsh(C)[0]))
+
+
+def excitation_index(traj: Trajectory, setup) -> float:
+    """`excitation` over the whole run, for the run's law form."""
+    return excitation(traj, setup.law.form)
+
+
+def relative_param_error(traj: Trajectory) -> np.ndarray:
+    """(N,) max_i |θ̂_i − θ_i| / scale_i, scale_i = |θ_i| or, for θ_i = 0, max_j |θ_j|."""
+    scale = np.abs(traj.theta)
+    floor = np.max(scale, axis=1, keepdims=True)
+    scale = np.where(scale > 0, scale, floor)
+    return np.max(np.abs(traj.theta_hat - traj.theta) / scale, axis=1)
+
+
+def drift_rate(traj: Trajectory, setup=None, *, start_fraction: float = 0.2) -> float:
+    """Growth of ||(θ̂(t) − θ̂(t0)) / |θ(t0)| || per 100 s (dimensionless fraction per 100 s).
+
+    t0 = t_start + start_fraction * run length (after the initial transient); the
+    rate is the least-squares slope of the norm over [t0, t_end], times 100.
+    """
+    t = traj.t
+    t0 = t[0] + start_fraction * (t[-1] - t[0])
+    rows = t >= t0
+    i0 = int(np.argmax(rows))
+    scale = np.abs(traj.theta[i0])
+    scale = np.where(scale > 0, scale, np.max(scale))
+    dev = np.linalg.norm((traj.theta_hat[rows] - traj.theta_hat[i0]) / scale, axis=1)
+    slope = np.polyfit(t[rows] - t0, dev, 1)[0]
+    return float(slope * 100.0)
+
+
+def first_event_time(setup) -> float | None:
+    return setup.events[0].t if setup is not None and setup.events else None
+
+
+def settle_time(t: np.ndarray, ok: np.ndarray, t_from: float) -> float | None:
+    """Time after t_from from which `ok` holds to the end of the run (None: it never settles)."""
+    rows = t >= t_from
+    tt, good = t[rows], ok[rows]
+    if tt.size == 0 or not good[-1]:
+        return None
+    bad = np.nonzero(~good)[0]
+    return 0.0 if bad.size == 0 else float(tt[bad[-1] + 1] - t_from)
+
+
+SWAP_THRESHOLD = 0.005  # rad: |ỹ| below which the arm counts as recovered after a payload swap
+
+
+def swap_response(traj: Trajectory, setup) -> dict:
+    """After the first event (payload swap): peak |ỹ|, recovery time (|ỹ| stays < SWAP_THRESHOLD),
+    re-convergence time of the estimates (relative_param_error stays <= 10 %)."""
+    t_e = first_event_time(setup)
+    if t_e is None:
+        return {}
+    after = traj.t >= t_e
+    e = np.abs(traj.y_tilde)
+    return {
+        "event_time": t_e,
+        "peak_error_after": float(e[after].max()) if after.any() else math.nan,
+        "recovery_time": settle_time(traj.t, e < SWAP_THRESHOLD, t_e),
+        "reconvergence_time": settle_time(traj.t, relative_param_error(traj) <= RELATIVE_PARAM_TOLERANCE, t_e),
+        "threshold": SWAP_THRESHOLD,
+    }
+
+
+def lyapunov_check(traj: Trajectory, setup) -> dict:
+    """V non-increasing and V' = -k s² (ideal case): the largest one-step increase of V, and
+    max |ΔV/Δt + k mean(s²)| relative to max k s² (midpoint rule, as the discrete V' check)."""
+    dt = traj.meta["dt"]
+    dV = np.diff(traj.V)
+    k = getattr(setup.law, "k", math.nan)
+    ks2 = k * 0.5 * (traj.s[:-1] ** 2 + traj.s[1:] ** 2)
+    scale = float(np.max(k * traj.s**2)) or 1.0
+    return {
+        "max_increase": float(max(0.0, dV.max())) if dV.size else 0.0,
+        "V0": float(traj.V[0]),
+        "V_end": float(traj.V[-1]),
+        "vdot_residual_rel": float(np.max(np.abs(dV / dt + ks2)) / scale) if dV.size else 0.0,
+        "dissipated": float(np.sum(ks2) * dt),
+    }
