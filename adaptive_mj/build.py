@@ -196,16 +196,16 @@ def _dead_zone(L) -> DeadZone | None:
 
 
 def _estimates(scn: Scenario, names, plant) -> np.ndarray:
+    """theta_hat(0). Baselines hold law.nominal (else law.initial_estimates); adaptive laws
+    start from law.initial_estimates (else law.nominal, else zeros)."""
     L = scn.law
-    if L.kind in ("fixed_nominal", "robust_sliding"):
-        if L.initial_estimates is not None:
-            raise ScenarioError(f"{scn.source}: law.initial_estimates does not apply to law.kind = {L.kind!r}; "
-                                "the baseline holds law.nominal")
-        return _named(scn, "law.nominal", L.nominal, names, plant)
-    if L.initial_estimates is not None:
-        return _named(scn, "law.initial_estimates", L.initial_estimates, names, plant)
-    if L.nominal is not None:
-        return _named(scn, "law.nominal", L.nominal, names, plant)
+    first, second = ("nominal", "initial_estimates")
+    if L.kind not in ("fixed_nominal", "robust_sliding"):
+        first, second = second, first
+    for key in (first, second):
+        values = getattr(L, key)
+        if values is not None:
+            return _named(scn, f"law.{key}", values, names, plant)
     return np.zeros(len(names))
 
 

@@ -11,7 +11,7 @@ import json
 import sys
 from pathlib import Path
 
-from adaptive_mj.errors import AdaptiveMJError
+from adaptive_mj.errors import AdaptiveMJError, LogFormatError
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -119,6 +119,8 @@ def cmd_replay(args) -> int:
     from adaptive_mj.metrics import clean_json, summary as make_summary
     from adaptive_mj.replay import read_log
 
+    if not args.log.is_file():
+        raise LogFormatError(f"{args.log}: no such log file")
     logged = read_log(args.log)
     summary = logged.summary
     if summary is None:  # truncated: summarise what was recovered

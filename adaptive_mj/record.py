@@ -20,7 +20,8 @@ full layout is in docs/LOG_FORMAT.md; `adaptive_mj.replay.read_log` reads it.
 Bounded loss: each `write_rows` call ends by closing the chunk in progress
 and flushing the file, so a run killed at any instant leaves a readable file
 that holds every row of every completed `write_rows` call. The loop calls
-`write_rows` once per simulated second by default.
+`write_rows` every `sink_every` physics steps (1000 by default: 1 s at
+dt = 1 ms), so that block is the most a killed run loses.
 """
 from __future__ import annotations
 
@@ -43,8 +44,8 @@ ROW_TOPICS = ("/state", "/reference", "/control", "/estimates", "/true_params", 
 EVENT_TOPIC = "/events"
 SUMMARY_TOPIC = "/summary"
 
-#: Key of the optional payload object that carries non-finite values ("inf", "-inf", "nan")
-#: for fields written as JSON null.
+#: Key of the optional payload object that carries the non-finite values ("inf", "-inf",
+#: "nan") of fields left out of a row message.
 NONFINITE_KEY = "nonfinite"
 
 HEADER_METADATA = "adaptive_mj"
@@ -138,18 +139,17 @@ def _check_header(header: LogHeader) -> None:
             raise ValueError(f"LogHeader.model_assets must map str to bytes, got {name!r}")
 
 
-def _number_property(description: str) -> dict:
-    # null stands for a non-finite value; its exact value is in the "nonfinite" object.
-    return {"type": ["number", "null"], "description": description}
-
-
 def _row_schema(title: str, description: str, fields: Mapping[str, str]) -> dict:
-    properties = {"t": {"type": "number", "description": "simulation time [s]"}}
-    properties.update({name: _number_property(text) for name, text in fields.items()})
+    """JSON Schema of a row payload {t, fields...}. Kept to what Foxglove's JSON Schema
+    parser accepts: one "type" string per property, "properties" on every object."""
+    properties: dict[str, dict] = {"t": {"type": "number", "description": "simulation time [s]"}}
+    absent = f"absent when non-finite (see {NONFINITE_KEY})"
+    properties.update({name: {"type": "number", "description": f"{text}; {absent}"}
+                       for name, text in fields.items()})
     properties[NONFINITE_KEY] = {
         "type": "object",
-        "description": "present only when a field is null: its value, 'inf', '-inf' or 'nan'",
-        "additionalProperties": {"type": "string", "enum": ["inf", "-inf", "nan"]},
+        "description": "present only when a field is non-finite: its value, 'inf', '-inf' or 'nan'",
+        "properties": {name: {"type": "string", "enum": ["inf", "-inf", "nan"]} for name in fields},
     }
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
@@ -157,7 +157,7 @@ def _row_schema(title: str, description: str, fields: Mapping[str, str]) -> dict
         "description": description,
         "type": "object",
         "properties": properties,
-        "required": ["t", *fields],
+        "required": ["t"],
         "additionalProperties": False,
     }
 
@@ -212,18 +212,23 @@ def _template(fields: tuple[str, ...]) -> str:
     return "{" + ",".join(f"{json.dumps(k)}:%r" for k in keys) + "}"
 
 
+def _dumps(payload: Any) -> bytes:
+    """Compact, standard JSON (no NaN/Infinity literals)."""
+    return json.dumps(payload, allow_nan=False, separators=(",", ":")).encode()
+
+
 def _slow_payload(fields: tuple[str, ...], values: list[float]) -> bytes:
-    """Payload of a row with non-finite values: those become null, listed in "nonfinite"."""
+    """Payload of a row with non-finite values: those are left out and listed in "nonfinite"
+    (JSON has no inf/nan, and an absent field is a gap in a Foxglove plot)."""
     payload: dict[str, Any] = {"t": values[0]}
     nonfinite = {}
     for name, v in zip(fields, values[1:]):
         if math.isfinite(v):
             payload[name] = v
         else:
-            payload[name] = None
             nonfinite[name] = "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")
     payload[NONFINITE_KEY] = nonfinite
-    return json.dumps(payload, allow_nan=False).encode()
+    return _dumps(payload)
 
 
 def jsonable(value: Any, where: str = "value") -> Any:
@@ -264,7 +269,8 @@ def _ns(t: float) -> int:
 class Recorder:
     """Writes one run to an MCAP file at `path`; implements `loop.Sink`.
 
-    path: the log's file; it must not exist yet (a log is never overwritten).
+    path: the log's file, written in place (created, or truncated if it exists:
+    the caller picks the path and reserves it, see runner.reserve_log_path).
     header: what the run is (see LogHeader); written first and flushed, so even
     a run killed before its first row leaves a readable log.
     flush_every_rows: besides the flush at the end of every write_rows call,
@@ -282,7 +288,8 @@ class Recorder:
         _check_header(header)
         if flush_every_rows is not None and (not isinstance(flush_every_rows, int)
                                              or flush_every_rows < 1):
-            raise ValueError(f"flush_every_rows must be an int >= 1 or None, got {flush_every_rows!r}")
+            raise ValueError(f"flush_every_rows must be an int >= 1 or None, "
+                             f"got {flush_every_rows!r}")
         self.path = os.fspath(path)
         self.header = header
         self.log_every = header.log_every
@@ -294,7 +301,7 @@ class Recorder:
         self._t_last = 0.0        # latest simulation time written [s]
         self._closed = False
 
-        self._file = open(self.path, "xb")
+        self._file = open(self.path, "wb")
         try:
             self._writer = Writer(self._file, compression=CompressionType.ZSTD)
             self._writer.start(library=f"adaptive_mj log format {LOG_FORMAT_VERSION}; "
@@ -366,14 +373,16 @@ class Recorder:
             raise ValueError(f"write_rows: rows must come in order; got k0={k0} after "
                              f"step {self._next_k - 1} was written")
         t = np.asarray(t, dtype=float)
-        n = t.shape[0] if t.ndim == 1 else -1
+        if t.ndim != 1:
+            raise ValueError(f"write_rows: t has shape {t.shape}, expected (N,)")
+        n = t.shape[0]
         cols = {"x": (x, (n, self.order)), "u": (u, (n,)), "s": (s, (n,)),
                 "ref": (ref, (n, self.order + 1)), "theta_hat": (theta_hat, (n, len(self.names))),
                 "theta": (theta, (n, len(self.names))), "V": (V, (n,))}
         arrays = {}
         for name, (value, shape) in cols.items():
             a = np.asarray(value, dtype=float)
-            if n < 0 or a.shape != shape:
+            if a.shape != shape:
                 raise ValueError(f"write_rows: {name} has shape {a.shape}, expected {shape} "
                                  f"(t has shape {t.shape}, order {self.order}, "
                                  f"params {self.names})")
@@ -420,13 +429,13 @@ class Recorder:
         ns = _ns(t)
         payload = {"t": t, "label": str(label)}
         payload.update(jsonable(detail, "write_event detail"))
-        self._writer.add_message(self._channels[EVENT_TOPIC], ns,
-                                 json.dumps(payload, allow_nan=False).encode(), ns)
+        self._writer.add_message(self._channels[EVENT_TOPIC], ns, _dumps(payload), ns)
         self._t_last = max(self._t_last, t)
 
     # -- closing --------------------------------------------------------------
 
-    def close(self, status: str, reason: str = "", summary: Mapping[str, Any] | None = None) -> None:
+    def close(self, status: str, reason: str = "",
+              summary: Mapping[str, Any] | None = None) -> None:
         """Write /summary ({...summary, status, reason}) and the "status" metadata,
         then finish the file (summary section and footer). status: one of CLOSE_STATUSES."""
         self._check_open()
@@ -439,8 +448,7 @@ class Recorder:
                                  f"the {key} argument {value!r}")
             payload[key] = value
         ns = _ns(self._t_last)
-        self._writer.add_message(self._channels[SUMMARY_TOPIC], ns,
-                                 json.dumps(payload, allow_nan=False).encode(), ns)
+        self._writer.add_message(self._channels[SUMMARY_TOPIC], ns, _dumps(payload), ns)
         self._writer.flush()
         self._writer.add_metadata(STATUS_METADATA, {"status": status, "reason": str(reason)})
         self._writer.finish()

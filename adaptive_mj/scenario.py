@@ -488,8 +488,8 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
         dz.finish()
     initial = _estimate_table(t, "initial_estimates")
     nominal = _estimate_table(t, "nominal")
-    if kind in ("fixed_nominal", "robust_sliding") and nominal is None:
-        raise ScenarioError(f"{t.where}: law.nominal is required for law.kind = {kind!r}")
+    if kind in ("fixed_nominal", "robust_sliding") and nominal is None and initial is None:
+        raise ScenarioError(f"{t.where}: law.nominal (or law.initial_estimates) is required for law.kind = {kind!r}")
     K = t.number("K", None, ge=0) if kind == "robust_sliding" else None
     phi = t.number("boundary_layer", None, gt=0) if kind == "robust_sliding" else None
     if kind == "robust_sliding" and (K is None or phi is None):

@@ -18,7 +18,7 @@ class Trajectory:
     theta_hat: (N, n_theta) estimates; theta: (N, n_theta) true values
     V: (N,) the law's Lyapunov function
     names: parameter names, len n_theta
-    status: "ok", "diverged", "interrupted" or "truncated"
+    status: "ok", "diverged", "interrupted", "failed" or "truncated"
     """
 
     t: np.ndarray

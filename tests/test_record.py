@@ -1,0 +1,563 @@
+"""MCAP run log: Recorder writes, read_log reads back, bit for bit, whole or cut."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import signal
+import struct
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from adaptive_mj import record
+from adaptive_mj.errors import LogFormatError
+from adaptive_mj.record import LogHeader, Recorder
+from adaptive_mj.replay import JsonDecoderFactory, read_log
+
+DT = 0.001          # physics step [s]
+RATE = 100.0        # logging rate [Hz]
+LOG_EVERY = 10      # = round(1 / (RATE * DT))
+NAMES = ("d", "b", "c")
+ROW_TOPICS = ("/state", "/reference", "/control", "/estimates", "/true_params", "/lyapunov")
+
+
+def make_header(*, order: int = 2, names=NAMES, model: bool = True, **kw) -> LogHeader:
+    fields = dict(
+        scenario_name="heave_tracking",
+        scenario_text='name = "heave_tracking"\n[law]\ngamma = 2.0\n',
+        scenario_source="scenarios/heave_tracking.toml",
+        overrides=("law.gamma=2.0", "duration=5"),
+        seed=7,
+        log_rate_hz=RATE,
+        dt=DT,
+        order=order,
+        param_names=tuple(names),
+        model_xml="<mujoco model='saved'/>" if model else None,
+        model_source="<mujoco model='source'/>" if model else None,
+        model_assets={"mesh.stl": b"\x00\x01binary\xff"} if model else {},
+        versions={"adaptive_mj": "0.1.0", "mujoco": "3.17.0", "mcap": "1.6.0"},
+        created_unix=1_700_000_000.25,
+    )
+    fields.update(kw)
+    return LogHeader(**fields)
+
+
+def synthetic(n: int, *, order: int = 2, n_theta: int = 3, seed: int = 0) -> dict:
+    """n physics steps of plausible rows with full-precision floats."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * DT
+    x = np.column_stack([np.sin(t + j) + 1e-3 * rng.standard_normal(n) for j in range(order)])
+    ref = np.column_stack([np.sin(t + j) for j in range(order + 1)])
+    s = 1e-2 * rng.standard_normal(n)
+    theta_hat = np.column_stack([1 + 0.1 * np.sin(t * (j + 1)) + 1e-4 * rng.standard_normal(n)
+                                 for j in range(n_theta)])
+    return dict(t=t, x=x, u=10 * np.cos(t) + rng.standard_normal(n), s=s, ref=ref,
+                theta_hat=theta_hat, theta=np.tile(np.arange(1.0, n_theta + 1) * 0.7, (n, 1)),
+                V=0.5 * s**2 + rng.random(n))
+
+
+def write_block(rec: Recorder, rows: dict, k0: int, k1: int) -> None:
+    sl = slice(k0, k1)
+    rec.write_rows(k0, rows["t"][sl], rows["x"][sl], rows["u"][sl], rows["s"][sl],
+                   rows["ref"][sl], rows["theta_hat"][sl], rows["theta"][sl], rows["V"][sl])
+
+
+def write_log(path, rows: dict, *, block: int = 1000, close: bool = True, header=None,
+              events=((0.5, "payload swap", {"mass": 2.5}), (2.0, "gust", {}))) -> Recorder:
+    n = len(rows["t"])
+    rec = Recorder(path, header or make_header(order=rows["x"].shape[1],
+                                               names=NAMES[:rows["theta"].shape[1]]))
+    pending = sorted(events)
+    for k0 in range(0, n, block):
+        while pending and pending[0][0] <= rows["t"][k0]:
+            t_e, label, detail = pending.pop(0)
+            rec.write_event(t_e, label, **detail)
+        write_block(rec, rows, k0, min(n, k0 + block))
+    if close:
+        rec.close("ok", "", {"rmse_y": 0.0123, "n_rows": rec.rows_written})
+    return rec
+
+
+def assert_rows_equal(traj, rows: dict, keep) -> None:
+    assert np.array_equal(traj.t, rows["t"][keep])
+    assert np.array_equal(traj.x, rows["x"][keep])
+    assert np.array_equal(traj.u, rows["u"][keep])
+    assert np.array_equal(traj.s, rows["s"][keep])
+    assert np.array_equal(traj.ref, rows["ref"][keep])
+    assert np.array_equal(traj.theta_hat, rows["theta_hat"][keep])
+    assert np.array_equal(traj.theta, rows["theta"][keep])
+    assert np.array_equal(traj.V, rows["V"][keep])
+
+
+@pytest.fixture
+def full_log(tmp_path):
+    rows = synthetic(5000)
+    path = tmp_path / "run.mcap"
+    write_log(path, rows)
+    return path, rows
+
+
+# -- round trip ---------------------------------------------------------------------------------
+
+def test_round_trip_is_exact(full_log):
+    path, rows = full_log
+    run = read_log(path)
+    assert run.status == "ok" and run.note == ""
+    assert run.recovered_rows == 500
+    traj = run.trajectory
+    assert_rows_equal(traj, rows, slice(0, None, LOG_EVERY))
+    assert traj.names == NAMES
+    assert traj.status == "ok" and traj.reason == ""
+    assert traj.meta["dt"] == DT and traj.meta["order"] == 2 and traj.meta["log_every"] == LOG_EVERY
+    assert run.summary == {"rmse_y": 0.0123, "n_rows": 500, "status": "ok", "reason": ""}
+
+
+def test_header_metadata_and_model_round_trip(full_log):
+    path, _ = full_log
+    run = read_log(path)
+    h = make_header()
+    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION
+    assert run.header["scenario_name"] == h.scenario_name
+    assert run.header["scenario_source"] == h.scenario_source
+    assert run.header["seed"] == 7 and run.header["order"] == 2
+    assert run.header["dt"] == DT and run.header["log_rate_hz"] == RATE
+    assert run.header["log_every"] == LOG_EVERY
+    assert run.header["param_names"] == list(NAMES)
+    assert run.header["created_unix"] == h.created_unix
+    assert run.header["versions"] == h.versions
+    assert run.scenario_text == h.scenario_text
+    assert run.overrides == h.overrides
+    assert run.model_xml == h.model_xml and run.model_source == h.model_source
+    assert run.model_assets == h.model_assets
+
+
+def test_events_round_trip(full_log):
+    path, _ = full_log
+    run = read_log(path)
+    assert run.events == [{"t": 0.5, "label": "payload swap", "mass": 2.5},
+                          {"t": 2.0, "label": "gust"}]
+    assert run.trajectory.meta["events"] == [(0.5, "payload swap"), (2.0, "gust")]
+
+
+@pytest.mark.parametrize("block", [333, 1000, 7])
+def test_decimation_keeps_global_steps_divisible_by_log_every(tmp_path, block):
+    rows = synthetic(2500)
+    path = tmp_path / "run.mcap"
+    write_log(path, rows, block=block, events=())
+    traj = read_log(path).trajectory
+    k = np.flatnonzero(np.isin(rows["t"], traj.t))
+    assert np.array_equal(k, np.arange(0, 2500, LOG_EVERY))
+    assert_rows_equal(traj, rows, slice(0, None, LOG_EVERY))
+
+
+def test_log_every_follows_rate_and_step():
+    assert make_header(log_rate_hz=100.0, dt=0.001).log_every == 10
+    assert make_header(log_rate_hz=2000.0, dt=0.001).log_every == 1
+    assert make_header(log_rate_hz=30.0, dt=0.002).log_every == 17
+
+
+def test_first_order_log(tmp_path):
+    rows = synthetic(3000, order=1, n_theta=2)
+    path = tmp_path / "first.mcap"
+    write_log(path, rows, events=())
+    run = read_log(path)
+    assert run.status == "ok"
+    assert run.trajectory.x.shape == (300, 1) and run.trajectory.ref.shape == (300, 2)
+    assert run.trajectory.names == ("d", "b")
+    assert_rows_equal(run.trajectory, rows, slice(0, None, LOG_EVERY))
+
+
+def test_non_finite_values_round_trip(tmp_path):
+    rows = synthetic(100)
+    rows["u"][50] = math.inf
+    rows["V"][50] = math.nan
+    rows["theta_hat"][60, 1] = -math.inf
+    path = tmp_path / "diverged.mcap"
+    rec = Recorder(path, make_header())
+    write_block(rec, rows, 0, 100)
+    rec.close("diverged", "non-finite control inf", {"rmse_y": float("nan")})
+    run = read_log(path)
+    assert run.status == "diverged" and run.trajectory.reason == "non-finite control inf"
+    traj = run.trajectory
+    assert traj.u[5] == math.inf and math.isnan(traj.V[5]) and traj.theta_hat[6, 1] == -math.inf
+    assert np.array_equal(traj.u, rows["u"][::LOG_EVERY])
+    assert np.array_equal(traj.V, rows["V"][::LOG_EVERY], equal_nan=True)
+    assert run.summary["rmse_y"] is None      # non-finite summary values become null
+    with open(path, "rb") as f:
+        control = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages("/control")]
+    y_tilde = rows["ref"][50, 0] - rows["x"][50, 0]
+    assert control[5] == {"t": 0.05, "s": rows["s"][50], "y_tilde": y_tilde,
+                          "nonfinite": {"u": "inf"}}
+
+
+@settings(max_examples=40, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(values=st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=40, max_size=40))
+def test_any_float_round_trips_bit_for_bit(tmp_path, values):
+    rows = synthetic(40)
+    v = np.array(values)
+    rows["u"], rows["V"] = v, v[::-1].copy()
+    rows["x"][:, 1] = v
+    rows["theta_hat"][:, 2] = -v
+    path = tmp_path / f"floats{len(list(tmp_path.iterdir()))}.mcap"
+    rec = Recorder(path, make_header(log_rate_hz=1000.0))
+    write_block(rec, rows, 0, 40)
+    rec.close("ok", "", {})
+    traj = read_log(path).trajectory
+    for name in ("u", "V", "x", "theta_hat"):
+        got, want = getattr(traj, name), rows[name]
+        assert np.array_equal(got, want, equal_nan=True), name
+        number = ~np.isnan(want)
+        assert np.array_equal(np.signbit(got[number]), np.signbit(want[number])), name   # -0.0
+
+
+def test_same_inputs_give_the_same_bytes(tmp_path):
+    rows = synthetic(2000)
+    write_log(tmp_path / "a.mcap", rows)
+    write_log(tmp_path / "b.mcap", rows)
+    assert (tmp_path / "a.mcap").read_bytes() == (tmp_path / "b.mcap").read_bytes()
+
+
+def assert_foxglove_can_parse(schema: dict, where: str) -> None:
+    """The subset of JSON Schema that Foxglove's parseJsonSchema accepts: an object with
+    "properties", each property one "type" string; nested objects recurse."""
+    assert schema["type"] == "object" and isinstance(schema["properties"], dict), where
+    for name, prop in schema["properties"].items():
+        assert prop["type"] in ("boolean", "string", "number", "integer", "object", "array"), \
+            f"{where}.{name}: {prop['type']!r}"
+        if prop["type"] == "object":
+            assert_foxglove_can_parse(prop, f"{where}.{name}")
+
+
+# -- what standard MCAP tools see ---------------------------------------------------------------
+
+def test_channels_have_json_schemas(full_log):
+    path, _ = full_log
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[JsonDecoderFactory()])
+        summary = reader.get_summary()
+        topics = {ch.topic: ch for ch in summary.channels.values()}
+        assert set(topics) == {*ROW_TOPICS, "/events", "/summary"}
+        first = {}
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            assert message.log_time == message.publish_time
+            if "t" in decoded:
+                assert message.log_time == round(decoded["t"] * 1e9)
+            first.setdefault(channel.topic, decoded)
+    for topic, channel in topics.items():
+        assert channel.message_encoding == "json"
+        schema = summary.schemas[channel.schema_id]
+        assert schema.encoding == "jsonschema"
+        body = json.loads(schema.data)
+        assert_foxglove_can_parse(body, topic)
+        assert set(body["required"]) <= set(first[topic])
+        if not body["additionalProperties"]:
+            assert set(first[topic]) <= set(body["properties"])
+    estimates = json.loads(summary.schemas[topics["/estimates"].schema_id].data)
+    assert set(estimates["properties"]) == {"t", *NAMES, "nonfinite"}
+    assert set(first["/state"]) == {"t", "y", "y_dot"}
+    assert set(first["/reference"]) == {"t", "y_d", "y_d_dot", "y_d_ddot"}
+    assert set(first["/control"]) == {"t", "u", "s", "y_tilde"}
+    assert set(first["/lyapunov"]) == {"t", "V"}
+    assert summary.statistics.message_count == 500 * 6 + 2 + 1
+
+
+def test_metadata_and_attachments_present(full_log):
+    path, _ = full_log
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+        attachments = {a.name: a for a in reader.iter_attachments()}
+    assert set(metadata) == {"adaptive_mj", "scenario", "status"}
+    assert metadata["adaptive_mj"]["log_format_version"] == "1"
+    assert metadata["adaptive_mj"]["log_every"] == "10"
+    assert json.loads(metadata["adaptive_mj"]["param_names"]) == list(NAMES)
+    assert metadata["adaptive_mj"]["version.mujoco"] == "3.17.0"
+    assert metadata["status"] == {"status": "ok", "reason": ""}
+    assert set(attachments) == {"model.xml", "model_source.xml", "asset/mesh.stl"}
+    assert attachments["model.xml"].media_type == "application/xml"
+
+
+def test_log_without_model(tmp_path):
+    rows = synthetic(500)
+    path = tmp_path / "nomodel.mcap"
+    write_log(path, rows, header=make_header(model=False), events=())
+    run = read_log(path)
+    assert run.model_xml is None and run.model_source is None and run.model_assets == {}
+
+
+# -- cut and killed logs ------------------------------------------------------------------------
+
+def test_truncated_logs_recover_a_prefix(full_log, tmp_path):
+    path, rows = full_log
+    data = path.read_bytes()
+    full = read_log(path).trajectory
+    counts = []
+    for tenth in range(1, 10):
+        cut = tmp_path / f"cut{tenth}.mcap"
+        cut.write_bytes(data[:len(data) * tenth // 10])
+        run = read_log(cut)
+        assert run.status == "truncated" and run.trajectory.status == "truncated"
+        assert run.summary is None
+        n = run.recovered_rows
+        assert len(run.trajectory) == n
+        span = n * LOG_EVERY * DT
+        assert run.note.startswith(f"recovered {n} rows ({span:.1f} s) of a truncated log")
+        for name in ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V"):
+            assert np.array_equal(getattr(run.trajectory, name), getattr(full, name)[:n])
+        counts.append(n)
+    assert counts == sorted(counts)
+    assert counts[-1] >= 400 and counts[-1] > counts[0]
+
+
+def test_killed_run_leaves_a_readable_prefix_after_every_block(tmp_path):
+    rows = synthetic(4000)
+    path = tmp_path / "live.mcap"
+    rec = Recorder(path, make_header())
+    snapshot = tmp_path / "snapshot.mcap"
+    shutil.copyfile(path, snapshot)            # killed before the first row
+    assert snapshot.stat().st_size > 0
+    run = read_log(snapshot)
+    assert run.status == "truncated" and run.recovered_rows == 0
+    assert run.scenario_text == make_header().scenario_text
+    for k0 in range(0, 4000, 1000):
+        write_block(rec, rows, k0, k0 + 1000)
+        shutil.copyfile(path, snapshot)        # what a SIGKILL right now would leave
+        run = read_log(snapshot)
+        assert run.status == "truncated"
+        assert_rows_equal(run.trajectory, rows, slice(0, k0 + 1000, LOG_EVERY))
+    rec.close("ok", "", {})
+
+
+_KILLED_WRITER = textwrap.dedent("""
+    import sys
+    import numpy as np
+    from adaptive_mj.record import LogHeader, Recorder
+    path = sys.argv[1]
+    header = LogHeader(scenario_name="killed", scenario_text="", scenario_source="", overrides=(),
+                       seed=0, log_rate_hz=100.0, dt=0.001, order=2, param_names=("d", "b", "c"),
+                       model_xml=None, model_source=None)
+    rec = Recorder(path, header)
+    for block in range(1000):
+        k0 = 1000 * block
+        t = (k0 + np.arange(1000)) * 0.001
+        one = np.ones(1000)
+        rec.write_rows(k0, t, np.column_stack([t, one]), t, t, np.column_stack([t, one, one]),
+                       np.column_stack([t, t, t]), np.ones((1000, 3)), t)
+        print(block + 1, flush=True)
+        sys.stdin.readline()
+""")
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs POSIX SIGKILL")
+def test_sigkilled_process_leaves_every_written_block(tmp_path):
+    path = tmp_path / "killed.mcap"
+    with subprocess.Popen([sys.executable, "-c", _KILLED_WRITER, str(path)],
+                          stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True) as proc:
+        try:
+            for _ in range(3):
+                blocks = int(proc.stdout.readline())
+                proc.stdin.write("\n")
+                proc.stdin.flush()
+            blocks = int(proc.stdout.readline())   # 4 blocks written; kill it mid-run
+        finally:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+    assert blocks == 4
+    run = read_log(path)
+    assert run.status == "truncated" and run.recovered_rows == 400
+    assert np.array_equal(run.trajectory.t, np.arange(0, 4000, 10) * 0.001)
+    assert run.note == "recovered 400 rows (4.0 s) of a truncated log " \
+                       f"(the file ends at byte {path.stat().st_size} without a footer)"
+
+
+def test_flush_every_rows_bounds_loss_inside_long_blocks(tmp_path):
+    rows = synthetic(3000)
+    path = tmp_path / "long.mcap"
+    rec = Recorder(path, make_header(), flush_every_rows=50)
+    # Die in the middle of one long write_rows call (at row 120): flushed chunks survive.
+    class Killed(BaseException):
+        pass
+
+    original = rec._writer.add_message
+    calls = []
+
+    def dying_add(*args, **kw):
+        calls.append(1)
+        if len(calls) == 6 * 120 + 3:
+            raise Killed
+        return original(*args, **kw)
+
+    rec._writer.add_message = dying_add
+    with pytest.raises(Killed):
+        write_block(rec, rows, 0, 3000)
+    rec._file.close()
+    run = read_log(path)
+    assert run.status == "truncated" and run.recovered_rows == 100
+
+
+def test_footer_missing_but_summary_written(full_log, tmp_path):
+    path, rows = full_log
+    data = path.read_bytes()
+    cut = tmp_path / "nofooter.mcap"
+    cut.write_bytes(data[:-20])
+    run = read_log(cut)
+    assert run.status == "ok" and run.recovered_rows == 500
+    assert "footer is missing" in run.note
+
+
+# -- context manager ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("exc, status", [(KeyboardInterrupt, "interrupted"),
+                                         (RuntimeError, "failed")])
+def test_context_manager_records_how_the_run_ended(tmp_path, exc, status):
+    rows = synthetic(1000)
+    path = tmp_path / "cm.mcap"
+    with pytest.raises(exc):
+        with Recorder(path, make_header()) as rec:
+            write_block(rec, rows, 0, 1000)
+            raise exc("stop")
+    run = read_log(path)
+    assert run.status == status and run.recovered_rows == 100
+    assert run.trajectory.reason == f"{exc.__name__}: stop"
+
+
+def test_context_manager_closes_ok(tmp_path):
+    rows = synthetic(1000)
+    with Recorder(tmp_path / "cm.mcap", make_header()) as rec:
+        write_block(rec, rows, 0, 1000)
+    assert rec.closed and read_log(tmp_path / "cm.mcap").status == "ok"
+
+
+def test_recorder_refuses_bad_use(tmp_path):
+    path = tmp_path / "x.mcap"
+    rec = Recorder(path, make_header())
+    rows = synthetic(100)
+    with pytest.raises(ValueError, match=r"x has shape \(100, 3\), expected \(100, 2\)"):
+        rec.write_rows(0, rows["t"], np.zeros((100, 3)), rows["u"], rows["s"], rows["ref"],
+                       rows["theta_hat"], rows["theta"], rows["V"])
+    write_block(rec, rows, 0, 100)
+    with pytest.raises(ValueError, match="rows must come in order"):
+        write_block(rec, rows, 50, 100)
+    with pytest.raises(ValueError, match="status must be one of"):
+        rec.close("great", "", {})
+    rec.close("ok", "", {})
+    with pytest.raises(RuntimeError, match="already closed"):
+        write_block(rec, rows, 0, 100)
+    with pytest.raises(ValueError, match="param_names"):
+        Recorder(tmp_path / "y.mcap", make_header(param_names=("t", "b")))
+    assert not (tmp_path / "y.mcap").exists()
+
+
+# -- unreadable files ---------------------------------------------------------------------------
+
+def test_zero_byte_file(tmp_path):
+    path = tmp_path / "empty.mcap"
+    path.write_bytes(b"")
+    with pytest.raises(LogFormatError, match=r"empty\.mcap: empty file \(0 bytes\)"):
+        read_log(path)
+
+
+def test_non_mcap_file(tmp_path):
+    path = tmp_path / "notes.mcap"
+    path.write_text("name = 'not a log'\n")
+    with pytest.raises(LogFormatError, match=r"notes\.mcap: not an MCAP file"):
+        read_log(path)
+
+
+def test_mcap_from_another_tool(tmp_path):
+    path = tmp_path / "other.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(library="someone-else")
+        sid = w.register_schema("S", "jsonschema", b"{}")
+        cid = w.register_channel("/x", "json", sid)
+        w.add_message(cid, 0, b"{}", 0)
+        w.finish()
+    with pytest.raises(LogFormatError,
+                       match=r"other\.mcap: MCAP file without 'adaptive_mj' metadata"
+                             r".*someone-else"):
+        read_log(path)
+
+
+def test_newer_log_format(tmp_path, monkeypatch):
+    monkeypatch.setattr(record, "LOG_FORMAT_VERSION", record.LOG_FORMAT_VERSION + 1)
+    path = tmp_path / "future.mcap"
+    write_log(path, synthetic(200), events=())
+    monkeypatch.undo()
+    with pytest.raises(LogFormatError, match=r"future\.mcap: log format version 2 is newer"):
+        read_log(path)
+
+
+def _chunk_offsets(path) -> list[int]:
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    return sorted(c.chunk_start_offset for c in summary.chunk_indexes)
+
+
+def _break_crc(data: bytearray, chunk_offset: int) -> None:
+    crc_at = chunk_offset + 9 + 8 + 8 + 8       # opcode, length, start, end, uncompressed size
+    (crc,) = struct.unpack_from("<I", data, crc_at)
+    struct.pack_into("<I", data, crc_at, crc ^ 0xFFFF)
+
+
+def test_crc_mismatch_in_first_chunk_is_unrecoverable(full_log, tmp_path):
+    path, _ = full_log
+    data = bytearray(path.read_bytes())
+    _break_crc(data, _chunk_offsets(path)[0])
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(LogFormatError, match=r"bad\.mcap: a damaged chunk at byte \d+ \(crc "
+                                             r"validation failed.*nothing to recover"):
+        read_log(bad)
+
+
+def test_crc_mismatch_later_recovers_the_rows_before_it(full_log, tmp_path):
+    path, rows = full_log
+    data = bytearray(path.read_bytes())
+    offsets = _chunk_offsets(path)
+    _break_crc(data, offsets[2])
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    run = read_log(bad)
+    assert run.status == "truncated" and run.recovered_rows == 200
+    assert run.note.startswith(
+        f"recovered 200 rows (2.0 s) before a damaged chunk at byte {offsets[2]}")
+    assert_rows_equal(run.trajectory, rows, slice(0, 2000, LOG_EVERY))
+    assert run.summary is None
+    assert run.note.endswith("; the run itself ended with status 'ok'")   # later chunk intact
+    assert run.events == [{"t": 0.5, "label": "payload swap", "mass": 2.5}]
+
+
+def test_no_input_bytes_escape_as_another_exception(tmp_path):
+    rows = synthetic(300)
+    path = tmp_path / "small.mcap"
+    write_log(path, rows, block=100)
+    data = path.read_bytes()
+    rng = np.random.default_rng(1)
+    probe = tmp_path / "probe.mcap"
+    cases = [data[:n] for n in range(0, len(data), 13)]
+    for _ in range(300):
+        mutated = bytearray(data)
+        for at in rng.integers(0, len(data), size=rng.integers(1, 4)):
+            mutated[at] = int(rng.integers(0, 256))
+        cases.append(bytes(mutated))
+    cases += [b"\x89MCAP0\r\n", b"\x89MCAP0\r\n" + bytes(100), b"\x89MCAP0\r\n" + b"\xff" * 64]
+    for case in cases:
+        probe.write_bytes(case)
+        try:
+            run = read_log(probe)
+        except LogFormatError as e:
+            assert "probe.mcap" in str(e) and "\n" not in str(e)
+        else:
+            assert run.status in ("ok", "truncated")
+            assert len(run.trajectory) == run.recovered_rows
