@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -44,6 +45,22 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("--plot", type=Path, metavar="FILE.png", help="draw tracking, error, u and s, estimates, V")
     rp.add_argument("--verify", action="store_true",
                     help="re-simulate from the log's scenario and model; report whether bit-identical")
+    b = sub.add_parser("bench", help="run the benchmark catalogue: report.md, figures, logs, summary.json")
+    b.add_argument("--quick", action="store_true", help="shorter runs and fewer variants (about 2 minutes)")
+    b.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
+    b.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: all cores)")
+
+    sw = sub.add_parser("sweep", help="run a scenario over a grid of keys and seeds, in parallel")
+    sw.add_argument("scenario", help="a scenario file, or the name of a bundled one")
+    sw.add_argument("--grid", action="append", default=[], metavar="KEY=LO:HI:N",
+                    help="a grid axis: KEY=LO:HI:N (N values, linear) or KEY=V1,V2,... (repeatable); "
+                         "KEY is a dotted scenario key or a bare key that names one uniquely")
+    sw.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    sw.add_argument("--seeds", type=int, default=1, help="seeds 0..N-1 per grid point")
+    sw.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    sw.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
+    sw.add_argument("--metric", action="append", default=[],
+                    help="metric(s) to plot against the grid (default: rms_tracking_error_tail)")
     return p
 
 
@@ -145,6 +162,15 @@ def cmd_replay(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
+        if args.command == "bench":
+            from adaptive_mj.bench import main_bench
+
+            return main_bench(args)
+        if args.command == "sweep":
+            from adaptive_mj.sweep import main_sweep
+
+            args.scenario = _scenario_path(args.scenario)
+            return main_sweep(args)
         return {"list": cmd_list, "run": cmd_run, "replay": cmd_replay}[args.command](args)
     except AdaptiveMJError as exc:
         if args.debug:
