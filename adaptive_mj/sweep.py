@@ -1,0 +1,542 @@
+"""`adaptive-mj sweep`: one scenario over a grid of keys × seeds, in parallel.
+
+    --grid exprs ──► parse_grid (one axis each) ──► grid_points ──► every point validated (scenario.load)
+                 ──► one Job per point × seed, each logging to DIR/logs/ ──► parallel.run_jobs
+                 ──► rows ──► DIR/sweep.csv, DIR/sweep.json, DIR/sweep.png, a table on stdout
+
+A grid axis is ``KEY=LO:HI:N`` (N values linearly spaced from LO to HI, both
+included; N = 1 gives LO) or ``KEY=V1,V2,...`` (TOML values). KEY is a dotted
+scenario key (``law.k``, ``noise.std.y``) or a bare key (``payload_mass``)
+that names exactly one key of the scenario or one documented key of a section.
+Bad input raises ScenarioError before anything runs (exit 2); a run that
+diverges or fails is recorded and the others go on (exit 1).
+"""
+from __future__ import annotations
+
+import csv
+import difflib
+import itertools
+import json
+import math
+import re
+import sys
+import tomllib
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from adaptive_mj import scenario as sc
+from adaptive_mj.errors import AdaptiveMJError, ScenarioError
+from adaptive_mj.metrics import metrics as run_metrics
+from adaptive_mj.parallel import Job, JobResult, progress_printer, run_jobs
+from adaptive_mj.trajectory import Trajectory
+
+EXIT_OK, EXIT_FAILED = 0, 1
+DEFAULT_METRIC = "rms_tracking_error_tail"
+LOG_SPAN = 100.0  # a plotted quantity spanning more than this ratio (2 decades) gets a log axis
+
+# The keys docs/SCENARIOS.md documents per section (tests check each one is there), so that a bare
+# grid key can name a key the scenario file leaves at its default, e.g. viscosity -> plant.viscosity.
+# The reference keys depend on reference.kind and are taken from the validator's own table.
+DOCUMENTED_KEYS: dict[str, tuple[str, ...]] = {
+    "plant": ("kind", "backend", "model", "joint", "actuator", "payload", "payload_mass", "site", "theta",
+              "g", "density", "viscosity", "ctrl_range", "thruster_time_constant", "regressor"),
+    "simulation": ("integrator", "timestep", "duration", "initial_state", "state_bound"),
+    "law": ("kind", "order", "lambda", "k", "gamma", "dead_zone.width", "dead_zone.on", "initial_estimates",
+            "nominal", "K", "boundary_layer"),
+    "noise": ("std",) + tuple(f"std.{signal}" for signal in sc.STATE_SIGNALS) + ("seed",),
+    "disturbance": ("kind", "magnitude", "t0", "omega", "phase"),
+    "log": ("rate_hz",),
+}
+TOP_LEVEL = ("schema_version", "name", "description", "reference", "events") + tuple(DOCUMENTED_KEYS)
+_KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
+
+# plant.kind -> (output y, control u) units; first_order has neither.
+PLANT_UNITS = {"heave": ("m", "N"), "arm": ("rad", "N·m")}
+_OUTPUT_METRICS = ("rms_tracking_error", "rms_tracking_error_tail", "max_abs_tracking_error_tail")
+_CONTROL_METRICS = ("control_rms", "control_total_variation")
+_KEY_UNITS = {"plant.payload_mass": "kg", "plant.density": "kg/m³", "plant.viscosity": "Pa·s",
+              "plant.thruster_time_constant": "s", "simulation.duration": "s", "simulation.timestep": "s",
+              "law.lambda": "1/s", "reference.omega": "rad/s", "disturbance.omega": "rad/s"}
+
+
+# --------------------------------------------------------------------------
+# grid expressions
+def _expected(expr: str) -> ScenarioError:
+    return ScenarioError(f"--grid {expr!r}: expected KEY=LO:HI:N or KEY=V1,V2,...")
+
+
+def _split_top_level(raw: str, sep: str) -> list[str]:
+    """raw split at `sep` outside quotes, [arrays] and {inline tables}; parts stripped."""
+    parts, depth, quote, start = [], 0, "", 0
+    for i, ch in enumerate(raw):
+        if quote:
+            if ch == quote and raw[i - 1] != "\\":
+                quote = ""
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth -= 1
+        elif ch == sep and depth == 0:
+            parts.append(raw[start:i].strip())
+            start = i + 1
+    parts.append(raw[start:].strip())
+    return parts
+
+
+def _paths(node: dict, prefix: str = "") -> list[str]:
+    """Every dotted key of a parsed document, tables and their entries (not inside arrays)."""
+    out = []
+    for name, value in node.items():
+        path = f"{prefix}{name}"
+        out.append(path)
+        if isinstance(value, dict):
+            out += _paths(value, f"{path}.")
+    return out
+
+
+def known_keys(doc: dict) -> list[str]:
+    """The keys a grid may name: those in the document and the documented keys of its sections."""
+    keys = [p for p in _paths(doc) if p not in TOP_LEVEL or not isinstance(doc.get(p), dict)]
+    keys += [f"{section}.{key}" for section, names in DOCUMENTED_KEYS.items() for key in names]
+    ref = doc.get("reference")
+    kind = ref.get("kind") if isinstance(ref, dict) else None
+    keys += [f"reference.{key}" for key in ("kind", *sc._REFERENCE_KEYS.get(kind, {}))]
+    return list(dict.fromkeys(keys))
+
+
+def resolve_key(key: str, doc: dict, *, expr: str) -> str:
+    """A dotted key from a section (used as is), or the one known key that ends with `key`."""
+    if not _KEY.match(key):
+        raise ScenarioError(f"--grid {expr!r}: key {key!r} must be a dotted scenario key like law.k "
+                            "or a bare key like payload_mass")
+    if key.split(".")[0] in TOP_LEVEL or key.split(".")[0] in doc:
+        return key
+    known = known_keys(doc)
+    matches = [k for k in known if k.endswith(f".{key}")]
+    if len(matches) == 1:
+        return matches[0]
+    if matches:
+        raise ScenarioError(f"--grid {expr!r}: {key!r} is ambiguous: it could be {', '.join(matches)}; "
+                            "write the dotted key")
+    by_name = {k.rsplit(".", 1)[-1]: k for k in reversed(known)}
+    close = [by_name[n] for n in difflib.get_close_matches(key.rsplit(".", 1)[-1], list(by_name), n=3)]
+    hint = f" (candidates: {', '.join(close)})" if close else " (write a dotted key like law.k)"
+    raise ScenarioError(f"--grid {expr!r}: no scenario key named {key!r}{hint}")
+
+
+def _number(text: str, *, expr: str, what: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise ScenarioError(f"--grid {expr!r}: {what} must be a finite number, got {text!r} "
+                            "(expected KEY=LO:HI:N)")
+    return value
+
+
+def _linear(raw: str, *, expr: str) -> list[float]:
+    parts = _split_top_level(raw, ":")
+    if len(parts) != 3:
+        raise _expected(expr)
+    lo = _number(parts[0], expr=expr, what="LO")
+    hi = _number(parts[1], expr=expr, what="HI")
+    try:
+        n = int(parts[2])
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ScenarioError(f"--grid {expr!r}: N must be an integer >= 1, got {parts[2]!r} (expected KEY=LO:HI:N)")
+    return [float(v) for v in np.linspace(lo, hi, n)]
+
+
+def _explicit(raw: str, *, expr: str) -> list[Any]:
+    if not raw:
+        raise ScenarioError(f"--grid {expr!r}: empty value list (expected KEY=V1,V2,...)")
+    items = _split_top_level(raw, ",")
+    for i, item in enumerate(items):
+        if not item:
+            raise ScenarioError(f"--grid {expr!r}: value {i + 1} is empty (expected KEY=V1,V2,...)")
+    return [sc.parse_value(item, what=f"--grid {expr!r}") for item in items]
+
+
+def parse_grid(expr: str, doc: dict) -> tuple[str, list[Any]]:
+    """One --grid expression -> (dotted key, its values).
+
+    doc: the scenario's parsed TOML (after --set overrides), used to resolve bare keys.
+    """
+    if "=" not in expr:
+        raise _expected(expr)
+    key, raw = (part.strip() for part in expr.split("=", 1))
+    if not key:
+        raise _expected(expr)
+    key = resolve_key(key, doc, expr=expr)
+    if len(_split_top_level(raw, ":")) > 1:
+        return key, _linear(raw, expr=expr)
+    return key, _explicit(raw, expr=expr)
+
+
+def grid_points(axes: Sequence[tuple[str, Sequence[Any]]]) -> list[dict[str, Any]]:
+    """The product of the axes, first axis slowest: [{key: value, ...}, ...]."""
+    keys = [key for key, _ in axes]
+    return [dict(zip(keys, combo)) for combo in itertools.product(*(values for _, values in axes))]
+
+
+# --------------------------------------------------------------------------
+# values as TOML text (overrides) and as short labels (file names, tables)
+def to_toml(value: Any) -> str:
+    """A TOML value's text: to_toml(v) parsed back gives v."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, list):
+        return "[" + ", ".join(to_toml(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k if _KEY.match(k) and '.' not in k else json.dumps(k)} = {to_toml(v)}"
+                               for k, v in value.items()) + "}"
+    return str(value)  # TOML dates and times print as TOML
+
+
+def label(value: Any) -> str:
+    """A short readable text for a grid value: 4 significant digits for floats."""
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, str):
+        return value
+    return to_toml(value)
+
+
+def short_names(keys: Sequence[str]) -> dict[str, str]:
+    """key without its section (law.gamma.J -> gamma.J), or the whole key where two axes would clash."""
+    last = [k.split(".", 1)[-1] for k in keys]
+    return {k: (n if last.count(n) == 1 else k) for k, n in zip(keys, last)}
+
+
+def run_name(index: int, point: dict[str, Any], seed: int, *, names: dict[str, str], width: int = 4) -> str:
+    """E.g. 0007-payload_mass=1.36-seed2 (characters unsafe in file names become _)."""
+    parts = [f"{names[k]}={label(v)}" for k, v in point.items()]
+    text = re.sub(r"[^A-Za-z0-9._=+-]+", "_", "-".join(parts))[:80]
+    return f"{index:0{width}d}-{text}-seed{seed}"
+
+
+# --------------------------------------------------------------------------
+# results -> rows -> files
+def scalar_metric_names() -> list[str]:
+    """The metric names of a summary's "metrics", param_error_final left to its entries."""
+    empty = Trajectory(t=np.zeros(0), x=np.zeros((0, 1)), u=np.zeros(0), s=np.zeros(0), ref=np.zeros((0, 2)),
+                       theta_hat=np.zeros((0, 0)), theta=np.zeros((0, 0)), V=np.zeros(0), names=())
+    return [k for k, v in run_metrics(empty).items() if not isinstance(v, dict)]
+
+
+def flat_metrics(summary: dict | None) -> dict[str, Any]:
+    """A summary's metrics with tables flattened: param_error_final.J, ..."""
+    out: dict[str, Any] = {}
+    for name, value in (summary or {}).get("metrics", {}).items():
+        if isinstance(value, dict):
+            out.update({f"{name}.{k}": v for k, v in value.items()})
+        else:
+            out[name] = value
+    return out
+
+
+def rows(results: Sequence[tuple[dict[str, Any], JobResult]], *, root: Path) -> list[dict[str, Any]]:
+    """One row per run: its name (the job's tag), grid values, seed, status, reason (why it diverged or
+    failed), the summary's metrics flattened, log (relative to root; "" if the run wrote none)."""
+    out = []
+    for point, result in results:
+        summary = result.summary
+        reason = result.error if result.status == "error" else (summary or {}).get("reason", "")
+        log = result.job.log
+        row = {"run": result.job.tag, **point, "seed": result.job.seed, "status": result.status, "reason": reason}
+        row.update(flat_metrics(summary))
+        row["log"] = log.relative_to(root).as_posix() if log is not None and log.is_file() else ""
+        out.append(row)
+    return out
+
+
+def columns(table: Sequence[dict[str, Any]]) -> list[str]:
+    """Every column in first-seen order, with `log` last."""
+    cols = list(dict.fromkeys(k for row in table for k in row if k != "log"))
+    return cols + ["log"]
+
+
+def write_csv(table: Sequence[dict[str, Any]], path: Path) -> Path:
+    """sweep.csv: numbers as Python writes them (exact floats), missing as empty, tables as TOML."""
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        writer = csv.DictWriter(f, fieldnames=columns(table))
+        writer.writeheader()
+        for row in table:
+            writer.writerow({k: "" if v is None else v if isinstance(v, (str, int, float)) else to_toml(v)
+                             for k, v in row.items()})
+    return path
+
+
+def write_json(inputs: dict[str, Any], table: Sequence[dict[str, Any]], path: Path) -> Path:
+    """sweep.json: {"inputs": ..., "counts": {status: n}, "rows": [...]} (non-finite numbers as null)."""
+    counts: dict[str, int] = {}
+    for row in table:
+        counts[row["status"]] = counts.get(row["status"], 0) + 1
+    from adaptive_mj.metrics import clean_json
+
+    doc = clean_json({"inputs": inputs, "counts": counts, "rows": list(table)})
+    path.write_text(json.dumps(doc, indent=1, ensure_ascii=False, default=str) + "\n", encoding="utf-8")
+    return path
+
+
+@dataclass(frozen=True)
+class PointStats:
+    """One grid point's metric over its seeds (ok runs only): mean, min, max, and n_ok of n runs."""
+
+    point: dict[str, Any]
+    mean: float
+    lo: float
+    hi: float
+    n_ok: int
+    n: int
+
+
+def point_stats(table: Sequence[dict[str, Any]], keys: Sequence[str], metric: str) -> list[PointStats]:
+    """The metric per grid point, over the seeds whose run is ok (NaN where none has a value)."""
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for row in table:
+        groups.setdefault(to_toml([row[k] for k in keys]), []).append(row)
+    out = []
+    for group in groups.values():
+        ok = [r for r in group if r["status"] == "ok"]
+        vals = np.array([r.get(metric) for r in ok if isinstance(r.get(metric), (int, float))], dtype=float)
+        vals = vals[np.isfinite(vals)]
+        mean, lo, hi = (float(vals.mean()), float(vals.min()), float(vals.max())) if vals.size else (math.nan,) * 3
+        out.append(PointStats({k: group[0][k] for k in keys}, mean, lo, hi, len(ok), len(group)))
+    return out
+
+
+def metric_label(metric: str, plant_kind: str) -> str:
+    """The metric name with its unit where known (tracking errors in the plant's output unit)."""
+    y_unit, u_unit = PLANT_UNITS.get(plant_kind, ("", ""))
+    unit = y_unit if metric in _OUTPUT_METRICS else u_unit if metric in _CONTROL_METRICS else ""
+    return f"{metric} [{unit}]" if unit else metric
+
+
+def key_label(key: str, plant_kind: str) -> str:
+    y_unit = PLANT_UNITS.get(plant_kind, ("", ""))[0]
+    unit = _KEY_UNITS.get(key) or {"noise.std.y": y_unit, "noise.std.y_dot": y_unit and f"{y_unit}/s"}.get(key, "")
+    return f"{key} [{unit}]" if unit else key
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _spans_decades(values: Sequence[float]) -> bool:
+    v = np.asarray([x for x in values if math.isfinite(x)], dtype=float)
+    return v.size > 1 and bool(np.all(v > 0)) and v.max() / v.min() > LOG_SPAN
+
+
+def plot_sweep(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Sequence[str], path: Path, *,
+               plant_kind: str = "", title: str = "") -> Path:
+    """One panel per metric against the first grid key; one line per value of the other keys.
+
+    Each point is the mean over the seeds whose run is ok, the band their min–max;
+    an x in the line's colour at the bottom marks a grid point where some run was not ok.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.transforms import blended_transform_factory
+
+    x_key, others = keys[0], list(keys[1:])
+    numeric_x = all(_is_number(r[x_key]) for r in table)
+    x_ticks = {to_toml(r[x_key]): label(r[x_key]) for r in table}  # categorical axis: value -> tick label
+    position = list(x_ticks).index
+
+    def x_of(st: PointStats) -> Any:
+        return st.point[x_key] if numeric_x else position(to_toml(st.point[x_key]))
+
+    names = short_names(keys)
+    seeds = len({r["seed"] for r in table})
+    fig, axes = plt.subplots(len(metrics), 1, figsize=(8, 3.6 * len(metrics) + 0.6), sharex=True,
+                             constrained_layout=True, squeeze=False)
+    for ax, metric in zip(axes[:, 0], metrics):
+        stats = point_stats(table, keys, metric)
+        series: dict[str, list[PointStats]] = {}
+        for st in stats:
+            series.setdefault(", ".join(label(st.point[k]) for k in others), []).append(st)
+        for i, (name, sts) in enumerate(series.items()):
+            xs = [x_of(st) for st in sts]
+            mean = np.array([st.mean for st in sts])
+            lo, hi = np.array([st.lo for st in sts]), np.array([st.hi for st in sts])
+            color = f"C{i % 10}"
+            ax.plot(xs, mean, "o-", color=color, lw=1.5, ms=4, label=name or "mean")
+            if seeds > 1:
+                ax.fill_between(xs, lo, hi, color=color, alpha=0.2, lw=0)
+            bad = [x_of(st) for st in sts if st.n_ok < st.n]
+            ax.plot(bad, [0.03] * len(bad), "x", color=color, ms=9, mew=2.5, clip_on=False,
+                    transform=blended_transform_factory(ax.transData, ax.transAxes))
+        bad = [st for st in stats if st.n_ok < st.n]
+        if bad:
+            ax.plot([], [], "x", color="grey", ms=9, mew=2.5, label="× some run not ok")
+        plotted = [v for st in stats for v in (st.mean, st.lo, st.hi)]
+        if _spans_decades(plotted):
+            ax.set_yscale("log")
+        ax.set_ylabel(metric_label(metric, plant_kind))
+        ax.grid(alpha=0.3, which="both")
+        if len(series) > 1 or bad:
+            ax.legend(title=", ".join(key_label(k, plant_kind) for k in others) or None, fontsize=8, title_fontsize=8,
+                      loc="best", ncol=2 if len(series) > 6 else 1)
+    ax = axes[-1, 0]
+    if numeric_x and _spans_decades([float(r[x_key]) for r in table]):
+        ax.set_xscale("log")
+    if not numeric_x:
+        ax.set_xticks(range(len(x_ticks)), list(x_ticks.values()))
+    ax.set_xlabel(key_label(x_key, plant_kind))
+    n_ok = sum(r["status"] == "ok" for r in table)
+    spread = f"mean over {seeds} seeds, band min–max" if seeds > 1 else "1 seed"
+    text = f"{spread}; {n_ok}/{len(table)} runs ok" + (" (the others left out)" if n_ok < len(table) else "")
+    axes[0, 0].set_title(f"{title}: {text}" if title else text, fontsize=10)
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def summary_table(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Sequence[str]) -> str:
+    """Text: one line per grid point with its values, each metric's mean over ok seeds, and ok/total."""
+    names = short_names(keys)
+    stats = {m: point_stats(table, keys, m) for m in metrics}
+    head = [names[k] for k in keys] + [f"mean {m}" for m in metrics] + ["ok/total"]
+    lines = []
+    for i, st in enumerate(stats[metrics[0]]):
+        cells = [label(st.point[k]) for k in keys]
+        cells += ["n/a" if math.isnan(stats[m][i].mean) else f"{stats[m][i].mean:.4g}" for m in metrics]
+        lines.append(cells + [f"{st.n_ok}/{st.n}"])
+    widths = [max(len(r[c]) for r in [head, *lines]) for c in range(len(head))]
+    return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths)) for r in [head, *lines])
+
+
+# --------------------------------------------------------------------------
+# the command
+def output_dir(out: Path | None, scenario_name: str, *, logs_dir: Path) -> Path:
+    """Create and return the sweep's folder: `out` if new or empty, else a new logs_dir/sweep-<name>-<UTC>."""
+    if out is not None:
+        out = Path(out)
+        if out.exists() and (not out.is_dir() or any(out.iterdir())):
+            raise AdaptiveMJError(f"{out}: exists and is not an empty folder; choose a new -o DIR")
+        out.mkdir(parents=True, exist_ok=True)
+        return out
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    logs_dir.mkdir(parents=True, exist_ok=True)
+    for i in range(10_000):
+        path = logs_dir / (f"sweep-{scenario_name}-{stamp}" + (f"-{i}" if i else ""))
+        try:
+            path.mkdir()
+            return path
+        except FileExistsError:
+            continue
+    raise AdaptiveMJError(f"{logs_dir}: could not find a free folder name for sweep-{scenario_name}-{stamp}")
+
+
+def _document(path: Path, overrides: Sequence[str]) -> tuple[dict, sc.Scenario]:
+    """The scenario as parsed TOML after the overrides (for key resolution), and validated."""
+    scn = sc.load(path, overrides=list(overrides))
+    doc = tomllib.loads(scn.text)
+    for expr in overrides:
+        sc.apply_override(doc, expr, where=str(path))
+    return doc, scn
+
+
+def _axes(exprs: Sequence[str], doc: dict) -> list[tuple[str, list[Any]]]:
+    if not exprs:
+        raise ScenarioError("sweep needs at least one --grid KEY=LO:HI:N or KEY=V1,V2,...")
+    axes: list[tuple[str, list[Any]]] = []
+    for expr in exprs:
+        key, values = parse_grid(expr, doc)
+        if key == "noise.seed":
+            raise ScenarioError(f"--grid {expr!r}: noise.seed is set per run; use --seeds N for seeds 0..N-1")
+        if key in (k for k, _ in axes):
+            raise ScenarioError(f"--grid {expr!r}: {key} is already a grid axis")
+        axes.append((key, values))
+    return axes
+
+
+def _metrics(requested: Sequence[str]) -> list[str]:
+    names = [n.strip() for item in requested for n in item.split(",") if n.strip()] or [DEFAULT_METRIC]
+    known = scalar_metric_names()
+    for name in names:
+        if name not in known and not name.startswith("param_error_final."):
+            raise ScenarioError(f"--metric {name!r}: expected one of {', '.join(known)} "
+                                "or param_error_final.<parameter>")
+    return list(dict.fromkeys(names))
+
+
+def _grid_overrides(point: dict[str, Any]) -> list[str]:
+    return [f"{key}={to_toml(value)}" for key, value in point.items()]
+
+
+def _validate_points(path: Path, overrides: Sequence[str], points: Sequence[dict[str, Any]]) -> None:
+    for point in points:
+        try:
+            sc.load(path, overrides=[*overrides, *_grid_overrides(point)])
+        except ScenarioError as exc:
+            where = ", ".join(f"{k}={label(v)}" for k, v in point.items())
+            raise ScenarioError(f"grid point {where}: {exc}") from None
+
+
+def main_sweep(args) -> int:
+    """Run the sweep the CLI parsed (see the module docstring); returns the exit code."""
+    from adaptive_mj.runner import LOGS_DIR
+
+    if args.seeds < 1:
+        raise ScenarioError(f"--seeds must be an integer >= 1, got {args.seeds}")
+    if args.jobs < 1:
+        raise ScenarioError(f"--jobs must be an integer >= 1, got {args.jobs}")
+    path = Path(args.scenario)
+    doc, base = _document(path, args.overrides)
+    axes = _axes(args.grid, doc)
+    keys = [key for key, _ in axes]
+    metrics = _metrics(args.metric)
+    points = grid_points(axes)
+    _validate_points(path, args.overrides, points)
+
+    out = output_dir(args.output, base.name, logs_dir=LOGS_DIR)
+    names = short_names(keys)
+    total = len(points) * args.seeds
+    width = max(4, len(str(total - 1)))
+    planned: list[tuple[dict[str, Any], Job]] = []
+    for p, point in enumerate(points):
+        for seed in range(args.seeds):
+            name = run_name(p * args.seeds + seed, point, seed, names=names, width=width)
+            job = Job(path, overrides=(*args.overrides, *_grid_overrides(point)), seed=seed,
+                      log=out / "logs" / f"{name}.mcap", tag=name)
+            planned.append((point, job))
+    print(f"sweep: {len(points)} grid point(s) x {args.seeds} seed(s) = {total} runs of {base.name} "
+          f"in {min(args.jobs, total)} processes -> {out}", file=sys.stderr)
+    results = run_jobs([job for _, job in planned], n_jobs=min(args.jobs, total),
+                       on_done=progress_printer(total, label="runs"))
+
+    table = rows([(point, result) for (point, _), result in zip(planned, results)], root=out)
+    inputs = {"scenario": str(path), "scenario_name": base.name,
+              "grid": [{"expr": expr, "key": key, "values": values} for expr, (key, values) in zip(args.grid, axes)],
+              "overrides": list(args.overrides), "seeds": args.seeds, "metrics": metrics,
+              "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+    write_csv(table, out / "sweep.csv")
+    write_json(inputs, table, out / "sweep.json")
+    plot_sweep(table, keys, metrics, out / "sweep.png", plant_kind=base.plant.kind, title=base.name)
+
+    print(summary_table(table, keys, metrics))
+    not_ok = [r for r in table if r["status"] != "ok"]
+    for row in not_ok[:5]:
+        print(f"  {row['run']}: {row['status']}: {row['reason']}", file=sys.stderr)
+    if len(not_ok) > 5:
+        print(f"  ... and {len(not_ok) - 5} more (see sweep.csv)", file=sys.stderr)
+    print(f"{total - len(not_ok)}/{total} runs ok; output: {out}")
+    return EXIT_OK if not not_ok else EXIT_FAILED
