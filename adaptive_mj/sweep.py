@@ -1,6 +1,6 @@
 """`adaptive-mj sweep`: one scenario over a grid of keys × seeds, in parallel.
 
-    --grid exprs ──► parse_grid (one axis each) ──► grid_points ──► every point validated (scenario.load)
+    --grid exprs ──► parse_grid (one axis each) ──► grid_points ──► each point validated (scenario.load)
                  ──► one Job per point × seed, each logging to DIR/logs/ ──► parallel.run_jobs
                  ──► rows ──► DIR/sweep.csv, DIR/sweep.json, DIR/sweep.png, a table on stdout
 
@@ -30,7 +30,7 @@ import numpy as np
 
 from adaptive_mj import scenario as sc
 from adaptive_mj.errors import AdaptiveMJError, ScenarioError
-from adaptive_mj.metrics import metrics as run_metrics
+from adaptive_mj.metrics import clean_json, metrics as run_metrics
 from adaptive_mj.parallel import Job, JobResult, progress_printer, run_jobs
 from adaptive_mj.trajectory import Trajectory
 
@@ -38,9 +38,9 @@ EXIT_OK, EXIT_FAILED = 0, 1
 DEFAULT_METRIC = "rms_tracking_error_tail"
 LOG_SPAN = 100.0  # a plotted quantity spanning more than this ratio (2 decades) gets a log axis
 
-# The keys docs/SCENARIOS.md documents per section (tests check each one is there), so that a bare
-# grid key can name a key the scenario file leaves at its default, e.g. viscosity -> plant.viscosity.
-# The reference keys depend on reference.kind and are taken from the validator's own table.
+# The keys of each section (docs/SCENARIOS.md), so that a bare grid key can name a key the scenario
+# file leaves at its default, e.g. viscosity -> plant.viscosity; tests/test_sweep.py checks that the
+# validator reads every one. The reference keys depend on reference.kind: the validator's own table.
 DOCUMENTED_KEYS: dict[str, tuple[str, ...]] = {
     "plant": ("kind", "backend", "model", "joint", "actuator", "payload", "payload_mass", "site", "theta",
               "g", "density", "viscosity", "ctrl_range", "thruster_time_constant", "regressor"),
@@ -102,7 +102,7 @@ def _paths(node: dict, prefix: str = "") -> list[str]:
 
 def known_keys(doc: dict) -> list[str]:
     """The keys a grid may name: those in the document and the documented keys of its sections."""
-    keys = [p for p in _paths(doc) if p not in TOP_LEVEL or not isinstance(doc.get(p), dict)]
+    keys = _paths(doc)
     keys += [f"{section}.{key}" for section, names in DOCUMENTED_KEYS.items() for key in names]
     ref = doc.get("reference")
     kind = ref.get("kind") if isinstance(ref, dict) else None
@@ -285,8 +285,6 @@ def write_json(inputs: dict[str, Any], table: Sequence[dict[str, Any]], path: Pa
     counts: dict[str, int] = {}
     for row in table:
         counts[row["status"]] = counts.get(row["status"], 0) + 1
-    from adaptive_mj.metrics import clean_json
-
     doc = clean_json({"inputs": inputs, "counts": counts, "rows": list(table)})
     path.write_text(json.dumps(doc, indent=1, ensure_ascii=False, default=str) + "\n", encoding="utf-8")
     return path
@@ -372,6 +370,7 @@ def plot_sweep(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Se
         for st in stats:
             series.setdefault(", ".join(label(st.point[k]) for k in others), []).append(st)
         for i, (name, sts) in enumerate(series.items()):
+            sts = sorted(sts, key=x_of)
             xs = [x_of(st) for st in sts]
             mean = np.array([st.mean for st in sts])
             lo, hi = np.array([st.lo for st in sts]), np.array([st.hi for st in sts])
@@ -380,11 +379,12 @@ def plot_sweep(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Se
             if seeds > 1:
                 ax.fill_between(xs, lo, hi, color=color, alpha=0.2, lw=0)
             bad = [x_of(st) for st in sts if st.n_ok < st.n]
-            ax.plot(bad, [0.03] * len(bad), "x", color=color, ms=9, mew=2.5, clip_on=False,
-                    transform=blended_transform_factory(ax.transData, ax.transAxes))
+            if bad:
+                ax.plot(bad, [0.03] * len(bad), "x", color=color, ms=9, mew=2.5, clip_on=False,
+                        transform=blended_transform_factory(ax.transData, ax.transAxes))
         bad = [st for st in stats if st.n_ok < st.n]
         if bad:
-            ax.plot([], [], "x", color="grey", ms=9, mew=2.5, label="× some run not ok")
+            ax.plot([], [], "x", color="grey", ms=9, mew=2.5, label="some run not ok")
         plotted = [v for st in stats for v in (st.mean, st.lo, st.hi)]
         if _spans_decades(plotted):
             ax.set_yscale("log")
@@ -491,6 +491,21 @@ def _validate_points(path: Path, overrides: Sequence[str], points: Sequence[dict
             raise ScenarioError(f"grid point {where}: {exc}") from None
 
 
+def plan(path: Path, points: Sequence[dict[str, Any]], *, seeds: int, overrides: Sequence[str],
+         logs: Path) -> list[tuple[dict[str, Any], Job]]:
+    """(grid point, Job) for every point × seed 0..seeds-1, seeds fastest; each job logs to logs/<name>.mcap."""
+    names = short_names(list(points[0]))
+    width = max(4, len(str(len(points) * seeds - 1)))
+    planned = []
+    for p, point in enumerate(points):
+        for seed in range(seeds):
+            name = run_name(p * seeds + seed, point, seed, names=names, width=width)
+            job = Job(path, overrides=(*overrides, *_grid_overrides(point)), seed=seed, log=logs / f"{name}.mcap",
+                      tag=name)
+            planned.append((point, job))
+    return planned
+
+
 def main_sweep(args) -> int:
     """Run the sweep the CLI parsed (see the module docstring); returns the exit code."""
     from adaptive_mj.runner import LOGS_DIR
@@ -508,16 +523,8 @@ def main_sweep(args) -> int:
     _validate_points(path, args.overrides, points)
 
     out = output_dir(args.output, base.name, logs_dir=LOGS_DIR)
-    names = short_names(keys)
-    total = len(points) * args.seeds
-    width = max(4, len(str(total - 1)))
-    planned: list[tuple[dict[str, Any], Job]] = []
-    for p, point in enumerate(points):
-        for seed in range(args.seeds):
-            name = run_name(p * args.seeds + seed, point, seed, names=names, width=width)
-            job = Job(path, overrides=(*args.overrides, *_grid_overrides(point)), seed=seed,
-                      log=out / "logs" / f"{name}.mcap", tag=name)
-            planned.append((point, job))
+    planned = plan(path, points, seeds=args.seeds, overrides=args.overrides, logs=out / "logs")
+    total = len(planned)
     print(f"sweep: {len(points)} grid point(s) x {args.seeds} seed(s) = {total} runs of {base.name} "
           f"in {min(args.jobs, total)} processes -> {out}", file=sys.stderr)
     results = run_jobs([job for _, job in planned], n_jobs=min(args.jobs, total),
@@ -533,6 +540,12 @@ def main_sweep(args) -> int:
     plot_sweep(table, keys, metrics, out / "sweep.png", plant_kind=base.plant.kind, title=base.name)
 
     print(summary_table(table, keys, metrics))
+    present = set(columns(table))
+    for name in metrics:
+        if name not in present:
+            have = [c for c in present if c.startswith("param_error_final.")]
+            print(f"--metric {name!r}: no run has this metric (have: {', '.join(sorted(have)) or 'none'})",
+                  file=sys.stderr)
     not_ok = [r for r in table if r["status"] != "ok"]
     for row in not_ok[:5]:
         print(f"  {row['run']}: {row['status']}: {row['reason']}", file=sys.stderr)

@@ -1,0 +1,60 @@
+"""adaptive-mj bench on a reduced catalogue: report, figures, logs and
+summary.json are written, a diverged run is reported and the rest go on."""
+import json
+from pathlib import Path
+
+import pytest
+
+from adaptive_mj import bench_catalogue
+from adaptive_mj.cli import main
+
+
+@pytest.fixture
+def small_catalogue(monkeypatch):
+    full = bench_catalogue.catalogue
+
+    def reduced(*, quick, logs):
+        sections = full(quick=quick, logs=logs)
+        keep = {s.key: s for s in sections if s.key in ("first_order", "phase", "payload_swap")}
+        out = []
+        for s in keep.values():
+            jobs = tuple(type(j)(scenario=j.scenario, overrides=j.overrides + ("simulation.duration=1.0",)
+                                 if s.key != "payload_swap" else j.overrides + ("simulation.duration=2.0",
+                                                                                 "events=[{t=1.0, kind='payload_mass', value=2.0}]"),
+                                 log=j.log, tag=j.tag, extras=j.extras) for j in s.jobs)
+            out.append(bench_catalogue.Section(s.key, s.title, s.claim, jobs, s.analyze))
+        # one run that diverges on purpose: the bench must go on
+        div = bench_catalogue._job("diverge", "lecture_heave", "lecture_heave", logs, ["simulation.state_bound=0.5"])
+        out.append(bench_catalogue.Section("diverge", "Divergence", "none", (div,),
+                                           lambda res, out_dir: bench_catalogue.SectionReport(
+                                               "diverged run: " + res[div.tag].status,
+                                               [bench_catalogue._row("diverge", "x", res[div.tag])])))
+        return out
+
+    monkeypatch.setattr(bench_catalogue, "catalogue", reduced)
+
+
+def test_quick_bench_on_a_reduced_catalogue(tmp_path, small_catalogue, capsys):
+    out = tmp_path / "bench"
+    assert main(["bench", "--quick", "-o", str(out), "--jobs", "2"]) == 0
+    report = (out / "report.md").read_text()
+    for title in ("1. Adaptive control of a first-order system", "2. Phase-space view", "7. Payload swap on the arm",
+                  "Divergence"):
+        assert f"## {title}" in report
+    assert "diverged run: diverged" in report
+    for fig in ("first_order", "phase_portrait", "payload_swap"):
+        assert (out / "figures" / f"{fig}.png").stat().st_size > 10_000
+        assert f"figures/{fig}.png" in report
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["diverge/lecture_heave"]["status"] == "diverged"
+    assert summary["first_order/lecture"]["status"] == "ok"
+    assert summary["payload_swap/adaptive"]["extras"]["swap_response"]["event_time"] == 1.0
+    logs = sorted(p.name for p in (out / "logs").glob("*.mcap"))
+    assert len(logs) == len(summary)
+    printed = capsys.readouterr().out
+    assert "section" in printed and "report:" in printed
+
+
+def test_bench_refuses_a_non_empty_output_dir(tmp_path):
+    (tmp_path / "keep.txt").write_text("x")
+    assert main(["bench", "--quick", "-o", str(tmp_path)]) == 2

@@ -1,0 +1,290 @@
+"""adaptive-mj sweep: grid expressions parse (or fail with a message naming the
+expression), the grid is the product of its axes, every point is validated
+before anything runs, and an end-to-end sweep writes one log per run and a
+CSV/JSON whose metrics are the ones stored in each log."""
+import csv
+import json
+import math
+import re
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from adaptive_mj import scenario as sc
+from adaptive_mj import sweep
+from adaptive_mj.cli import main
+from adaptive_mj.errors import AdaptiveMJError, ScenarioError
+from adaptive_mj.parallel import Job, JobResult
+
+REPO = Path(__file__).resolve().parents[1]
+ARM = REPO / "scenarios" / "arm_payload_swap.toml"
+HEAVE = REPO / "scenarios" / "heave_tracking.toml"
+
+
+def doc_of(path: Path) -> dict:
+    return tomllib.loads(path.read_text())
+
+
+@pytest.fixture(scope="module")
+def arm_doc() -> dict:
+    return doc_of(ARM)
+
+
+# --------------------------------------------------------------------------
+# parse_grid
+def test_linear_grid_includes_both_endpoints_evenly_spaced(arm_doc):
+    key, values = sweep.parse_grid("law.k=0.25:4:8", arm_doc)
+    assert key == "law.k"
+    assert len(values) == 8
+    assert values[0] == 0.25 and values[-1] == 4.0
+    steps = [b - a for a, b in zip(values, values[1:])]
+    assert all(math.isclose(d, 3.75 / 7) for d in steps)
+
+
+def test_linear_grid_can_run_downwards_and_n1_gives_lo(arm_doc):
+    assert sweep.parse_grid("law.k=4:1:4", arm_doc)[1] == [4.0, 3.0, 2.0, 1.0]
+    assert sweep.parse_grid("law.k=2.5:9:1", arm_doc)[1] == [2.5]
+
+
+def test_explicit_values_are_toml(arm_doc):
+    assert sweep.parse_grid("law.k=1,2.5,10", arm_doc) == ("law.k", [1, 2.5, 10])
+    assert sweep.parse_grid("reference.kind=sine, cosine", arm_doc) == ("reference.kind", ["sine", "cosine"])
+    key, values = sweep.parse_grid("noise.std={y=0.01, y_dot=0.1},{y=0.0}", arm_doc)
+    assert key == "noise.std" and values == [{"y": 0.01, "y_dot": 0.1}, {"y": 0.0}]
+    assert sweep.parse_grid("law.k=5", arm_doc)[1] == [5]
+
+
+def test_bare_key_resolves_to_the_one_key_that_ends_with_it(arm_doc):
+    assert sweep.parse_grid("payload_mass=0.25:4:8", arm_doc)[0] == "plant.payload_mass"
+    assert sweep.parse_grid("lambda=1,2", arm_doc)[0] == "law.lambda"
+    assert sweep.parse_grid("gamma.J=0.01,0.1", arm_doc)[0] == "law.gamma.J"  # a dotted suffix
+    # documented keys the file leaves at their default resolve too
+    assert sweep.parse_grid("viscosity=0,1", arm_doc)[0] == "plant.viscosity"
+    assert sweep.parse_grid("rate_hz=50", arm_doc)[0] == "log.rate_hz"
+
+
+def test_dotted_key_of_a_section_is_taken_as_written(arm_doc):
+    assert sweep.parse_grid("noise.std.y=0,0.01", arm_doc)[0] == "noise.std.y"
+
+
+def test_ambiguous_bare_key_lists_the_candidates():
+    with pytest.raises(ScenarioError, match=r"--grid 'b=1,2': 'b' is ambiguous: it could be "
+                                            r"law\.gamma\.b, law\.initial_estimates\.b; write the dotted key"):
+        sweep.parse_grid("b=1,2", doc_of(HEAVE))
+    with pytest.raises(ScenarioError, match=r"'kind' is ambiguous: .*plant\.kind.*law\.kind"):
+        sweep.parse_grid("kind=x", doc_of(HEAVE))
+
+
+def test_unknown_bare_key_suggests_close_keys(arm_doc):
+    with pytest.raises(ScenarioError, match=r"--grid 'payload_mas=1,2': no scenario key named 'payload_mas' "
+                                            r"\(candidates: plant\.payload_mass"):
+        sweep.parse_grid("payload_mas=1,2", arm_doc)
+    with pytest.raises(ScenarioError, match=r"no scenario key named 'zzz' \(write a dotted key like law\.k\)"):
+        sweep.parse_grid("zzz=1", arm_doc)
+
+
+@pytest.mark.parametrize("expr, message", [
+    ("law.k", r"--grid 'law\.k': expected KEY=LO:HI:N or KEY=V1,V2,\.\.\."),
+    ("=1,2", r"--grid '=1,2': expected KEY=LO:HI:N or KEY=V1,V2,\.\.\."),
+    ("law.k=1:2", r"--grid 'law\.k=1:2': expected KEY=LO:HI:N or KEY=V1,V2,\.\.\."),
+    ("law.k=1:2:3:4", r"--grid 'law\.k=1:2:3:4': expected KEY=LO:HI:N or KEY=V1,V2,\.\.\."),
+    ("law.k=1:2:2.5", r"--grid 'law\.k=1:2:2\.5': N must be an integer >= 1, got '2\.5'"),
+    ("law.k=1:2:x", r"--grid 'law\.k=1:2:x': N must be an integer >= 1, got 'x'"),
+    ("law.k=1:2:0", r"--grid 'law\.k=1:2:0': N must be an integer >= 1, got '0'"),
+    ("law.k=1:2:-3", r"N must be an integer >= 1, got '-3'"),
+    ("law.k=a:2:3", r"--grid 'law\.k=a:2:3': LO must be a finite number, got 'a' \(expected KEY=LO:HI:N\)"),
+    ("law.k=1:inf:3", r"--grid 'law\.k=1:inf:3': HI must be a finite number, got 'inf'"),
+    ("law.k=", r"--grid 'law\.k=': empty value list \(expected KEY=V1,V2,\.\.\.\)"),
+    ("law.k=1,,2", r"--grid 'law\.k=1,,2': value 2 is empty \(expected KEY=V1,V2,\.\.\.\)"),
+    ("law.k=[1", r"--grid 'law\.k=\[1': value '\[1' is not a TOML value"),
+    ("law k=1", r"--grid 'law k=1': key 'law k' must be a dotted scenario key like law\.k"),
+])
+def test_malformed_grid_expressions_name_the_expression(arm_doc, expr, message):
+    with pytest.raises(ScenarioError, match=message):
+        sweep.parse_grid(expr, arm_doc)
+
+
+def test_grid_points_is_the_product_first_axis_slowest():
+    points = sweep.grid_points([("a", [1, 2]), ("b", ["x", "y", "z"])])
+    assert points == [{"a": 1, "b": "x"}, {"a": 1, "b": "y"}, {"a": 1, "b": "z"},
+                      {"a": 2, "b": "x"}, {"a": 2, "b": "y"}, {"a": 2, "b": "z"}]
+    assert sweep.grid_points([("a", [0.5])]) == [{"a": 0.5}]
+
+
+@pytest.mark.parametrize("value", [1, -2.5, 1 / 3, 1e-300, True, "sine", 'a "quoted" str', [1.0, 2],
+                                   {"y": 0.01, "y_dot": 0.1}, {"J": [1, {"b": False}]}])
+def test_grid_values_round_trip_through_their_toml_text(value):
+    assert sc.parse_value(sweep.to_toml(value), what="test") == value
+
+
+def test_every_section_key_is_one_the_validator_knows():
+    """Each key a bare grid key can resolve to is read by the validator in some bundled scenario."""
+    for section, names in sweep.DOCUMENTED_KEYS.items():
+        for name in names:
+            key = f"{section}.{name}"
+            messages = []
+            for path in sc.bundled():
+                try:  # true: a value no key accepts; law.K and law.boundary_layer are robust_sliding's
+                    sc.load(path, overrides=[*(["law.kind=robust_sliding"] if name in ("K", "boundary_layer") else []),
+                                             f"{key}=true"])
+                    messages.append("accepted")
+                except ScenarioError as exc:
+                    messages.append(str(exc))
+            assert any("unknown key" not in m for m in messages), (key, messages)
+
+
+def test_run_names_are_readable_and_unique():
+    names = sweep.short_names(["plant.payload_mass", "noise.std.y"])
+    assert names == {"plant.payload_mass": "payload_mass", "noise.std.y": "std.y"}
+    assert (sweep.run_name(7, {"plant.payload_mass": 1.3571428571428572}, 2, names=names)
+            == "0007-payload_mass=1.357-seed2")
+    assert sweep.short_names(["law.gamma", "plant.gamma"]) == {"law.gamma": "law.gamma", "plant.gamma": "plant.gamma"}
+    assert sweep.short_names(["law.k", "noise.k"]) == {"law.k": "law.k", "noise.k": "noise.k"}
+    odd = sweep.run_name(12, {"noise.std": {"y": 0.01}}, 0, names={"noise.std": "std"}, width=5)
+    assert odd == "00012-std=_y_=_0.01_-seed0"
+
+
+# --------------------------------------------------------------------------
+# rows and files (no simulation)
+def _result(tmp_path, seed, status, metrics, *, error=""):
+    log = tmp_path / "logs" / f"run{seed}.mcap"
+    summary = None if status == "error" else {"status": status, "reason": "why" if status != "ok" else "",
+                                              "metrics": metrics}
+    return JobResult(Job(ARM, seed=seed, log=log, tag=f"run{seed}"), status, summary, error=error)
+
+
+def test_rows_flatten_metrics_and_keep_failures(tmp_path):
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / "run0.mcap").write_bytes(b"x")
+    m = {"rms_tracking_error_tail": 0.5, "param_error_final": {"J": 0.1, "b": -0.2}}
+    table = sweep.rows([({"law.k": 1.0}, _result(tmp_path, 0, "ok", m)),
+                        ({"law.k": 1.0}, _result(tmp_path, 1, "diverged", {"rms_tracking_error_tail": None})),
+                        ({"law.k": 2.0}, _result(tmp_path, 2, "error", {}, error="boom"))], root=tmp_path)
+    assert table[0] == {"run": "run0", "law.k": 1.0, "seed": 0, "status": "ok", "reason": "",
+                        "rms_tracking_error_tail": 0.5, "param_error_final.J": 0.1, "param_error_final.b": -0.2,
+                        "log": "logs/run0.mcap"}
+    assert table[1]["status"] == "diverged" and table[1]["reason"] == "why" and table[1]["log"] == ""
+    assert table[2]["status"] == "error" and table[2]["reason"] == "boom"
+    stats = sweep.point_stats(table, ["law.k"], "rms_tracking_error_tail")
+    assert [(s.point, s.mean, s.n_ok, s.n) for s in stats[:1]] == [({"law.k": 1.0}, 0.5, 1, 2)]
+    assert math.isnan(stats[1].mean) and (stats[1].n_ok, stats[1].n) == (0, 1)
+    text = sweep.summary_table(table, ["law.k"], ["rms_tracking_error_tail"])
+    assert text.splitlines()[1].split() == ["1", "0.5", "1/2"]
+    assert text.splitlines()[2].split() == ["2", "n/a", "0/1"]
+
+
+def test_metric_units_follow_the_plant():
+    assert sweep.metric_label("rms_tracking_error_tail", "arm") == "rms_tracking_error_tail [rad]"
+    assert sweep.metric_label("max_abs_tracking_error_tail", "heave") == "max_abs_tracking_error_tail [m]"
+    assert sweep.metric_label("control_rms", "arm") == "control_rms [N·m]"
+    assert sweep.metric_label("rms_tracking_error", "first_order") == "rms_tracking_error"
+    assert sweep.key_label("noise.std.y", "heave") == "noise.std.y [m]"
+
+
+def test_output_dir_refuses_a_non_empty_folder_and_never_reuses_a_default(tmp_path):
+    full = tmp_path / "full"
+    full.mkdir()
+    (full / "keep").write_text("keep")
+    with pytest.raises(AdaptiveMJError, match=r"full: exists and is not an empty folder; choose a new -o DIR"):
+        sweep.output_dir(full, "s", logs_dir=tmp_path)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert sweep.output_dir(empty, "s", logs_dir=tmp_path) == empty
+    a = sweep.output_dir(None, "s", logs_dir=tmp_path / "logs")
+    b = sweep.output_dir(None, "s", logs_dir=tmp_path / "logs")
+    assert a != b and a.is_dir() and b.is_dir() and a.name.startswith("sweep-s-")
+
+
+# --------------------------------------------------------------------------
+# the command end to end
+FAST = ["--set", "simulation.duration=0.5", "--set", "events=[]"]
+
+
+def test_sweep_end_to_end_logs_csv_json_png_match_the_logs(tmp_path, capsys):
+    from adaptive_mj.replay import read_log
+
+    out = tmp_path / "sweep"
+    code = main(["sweep", "arm_payload_swap", "--grid", "payload_mass=0.5:2:2", "--seeds", "2", "--jobs", "2",
+                 "-o", str(out), *FAST, "--set", "noise.std={y=0.001}"])
+    printed = capsys.readouterr().out
+    assert code == 0
+    logs = sorted((out / "logs").glob("*.mcap"))
+    assert [p.name for p in logs] == ["0000-payload_mass=0.5-seed0.mcap", "0001-payload_mass=0.5-seed1.mcap",
+                                      "0002-payload_mass=2-seed0.mcap", "0003-payload_mass=2-seed1.mcap"]
+    with open(out / "sweep.csv", newline="") as f:
+        table = list(csv.DictReader(f))
+    assert len(table) == 4
+    cols = list(table[0])
+    assert cols[:5] == ["run", "plant.payload_mass", "seed", "status", "reason"] and cols[-1] == "log"
+    assert {"rms_tracking_error_tail", "control_rms", "param_error_final.J", "param_error_final.g_cos"} <= set(cols)
+    assert [(r["plant.payload_mass"], r["seed"], r["status"]) for r in table] == [
+        ("0.5", "0", "ok"), ("0.5", "1", "ok"), ("2.0", "0", "ok"), ("2.0", "1", "ok")]
+    for row in table:
+        logged = read_log(out / row["log"])
+        m = logged.summary["metrics"]
+        assert float(row["rms_tracking_error_tail"]) == m["rms_tracking_error_tail"]
+        assert float(row["param_error_final.J"]) == m["param_error_final"]["J"]
+        assert logged.header["seed"] == int(row["seed"])
+        assert f"plant.payload_mass={row['plant.payload_mass']}" in logged.overrides
+    # the seeds differ (noise), the grid values differ (mass)
+    assert table[0]["rms_tracking_error_tail"] != table[1]["rms_tracking_error_tail"]
+    assert table[0]["control_rms"] != table[2]["control_rms"]
+
+    saved = json.loads((out / "sweep.json").read_text())
+    assert saved["inputs"]["scenario"].endswith("arm_payload_swap.toml")
+    assert saved["inputs"]["grid"] == [{"expr": "payload_mass=0.5:2:2", "key": "plant.payload_mass",
+                                        "values": [0.5, 2.0]}]
+    assert saved["inputs"]["overrides"] == ["simulation.duration=0.5", "events=[]", "noise.std={y=0.001}"]
+    assert saved["inputs"]["seeds"] == 2 and saved["counts"] == {"ok": 4}
+    assert [r["rms_tracking_error_tail"] for r in saved["rows"]] == [float(r["rms_tracking_error_tail"])
+                                                                     for r in table]
+    assert (out / "sweep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (out / "sweep.png").stat().st_size > 10_000
+    lines = printed.splitlines()
+    assert lines[0].split() == ["payload_mass", "mean", "rms_tracking_error_tail", "ok/total"]
+    assert [line.split()[0] for line in lines[1:3]] == ["0.5", "2"] and lines[1].split()[-1] == "2/2"
+    assert lines[-1] == f"4/4 runs ok; output: {out}"
+
+
+def test_sweep_records_diverged_runs_and_exits_1(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    code = main(["sweep", "lecture_first_order", "--grid", "state_bound=0.2,5", "--jobs", "1", "-o", str(out),
+                 "--set", "simulation.duration=2", "--metric", "rms_tracking_error,control_rms"])
+    assert code == 1
+    with open(out / "sweep.csv", newline="") as f:
+        table = list(csv.DictReader(f))
+    assert [(r["simulation.state_bound"], r["status"]) for r in table] == [("0.2", "diverged"), ("5", "ok")]
+    assert "beyond the bound 0.2" in table[0]["reason"]
+    assert (out / table[0]["log"]).is_file()  # a diverged run keeps its log
+    assert json.loads((out / "sweep.json").read_text())["counts"] == {"diverged": 1, "ok": 1}
+    assert (out / "sweep.png").is_file()
+    assert "1/2 runs ok" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--grid", "law.k=-1,1"], r"grid point law\.k=-1: .*law\.k must be >= 0, got -1\.0"),
+    (["--grid", "law.k=1:2"], r"--grid 'law\.k=1:2': expected KEY=LO:HI:N or KEY=V1,V2,\.\.\."),
+    (["--grid", "noise.seed=1,2"], r"noise\.seed is set per run; use --seeds N"),
+    (["--grid", "law.k=1,2", "--grid", "k=3"], r"--grid 'k=3': law\.k is already a grid axis"),
+    (["--grid", "law.k=1", "--metric", "rms"], r"--metric 'rms': expected one of rms_tracking_error, "),
+    (["--grid", "law.k=1", "--seeds", "0"], r"--seeds must be an integer >= 1, got 0"),
+    ([], r"sweep needs at least one --grid"),
+])
+def test_bad_input_exits_2_before_any_run(tmp_path, capsys, args, message):
+    out = tmp_path / "sweep"
+    code = main(["sweep", "arm_payload_swap", "-o", str(out), *FAST, *args])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("adaptive-mj: error: ")
+    assert re.search(message, err), err
+    assert not out.exists()  # nothing ran, no folder, no logs
+
+
+def test_sweep_refuses_a_non_empty_output_folder(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    out.mkdir()
+    (out / "old.csv").write_text("keep")
+    assert main(["sweep", "arm_payload_swap", "--grid", "law.k=1", "-o", str(out), *FAST]) == 2
+    assert "exists and is not an empty folder" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["old.csv"]
