@@ -379,6 +379,7 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:
         raise ScenarioError(f"{t.where}: plant.theta is required for plant.kind = 'first_order' (e.g. {{a = 2, b = 1.5}})")
     if theta is not None:
         regressor = t.data.get("regressor", "lecture")
+        regressor = regressor if isinstance(regressor, str) else "lecture"  # its type is checked below
         expected = {"heave": ("d", "b", "c"), "arm": ("J", "b", "g_sin", "g_cos"),
                     "first_order": FIRST_ORDER_PARAMS.get(regressor, ("a", "b"))}[kind]
         if tuple(theta) != expected:

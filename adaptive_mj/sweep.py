@@ -389,7 +389,8 @@ def plot_sweep(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Se
         if _spans_decades(plotted):
             ax.set_yscale("log")
         ax.set_ylabel(metric_label(metric, plant_kind))
-        ax.grid(alpha=0.3, which="both")
+        ax.grid(alpha=0.3)
+        ax.grid(alpha=0.1, which="minor")
         if len(series) > 1 or bad:
             ax.legend(title=", ".join(key_label(k, plant_kind) for k in others) or None, fontsize=8, title_fontsize=8,
                       loc="best", ncol=2 if len(series) > 6 else 1)
