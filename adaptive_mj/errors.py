@@ -28,3 +28,38 @@ class SimulationDiverged(AdaptiveMJError, RuntimeError):
         super().__init__(f"diverged at t={t:.6g} s: {reason}")
         self.reason = reason
         self.t = t
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM arrived; the run in progress stops cleanly, its log closed with
+    status "interrupted". The CLI's signal handler raises it for both signals; loop.run turns
+    a plain KeyboardInterrupt into one.
+
+    signum: the signal (2 = SIGINT); trajectory: the rows simulated before it (set by
+    loop.run); summary: that run's summary (set by runner.execute once the log is closed);
+    note: what was left behind, for the one-line message (set by the command).
+    """
+
+    def __init__(self, signum: int = 2, trajectory=None):
+        super().__init__(signum)
+        self.signum = signum
+        self.trajectory = trajectory
+        self.summary = None
+        self.note = ""
+
+    @property
+    def signal_name(self) -> str:
+        import signal
+
+        try:
+            return signal.Signals(self.signum).name
+        except ValueError:
+            return f"signal {self.signum}"
+
+    @property
+    def exit_code(self) -> int:
+        """128 + the signal number: 130 for SIGINT, 143 for SIGTERM (the shell's convention)."""
+        return 128 + self.signum
+
+    def __str__(self) -> str:
+        return f"interrupted by {self.signal_name}"

@@ -17,11 +17,13 @@ once per physics step. Calls past the last stage (an extra mj_forward) see
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
+from adaptive_mj.errors import Interrupted
 from adaptive_mj.trajectory import Trajectory
 
 
@@ -101,10 +103,13 @@ class Sink(Protocol):
     def write_event(self, t: float, label: str) -> None: ...
 
 
+NATIVE_CHUNK = 250  # physics steps per mj_step(nstep) call on the native path
+
+
 def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
         noise_std: Sequence[float] | None = None, rng: np.random.Generator | None = None,
         events: Sequence[Event] = (), state_bound: float = math.inf,
-        sink: Sink | None = None, sink_every: int = 1000) -> Trajectory:
+        sink: Sink | None = None, sink_every: int = 1000, native: bool | None = None) -> Trajectory:
     """Run plant under law tracking reference for `duration` seconds.
 
     theta_hat0: (n_theta,) initial estimates (the nominal values for baselines).
@@ -114,10 +119,16 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
     state_bound: |x_i| above this counts as divergence.
     sink: receives the rows every `sink_every` steps and at the end, and each
     event as it is applied, so a killed run loses at most one block.
+    native: run the law as a compiled MuJoCo callback (adaptive_mj.native);
+    None = whenever the plant and law support it. The two paths agree to
+    ~1e-12; on the native path a MuJoCo warning is detected per chunk of
+    NATIVE_CHUNK steps instead of per step.
 
     Returns a Trajectory with one row per physics step (the state at the step's
     start and what was applied during it). A run that diverges stops at that
-    step and comes back with status "diverged" and the reason.
+    step and comes back with status "diverged" and the reason. A KeyboardInterrupt
+    (SIGINT, or SIGTERM through the CLI) first hands the sink every whole row, then
+    comes out as errors.Interrupted carrying them (status "interrupted").
     """
     order = plant.form.order
     if order != law.order:
@@ -152,20 +163,66 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
         nonlocal flushed
         if sink is not None and upto > flushed:
             rows = slice(flushed, upto)
+            flushed = upto  # first: a write cut short by an interruption is never repeated
             V = law.lyapunov(s[rows], theta_hat[rows], theta[rows])
-            sink.write_rows(flushed, t[rows], x[rows], u[rows], s[rows], ref[rows],
+            sink.write_rows(rows.start, t[rows], x[rows], u[rows], s[rows], ref[rows],
                             theta_hat[rows], theta[rows], V)
-        flushed = upto
 
-    with plant.controlled_by(ctrl):
+    def result(n: int, status: str, reason: str) -> Trajectory:
+        keep = slice(0, n)
+        V = law.lyapunov(s[keep], theta_hat[keep], theta[keep])
+        return Trajectory(t=t[keep], x=x[keep], u=u[keep], s=s[keep], ref=ref[keep],
+                          theta_hat=theta_hat[keep], theta=theta[keep], V=V, names=names,
+                          status=status, reason=reason,
+                          meta={"dt": dt, "order": order, "events": applied, "native": bool(native)})
+
+    def stopped(reason: str) -> Trajectory:  # rows 0..k-1 are whole when an interruption comes
+        flush(k)
+        return result(k, "interrupted", reason)
+
+    def apply_events(t_k: float) -> None:
+        while pending and t_k >= pending[0].t - 0.5 * dt:
+            event = pending.pop(0)
+            event.apply(plant)
+            applied.append((t_k, event.label))
+            if sink is not None:
+                sink.write_event(t_k, event.label)
+
+    if native is None:
+        from adaptive_mj import native as native_mod
+
+        native = native_mod.supported(plant, law)
+    if native:
+        from adaptive_mj.native import NativeController
+
+        nc = NativeController(plant, law, reference, theta_hat0, NATIVE_CHUNK)
+        with _interruptible(stopped), plant.controlled_natively(nc.callback):
+            while k < n_steps:
+                t_k = plant.time
+                apply_events(t_k)
+                rows = min(NATIVE_CHUNK, n_steps - k, sink_every - k % sink_every)
+                if pending:  # stop at the step where the next event applies
+                    rows = min(rows, max(1, math.ceil((pending[0].t - 0.5 * dt - t_k) / dt)))
+                noise = rng.normal(0.0, noise_std, size=(rows, order)) if noise_std is not None else None
+                theta_now = plant.true_theta()
+                block = slice(k, k + rows)
+                t[block], x[block], u[block], s[block], ref[block], theta_hat[block] = nc.chunk(rows, noise)
+                theta[block] = theta_now
+                bad, reason = _first_divergence(plant, x[block], u[block], theta_hat[block], nc.theta,
+                                                state_bound)
+                if bad is not None:
+                    k, status = k + bad, "diverged"
+                    break
+                k += rows
+                if k % sink_every == 0:
+                    flush(k)
+        flush(k)
+        return result(k, status, reason)
+
+    with _interruptible(stopped), plant.controlled_by(ctrl):
         for k in range(n_steps):
             t_k = plant.time
-            while pending and t_k >= pending[0].t - 0.5 * dt:
-                event = pending.pop(0)
-                event.apply(plant)
-                applied.append((t_k, event.label))
-                if sink is not None:
-                    sink.write_event(t_k, event.label)
+            apply_events(t_k)
             t[k] = t_k
             x[k] = plant.observe()
             theta[k] = plant.true_theta()
@@ -188,11 +245,44 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
         else:
             k = n_steps
     flush(k)
-    keep = slice(0, k)
-    V = law.lyapunov(s[keep], theta_hat[keep], theta[keep])
-    return Trajectory(t=t[keep], x=x[keep], u=u[keep], s=s[keep], ref=ref[keep],
-                      theta_hat=theta_hat[keep], theta=theta[keep], V=V, names=names,
-                      status=status, reason=reason, meta={"dt": dt, "order": order, "events": applied})
+    return result(k, status, reason)
+
+
+@contextmanager
+def _interruptible(stopped: Callable[[str], Trajectory]):
+    """Turn a KeyboardInterrupt into errors.Interrupted carrying stopped(reason), the rows so far."""
+    try:
+        yield
+    except KeyboardInterrupt as exc:
+        interrupted = exc if isinstance(exc, Interrupted) else Interrupted()
+        interrupted.trajectory = stopped(str(interrupted))
+        if interrupted is exc:
+            raise
+        raise interrupted from exc
+
+
+def _first_divergence(plant, x, u, theta_hat, theta_next, bound):
+    """For a native chunk: (rows to keep, reason) at the first step that diverged, or (None, '').
+
+    Row j's state and estimate are the result of step j-1; the state after the chunk's
+    last step is read from the plant. Mirrors `_divergence`, step by step."""
+    x_next = np.vstack([x[1:], plant.observe()[None, :]])
+    th_next = np.vstack([theta_hat[1:], theta_next[None, :]])
+    bad = (~np.all(np.isfinite(x_next), axis=1) | ~np.isfinite(u) | ~np.all(np.isfinite(th_next), axis=1)
+           | np.any(np.abs(x_next) > bound, axis=1))
+    if bad.any():
+        j = int(np.argmax(bad))
+        if not np.all(np.isfinite(x_next[j])):
+            return j + 1, f"non-finite state {x_next[j].tolist()}"
+        if not math.isfinite(u[j]):
+            return j + 1, f"non-finite control {u[j]}"
+        if not np.all(np.isfinite(th_next[j])):
+            return j + 1, f"non-finite estimate {th_next[j].tolist()}"
+        return j + 1, f"state {x_next[j].tolist()} beyond the bound {bound}"
+    warning = plant.instability()
+    if warning:
+        return len(u), f"{warning} (within the {len(u)} steps before t={plant.time:.6g} s)"
+    return None, ""
 
 
 def _divergence(plant, x_k, u_k, theta_hat, bound) -> str:

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from adaptive_mj.form import ModelForm
-from adaptive_mj.laws.common import DeadZone, LawStep, as_gamma
+from adaptive_mj.laws.common import DeadZone, DeadZoneOn, LawStep, as_gamma
 
 
 def surface_coefficients(order: int, lam: float) -> np.ndarray:
@@ -32,12 +32,56 @@ def surface_coefficients(order: int, lam: float) -> np.ndarray:
 
 
 def sliding_terms(coeffs: np.ndarray, x: np.ndarray, ref: np.ndarray) -> tuple[float, float, float]:
-    """(s, ṡ_r, ỹ) for state x (n,) and reference ref (n+1,)."""
+    """(s, ṡ_r, ỹ) for state x (n,) and reference ref (n+1,).
+
+    s = sum_i c_i ỹ^(i);  ṡ_r = y_d^(n) + sum_{i>=1} c_{i-1} ỹ^(i).
+    Written as scalar loops so the same code also compiles with numba
+    (adaptive_mj.native) for MuJoCo's native control callback.
+    """
     n = coeffs.shape[0]
-    e = ref[:n] - x
-    s = float(coeffs @ e)
-    s_r_dot = float(ref[n] + coeffs[:-1] @ e[1:])
-    return s, s_r_dot, float(e[0])
+    s = 0.0
+    s_r_dot = ref[n]
+    for i in range(n):
+        e_i = ref[i] - x[i]
+        s += coeffs[i] * e_i
+        if i > 0:
+            s_r_dot += coeffs[i - 1] * e_i
+    return s, s_r_dot, ref[0] - x[0]
+
+
+def sliding_law(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, boundary_layer,
+                phi_fn, f_fn, h_fn, rate):
+    """One evaluation of the sliding laws (adaptive, fixed nominal, robust), as plain array code.
+
+    x (n,), ref (n+1,), theta (n_theta,) = [d̂, p̂...], coeffs (n,) surface coefficients,
+    k gain on s, gamma (n_theta,) adaptation gains, adapt: estimates move (False for the
+    baselines), dead-zone: adaptation off while |s| (dz_on_s) or |ỹ| < dz_width,
+    K, boundary_layer: robust term K sat(s/Phi) (K = 0: none). Writes θ̂' into rate
+    (n_theta,) and returns (u, s, ṡ_r):
+
+        u = h^-1 (d̂ ṡ_r - f - phi p̂ + k s [+ K sat(s/Phi)])
+        d̂' = ṡ_r s / gamma_d,   p̂' = -phi^T s / gamma_p
+
+    The Python laws below call it; adaptive_mj.native compiles this same function.
+    """
+    s, s_r_dot, y_tilde = sliding_terms(coeffs, x, ref)
+    phi = phi_fn(x)
+    acc = theta[0] * s_r_dot - f_fn(x) + k * s
+    for j in range(phi.shape[0]):
+        acc -= phi[j] * theta[j + 1]
+    if K > 0.0:
+        z = s / boundary_layer
+        acc += K * min(1.0, max(-1.0, z))
+    u = acc / h_fn(x)
+    signal = s if dz_on_s else y_tilde
+    if adapt and abs(signal) >= dz_width:
+        rate[0] = s_r_dot * s / gamma[0]
+        for j in range(phi.shape[0]):
+            rate[j + 1] = -phi[j] * s / gamma[j + 1]
+    else:
+        for j in range(rate.shape[0]):
+            rate[j] = 0.0
+    return u, s, s_r_dot
 
 
 def _check_gains(form: ModelForm, lam: float, k: float) -> None:
@@ -49,53 +93,10 @@ def _check_gains(form: ModelForm, lam: float, k: float) -> None:
         raise ValueError(f"k must be finite and >= 0, got {k}")
 
 
-def _certainty_equivalent(form, x, s, s_r_dot, theta, k) -> float:
-    """h^-1 (d̂ ṡ_r - f - phi p̂ + k s)."""
-    return (theta[0] * s_r_dot - form.f(x) - float(form.phi(x) @ theta[1:]) + k * s) / form.h(x)
+class _SlidingBase:
+    """What the three sliding laws share: the surface, and the call into `sliding_law`."""
 
-
-class SlidingAdaptiveLaw:
-    """The lecture's adaptive sliding law of order n = form.order, optionally with a dead-zone.
-
-    lam: lambda [1/s] of the surface; k: gain on s [u per unit of s];
-    gamma: scalar or (n_theta,) adaptation "stiffness" (estimates move at 1/gamma);
-    dead_zone: None, or a DeadZone (default test |s| < eps, the lecture's formula).
-    """
-
-    def __init__(self, form: ModelForm, *, lam: float, k: float, gamma, dead_zone: DeadZone | None = None):
-        _check_gains(form, lam, k)
-        self.form = form
-        self.order = form.order
-        self.names = form.names
-        self.lam = float(lam)
-        self.k = float(k)
-        self.gamma = as_gamma(gamma, len(self.names))
-        self.dead_zone = dead_zone
-        self._coeffs = surface_coefficients(form.order, self.lam)
-
-    def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
-        form = self.form
-        s, s_r_dot, y_tilde = sliding_terms(self._coeffs, x, ref)
-        u = _certainty_equivalent(form, x, s, s_r_dot, theta_hat, self.k)
-        if self.dead_zone is None or self.dead_zone.adapting(s, y_tilde):
-            rate = np.empty(len(self.names))
-            rate[0] = s_r_dot * s
-            rate[1:] = -form.phi(x) * s
-            rate /= self.gamma
-        else:
-            rate = np.zeros(len(self.names))
-        return LawStep(u, rate, s, s_r_dot)
-
-    def lyapunov(self, s, theta_hat, theta) -> np.ndarray:
-        """V = ½ d s² + ½ sum_i gamma_i (θ̂_i - θ_i)².  s: (N,), theta*: (N, n_theta)."""
-        s = np.asarray(s, dtype=float)
-        err = np.asarray(theta_hat, dtype=float) - np.asarray(theta, dtype=float)
-        d = np.asarray(theta, dtype=float)[..., 0]
-        return 0.5 * d * s**2 + 0.5 * np.sum(self.gamma * err**2, axis=-1)
-
-
-class FixedNominalLaw:
-    """Baseline: the same control structure with theta_hat held at its initial (nominal) value."""
+    adapt = True
 
     def __init__(self, form: ModelForm, *, lam: float, k: float):
         _check_gains(form, lam, k)
@@ -105,11 +106,52 @@ class FixedNominalLaw:
         self.lam = float(lam)
         self.k = float(k)
         self._coeffs = surface_coefficients(form.order, self.lam)
+        self.gamma = np.ones(len(self.names))
+        self.dead_zone = None
+        self.K = 0.0
+        self.boundary_layer = 1.0
 
-    def __call__(self, t, x, ref, theta_hat) -> LawStep:
-        s, s_r_dot, _ = sliding_terms(self._coeffs, x, ref)
-        u = _certainty_equivalent(self.form, x, s, s_r_dot, theta_hat, self.k)
-        return LawStep(u, np.zeros(len(self.names)), s, s_r_dot)
+    def native_params(self) -> dict:
+        """The numbers `sliding_law` takes, for the native (numba) callback."""
+        dz = self.dead_zone
+        return {"coeffs": self._coeffs, "k": self.k, "gamma": self.gamma, "adapt": self.adapt,
+                "dz_width": 0.0 if dz is None else dz.width, "dz_on_s": dz is None or dz.on is DeadZoneOn.S,
+                "K": self.K, "boundary_layer": self.boundary_layer}
+
+    def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
+        p = self.native_params()
+        rate = np.empty(len(self.names))
+        u, s, s_r_dot = sliding_law(x, ref, theta_hat, p["coeffs"], p["k"], p["gamma"], p["adapt"], p["dz_width"],
+                                    p["dz_on_s"], p["K"], p["boundary_layer"], self.form.phi, self.form.f,
+                                    self.form.h, rate)
+        return LawStep(u, rate, s, s_r_dot)
+
+
+class SlidingAdaptiveLaw(_SlidingBase):
+    """The lecture's adaptive sliding law of order n = form.order, optionally with a dead-zone.
+
+    lam: lambda [1/s] of the surface; k: gain on s [u per unit of s];
+    gamma: scalar or (n_theta,) adaptation "stiffness" (estimates move at 1/gamma);
+    dead_zone: None, or a DeadZone (default test |s| < eps, the lecture's formula).
+    """
+
+    def __init__(self, form: ModelForm, *, lam: float, k: float, gamma, dead_zone: DeadZone | None = None):
+        super().__init__(form, lam=lam, k=k)
+        self.gamma = as_gamma(gamma, len(self.names))
+        self.dead_zone = dead_zone
+
+    def lyapunov(self, s, theta_hat, theta) -> np.ndarray:
+        """V = ½ d s² + ½ sum_i gamma_i (θ̂_i - θ_i)².  s: (N,), theta*: (N, n_theta)."""
+        s = np.asarray(s, dtype=float)
+        err = np.asarray(theta_hat, dtype=float) - np.asarray(theta, dtype=float)
+        d = np.asarray(theta, dtype=float)[..., 0]
+        return 0.5 * d * s**2 + 0.5 * np.sum(self.gamma * err**2, axis=-1)
+
+
+class FixedNominalLaw(_SlidingBase):
+    """Baseline: the same control structure with theta_hat held at its initial (nominal) value."""
+
+    adapt = False
 
     def lyapunov(self, s, theta_hat, theta) -> np.ndarray:
         """No adaptation, so only the tracking part: V = ½ d s²."""
@@ -133,8 +175,3 @@ class RobustSlidingLaw(FixedNominalLaw):
             raise ValueError(f"boundary_layer must be finite and > 0, got {boundary_layer}")
         self.K = float(K)
         self.boundary_layer = float(boundary_layer)
-
-    def __call__(self, t, x, ref, theta_hat) -> LawStep:
-        step = super().__call__(t, x, ref, theta_hat)
-        sat = min(1.0, max(-1.0, step.s / self.boundary_layer))
-        return step._replace(u=step.u + self.K * sat / self.form.h(x))

@@ -179,6 +179,17 @@ class MujocoPlant:
         with control_callback(callback):
             yield
 
+    @contextlib.contextmanager
+    def controlled_natively(self, cfunc) -> Iterator[None]:
+        """Install a compiled (numba cfunc) control callback for the block (see adaptive_mj.native)."""
+        with control_callback(cfunc.ctypes):
+            yield
+
+    def step_native(self, nstep: int) -> None:
+        """nstep physics steps in one mj_step call, the constant external force held throughout."""
+        self.data.qfrc_applied[self._dadr] = self.force_offset
+        mujoco.mj_step(self.model, self.data, nstep=nstep)
+
     def step(self) -> None:
         """One mj_step; the external force (offset + disturbance(t)) is held over the step."""
         d = self.data
