@@ -152,6 +152,7 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
     ref = np.empty((n_steps, order + 1))
     theta_hat = np.empty((n_steps, n_theta))
     theta = np.empty((n_steps, n_theta))
+    V = np.empty(n_steps)  # filled block by block (no full-length temporaries at the end)
 
     ctrl = _Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, dt)
     pending = sorted(events, key=lambda e: e.t)
@@ -160,19 +161,21 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
     flushed = 0
 
     def flush(upto: int) -> None:
+        """Compute V for rows not yet flushed and hand them to the sink."""
         nonlocal flushed
-        if sink is not None and upto > flushed:
+        if upto > flushed:
             rows = slice(flushed, upto)
             flushed = upto  # first: a write cut short by an interruption is never repeated
-            V = law.lyapunov(s[rows], theta_hat[rows], theta[rows])
-            sink.write_rows(rows.start, t[rows], x[rows], u[rows], s[rows], ref[rows],
-                            theta_hat[rows], theta[rows], V)
+            V[rows] = law.lyapunov(s[rows], theta_hat[rows], theta[rows])
+            if sink is not None:
+                sink.write_rows(rows.start, t[rows], x[rows], u[rows], s[rows], ref[rows],
+                                theta_hat[rows], theta[rows], V[rows])
 
     def result(n: int, status: str, reason: str) -> Trajectory:
         keep = slice(0, n)
-        V = law.lyapunov(s[keep], theta_hat[keep], theta[keep])
+        flush(n)
         return Trajectory(t=t[keep], x=x[keep], u=u[keep], s=s[keep], ref=ref[keep],
-                          theta_hat=theta_hat[keep], theta=theta[keep], V=V, names=names,
+                          theta_hat=theta_hat[keep], theta=theta[keep], V=V[keep], names=names,
                           status=status, reason=reason,
                           meta={"dt": dt, "order": order, "events": applied, "native": bool(native)})
 

@@ -1,79 +1,166 @@
-"""Speed benchmark: µs per physics step of bare MuJoCo stepping against the
-closed loop (adaptive law in the control callback), on the heave and arm
-models, in one process. Prints medians over repetitions with the spread and
-the ratios. Usage: python benchmarks/speed.py [--reps 5] [--steps 20000] [--json]
+"""Speed benchmark (issue 6): µs per physics step of bare MuJoCo stepping against
+the closed loop, on the heave and arm models, in one process; sweep throughput
+with 1 and 2 jobs; log size per simulated second; peak memory of a 600 s run.
+
+  a  bare MuJoCo: mj_step(m, d, nstep=N), no control
+  b  closed loop, adaptive law in the control callback (native path), no logging
+  b_py  the same law through the Python callback (the path users' own laws take)
+  c  closed loop with MCAP logging at the default rate (100 Hz)
+  d  closed loop with MCAP logging of every physics step
+
+Every figure is the median of --reps repetitions, with [min, max].
+Usage: python benchmarks/speed.py [--reps 5] [--steps 20000] [--json] [--quick]
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import resource
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import mujoco
-import numpy as np
 
 from adaptive_mj import scenario as sc
 from adaptive_mj.build import build
 from adaptive_mj.loop import run
+from adaptive_mj.parallel import Job
 from adaptive_mj.runner import execute
 
 REPO = Path(__file__).resolve().parents[1]
 CASES = {"heave": "heave_tracking", "arm": "arm_payload_swap"}
 
 
-def _bare(setup, steps: int) -> float:
-    m = setup.plant.model
-    d = mujoco.MjData(m)
+def _scenario(name: str, steps: int, extra=()):
+    return sc.load(REPO / "scenarios" / f"{name}.toml",
+                   overrides=[f"simulation.duration={steps * 0.001!r}", "events=[]", *extra])
+
+
+def bare(name: str, steps: int) -> float:
+    setup = build(_scenario(name, steps))
+    m, d = setup.plant.model, setup.plant.data
     t0 = time.perf_counter()
     mujoco.mj_step(m, d, nstep=steps)
     return (time.perf_counter() - t0) / steps * 1e6
 
 
-def _loop(scn, steps: int, log: bool) -> float:
-    duration = steps * 0.001
-    s = sc.load(scn, overrides=[f"simulation.duration={duration}", "events=[]"])
-    if log:
-        with tempfile.TemporaryDirectory() as tmp:
-            t0 = time.perf_counter()
-            execute(s, log_path=Path(tmp) / "x.mcap")
-            return (time.perf_counter() - t0) / steps * 1e6
-    setup = build(s)
+def loop(name: str, steps: int, native: bool) -> float:
+    scn = _scenario(name, steps)
+    setup = build(scn)
     t0 = time.perf_counter()
-    run(setup.plant, setup.law, setup.reference, duration=duration, theta_hat0=setup.theta_hat0)
+    run(setup.plant, setup.law, setup.reference, duration=scn.simulation.duration, theta_hat0=setup.theta_hat0,
+        native=native)
     return (time.perf_counter() - t0) / steps * 1e6
 
 
+def logged(name: str, steps: int, rate_hz: float | None) -> tuple[float, int]:
+    scn = _scenario(name, steps, [f"log.rate_hz={rate_hz!r}"] if rate_hz else [])
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "run.mcap"
+        t0 = time.perf_counter()
+        execute(scn, log_path=path)
+        el = time.perf_counter() - t0
+        return el / steps * 1e6, path.stat().st_size
+
+
+def med(xs):
+    return {"median": statistics.median(xs), "min": min(xs), "max": max(xs)}
+
+
+SWEEP_SECONDS = 30.0  # simulated seconds per sweep run
+
+
+def sweep_throughput(jobs: int, runs: int) -> float:
+    """Runs per minute for `runs` logged heave runs of SWEEP_SECONDS in `jobs` fresh worker
+    processes (both cases pay the same start-up: interpreter, imports, numba compile)."""
+    import concurrent.futures as cf
+    import multiprocessing as mp
+
+    from adaptive_mj.parallel import run_job
+
+    with tempfile.TemporaryDirectory() as tmp:
+        js = [Job(REPO / "scenarios" / "heave_tracking.toml", (f"simulation.duration={SWEEP_SECONDS}",), seed=i,
+                  log=Path(tmp) / f"{i}.mcap") for i in range(runs)]
+        t0 = time.perf_counter()
+        with cf.ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as pool:
+            res = list(pool.map(run_job, js))
+        el = time.perf_counter() - t0
+        assert all(r.status == "ok" for r in res), [r.error for r in res]
+    return runs / el * 60.0
+
+
+PEAK_RSS_CODE = """
+import resource, sys, tempfile
+from pathlib import Path
+from adaptive_mj import scenario as sc
+from adaptive_mj.runner import execute
+scn = sc.load(sys.argv[1], overrides=['simulation.duration=600.0'])
+with tempfile.TemporaryDirectory() as tmp:
+    execute(scn, log_path=Path(tmp) / 'run.mcap')
+print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+"""
+
+
+def peak_rss_600s() -> float:
+    """Peak RSS [MB] of a 600 s heave run at 1 kHz with default logging, in a fresh process."""
+    out = subprocess.run([sys.executable, "-c", PEAK_RSS_CODE, str(REPO / "scenarios" / "heave_tracking.toml")],
+                         capture_output=True, text=True, check=True)
+    return int(out.stdout.strip().splitlines()[-1]) / 1024.0
+
+
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--steps", type=int, default=20000)
+    ap.add_argument("--sweep-runs", type=int, default=8)
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     out = {"cores": os.cpu_count(), "steps": args.steps, "reps": args.reps, "models": {}}
     for plant, name in CASES.items():
-        path = REPO / "scenarios" / f"{name}.toml"
-        setup = build(sc.load(path))
-        rows = {}
-        for key, fn in (("a_bare_mj_step", lambda: _bare(setup, args.steps)),
-                        ("b_closed_loop", lambda: _loop(path, args.steps, False)),
-                        ("c_closed_loop_logged", lambda: _loop(path, args.steps, True))):
-            xs = [fn() for _ in range(args.reps)]
-            rows[key] = {"median_us": statistics.median(xs), "min_us": min(xs), "max_us": max(xs)}
-        a = rows["a_bare_mj_step"]["median_us"]
-        ratios = {f"{k[0]}/a": v["median_us"] / a for k, v in rows.items() if not k.startswith("a")}
-        out["models"][plant] = {"integrator": "RK4", "us_per_step": rows, "ratios": ratios}
+        loop(name, 500, True)  # compile the native callback once (numba), outside the timing
+        rows = {"a_bare": [], "b_closed_loop": [], "b_py_python_callback": [], "c_logged_100Hz": [],
+                "d_logged_every_step": []}
+        sizes = []
+        for _ in range(args.reps):
+            rows["a_bare"].append(bare(name, args.steps))
+            rows["b_closed_loop"].append(loop(name, args.steps, True))
+            rows["b_py_python_callback"].append(loop(name, max(2000, args.steps // 5), False))
+            c, size = logged(name, args.steps, None)
+            rows["c_logged_100Hz"].append(c)
+            sizes.append(size / (args.steps * 0.001))
+            rows["d_logged_every_step"].append(logged(name, args.steps, 1000.0)[0])
+        stats = {k: med(v) for k, v in rows.items()}
+        a = stats["a_bare"]["median"]
+        out["models"][plant] = {
+            "integrator": "RK4", "us_per_step": stats,
+            "ratios": {"b/a": stats["b_closed_loop"]["median"] / a, "b_py/a": stats["b_py_python_callback"]["median"] / a,
+                       "c/a": stats["c_logged_100Hz"]["median"] / a, "d/a": stats["d_logged_every_step"]["median"] / a},
+            "log_bytes_per_sim_second_100Hz": statistics.median(sizes),
+        }
+    t1 = [sweep_throughput(1, args.sweep_runs) for _ in range(max(1, args.reps // 2))]
+    t2 = [sweep_throughput(2, args.sweep_runs) for _ in range(max(1, args.reps // 2))]
+    out["sweep_runs_per_minute"] = {"jobs1": med(t1), "jobs2": med(t2),
+                                    "speedup": statistics.median(t2) / statistics.median(t1)}
+    out["peak_rss_mb_600s_heave_logged"] = peak_rss_600s()
     if args.json:
         print(json.dumps(out, indent=2))
         return
-    print(f"cores: {out['cores']}, {args.steps} steps x {args.reps} reps (median [min, max] µs/step)")
+    print(f"cores: {out['cores']}; {args.steps} steps per figure; median [min, max] of {args.reps} reps")
     for plant, res in out["models"].items():
+        print(f"\n{plant} (RK4, 1 ms):")
         for key, v in res["us_per_step"].items():
-            print(f"  {plant:6s} {key:22s} {v['median_us']:8.2f} [{v['min_us']:.2f}, {v['max_us']:.2f}]")
-        print("  " + plant + " ratios: " + ", ".join(f"{k} = {v:.1f}" for k, v in res["ratios"].items()))
+            print(f"  {key:24s} {v['median']:8.2f} µs/step  [{v['min']:.2f}, {v['max']:.2f}]")
+        print("  ratios: " + ", ".join(f"{k} = {v:.2f}" for k, v in res["ratios"].items()))
+        print(f"  log size at 100 Hz: {res['log_bytes_per_sim_second_100Hz'] / 1000:.1f} kB per simulated second")
+    sw = out["sweep_runs_per_minute"]
+    print(f"\nsweep ({args.sweep_runs} x {SWEEP_SECONDS:g} s heave runs, logged, fresh workers): jobs 1 {sw['jobs1']['median']:.1f} runs/min, "
+          f"jobs 2 {sw['jobs2']['median']:.1f} runs/min, speed-up {sw['speedup']:.2f}x")
+    print(f"peak RSS of a 600 s heave run at 1 kHz with default logging: {out['peak_rss_mb_600s_heave_logged']:.0f} MB")
 
 
 if __name__ == "__main__":
