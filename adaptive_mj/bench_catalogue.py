@@ -536,6 +536,8 @@ def _pe(quick: bool, logs: Path) -> Section:
             lines.append(f"| {v} | {idx:.3g} | {rho:.3g} | {math.exp(-rho * T):.2g} | {rel[-1]:.3g} | "
                          f"{_g(r.summary['metrics']['rms_tracking_error_tail'])} |")
             rows.append(_row("excitation", v, r, f"rate {rho:.2g}/s, final rel. error {rel[-1]:.2g}"))
+        lows = [ln.get_ydata().min() for ln in ax[0].lines[::2] if len(ln.get_ydata())]
+        ax[0].set_ylim(max(1e-9, 0.1 * min(lows)) if lows else 1e-9, 10.0)
         ax[0].set_xlabel("time t [s]")
         ax[0].set_ylabel("max relative parameter error [-]\n(dotted: e^(−ρt))")
         ax[0].legend(fontsize=8)

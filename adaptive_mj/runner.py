@@ -2,6 +2,7 @@
 summarise. Also where log file names are chosen (never overwriting)."""
 from __future__ import annotations
 
+import contextlib
 import platform
 import time
 from dataclasses import dataclass
@@ -9,8 +10,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from adaptive_mj import __version__
-from adaptive_mj.build import ModelSource, build
-from adaptive_mj.errors import AdaptiveMJError
+from adaptive_mj.build import ModelSource, Setup, build
+from adaptive_mj.errors import AdaptiveMJError, Interrupted
 from adaptive_mj.loop import run
 from adaptive_mj.metrics import clean_json, summary as make_summary
 from adaptive_mj.scenario import Scenario
@@ -39,15 +40,19 @@ def reserve_log_path(scn: Scenario, *, out: Path | None = None, directory: Path 
                      force: bool = False) -> Path:
     """The log's path, created empty so no later run can take it.
 
-    out: an explicit file; refused if it exists unless force.
+    out: an explicit file; refused if it exists unless force (then it is left as it
+    is until the run starts writing, so a run that fails to start keeps the old file).
     Otherwise <directory>/<scenario>-<UTC time>-seed<N>[-i].mcap, never an existing name.
     """
     if out is not None:
         out = Path(out)
         if out.exists() and not force:
             raise AdaptiveMJError(f"{out}: file exists; pass --force to overwrite it")
+        if out.exists() and not out.is_file():
+            raise AdaptiveMJError(f"{out}: not a regular file; choose a log file name")
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_bytes(b"")
+        if not out.exists():
+            out.write_bytes(b"")
         return out
     directory = Path(directory) if directory is not None else LOGS_DIR
     directory.mkdir(parents=True, exist_ok=True)
@@ -63,6 +68,20 @@ def reserve_log_path(scn: Scenario, *, out: Path | None = None, directory: Path 
     raise AdaptiveMJError(f"{directory}: could not find a free log name for {stem}")
 
 
+def log_header(scn: Scenario, setup: Setup):
+    """The record.LogHeader of a run of `scn` built as `setup` (also used by adaptive_mj.env)."""
+    from adaptive_mj.record import LogHeader
+
+    plant = setup.plant
+    return LogHeader(
+        scenario_name=scn.name, scenario_text=scn.text, scenario_source=scn.source, overrides=scn.overrides,
+        seed=scn.noise.seed, log_rate_hz=scn.log_rate_hz, dt=plant.dt, order=plant.form.order,
+        param_names=tuple(setup.law.names), model_xml=setup.model_xml,
+        model_source=setup.source.xml if setup.source else None,
+        model_assets=dict(setup.source.assets) if setup.source else {},
+        versions=versions(), created_unix=time.time())
+
+
 def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None) -> RunResult:
     """Build and run one scenario; stream it to log_path (MCAP) when given."""
     setup = build(scn, source=source)
@@ -75,21 +94,22 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
         traj = run(plant, setup.law, setup.reference, **kwargs)
         return RunResult(traj, clean_json(make_summary(scn.name, traj)), None)
 
-    from adaptive_mj.record import LogHeader, Recorder
+    from adaptive_mj.record import Recorder
 
-    model_xml = setup.model_xml
-    header = LogHeader(
-        scenario_name=scn.name, scenario_text=scn.text, scenario_source=scn.source, overrides=scn.overrides,
-        seed=scn.noise.seed, log_rate_hz=scn.log_rate_hz, dt=plant.dt, order=plant.form.order,
-        param_names=tuple(setup.law.names), model_xml=model_xml,
-        model_source=setup.source.xml if setup.source else None,
-        model_assets=dict(setup.source.assets) if setup.source else {},
-        versions=versions(), created_unix=time.time())
-    recorder = Recorder(log_path, header)
+    try:
+        recorder = Recorder(log_path, log_header(scn, setup))
+    except BaseException:
+        with contextlib.suppress(OSError):
+            Path(log_path).unlink()  # a half-written header must not pass for a log
+        raise
     try:
         traj = run(plant, setup.law, setup.reference, sink=recorder, **kwargs)
-    except KeyboardInterrupt:
-        recorder.close("interrupted", "interrupted by the user (SIGINT)", {})
+    except KeyboardInterrupt as exc:  # loop.run has handed the recorder every whole row
+        partial = getattr(exc, "trajectory", None)
+        summary = {} if partial is None else clean_json(make_summary(scn.name, partial))
+        recorder.close("interrupted", summary.get("reason") or str(exc) or "interrupted", summary)
+        if isinstance(exc, Interrupted):
+            exc.summary = summary or None
         raise
     except BaseException as exc:
         recorder.close("failed", f"{type(exc).__name__}: {exc}", {})

@@ -1,0 +1,501 @@
+"""dm_env environments over the benchmark's scenarios, built on dm_control's
+``control.Environment`` and a ``control.Task``.
+
+    env = adaptive_mj.env.load("heave_tracking")            # an agent supplies u
+    env = adaptive_mj.env.load("heave_tracking", law="scenario")  # the scenario's law does
+
+The physics is the scenario's own plant: each episode calls
+``adaptive_mj.build.build(scenario)`` and the dm_control ``Physics`` wraps that
+plant's MjModel and MjData (shared, not copied). The plant stays the only
+code that knows joint and actuator ids and true parameters, and an episode is
+stepped exactly as ``adaptive-mj run`` steps a run (``loop.run``): one
+``plant.step()`` per physics step, the scenario's events applied at the first
+step with t_k >= t_event, its disturbance held over each step, the control
+written inside MuJoCo's control callback (installed only while the physics
+steps, then the previous one is restored).
+
+Episode. Starts from the scenario's initial state; every episode rebuilds the
+plant, so events (payload swap, density scale, constant force) are undone
+and the noise generator restarts from the seed: with the same actions,
+episodes are identical. It ends (StepType.LAST) after the run's
+round(duration / dt) physics steps, i.e. ceil(round(duration / dt) / n_sub_steps)
+agent steps (the last one shorter when they do not divide), with discount 1.0
+(a time limit, as in dm_control), or earlier when the run diverges (non-finite state,
+control or estimate, |x_i| > simulation.state_bound, a MuJoCo warning) with
+discount 0.0. MID steps have discount 1.0.
+
+Action: a ``BoundedArray`` of shape (1,) named "u" with the actuator's
+ctrlrange [N or N*m], held over the control step (zero-order hold at every
+RK4 stage). Finite actions outside the bounds are clipped to them; a wrong
+shape or a non-finite value raises ValueError. With ``law=`` the action is
+ignored (pass anything, e.g. zeros or None).
+
+Observation (an OrderedDict of float64 arrays):
+    "state"      (n,)   [y, y', ...] as measured: the true state plus the
+                        scenario's noise (one draw per physics step, from
+                        noise.seed), exactly what the law sees in a run
+    "reference"  (n+1,) [y_d, y_d', ..., y_d^(n)] at time t
+    "t"          ()     simulation time [s]
+    "theta"      (n_theta,) true parameters, ordered as ``task.param_names``;
+                        only with ``privileged=True``
+n is the plant's order (2, or 3 with a thruster lag); y is in m (heave) or rad (arm).
+
+Reward: -sum over the step's physics steps j of (y_d(t_j+1) - y(t_j+1))^2 * dt,
+the squared tracking error of the true output at the end of each physics
+step times the physics step: the integral of the squared error over the
+control step by the right-endpoint rule [m^2*s or rad^2*s]. So an episode's
+return is about -duration * (RMS tracking error)^2. (It is non-finite if the
+state is; that step is LAST with discount 0.)
+
+The law as the policy (``law="scenario"`` or a law object): the law runs
+inside MuJoCo's control callback at every evaluation of the dynamics, with the
+estimates staged through the integrator's stages and advanced once per
+physics step by ``loop._Controller`` itself (loop.run's Python path; its
+native numba path computes the same numbers), so an episode is step for step
+the computation ``adaptive-mj run`` does: the tests find bit-identical rows.
+``law_policy(env)`` (a ``LawPolicy``) is the other design: the law as an
+ordinary agent that sees only observations, holds u over the control step
+and advances its estimates by explicit Euler once per agent step.
+
+Logging: with ``log=DIR`` every episode writes DIR/<scenario>-<UTC>-seed<N>.mcap
+through ``record.Recorder`` with the header ``adaptive-mj run`` writes
+(``runner.log_header``), rows per physics step at the scenario's log rate, and
+a /summary that also says which "policy" drove it ("agent" or "law") and the
+control_timestep [s]. Agent episodes log the estimates and V as NaN (an
+agent has none) and s as the scenario law's sliding variable of the measured
+state. A log closes with status "ok" or "diverged" at the episode's end, and
+"interrupted" when the episode is cut short by reset() or env.close().
+"""
+from __future__ import annotations
+
+import collections
+import dataclasses
+import math
+import os
+from pathlib import Path
+import numpy as np
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # dm_control probes a GL backend on import
+import dm_env  # noqa: E402
+from dm_control import mujoco as dm_mujoco  # noqa: E402
+from dm_control.mujoco import wrapper  # noqa: E402
+from dm_control.rl import control  # noqa: E402
+from dm_env import specs  # noqa: E402
+
+from adaptive_mj import scenario as scenario_io  # noqa: E402
+from adaptive_mj.build import Setup, build  # noqa: E402
+from adaptive_mj.errors import ScenarioError  # noqa: E402
+from adaptive_mj.loop import _Controller, _divergence  # noqa: E402
+from adaptive_mj.metrics import clean_json, summary as make_summary  # noqa: E402
+from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402
+from adaptive_mj.trajectory import Trajectory  # noqa: E402
+
+#: ``law=`` value that runs the scenario's own law (the one ``adaptive-mj run`` runs).
+SCENARIO_LAW = "scenario"
+
+#: Final discount of an episode that reached its time limit / that diverged.
+DISCOUNT_TIME_LIMIT = 1.0
+DISCOUNT_DIVERGED = 0.0
+
+
+def load(scenario, *, law=None, log: str | os.PathLike | None = None, seed: int | None = None,
+         overrides=(), privileged: bool = False, n_sub_steps: int | None = None,
+         control_timestep: float | None = None) -> TrackingEnvironment:
+    """A dm_env.Environment running `scenario` (see the module docstring).
+
+    scenario: a Scenario, a scenario file, or the name of a bundled one ("heave_tracking").
+    law: None (the agent's action is the control), "scenario" (the scenario's
+      law), or a law object for the scenario's plant (same parameter names as
+      the scenario's law, whose initial estimates it starts from).
+    log: a directory; every episode writes an MCAP log there.
+    seed: noise seed (replaces noise.seed); overrides: "key=value" scenario overrides.
+    privileged: also observe the true parameters ("theta").
+    n_sub_steps / control_timestep [s]: physics steps per agent step (default 1),
+      or the agent's step, a whole multiple of the physics step; not both.
+
+    Raises ScenarioError for a scenario without a MuJoCo plant (first_order, twin backend).
+    """
+    scn = _scenario(scenario, overrides=tuple(overrides), seed=seed)
+    setup = build(scn)
+    if not isinstance(setup.plant, MujocoPlant):
+        raise ScenarioError(f"{scn.source}: adaptive_mj.env needs a MuJoCo plant, got plant.kind = "
+                            f"{scn.plant.kind!r} with plant.backend = {scn.plant.backend!r}")
+    physics = PlantPhysics.of(setup.plant)
+    if n_sub_steps is not None and control_timestep is not None:
+        raise ValueError("pass n_sub_steps or control_timestep, not both")
+    if control_timestep is not None:
+        n_sub_steps = control.compute_n_steps(control_timestep, physics.timestep())
+    n_sub_steps = 1 if n_sub_steps is None else int(n_sub_steps)
+    if n_sub_steps < 1:
+        raise ValueError(f"n_sub_steps must be >= 1, got {n_sub_steps}")
+    task = TrackingTask(scn, setup, law=law, privileged=privileged, n_sub_steps=n_sub_steps,
+                        log_dir=None if log is None else Path(log))
+    # The task ends episodes itself (an exact step count; dm_control's time_limit
+    # divides floats and can add a step), so the Environment has no time limit.
+    return TrackingEnvironment(physics, task, n_sub_steps=n_sub_steps, legacy_step=False)
+
+
+def _scenario(scenario, *, overrides: tuple[str, ...], seed: int | None) -> scenario_io.Scenario:
+    if isinstance(scenario, scenario_io.Scenario):
+        if not overrides and seed is None:
+            return scenario
+        source = Path(scenario.source)
+        return scenario_io.loads(scenario.text, where=scenario.source,
+                                 base_dir=source.parent if source.is_file() else None,
+                                 default_name=scenario.name, overrides=(*scenario.overrides, *overrides),
+                                 seed=seed)
+    path = Path(scenario)
+    if not path.exists() and "/" not in str(scenario):
+        bundled = scenario_io.SCENARIOS_DIR / path.with_suffix(".toml").name
+        if bundled.exists():
+            path = bundled
+    return scenario_io.load(path, overrides=overrides, seed=seed)
+
+
+class TrackingEnvironment(control.Environment):
+    """dm_control's Environment; close() also closes an episode log left open."""
+
+    def close(self) -> None:
+        self.task.close()
+
+
+class PlantPhysics(dm_mujoco.Physics):
+    """dm_control's Physics over a plant's own MjModel and MjData (shared, not copied).
+
+    step(n) advances the current episode by n physics steps through the
+    episode (events, noise, the policy in MuJoCo's control callback, logging)
+    rather than calling mj_step directly, so stepping is the same as
+    ``adaptive-mj run``'s.
+    """
+
+    episode: "_Episode | None" = None
+
+    @classmethod
+    def of(cls, plant: MujocoPlant) -> PlantPhysics:
+        return cls(wrapper.MjData(plant.data))
+
+    def use(self, plant: MujocoPlant) -> None:
+        """Wrap another plant's model and data (a new episode's)."""
+        self._reload_from_data(wrapper.MjData(plant.data))
+
+    def step(self, nstep: int = 1) -> None:
+        if self.episode is None:
+            raise RuntimeError("PlantPhysics.step before an episode began (call env.reset())")
+        self.episode.advance(nstep)
+
+
+class TrackingTask(control.Task):
+    """Track the scenario's reference; see the module docstring for specs and reward.
+
+    law: the law (the scenario's unless one was passed; with an agent it
+      only gives the logged s); drives_law: whether it supplies the control.
+    param_names: names of theta (the "theta" observation, the logged estimates);
+    theta_hat0: (n_theta,) the scenario's initial estimates.
+    log_paths: the MCAP logs written so far, one per episode.
+    """
+
+    def __init__(self, scn: scenario_io.Scenario, setup: Setup, *, law=None, privileged: bool = False,
+                 n_sub_steps: int = 1, log_dir: Path | None = None):
+        plant = setup.plant
+        self.scenario = scn
+        self.privileged = bool(privileged)
+        self.n_sub_steps = int(n_sub_steps)
+        self.log_dir = log_dir
+        self.log_paths: list[Path] = []
+        self.order = plant.form.order
+        self.param_names = tuple(setup.law.names)
+        self.theta_hat0 = np.array(setup.theta_hat0, dtype=float)  # (n_theta,) the law's start
+        self.drives_law = law is not None  # the law, not the agent, supplies the control
+        if law is None or (isinstance(law, str) and law == SCENARIO_LAW):
+            law = setup.law
+        elif isinstance(law, str):
+            raise ValueError(f"law must be None, {SCENARIO_LAW!r} or a law object, got {law!r}")
+        elif law.order != self.order:
+            raise ValueError(f"law of order {law.order} on a plant of order {self.order}")
+        elif tuple(law.names) != self.param_names:
+            raise ValueError(f"law parameters {tuple(law.names)} differ from the scenario's "
+                             f"{self.param_names}")
+        self.law = law  # laws are pure, so one object serves every episode
+        lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (-math.inf, math.inf)
+        self._action_spec = specs.BoundedArray((1,), np.float64, np.full(1, lo), np.full(1, hi), name="u")
+        fields = [("state", (self.order,)), ("reference", (self.order + 1,)), ("t", ())]
+        if self.privileged:
+            fields.append(("theta", (len(self.param_names),)))
+        self._observation_spec = collections.OrderedDict(
+            (name, specs.Array(shape, np.float64, name=name)) for name, shape in fields)
+        self.n_physics_steps = int(round(scn.simulation.duration / plant.dt))
+        self.n_agent_steps = -(-self.n_physics_steps // self.n_sub_steps)  # per episode
+        self._episode: _Episode | None = None
+
+    # -- control.Task ---------------------------------------------------------
+
+    def initialize_episode(self, physics: PlantPhysics) -> None:
+        self.close()
+        setup = build(self.scenario)
+        physics.use(setup.plant)
+        recorder = None
+        if self.log_dir is not None:
+            from adaptive_mj.record import Recorder
+            from adaptive_mj.runner import log_header, reserve_log_path
+
+            path = reserve_log_path(self.scenario, directory=self.log_dir)
+            recorder = Recorder(path, log_header(self.scenario, setup))
+            self.log_paths.append(path)
+        self._episode = _Episode(self.scenario, setup, law=self.law, drive=self.drives_law,
+                                 n_steps=self.n_physics_steps,
+                                 control_dt=self.n_sub_steps * setup.plant.dt, recorder=recorder)
+        physics.episode = self._episode
+
+    def before_step(self, action, physics) -> None:
+        if self.drives_law:
+            return
+        u = np.asarray(action, dtype=np.float64)
+        if u.shape != (1,):
+            raise ValueError(f"action must have shape (1,) (the control u), got shape {u.shape}")
+        if not np.isfinite(u[0]):
+            raise ValueError(f"action u must be finite, got {u[0]}")
+        self._episode.hold(float(np.clip(u[0], self._action_spec.minimum[0], self._action_spec.maximum[0])))
+
+    def get_observation(self, physics) -> collections.OrderedDict:
+        ep = self._episode
+        t = ep.plant.time
+        obs = collections.OrderedDict()
+        obs["state"] = ep.measured_state()
+        obs["reference"] = np.asarray(ep.reference(t, self.order), dtype=np.float64)
+        obs["t"] = np.array(t, dtype=np.float64)
+        if self.privileged:
+            obs["theta"] = np.array(ep.plant.true_theta(), dtype=np.float64)
+        return obs
+
+    def get_reward(self, physics) -> float:
+        return self._episode.last_reward
+
+    def get_termination(self, physics) -> float | None:
+        ep = self._episode
+        if ep.status == "diverged":
+            return DISCOUNT_DIVERGED
+        if ep.k >= ep.n_steps:
+            return DISCOUNT_TIME_LIMIT
+        return None
+
+    def action_spec(self, physics) -> specs.BoundedArray:
+        return self._action_spec
+
+    def observation_spec(self, physics) -> collections.OrderedDict:
+        return self._observation_spec
+
+    # -- beyond control.Task ----------------------------------------------------
+
+    @property
+    def theta_hat(self) -> np.ndarray | None:
+        """(n_theta,) the law's current estimates, or None when the agent drives."""
+        ep = self._episode
+        return None if ep is None or ep.controller is None else ep.controller.theta_hat.copy()
+
+    def trajectory(self) -> Trajectory:
+        """The current (or last) episode so far, one row per physics step, as ``loop.run`` returns it."""
+        if self._episode is None:
+            raise RuntimeError("no episode yet (call env.reset())")
+        return self._episode.trajectory()
+
+    def close(self) -> None:
+        """Close the current episode's log if it is still open (status "interrupted")."""
+        if self._episode is not None:
+            self._episode.close_log("interrupted", "the episode was cut short (reset or close)")
+
+
+class _Episode:
+    """One episode of a scenario: ``loop.run``'s step body, driven one agent step at a time.
+
+    Rows are kept per physics step k: t (N,) [s], x (N, n) true state, u (N,)
+    applied control, s (N,), ref (N, n+1), theta_hat and theta (N, n_theta).
+    """
+
+    def __init__(self, scn, setup: Setup, *, law, drive: bool, n_steps: int, control_dt: float,
+                 recorder=None):
+        plant = setup.plant
+        self.name = scn.name
+        self.plant = plant
+        self.law = law
+        self.reference = setup.reference
+        self.order = plant.form.order
+        self.dt = plant.dt
+        self.control_dt = control_dt
+        self.n_steps = n_steps
+        self.state_bound = scn.simulation.state_bound
+        self.theta_hat0 = np.asarray(setup.theta_hat0, dtype=float)
+        self.pending = sorted(setup.events, key=lambda e: e.t)
+        self.applied: list[tuple[float, str]] = []
+        self.noise_std, self.rng = setup.noise_std, setup.rng
+        self.controller = None
+        if drive:
+            self.controller = _Controller(law, setup.reference, self.theta_hat0, plant.ctrl_range,
+                                          self.order, plant.stages, plant.dt)
+            self._policy = self.controller
+        else:
+            self._policy = lambda t, x: self._u
+        self._u = 0.0
+        self.noise = self._draw()  # the noise of the coming physics step
+        n, n_theta = n_steps, len(self.theta_hat0)
+        self.t, self.x, self.u, self.s = np.empty(n), np.empty((n, self.order)), np.empty(n), np.empty(n)
+        self.ref = np.empty((n, self.order + 1))
+        self.theta_hat, self.theta = np.empty((n, n_theta)), np.empty((n, n_theta))
+        self.k = 0
+        self.status, self.reason = "ok", ""
+        self.last_reward = 0.0
+        self.recorder = recorder
+        self.sink_every = max(1, round(1.0 / self.dt))  # flush about once per simulated second
+        self.flushed = 0
+        self._apply_due_events()
+
+    def _apply_due_events(self) -> None:
+        """Events due at the coming step's start (t_k >= t_event - dt/2), as loop.run applies
+        them; applied now, before the observation, so an observation at t_k already sees them."""
+        t_k = self.plant.time
+        while self.pending and t_k >= self.pending[0].t - 0.5 * self.dt:
+            event = self.pending.pop(0)
+            event.apply(self.plant)
+            self.applied.append((t_k, event.label))
+            if self.recorder is not None:
+                self.recorder.write_event(t_k, event.label)
+
+    def _draw(self) -> np.ndarray | None:
+        return self.rng.normal(0.0, self.noise_std) if self.noise_std is not None else None
+
+    def hold(self, u: float) -> None:
+        """The agent's control [N or N*m] for the coming agent step (already clipped)."""
+        self._u = u
+
+    def measured_state(self) -> np.ndarray:
+        """(n,) the state the law sees at the coming step: true state + that step's noise."""
+        x = self.plant.observe()
+        return x + self.noise if self.noise is not None else x
+
+    def advance(self, n_sub: int) -> None:
+        """Run up to n_sub physics steps; stop early at the episode's end or a divergence."""
+        reward = 0.0
+        try:
+            with self.plant.controlled_by(self._policy):
+                for _ in range(n_sub):
+                    if self.k >= self.n_steps or self.status != "ok":
+                        break
+                    reward += self._one_step()
+        except BaseException as exc:
+            status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed"
+            self.close_log(status, f"{type(exc).__name__}: {exc}")
+            raise
+        self.last_reward = reward
+        if self.k >= self.n_steps or self.status != "ok":
+            self.close_log(self.status, self.reason)
+        elif self.k - self.flushed >= self.sink_every:
+            self._flush()
+
+    def _one_step(self) -> float:
+        """One physics step, as in loop.run; returns -(y_d - y)^2 * dt at its end."""
+        plant, k, ctrl = self.plant, self.k, self.controller
+        t_k = plant.time
+        self.t[k] = t_k
+        self.x[k] = plant.observe()
+        self.theta[k] = plant.true_theta()
+        if ctrl is not None:
+            self.theta_hat[k] = ctrl.theta_hat
+            ctrl.arm(self.noise)
+            plant.step()
+            self.u[k], self.s[k], self.ref[k] = ctrl.step_u, ctrl.step_out.s, ctrl.step_ref
+            ctrl.finish_step()
+            estimates = ctrl.theta_hat
+        else:
+            self.theta_hat[k] = np.nan
+            ref = self.reference(t_k, self.order)
+            seen = self.x[k] + self.noise if self.noise is not None else self.x[k]
+            self.s[k] = self.law(t_k, seen, ref, self.theta_hat0).s
+            self.ref[k] = ref
+            plant.step()
+            self.u[k] = self._u
+            estimates = self.theta_hat0
+        self.k = k + 1
+        self.noise = self._draw()
+        reason = _divergence(plant, self.x[k], self.u[k], estimates, self.state_bound)
+        if reason:
+            self.status, self.reason = "diverged", reason
+        elif self.k < self.n_steps:
+            self._apply_due_events()
+        y_tilde = float(self.reference(plant.time, 0)[0]) - float(plant.observe()[0])
+        return -(y_tilde * y_tilde) * self.dt
+
+    def _V(self, rows: slice) -> np.ndarray:
+        if self.controller is None:
+            return np.full(rows.stop - rows.start, np.nan)
+        return self.law.lyapunov(self.s[rows], self.theta_hat[rows], self.theta[rows])
+
+    def _flush(self) -> None:
+        if self.recorder is not None and self.k > self.flushed:
+            rows = slice(self.flushed, self.k)
+            self.recorder.write_rows(self.flushed, self.t[rows], self.x[rows], self.u[rows], self.s[rows],
+                                     self.ref[rows], self.theta_hat[rows], self.theta[rows], self._V(rows))
+        self.flushed = self.k
+
+    def trajectory(self) -> Trajectory:
+        keep = slice(0, self.k)
+        return Trajectory(t=self.t[keep].copy(), x=self.x[keep].copy(), u=self.u[keep].copy(),
+                          s=self.s[keep].copy(), ref=self.ref[keep].copy(),
+                          theta_hat=self.theta_hat[keep].copy(), theta=self.theta[keep].copy(),
+                          V=self._V(keep), names=tuple(self.law.names), status=self.status,
+                          reason=self.reason,
+                          meta={"dt": self.dt, "order": self.order, "events": list(self.applied)})
+
+    def close_log(self, status: str, reason: str) -> None:
+        """Write the remaining rows and the summary, and finish the log (no-op without an open log)."""
+        if self.recorder is None or self.recorder.closed:
+            return
+        recorder = self.recorder
+        self._flush()
+        self.recorder = None
+        traj = dataclasses.replace(self.trajectory(), status=status, reason=reason)
+        summary = clean_json(make_summary(self.name, traj))
+        summary.update(policy="law" if self.controller is not None else "agent",
+                       control_timestep=self.control_dt)
+        recorder.close(status, reason, summary)
+
+
+def law_policy(env: control.Environment, law=SCENARIO_LAW) -> LawPolicy:
+    """The scenario's law (or `law`) as an ordinary agent: policy(timestep) -> action (1,)."""
+    return LawPolicy(env, law)
+
+
+class LawPolicy:
+    """A law driving an environment from its observations only, like any agent.
+
+    u = law(t, state, reference, θ̂) clipped to the action spec and held over
+    the control step; θ̂ (``theta_hat``, (n_theta,)) starts at the scenario's
+    initial estimates on every FIRST step and then advances by explicit Euler,
+    θ̂ += control_timestep * θ̂', once per agent step. So it differs from
+    ``load(..., law="scenario")`` (and ``adaptive-mj run``) only in that u is
+    held over the RK4 stages and θ̂ is staged by Euler at the agent's rate.
+    """
+
+    def __init__(self, env: control.Environment, law=SCENARIO_LAW):
+        task = env.task
+        if task.drives_law:
+            raise ValueError("law_policy needs an environment the agent drives (load without law=)")
+        if isinstance(law, str):
+            if law != SCENARIO_LAW:
+                raise ValueError(f"law must be {SCENARIO_LAW!r} or a law object, got {law!r}")
+            law = task.law
+        elif law.order != task.order or tuple(law.names) != task.param_names:
+            raise ValueError(f"law of order {law.order} with parameters {tuple(law.names)} does not fit "
+                             f"the plant (order {task.order}, parameters {task.param_names})")
+        self.law = law
+        self.theta_hat0 = task.theta_hat0.copy()
+        self.theta_hat = self.theta_hat0.copy()
+        self._h = env.control_timestep()
+        spec = env.action_spec()
+        self._lo, self._hi = spec.minimum, spec.maximum
+
+    def __call__(self, timestep: dm_env.TimeStep) -> np.ndarray:
+        if timestep.first():
+            self.theta_hat = self.theta_hat0.copy()
+        obs = timestep.observation
+        out = self.law(float(obs["t"]), obs["state"], obs["reference"], self.theta_hat)
+        self.theta_hat = self.theta_hat + self._h * np.asarray(out.theta_hat_dot, dtype=float)
+        return np.clip(np.array([out.u], dtype=np.float64), self._lo, self._hi)
