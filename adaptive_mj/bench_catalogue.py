@@ -486,17 +486,34 @@ def _swap(quick: bool, logs: Path) -> Section:
         ax[2].legend(fontsize=8)
         fig.suptitle(f"arm: payload mass → {ev.value:g} kg at t = {ev.t:g} s")
         img = _save(fig, out, "payload_swap")
+        gif = _swap_gif(jobs[0], ev.t, out)
         text = (f"`arm_payload_swap`: the 0.5 kg payload becomes {ev.value:g} kg (×4) at t = {ev.t:g} s; both "
                 "controllers start from the true parameters of the arm as compiled; the fixed controller keeps them. "
                 f"Recovery: time after the swap from which |ỹ| < {analysis.SWAP_THRESHOLD} rad to the end; "
                 "re-convergence: from which every parameter the swap changed (J, g_sin) is within 10 % of its new "
                 "value to the end.\n\n"
-                + "\n".join(lines) + "\n\n" + img + _status_note(res))
+                + "\n".join(lines) + "\n\n" + img + gif + _status_note(res))
         return SectionReport(text, rows)
 
     return Section("payload_swap", "7. Payload swap on the arm",
                    "an adaptive controller re-identifies changed inertial parameters on line, where a fixed "
                    "controller designed for the old payload keeps the error the change causes.", jobs, analyze)
+
+
+def _swap_gif(job: Job, t_event: float, out: Path) -> str:
+    """A short GIF of the adaptive run around the swap, rendered headless from its log."""
+    if job.log is None or not job.log.exists():
+        return ""
+    from adaptive_mj.errors import AdaptiveMJError
+    from adaptive_mj.video import render_log
+
+    try:
+        video = render_log(job.log, out / "figures" / "payload_swap.gif", fps=15, size=(480, 240),
+                           t_range=(t_event - 2.0, t_event + 6.0))
+    except AdaptiveMJError as exc:  # e.g. no EGL on this machine: the report says so
+        return f"\n\n(No video: {exc})"
+    return (f"\n\nThe swap in MuJoCo ({video.frames} frames at 15 fps, rendered headless from the log; the "
+            "translucent green body is the reference pose):\n\n![payload swap](figures/payload_swap.gif)")
 
 
 # ---------------------------------------------------------------- 8. persistent excitation

@@ -1,18 +1,21 @@
 """The command line: adaptive-mj list | run | replay.
 
-Exit codes: 0 success; 1 the run failed (diverged) or a verify mismatch;
-2 bad input (a bad scenario, model or log, a bad option). A user mistake
-prints one line on stderr; a traceback only with --debug.
+Exit codes: 0 success; 1 the run failed (diverged, failed, a truncated log) or a
+verify mismatch; 2 bad input (a bad scenario, model or log, a bad option);
+130 / 143 interrupted by SIGINT / SIGTERM (every open log closed with status
+"interrupted"). A user mistake prints one line on stderr; a traceback only
+with --debug.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import signal
 import sys
 from pathlib import Path
 
-from adaptive_mj.errors import AdaptiveMJError, LogFormatError
+from adaptive_mj.errors import AdaptiveMJError, Interrupted, LogFormatError
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -45,6 +48,10 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("--plot", type=Path, metavar="FILE.png", help="draw tracking, error, u and s, estimates, V")
     rp.add_argument("--verify", action="store_true",
                     help="re-simulate from the log's scenario and model; report whether bit-identical")
+    rp.add_argument("--video", type=Path, metavar="FILE.mp4|.gif",
+                    help="render the run headless from the log's model: scene, tracking error, estimates")
+    rp.add_argument("--video-fps", type=float, metavar="FPS", help="video frames per second (default 30, real time)")
+    rp.add_argument("--video-size", metavar="WxH", help="video frame size in pixels (default 800x400)")
     b = sub.add_parser("bench", help="run the benchmark catalogue: report.md, figures, logs, summary.json")
     b.add_argument("--quick", action="store_true", help="shorter runs and fewer variants (about 2 minutes)")
     b.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
@@ -119,8 +126,12 @@ def cmd_run(args) -> int:
     log = reserve_log_path(scn, out=args.output, force=args.force)
     try:
         result = execute(scn, log_path=log)
-    except AdaptiveMJError:
-        log.unlink(missing_ok=True)  # a run that never started leaves no file that looks like a log
+    except BaseException as exc:
+        if log.is_file() and log.stat().st_size == 0:
+            log.unlink()  # the run never started: leave no file that looks like a log
+        elif isinstance(exc, Interrupted) and exc.summary is not None:
+            _print_summary(exc.summary, as_json=args.json, log=None if args.json else log)
+            exc.note = f"{exc.summary['duration']:.3f} s simulated, log closed with status 'interrupted': {log}"
         raise
     if args.plot:
         from adaptive_mj.plot import plot_run
@@ -140,14 +151,26 @@ def cmd_replay(args) -> int:
         raise LogFormatError(f"{args.log}: no such log file")
     logged = read_log(args.log)
     summary = logged.summary
-    if summary is None:  # truncated: summarise what was recovered
-        summary = clean_json(make_summary(logged.header.get("scenario_name", args.log.stem), logged.trajectory))
+    if summary is None or "metrics" not in summary:  # truncated, or closed without metrics: summarise the rows
+        traj = logged.trajectory
+        summary = clean_json(make_summary(logged.header.get("scenario_name", args.log.stem), traj,
+                                          steps=len(traj) * int(logged.header.get("log_every", 1))))
         summary["status"] = logged.status
+        summary["reason"] = logged.trajectory.reason
     _print_summary(summary, as_json=args.json, note=logged.note)
     if args.plot:
         from adaptive_mj.plot import plot_run
 
         plot_run(logged.trajectory, args.plot, title=f"{summary['scenario']} (replay)")
+    if args.video:
+        from adaptive_mj.video import render_log
+
+        video = render_log(args.log, args.video, fps=args.video_fps, size=args.video_size)
+        print(f"video: {video.path} ({video.frames} frames at {video.fps:g} fps, "
+              f"{video.size[0]}x{video.size[1]}; rendered at {video.render_rate:.1f} frames/s)",
+              file=sys.stderr if args.json else sys.stdout)
+    if logged.damaged:  # what could be read is shown above; the file itself is bad input
+        raise LogFormatError(f"{args.log}: damaged log: {logged.note}")
     code = EXIT_OK if summary["status"] == "ok" else EXIT_FAILED
     if args.verify:
         from adaptive_mj.verify import verify
@@ -159,8 +182,20 @@ def cmd_replay(args) -> int:
     return code
 
 
+def _one_line(text: str) -> str:
+    """A message on one line (MuJoCo's compiler messages span several)."""
+    return " ".join(part.strip() for part in str(text).splitlines() if part.strip())
+
+
 def main(argv: list[str] | None = None) -> int:
+    from adaptive_mj.interrupt import stop_on_signals
+
     args = _parser().parse_args(argv)
+    with stop_on_signals():  # SIGINT, SIGTERM: errors.Interrupted, handled in _dispatch
+        return _dispatch(args)
+
+
+def _dispatch(args) -> int:
     try:
         if args.command == "bench":
             from adaptive_mj.bench import main_bench
@@ -175,11 +210,13 @@ def main(argv: list[str] | None = None) -> int:
     except AdaptiveMJError as exc:
         if args.debug:
             raise
-        print(f"adaptive-mj: error: {exc}", file=sys.stderr)
+        print(f"adaptive-mj: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("adaptive-mj: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        if not isinstance(exc, Interrupted):
+            exc = Interrupted(signal.SIGINT)
+        print(f"adaptive-mj: {exc}" + (f"; {exc.note}" if exc.note else ""), file=sys.stderr)
+        return exc.exit_code
 
 
 if __name__ == "__main__":

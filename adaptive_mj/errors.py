@@ -32,8 +32,9 @@ class SimulationDiverged(AdaptiveMJError, RuntimeError):
 
 class Interrupted(KeyboardInterrupt):
     """SIGINT or SIGTERM arrived; the run in progress stops cleanly, its log closed with
-    status "interrupted". The CLI's signal handler raises it for both signals; loop.run turns
-    a plain KeyboardInterrupt into one.
+    status "interrupted". adaptive_mj.interrupt's handler raises it for both signals (in the
+    CLI, and for SIGTERM in bench/sweep workers); loop.run turns a plain KeyboardInterrupt
+    into one.
 
     signum: the signal (2 = SIGINT); trajectory: the rows simulated before it (set by
     loop.run); summary: that run's summary (set by runner.execute once the log is closed);

@@ -179,9 +179,10 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
                           status=status, reason=reason,
                           meta={"dt": dt, "order": order, "events": applied, "native": bool(native)})
 
-    def stopped(reason: str) -> Trajectory:  # rows 0..k-1 are whole when an interruption comes
-        flush(k)
-        return result(k, "interrupted", reason)
+    def stopped(reason: str) -> Trajectory:  # rows 0..k-1 (and all flushed) are whole when an interruption comes
+        n = max(k, flushed)
+        flush(n)
+        return result(n, "interrupted", reason)
 
     def apply_events(t_k: float) -> None:
         while pending and t_k >= pending[0].t - 0.5 * dt:

@@ -5,19 +5,32 @@ validates, runs and logs it, and sends back a small JobResult: the summary,
 extra metrics computed on the full-rate trajectory, and the trajectory
 decimated to the logging rate (for figures). One run that diverges or fails
 is reported as such; the others go on.
+
+SIGINT and SIGTERM. Workers ignore SIGINT (a Ctrl-C reaches the whole process
+group; stopping is the parent's job). On KeyboardInterrupt (the CLI turns
+SIGTERM into one too) the parent sends each worker SIGTERM: a worker in a run
+raises errors.Interrupted there, so the run's log is closed with status
+"interrupted", and starts no further job; the parent waits for every worker to
+exit, then re-raises. Workers are spawned with both signals blocked until their
+handlers are in place, so no signal can kill one half set up.
 """
 from __future__ import annotations
 
 import concurrent.futures as cf
 import multiprocessing as mp
 import os
+import signal
+import sys
+import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-from adaptive_mj.errors import AdaptiveMJError
+from adaptive_mj import interrupt
+from adaptive_mj.errors import AdaptiveMJError, Interrupted
 from adaptive_mj.trajectory import Trajectory
 
 
@@ -25,7 +38,7 @@ from adaptive_mj.trajectory import Trajectory
 class Job:
     """scenario: a scenario file; overrides: --set expressions; seed: noise seed or None;
     log: the MCAP path to write (None: no log); tag: caller's label;
-    extras: names of functions in adaptive_mj.analysis run on the full-rate trajectory."""
+    extras: names of functions in adaptive_mj.analysis run on the full-rate trajectory (from EXTRAS)."""
 
     scenario: Path
     overrides: tuple[str, ...] = ()
@@ -35,10 +48,17 @@ class Job:
     extras: tuple[str, ...] = ()
 
 
+#: The analyses a Job may name (a closed set, so no text from a scenario or log picks a function).
+EXTRAS = ("excitation_index", "excitation_rate", "drift_rate", "swap_response", "lyapunov_check")
+
+#: Seconds the parent waits, after SIGTERM, for the workers to close their logs and exit.
+STOP_TIMEOUT = 30.0
+
+
 @dataclass(frozen=True)
 class JobResult:
     job: Job
-    status: str  # the summary status, or "error" when the run could not be set up
+    status: str  # the summary status, "error" when the run could not be set up, or "interrupted"
     summary: dict | None
     extras: dict = field(default_factory=dict)
     trajectory: Trajectory | None = None  # decimated to the scenario's logging rate
@@ -63,6 +83,9 @@ def run_job(job: Job) -> JobResult:
     from adaptive_mj.runner import execute
 
     try:
+        for name in job.extras:
+            if name not in EXTRAS:
+                raise AdaptiveMJError(f"unknown analysis {name!r}; expected one of {', '.join(EXTRAS)}")
         scn = sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed)
         if job.log is not None:
             job.log.parent.mkdir(parents=True, exist_ok=True)
@@ -82,8 +105,56 @@ def run_job(job: Job) -> JobResult:
         return JobResult(job, "error", None, error=str(exc))
 
 
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
 def _init_worker() -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    interrupt.install([signal.SIGTERM])  # raised only inside a run (interrupt.armed)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)  # blocked by the parent for the spawn
+
+
+def _run_in_worker(job: Job) -> JobResult:
+    """run_job in a worker: SIGTERM interrupts the run (its log closed as "interrupted");
+    once one came, jobs still queued are not started."""
+    if interrupt.requested() is not None:
+        return JobResult(job, "interrupted", None, error="not started: the runs were interrupted")
+    try:
+        with interrupt.armed():
+            return run_job(job)
+    except KeyboardInterrupt as exc:
+        return JobResult(job, "interrupted", getattr(exc, "summary", None), error=str(exc) or "interrupted")
+
+
+@contextmanager
+def _stop_signals_blocked():
+    """SIGINT and SIGTERM held back in this thread (and in processes spawned meanwhile)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)  # a signal that came meanwhile is raised now
+
+
+def _stop_workers(pool: cf.ProcessPoolExecutor, *, timeout: float = STOP_TIMEOUT) -> None:
+    """SIGTERM every worker (its run closes its log as "interrupted"), cancel what has not
+    started, and wait for all of them to exit; kill one that has not after `timeout` s."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
+    deadline = time.monotonic() + timeout
+    for p in procs:
+        p.join(max(0.0, deadline - time.monotonic()))
+        if p.is_alive():
+            p.kill()
+            p.join()
 
 
 def run_jobs(jobs: Sequence[Job], *, n_jobs: int = 1,
@@ -92,27 +163,44 @@ def run_jobs(jobs: Sequence[Job], *, n_jobs: int = 1,
     results: list[JobResult | None] = [None] * len(jobs)
     if n_jobs <= 1:
         for i, job in enumerate(jobs):
-            results[i] = run_job(job)
+            try:
+                results[i] = run_job(job)
+            except KeyboardInterrupt as exc:
+                if isinstance(exc, Interrupted):
+                    exc.note = _interrupted_note(i, len(jobs))
+                raise
             if on_done:
                 on_done(results[i])
         return results  # type: ignore[return-value]
     ctx = mp.get_context("spawn")  # a clean MuJoCo (and control callback) per worker
+    finished = 0
     with cf.ProcessPoolExecutor(max_workers=n_jobs, mp_context=ctx, initializer=_init_worker) as pool:
-        futures = {pool.submit(run_job, job): i for i, job in enumerate(jobs)}
         try:
+            with _stop_signals_blocked():  # the workers are spawned by submit
+                futures = {pool.submit(_run_in_worker, job): i for i, job in enumerate(jobs)}
             for fut in cf.as_completed(futures):
                 i = futures[fut]
                 try:
                     results[i] = fut.result()
                 except Exception as exc:  # a worker crashed: record it, go on
                     results[i] = JobResult(jobs[i], "error", None, error=f"{type(exc).__name__}: {exc}")
+                if results[i].status == "interrupted":  # a worker was told to stop: stop them all
+                    raise Interrupted(signal.SIGTERM)
+                finished += 1
                 if on_done:
                     on_done(results[i])
-        except KeyboardInterrupt:
-            for fut in futures:
-                fut.cancel()
+        except KeyboardInterrupt as exc:
+            _stop_workers(pool)
+            if on_done and finished:
+                sys.stderr.write("\n")  # end the progress line
+            if isinstance(exc, Interrupted):
+                exc.note = _interrupted_note(finished, len(jobs))
             raise
     return results  # type: ignore[return-value]
+
+
+def _interrupted_note(finished: int, total: int) -> str:
+    return f"{finished} of {total} runs had finished; the run(s) in progress closed their logs as 'interrupted'"
 
 
 def progress_printer(total: int, *, label: str = "runs", stream=None) -> Callable[[JobResult], None]:

@@ -21,10 +21,13 @@ Bounded loss: each `write_rows` call ends by closing the chunk in progress
 and flushing the file, so a run killed at any instant leaves a readable file
 that holds every row of every completed `write_rows` call. The loop calls
 `write_rows` every `sink_every` physics steps (1000 by default: 1 s at
-dt = 1 ms), so that block is the most a killed run loses.
+dt = 1 ms), so that block is the most a killed run loses. A stop signal
+(SIGINT, SIGTERM, see adaptive_mj.interrupt) never cuts a write or the close
+in half: it is raised once the call is done.
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -33,6 +36,8 @@ from typing import Any, Mapping
 
 import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
+
+from adaptive_mj.interrupt import deferred
 
 LOG_FORMAT_VERSION = 1
 
@@ -266,6 +271,16 @@ def _ns(t: float) -> int:
     return round(t * _NS_PER_S)
 
 
+def _whole(method):
+    """A stop signal waits until the method is done (adaptive_mj.interrupt.deferred)."""
+    @functools.wraps(method)
+    def whole(*args, **kwargs):
+        with deferred():
+            return method(*args, **kwargs)
+
+    return whole
+
+
 class Recorder:
     """Writes one run to an MCAP file at `path`; implements `loop.Sink`.
 
@@ -283,6 +298,7 @@ class Recorder:
     run's real status and summary.
     """
 
+    @_whole
     def __init__(self, path: str | os.PathLike, header: LogHeader, *,
                  flush_every_rows: int | None = None):
         _check_header(header)
@@ -360,6 +376,7 @@ class Recorder:
 
     # -- loop.Sink ------------------------------------------------------------
 
+    @_whole
     def write_rows(self, k0, t, x, u, s, ref, theta_hat, theta, V) -> None:
         """Log the kept rows of a block of consecutive physics steps k0, k0+1, ...
 
@@ -421,6 +438,7 @@ class Recorder:
                 self._writer.flush()
         self._t_last = max(self._t_last, t_list[-1])
 
+    @_whole
     def write_event(self, t: float, label: str, **detail) -> None:
         """Log an event applied at simulation time t [s]; detail: extra JSON-able fields.
         Written with the next flush (the end of the next write_rows call, or close)."""
@@ -434,6 +452,7 @@ class Recorder:
 
     # -- closing --------------------------------------------------------------
 
+    @_whole
     def close(self, status: str, reason: str = "",
               summary: Mapping[str, Any] | None = None) -> None:
         """Write /summary ({...summary, status, reason}) and the "status" metadata,

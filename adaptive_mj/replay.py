@@ -73,6 +73,8 @@ class LoggedRun:
     status: "ok", "diverged", "interrupted", "failed", or "truncated" when
     the rows are a recovered prefix (the run never closed its log, or part of
     the file is damaged); note says what was recovered ("" for a whole log).
+    damaged: part of the file is corrupt (a chunk failing its CRC, an unreadable
+    record), not just cut off.
     """
 
     header: dict
@@ -87,6 +89,7 @@ class LoggedRun:
     status: str
     recovered_rows: int
     note: str = ""
+    damaged: bool = False
 
 
 @dataclass
@@ -181,6 +184,7 @@ def _read(name: str, data: bytes) -> LoggedRun:
         status=status,
         recovered_rows=n_rows,
         note=note,
+        damaged=scan.damaged,
     )
 
 

@@ -286,6 +286,8 @@ def loads(text: str, *, where: str = "<string>", base_dir: Path | None = None, d
 
 
 _KEY_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
+# A scenario name goes into log file and folder names: one path component, not hidden.
+_NAME_RE = re.compile(r"[^./\\\x00-\x1f\x7f][^/\\\x00-\x1f\x7f]{0,99}")
 
 
 def parse_value(raw: str, *, what: str) -> Any:
@@ -325,6 +327,9 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
     if version != SCHEMA_VERSION:
         raise top.fail("schema_version", f"{SCHEMA_VERSION} (this adaptive-mj reads version {SCHEMA_VERSION})", version)
     name = top.string("name", default_name)
+    if "name" in doc and not _NAME_RE.fullmatch(name):
+        raise top.fail("name", "a plain name of 1 to 100 characters for log files (no '/', '\\', "
+                               "control characters or leading '.')", name)
     description = top.string("description", "")
 
     plant = _plant(top.table("plant"), base_dir)

@@ -561,3 +561,107 @@ def test_no_input_bytes_escape_as_another_exception(tmp_path):
         else:
             assert run.status in ("ok", "truncated")
             assert len(run.trajectory) == run.recovered_rows
+
+
+# -- fuzzing the reader on a real run's log (hypothesis) --------------------------------------------
+
+@pytest.fixture(scope="module")
+def real_log(tmp_path_factory):
+    """A 3 s log of a real run: the MuJoCo heave vehicle with sensor noise (model attached)."""
+    from adaptive_mj import scenario as sc
+    from adaptive_mj.runner import execute
+
+    path = tmp_path_factory.mktemp("real") / "heave.mcap"
+    scn = sc.load(sc.SCENARIOS_DIR / "heave_tracking.toml",
+                  overrides=["simulation.duration=3.0", "noise.std={y=0.001, y_dot=0.01}"])
+    execute(scn, log_path=path)
+    return path, path.read_bytes(), read_log(path)
+
+
+def _check_readable_or_refused(path, data: bytes, full) -> None:
+    """read_log either refuses the bytes with a one-line LogFormatError naming the file, or
+    returns a consistent run whose rows, when the log's own, are a prefix of the real ones."""
+    path.write_bytes(data)
+    try:
+        run = read_log(path)
+    except LogFormatError as e:
+        assert str(e).startswith(f"{path}: ") and "\n" not in str(e)
+        return
+    assert run.status in ("ok", "diverged", "interrupted", "failed", "truncated")
+    assert len(run.trajectory) == run.recovered_rows and run.trajectory.status == run.status
+    if run.status == "truncated":
+        assert run.summary is None and run.note.startswith(f"recovered {run.recovered_rows} rows (")
+
+
+def test_real_log_cut_at_every_tenth_recovers_a_growing_prefix(real_log, tmp_path):
+    _, data, full = real_log
+    assert full.status == "ok" and full.recovered_rows == 300
+    counts = []
+    for tenth in range(10):
+        cut = tmp_path / f"cut{tenth}.mcap"
+        cut.write_bytes(data[:len(data) * tenth // 10])
+        if tenth == 0:
+            with pytest.raises(LogFormatError, match=r"cut0\.mcap: empty file \(0 bytes\)"):
+                read_log(cut)
+            continue
+        run = read_log(cut)
+        assert run.status == "truncated" and run.summary is None
+        n = run.recovered_rows
+        assert run.note.startswith(f"recovered {n} rows ({n * 0.01:.1f} s) of a truncated log")
+        for name in ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V"):
+            assert np.array_equal(getattr(run.trajectory, name), getattr(full.trajectory, name)[:n])
+        assert run.scenario_text == full.scenario_text and run.model_source == full.model_source
+        counts.append(n)
+    assert counts == sorted(counts) and counts[-1] >= 200
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(flips=st.lists(st.tuples(st.floats(0.0, 1.0, exclude_max=True), st.integers(0, 7)), min_size=1, max_size=4))
+def test_fuzz_bit_flips_in_a_real_log(real_log, tmp_path, flips):
+    _, data, full = real_log
+    mutated = bytearray(data)
+    for where, bit in flips:
+        mutated[int(where * len(data))] ^= 1 << bit
+    _check_readable_or_refused(tmp_path / "flipped.mcap", bytes(mutated), full)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.binary(max_size=2000), magic=st.booleans(), cut=st.floats(0.0, 1.0))
+def test_fuzz_random_bytes_and_random_cuts(real_log, tmp_path, data, magic, cut):
+    _, real, full = real_log
+    probe = tmp_path / "random.mcap"
+    _check_readable_or_refused(probe, (b"\x89MCAP0\r\n" if magic else b"") + data, full)
+    # a real log's start followed by random bytes
+    _check_readable_or_refused(probe, real[:int(cut * len(real))] + data, full)
+
+
+# -- a stop signal never cuts a write in half ----------------------------------------------------------
+
+@pytest.mark.skipif(not hasattr(signal, "SIGTERM"), reason="needs POSIX signals")
+def test_a_signal_during_write_rows_is_raised_after_the_whole_block(tmp_path):
+    from adaptive_mj.errors import Interrupted
+    from adaptive_mj.interrupt import stop_on_signals
+
+    rows = synthetic(2000)
+    path = tmp_path / "signalled.mcap"
+    with stop_on_signals():
+        rec = Recorder(path, make_header())
+        original = rec._writer.add_message
+        calls = []
+
+        def add_and_signal(*args, **kw):
+            calls.append(1)
+            if len(calls) in (7, 300):  # a SIGTERM, then a second signal while the first waits
+                os.kill(os.getpid(), signal.SIGTERM if len(calls) == 7 else signal.SIGINT)
+            return original(*args, **kw)
+
+        rec._writer.add_message = add_and_signal
+        with pytest.raises(Interrupted, match="interrupted by SIGTERM") as stop:
+            write_block(rec, rows, 0, 1000)
+        assert stop.value.exit_code == 143
+        assert rec.rows_written == 100  # the block went in whole before the signal was raised
+        write_block(rec, rows, 1000, 2000)  # the second signal changed nothing
+        rec.close("interrupted", "interrupted by SIGTERM", {})
+    run = read_log(path)
+    assert run.status == "interrupted" and run.recovered_rows == 200
+    assert_rows_equal(run.trajectory, rows, slice(0, 2000, LOG_EVERY))

@@ -1,5 +1,6 @@
 """Scenario validation: every rule rejects bad input with a message naming
 the file, the key, what was expected and what came."""
+import json
 from pathlib import Path
 
 import math
@@ -159,3 +160,119 @@ def test_initial_state_reference_and_model_estimates(tmp_path):
     setup = build(load_text(tmp_path, text))
     np.testing.assert_array_equal(setup.theta_hat0, setup.plant.true_theta())
     np.testing.assert_array_equal(setup.plant.observe(), [1.0, 0.0])  # cos(0), -sin(0)
+
+
+# -- fuzzing: random documents and values raise only the project's own errors --------------------
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from adaptive_mj.errors import AdaptiveMJError  # noqa: E402
+from adaptive_mj.sweep import DOCUMENTED_KEYS, to_toml  # noqa: E402
+
+# Every key the validator reads, dotted, and the words it accepts, so random documents often get
+# past the first check and reach the deeper ones.
+_KEYS = sorted({f"{section}.{key}" for section, keys in DOCUMENTED_KEYS.items() for key in keys}
+               | {f"reference.{key}" for keys in sc._REFERENCE_KEYS.values() for key in keys}
+               | {"reference.kind", "name", "description", "schema_version", "events"})
+_WORDS = sorted(set(sc.PLANT_KINDS + sc.BACKENDS + sc.INTEGRATORS + sc.REFERENCE_KINDS + sc.LAW_KINDS
+                    + sc.DEAD_ZONE_ON + sc.DISTURBANCE_KINDS + sc.EVENT_KINDS + sc.REGRESSORS + sc.STATE_SIGNALS
+                    + ("model", "reference", "heave_vehicle", "pendulum_arm", "sphere", "none", "tip",
+                       "payload/body", "heave", "thrust", "d", "b", "c", "J", "g_sin", "g_cos", "a", "p")))
+_LEAVES = sorted({k.rsplit(".", 1)[-1] for k in _KEYS} | {"t", "kind", "value", "body", "width", "on"} | set(_WORDS))
+
+_names = st.sampled_from(_LEAVES) | st.text(st.characters(codec="utf-8"), min_size=1, max_size=5)
+_scalars = st.one_of(
+    st.booleans(),
+    st.integers(-3, 5),
+    st.integers(-2**63, 2**63 - 1),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([0.0, -0.0, 1e-300, 1e300, 0.001, 2.0, 100.0]),
+    st.sampled_from(_WORDS),
+    st.text(st.characters(codec="utf-8"), max_size=8),
+)
+_values = st.recursive(_scalars, lambda inner: st.lists(inner, max_size=4) | st.dictionaries(_names, inner, max_size=4),
+                       max_leaves=10)
+# Values of the key's own type, often in range: they get past the type checks to the range and
+# consistency checks, and to build() (model compile, joint and actuator look-up, law construction).
+_CHOICES = {"plant.kind": sc.PLANT_KINDS, "plant.backend": sc.BACKENDS, "simulation.integrator": sc.INTEGRATORS,
+            "reference.kind": sc.REFERENCE_KINDS, "law.kind": sc.LAW_KINDS, "law.dead_zone.on": sc.DEAD_ZONE_ON,
+            "disturbance.kind": sc.DISTURBANCE_KINDS, "plant.regressor": sc.REGRESSORS,
+            "plant.payload": ("sphere", "none", "nope"), "plant.model": ("heave_vehicle", "pendulum_arm", "nope"),
+            "plant.joint": ("heave", "shoulder", "nope"), "plant.actuator": ("thrust", "nope"),
+            "plant.site": ("tip", "nope"), "name": ("x", "a b", "../x"), "description": ("", "d")}
+_INTS = {"schema_version": st.integers(0, 2), "noise.seed": st.integers(-1, 2**64), "law.order": st.integers(0, 4)}
+_ARRAYS = {"plant.ctrl_range", "simulation.initial_state", "reference.amplitudes", "reference.omegas",
+           "reference.phases"}
+_small = st.floats(-1.0, 100.0) | st.sampled_from([0.0, 1e-9, 1e6])
+_thetas = st.one_of(*[st.fixed_dictionaries({n: _small for n in names})
+                      for names in (("d", "b", "c"), ("J", "b", "g_sin", "g_cos"), ("a", "b"), ("p",))])
+_TABLES = {"plant.theta": _thetas, "law.gamma": _thetas | _small, "law.nominal": _thetas | st.just("model"),
+           "law.initial_estimates": _thetas | st.just("model"),
+           "noise.std": st.dictionaries(st.sampled_from(sc.STATE_SIGNALS), _small, max_size=3),
+           "law.dead_zone": st.fixed_dictionaries({"width": _small}, optional={"on": st.sampled_from(sc.DEAD_ZONE_ON)})}
+
+
+def _typed(key: str):
+    if key in _CHOICES:
+        return st.sampled_from(_CHOICES[key])
+    if key in _INTS:
+        return _INTS[key]
+    if key in _ARRAYS:
+        return st.lists(st.floats(-2.0, 5.0), min_size=1, max_size=3) | st.just("reference")
+    if key in _TABLES:
+        return _TABLES[key]
+    if key == "events":
+        return _events
+    return _small
+_events = st.lists(st.fixed_dictionaries(
+    {"t": st.floats(-1.0, 30.0) | _scalars, "kind": st.sampled_from(sc.EVENT_KINDS) | _scalars},
+    optional={"value": st.floats(-3.0, 3.0) | _scalars, "body": st.sampled_from(["payload/body", "nope"]),
+              "extra": _scalars}), max_size=3)
+_changes = st.lists(st.sampled_from(_KEYS).flatmap(lambda k: st.tuples(st.just(k), st.one_of(_typed(k), _typed(k),
+                                                                                        _values))),
+                   min_size=1, max_size=3)
+_FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+def _load_and_build(text: str, overrides=(), tmp_path=None):
+    """Load (and, when valid, build) a scenario; only AdaptiveMJError may come out."""
+    try:
+        scn = sc.loads(text, where="fuzz.toml", base_dir=Path(tmp_path or "."), overrides=list(overrides))
+        build(scn)
+    except AdaptiveMJError as exc:
+        assert str(exc) and "\n" not in str(exc).strip() or "MuJoCo" in str(exc)
+
+
+@_FUZZ
+@given(path=st.sampled_from(sc.bundled()),
+       changes=_changes)
+def test_fuzz_random_values_for_the_real_keys(path, changes):
+    _load_and_build(path.read_text(), [f"{key}={to_toml(value)}" for key, value in changes])
+
+
+@_FUZZ
+@given(doc=st.dictionaries(st.sampled_from(_KEYS + ["plant", "simulation", "law", "reference", "noise", "log"])
+                           | _names, _values, max_size=12))
+def test_fuzz_random_documents(doc):
+    tables: dict = {}
+    for key, value in doc.items():  # dotted keys become nested tables
+        *parents, last = key.split(".") if sc._KEY_RE.match(key) else [key]
+        node = tables
+        for part in parents:
+            node = node.setdefault(part, {}) if isinstance(node.get(part, {}), dict) else {}
+        node[last] = value
+    text = "\n".join(f"{json.dumps(k)} = {to_toml(v)}" for k, v in tables.items())
+    _load_and_build(text)
+
+
+@_FUZZ
+@given(text=st.text(max_size=200) | st.binary(max_size=200).map(lambda b: b.decode("latin-1")))
+def test_fuzz_random_text(text):
+    _load_and_build(text)
+
+
+@_FUZZ
+@given(exprs=st.lists(st.text(max_size=30), min_size=1, max_size=3))
+def test_fuzz_random_set_expressions(exprs):
+    _load_and_build(GOOD, exprs)

@@ -1,0 +1,300 @@
+"""Interruption with real signals to a real process: SIGINT and SIGTERM finish every open
+log (readable by make_reader, status "interrupted") and leave no worker behind; SIGKILL
+loses at most the last second of simulated data; a run that fails leaves no good-looking log."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import struct
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from adaptive_mj.cli import main
+from adaptive_mj.replay import JsonDecoderFactory, read_log
+
+pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL") or not Path("/proc").is_dir(),
+                                reason="needs POSIX signals and /proc")
+
+REPO = Path(__file__).resolve().parents[1]
+LONG = "simulation.duration=3000.0"  # far longer than any test waits: the signal always comes mid-run
+
+
+def start(*args: str) -> subprocess.Popen:
+    """The CLI in its own process group (as a shell runs a foreground job)."""
+    env = dict(os.environ, MUJOCO_GL="egl")
+    return subprocess.Popen([sys.executable, "-m", "adaptive_mj", *map(str, args)], cwd=REPO, env=env,
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+
+
+def wait_for(condition, proc: subprocess.Popen, *, timeout: float = 120.0, what: str = "") -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if proc.poll() is not None:
+            out, err = proc.communicate()
+            pytest.fail(f"the process ended (rc={proc.returncode}) before {what}:\n{out}\n{err}")
+        if time.monotonic() > deadline:
+            proc.kill()
+            pytest.fail(f"timed out waiting for {what}")
+        time.sleep(0.05)
+
+
+def children(pid: int) -> set[int]:
+    """Direct children of pid (from /proc)."""
+    out = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.add(int(stat.parent.name))
+    return out
+
+
+def alive(pid: int) -> bool:
+    """Running (a zombie, exited but not yet reaped by init, counts as gone)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def assert_gone(pids: set[int], timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while any(alive(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not [p for p in pids if alive(p)], "orphan processes left behind"
+
+
+def closed_status(path: Path) -> dict:
+    """The /summary of a log read through its index: make_reader needs the footer."""
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[JsonDecoderFactory()])
+        assert reader.get_summary() is not None
+        summaries = [m for _, _, _, m in reader.iter_decoded_messages(topics=["/summary"])]
+    assert len(summaries) == 1
+    return summaries[0]
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_signal_during_run_closes_the_log_as_interrupted(tmp_path, capsys, sig, code):
+    log = tmp_path / "run.mcap"
+    proc = start("run", "heave_drift", "-o", log, "--json", "--set", LONG)
+    wait_for(lambda: log.is_file() and log.stat().st_size > 100_000, proc, what="the log to grow")
+    os.kill(proc.pid, sig)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == code, err
+    name = signal.Signals(sig).name
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"adaptive-mj: interrupted by {name}; ")
+    assert f"log closed with status 'interrupted': {log}" in lines[0]
+    printed = json.loads(out)
+    assert printed["status"] == "interrupted" and printed["reason"] == f"interrupted by {name}"
+    assert 2.0 < printed["duration"] < 3000.0
+
+    logged = closed_status(log)
+    assert logged == printed  # the log's /summary is the summary printed
+    run = read_log(log)
+    assert run.status == "interrupted" and run.note == ""
+    # every row simulated before the signal is in the log, not only the whole 1 s blocks
+    row_span = run.header["log_every"] * run.header["dt"]
+    t_end = run.trajectory.t[-1] + row_span  # the logged rows cover [0, t_end)
+    assert printed["duration"] - 1e-9 <= t_end < printed["duration"] + row_span
+    assert main(["replay", str(log), "--json"]) == 1  # not ok, not bad input
+    assert json.loads(capsys.readouterr().out) == printed
+
+
+def test_sigint_to_the_process_group_during_sweep_closes_every_log_and_leaves_no_worker(tmp_path):
+    out_dir = tmp_path / "sweep"
+    proc = start("sweep", "heave_drift", "--grid", "law.k=100,200,300", "--jobs", "2", "-o", out_dir,
+                 "--set", LONG)
+    logs = out_dir / "logs"
+    wait_for(lambda: len([p for p in logs.glob("*.mcap") if p.stat().st_size > 50_000]) == 2, proc,
+             what="both workers' logs to grow")
+    workers = children(proc.pid)
+    assert len(workers) >= 2
+    os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: every process of the group
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    last = err.strip().splitlines()[-1]
+    assert last == ("adaptive-mj: interrupted by SIGINT; 0 of 3 runs had finished; "
+                    "the run(s) in progress closed their logs as 'interrupted'")
+    assert "Traceback" not in err
+    assert_gone(workers)
+    written = sorted(logs.glob("*.mcap"))
+    assert len(written) == 2  # the third run never started, and left no file
+    for path in written:
+        summary = closed_status(path)
+        assert summary["status"] == "interrupted" and summary["duration"] > 1.0
+        assert read_log(path).status == "interrupted"
+
+
+def test_sigterm_to_one_sweep_worker_stops_the_whole_sweep_cleanly(tmp_path):
+    out_dir = tmp_path / "sweep"
+    proc = start("sweep", "heave_drift", "--grid", "law.k=100,200,300", "--jobs", "2", "-o", out_dir,
+                 "--set", LONG)
+    logs = out_dir / "logs"
+    wait_for(lambda: len([p for p in logs.glob("*.mcap") if p.stat().st_size > 50_000]) == 2, proc,
+             what="both workers' logs to grow")
+    workers = children(proc.pid)
+    worker = next(p for p in workers if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes())
+    os.kill(worker, signal.SIGTERM)  # e.g. a scheduler stopping one process: all runs stop, none half-logged
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines()[-1].startswith("adaptive-mj: interrupted by SIGTERM; 0 of 3 runs had finished")
+    assert_gone(workers)
+    assert sorted(closed_status(path)["status"] for path in logs.glob("*.mcap")) == ["interrupted"] * 2
+
+
+def test_sigterm_to_bench_closes_every_log_and_leaves_no_worker(tmp_path):
+    out_dir = tmp_path / "bench"
+    proc = start("bench", "--quick", "--jobs", "2", "-o", out_dir)
+    logs = out_dir / "logs"
+
+    def a_log_is_being_written() -> bool:
+        return any(p.stat().st_size > 20_000 and not p.read_bytes().endswith(b"\x89MCAP0\r\n")
+                   for p in logs.glob("*.mcap"))
+
+    wait_for(a_log_is_being_written, proc, what="a worker to be writing a log")
+    workers = children(proc.pid)
+    assert len(workers) >= 2
+    os.kill(proc.pid, signal.SIGTERM)  # the parent only: it stops its workers itself
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("adaptive-mj: interrupted by SIGTERM; ") and "Traceback" not in err
+    assert_gone(workers)
+    statuses = [closed_status(path)["status"] for path in logs.glob("*.mcap")]
+    assert statuses and set(statuses) <= {"ok", "diverged", "interrupted"}
+    assert "interrupted" in statuses
+    assert not (out_dir / "report.md").exists()  # no report made of an interrupted bench
+
+
+# A `run` whose every reading of the plant state also stores the simulated time reached in a
+# shared 8-byte file, so the test knows how far the run had got when it was killed.
+_TRACED_RUN = textwrap.dedent("""
+    import mmap, struct, sys
+    from adaptive_mj import runner
+    from adaptive_mj.cli import main
+
+    with open(sys.argv[1], "r+b") as f:
+        reached = mmap.mmap(f.fileno(), 8)
+    build = runner.build
+
+    def traced_build(scn, **kw):
+        setup = build(scn, **kw)
+        plant, observe = setup.plant, setup.plant.observe
+
+        def traced_observe():
+            x = observe()
+            struct.pack_into("<d", reached, 0, plant.time)
+            return x
+
+        plant.observe = traced_observe
+        return setup
+
+    runner.build = traced_build
+    sys.exit(main(sys.argv[2:]))
+""")
+
+
+@pytest.mark.parametrize("scenario, grow_to", [("heave_drift", 150_000), ("lecture_first_order", 150_000)])
+def test_sigkill_loses_at_most_one_second_and_replay_reports_truncated(tmp_path, scenario, grow_to):
+    log = tmp_path / "killed.mcap"
+    shared = tmp_path / "reached"
+    shared.write_bytes(bytes(8))
+    env = dict(os.environ, MUJOCO_GL="egl")
+    proc = subprocess.Popen([sys.executable, "-c", _TRACED_RUN, str(shared), "run", scenario, "-o", str(log),
+                             "--set", LONG], cwd=REPO, env=env, stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    wait_for(lambda: log.is_file() and log.stat().st_size > grow_to, proc, what="the log to grow")
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.communicate(timeout=30)
+    assert proc.returncode == -signal.SIGKILL
+    (reached,) = struct.unpack("<d", shared.read_bytes())
+
+    run = read_log(log)
+    assert run.status == "truncated" and run.summary is None
+    row_span = run.header["log_every"] * run.header["dt"]
+    recovered = run.trajectory.t[-1] + row_span  # the rows cover [0, recovered)
+    lost = reached - recovered
+    assert reached > 2.0
+    assert -1e-9 <= lost <= 1.0 + 1e-9, f"reached {reached} s, recovered up to {recovered} s"
+    assert run.note.startswith(f"recovered {run.recovered_rows} rows ({run.recovered_rows * row_span:.1f} s) "
+                               "of a truncated log")
+
+    r = subprocess.run([sys.executable, "-m", "adaptive_mj", "replay", str(log)], cwd=REPO, env=env,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1 and r.stderr == ""
+    assert r.stdout.startswith(f"{scenario}: truncated (recovered {run.recovered_rows} rows")
+
+
+# -- a run that fails never leaves a file that looks like a good log ------------------------------
+
+def test_run_that_fails_to_start_leaves_no_file(tmp_path, capsys):
+    log = tmp_path / "x.mcap"
+    code = main(["run", "heave_tracking", "-o", str(log), "--set", "plant.model=no_such_model"])
+    assert code == 2 and "no_such_model.xml' not found" in capsys.readouterr().err
+    assert not log.exists()
+
+
+def test_interrupted_before_the_log_opens_leaves_no_file(tmp_path, capsys, monkeypatch):
+    from adaptive_mj import runner
+
+    def interrupted_build(scn, **kw):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "build", interrupted_build)
+    log = tmp_path / "x.mcap"
+    assert main(["run", "lecture_first_order", "-o", str(log)]) == 130
+    assert capsys.readouterr().err == "adaptive-mj: interrupted by SIGINT\n"
+    assert not log.exists()
+
+
+def test_force_keeps_the_old_log_when_the_new_run_cannot_start(tmp_path, capsys):
+    log = tmp_path / "x.mcap"
+    assert main(["run", "lecture_first_order", "-o", str(log), "--set", "simulation.duration=0.5"]) == 0
+    before = log.read_bytes()
+    code = main(["run", "heave_tracking", "-o", str(log), "--force", "--set", "plant.model=no_such_model"])
+    assert code == 2
+    assert log.read_bytes() == before
+
+
+def test_crash_mid_run_leaves_a_failed_log_that_replay_reports(tmp_path, capsys, monkeypatch):
+    from adaptive_mj import runner
+
+    build = runner.build
+
+    def crashing_build(scn, **kw):
+        setup = build(scn, **kw)
+        reference = setup.reference
+
+        def crashing_reference(t, n):
+            if t > 1.5:
+                raise RuntimeError("sensor driver crashed")
+            return reference(t, n)
+
+        setup.reference = crashing_reference
+        return setup
+
+    monkeypatch.setattr(runner, "build", crashing_build)
+    log = tmp_path / "crash.mcap"
+    with pytest.raises(RuntimeError, match="sensor driver crashed"):
+        main(["run", "lecture_first_order", "-o", str(log)])
+    monkeypatch.undo()
+    capsys.readouterr()
+    run = read_log(log)
+    assert run.status == "failed" and run.trajectory.reason == "RuntimeError: sensor driver crashed"
+    assert closed_status(log)["status"] == "failed"
+    assert main(["replay", str(log)]) == 1
+    out = capsys.readouterr().out
+    assert out.startswith("lecture_first_order: failed (RuntimeError: sensor driver crashed), 1.000 s simulated")
