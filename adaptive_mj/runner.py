@@ -3,6 +3,7 @@ summarise. Also where log file names are chosen (never overwriting)."""
 from __future__ import annotations
 
 import contextlib
+import os
 import platform
 import time
 from dataclasses import dataclass
@@ -17,7 +18,8 @@ from adaptive_mj.metrics import clean_json, summary as make_summary
 from adaptive_mj.scenario import Scenario
 from adaptive_mj.trajectory import Trajectory
 
-LOGS_DIR = Path(__file__).resolve().parents[1] / "logs"
+# Run outputs: the repository's logs/ (ignored by git), or $ADAPTIVE_MJ_LOGS.
+LOGS_DIR = Path(os.environ.get("ADAPTIVE_MJ_LOGS") or Path(__file__).resolve().parents[1] / "logs")
 
 
 @dataclass(frozen=True)

@@ -47,3 +47,33 @@ def test_adding_a_plant_example_runs(tmp_path):
             assert r.returncode == 0, r.stderr
             assert r.stdout.strip() == "{'J': 0.0458, 'b': 0.02, 'g_sin': 0.0, 'g_cos': 1.7658}"  # horizontal at q = 0: gravity through cos q
     assert (tmp_path / "my_arm.mcap").stat().st_size > 10_000
+
+
+def readme_commands() -> list[str]:
+    """Every `.venv/bin/adaptive-mj ...` line in the README's code blocks (comments cut)."""
+    out, inside = [], False
+    for line in (REPO / "README.md").read_text().splitlines():
+        if line.startswith("```"):
+            inside = not inside
+            continue
+        line = line.split("   #")[0].strip()
+        if inside and line.startswith(".venv/bin/adaptive-mj "):
+            out.append(line)
+    return out
+
+
+def test_every_readme_command_runs(tmp_path):
+    import shlex
+
+    cmds = readme_commands()
+    assert len(cmds) >= 8, cmds
+    e = dict(env(), ADAPTIVE_MJ_LOGS=str(tmp_path / "logs"))
+    for line in cmds:
+        argv = [sys.executable, "-m", "adaptive_mj", *shlex.split(line)[1:]]
+        r = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, env=e, timeout=600,
+                           stdin=subprocess.DEVNULL)
+        assert r.returncode == 0, (line, r.stdout[-2000:], r.stderr[-2000:])
+    assert (tmp_path / "logs" / "tour" / "heave.png").stat().st_size > 20_000
+    assert (tmp_path / "logs" / "arm.mp4").stat().st_size > 10_000
+    assert list((tmp_path / "logs").glob("bench-quick-*/report.md"))
+    assert list((tmp_path / "logs").glob("sweep-*/sweep.csv"))
