@@ -43,7 +43,7 @@ def _with_globals(fn, **replace):
                                 fn.__closure__)
 
 
-def _compiled(form):
+def compiled(form):
     """The cfunc for one regressor (cached by the functions' code and closure values)."""
     key = tuple((fn.__code__, tuple(c.cell_contents for c in (fn.__closure__ or ())))
                 for fn in (form.phi, form.f, form.h))
@@ -146,7 +146,7 @@ class NativeController:
 
     def __init__(self, plant, law, reference, theta_hat0, max_rows: int):
         self.plant, self.law, self.reference = plant, law, reference
-        self.callback = _compiled(plant.form)
+        self.callback = compiled(plant.form)
         n, nth = plant.form.order, len(law.names)
         self.n, self.nth = n, nth
         self.nst = plant.stages

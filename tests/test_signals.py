@@ -146,7 +146,10 @@ def test_sigterm_to_one_sweep_worker_stops_the_whole_sweep_cleanly(tmp_path):
     wait_for(lambda: len([p for p in logs.glob("*.mcap") if p.stat().st_size > 50_000]) == 2, proc,
              what="both workers' logs to grow")
     workers = children(proc.pid)
-    worker = next(p for p in workers if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes())
+    parent_cmd = Path(f"/proc/{proc.pid}/cmdline").read_bytes()
+    worker = next(p for p in workers  # forked workers share the parent's command line (spawned: spawn_main)
+                  if Path(f"/proc/{p}/cmdline").read_bytes() in (parent_cmd,) or b"spawn_main" in
+                  Path(f"/proc/{p}/cmdline").read_bytes())
     os.kill(worker, signal.SIGTERM)  # e.g. a scheduler stopping one process: all runs stop, none half-logged
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, err
