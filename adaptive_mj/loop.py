@@ -151,7 +151,27 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
     s = np.empty(n_steps)
     ref = np.empty((n_steps, order + 1))
     theta_hat = np.empty((n_steps, n_theta))
-    theta = np.empty((n_steps, n_theta))
+    # True θ is piecewise constant (it changes only at events): kept as segments
+    # (first row, value) and expanded only where asked, so a long run does not hold an
+    # (n_steps, n_theta) copy of a constant.
+    segments: list[tuple[int, np.ndarray]] = []
+
+    def note_theta(row: int, value: np.ndarray) -> None:
+        if not segments or (segments[-1][1] is not value and not np.array_equal(segments[-1][1], value)):
+            segments.append((row, np.array(value, dtype=float)))
+
+    def theta_rows(a: int, b: int) -> np.ndarray:
+        """(b - a, n_theta) true θ of rows a..b-1."""
+        if len(segments) == 1:
+            return np.broadcast_to(segments[0][1], (b - a, n_theta))
+        out = np.empty((b - a, n_theta))
+        for i, (start, value) in enumerate(segments):
+            end = segments[i + 1][0] if i + 1 < len(segments) else b
+            lo, hi = max(start, a), min(end, b)
+            if lo < hi:
+                out[lo - a:hi - a] = value
+        return out
+
     V = np.empty(n_steps)  # filled block by block (no full-length temporaries at the end)
 
     ctrl = _Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, dt)
@@ -166,16 +186,17 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
         if upto > flushed:
             rows = slice(flushed, upto)
             flushed = upto  # first: a write cut short by an interruption is never repeated
-            V[rows] = law.lyapunov(s[rows], theta_hat[rows], theta[rows])
+            theta = theta_rows(rows.start, rows.stop)
+            V[rows] = law.lyapunov(s[rows], theta_hat[rows], theta)
             if sink is not None:
                 sink.write_rows(rows.start, t[rows], x[rows], u[rows], s[rows], ref[rows],
-                                theta_hat[rows], theta[rows], V[rows])
+                                theta_hat[rows], theta, V[rows])
 
     def result(n: int, status: str, reason: str) -> Trajectory:
         keep = slice(0, n)
         flush(n)
         return Trajectory(t=t[keep], x=x[keep], u=u[keep], s=s[keep], ref=ref[keep],
-                          theta_hat=theta_hat[keep], theta=theta[keep], V=V[keep], names=names,
+                          theta_hat=theta_hat[keep], theta=theta_rows(0, n), V=V[keep], names=names,
                           status=status, reason=reason,
                           meta={"dt": dt, "order": order, "events": applied, "native": bool(native)})
 
@@ -211,7 +232,7 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
                 theta_now = plant.true_theta()
                 block = slice(k, k + rows)
                 t[block], x[block], u[block], s[block], ref[block], theta_hat[block] = nc.chunk(rows, noise)
-                theta[block] = theta_now
+                note_theta(k, theta_now)
                 bad, reason = _first_divergence(plant, x[block], u[block], theta_hat[block], nc.theta,
                                                 state_bound)
                 if bad is not None:
@@ -229,7 +250,7 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
             apply_events(t_k)
             t[k] = t_k
             x[k] = plant.observe()
-            theta[k] = plant.true_theta()
+            note_theta(k, plant.true_theta())
             theta_hat[k] = ctrl.theta_hat
             noise = rng.normal(0.0, noise_std) if noise_std is not None else None
             ctrl.arm(noise)
