@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import statistics
 import subprocess
 import sys
@@ -99,21 +98,28 @@ def sweep_throughput(jobs: int, runs: int) -> float:
 
 
 PEAK_RSS_CODE = """
-import resource, sys, tempfile
+import sys, tempfile
 from pathlib import Path
 from adaptive_mj import scenario as sc
 from adaptive_mj.runner import execute
 scn = sc.load(sys.argv[1], overrides=['simulation.duration=600.0'])
 with tempfile.TemporaryDirectory() as tmp:
     execute(scn, log_path=Path(tmp) / 'run.mcap')
-print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+# VmHWM: the peak RSS of this process's own address space (ru_maxrss would also count
+# the parent's pages at fork time, which Linux carries across exec)
+print(next(int(line.split()[1]) for line in open('/proc/self/status') if line.startswith('VmHWM:')))
 """
 
 
-def peak_rss_600s() -> float:
-    """Peak RSS [MB] of a 600 s heave run at 1 kHz with default logging, in a fresh process."""
+def peak_rss_600s(*, gl: str | None = None) -> float:
+    """Peak RSS [MB] of a 600 s heave run at 1 kHz with default logging, in a fresh process
+    started as `adaptive-mj run` would be: MUJOCO_GL unset (gl=None), or set to `gl` (then
+    `import mujoco` loads that GL backend, e.g. Mesa's EGL, even though nothing renders)."""
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    if gl:
+        env["MUJOCO_GL"] = gl
     out = subprocess.run([sys.executable, "-c", PEAK_RSS_CODE, str(REPO / "scenarios" / "heave_tracking.toml")],
-                         capture_output=True, text=True, check=True)
+                         capture_output=True, text=True, check=True, env=env)
     return int(out.stdout.strip().splitlines()[-1]) / 1024.0
 
 
@@ -153,6 +159,7 @@ def main() -> None:
     out["sweep_runs_per_minute"] = {"jobs1": med(t1), "jobs2": med(t2),
                                     "speedup": statistics.median(t2) / statistics.median(t1)}
     out["peak_rss_mb_600s_heave_logged"] = med([peak_rss_600s() for _ in range(3)])
+    out["peak_rss_mb_600s_heave_logged_with_MUJOCO_GL_egl"] = peak_rss_600s(gl="egl")
     if args.json:
         print(json.dumps(out, indent=2))
         return
@@ -168,7 +175,8 @@ def main() -> None:
           f"jobs 2 {sw['jobs2']['median']:.1f} runs/min, speed-up {sw['speedup']:.2f}x")
     rss = out["peak_rss_mb_600s_heave_logged"]
     print(f"peak RSS of a 600 s heave run at 1 kHz with default logging: {rss['median']:.0f} MB "
-          f"[{rss['min']:.0f}, {rss['max']:.0f}] (3 fresh processes)")
+          f"[{rss['min']:.0f}, {rss['max']:.0f}] (3 fresh processes, MUJOCO_GL unset); "
+          f"{out['peak_rss_mb_600s_heave_logged_with_MUJOCO_GL_egl']:.0f} MB with MUJOCO_GL=egl")
 
 
 if __name__ == "__main__":

@@ -388,18 +388,23 @@ def test_flush_every_rows_bounds_loss_inside_long_blocks(tmp_path):
     class Killed(BaseException):
         pass
 
-    original = rec._writer.add_message
-    calls = []
+    import adaptive_mj.record as record_mod
 
-    def dying_add(*args, **kw):
-        calls.append(1)
-        if len(calls) == 6 * 120 + 3:
+    original = record_mod._add_messages
+    written = []
+
+    def dying_add(writer, batch):  # rows go to the writer in batches of flush_every_rows
+        if sum(written) + len(batch) // 6 > 120:
             raise Killed
-        return original(*args, **kw)
+        written.append(len(batch) // 6)
+        return original(writer, batch)
 
-    rec._writer.add_message = dying_add
-    with pytest.raises(Killed):
-        write_block(rec, rows, 0, 3000)
+    record_mod._add_messages = dying_add
+    try:
+        with pytest.raises(Killed):
+            write_block(rec, rows, 0, 3000)
+    finally:
+        record_mod._add_messages = original
     rec._file.close()
     run = read_log(path)
     assert run.status == "truncated" and run.recovered_rows == 100
@@ -646,18 +651,21 @@ def test_a_signal_during_write_rows_is_raised_after_the_whole_block(tmp_path):
     path = tmp_path / "signalled.mcap"
     with stop_on_signals():
         rec = Recorder(path, make_header())
-        original = rec._writer.add_message
-        calls = []
+        import adaptive_mj.record as record_mod
 
-        def add_and_signal(*args, **kw):
-            calls.append(1)
-            if len(calls) in (7, 300):  # a SIGTERM, then a second signal while the first waits
-                os.kill(os.getpid(), signal.SIGTERM if len(calls) == 7 else signal.SIGINT)
-            return original(*args, **kw)
+        original = record_mod._add_messages
 
-        rec._writer.add_message = add_and_signal
-        with pytest.raises(Interrupted, match="interrupted by SIGTERM") as stop:
-            write_block(rec, rows, 0, 1000)
+        def add_and_signal(writer, batch):  # a SIGTERM, then a second signal while the first waits
+            os.kill(os.getpid(), signal.SIGTERM)
+            os.kill(os.getpid(), signal.SIGINT)
+            return original(writer, batch)
+
+        record_mod._add_messages = add_and_signal
+        try:
+            with pytest.raises(Interrupted, match="interrupted by SIGTERM") as stop:
+                write_block(rec, rows, 0, 1000)
+        finally:
+            record_mod._add_messages = original
         assert stop.value.exit_code == 143
         assert rec.rows_written == 100  # the block went in whole before the signal was raised
         write_block(rec, rows, 1000, 2000)  # the second signal changed nothing
@@ -665,3 +673,32 @@ def test_a_signal_during_write_rows_is_raised_after_the_whole_block(tmp_path):
     run = read_log(path)
     assert run.status == "interrupted" and run.recovered_rows == 200
     assert_rows_equal(run.trajectory, rows, slice(0, 2000, LOG_EVERY))
+
+
+def test_batched_message_writing_gives_the_same_bytes_as_mcap_add_message(tmp_path):
+    """record._add_messages (the fast path) writes exactly what Writer.add_message would."""
+    import adaptive_mj.record as record_mod
+
+    rows = synthetic(2500)
+    header = make_header()
+    fast = tmp_path / "fast.mcap"
+    rec = Recorder(fast, header)
+    write_block(rec, rows, 0, 1300)
+    write_block(rec, rows, 1300, 2500)
+    rec.close("ok", "", {"x": 1})
+
+    def reference(writer, batch):
+        for channel_id, ns, data in batch:
+            writer.add_message(channel_id, ns, data, ns)
+
+    original = record_mod._add_messages
+    record_mod._add_messages = reference
+    try:
+        slow = tmp_path / "slow.mcap"
+        rec = Recorder(slow, header)
+        write_block(rec, rows, 0, 1300)
+        write_block(rec, rows, 1300, 2500)
+        rec.close("ok", "", {"x": 1})
+    finally:
+        record_mod._add_messages = original
+    assert fast.read_bytes() == slow.read_bytes()
