@@ -38,6 +38,7 @@ from typing import Any, Mapping
 import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
+from mcap.opcode import Opcode
 from mcap.records import MessageIndex
 
 from adaptive_mj.interrupt import deferred
@@ -510,6 +511,19 @@ class Recorder:
             self._file.close()
 
 
+class _PackedMessageIndex(MessageIndex):
+    """mcap's MessageIndex, serialised with one struct.pack instead of two calls per entry
+    (same bytes: channel u16, byte length u32, then (log_time u64, offset u64) pairs)."""
+
+    def write(self, stream) -> None:
+        stream.start_record(Opcode.MESSAGE_INDEX)
+        stream.write2(self.channel_id)
+        stream.write4(len(self.records) * 16)
+        flat = [v for pair in self.records for v in pair]
+        stream.write(struct.pack(f"<{len(flat)}Q", *flat))
+        stream.finish_record()
+
+
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log_time, publish_time
 _OPCODE_MESSAGE = 0x05
 
@@ -542,7 +556,7 @@ def _add_messages(writer: Writer, batch: list[tuple[int, int, bytes]]) -> None:
     for channel_id, ns, data in batch:
         index = indices.get(channel_id)
         if index is None:
-            index = indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
+            index = indices[channel_id] = _PackedMessageIndex(channel_id=channel_id, records=[])
         index.records.append((ns, buf.tell()))
         buf.write(pack(_OPCODE_MESSAGE, 22 + len(data), channel_id, 0, ns, ns))
         buf.write(data)
