@@ -572,8 +572,9 @@ def _pe(quick: bool, logs: Path) -> Section:
                 "regressor ψ = [y_d'', −y_d'|y_d'|, −g] (D = diag M), so 0 = a direction never excited and 1 = "
                 "orthogonal regressor columns. It is scale-free, so it says whether every direction is excited, "
                 "not how fast: the rate ρ = λ_min(Γ^-½ M Γ^-½)/k adds the gains (from the slow-adaptation "
-                "approximation s ≈ ψᵀθ̃/k, θ̃' ≈ −Γ⁻¹ψψᵀθ̃/k) and e^(−ρT) predicts the fraction of the initial "
-                "parameter error left after T.\n\n" + "\n".join(lines) + "\n\n" + img + _status_note(res))
+                "approximation s ≈ ψᵀθ̃/k, θ̃' ≈ −Γ⁻¹ψψᵀθ̃/k), and e^(−ρT) is that approximation's prediction of "
+                "the fraction of the initial parameter error left after T — compare it with the measured column: "
+                "it ranks the references, but for fast adaptation (large ρ) the approximation no longer holds.\n\n" + "\n".join(lines) + "\n\n" + img + _status_note(res))
         return SectionReport(text, rows)
 
     return Section("excitation", "8. Persistent excitation",

@@ -41,33 +41,33 @@ class Constant:
 
 
 @dataclass(frozen=True)
-class Cosine:
-    """y_d = offset + amplitude*cos(omega*t + phase).  omega [rad/s], phase [rad]."""
+class _Harmonic:
+    """y_d = offset + amplitude*base(omega*t + phase), base = cos or sin.  omega [rad/s], phase [rad]."""
 
     amplitude: float = 1.0
     omega: float = 1.0
     phase: float = 0.0
     offset: float = 0.0
+    _base = staticmethod(np.cos)
 
     def __call__(self, t, order: int) -> np.ndarray:
-        out = _harmonic(t, self.amplitude, self.omega, self.phase, order, np.cos)
+        out = _harmonic(t, self.amplitude, self.omega, self.phase, order, self._base)
         out[0] += self.offset
         return out
 
 
 @dataclass(frozen=True)
-class Sine:
-    """y_d = offset + amplitude*sin(omega*t + phase)."""
+class Cosine(_Harmonic):
+    """y_d = offset + amplitude*cos(omega*t + phase).  omega [rad/s], phase [rad]."""
 
-    amplitude: float = 1.0
-    omega: float = 1.0
-    phase: float = 0.0
-    offset: float = 0.0
+    _base = staticmethod(np.cos)
 
-    def __call__(self, t, order: int) -> np.ndarray:
-        out = _harmonic(t, self.amplitude, self.omega, self.phase, order, np.sin)
-        out[0] += self.offset
-        return out
+
+@dataclass(frozen=True)
+class Sine(_Harmonic):
+    """y_d = offset + amplitude*sin(omega*t + phase).  omega [rad/s], phase [rad]."""
+
+    _base = staticmethod(np.sin)
 
 
 @dataclass(frozen=True)

@@ -20,23 +20,7 @@ from adaptive_mj.errors import ScenarioError
 
 REPO = Path(__file__).resolve().parents[1]
 
-GOOD = """\
-schema_version = 1
-[plant]
-kind = "heave"
-backend = "mujoco"
-[simulation]
-duration = 2.0
-timestep = 0.001
-initial_state = [1.0, 0.0]
-[reference]
-kind = "cosine"
-[law]
-kind = "sliding_adaptive"
-lambda = 5.0
-k = 200.0
-gamma = { d = 0.0025, b = 0.002, c = 0.5 }
-"""
+from test_scenario import GOOD  # noqa: E402  the same valid scenario, edited case by case
 ARM = GOOD.replace('kind = "heave"', 'kind = "arm"').replace(
     "gamma = { d = 0.0025, b = 0.002, c = 0.5 }", "gamma = 1.0")
 
