@@ -110,6 +110,7 @@ class _SlidingBase:
         self.dead_zone = None
         self.K = 0.0
         self.boundary_layer = 1.0
+        self._args = None
 
     def native_params(self) -> dict:
         """The numbers `sliding_law` takes, for the native (numba) callback."""
@@ -119,11 +120,12 @@ class _SlidingBase:
                 "K": self.K, "boundary_layer": self.boundary_layer}
 
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
-        p = self.native_params()
+        if self._args is None:  # the gains, once (they are fixed after construction)
+            p = self.native_params()
+            self._args = (p["coeffs"], p["k"], p["gamma"], p["adapt"], p["dz_width"], p["dz_on_s"], p["K"],
+                          p["boundary_layer"], self.form.phi, self.form.f, self.form.h)
         rate = np.empty(len(self.names))
-        u, s, s_r_dot = sliding_law(x, ref, theta_hat, p["coeffs"], p["k"], p["gamma"], p["adapt"], p["dz_width"],
-                                    p["dz_on_s"], p["K"], p["boundary_layer"], self.form.phi, self.form.f,
-                                    self.form.h, rate)
+        u, s, s_r_dot = sliding_law(x, ref, theta_hat, *self._args, rate)
         return LawStep(u, rate, s, s_r_dot)
 
 
