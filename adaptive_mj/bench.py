@@ -43,12 +43,14 @@ def _fmt(v, spec=".3g") -> str:
 
 
 def main_table(rows: list[dict]) -> str:
-    """The terminal table: one line per run."""
-    head = f"{'section':14s} {'run':34s} {'status':9s} {'rms err tail':>12s} {'u rms':>8s} {'u TV':>9s}  key result"
+    """The terminal table: one line per run (units: the run's output and control units)."""
+    head = (f"{'section':14s} {'run':30s} {'status':9s} {'rms err tail':>16s} {'u rms':>12s} {'u TV':>14s}"
+            "  key result")
     lines = [head, "-" * len(head)]
     for r in rows:
-        lines.append(f"{r['section']:14s} {r['run']:34s} {r['status']:9s} {_fmt(r.get('tail')):>12s} "
-                     f"{_fmt(r.get('u_rms')):>8s} {_fmt(r.get('u_tv')):>9s}  {r.get('key', '')}")
+        yu, uu = r.get("y_unit", ""), r.get("u_unit", "")
+        lines.append(f"{r['section']:14s} {r['run']:30s} {r['status']:9s} {_fmt(r.get('tail')) + ' ' + yu:>16s} "
+                     f"{_fmt(r.get('u_rms')) + ' ' + uu:>12s} {_fmt(r.get('u_tv')) + ' ' + uu:>14s}  {r.get('key', '')}")
     return "\n".join(lines)
 
 
@@ -74,7 +76,10 @@ def main_bench(args) -> int:
               f"the analytic twin, {max(1, args.jobs)} worker processes: runs took {run_seconds:.1f} s, "
               f"the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
               f"every run's MCAP log is in `logs/` (replay with `adaptive-mj replay logs/<run>.mcap --verify`).\n\n"
-              "```\n" + main_table(rows) + "\n```\n\n")
+              + ("**Quick mode:** runs are shorter (15–60 s instead of 20–200 s), so estimates that need "
+                 "time to converge (first-order example, payload swap, drift) have not; run `adaptive-mj bench` "
+                 "for the full catalogue.\n\n" if args.quick else "")
+              + "```\n" + main_table(rows) + "\n```\n\n")
     (out / "report.md").write_text(header + "\n".join(parts), encoding="utf-8")
     summary = {r.job.tag: {"scenario": str(r.job.scenario.name), "overrides": list(r.job.overrides),
                            "log": str(r.job.log.relative_to(out)) if r.job.log else None,

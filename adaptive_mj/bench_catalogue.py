@@ -16,18 +16,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from adaptive_mj import analysis  # noqa: E402
+from adaptive_mj import analysis, units  # noqa: E402
 from adaptive_mj import scenario as sc  # noqa: E402
 from adaptive_mj.parallel import Job, JobResult  # noqa: E402
 
 SCN = sc.SCENARIOS_DIR
-UNITS = {
-    "heave": {"d": "kg", "b": "kg/m", "c": "kg", "tau_d": "kg s", "tau_b": "kg s/m"},
-    "arm": {"J": "kg m²", "b": "N m s/rad", "g_sin": "N m", "g_cos": "N m"},
-    "first_order": {"a": "-", "b": "-", "p": "-"},
-}
-
-
 @dataclass
 class SectionReport:
     text: str
@@ -53,11 +46,18 @@ def _ok(r: JobResult) -> bool:
     return r.status == "ok" and r.trajectory is not None
 
 
+SECTION_PLANT = {"first-order": "first_order", "phase space": "first_order", "Lyapunov": "heave",
+                 "2nd order": "heave", "n-th order": "heave", "drift": "heave", "payload swap": "arm",
+                 "excitation": "heave"}
+
+
 def _row(section: str, variant: str, r: JobResult, key: str = "") -> dict:
     m = (r.summary or {}).get("metrics", {})
     status = r.status if r.status != "error" else "error"
+    kind = SECTION_PLANT.get(section, "")
     return {"section": section, "run": variant, "status": status, "tail": m.get("rms_tracking_error_tail"),
-            "u_rms": m.get("control_rms"), "u_tv": m.get("control_total_variation"), "key": key}
+            "u_rms": m.get("control_rms"), "u_tv": m.get("control_total_variation"), "key": key,
+            "y_unit": units.OUTPUT.get(kind, ""), "u_unit": units.CONTROL.get(kind, "")}
 
 
 def _status_note(results: dict[str, JobResult]) -> str:
@@ -75,7 +75,7 @@ def _save(fig, out: Path, name: str) -> str:
 
 
 def _unit(name: str, plant: str) -> str:
-    return UNITS.get(plant, {}).get(name, "")
+    return units.param(plant, name)
 
 
 def _g(v, spec=".3g") -> str:
@@ -138,7 +138,8 @@ def _first_order(quick: bool, logs: Path) -> Section:
 
     return Section("first_order", "1. Adaptive control of a first-order system",
                    "u = ẋ_d − f − φp̂ + k x̃ with p̂' = −φᵀx̃/γ gives V' = −k x̃², so x̃ → 0; the estimates "
-                   "are only shown bounded (here the cosine excites both, so they also converge).", jobs, analyze)
+                   "are only shown bounded (whether they reach a and b depends on excitation and time: see the "
+                   "table).", jobs, analyze)
 
 
 # ---------------------------------------------------------------- 2. phase space
@@ -236,8 +237,8 @@ def _lyapunov(quick: bool, logs: Path) -> Section:
                 "per physics step (1 ms, full rate); the V' check uses the midpoint rule at full rate. In the "
                 "ideal case V never rises by more than the table's largest increase and |V'| falls from its "
                 "first-10 % mean to its last-10 % mean (Barbalat: V' → 0). The water case adds a viscous drag "
-                "the regressor does not model; it is dissipative, and the table shows whether V still never "
-                "grows beyond round-off.\n\n"
+                "the regressor does not model (0.0025 N s/m, so the two runs differ only in late digits); it is "
+                "dissipative, and the table shows whether V still never grows beyond round-off.\n\n"
                 + "\n".join(lines) + "\n\n" + img + _status_note(res))
         return SectionReport(text, rows)
 
@@ -323,7 +324,10 @@ def _second_order(quick: bool, logs: Path) -> Section:
                 f"({nominal['d']:.4g}, {nominal['b']:.4g}, {nominal['c']:.4g}) against the true "
                 f"({truth[0]:.4g}, {truth[1]:.4g}, {truth[2]:.4g}) read from the model; λ = 5, k = 200. "
                 f"The robust controller's K = {K:.3g} N is 1.1 × the bound |d̃|·1 + |b̃|·1 + |c̃|·g on the model "
-                "error along y_d = cos t. Tail = last 25 % of the run.\n\n" + "\n".join(lines) + "\n\n" + img
+                "error along y_d = cos t; the boundary layer Φ [m/s] sets how close to switching it gets "
+                "(Φ = 1e-5 m/s is nearly sign(s)). Tail = last 25 % of the run. The thrust curves are drawn "
+                "from the 100 Hz log, so the nearly switching controller's chattering (at the 1 kHz physics "
+                "rate) is aliased in the figure; its Σ|Δu| in the table is computed at the full rate.\n\n" + "\n".join(lines) + "\n\n" + img
                 + lec_text + _status_note(res))
         return SectionReport(text, rows)
 
@@ -401,7 +405,8 @@ def _drift(quick: bool, logs: Path) -> Section:
             tr, m, rate = r.trajectory, r.summary["metrics"], r.extras["drift_rate"]
             rel = tr.theta_hat / tr.theta
             for i, name in enumerate(tr.names):
-                ax[0].plot(tr.t, rel[:, i], style, color=f"C{i}", lw=1.2, label=f"{name}̂/{name}, {v}")
+                ax[0].plot(tr.t, rel[:, i], style, color=f"C{i}", lw=1.2,
+                           label=f"$\\hat{{{name}}}/{name}$, {v}")
             ax[1].plot(tr.t, tr.y_tilde * 1e3, style, lw=0.8, label=v)
             lines.append(f"| {v} | {rate:.4f} | {_g(m['rms_tracking_error'])} | {rel[-1, 0]:.3f} | {rel[-1, 1]:.3f} | "
                          f"{rel[-1, 2]:.3f} |")
@@ -567,7 +572,10 @@ def _pe(quick: bool, logs: Path) -> Section:
         ax[1].grid(alpha=0.3)
         fig.suptitle("persistent excitation: parameter convergence on the MuJoCo heave vehicle")
         img = _save(fig, out, "excitation")
-        text = (f"`heave_tracking` (estimates from zero, starting on the reference) with {len(jobs)} references. "
+        text = (f"`heave_tracking` (estimates from zero, starting on the reference) with {len(jobs)} references: "
+                "a sum of three sines, the same shape at smaller amplitude (`sum_of_sines_small`: less excitation "
+                "of the drag term, whose regressor y'|y'| grows with amplitude squared), a single cosine, and a "
+                "setpoint. "
                 "Excitation index: λ_min of C = D^-½ M D^-½, M = (1/T)∫ψψᵀdt over the run with the desired "
                 "regressor ψ = [y_d'', −y_d'|y_d'|, −g] (D = diag M), so 0 = a direction never excited and 1 = "
                 "orthogonal regressor columns. It is scale-free, so it says whether every direction is excited, "

@@ -66,6 +66,10 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     plant, model_xml = _plant(scn, source, reference)
     for e in scn.events:
         if e.kind == "payload_mass":
+            if scn.plant.payload is None and e.body.startswith("payload/"):
+                raise ScenarioError(f"{scn.source}: events: a payload_mass event on {e.body!r} needs a payload "
+                                    "(plant.payload is 'none'); attach one or name a body of your model with "
+                                    "events[].body")
             plant.body_id(e.body)  # a missing body fails now, not mid-run
     order = plant.form.order
     law = _law(scn, plant.form)
@@ -180,6 +184,8 @@ def _law(scn: Scenario, form):
         if L.kind == "fixed_nominal":
             return FixedNominalLaw(form, lam=L.lam, k=L.k)
         return RobustSlidingLaw(form, lam=L.lam, k=L.k, K=L.K, boundary_layer=L.boundary_layer)
+    except ScenarioError:
+        raise
     except ValueError as exc:
         raise ScenarioError(f"{scn.source}: law: {exc}") from None
 

@@ -28,7 +28,11 @@ class _Parser(argparse.ArgumentParser):
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="adaptive-mj", description="Adaptive control on MuJoCo physics (lecture 7).")
     p.add_argument("--debug", action="store_true", help="show tracebacks")
+    debug = argparse.ArgumentParser(add_help=False)  # --debug also after the command
+    debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    _add = sub.add_parser
+    sub.add_parser = lambda *a, **kw: _add(*a, parents=[debug], **kw)  # type: ignore[method-assign]
 
     sub.add_parser("list", help="the bundled scenarios, one line each")
 
@@ -52,6 +56,7 @@ def _parser() -> argparse.ArgumentParser:
                     help="render the run headless from the log's model: scene, tracking error, estimates")
     rp.add_argument("--video-fps", type=float, metavar="FPS", help="video frames per second (default 30, real time)")
     rp.add_argument("--video-size", metavar="WxH", help="video frame size in pixels (default 800x400)")
+    rp.add_argument("--video-range", metavar="T0:T1", help="only simulation times T0..T1 [s], e.g. 18:26")
     b = sub.add_parser("bench", help="run the benchmark catalogue: report.md, figures, logs, summary.json")
     b.add_argument("--quick", action="store_true", help="shorter runs and fewer variants (about 2 minutes)")
     b.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
@@ -82,24 +87,31 @@ def _scenario_path(arg: str) -> Path:
     return path
 
 
-def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, note: str = "") -> None:
+def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, note: str = "",
+                   kind: str | None = None) -> None:
     if as_json:
         print(json.dumps(summary, sort_keys=False))
         return
+    from adaptive_mj import units
+
     m = summary["metrics"]
+    yu, uu = units.OUTPUT.get(kind or "", ""), units.CONTROL.get(kind or "", "")
     print(f"{summary['scenario']}: {summary['status']}"
           + (f" ({summary['reason']})" if summary.get("reason") else "")
           + f", {summary['duration']:.3f} s simulated, {summary['steps']} steps")
 
-    def f(v):
-        return "n/a" if v is None else f"{v:.3g}"
+    def f(v, unit=""):
+        return "n/a" if v is None else f"{v:.3g}" + (f" {unit}" if unit and unit != "-" else "")
 
-    print(f"  tracking error rms {f(m['rms_tracking_error'])}, tail rms {f(m['rms_tracking_error_tail'])}, "
-          f"tail max {f(m['max_abs_tracking_error_tail'])}")
-    print(f"  control rms {f(m['control_rms'])}, total variation {f(m['control_total_variation'])}")
+    if m:
+        print(f"  tracking error rms {f(m['rms_tracking_error'], yu)}, tail rms {f(m['rms_tracking_error_tail'], yu)}, "
+              f"tail max {f(m['max_abs_tracking_error_tail'], yu)}")
+        print(f"  control rms {f(m['control_rms'], uu)}, total variation {f(m['control_total_variation'], uu)}")
     final = summary["final"]
-    parts = [f"{n} {f(final['theta_hat'][n])} (true {f(final['theta'][n])})" for n in final["theta_hat"]]
-    print("  estimates: " + ", ".join(parts))
+    parts = [f"{n} {f(final['theta_hat'][n], units.param(kind, n))} (true {f(final['theta'][n], units.param(kind, n))})"
+             for n in final["theta_hat"]]
+    if parts:
+        print("  estimates: " + ", ".join(parts))
     if note:
         print(f"  {note}")
     if log is not None:
@@ -112,9 +124,10 @@ def cmd_list(args) -> int:
     for path in sc.bundled():
         try:
             s = sc.load(path)
-            print(f"{s.name:28s} {s.plant.kind}/{s.plant.backend:6s} {s.description}")
+            plant = f"{s.plant.kind}/{s.plant.backend}"
+            print(f"{s.name:24s} {plant:18s} {s.description}")
         except AdaptiveMJError as exc:
-            print(f"{path.stem:28s} INVALID: {exc}")
+            print(f"{path.stem:24s} {'INVALID':18s} {_one_line(exc)}")
     return EXIT_OK
 
 
@@ -130,14 +143,14 @@ def cmd_run(args) -> int:
         if log.is_file() and log.stat().st_size == 0:
             log.unlink()  # the run never started: leave no file that looks like a log
         elif isinstance(exc, Interrupted) and exc.summary is not None:
-            _print_summary(exc.summary, as_json=args.json, log=None if args.json else log)
+            _print_summary(exc.summary, as_json=args.json, log=None if args.json else log, kind=scn.plant.kind)
             exc.note = f"{exc.summary['duration']:.3f} s simulated, log closed with status 'interrupted': {log}"
         raise
     if args.plot:
         from adaptive_mj.plot import plot_run
 
-        plot_run(result.trajectory, args.plot, title=scn.name)
-    _print_summary(result.summary, as_json=args.json, log=None if args.json else log)
+        plot_run(result.trajectory, args.plot, title=scn.name, kind=scn.plant.kind)
+    _print_summary(result.summary, as_json=args.json, log=None if args.json else log, kind=scn.plant.kind)
     if args.json:
         print(f"log: {log}", file=sys.stderr)
     return EXIT_OK if result.summary["status"] == "ok" else EXIT_FAILED
@@ -157,15 +170,19 @@ def cmd_replay(args) -> int:
                                           steps=len(traj) * int(logged.header.get("log_every", 1))))
         summary["status"] = logged.status
         summary["reason"] = logged.trajectory.reason
-    _print_summary(summary, as_json=args.json, note=logged.note)
+    from adaptive_mj.units import plant_kind_of
+
+    kind = plant_kind_of(logged.scenario_text)
+    _print_summary(summary, as_json=args.json, note=logged.note, kind=kind)
     if args.plot:
         from adaptive_mj.plot import plot_run
 
-        plot_run(logged.trajectory, args.plot, title=f"{summary['scenario']} (replay)")
+        plot_run(logged.trajectory, args.plot, title=f"{summary['scenario']} (replay)", kind=kind)
     if args.video:
         from adaptive_mj.video import render_log
 
-        video = render_log(args.log, args.video, fps=args.video_fps, size=args.video_size)
+        video = render_log(args.log, args.video, fps=args.video_fps, size=args.video_size,
+                           t_range=_time_range(args.video_range))
         print(f"video: {video.path} ({video.frames} frames at {video.fps:g} fps, "
               f"{video.size[0]}x{video.size[1]}; rendered at {video.render_rate:.1f} frames/s)",
               file=sys.stderr if args.json else sys.stdout)
@@ -187,12 +204,30 @@ def _one_line(text: str) -> str:
     return " ".join(part.strip() for part in str(text).splitlines() if part.strip())
 
 
+def _time_range(text: str | None) -> tuple[float, float] | None:
+    """'T0:T1' -> (T0, T1) in seconds; a malformed range is bad input."""
+    if text is None:
+        return None
+    try:
+        t0, t1 = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise AdaptiveMJError(f"--video-range {text!r}: expected T0:T1 in seconds, e.g. 18:26") from None
+    if not t0 < t1:
+        raise AdaptiveMJError(f"--video-range {text!r}: expected T0 < T1")
+    return t0, t1
+
+
 def main(argv: list[str] | None = None) -> int:
     from adaptive_mj.interrupt import stop_on_signals
 
     args = _parser().parse_args(argv)
-    with stop_on_signals():  # SIGINT, SIGTERM: errors.Interrupted, handled in _dispatch
-        return _dispatch(args)
+    try:
+        with stop_on_signals():  # SIGINT, SIGTERM: errors.Interrupted, handled in _dispatch
+            return _dispatch(args)
+    except BrokenPipeError:  # e.g. `adaptive-mj list | head -1`: the reader left; not an error of ours
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # so the interpreter's final flush does not fail again
+        return EXIT_OK
 
 
 def _dispatch(args) -> int:

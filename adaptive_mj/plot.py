@@ -12,8 +12,21 @@ import numpy as np  # noqa: E402
 from adaptive_mj.trajectory import Trajectory  # noqa: E402
 
 
-def plot_run(traj: Trajectory, path: str | Path, *, title: str = "") -> Path:
-    """Tracking, tracking error, control and s, estimates against truth, V.  Returns the path."""
+def plot_run(traj: Trajectory, path: str | Path, *, title: str = "", kind: str | None = None) -> Path:
+    """Tracking, tracking error, control and s, estimates against truth, V.  Returns the path.
+
+    kind: the plant kind ("heave", "arm", "first_order"), for the units on the axes."""
+    from adaptive_mj import units
+
+    yu = units.OUTPUT.get(kind or "", "")
+    uu = units.CONTROL.get(kind or "", "")
+    n = traj.x.shape[1]
+    su = yu if n == 1 or yu in ("", "-") else f"{yu}/s" if n == 2 else f"{yu}/s²"
+    vu = "-" if kind == "first_order" else "J" if kind else ""
+
+    def lab(text, unit):
+        return f"{text} [{unit}]" if unit else text
+
     n_par = len(traj.names)
     rows = 2 + (n_par + 1) // 2 + (1 if n_par % 2 == 0 else 0)  # V fills the free slot when n_par is odd
     fig = plt.figure(figsize=(11, 2.8 * rows), constrained_layout=True)
@@ -22,33 +35,36 @@ def plot_run(traj: Trajectory, path: str | Path, *, title: str = "") -> Path:
     ax = fig.add_subplot(grid[0, :])
     ax.plot(t, traj.ref[:, 0], "k--", lw=1, label="$y_d$")
     ax.plot(t, traj.q, lw=1.2, label="$y$")
-    ax.set_ylabel("output y")
+    ax.set_ylabel(lab("output y", yu))
     ax.legend(loc="upper right")
     ax.set_title(title or "tracking")
     ax = fig.add_subplot(grid[1, 0])
     ax.plot(t, traj.y_tilde, lw=1)
-    ax.set_ylabel(r"$\tilde y = y_d - y$")
+    ax.set_ylabel(lab(r"$\tilde y = y_d - y$", yu))
     ax = fig.add_subplot(grid[1, 1])
     ax.plot(t, traj.u, lw=1, color="C2", label="u")
-    ax.set_ylabel("control u", color="C2")
+    ax.set_ylabel(lab("control u", uu), color="C2")
     ax2 = ax.twinx()
     ax2.plot(t, traj.s, lw=0.8, color="C3", label="s")
-    ax2.set_ylabel("sliding variable s", color="C3")
+    ax2.set_ylabel(lab("sliding variable s", su), color="C3")
     for i, name in enumerate(traj.names):
         ax = fig.add_subplot(grid[2 + i // 2, i % 2])
         ax.plot(t, traj.theta[:, i], "k--", lw=1, label=f"true {name}")
         ax.plot(t, traj.theta_hat[:, i], lw=1.2, label=f"estimate {name}")
-        ax.set_ylabel(name)
+        ax.set_ylabel(lab(name, units.param(kind, name)))
         ax.legend(loc="best", fontsize=8)
     ax = fig.add_subplot(grid[-1, :] if n_par % 2 == 0 else grid[-1, 1])
     ax.plot(t, traj.V, lw=1.2, color="C4")
-    ax.set_ylabel("Lyapunov V")
+    ax.set_ylabel(lab("Lyapunov V", vu))
     if np.all(traj.V > 0):
         ax.set_yscale("log")
     for a in fig.axes:
         a.grid(alpha=0.3)
         for (te, label) in traj.meta.get("events", []):
             a.axvline(te, color="grey", lw=0.8, ls=":")
+    for a in fig.axes:
+        if a.get_subplotspec() is not None and a.get_subplotspec().is_last_row():
+            a.set_xlabel("time t [s]")
     fig.axes[-1].set_xlabel("time t [s]")
     path = Path(path)
     fig.savefig(path, dpi=90)

@@ -156,7 +156,11 @@ class _Table:
         self.used.add(name)
         if name not in self.data:
             if default is _MISSING:
-                raise ScenarioError(f"{self.where}: {self.key(name)} is required but missing")
+                import difflib
+
+                close = difflib.get_close_matches(name, [k for k in self.data if isinstance(k, str)], n=1)
+                hint = f" (found {self.key(close[0])!r}: a misspelling?)" if close else ""
+                raise ScenarioError(f"{self.where}: {self.key(name)} is required but missing{hint}")
             return default
         return self.data[name]
 

@@ -115,7 +115,9 @@ def build_arm_xml(*, arm: str | Path = MODEL_PATH, payload: str | Path | None = 
                 g.mass = float(g.mass) * payload_mass / total
         tip = root.find("site", site)
         if tip is None:
-            raise ModelError(f"{arm}: no site named {site!r} to attach the payload to")
+            sites = [x.name for x in root.find_all("site") if x.name]
+            raise ModelError(f"{arm}: no site named {site!r} to attach the payload to (the model has sites "
+                             f"{sites}; set plant.site, or plant.payload = \"none\")")
         tip.attach(load)
     return root.to_xml_string(), root.get_assets()
 
