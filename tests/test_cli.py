@@ -108,3 +108,36 @@ def test_diverged_run_exits_1(tmp_path):
     assert s["status"] == "diverged" and "beyond the bound" in s["reason"]
     r2 = cli("replay", log, "--json")
     assert json.loads(r2.stdout) == s and r2.returncode == 1
+
+
+def test_debug_after_the_command_shows_the_traceback():
+    r = cli("run", "no_such_scenario_file.toml", "--debug")
+    assert r.returncode != 0 and "Traceback" in r.stderr and "scenario file not found" in r.stderr
+
+
+def test_list_into_a_closed_pipe_is_quiet():
+    env = dict(os.environ, MUJOCO_GL="egl")
+    r = subprocess.run(f"{sys.executable} -m adaptive_mj list | head -1", shell=True, capture_output=True, text=True,
+                       cwd=REPO, env=env, timeout=120)
+    assert r.returncode == 0 and len(r.stdout.splitlines()) == 1 and "Traceback" not in r.stderr
+
+
+def test_misspelt_required_key_is_pointed_out(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text((REPO / "scenarios" / "heave_tracking.toml").read_text().replace("lambda = 5.0", "lamda = 5.0"))
+    r = cli("run", bad)
+    assert r.returncode == 2
+    assert "law.lambda is required but missing (found 'law.lamda': a misspelling?)" in r.stderr
+
+
+def test_malformed_video_range_is_bad_input(tmp_path):
+    log = tmp_path / "x.mcap"
+    assert cli("run", "heave_tracking", "-o", log, "--set", "simulation.duration=0.2").returncode == 0
+    r = cli("replay", log, "--video", tmp_path / "x.gif", "--video-range", "5")
+    assert r.returncode == 2 and "--video-range '5': expected T0:T1" in r.stderr
+    assert not (tmp_path / "x.gif").exists()
+
+
+def test_payload_mass_event_without_payload_says_so(tmp_path):
+    r = cli("run", "arm_payload_swap", "-o", tmp_path / "x.mcap", "--set", "plant.payload=none")
+    assert r.returncode == 2 and "needs a payload (plant.payload is 'none')" in r.stderr
