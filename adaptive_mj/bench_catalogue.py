@@ -252,7 +252,7 @@ def _law_k(job: Job) -> float:
 
 
 # ---------------------------------------------------------------- 4. second order vs baselines
-NOMINAL_FRACTION = {"d": 30.0 / 37.0, "b": 45.0 / 60.0, "c": 1.5}  # the designer's guess: -19 %, -25 %, +50 %
+NOMINAL_FRACTION = {"d": 0.81, "b": 0.75, "c": 1.5}  # the designer's guess, as a fraction of the truth
 
 
 def _robust_gain(scn_path: Path, nominal: dict, margin: float = 1.1) -> float:
