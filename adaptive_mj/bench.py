@@ -7,31 +7,8 @@ from __future__ import annotations
 
 import json
 import time
-from datetime import datetime, timezone
-from pathlib import Path
 
-from adaptive_mj.errors import AdaptiveMJError
 from adaptive_mj.parallel import run_jobs, progress_printer
-
-
-def output_dir(requested: Path | None, prefix: str) -> Path:
-    """A new output folder: `requested` (must be empty or absent) or logs/<prefix>-<UTC time>[-i]."""
-    from adaptive_mj.runner import LOGS_DIR
-
-    if requested is not None:
-        if requested.exists() and any(requested.iterdir()):
-            raise AdaptiveMJError(f"{requested}: output directory is not empty; choose a new one")
-        requested.mkdir(parents=True, exist_ok=True)
-        return requested
-    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-    for i in range(1000):
-        path = LOGS_DIR / (f"{prefix}-{stamp}" if i == 0 else f"{prefix}-{stamp}-{i}")
-        try:
-            path.mkdir(parents=True)
-            return path
-        except FileExistsError:
-            continue
-    raise AdaptiveMJError(f"{LOGS_DIR}: could not create a new {prefix} folder")
 
 
 def _fmt(v, spec=".3g") -> str:
@@ -57,7 +34,9 @@ def main_table(rows: list[dict]) -> str:
 def main_bench(args) -> int:
     from adaptive_mj.bench_catalogue import catalogue
 
-    out = output_dir(args.output, "bench-quick" if args.quick else "bench")
+    from adaptive_mj.runner import new_output_dir
+
+    out = new_output_dir(args.output, "bench-quick" if args.quick else "bench")
     sections = catalogue(quick=args.quick, logs=out / "logs")
     jobs = [job for s in sections for job in s.jobs]
     t0 = time.perf_counter()

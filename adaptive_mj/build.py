@@ -8,7 +8,6 @@ model without the repo that made it.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 

@@ -36,8 +36,10 @@ class Event:
     apply: Callable[[object], None]
 
 
-# Stage increments a_i (θ̂_i = θ̂_k + h a_i k_{i-1}) and weights b_i per stage count.
-_TABLEAU = {
+# Per stage count: increments a_i (θ̂_i = θ̂_k + h a_i k_{i-1}) and weights b_i. For the
+# classic RK4 tableau a_i are also the stage-time offsets c_i (MuJoCo evaluates stage i at
+# t + c_i h), which adaptive_mj.native uses to evaluate the reference ahead of a chunk.
+TABLEAU = {
     1: ((0.0,), (1.0,)),
     4: ((0.0, 0.5, 0.5, 1.0), (1 / 6, 1 / 3, 1 / 3, 1 / 6)),
 }
@@ -54,7 +56,7 @@ class _Controller:
         self.theta_hat = np.array(theta_hat0, dtype=float)
         self.lo, self.hi = ctrl_range if ctrl_range is not None else (-math.inf, math.inf)
         self.noise = np.zeros(order)
-        self.inc, self.weights = _TABLEAU[stages]
+        self.inc, self.weights = TABLEAU[stages]
         self.h = dt
         self.stage = len(self.inc)
         self.prev_rate = None

@@ -141,8 +141,6 @@ def supported(plant, law) -> bool:
 class NativeController:
     """Owns the buffers of one native run and steps the plant chunk by chunk."""
 
-    _STAGE_TIMES = {1: (0.0,), 4: (0.0, 0.5, 0.5, 1.0)}
-    _TABLEAU = {1: ((0.0,), (1.0,)), 4: ((0.0, 0.5, 0.5, 1.0), (1 / 6, 1 / 3, 1 / 3, 1 / 6))}
 
     def __init__(self, plant, law, reference, theta_hat0, max_rows: int):
         self.plant, self.law, self.reference = plant, law, reference
@@ -161,7 +159,10 @@ class NativeController:
         self.noise = np.zeros(max_rows * n)
         self.rec = np.zeros(max_rows * self.ncol)
         lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (-math.inf, math.inf)
-        inc, weights = self._TABLEAU[self.nst]
+        from adaptive_mj.loop import TABLEAU
+
+        inc, weights = TABLEAU[self.nst]
+        self.stage_offsets = np.asarray(inc)  # RK4: c_i = a_i (see loop.TABLEAU)
         W = _W
         W[:] = 0.0
         W[W_NSTAGES], W[W_H], W[W_LO], W[W_HI] = self.nst, plant.dt, lo, hi
@@ -182,7 +183,7 @@ class NativeController:
         t[0] = plant.time
         for i in range(1, rows):  # MuJoCo's own time accumulation, bit for bit
             t[i] = t[i - 1] + h
-        stage_t = t[:, None] + h * np.asarray(self._STAGE_TIMES[nst])[None, :]
+        stage_t = t[:, None] + h * self.stage_offsets[None, :]
         refs = self.reference(stage_t.ravel(), n)  # (n+1, rows*nst)
         self.ref[: refs.size] = refs.T.ravel()
         if noise is not None:

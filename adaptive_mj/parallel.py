@@ -26,9 +26,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
-
-import numpy as np
+from typing import Callable, Sequence
 
 from adaptive_mj import interrupt
 from adaptive_mj.errors import AdaptiveMJError, Interrupted

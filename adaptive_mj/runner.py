@@ -84,6 +84,28 @@ def log_header(scn: Scenario, setup: Setup):
         versions=versions(), created_unix=time.time())
 
 
+def new_output_dir(requested: Path | None, name: str, *, logs_dir: Path | None = None) -> Path:
+    """A folder for a bench or sweep: `requested` if new or empty (created), else a new
+    <logs_dir>/<name>-<UTC time>[-i] that no earlier run used (logs_dir: LOGS_DIR)."""
+    if requested is not None:
+        out = Path(requested)
+        if out.exists() and (not out.is_dir() or any(out.iterdir())):
+            raise AdaptiveMJError(f"{out}: exists and is not an empty folder; choose a new -o DIR")
+        out.mkdir(parents=True, exist_ok=True)
+        return out
+    logs_dir = Path(logs_dir) if logs_dir is not None else LOGS_DIR
+    logs_dir.mkdir(parents=True, exist_ok=True)
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    for i in range(10_000):
+        path = logs_dir / (f"{name}-{stamp}" + (f"-{i}" if i else ""))
+        try:
+            path.mkdir()
+            return path
+        except FileExistsError:
+            continue
+    raise AdaptiveMJError(f"{logs_dir}: could not find a free folder name for {name}-{stamp}")
+
+
 def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None) -> RunResult:
     """Build and run one scenario; stream it to log_path (MCAP) when given."""
     setup = build(scn, source=source)

@@ -29,7 +29,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from adaptive_mj import scenario as sc
-from adaptive_mj.errors import AdaptiveMJError, ScenarioError
+from adaptive_mj.errors import ScenarioError
 from adaptive_mj.metrics import clean_json, metrics as run_metrics
 from adaptive_mj.parallel import Job, JobResult, progress_printer, run_jobs
 from adaptive_mj.trajectory import Trajectory
@@ -360,7 +360,6 @@ def plot_sweep(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Se
     def x_of(st: PointStats) -> Any:
         return st.point[x_key] if numeric_x else position(to_toml(st.point[x_key]))
 
-    names = short_names(keys)
     seeds = len({r["seed"] for r in table})
     fig, axes = plt.subplots(len(metrics), 1, figsize=(8, 3.6 * len(metrics) + 0.6), sharex=True,
                              constrained_layout=True, squeeze=False)
@@ -426,26 +425,6 @@ def summary_table(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics:
 
 # --------------------------------------------------------------------------
 # the command
-def output_dir(out: Path | None, scenario_name: str, *, logs_dir: Path) -> Path:
-    """Create and return the sweep's folder: `out` if new or empty, else a new logs_dir/sweep-<name>-<UTC>."""
-    if out is not None:
-        out = Path(out)
-        if out.exists() and (not out.is_dir() or any(out.iterdir())):
-            raise AdaptiveMJError(f"{out}: exists and is not an empty folder; choose a new -o DIR")
-        out.mkdir(parents=True, exist_ok=True)
-        return out
-    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-    logs_dir.mkdir(parents=True, exist_ok=True)
-    for i in range(10_000):
-        path = logs_dir / (f"sweep-{scenario_name}-{stamp}" + (f"-{i}" if i else ""))
-        try:
-            path.mkdir()
-            return path
-        except FileExistsError:
-            continue
-    raise AdaptiveMJError(f"{logs_dir}: could not find a free folder name for sweep-{scenario_name}-{stamp}")
-
-
 def _document(path: Path, overrides: Sequence[str]) -> tuple[dict, sc.Scenario]:
     """The scenario as parsed TOML after the overrides (for key resolution), and validated."""
     scn = sc.load(path, overrides=list(overrides))
@@ -509,7 +488,7 @@ def plan(path: Path, points: Sequence[dict[str, Any]], *, seeds: int, overrides:
 
 def main_sweep(args) -> int:
     """Run the sweep the CLI parsed (see the module docstring); returns the exit code."""
-    from adaptive_mj.runner import LOGS_DIR
+    from adaptive_mj.runner import new_output_dir
 
     if args.seeds < 1:
         raise ScenarioError(f"--seeds must be an integer >= 1, got {args.seeds}")
@@ -523,7 +502,7 @@ def main_sweep(args) -> int:
     points = grid_points(axes)
     _validate_points(path, args.overrides, points)
 
-    out = output_dir(args.output, base.name, logs_dir=LOGS_DIR)
+    out = new_output_dir(args.output, f"sweep-{base.name}")
     planned = plan(path, points, seeds=args.seeds, overrides=args.overrides, logs=out / "logs")
     total = len(planned)
     print(f"sweep: {len(points)} grid point(s) x {args.seeds} seed(s) = {total} runs of {base.name} "

@@ -306,7 +306,7 @@ def test_bench_and_sweep_never_write_into_a_used_folder(tmp_path, capsys):
     used.mkdir()
     (used / "summary.json").write_text("keep")
     assert main(["bench", "--quick", "-o", str(used)]) == 2
-    assert error_line(capsys) == f"{used}: output directory is not empty; choose a new one"
+    assert error_line(capsys) == f"{used}: exists and is not an empty folder; choose a new -o DIR"
     assert main(["sweep", "heave_tracking", "--grid", "law.k=1,2", "-o", str(used)]) == 2
     assert error_line(capsys) == f"{used}: exists and is not an empty folder; choose a new -o DIR"
     assert [p.name for p in used.iterdir()] == ["summary.json"]

@@ -1,7 +1,6 @@
 """adaptive-mj bench on a reduced catalogue: report, figures, logs and
 summary.json are written, a diverged run is reported and the rest go on."""
 import json
-from pathlib import Path
 
 import pytest
 

@@ -3,7 +3,6 @@ the file, the key, what was expected and what came."""
 import json
 from pathlib import Path
 
-import math
 import numpy as np
 import pytest
 

@@ -183,16 +183,18 @@ def test_metric_units_follow_the_plant():
 
 
 def test_output_dir_refuses_a_non_empty_folder_and_never_reuses_a_default(tmp_path):
+    from adaptive_mj.runner import new_output_dir
+
     full = tmp_path / "full"
     full.mkdir()
     (full / "keep").write_text("keep")
     with pytest.raises(AdaptiveMJError, match=r"full: exists and is not an empty folder; choose a new -o DIR"):
-        sweep.output_dir(full, "s", logs_dir=tmp_path)
+        new_output_dir(full, "sweep-s", logs_dir=tmp_path)
     empty = tmp_path / "empty"
     empty.mkdir()
-    assert sweep.output_dir(empty, "s", logs_dir=tmp_path) == empty
-    a = sweep.output_dir(None, "s", logs_dir=tmp_path / "logs")
-    b = sweep.output_dir(None, "s", logs_dir=tmp_path / "logs")
+    assert new_output_dir(empty, "sweep-s", logs_dir=tmp_path) == empty
+    a = new_output_dir(None, "sweep-s", logs_dir=tmp_path / "logs")
+    b = new_output_dir(None, "sweep-s", logs_dir=tmp_path / "logs")
     assert a != b and a.is_dir() and b.is_dir() and a.name.startswith("sweep-s-")
 
 
