@@ -137,3 +137,206 @@ class SmoothStep:
             S = S.deriv()
             out[k] = np.where(inside, span * S(x) / self.rise_time**k, 0.0)
         return out
+
+
+# --------------------------------------------------------------------------
+# Joint-space references for an arm of m joints.
+#
+# Called as ``ref(t, order)``; return shape ``(order+1,) + np.shape(t) + (m,)``:
+# (order+1, m) for a scalar t, (order+1, T, m) for t of shape (T,). Row k holds
+# the k-th time derivative [rad/s^k, or m/s^k for slide joints], exact.
+# Times are evaluated as one flat array whatever the shape of t, so a scalar
+# call gives bit for bit the same numbers as the matching entry of an array call.
+# --------------------------------------------------------------------------
+
+
+def _check_order(cls: str, order, max_order: int | None = None) -> int:
+    if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 0:
+        raise ValueError(f"{cls}: order must be a non-negative integer, got {order!r}")
+    if max_order is not None and order > max_order:
+        raise ValueError(
+            f"{cls}: order must be at most {max_order} (derivatives beyond "
+            f"{max_order} are not continuous), got {order}")
+    return int(order)
+
+
+def _float_tuple(cls: str, field: str, value, length: int | None = None) -> tuple[float, ...]:
+    """`value` as a tuple of finite floats (optionally of a given length), else ValueError naming `field`."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{cls}: {field} must be a sequence of numbers, got {value!r}") from None
+    if arr.ndim != 1:
+        raise ValueError(f"{cls}: {field} must be a flat sequence of numbers, got shape {arr.shape}")
+    if length is not None and arr.shape[0] != length:
+        raise ValueError(f"{cls}: {field} must have length {length}, got length {arr.shape[0]}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{cls}: {field} must be finite, got {value!r}")
+    return tuple(float(v) for v in arr)
+
+
+def _flat_times(t) -> tuple[np.ndarray, tuple[int, ...]]:
+    t = np.asarray(t, dtype=float)
+    return np.ascontiguousarray(t.reshape(-1)), t.shape
+
+
+@dataclass(frozen=True)
+class JointSumOfSines:
+    """Per joint i: q_d,i(t) = center[i] + sum_k amplitudes[i][k]*sin(omegas[i][k]*t + phases[i][k]).
+
+    center: m positions [rad or m]; amplitudes, omegas [rad/s], phases [rad]:
+    m tuples each (joint i may have its own number of terms, the same in all
+    three). phases=None means all zeros. Sequences are stored as tuples.
+    """
+
+    center: tuple[float, ...]
+    amplitudes: tuple[tuple[float, ...], ...]
+    omegas: tuple[tuple[float, ...], ...]
+    phases: tuple[tuple[float, ...], ...] | None = None
+
+    def __post_init__(self):
+        cls = type(self).__name__
+        center = _float_tuple(cls, "center", self.center)
+        m = len(center)
+        if m == 0:
+            raise ValueError(f"{cls}: center must have at least one joint, got length 0")
+
+        def per_joint(field, value, lengths=None):
+            try:
+                n = len(value)
+            except TypeError:
+                raise ValueError(f"{cls}: {field} must be a sequence of {m} per-joint sequences "
+                                 f"(one per entry of center), got {value!r}") from None
+            if isinstance(value, (str, bytes)) or n != m:
+                raise ValueError(f"{cls}: {field} must have {m} per-joint sequences "
+                                 f"(one per entry of center), got {n}")
+            return tuple(
+                _float_tuple(cls, f"{field}[{i}]", row, None if lengths is None else lengths[i])
+                for i, row in enumerate(value))
+
+        amplitudes = per_joint("amplitudes", self.amplitudes)
+        lengths = [len(a) for a in amplitudes]
+        omegas = per_joint("omegas", self.omegas, lengths)
+        phases = (tuple((0.0,) * n for n in lengths) if self.phases is None
+                  else per_joint("phases", self.phases, lengths))
+        object.__setattr__(self, "center", center)
+        object.__setattr__(self, "amplitudes", amplitudes)
+        object.__setattr__(self, "omegas", omegas)
+        object.__setattr__(self, "phases", phases)
+
+    @property
+    def m(self) -> int:
+        """Number of joints."""
+        return len(self.center)
+
+    def __call__(self, t, order: int) -> np.ndarray:
+        order = _check_order(type(self).__name__, order)
+        tf, shape = _flat_times(t)
+        out = np.zeros((order + 1, tf.size, self.m))
+        for i in range(self.m):
+            joint = sum(
+                (_harmonic(tf, a, w, p, order, np.sin)
+                 for a, w, p in zip(self.amplitudes[i], self.omegas[i], self.phases[i])),
+                np.zeros((order + 1, tf.size)))
+            joint[0] += self.center[i]
+            out[:, :, i] = joint
+        return out.reshape((order + 1,) + shape + (self.m,))
+
+
+@dataclass(frozen=True)
+class JointWaypoints:
+    """Point-to-point moves through waypoints, each move a C^4 smooth step.
+
+    waypoints: K >= 2 poses of m joints [rad or m]; durations: K-1 positive
+    move times [s]. The arm rests at waypoints[0] until t0 [s], moves from
+    waypoints[j] to waypoints[j+1] during durations[j] along the degree-9
+    polynomial _SMOOTHSTEP (first four derivatives zero at both ends), and
+    rests at waypoints[-1] afterwards. Every move starts and ends at rest, so
+    consecutive moves join C^4; derivatives are exact up to order 4.
+
+    cycle=True repeats the moves forever after t0 with period sum(durations);
+    it requires waypoints[-1] == waypoints[0].
+    """
+
+    waypoints: tuple[tuple[float, ...], ...]
+    durations: tuple[float, ...]
+    t0: float = 0.0
+    cycle: bool = False
+
+    MAX_ORDER = 4  # class constant (not a field): _SMOOTHSTEP is C^4
+
+    def __post_init__(self):
+        cls = type(self).__name__
+        try:
+            K = len(self.waypoints)
+        except TypeError:
+            raise ValueError(f"{cls}: waypoints must be a sequence of poses, got {self.waypoints!r}") from None
+        if K < 2:
+            raise ValueError(f"{cls}: waypoints must hold at least 2 poses, got {K}")
+        first = _float_tuple(cls, "waypoints[0]", self.waypoints[0])
+        m = len(first)
+        if m == 0:
+            raise ValueError(f"{cls}: waypoints[0] must have at least one joint, got length 0")
+        waypoints = (first,) + tuple(
+            _float_tuple(cls, f"waypoints[{j}]", w, m) for j, w in enumerate(self.waypoints) if j > 0)
+        try:
+            nd = len(self.durations)
+        except TypeError:
+            raise ValueError(f"{cls}: durations must be a sequence of {K - 1} move times, "
+                             f"got {self.durations!r}") from None
+        if nd != K - 1:
+            raise ValueError(f"{cls}: durations must have {K - 1} entries (one per move between "
+                             f"{K} waypoints), got {nd}")
+        durations = _float_tuple(cls, "durations", self.durations, K - 1)
+        if not all(d > 0.0 for d in durations):
+            raise ValueError(f"{cls}: durations must all be positive, got {durations}")
+        t0 = float(self.t0)
+        if not np.isfinite(t0):
+            raise ValueError(f"{cls}: t0 must be finite, got {self.t0!r}")
+        if not isinstance(self.cycle, (bool, np.bool_)):
+            raise ValueError(f"{cls}: cycle must be a bool, got {self.cycle!r}")
+        if self.cycle and waypoints[-1] != waypoints[0]:
+            raise ValueError(f"{cls}: cycle=True needs waypoints[-1] == waypoints[0], "
+                             f"got {waypoints[-1]} and {waypoints[0]}")
+        object.__setattr__(self, "waypoints", waypoints)
+        object.__setattr__(self, "durations", durations)
+        object.__setattr__(self, "t0", t0)
+        object.__setattr__(self, "cycle", bool(self.cycle))
+
+    @property
+    def m(self) -> int:
+        """Number of joints."""
+        return len(self.waypoints[0])
+
+    @property
+    def period(self) -> float:
+        """Total time of one pass through the moves, sum(durations) [s]."""
+        return float(np.cumsum(self.durations)[-1])
+
+    def __call__(self, t, order: int) -> np.ndarray:
+        order = _check_order(type(self).__name__, order, self.MAX_ORDER)
+        tf, shape = _flat_times(t)
+        wp = np.array(self.waypoints)                        # (K, m)
+        d = np.array(self.durations)                         # (K-1,)
+        # absolute move starts: t = t0 + durations[0] hits starts[1] exactly
+        cum = np.cumsum(d)
+        starts = self.t0 + np.concatenate(([0.0], cum))
+        if self.cycle:  # later passes fold back into the first (fmod is exact)
+            tf = np.where(tf >= starts[-1], self.t0 + np.fmod(tf - self.t0, cum[-1]), tf)
+        # move index j and its local coordinate x (in [0, 1] during the move)
+        j = np.clip(np.searchsorted(starts, tf, side="right") - 1, 0, len(d) - 1)
+        x = (tf - starts[j]) / d[j]
+        before, after = x <= 0.0, x >= 1.0
+        inside = ~(before | after)
+        x = np.clip(x, 0.0, 1.0)
+        span = wp[j + 1] - wp[j]                             # (N, m)
+        out = np.zeros((order + 1, tf.size, wp.shape[1]))
+        # at rest exactly at the move's start or end pose outside (0, 1)
+        out[0] = np.where(before[:, None], wp[j], np.where(after[:, None], wp[j + 1],
+                                                             wp[j] + span * _SMOOTHSTEP(x)[:, None]))
+        S = _SMOOTHSTEP
+        for k in range(1, order + 1):
+            S = S.deriv()
+            rate = S(x) / d[j] ** k
+            out[k] = np.where(inside[:, None], span * rate[:, None], 0.0)
+        return out.reshape((order + 1,) + shape + (wp.shape[1],))
