@@ -49,13 +49,15 @@ class _Controller:
     """The policy the plant calls at every stage: the law on (noisy) measured
     state with the stage's estimate; see the module docstring."""
 
-    def __init__(self, law, reference, theta_hat0, ctrl_range, order: int, stages: int, dt: float):
+    def __init__(self, law, reference, theta_hat0, ctrl_range, order: int, stages: int, dt: float,
+                 joint_shape: tuple = ()):
         self.law = law
         self.reference = reference
         self.order = order
         self.theta_hat = np.array(theta_hat0, dtype=float)
         self.lo, self.hi = ctrl_range if ctrl_range is not None else (-math.inf, math.inf)
-        self.noise = np.zeros(order)
+        self.joints = bool(joint_shape)
+        self.noise = np.zeros((order,) + tuple(joint_shape))
         self.inc, self.weights = TABLEAU[stages]
         self.h = dt
         self.stage = len(self.inc)
@@ -80,7 +82,7 @@ class _Controller:
         else:
             theta_i = self.theta_hat + (self.h * self.inc[i]) * self.prev_rate
         out = self.law(t, x + self.noise, ref, theta_i)
-        u = min(max(out.u, self.lo), self.hi)
+        u = np.minimum(np.maximum(out.u, self.lo), self.hi) if self.joints else min(max(out.u, self.lo), self.hi)
         if i < len(self.inc):
             self.prev_rate = out.theta_hat_dot
             self.rate_sum = self.rate_sum + self.weights[i] * out.theta_hat_dot
@@ -132,7 +134,8 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
     (SIGINT, or SIGTERM through the CLI) first hands the sink every whole row, then
     comes out as errors.Interrupted carrying them (status "interrupted").
     """
-    order = plant.form.order
+    order = plant_order(plant)
+    joint_shape = tuple(getattr(plant, "joint_shape", ()))  # () for 1-DOF plants, (m,) for m joints
     if order != law.order:
         raise ValueError(f"law of order {law.order} on a plant of order {order}")
     names = tuple(law.names)
@@ -148,10 +151,10 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
             raise ValueError("noise_std needs an rng (np.random.Generator)")
 
     t = np.empty(n_steps)
-    x = np.empty((n_steps, order))
-    u = np.empty(n_steps)
-    s = np.empty(n_steps)
-    ref = np.empty((n_steps, order + 1))
+    x = np.empty((n_steps, order) + joint_shape)
+    u = np.empty((n_steps,) + joint_shape)
+    s = np.empty((n_steps,) + joint_shape)
+    ref = np.empty((n_steps, order + 1) + joint_shape)
     theta_hat = np.empty((n_steps, n_theta))
     # True θ is piecewise constant (it changes only at events): kept as segments
     # (first row, value) and expanded only where asked, so a long run does not hold an
@@ -176,7 +179,7 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
 
     V = np.empty(n_steps)  # filled block by block (no full-length temporaries at the end)
 
-    ctrl = _Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, dt)
+    ctrl = _Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, dt, joint_shape)
     pending = sorted(events, key=lambda e: e.t)
     applied: list[tuple[float, str]] = []
     status, reason, k = "ok", "", 0
@@ -189,7 +192,10 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
             rows = slice(flushed, upto)
             flushed = upto  # first: a write cut short by an interruption is never repeated
             theta = theta_rows(rows.start, rows.stop)
-            V[rows] = law.lyapunov(s[rows], theta_hat[rows], theta)
+            if joint_shape:  # V = ½ sᵀ M(q) s + ...: the plant gives M at the logged q
+                V[rows] = law.lyapunov(s[rows], theta_hat[rows], theta, M=plant.mass_matrices(x[rows, 0]))
+            else:
+                V[rows] = law.lyapunov(s[rows], theta_hat[rows], theta)
             if sink is not None:
                 sink.write_rows(rows.start, t[rows], x[rows], u[rows], s[rows], ref[rows],
                                 theta_hat[rows], theta, V[rows])
@@ -197,10 +203,14 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
     def result(n: int, status: str, reason: str) -> Trajectory:
         keep = slice(0, n)
         flush(n)
+        meta = {"dt": dt, "order": order, "events": applied, "native": bool(native)}
+        contact = getattr(plant, "first_contact", None)
+        if contact is not None:
+            meta["warnings"] = [f"t={contact[0]:.6g} s: {contact[1]} (the regressor has no contact forces)"]
         return Trajectory(t=t[keep], x=x[keep], u=u[keep], s=s[keep], ref=ref[keep],
                           theta_hat=theta_hat[keep], theta=theta_rows(0, n), V=V[keep], names=names,
-                          status=status, reason=reason,
-                          meta={"dt": dt, "order": order, "events": applied, "native": bool(native)})
+                          status=status, reason=reason, joint_names=tuple(getattr(plant, "joint_names", ())),
+                          meta=meta)
 
     def stopped(reason: str) -> Trajectory:  # rows 0..k-1 (and all flushed) are whole when an interruption comes
         n = max(k, flushed)
@@ -230,7 +240,8 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
                 rows = min(NATIVE_CHUNK, n_steps - k, sink_every - k % sink_every)
                 if pending:  # stop at the step where the next event applies
                     rows = min(rows, max(1, math.ceil((pending[0].t - 0.5 * dt - t_k) / dt)))
-                noise = rng.normal(0.0, noise_std, size=(rows, order)) if noise_std is not None else None
+                noise = rng.normal(0.0, noise_std, size=(rows, order) + joint_shape) if noise_std is not None \
+                    else None
                 theta_now = plant.true_theta()
                 block = slice(k, k + rows)
                 t[block], x[block], u[block], s[block], ref[block], theta_hat[block] = nc.chunk(rows, noise)
@@ -275,6 +286,12 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
     return result(k, status, reason)
 
 
+def plant_order(plant) -> int:
+    """n: the order of the plant's output dynamics (2 for a manipulator: x = [q; q̇])."""
+    form = getattr(plant, "form", None)
+    return form.order if form is not None else plant.order
+
+
 @contextmanager
 def _interruptible(stopped: Callable[[str], Trajectory]):
     """Turn a KeyboardInterrupt into errors.Interrupted carrying stopped(reason), the rows so far."""
@@ -293,16 +310,18 @@ def _first_divergence(plant, x, u, theta_hat, theta_next, bound):
 
     Row j's state and estimate are the result of step j-1; the state after the chunk's
     last step is read from the plant. Mirrors `_divergence`, step by step."""
-    x_next = np.vstack([x[1:], plant.observe()[None, :]])
+    n = len(x)
+    x_next = np.concatenate([x[1:], plant.observe()[None]]).reshape(n, -1)
     th_next = np.vstack([theta_hat[1:], theta_next[None, :]])
-    bad = (~np.all(np.isfinite(x_next), axis=1) | ~np.isfinite(u) | ~np.all(np.isfinite(th_next), axis=1)
-           | np.any(np.abs(x_next) > bound, axis=1))
+    u_rows = np.asarray(u).reshape(n, -1)
+    bad = (~np.all(np.isfinite(x_next), axis=1) | ~np.all(np.isfinite(u_rows), axis=1)
+           | ~np.all(np.isfinite(th_next), axis=1) | np.any(np.abs(x_next) > bound, axis=1))
     if bad.any():
         j = int(np.argmax(bad))
         if not np.all(np.isfinite(x_next[j])):
             return j + 1, f"non-finite state {x_next[j].tolist()}"
-        if not math.isfinite(u[j]):
-            return j + 1, f"non-finite control {u[j]}"
+        if not np.all(np.isfinite(u[j])):
+            return j + 1, f"non-finite control {np.asarray(u[j]).tolist()}"
         if not np.all(np.isfinite(th_next[j])):
             return j + 1, f"non-finite estimate {th_next[j].tolist()}"
         return j + 1, f"state {x_next[j].tolist()} beyond the bound {bound}"
@@ -317,8 +336,8 @@ def _divergence(plant, x_k, u_k, theta_hat, bound) -> str:
     x_next = plant.observe()
     if not np.all(np.isfinite(x_next)):
         return f"non-finite state {x_next.tolist()}"
-    if not math.isfinite(u_k):
-        return f"non-finite control {u_k}"
+    if not np.all(np.isfinite(u_k)):
+        return f"non-finite control {np.asarray(u_k).tolist()}"
     if not np.all(np.isfinite(theta_hat)):
         return f"non-finite estimate {theta_hat.tolist()}"
     if np.any(np.abs(x_next) > bound):

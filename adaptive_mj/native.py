@@ -134,7 +134,7 @@ def compiled(form):
 def supported(plant, law) -> bool:
     """Native path: a MuJoCo plant of order 2 (its state is [q, q'], which the callback reads
     directly), a sliding law, no time-varying disturbance (held per step in Python)."""
-    return (hasattr(plant, "step_native") and plant.form.order == 2 and hasattr(law, "native_params")
+    return (hasattr(plant, "step_native") and getattr(plant, "form", None) is not None and plant.form.order == 2 and hasattr(law, "native_params")
             and plant.stages in (1, 4) and plant.disturbance is None)
 
 

@@ -11,13 +11,16 @@ class Trajectory:
     """One run, sampled at the start of every recorded physics step.
 
     t: (N,) time [s]
-    x: (N, n) true plant state [y, y', ..., y^(n-1)] (y in m or rad)
-    u: (N,) applied control (after saturation) held over the step [N or N*m]
-    s: (N,) sliding variable; for the first-order law s = x̃
-    ref: (N, n+1) reference [y_d, ..., y_d^(n)]
+    x: (N, n) true plant state [y, y', ..., y^(n-1)] (y in m or rad); for a plant of
+       m joints (N, n, m): [q; q̇] per joint, the joints last
+    u: (N,) applied control (after saturation) held over the step [N or N*m]; (N, m)
+       joint torques for m joints
+    s: (N,) sliding variable (for the first-order law s = x̃); (N, m) for m joints
+    ref: (N, n+1) reference [y_d, ..., y_d^(n)]; (N, n+1, m) for m joints
     theta_hat: (N, n_theta) estimates; theta: (N, n_theta) true values
     V: (N,) the law's Lyapunov function
     names: parameter names, len n_theta
+    joint_names: () for a 1-DOF plant (scalar y and u), else the m joint names
     status: "ok", "diverged", "interrupted", "failed" or "truncated"
     """
 
@@ -32,23 +35,34 @@ class Trajectory:
     names: tuple[str, ...]
     status: str = "ok"
     reason: str = ""
+    joint_names: tuple[str, ...] = ()
     meta: dict = field(default_factory=dict)
 
     @property
+    def m(self) -> int:
+        """Number of joints (1 for the 1-DOF plants)."""
+        return max(1, len(self.joint_names))
+
+    @property
     def q(self) -> np.ndarray:
-        """(N,) output y [m or rad]."""
+        """(N,) output y [m or rad]; (N, m) for m joints."""
         return self.x[:, 0]
 
     @property
+    def joint_errors(self) -> np.ndarray:
+        """(N, m) tracking error per joint (m = 1 for the 1-DOF plants)."""
+        return self.y_tilde.reshape(len(self.t), -1)
+
+    @property
     def qd(self) -> np.ndarray:
-        """(N,) output rate y' (n >= 2), else the reference-free finite difference of y."""
+        """(N,) output rate y' (n >= 2), else the reference-free finite difference of y; (N, m) for m joints."""
         if self.x.shape[1] >= 2:
             return self.x[:, 1]
-        return np.gradient(self.x[:, 0], self.t) if len(self.t) > 1 else np.zeros(len(self.t))
+        return np.gradient(self.x[:, 0], self.t, axis=0) if len(self.t) > 1 else np.zeros_like(self.x[:, 0])
 
     @property
     def y_tilde(self) -> np.ndarray:
-        """(N,) tracking error y_d - y."""
+        """(N,) tracking error y_d - y; (N, m) for m joints."""
         return self.ref[:, 0] - self.x[:, 0]
 
     @property

@@ -1,0 +1,135 @@
+"""The Slotine–Li adaptive law for an m-joint manipulator, and two baselines.
+
+Plant:  M(q) q̈ + C(q, q̇) q̇ + g(q) + D q̇ = τ,  linear in the parameters π:
+        Y(q, q̇, q̇_r, q̈_r) π + τ_known = M q̈_r + C q̇_r + g + D q̇   (C: Christoffel form)
+
+With q̃ = q_d - q (the project's sign for tracking errors), per joint
+
+    s    = q̃' + Λ q̃,         q̇_r = q̇_d + Λ q̃,       q̈_r = q̈_d + Λ q̃'
+    τ    = Y π̂ + τ_known + K_D s
+    π̂'   = Γ⁻¹ Yᵀ s            (π̃ = π̂ - π)
+
+Then M ṡ + C s + K_D s = -Y π̃, and V = ½ sᵀ M(q) s + ½ π̃ᵀ Γ π̃ has V' = -sᵀ K_D s
+(Ṁ - 2C skew). Λ, K_D are scalar or per joint; Γ scalar or per parameter. The
+dead-zone stops adaptation while |s| (Euclidean norm) or |q̃| is below its width.
+
+Baselines, the same τ with π̂ held at a nominal π_0:
+  computed torque:        τ = Y(q, q̇, q̇_r, q̈_r) π_0 + τ_known + K_D s
+  PD + gravity:           τ = g_0(q) + K_D s  (Y at q̇ = q̇_r = q̈_r = 0)
+
+The plant hands the law its regressor: ``regressor(v, w, a) -> (Y (m, n_params),
+τ_known (m,))`` evaluated at the current configuration, like φ(x) for the 1-DOF laws.
+No mujoco here.
+"""
+from __future__ import annotations
+
+import enum
+import math
+
+import numpy as np
+
+from adaptive_mj.laws.common import DeadZone, DeadZoneOn, LawStep, as_gamma
+
+
+class Mode(enum.IntEnum):
+    ADAPTIVE = 0
+    COMPUTED_TORQUE = 1
+    PD_GRAVITY = 2
+
+
+def reference_terms(x, ref, lam, s, qd_r, qdd_r):
+    """Fill s, q̇_r, q̈_r (m,) from x (2, m) = [q; q̇] and ref (3, m) = [q_d; q̇_d; q̈_d]."""
+    m = s.shape[0]
+    for j in range(m):
+        e = ref[0, j] - x[0, j]
+        de = ref[1, j] - x[1, j]
+        s[j] = de + lam[j] * e
+        qd_r[j] = ref[1, j] + lam[j] * e
+        qdd_r[j] = ref[2, j] + lam[j] * de
+
+
+def slotine_li_output(Y, tau_known, theta, s, kd, gamma, adapt, dz_width, dz_on_s, e_norm, u, rate):
+    """τ = Y θ + τ_known + K_D s into u (m,); θ' = Γ⁻¹ Yᵀ s into rate (unless not adapt,
+    or the dead-zone signal ‖s‖ (dz_on_s) or ‖q̃‖ = e_norm is below dz_width)."""
+    m, n = Y.shape[0], Y.shape[1]
+    s_norm = 0.0
+    for j in range(m):
+        acc = tau_known[j] + kd[j] * s[j]
+        for i in range(n):
+            acc += Y[j, i] * theta[i]
+        u[j] = acc
+        s_norm += s[j] * s[j]
+    s_norm = math.sqrt(s_norm)
+    signal = s_norm if dz_on_s else e_norm
+    if adapt and signal >= dz_width:
+        for i in range(n):
+            acc = 0.0
+            for j in range(m):
+                acc += Y[j, i] * s[j]
+            rate[i] = acc / gamma[i]
+    else:
+        for i in range(n):
+            rate[i] = 0.0
+
+
+def _per_joint(value, m: int, what: str) -> np.ndarray:
+    v = np.broadcast_to(np.asarray(value, dtype=float), (m,)).copy()
+    if not np.all(np.isfinite(v)) or np.any(v < 0):
+        raise ValueError(f"{what} must be finite and >= 0 (scalar or one per joint), got {value}")
+    return v
+
+
+class SlotineLiLaw:
+    """Slotine–Li adaptive control (mode ADAPTIVE) or a fixed-parameter baseline.
+
+    regressor: the plant's regressor(v, w, a) -> (Y, τ_known).
+    names: parameter names (n_params,); m: joints.
+    lam: Λ [1/s], kd: K_D [N m s/rad], scalar or (m,); gamma: Γ, scalar or (n_params,)
+    (estimates move at 1/γ); dead_zone: None or a DeadZone on ‖s‖ (or ‖q̃‖).
+    """
+
+    order = 2
+
+    def __init__(self, regressor, names, m: int, *, lam, kd, gamma=1.0, dead_zone: DeadZone | None = None,
+                 mode: Mode = Mode.ADAPTIVE):
+        self.regressor = regressor
+        self.names = tuple(names)
+        self.m = int(m)
+        self.mode = Mode(mode)
+        self.lam = _per_joint(lam, self.m, "lambda")
+        if np.any(self.lam <= 0):
+            raise ValueError(f"lambda must be > 0, got {lam}")
+        self.kd = _per_joint(kd, self.m, "kd")
+        self.gamma = as_gamma(gamma, len(self.names))
+        self.dead_zone = dead_zone
+        self.adapt = self.mode is Mode.ADAPTIVE
+        self._zero = np.zeros(self.m)
+
+    def native_params(self) -> dict:
+        dz = self.dead_zone
+        return {"lam": self.lam, "kd": self.kd, "gamma": self.gamma, "adapt": self.adapt, "mode": int(self.mode),
+                "dz_width": 0.0 if dz is None else dz.width, "dz_on_s": dz is None or dz.on is DeadZoneOn.S}
+
+    def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
+        m = self.m
+        s, qd_r, qdd_r = np.empty(m), np.empty(m), np.empty(m)
+        reference_terms(x, ref, self.lam, s, qd_r, qdd_r)
+        if self.mode is Mode.PD_GRAVITY:
+            Y, tau_known = self.regressor(self._zero, self._zero, self._zero)
+        else:
+            Y, tau_known = self.regressor(x[1], qd_r, qdd_r)
+        u, rate = np.empty(m), np.empty(len(self.names))
+        p = self.native_params()
+        e_norm = float(np.linalg.norm(ref[0] - x[0]))
+        slotine_li_output(Y, tau_known, theta_hat, s, self.kd, self.gamma, self.adapt, p["dz_width"],
+                          p["dz_on_s"], e_norm, u, rate)
+        return LawStep(u, rate, s, qdd_r)
+
+    def lyapunov(self, s, theta_hat, theta, *, M) -> np.ndarray:
+        """V = ½ sᵀ M s + ½ Σ γ_i π̃_i² (baselines: ½ sᵀ M s).  s: (N, m), M: (N, m, m)."""
+        s = np.asarray(s, dtype=float)
+        V = 0.5 * np.einsum("ni,nij,nj->n", s, M, s)
+        if self.adapt:
+            err = np.asarray(theta_hat, dtype=float) - np.asarray(theta, dtype=float)
+            V = V + 0.5 * np.sum(self.gamma * err**2, axis=-1)
+        return V

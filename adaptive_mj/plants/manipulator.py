@@ -1,0 +1,483 @@
+"""A manipulator: any MJCF whose moving part is a tree of hinge and slide joints, each
+driven by its own torque motor (models/ur5e_arm.xml is the bundled one).
+
+    M(q) q̈ + C(q, q̇) q̇ + g(q) + D q̇ = τ,        τ_j = gear_j ctrl_j
+
+The law's parameters π are the standard 10 inertial parameters of each unknown body
+(adaptive_mj.plants.regressor_kernel.BODY_PARAM_NAMES: m, m·c, inertia about the body
+origin, in the body frame), optionally the joints' armature and damping, and
+optionally reduced to a base (identifiable) set. Everything known is computed from the
+compiled model and enters as the known torque τ_known, so
+
+    Y(q, q̇, q̇_r, q̈_r) π + τ_known = M q̈_r + C(q, q̇) q̇_r + g + armature·q̈_r + D q̇
+
+exactly (tests/test_manipulator.py checks it against mj_inverse). The regressor is
+evaluated on the MjData of the current evaluation of the dynamics (the control
+callback's stage), where MuJoCo's kinematics (cdof, xpos, xmat, subtree_com, cinert)
+are current.
+"""
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+from typing import Iterator
+
+import mujoco
+import numpy as np
+
+from adaptive_mj.errors import ModelError
+from adaptive_mj.plants import regressor_kernel as rk
+from adaptive_mj.plants.mujoco_plant import control_callback
+
+
+def _name(model, objtype, i: int) -> str:
+    return mujoco.mj_id2name(model, objtype, i) or f"#{i}"
+
+
+def check_supported(model: mujoco.MjModel, where: str) -> None:
+    """Refuse, with one line, what the manipulator regressor does not cover."""
+    for j in range(model.njnt):
+        t = mujoco.mjtJoint(model.jnt_type[j])
+        if t not in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
+            kind = t.name.removeprefix("mjJNT_").lower()
+            raise ModelError(f"{where}: joint {_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)!r} is a {kind} joint; "
+                             "the manipulator plant supports only hinge and slide joints on a fixed base "
+                             "(replace it, or weld a floating base to the world)")
+        if model.jnt_stiffness[j] != 0:
+            raise ModelError(f"{where}: joint {_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)!r} has stiffness "
+                             f"{model.jnt_stiffness[j]:g}, which the regressor does not cover; set it to 0")
+    if model.nv == 0:
+        raise ModelError(f"{where}: the model has no joints; the manipulator plant needs a tree of hinge/slide joints")
+    if np.any(model.dof_frictionloss != 0):
+        raise ModelError(f"{where}: joint frictionloss is not covered by the regressor; set it to 0")
+    if model.ntendon:
+        raise ModelError(f"{where}: the model has {model.ntendon} tendon(s); the manipulator plant needs each "
+                         "joint driven by its own motor, with no tendons")
+    if model.neq:
+        raise ModelError(f"{where}: the model has {model.neq} equality constraint(s), which the regressor does "
+                         "not cover; remove them")
+    if np.any(model.body_gravcomp != 0):
+        raise ModelError(f"{where}: gravcomp is set on a body; the manipulator regressor models full gravity; "
+                         "set gravcomp to 0")
+    if model.opt.density != 0 or model.opt.viscosity != 0:
+        raise ModelError(f"{where}: fluid forces (option density/viscosity) are not covered by the manipulator "
+                         "regressor; set them to 0")
+    driven = np.full(model.nv, -1)
+    for a in range(model.nu):
+        aname = _name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
+        if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT:
+            raise ModelError(f"{where}: actuator {aname!r} does not drive a joint directly (tendon, site or "
+                             "coupled transmission); the manipulator plant needs one motor per joint")
+        if (model.actuator_gaintype[a] != mujoco.mjtGain.mjGAIN_FIXED
+                or model.actuator_biastype[a] != mujoco.mjtBias.mjBIAS_NONE
+                or model.actuator_dyntype[a] != mujoco.mjtDyn.mjDYN_NONE):
+            raise ModelError(f"{where}: actuator {aname!r} is not a torque <motor> (it has a bias, a gain "
+                             "function or dynamics, e.g. a position servo); set plant.servo_to_torque = true to "
+                             "rebuild servos as torque motors limited to their forcerange")
+        dof = int(model.jnt_dofadr[model.actuator_trnid[a, 0]])
+        if driven[dof] >= 0:
+            raise ModelError(f"{where}: joint {_name(model, mujoco.mjtObj.mjOBJ_JOINT, model.dof_jntid[dof])!r} "
+                             "is driven by more than one actuator; the manipulator plant needs exactly one each")
+        driven[dof] = a
+    missing = [_name(model, mujoco.mjtObj.mjOBJ_JOINT, model.dof_jntid[j]) for j in range(model.nv) if driven[j] < 0]
+    if missing:
+        raise ModelError(f"{where}: joint(s) {missing} have no actuator; the manipulator plant needs every joint "
+                         "actuated (fix the unactuated joints in the MJCF, or add a <motor>)")
+
+
+def servo_to_torque(spec) -> list[str]:
+    """Rebuild position servos (<position>, or <general> with an affine bias) as torque motors.
+
+    Each becomes gain 1, no bias, no dynamics, its control range set to its
+    forcerange (which must be given). Returns one line per converted actuator.
+    """
+    notes = []
+    for act in spec.actuators:
+        if act.biastype == mujoco.mjtBias.mjBIAS_NONE and act.gaintype == mujoco.mjtGain.mjGAIN_FIXED \
+                and act.dyntype == mujoco.mjtDyn.mjDYN_NONE:
+            continue
+        lo, hi = act.forcerange
+        if not (act.forcelimited == mujoco.mjtLimited.mjLIMITED_TRUE or (act.forcelimited == mujoco.mjtLimited.mjLIMITED_AUTO and lo < hi)) or not lo < hi:
+            raise ModelError(f"actuator {act.name!r}: servo_to_torque needs a forcerange to limit the torque motor")
+        act.gaintype = mujoco.mjtGain.mjGAIN_FIXED
+        act.gainprm = np.zeros_like(act.gainprm)
+        act.gainprm[0] = 1.0
+        act.biastype = mujoco.mjtBias.mjBIAS_NONE
+        act.biasprm = np.zeros_like(act.biasprm)
+        act.dyntype = mujoco.mjtDyn.mjDYN_NONE
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.ctrlrange = [lo, hi]
+        notes.append(f"actuator {act.name!r}: servo rebuilt as a torque motor, |tau| <= [{lo:g}, {hi:g}] N*m")
+    return notes
+
+
+@dataclass(frozen=True)
+class ParamLayout:
+    """Which parameters are unknown, and their names.
+
+    bodies: unknown body ids; joints: whether armature and damping are unknown;
+    names: (n_standard,) names "<body>.<param>" and "<joint>.armature"/".damping".
+    """
+
+    bodies: tuple[int, ...]
+    joints: bool
+    names: tuple[str, ...]
+
+
+def moving_bodies(model) -> list[int]:
+    """Bodies with at least one joint between them and the world."""
+    out = []
+    for b in range(1, model.nbody):
+        x = b
+        while x > 0 and model.body_dofnum[x] == 0:
+            x = int(model.body_parentid[x])
+        if x > 0:
+            out.append(b)
+    return out
+
+
+def param_layout(model, unknown, *, joints: bool, where: str) -> ParamLayout:
+    """unknown: "payload" (bodies named payload/... with mass), "all" (every moving body with mass;
+    a massless body, such as the frame PyMJCF attaches a payload with, has no parameters to
+    identify) or a list of body names."""
+    moving = moving_bodies(model)
+    if unknown == "all":
+        bodies = [b for b in moving if model.body_mass[b] > 0]
+    elif unknown == "payload":
+        bodies = [b for b in moving if _name(model, mujoco.mjtObj.mjOBJ_BODY, b).startswith("payload/")
+                  and model.body_mass[b] > 0]
+        if not bodies:
+            raise ModelError(f"{where}: plant.unknown = 'payload' but the model has no payload body; attach one "
+                             "(plant.payload) or name the unknown bodies (plant.unknown = [\"link\", ...])")
+    else:
+        bodies = []
+        for name in unknown:
+            b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+            if b < 0:
+                raise ModelError(f"{where}: plant.unknown names body {name!r}, which the model does not have "
+                                 f"(moving bodies: {[_name(model, mujoco.mjtObj.mjOBJ_BODY, i) for i in moving]})")
+            if b not in moving:
+                raise ModelError(f"{where}: plant.unknown names body {name!r}, which no joint moves; its "
+                                 "parameters do not enter the dynamics")
+            bodies.append(b)
+        bodies = sorted(set(bodies))
+    names = [f"{_name(model, mujoco.mjtObj.mjOBJ_BODY, b)}.{p}" for b in bodies for p in rk.BODY_PARAM_NAMES]
+    if joints:
+        for jn in rk.JOINT_PARAM_NAMES:
+            names += [f"{_name(model, mujoco.mjtObj.mjOBJ_JOINT, model.dof_jntid[j])}.{jn}" for j in range(model.nv)]
+    return ParamLayout(tuple(bodies), bool(joints), tuple(names))
+
+
+def standard_params(model, layout: ParamLayout) -> np.ndarray:
+    """(n_standard,) true π from the compiled model: body_mass, body_ipos, body_inertia,
+    body_iquat (and dof_armature, dof_damping)."""
+    out = []
+    R = np.empty(9)
+    for b in layout.bodies:
+        mujoco.mju_quat2Mat(R, model.body_iquat[b])
+        out.append(rk.body_params(float(model.body_mass[b]), model.body_ipos[b], model.body_inertia[b],
+                                  R.reshape(3, 3)))
+    if layout.joints:
+        out += [np.array(model.dof_armature, dtype=float), np.array(model.dof_damping, dtype=float)]
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+class Regressor:
+    """Y(q, q̇, q̇_r, q̈_r) and τ_known on a live MjData (see regressor_kernel.regressor).
+
+    Call as regressor(v, w, a) -> (Y (nv, n_params), tau_known (nv,)); the returned
+    arrays are reused buffers. With a base-parameter map B (n_standard, n_base),
+    Y_base = Y_standard B.
+    """
+
+    def __init__(self, model, data, layout: ParamLayout, base_map: np.ndarray | None = None):
+        self.model, self.data, self.layout = model, data, layout
+        nb, nv = model.nbody, model.nv
+        self.body_col = np.full(nb, -1, dtype=np.int64)
+        self.body_known = np.zeros(nb, dtype=np.int64)
+        for b in moving_bodies(model):
+            self.body_known[b] = 1
+        for i, b in enumerate(layout.bodies):
+            self.body_col[b] = 10 * i
+            self.body_known[b] = 0
+        n_body_cols = 10 * len(layout.bodies)
+        if layout.joints:
+            self.col_arm = np.arange(n_body_cols, n_body_cols + nv, dtype=np.int64)
+            self.col_damp = self.col_arm + nv
+        else:
+            self.col_arm = np.full(nv, -1, dtype=np.int64)
+            self.col_damp = np.full(nv, -1, dtype=np.int64)
+        self.n_standard = len(layout.names)
+        self.base_map = base_map
+        self.Y_std = np.zeros((nv, self.n_standard))
+        self.tau_known = np.zeros(nv)
+        self.parent = np.asarray(model.body_parentid, dtype=np.int64)
+        self.dofadr = np.asarray(model.body_dofadr, dtype=np.int64)
+        self.dofnum = np.asarray(model.body_dofnum, dtype=np.int64)
+        self.rootid = np.asarray(model.body_rootid, dtype=np.int64)
+        self._kernel = kernel()
+
+    def static_args(self):
+        """The model arrays the kernel takes, in its order (also used by adaptive_mj.native)."""
+        m = self.model
+        return (self.parent, self.dofadr, self.dofnum, self.rootid, self.body_col, self.body_known,
+                self.col_arm, self.col_damp, m.dof_armature, m.dof_damping)
+
+    def __call__(self, v, w, a):
+        m, d = self.model, self.data
+        self._kernel(*self.static_args(), d.cdof, d.xpos, d.xmat, d.subtree_com, d.cinert, m.opt.gravity,
+                     np.ascontiguousarray(v, dtype=float), np.ascontiguousarray(w, dtype=float),
+                     np.ascontiguousarray(a, dtype=float), self.Y_std, self.tau_known)
+        if self.base_map is None:
+            return self.Y_std, self.tau_known
+        return self.Y_std @ self.base_map, self.tau_known
+
+
+_KERNEL = None
+
+
+def kernel():
+    """regressor_kernel.regressor compiled with numba (once per process), or the Python source."""
+    global _KERNEL
+    if _KERNEL is None:
+        try:
+            import numba
+
+            helpers = {name: numba.njit(getattr(rk, name)) for name in
+                       ("cinert_of_params", "_inert_mul", "_cross_force_add", "_cross_motion_add")}
+            helpers["_body_force"] = numba.njit(_with_globals(rk._body_force, **helpers))
+            helpers["_project"] = numba.njit(rk._project)
+            helpers["_project_col"] = numba.njit(rk._project_col)
+            _KERNEL = numba.njit(_with_globals(rk.regressor, **helpers))
+        except ImportError:  # pragma: no cover - numba is a dependency
+            _KERNEL = rk.regressor
+    return _KERNEL
+
+
+def _with_globals(fn, **replace):
+    import types
+
+    return types.FunctionType(fn.__code__, {**fn.__globals__, **replace}, fn.__name__, fn.__defaults__,
+                              fn.__closure__)
+
+
+def base_parameters(regressor: "Regressor", *, samples: int = 30, seed: int = 0, rtol: float = 1e-9):
+    """A base (identifiable) parameter set, found numerically (Gautier's method).
+
+    Y is sampled at `samples` random states (q, q̇, q̇_r, q̈_r ~ N(0, 1)); a QR
+    decomposition with column pivoting picks independent columns Y_1 (the rest, Y_2,
+    are dependent: Y_2 = Y_1 K exactly), so Y π = Y_1 (π_1 + K π_2).
+
+    Returns (B, P, names): B (n_standard, n_base) selects Y_1 = Y B; P (n_base,
+    n_standard) gives π_base = P π; names: each base parameter is named after its
+    independent column, with "+" where dependent ones are regrouped into it.
+    """
+    import scipy.linalg
+
+    model = regressor.model
+    data = mujoco.MjData(model)
+    scratch = Regressor(model, data, regressor.layout)
+    rng = np.random.default_rng(seed)
+    rows = []
+    for _ in range(samples):
+        data.qpos[:] = rng.uniform(-np.pi, np.pi, model.nq)
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        Y, _ = scratch(rng.normal(size=model.nv), rng.normal(size=model.nv), rng.normal(size=model.nv))
+        rows.append(Y.copy())
+    W = np.vstack(rows)
+    _, R, piv = scipy.linalg.qr(W, mode="economic", pivoting=True)
+    diag = np.abs(np.diag(R))
+    rank = int(np.sum(diag > rtol * diag[0])) if diag.size and diag[0] > 0 else 0
+    indep = np.sort(piv[:rank])
+    dep = np.setdiff1d(np.arange(W.shape[1]), indep)
+    K = np.linalg.lstsq(W[:, indep], W[:, dep], rcond=None)[0] if dep.size else np.zeros((rank, 0))
+    K[np.abs(K) < 1e-10] = 0.0
+    n_std = W.shape[1]
+    B = np.zeros((n_std, rank))
+    B[indep, np.arange(rank)] = 1.0
+    P = np.zeros((rank, n_std))
+    P[np.arange(rank), indep] = 1.0
+    P[:, dep] = K
+    std = regressor.layout.names
+    names = tuple(std[c] + ("*" if np.any(K[i]) else "") for i, c in enumerate(indep))
+    return B, P, names
+
+
+def plant_dofs(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(qpos address, actuator id, gear) per dof, dof order."""
+    qadr = np.array([model.jnt_qposadr[model.dof_jntid[j]] for j in range(model.nv)], dtype=np.int64)
+    act = np.full(model.nv, -1, dtype=np.int64)
+    for a in range(model.nu):
+        act[model.jnt_dofadr[model.actuator_trnid[a, 0]]] = a
+    gear = np.array([model.actuator_gear[a, 0] for a in act], dtype=float)
+    return qadr, act, gear
+
+
+class ManipulatorPlant:
+    """A MuJoCo arm of m = nv joints under joint torques (see the module docstring).
+
+    model: compiled, checked by check_supported. unknown: "payload", "all" or body
+    names; joint_params: armature and damping unknown too; base: reduce π to a base
+    set. The loop's interface (adaptive_mj.plants) with a joint axis: the state is
+    x (2, m) = [q; q̇] [rad or m; per s], the input τ (m,) [N m or N].
+    """
+
+    order = 2
+
+    def __init__(self, model: mujoco.MjModel, *, unknown="payload", joint_params: bool = False,
+                 base: bool = False, where: str = "manipulator model", notes: tuple[str, ...] = ()):
+        check_supported(model, where)
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.where = where
+        self.notes = tuple(notes)
+        self.m = int(model.nv)
+        self.joint_shape = (self.m,)
+        self.joint_names = tuple(_name(model, mujoco.mjtObj.mjOBJ_JOINT, model.dof_jntid[j]) for j in range(self.m))
+        self._qadr, self._act, self._gear = plant_dofs(model)
+        self.layout = param_layout(model, unknown, joints=joint_params, where=where)
+        self.regressor = Regressor(model, self.data, self.layout)
+        self.base_map = self.base_projection = None
+        self.names = self.layout.names
+        if base:
+            B, P, names = base_parameters(self.regressor)
+            self.regressor.base_map, self.base_map, self.base_projection, self.names = B, B, P, names
+        lo = np.full(self.m, -np.inf)
+        hi = np.full(self.m, np.inf)
+        for j, a in enumerate(self._act):
+            if model.actuator_ctrllimited[a]:
+                c0, c1 = model.actuator_ctrlrange[a] * self._gear[j]
+                lo[j], hi[j] = min(c0, c1), max(c0, c1)
+        self.ctrl_range = (lo, hi) if np.isfinite(lo).any() or np.isfinite(hi).any() else None
+        self._theta = None
+        self.force_offset = 0.0
+        self.disturbance = None
+        self.first_contact = None  # (t, text) of the first contact seen, see step()
+        self._warning_total0 = int(self.data.warning.number.sum())
+        self._warnings0 = self.data.warning.number.copy()
+        self._scratch = mujoco.MjData(model)
+        self._M = np.zeros((self.m, self.m))
+
+    # --- state -------------------------------------------------------------
+    @property
+    def dt(self) -> float:
+        return float(self.model.opt.timestep)
+
+    @property
+    def stages(self) -> int:
+        return 4 if self.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 else 1
+
+    @property
+    def time(self) -> float:
+        return float(self.data.time)
+
+    def set_state(self, x0) -> None:
+        """x0: (2, m) [q; q̇] initial joint positions [rad or m] and velocities."""
+        x0 = np.asarray(x0, dtype=float).reshape(2, self.m)
+        mujoco.mj_resetData(self.model, self.data)
+        self._warnings0 = self.data.warning.number.copy()
+        self._warning_total0 = int(self._warnings0.sum())
+        self.data.qpos[self._qadr] = x0[0]
+        self.data.qvel[:] = x0[1]
+        self.first_contact = None
+
+    def measure(self, d, x: np.ndarray) -> None:
+        x[0] = d.qpos[self._qadr]
+        x[1] = d.qvel
+
+    def observe(self) -> np.ndarray:
+        x = np.empty((2, self.m))
+        self.measure(self.data, x)
+        return x
+
+    def true_theta(self) -> np.ndarray:
+        """(n_params,) true π (standard, or base = P π) from the compiled model, re-read after events."""
+        if self._theta is None:
+            pi = standard_params(self.model, self.layout)
+            self._theta = pi if self.base_projection is None else self.base_projection @ pi
+        return self._theta
+
+    def model_changed(self) -> None:
+        self._theta = None
+
+    def mass_matrices(self, q: np.ndarray) -> np.ndarray:
+        """(N, m, m) joint-space inertia M(q) (armature included) at rows q (N, m)."""
+        d = self._scratch
+        out = np.empty((len(q), self.m, self.m))
+        for i, qi in enumerate(q):
+            d.qpos[self._qadr] = qi
+            mujoco.mj_kinematics(self.model, d)
+            mujoco.mj_comPos(self.model, d)
+            mujoco.mj_crb(self.model, d)
+            mujoco.mj_fullM(self.model, d, out[i])
+        return out
+
+    # --- stepping ----------------------------------------------------------
+    @contextlib.contextmanager
+    def controlled_by(self, policy) -> Iterator[None]:
+        """Run policy(t, x) -> τ (m,) inside MuJoCo's control callback (each RK4 stage too)."""
+        act, gear, measure = self._act, self._gear, self.measure
+        x = np.empty((2, self.m))
+
+        def callback(m, d):
+            measure(d, x)
+            d.ctrl[act] = policy(d.time, x) / gear
+
+        with control_callback(callback):
+            yield
+
+    @contextlib.contextmanager
+    def controlled_natively(self, cfunc) -> Iterator[None]:
+        with control_callback(cfunc.ctypes):
+            yield
+
+    def step_native(self, nstep: int) -> None:
+        mujoco.mj_step(self.model, self.data, nstep=nstep)
+        self._note_contact()
+
+    def step(self) -> None:
+        mujoco.mj_step(self.model, self.data)
+        self._note_contact()
+
+    def _note_contact(self) -> None:
+        if self.first_contact is None and self.data.ncon > 0:
+            c = self.data.contact[0]
+            g1 = _name(self.model, mujoco.mjtObj.mjOBJ_GEOM, c.geom1)
+            g2 = _name(self.model, mujoco.mjtObj.mjOBJ_GEOM, c.geom2)
+            self.first_contact = (self.time, f"contact between geoms {g1!r} and {g2!r}")
+
+    def instability(self) -> str | None:
+        if int(self.data.warning.number.sum()) == self._warning_total0:
+            return None
+        new = np.nonzero(self.data.warning.number > self._warnings0)[0]
+        if new.size == 0:
+            return None
+        return "MuJoCo warning " + ", ".join(mujoco.mjtWarning(int(i)).name for i in new)
+
+    # --- events ------------------------------------------------------------
+    def body_id(self, name: str) -> int:
+        idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if idx < 0:
+            raise ModelError(f"{self.where}: no body named {name!r}")
+        return idx
+
+    def set_body_mass(self, name: str, mass: float) -> None:
+        """Set a body's mass [kg], its inertia scaled with it (same shape, denser)."""
+        b = self.body_id(name)
+        scale = mass / self.model.body_mass[b]
+        self.model.body_mass[b] = mass
+        self.model.body_inertia[b] *= scale
+        mujoco.mj_setConst(self.model, mujoco.MjData(self.model))
+        self.model_changed()
+
+    def set_body_inertial(self, name: str, *, mass: float, ipos, iquat, inertia) -> None:
+        """Replace a body's mass [kg], centre of mass (3,) [m], inertia frame quaternion (4,)
+        and principal inertia (3,) [kg m²] together (a payload swap)."""
+        b = self.body_id(name)
+        self.model.body_mass[b] = mass
+        self.model.body_ipos[b] = ipos
+        self.model.body_iquat[b] = iquat
+        self.model.body_inertia[b] = inertia
+        mujoco.mj_setConst(self.model, mujoco.MjData(self.model))
+        self.model_changed()
