@@ -8,6 +8,7 @@ model without the repo that made it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -40,6 +41,7 @@ class Setup:
     events: list[Event]
     source: ModelSource | None
     model_xml: str | None = None  # the compiled model as MJCF (the log's model.xml)
+    notes: tuple[str, ...] = ()  # model edits made for the run (servo_to_torque), shown and logged
 
 
 def model_source(scn: Scenario) -> ModelSource | None:
@@ -47,7 +49,7 @@ def model_source(scn: Scenario) -> ModelSource | None:
     p = scn.plant
     if p.kind == "first_order" or (p.backend == "twin" and p.theta is not None):
         return None
-    if p.kind == "arm":
+    if p.kind in ("arm", "manipulator"):
         from adaptive_mj.plants import arm
 
         xml, assets = arm.build_arm_xml(arm=p.model, payload=p.payload, payload_mass=p.payload_mass, site=p.site)
@@ -61,6 +63,8 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     """Build a run's objects. `source` replaces the model files (used by replay --verify)."""
     if source is None:
         source = model_source(scn)
+    if scn.plant.kind == "manipulator":
+        return _manipulator_setup(scn, source)
     reference = _reference(scn)
     plant, model_xml = _plant(scn, source, reference)
     for e in scn.events:
@@ -83,7 +87,7 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
                  rng=rng, events=[_event(e) for e in scn.events], source=source, model_xml=model_xml)
 
 
-def _compile(scn: Scenario, source: ModelSource):
+def _compile(scn: Scenario, source: ModelSource, edit=None):
     """(model, compiled MJCF text). A thruster lag turns the actuator into a first-order filter."""
     import mujoco
 
@@ -91,11 +95,13 @@ def _compile(scn: Scenario, source: ModelSource):
 
     lag = scn.plant.thruster_time_constant
 
-    def edit(spec):
+    def thruster_lag(spec):
         if lag is not None:
             for act in spec.actuators:
                 act.dyntype = mujoco.mjtDyn.mjDYN_FILTER
                 act.dynprm[0] = lag
+
+    edit = edit or thruster_lag
 
     model, xml = compile_spec(source.xml, source.assets, where=str(scn.plant.model), edit=edit)
     sim = scn.simulation
@@ -205,7 +211,7 @@ def _estimates(scn: Scenario, names, plant) -> np.ndarray:
     start from law.initial_estimates (else law.nominal, else zeros)."""
     L = scn.law
     first, second = ("nominal", "initial_estimates")
-    if L.kind not in ("fixed_nominal", "robust_sliding"):
+    if L.kind not in ("fixed_nominal", "robust_sliding", "computed_torque", "pd_gravity"):
         first, second = second, first
     for key in (first, second):
         values = getattr(L, key)
@@ -232,7 +238,11 @@ def _disturbance(scn: Scenario):
     return lambda t: d.magnitude * float(np.sin(d.omega * t + d.phase))
 
 
-def _event(e) -> Event:
+def _event(e, scn: Scenario | None = None) -> Event:
+    if e.kind == "payload_swap":
+        inertial = _payload_inertial(scn, e.payload)
+        return Event(e.t, f"payload_swap {e.body} = {e.payload} ({inertial['mass']:g} kg)",
+                     lambda plant, e=e: plant.set_body_inertial(e.body, **inertial))
     if e.kind == "payload_mass":
         return Event(e.t, f"payload_mass {e.body} = {e.value} kg",
                      lambda plant, e=e: plant.set_body_mass(e.body, e.value))
@@ -244,3 +254,141 @@ def _event(e) -> Event:
         plant.force_offset += e.value
 
     return Event(e.t, f"constant force {e.value:+g}", add_force)
+
+
+# --------------------------------------------------------------------------
+# manipulators
+def _manipulator_setup(scn: Scenario, source: ModelSource) -> Setup:
+    from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
+    from adaptive_mj.plants.manipulator import ManipulatorPlant, servo_to_torque
+
+    p = scn.plant
+    notes: list[str] = []
+
+    def edit(spec):
+        if p.manipulator.servo_to_torque:
+            try:
+                notes.extend(servo_to_torque(spec))
+            except ModelError as exc:
+                raise ScenarioError(f"{scn.source}: plant.servo_to_torque: {exc}") from None
+
+    model, model_xml = _compile(scn, source, edit=edit)
+    where = str(p.model)
+    plant = ManipulatorPlant(model, unknown=p.manipulator.unknown, joint_params=p.manipulator.joint_params,
+                             base=p.manipulator.base_parameters, where=where, notes=tuple(notes))
+    reference = _joint_reference(scn, model, plant.joint_names)
+    plant.set_state(reference(0.0, 2)[:2])
+    L = scn.law
+    lam = _per_joint(scn, "law.lambda", L.lam_joints if L.lam_joints is not None else L.lam, plant.joint_names)
+    kd = _per_joint(scn, "law.kd", L.kd, plant.joint_names)
+    mode = {"slotine_li": Mode.ADAPTIVE, "computed_torque": Mode.COMPUTED_TORQUE,
+            "pd_gravity": Mode.PD_GRAVITY}[L.kind]
+    try:
+        law = SlotineLiLaw(plant.regressor, plant.names, plant.m, lam=lam, kd=kd,
+                           gamma=_gamma(scn, plant.names) if L.gamma is not None else 1.0,
+                           dead_zone=_dead_zone(L), mode=mode)
+    except ValueError as exc:
+        raise ScenarioError(f"{scn.source}: law: {exc}") from None
+    theta_hat0 = _estimates(scn, plant.names, plant)
+    for e in scn.events:
+        plant.body_id(e.body)  # a missing body fails now, not mid-run
+        if e.kind == "payload_swap":
+            _payload_inertial(scn, e.payload)
+    return Setup(plant=plant, law=law, reference=reference, theta_hat0=theta_hat0, noise_std=None,
+                 rng=np.random.default_rng(scn.noise.seed), events=[_event(e, scn) for e in scn.events],
+                 source=source, model_xml=model_xml, notes=tuple(notes))
+
+
+def _per_joint(scn: Scenario, key: str, value, joints: tuple[str, ...]) -> np.ndarray:
+    if not isinstance(value, dict):
+        return np.full(len(joints), float(value))
+    unknown = [j for j in value if j not in joints]
+    if unknown:
+        raise ScenarioError(f"{scn.source}: {key} names joint {unknown[0]!r}, which the model does not have "
+                            f"(joints: {', '.join(joints)})")
+    missing = [j for j in joints if j not in value]
+    if missing:
+        raise ScenarioError(f"{scn.source}: {key} must give every joint a value, missing {', '.join(missing)}")
+    return np.array([value[j] for j in joints], dtype=float)
+
+
+def _pose(scn: Scenario, key: str, value, model, joints: tuple[str, ...], base: np.ndarray) -> np.ndarray:
+    """(m,) joint positions: a keyframe name, or a table {joint: position} over `base`."""
+    import mujoco
+
+    qadr = [model.jnt_qposadr[model.dof_jntid[j]] for j in range(model.nv)]
+    if isinstance(value, str):
+        k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, value)
+        if k < 0:
+            keys = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_KEY, i) for i in range(model.nkey)]
+            raise ScenarioError(f"{scn.source}: {key} names keyframe {value!r}, which the model does not have "
+                                f"(keyframes: {keys})")
+        return np.array(model.key_qpos[k][qadr], dtype=float)
+    out = base.copy()
+    for name, v in value.items():
+        if name not in joints:
+            raise ScenarioError(f"{scn.source}: {key} names joint {name!r}, which the model does not have "
+                                f"(joints: {', '.join(joints)})")
+        out[joints.index(name)] = v
+    return out
+
+
+def _joint_reference(scn: Scenario, model, joints: tuple[str, ...]):
+    r = scn.reference
+    qadr = [model.jnt_qposadr[model.dof_jntid[j]] for j in range(model.nv)]
+    qpos0 = np.array(model.qpos0[qadr], dtype=float)
+    if r.kind == "joint_waypoints":
+        points, prev = [], qpos0
+        for i, w in enumerate(r.params["waypoints"]):
+            prev = _pose(scn, f"reference.waypoints[{i}]", w, model, joints, prev)
+            points.append(tuple(prev))
+        try:
+            return refs.JointWaypoints(waypoints=tuple(points), durations=tuple(r.params["durations"]),
+                                       t0=r.params["t0"], cycle=r.params["cycle"])
+        except ValueError as exc:
+            raise ScenarioError(f"{scn.source}: reference: {exc}") from None
+    center = qpos0 if r.params["center"] is None else _pose(scn, "reference.center", r.params["center"], model,
+                                                              joints, qpos0)
+    terms = {}
+    for key in ("amplitudes", "omegas", "phases"):
+        v = r.params[key]
+        if v is None:
+            terms[key] = None
+        elif isinstance(v, dict):
+            _per_joint_names(scn, f"reference.{key}", v, joints)
+            terms[key] = tuple(tuple(v.get(j, ())) for j in joints)
+        else:
+            terms[key] = tuple(tuple(v) for _ in joints)
+    if terms["phases"] is None:
+        terms["phases"] = tuple(tuple(0.0 for _ in a) for a in terms["amplitudes"])
+    try:
+        return refs.JointSumOfSines(center=tuple(center), amplitudes=terms["amplitudes"], omegas=terms["omegas"],
+                                    phases=terms["phases"])
+    except ValueError as exc:
+        raise ScenarioError(f"{scn.source}: reference: {exc}") from None
+
+
+def _per_joint_names(scn: Scenario, key: str, value: dict, joints: tuple[str, ...]) -> None:
+    for name in value:
+        if name not in joints:
+            raise ScenarioError(f"{scn.source}: {key} names joint {name!r}, which the model does not have "
+                                f"(joints: {', '.join(joints)})")
+
+
+def _payload_inertial(scn: Scenario, payload: str) -> dict:
+    """mass, ipos, iquat, inertia of the body named "body" of a payload file (compiled alone)."""
+    import mujoco
+
+    from adaptive_mj.plants.arm import PAYLOADS
+    from adaptive_mj.plants.mujoco_plant import compile_xml_path
+
+    path = Path(payload) if Path(payload).suffix == ".xml" else PAYLOADS / f"{payload}.xml"
+    if not path.is_file():
+        choices = sorted(p.stem for p in PAYLOADS.glob("*.xml"))
+        raise ScenarioError(f"{scn.source}: events: payload {payload!r} not found (bundled payloads: {choices})")
+    model = compile_xml_path(path)
+    b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "body")
+    if b < 0:
+        raise ScenarioError(f"{scn.source}: events: payload {payload!r} has no body named 'body'")
+    return {"mass": float(model.body_mass[b]), "ipos": model.body_ipos[b].copy(),
+            "iquat": model.body_iquat[b].copy(), "inertia": model.body_inertia[b].copy()}

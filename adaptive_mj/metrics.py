@@ -32,7 +32,7 @@ def metrics(traj: Trajectory) -> dict:
     tail = tail_mask(traj)
     dV = np.diff(traj.V)
     final_err = traj.theta_hat[-1] - traj.theta[-1] if len(traj) else np.full(len(traj.names), math.nan)
-    return {
+    out = {
         "rms_tracking_error": _rms(e),
         "rms_tracking_error_tail": _rms(e[tail]),
         "max_abs_tracking_error_tail": float(np.max(np.abs(e[tail]))) if tail.any() else math.nan,
@@ -43,6 +43,26 @@ def metrics(traj: Trajectory) -> dict:
         "lyapunov_initial": float(traj.V[0]) if len(traj) else math.nan,
         "lyapunov_final": float(traj.V[-1]) if len(traj) else math.nan,
         "lyapunov_max_increase": float(max(0.0, dV.max())) if dV.size else 0.0,
+    }
+    if traj.joint_names:
+        out.update(joint_metrics(traj))
+    return out
+
+
+def joint_metrics(traj: Trajectory) -> dict:
+    """For m joints: tail RMS and max tracking error per joint [rad or m], the RMS of the
+    error norm |q̃| over the tail, and the RMS torque per joint [N m or N]."""
+    e = traj.joint_errors
+    tail = tail_mask(traj)
+    norm = np.linalg.norm(e, axis=1)
+    u = np.asarray(traj.u).reshape(len(traj.t), -1)
+    per = lambda f: {j: f(i) for i, j in enumerate(traj.joint_names)}  # noqa: E731
+    return {
+        "rms_tracking_error_tail_per_joint": per(lambda i: _rms(e[tail, i])),
+        "max_abs_tracking_error_tail_per_joint": per(
+            lambda i: float(np.max(np.abs(e[tail, i]))) if tail.any() else math.nan),
+        "rms_tracking_error_norm_tail": _rms(norm[tail]),
+        "control_rms_per_joint": per(lambda i: _rms(u[:, i])),
     }
 
 
@@ -57,8 +77,8 @@ def summary(name: str, traj: Trajectory, *, steps: int | None = None) -> dict:
     if len(traj):
         last = {
             "t": float(traj.t[-1]),
-            "q": [float(traj.x[-1, 0])],
-            "qd": [float(traj.qd[-1])],
+            "q": np.atleast_1d(traj.x[-1, 0]).astype(float).tolist(),
+            "qd": np.atleast_1d(traj.qd[-1]).astype(float).tolist(),
             "theta_hat": {n: float(v) for n, v in zip(traj.names, traj.theta_hat[-1])},
             "theta": {n: float(v) for n, v in zip(traj.names, traj.theta[-1])},
         }

@@ -43,7 +43,7 @@ from mcap.records import MessageIndex
 
 from adaptive_mj.interrupt import deferred
 
-LOG_FORMAT_VERSION = 1
+LOG_FORMAT_VERSION = 2  # 2: joint_names/notes in the header, per-joint fields for m joints (1: 1-DOF only)
 
 #: Statuses a run can be closed with (replay adds "truncated" for a log that was never closed).
 CLOSE_STATUSES = ("ok", "diverged", "interrupted", "failed")
@@ -87,6 +87,25 @@ CONTROL_FIELDS = ("u", "s", "y_tilde")
 LYAPUNOV_FIELDS = ("V",)
 
 
+def row_fields(order: int, names: tuple[str, ...], joint_names: tuple[str, ...] = ()) -> dict[str, tuple[str, ...]]:
+    """Field names of each row topic. A 1-DOF run (no joint names) uses y, y_dot, ..., u, s,
+    y_tilde (format 1 and 2 alike); a run of m joints names one field per joint:
+    q_<joint>, q_dot_<joint> (/state, derivative-major, as x (n, m) flattened),
+    q_d_<joint>, q_d_dot_<joint>, q_d_ddot_<joint> (/reference), tau_<joint>, s_<joint>,
+    q_tilde_<joint> (/control)."""
+    if not joint_names:
+        state, ref, control = state_fields(order), reference_fields(order), CONTROL_FIELDS
+    else:
+        def per(bases):
+            return tuple(f"{b}_{j}" for b in bases for j in joint_names)
+
+        state = per(derivative_name("q", k) for k in range(order))
+        ref = per(derivative_name("q_d", k) for k in range(order + 1))
+        control = per(("tau", "s", "q_tilde"))
+    return {"/state": state, "/reference": ref, "/control": control, "/estimates": tuple(names),
+            "/true_params": tuple(names), "/lyapunov": LYAPUNOV_FIELDS}
+
+
 @dataclass(frozen=True)
 class LogHeader:
     """What a log records about its run before the first row.
@@ -117,6 +136,8 @@ class LogHeader:
     model_assets: dict[str, bytes] = field(default_factory=dict)
     versions: dict[str, str] = field(default_factory=dict)
     created_unix: float = 0.0
+    joint_names: tuple[str, ...] = ()  # () for a 1-DOF plant; the m joint names otherwise
+    notes: tuple[str, ...] = ()  # edits made to the model for the run (e.g. servo_to_torque)
 
     @property
     def log_every(self) -> int:
@@ -140,6 +161,13 @@ def _check_header(header: LogHeader) -> None:
             or reserved & set(names)):
         raise ValueError(f"LogHeader.param_names must be distinct non-empty strings other than "
                          f"{sorted(reserved)}, got {names!r}")
+    joints = tuple(header.joint_names)
+    if any(not isinstance(j, str) or not j for j in joints):
+        raise ValueError(f"LogHeader.joint_names must be non-empty strings, got {joints!r}")
+    if joints:
+        fields = [f for topic_fields in row_fields(header.order, (), joints).values() for f in topic_fields]
+        if len(set(fields)) != len(fields) or len(set(joints)) != len(joints):
+            raise ValueError(f"LogHeader.joint_names {joints!r} make clashing field names")
     for key, value in header.versions.items():
         if not isinstance(key, str) or not isinstance(value, str):
             raise ValueError(f"LogHeader.versions must map str to str, got {key!r}: {value!r}")
@@ -171,21 +199,29 @@ def _row_schema(title: str, description: str, fields: Mapping[str, str]) -> dict
     }
 
 
-def _schemas(order: int, names: tuple[str, ...]) -> dict[str, tuple[str, dict]]:
+def _schemas(order: int, names: tuple[str, ...], joint_names: tuple[str, ...] = ()) -> dict[str, tuple[str, dict]]:
     """topic -> (schema name, JSON Schema)."""
     state = {n: f"output derivative {j} (y in m or rad)" for j, n in enumerate(state_fields(order))}
     ref = {n: f"reference derivative {j}" for j, n in enumerate(reference_fields(order))}
+    control = {"u": "applied control after saturation [N or N*m]",
+               "s": "sliding variable (first order: the tracking error)",
+               "y_tilde": "tracking error y_d - y"}
+    if joint_names:
+        f = row_fields(order, names, joint_names)
+        m = len(joint_names)
+        state = {n: f"joint {joint_names[i % m]}: position derivative {i // m} [rad or m, per s^k]"
+                 for i, n in enumerate(f["/state"])}
+        ref = {n: f"joint {joint_names[i % m]}: reference derivative {i // m}" for i, n in enumerate(f["/reference"])}
+        what = ("joint torque applied after saturation [N m or N]", "sliding variable s = q_tilde' + lambda q_tilde",
+                "tracking error q_d - q [rad or m]")
+        control = {n: f"joint {joint_names[i % m]}: {what[i // m]}" for i, n in enumerate(f["/control"])}
     return {
         "/state": ("adaptive_mj.State", _row_schema(
             "State", "true plant state [y, y', ..., y^(n-1)] at the start of the step", state)),
         "/reference": ("adaptive_mj.Reference", _row_schema(
             "Reference", "reference [y_d, ..., y_d^(n)] at the start of the step", ref)),
         "/control": ("adaptive_mj.Control", _row_schema(
-            "Control", "control applied over the step and the law's signals", {
-                "u": "applied control after saturation [N or N*m]",
-                "s": "sliding variable (first order: the tracking error)",
-                "y_tilde": "tracking error y_d - y",
-            })),
+            "Control", "control applied over the step and the law's signals", control)),
         "/estimates": ("adaptive_mj.Estimates", _row_schema(
             "Estimates", "parameter estimates theta_hat", {n: f"estimate of {n}" for n in names})),
         "/true_params": ("adaptive_mj.TrueParams", _row_schema(
@@ -315,6 +351,8 @@ class Recorder:
         self.log_every = header.log_every
         self.order = int(header.order)
         self.names = tuple(header.param_names)
+        self.joint_names = tuple(header.joint_names)
+        self.joint_shape = (len(self.joint_names),) if self.joint_names else ()
         self._flush_every = flush_every_rows
         self._next_k = 0          # first global step index not yet seen
         self._rows = 0            # logged rows written
@@ -337,19 +375,12 @@ class Recorder:
     def _write_header(self) -> None:
         h = self.header
         self._channels: dict[str, int] = {}
-        for topic, (name, schema) in _schemas(self.order, self.names).items():
+        for topic, (name, schema) in _schemas(self.order, self.names, self.joint_names).items():
             schema_id = self._writer.register_schema(
                 name, "jsonschema", json.dumps(schema, separators=(",", ":")).encode())
             self._channels[topic] = self._writer.register_channel(topic, "json", schema_id)
-        row_fields = {
-            "/state": state_fields(self.order),
-            "/reference": reference_fields(self.order),
-            "/control": CONTROL_FIELDS,
-            "/estimates": self.names,
-            "/true_params": self.names,
-            "/lyapunov": LYAPUNOV_FIELDS,
-        }
-        self._row_fields = [(self._channels[topic], row_fields[topic]) for topic in ROW_TOPICS]
+        fields = row_fields(self.order, self.names, self.joint_names)
+        self._row_fields = [(self._channels[topic], fields[topic]) for topic in ROW_TOPICS]
         self._templates = [_template(fields) for _, fields in self._row_fields]
 
         meta = {
@@ -363,6 +394,8 @@ class Recorder:
             "order": str(self.order),
             "param_names": json.dumps(list(self.names)),
             "overrides": json.dumps(list(h.overrides)),
+            "joint_names": json.dumps(list(self.joint_names)),
+            "notes": json.dumps(list(h.notes)),
             "created_unix": repr(float(h.created_unix)),
         }
         meta.update({VERSION_KEY_PREFIX + k: v for k, v in sorted(h.versions.items())})
@@ -384,8 +417,8 @@ class Recorder:
     def write_rows(self, k0, t, x, u, s, ref, theta_hat, theta, V) -> None:
         """Log the kept rows of a block of consecutive physics steps k0, k0+1, ...
 
-        t: (N,) [s]; x: (N, n); u, s: (N,); ref: (N, n+1);
-        theta_hat, theta: (N, n_theta); V: (N,). Rows with k % log_every == 0
+        t: (N,) [s]; x: (N, n); u, s: (N,); ref: (N, n+1) (m joints: x (N, n, m), u, s
+        (N, m), ref (N, n+1, m)); theta_hat, theta: (N, n_theta); V: (N,). Rows with k % log_every == 0
         are written; the file is flushed before returning.
         """
         self._check_open()
@@ -397,8 +430,9 @@ class Recorder:
         if t.ndim != 1:
             raise ValueError(f"write_rows: t has shape {t.shape}, expected (N,)")
         n = t.shape[0]
-        cols = {"x": (x, (n, self.order)), "u": (u, (n,)), "s": (s, (n,)),
-                "ref": (ref, (n, self.order + 1)), "theta_hat": (theta_hat, (n, len(self.names))),
+        js = self.joint_shape
+        cols = {"x": (x, (n, self.order) + js), "u": (u, (n,) + js), "s": (s, (n,) + js),
+                "ref": (ref, (n, self.order + 1) + js), "theta_hat": (theta_hat, (n, len(self.names))),
                 "theta": (theta, (n, len(self.names))), "V": (V, (n,))}
         arrays = {}
         for name, (value, shape) in cols.items():
@@ -416,7 +450,9 @@ class Recorder:
                 raise ValueError("write_rows: times must be finite and >= 0 s")
             x, ref = arrays["x"][keep], arrays["ref"][keep]
             u, s = arrays["u"][keep], arrays["s"][keep]
-            blocks = [x, ref, np.column_stack([u, s, ref[:, 0] - x[:, 0]]),
+            m = len(tk)
+            blocks = [x.reshape(m, -1), ref.reshape(m, -1),
+                      np.column_stack([u.reshape(m, -1), s.reshape(m, -1), (ref[:, 0] - x[:, 0]).reshape(m, -1)]),
                       arrays["theta_hat"][keep], arrays["theta"][keep], arrays["V"][keep, None]]
             self._write_block(tk, blocks)
         self._writer.flush()

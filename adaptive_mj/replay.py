@@ -42,6 +42,7 @@ from adaptive_mj.record import (
     SUMMARY_TOPIC,
     VERSION_KEY_PREFIX,
     reference_fields,
+    row_fields,
     state_fields,
 )
 from adaptive_mj.trajectory import Trajectory
@@ -146,26 +147,29 @@ def _read(name: str, data: bytes) -> LoggedRun:
     scenario_text = scan.metadata[SCENARIO_METADATA].get("text", "")
     order, log_every, dt = header["order"], header["log_every"], header["dt"]
     names = tuple(header["param_names"])
+    joints = tuple(header.get("joint_names", ()))  # format 1: always a 1-DOF run
 
-    times, cols, events, summary = _rows(name, scan.messages, order, names)
+    times, cols, events, summary = _rows(name, scan.messages, order, names, joints)
     n_rows = len(times)
     status, reason, note = _final_status(name, scan, summary, n_rows, span=n_rows * log_every * dt)
 
     event_list = [(_number(e.get("t"), name, EVENT_TOPIC, "t"), str(e.get("label", "")))
                   for e in events]
     control = cols["/control"]
+    n, m = len(times), len(joints)
     trajectory = Trajectory(
         t=np.array(times, dtype=float),
-        x=cols["/state"],
-        u=control[:, 0].copy(),
-        s=control[:, 1].copy(),
-        ref=cols["/reference"],
+        x=cols["/state"].reshape(n, order, m) if joints else cols["/state"],
+        u=control[:, :m].copy() if joints else control[:, 0].copy(),
+        s=control[:, m:2 * m].copy() if joints else control[:, 1].copy(),
+        ref=cols["/reference"].reshape(n, order + 1, m) if joints else cols["/reference"],
         theta_hat=cols["/estimates"],
         theta=cols["/true_params"],
         V=cols["/lyapunov"][:, 0].copy(),
         names=names,
         status=status,
         reason=reason,
+        joint_names=joints,
         meta={"dt": dt, "order": order, "events": event_list, "log_every": log_every},
     )
     assets = {k[len(ASSET_ATTACHMENT_PREFIX):]: v for k, v in scan.attachments.items()
@@ -188,7 +192,8 @@ def _read(name: str, data: bytes) -> LoggedRun:
     )
 
 
-def _rows(name: str, messages: list[tuple[str, bytes]], order: int, names: tuple[str, ...]):
+def _rows(name: str, messages: list[tuple[str, bytes]], order: int, names: tuple[str, ...],
+          joints: tuple[str, ...] = ()):
     """Decode the messages: (times, {row topic: (N, fields) array}, events, summary).
     A row is kept only if every row topic has a message at its t (a cut log may end mid-row)."""
     by_t: dict[str, dict[float, dict]] = {topic: {} for topic in ROW_TOPICS}
@@ -210,14 +215,7 @@ def _rows(name: str, messages: list[tuple[str, bytes]], order: int, names: tuple
         elif topic == SUMMARY_TOPIC:
             summary = payload
     times = [t for t in state_times if all(t in by_t[topic] for topic in ROW_TOPICS)]
-    fields = {
-        "/state": state_fields(order),
-        "/reference": reference_fields(order),
-        "/control": CONTROL_FIELDS,
-        "/estimates": names,
-        "/true_params": names,
-        "/lyapunov": LYAPUNOV_FIELDS,
-    }
+    fields = row_fields(order, names, joints)
     cols = {topic: np.array([_values(by_t[topic][t], fields[topic], name, topic) for t in times],
                             dtype=float).reshape(len(times), len(fields[topic]))
             for topic in ROW_TOPICS}
@@ -389,7 +387,7 @@ def _decode_header(name: str, scan: _Scan) -> dict:
     convert: dict[str, Callable[[str], Any]] = {
         "log_format_version": int, "seed": int, "log_every": int, "order": int,
         "log_rate_hz": float, "dt": float, "created_unix": float,
-        "param_names": str_list, "overrides": str_list,
+        "param_names": str_list, "overrides": str_list, "joint_names": str_list, "notes": str_list,
     }
     header: dict[str, Any] = {}
     versions: dict[str, str] = {}

@@ -13,7 +13,7 @@ from pathlib import Path
 from adaptive_mj import __version__
 from adaptive_mj.build import ModelSource, Setup, build
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
-from adaptive_mj.loop import run
+from adaptive_mj.loop import plant_order, run
 from adaptive_mj.metrics import clean_json, summary as make_summary
 from adaptive_mj.scenario import Scenario
 from adaptive_mj.trajectory import Trajectory
@@ -77,7 +77,8 @@ def log_header(scn: Scenario, setup: Setup):
     plant = setup.plant
     return LogHeader(
         scenario_name=scn.name, scenario_text=scn.text, scenario_source=scn.source, overrides=scn.overrides,
-        seed=scn.noise.seed, log_rate_hz=scn.log_rate_hz, dt=plant.dt, order=plant.form.order,
+        seed=scn.noise.seed, log_rate_hz=scn.log_rate_hz, dt=plant.dt, order=plant_order(plant),
+        joint_names=tuple(getattr(plant, "joint_names", ())), notes=tuple(setup.notes),
         param_names=tuple(setup.law.names), model_xml=setup.model_xml,
         model_source=setup.source.xml if setup.source else None,
         model_assets=dict(setup.source.assets) if setup.source else {},

@@ -22,15 +22,17 @@ REPO = Path(__file__).resolve().parents[1]
 MODELS_DIR = REPO / "models"
 SCENARIOS_DIR = REPO / "scenarios"
 
-PLANT_KINDS = ("heave", "arm", "first_order")
+PLANT_KINDS = ("heave", "arm", "first_order", "manipulator")
 BACKENDS = ("mujoco", "twin")
 INTEGRATORS = ("rk4", "euler", "implicitfast", "implicit")
 REFERENCE_KINDS = ("constant", "cosine", "sine", "sum_of_sines", "smooth_step")
+JOINT_REFERENCE_KINDS = ("joint_sum_of_sines", "joint_waypoints")
 LAW_KINDS = ("sliding_adaptive", "first_order_adaptive", "fixed_nominal", "robust_sliding")
+MANIPULATOR_LAW_KINDS = ("slotine_li", "computed_torque", "pd_gravity")
 DEAD_ZONE_ON = ("s", "tracking_error")
 DISTURBANCE_KINDS = ("none", "constant", "step", "sine")
-EVENT_KINDS = ("payload_mass", "fluid_density_scale", "constant_force")
-DEFAULT_MODEL = {"heave": "heave_vehicle", "arm": "pendulum_arm"}
+EVENT_KINDS = ("payload_mass", "payload_swap", "fluid_density_scale", "constant_force")
+DEFAULT_MODEL = {"heave": "heave_vehicle", "arm": "pendulum_arm", "manipulator": "ur5e_arm"}
 STATE_SIGNALS = ("y", "y_dot", "y_ddot")
 REGRESSORS = ("lecture", "sin_squared")
 FIRST_ORDER_PARAMS = {"lecture": ("a", "b"), "sin_squared": ("p",)}
@@ -55,6 +57,22 @@ class PlantSpec:
     ctrl_range: tuple[float, float] | None
     thruster_time_constant: float | None = None  # heave: first-order thruster lag tau [s]
     regressor: str = "lecture"  # first_order: "lecture" (sin x - a x + b x²) or "sin_squared"
+    manipulator: "ManipulatorSpec | None" = None  # kind = "manipulator" only
+
+
+@dataclass(frozen=True)
+class ManipulatorSpec:
+    """plant.* keys of a manipulator: which parameters are unknown, and model edits.
+
+    unknown: "payload", "all" or body names; joint_params: armature and damping unknown;
+    base_parameters: reduce to a base (identifiable) set; servo_to_torque: rebuild
+    position servos as torque motors limited to their forcerange.
+    """
+
+    unknown: str | tuple[str, ...]
+    joint_params: bool
+    base_parameters: bool
+    servo_to_torque: bool
 
 
 @dataclass(frozen=True)
@@ -90,6 +108,8 @@ class LawSpec:
     nominal: dict[str, float] | str | None
     K: float | None
     boundary_layer: float | None
+    kd: float | dict[str, float] | None = None  # manipulator laws: K_D, scalar or per joint
+    lam_joints: dict[str, float] | None = None  # manipulator laws: Λ per joint (else lam for all)
 
 
 @dataclass(frozen=True)
@@ -113,6 +133,7 @@ class EventSpec:
     kind: str
     value: float
     body: str
+    payload: str | None = None  # payload_swap: the payload file (name in models/payloads or path)
 
 
 @dataclass(frozen=True)
@@ -197,6 +218,14 @@ class _Table:
             raise self.fail(name, "a string", v)
         if choices is not None and v not in choices:
             raise self.fail(name, "one of " + ", ".join(repr(c) for c in choices), v)
+        return v
+
+    def boolean(self, name, default=_MISSING) -> bool:
+        if name not in self.data:
+            return self.get(name, default)
+        v = self.get(name)
+        if not isinstance(v, bool):
+            raise self.fail(name, "true or false", v)
         return v
 
     def table(self, name, default=_MISSING) -> "_Table | None":
@@ -339,10 +368,17 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
     plant = _plant(top.table("plant"), base_dir)
     order = _order(doc, plant, where)
     sim = _simulation(top.table("simulation"), plant, order)
-    reference = _reference(top.table("reference"))
+    reference = _reference(top.table("reference"), plant)
     law = _law(top.table("law"), plant, order)
     noise = _noise(top.table("noise", {}), order)
     disturbance = _disturbance(top.table("disturbance", {}))
+    if plant.kind == "manipulator":
+        if noise.std:
+            raise ScenarioError(f"{where}: noise.std is not supported for plant.kind = 'manipulator' yet "
+                                "(the regressor is evaluated at the true configuration); remove it")
+        if disturbance.kind != "none":
+            raise ScenarioError(f"{where}: disturbance is not supported for plant.kind = 'manipulator' yet; "
+                                "remove it")
     events = _events(top.get("events", []), top, plant, sim)
     log = top.table("log", {})
     log_rate = log.number("rate_hz", 100.0, gt=0)
@@ -377,10 +413,21 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:
         payload = None
     payload_mass = t.number("payload_mass", None, gt=0)
     site = t.string("site", "tip")
-    if kind != "arm":
+    if kind not in ("arm", "manipulator"):
         for key in ("payload", "payload_mass", "site"):
             if key in t.data:
-                raise t.fail(key, "absent unless plant.kind = 'arm'", t.data[key])
+                raise t.fail(key, "absent unless plant.kind = 'arm' or 'manipulator'", t.data[key])
+    manipulator = None
+    if kind == "manipulator":
+        if backend != "mujoco":
+            raise t.fail("backend", "'mujoco' for plant.kind = 'manipulator' (its truth is the MuJoCo model)", backend)
+        if payload_mass is not None and payload is None:
+            raise t.fail("payload_mass", "absent when plant.payload is 'none'", payload_mass)
+        manipulator = _manipulator(t, payload)
+    else:
+        for key in ("unknown", "joint_params", "base_parameters", "servo_to_torque"):
+            if key in t.data:
+                raise t.fail(key, "absent unless plant.kind = 'manipulator'", t.data[key])
     theta = t.named_numbers("theta", None)
     if theta is not None and backend != "twin":
         raise t.fail("theta", "absent for backend 'mujoco' (true parameters come from the compiled model)", theta)
@@ -410,7 +457,24 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:
     t.finish()
     return PlantSpec(kind=kind, backend=backend, model=model, joint=joint, actuator=actuator, payload=payload,
                      payload_mass=payload_mass, site=site, theta=theta, g=g, density=density,
-                     viscosity=viscosity, ctrl_range=ctrl, thruster_time_constant=lag, regressor=regressor)
+                     viscosity=viscosity, ctrl_range=ctrl, thruster_time_constant=lag, regressor=regressor,
+                     manipulator=manipulator)
+
+
+def _manipulator(t: _Table, payload: str | None) -> ManipulatorSpec:
+    raw = t.get("unknown", "payload" if payload is not None else "all")
+    if isinstance(raw, list):
+        if not raw or not all(isinstance(v, str) and v for v in raw):
+            raise t.fail("unknown", "'payload', 'all' or a non-empty array of body names", raw)
+        unknown: str | tuple[str, ...] = tuple(raw)
+    else:
+        unknown = t.string("unknown", choices=("payload", "all"))
+        if unknown == "payload" and payload is None:
+            raise t.fail("unknown", "'all' or an array of body names when there is no payload (plant.payload "
+                                    "is 'none')", unknown)
+    return ManipulatorSpec(unknown=unknown, joint_params=t.boolean("joint_params", False),
+                           base_parameters=t.boolean("base_parameters", False),
+                           servo_to_torque=t.boolean("servo_to_torque", False))
 
 
 def _order(doc: dict, plant: PlantSpec, where: str) -> int:
@@ -431,7 +495,9 @@ def _simulation(t: _Table, plant: PlantSpec, order: int) -> SimulationSpec:
     duration = t.number("duration", gt=0)
     if timestep is not None and timestep > duration:
         raise t.fail("timestep", f"<= simulation.duration ({duration})", timestep)
-    if t.data.get("initial_state") == "reference":
+    if plant.kind == "manipulator":  # starts on the reference (joint positions and velocities)
+        x0 = t.string("initial_state", "reference", choices=("reference",))
+    elif t.data.get("initial_state") == "reference":
         x0 = t.string("initial_state")  # start on the reference: x0 = [y_d(0), ..., y_d^(n-1)(0)]
     else:
         x0 = t.numbers("initial_state", None, length=order)
@@ -450,7 +516,55 @@ _REFERENCE_KEYS = {
 }
 
 
-def _reference(t: _Table) -> ReferenceSpec:
+def _joint_values(t: _Table, name: str, *, arrays: bool):
+    """A value for every joint (a number, or an array with arrays=True), or a table by joint name."""
+    v = t.get(name)
+    if isinstance(v, dict):
+        sub = t.table(name)
+        return {key: (sub.numbers(key) if arrays else sub.number(key)) for key in v}
+    return t.numbers(name) if arrays else t.number(name)
+
+
+def _joint_reference(t: _Table, kind: str) -> ReferenceSpec:
+    """Joint-space references; joint names and keyframes are resolved against the model in build."""
+    params: dict[str, Any] = {}
+    if kind == "joint_sum_of_sines":
+        center = t.get("center", None)
+        params["center"] = center if center is None or isinstance(center, str) else _joint_values(
+            t, "center", arrays=False)
+        if isinstance(params["center"], float):
+            raise t.fail("center", "a keyframe name or a table {joint = position}", center)
+        for key in ("amplitudes", "omegas", "phases"):
+            params[key] = _joint_values(t, key, arrays=True) if (key in t.data or key != "phases") else None
+    else:
+        raw = t.get("waypoints")
+        if not isinstance(raw, list) or len(raw) < 2:
+            raise t.fail("waypoints", "an array of at least 2 poses (keyframe names or tables {joint = position})",
+                         raw)
+        points = []
+        for i, item in enumerate(raw):
+            if isinstance(item, str):
+                points.append(item)
+            elif isinstance(item, dict):
+                sub = _Table(item, f"{t.prefix}waypoints[{i}].", t.where)
+                points.append({key: sub.number(key) for key in item})
+            else:
+                raise t.fail(f"waypoints[{i}]", "a keyframe name or a table {joint = position}", item)
+        params["waypoints"] = tuple(points)
+        params["durations"] = t.numbers("durations")
+        if len(params["durations"]) != len(points) - 1 or any(d <= 0 for d in params["durations"]):
+            raise t.fail("durations", f"{len(points) - 1} move times > 0 [s] (one per move)",
+                         list(params["durations"]))
+        params["t0"] = t.number("t0", 0.0, ge=0)
+        params["cycle"] = t.boolean("cycle", False)
+    t.finish()
+    return ReferenceSpec(kind=kind, params=params)
+
+
+def _reference(t: _Table, plant: PlantSpec) -> ReferenceSpec:
+    if plant.kind == "manipulator":
+        kind = t.string("kind", choices=JOINT_REFERENCE_KINDS)
+        return _joint_reference(t, kind)
     kind = t.string("kind", choices=REFERENCE_KINDS)
     params: dict[str, Any] = {}
     for key, default in _REFERENCE_KEYS[kind].items():
@@ -477,7 +591,35 @@ def _gamma(t: _Table):
     return t.number("gamma", gt=0)
 
 
+def _manipulator_law(t: _Table) -> LawSpec:
+    kind = t.string("kind", "slotine_li", choices=MANIPULATOR_LAW_KINDS)
+    lam = _joint_values(t, "lambda", arrays=False)
+    kd = _joint_values(t, "kd", arrays=False)
+    for key, value in (("lambda", lam), ("kd", kd)):
+        for j, v in (value.items() if isinstance(value, dict) else [("", value)]):
+            if not v > 0:
+                raise t.fail(key + (f".{j}" if j else ""), "> 0", v)
+    gamma = _gamma(t)
+    if gamma is None and kind == "slotine_li":
+        raise ScenarioError(f"{t.where}: law.gamma is required for law.kind = 'slotine_li'")
+    dz = t.table("dead_zone", None)
+    dead_zone = None
+    if dz is not None:
+        dead_zone = DeadZoneSpec(width=dz.number("width", ge=0), on=dz.string("on", "s", choices=DEAD_ZONE_ON))
+        dz.finish()
+    initial = _estimate_table(t, "initial_estimates")
+    nominal = _estimate_table(t, "nominal")
+    if kind != "slotine_li" and nominal is None and initial is None:
+        raise ScenarioError(f"{t.where}: law.nominal (or law.initial_estimates) is required for law.kind = {kind!r}")
+    t.finish()
+    return LawSpec(kind=kind, order=2, lam=None if isinstance(lam, dict) else lam, k=0.0, gamma=gamma,
+                   dead_zone=dead_zone, initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None,
+                   kd=kd, lam_joints=lam if isinstance(lam, dict) else None)
+
+
 def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
+    if plant.kind == "manipulator":
+        return _manipulator_law(t)
     default_kind = "first_order_adaptive" if plant.kind == "first_order" else "sliding_adaptive"
     kind = t.string("kind", default_kind, choices=LAW_KINDS)
     if (kind == "first_order_adaptive") != (plant.kind == "first_order"):
@@ -549,13 +691,20 @@ def _events(raw, top: _Table, plant: PlantSpec, sim: SimulationSpec) -> tuple[Ev
         if time > sim.duration:
             raise t.fail("t", f"<= simulation.duration ({sim.duration})", time)
         kind = t.string("kind", choices=EVENT_KINDS)
-        value = t.number("value", gt=0 if kind != "constant_force" else None)
+        value = 0.0 if kind == "payload_swap" else t.number("value", gt=0 if kind != "constant_force" else None)
         body = t.string("body", "payload/body")
-        needs = {"payload_mass": ("arm", "mujoco"), "fluid_density_scale": ("heave", "mujoco")}.get(kind)
-        if needs and (plant.kind, plant.backend) != needs:
-            raise t.fail("kind", f"used only with plant.kind = {needs[0]!r} on backend {needs[1]!r}", kind)
+        payload = t.string("payload") if kind == "payload_swap" else None
+        needs = {"payload_mass": (("arm", "manipulator"), "mujoco"), "fluid_density_scale": (("heave",), "mujoco"),
+                 "payload_swap": (("manipulator",), "mujoco"),
+                 "constant_force": (("heave", "arm", "first_order"), plant.backend)}.get(kind)
+        if needs and (plant.kind not in needs[0] or plant.backend != needs[1]):
+            kinds = " or ".join(repr(k) for k in needs[0])
+            raise t.fail("kind", f"used only with plant.kind = {kinds} on backend {needs[1]!r}", kind)
+        if kind in ("payload_mass", "payload_swap") and plant.kind == "manipulator" and plant.payload is None \
+                and body.startswith("payload/"):
+            raise t.fail("kind", "an event on a payload body needs plant.payload (it is 'none')", kind)
         t.finish()
-        out.append(EventSpec(t=time, kind=kind, value=value, body=body))
+        out.append(EventSpec(t=time, kind=kind, value=value, body=body, payload=payload))
     return tuple(sorted(out, key=lambda e: e.t))
 
 

@@ -236,8 +236,9 @@ def test_replay_of_a_newer_log_format(tmp_path, capsys, monkeypatch):
     monkeypatch.undo()
     capsys.readouterr()
     assert main(["replay", str(path)]) == 2
-    assert error_line(capsys) == (f"{path}: log format version 2 is newer than this adaptive_mj reads (up to 1); "
-                                  "upgrade adaptive_mj")
+    v = record.LOG_FORMAT_VERSION
+    assert error_line(capsys) == (f"{path}: log format version {v + 1} is newer than this adaptive_mj reads "
+                                  f"(up to {v}); upgrade adaptive_mj")
 
 
 def test_replay_of_a_log_with_a_bad_crc_in_its_first_chunk(real_log, tmp_path, capsys):

@@ -278,7 +278,7 @@ def test_metadata_and_attachments_present(full_log):
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
         attachments = {a.name: a for a in reader.iter_attachments()}
     assert set(metadata) == {"adaptive_mj", "scenario", "status"}
-    assert metadata["adaptive_mj"]["log_format_version"] == "1"
+    assert metadata["adaptive_mj"]["log_format_version"] == str(record.LOG_FORMAT_VERSION)
     assert metadata["adaptive_mj"]["log_every"] == "10"
     assert json.loads(metadata["adaptive_mj"]["param_names"]) == list(NAMES)
     assert metadata["adaptive_mj"]["version.mujoco"] == "3.17.0"
@@ -499,7 +499,8 @@ def test_newer_log_format(tmp_path, monkeypatch):
     path = tmp_path / "future.mcap"
     write_log(path, synthetic(200), events=())
     monkeypatch.undo()
-    with pytest.raises(LogFormatError, match=r"future\.mcap: log format version 2 is newer"):
+    newer = record.LOG_FORMAT_VERSION + 1
+    with pytest.raises(LogFormatError, match=rf"future\.mcap: log format version {newer} is newer"):
         read_log(path)
 
 
