@@ -107,6 +107,9 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
         print(f"  tracking error rms {f(m['rms_tracking_error'], yu)}, tail rms {f(m['rms_tracking_error_tail'], yu)}, "
               f"tail max {f(m['max_abs_tracking_error_tail'], yu)}")
         print(f"  control rms {f(m['control_rms'], uu)}, total variation {f(m['control_total_variation'], uu)}")
+        if "rms_tracking_error_tail_per_joint" in m:
+            print("  tail rms per joint [rad]: " + ", ".join(
+                f"{j} {f(v)}" for j, v in m["rms_tracking_error_tail_per_joint"].items()))
     final = summary["final"]
     parts = [f"{n} {f(final['theta_hat'][n], units.param(kind, n))} (true {f(final['theta'][n], units.param(kind, n))})"
              for n in final["theta_hat"]]

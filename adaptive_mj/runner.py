@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import os
 import platform
+import sys
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -111,6 +112,8 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
     """Build and run one scenario; stream it to log_path (MCAP) when given."""
     setup = build(scn, source=source)
     plant = setup.plant
+    for note in setup.notes:  # model edits the scenario asked for: said on the terminal and kept in the log
+        print(f"{scn.source}: note: {note}", file=sys.stderr)
     sink_every = max(1, round(1.0 / plant.dt))  # flush about once per simulated second
     kwargs = dict(duration=scn.simulation.duration, theta_hat0=setup.theta_hat0, noise_std=setup.noise_std,
                   rng=setup.rng, events=setup.events, state_bound=scn.simulation.state_bound,
