@@ -144,3 +144,55 @@ def lyapunov_check(traj: Trajectory, setup) -> dict:
         "vdot_start": float(np.mean(np.abs(dV[: max(1, dV.size // 10)]))) / dt if dV.size else 0.0,
         "vdot_tail": float(np.mean(np.abs(dV[-max(1, dV.size // 10):]))) / dt if dV.size else 0.0,
     }
+
+
+def manipulator_response(traj: Trajectory, setup) -> dict:
+    """A run of m joints: per-joint tail RMS error [rad], the Lyapunov check (largest one-step
+    increase of V relative to V(0), and max |ΔV/Δt + sᵀK_D s| relative to max sᵀK_D s, midpoint
+    rule), after the first event the peak error max_j |q̃_j| and the recovery time (every joint
+    stays below SWAP_THRESHOLD), and for a payload body among the unknowns the identification
+    errors over time: mass (relative), centre of mass m·c/m [m] and inertia [kg m²]."""
+    from adaptive_mj.metrics import tail_mask
+
+    e = traj.joint_errors
+    tail = tail_mask(traj)
+    out: dict = {"tail_rms_per_joint": np.sqrt(np.mean(e[tail] ** 2, axis=0)).tolist()}
+    dt = traj.meta["dt"]
+    kd = np.asarray(getattr(setup.law, "kd", np.zeros(e.shape[1])))
+    s = np.asarray(traj.s).reshape(len(traj.t), -1)
+    sks = np.sum(kd * s * s, axis=1)
+    dV = np.diff(traj.V)
+    t_e = first_event_time(setup)
+    keep = np.ones(len(dV), dtype=bool) if t_e is None else (traj.t[1:] < t_e) | (traj.t[:-1] >= t_e)
+    scale = float(np.max(sks)) or 1.0
+    out["lyapunov_max_increase_rel"] = float(max(0.0, dV[keep].max()) / traj.V[0]) if dV.size and traj.V[0] else 0.0
+    out["lyapunov_rate_error_rel"] = float(np.max(np.abs(dV / dt + 0.5 * (sks[:-1] + sks[1:]))[keep]) / scale) \
+        if dV.size and getattr(setup.law, "adapt", False) else None
+    if t_e is not None:
+        after = traj.t >= t_e
+        worst = np.abs(e).max(axis=1)
+        out["event_time"] = t_e
+        out["peak_error_after"] = float(worst[after].max()) if after.any() else math.nan
+        out["recovery_time"] = settle_time(traj.t, worst < SWAP_THRESHOLD, t_e)
+    names = list(traj.names)
+    if "payload/body.m" in names:
+        i = names.index("payload/body.m")
+        m_hat, m = traj.theta_hat[:, i], traj.theta[:, i]
+        c_hat = traj.theta_hat[:, i + 1:i + 4] / np.where(np.abs(m_hat) > 1e-9, m_hat, np.nan)[:, None]
+        c = traj.theta[:, i + 1:i + 4] / m[:, None]
+        out["payload"] = {
+            "t": traj.t.tolist()[::max(1, len(traj.t) // 400)],
+            "mass_rel_error": (np.abs(m_hat - m) / m).tolist()[::max(1, len(traj.t) // 400)],
+            "com_error": np.linalg.norm(c_hat - c, axis=1).tolist()[::max(1, len(traj.t) // 400)],
+            "inertia_error": np.abs(traj.theta_hat[:, i + 4:i + 10] - traj.theta[:, i + 4:i + 10]).max(axis=1)
+            .tolist()[::max(1, len(traj.t) // 400)],
+            "final": {"mass": float(m_hat[-1]), "mass_true": float(m[-1]),
+                      "mass_rel_error": float(abs(m_hat[-1] - m[-1]) / m[-1]),
+                      "com": c_hat[-1].tolist(), "com_true": c[-1].tolist(),
+                      "com_error": float(np.linalg.norm(c_hat[-1] - c[-1])),
+                      "inertia": traj.theta_hat[-1, i + 4:i + 10].tolist(),
+                      "inertia_true": traj.theta[-1, i + 4:i + 10].tolist(),
+                      "inertia_error": float(np.abs(traj.theta_hat[-1, i + 4:i + 10]
+                                                    - traj.theta[-1, i + 4:i + 10]).max())},
+        }
+    return out

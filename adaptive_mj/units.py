@@ -1,8 +1,11 @@
 """SI units of each plant kind's output, control and parameters (for labels and summaries)."""
 from __future__ import annotations
 
-OUTPUT = {"heave": "m", "arm": "rad", "first_order": "-"}
-CONTROL = {"heave": "N", "arm": "N m", "first_order": "-"}
+OUTPUT = {"heave": "m", "arm": "rad", "first_order": "-", "manipulator": "rad"}  # manipulator: rad (hinges) or m
+CONTROL = {"heave": "N", "arm": "N m", "first_order": "-", "manipulator": "N m"}
+_BODY_PARAM_UNITS = {"m": "kg", "mcx": "kg m", "mcy": "kg m", "mcz": "kg m", "Ixx": "kg m²", "Ixy": "kg m²",
+                     "Iyy": "kg m²", "Ixz": "kg m²", "Iyz": "kg m²", "Izz": "kg m²", "armature": "kg m²",
+                     "damping": "N m s/rad"}
 PARAMS = {
     "heave": {"d": "kg", "b": "kg/m", "c": "kg", "tau_d": "kg s", "tau_b": "kg s/m"},
     "arm": {"J": "kg m²", "b": "N m s/rad", "g_sin": "N m", "g_cos": "N m"},
@@ -12,6 +15,8 @@ PARAMS = {
 
 def param(kind: str | None, name: str) -> str:
     """Unit of parameter `name` of a plant kind ('' when unknown)."""
+    if kind == "manipulator":  # "<body>.<param>" or "<joint>.armature"; a base parameter ends in "*"
+        return _BODY_PARAM_UNITS.get(name.rstrip("*").rsplit(".", 1)[-1], "")
     return PARAMS.get(kind or "", {}).get(name, "")
 
 
