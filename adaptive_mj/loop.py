@@ -225,13 +225,15 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
             if sink is not None:
                 sink.write_event(t_k, event.label)
 
-    if native is None:
+    if joint_shape:  # a manipulator: its own compiled callback (regressor inside)
+        from adaptive_mj import native_manipulator as native_mod
+        from adaptive_mj.native_manipulator import NativeManipulatorController as NativeController
+    else:
         from adaptive_mj import native as native_mod
-
+        from adaptive_mj.native import NativeController
+    if native is None:
         native = native_mod.supported(plant, law)
     if native:
-        from adaptive_mj.native import NativeController
-
         nc = NativeController(plant, law, reference, theta_hat0, NATIVE_CHUNK)
         with _interruptible(stopped), plant.controlled_natively(nc.callback):
             while k < n_steps:

@@ -1,0 +1,240 @@
+"""The native (numba cfunc) closed loop for manipulators reproduces the Python path:
+the specialised regressor kernel gives regressor_kernel's numbers, and chunks driven as
+loop.run's native branch drives them give the rows of run(..., native=False) (here:
+bit for bit) for the adaptive law, both baselines, a base-parameter plant, saturation,
+a dead-zone and measurement noise, under RK4 and Euler."""
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from adaptive_mj import native_manipulator as nm
+from adaptive_mj.laws import DeadZone, DeadZoneOn
+from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
+from adaptive_mj.loop import run
+from adaptive_mj.plants import manipulator as mp
+from adaptive_mj.plants.arm import MODELS, build_arm_xml
+from adaptive_mj.reference import JointSumOfSines, JointWaypoints
+
+UR5E = MODELS / "ur5e_arm.xml"
+FIELDS = ("t", "x", "u", "s", "ref", "theta_hat")
+TOL = 1e-12  # relative to each field's scale; the paths agree bit for bit today
+
+# Slide and hinge joints with skew axes, two joints on one body, a branch, a massless
+# frame body, a welded body, gears and damping/armature (for the kernel comparison).
+SMALL_ARM = """
+<mujoco><option gravity="0.4 -0.7 -9.81" timestep="0.001"/>
+<worldbody><body name="base" pos="0.1 0.2 0.3" quat="0.9 0.1 0.3 0.2">
+  <joint name="j1" type="hinge" axis="0.3 0.5 0.8" armature="0.1" damping="0.7"/>
+  <inertial pos="0.05 -0.1 0.2" quat="0.8 0.3 -0.2 0.4" mass="2.5" diaginertia="0.3 0.2 0.15"/>
+  <body name="l2" pos="0.3 0 0.1" euler="0.3 0.2 0.1">
+    <joint name="j2" type="slide" axis="1 0.2 0" damping="0.3" armature="0.2"/>
+    <joint name="j3" type="hinge" axis="0 1 0.3" armature="0.05"/>
+    <inertial pos="0 0.1 0.05" mass="1" diaginertia="0.1 0.07 0.05" quat="0.3 0.4 0.5 0.6"/>
+    <body name="l3a" pos="0.2 0.1 0"><joint name="j4" type="hinge" axis="0 0 1"/>
+      <inertial pos="0.1 0.1 0" mass="0.5" diaginertia="0.01 0.02 0.03"/></body>
+    <body name="frame" pos="0 0.1 0.3" quat="0.7 0 0.7 0">
+      <body name="l3b"><joint name="j5" type="hinge" axis="1 0 0" damping="0.2"/>
+        <inertial pos="0.1 0.1 0" mass="0.5" diaginertia="0.01 0.02 0.03"/>
+        <body name="tool" pos="0.1 0 0">
+          <inertial pos="0.02 0.03 0.01" mass="0.3" diaginertia="0.001 0.002 0.003" quat="0.5 0.5 0.5 0.1"/>
+        </body></body></body></body></body></worldbody>
+<actuator><motor joint="j1" gear="2"/><motor joint="j2"/><motor joint="j3"/><motor joint="j4"/>
+  <motor joint="j5" gear="0.5"/></actuator></mujoco>"""
+
+
+UR5E_XML = build_arm_xml(arm=UR5E, payload="tool_offset", site="tip")  # (xml, assets)
+
+
+def _ur5e_model() -> mujoco.MjModel:
+    return mujoco.MjModel.from_xml_string(*UR5E_XML)
+
+
+def _setup(mode=Mode.ADAPTIVE, unknown="payload", base=False, euler=False, limit=None, dead_zone=None,
+           waypoints=False):
+    """A UR5e + tool_offset plant, its law, a joint reference and θ̂(0), built the same way each call."""
+    model = _ur5e_model()
+    if euler:
+        model.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
+    if limit is not None:  # tighter torque limits (m,), so the clamp acts
+        limit = np.asarray(limit, dtype=float)[:, None]
+        model.actuator_ctrlrange[:] = np.hstack([-limit, limit]) / model.actuator_gear[:, :1]
+        model.actuator_ctrllimited[:] = 1
+    plant = mp.ManipulatorPlant(model, unknown=unknown, base=base)
+    home = np.array(model.key("home").qpos)
+    if waypoints:
+        ref = JointWaypoints(waypoints=(tuple(home), tuple(home + 0.3), tuple(home - 0.2)), durations=(0.3, 0.4),
+                             t0=0.05)
+    else:
+        ref = JointSumOfSines(center=tuple(home), amplitudes=((0.3, 0.2),) * 6,
+                              omegas=((0.9, 2.3), (1.1, 2.7), (0.7, 1.9), (1.3, 3.1), (1.7, 2.9), (0.8, 3.7)))
+    law = SlotineLiLaw(plant.regressor, plant.names, plant.m, lam=10.0, kd=50.0, gamma=0.5, mode=mode,
+                       dead_zone=dead_zone)
+    x0 = ref(0.0, 2)[:2].copy()
+    x0[0] += 0.05  # start off the reference
+    plant.set_state(x0)
+    theta0 = np.zeros(len(plant.names)) if mode is Mode.ADAPTIVE else plant.true_theta() * 0.5
+    return plant, law, ref, theta0
+
+
+def _native(plant, law, ref, theta0, duration, *, chunk=250, noise_std=None, rng=None, between=None):
+    """loop.run's native branch (no events): chunks of `chunk` rows, rows concatenated."""
+    n = int(round(duration / plant.dt))
+    nc = nm.NativeManipulatorController(plant, law, ref, theta0, chunk)
+    parts = []
+    with plant.controlled_natively(nc.callback):
+        k = 0
+        while k < n:
+            rows = min(chunk, n - k)
+            noise = rng.normal(0.0, noise_std, size=(rows, 2, plant.m)) if noise_std is not None else None
+            parts.append(nc.chunk(rows, noise))
+            k += rows
+            if between is not None:
+                between(plant, nc)
+    return dict(zip(FIELDS, (np.concatenate(f) for f in zip(*parts)))), nc
+
+
+def _compare(setup_kw, duration, **native_kw):
+    """Max relative difference per field between the Python and the native path."""
+    plant_py, law, ref, theta0 = _setup(**setup_kw)
+    rng_kw = {}
+    if "noise_std" in native_kw:
+        rng_kw = dict(noise_std=native_kw["noise_std"], rng=np.random.default_rng(7))
+        native_kw = dict(native_kw, rng=np.random.default_rng(7))
+    traj = run(plant_py, law, ref, duration=duration, theta_hat0=theta0, native=False, **rng_kw)
+    assert traj.status == "ok", traj.reason
+    plant, law, ref, theta0 = _setup(**setup_kw)
+    assert nm.supported(plant, law)
+    rows, nc = _native(plant, law, ref, theta0, duration, **native_kw)
+    diffs = {}
+    for f in FIELDS:
+        a, b = np.asarray(getattr(traj, f)), rows[f]
+        assert a.shape == b.shape, (f, a.shape, b.shape)
+        diffs[f] = float(np.max(np.abs(a - b)) / max(1.0, float(np.max(np.abs(a)))))
+    diffs["x_end"] = float(np.max(np.abs(plant_py.observe() - plant.observe())))
+    return diffs, traj, rows, nc
+
+
+CASES = {
+    "adaptive_payload": dict(mode=Mode.ADAPTIVE),
+    "computed_torque": dict(mode=Mode.COMPUTED_TORQUE),
+    "pd_gravity": dict(mode=Mode.PD_GRAVITY),
+    "base_all": dict(mode=Mode.ADAPTIVE, unknown="all", base=True),
+}
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "euler"])
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_native_chunks_reproduce_python_path(case, integrator):
+    diffs, traj, rows, nc = _compare(dict(CASES[case], euler=integrator == "euler"), 1.0)
+    assert max(diffs.values()) <= TOL, diffs
+    assert traj.t.shape == (1000,) and rows["x"].shape == (1000, 2, 6)
+    if CASES[case]["mode"] is Mode.ADAPTIVE:  # the estimates moved, and the native ones kept moving
+        assert np.abs(rows["theta_hat"][-1]).max() > 0
+        assert not np.array_equal(nc.theta, rows["theta_hat"][-1])
+    else:
+        assert np.array_equal(rows["theta_hat"], np.broadcast_to(rows["theta_hat"][0], rows["theta_hat"].shape))
+
+
+def test_saturation_dead_zone_and_waypoints():
+    limit = (100.0, 100.0, 100.0, 20.0, 20.0, 20.0)
+    diffs, traj, rows, nc = _compare(dict(limit=limit, waypoints=True,
+                                          dead_zone=DeadZone(0.02, DeadZoneOn.TRACKING_ERROR)), 0.6)
+    assert max(diffs.values()) <= TOL, diffs
+    assert np.all(np.any(np.abs(rows["u"]) == limit, axis=0))  # the clamp acted on every joint
+    e = np.linalg.norm(rows["ref"][:, 0] - rows["x"][:, 0], axis=1)
+    assert np.any(e < 0.02) and np.any(e >= 0.02)  # adaptation went off and on
+    diffs, *_ = _compare(dict(dead_zone=DeadZone(0.3, DeadZoneOn.S), euler=True), 0.5)
+    assert max(diffs.values()) <= TOL, diffs
+
+
+def test_measurement_noise_and_uneven_chunks():
+    """Noise drawn per chunk (rows, 2, m) is the same stream as the Python path's per step."""
+    diffs, *_ = _compare(dict(euler=True), 0.5, chunk=97, noise_std=np.full((2, 6), 1e-3))
+    assert max(diffs.values()) <= TOL, diffs
+
+
+def test_extra_forward_and_other_data_leave_ctrl_alone():
+    """mj_forward on the plant's data between chunks (a call past the step's stages) and on another
+    MjData change no ctrl, no estimate, no record: the run still matches the Python path."""
+    def between(plant, nc):
+        ctrl, theta = plant.data.ctrl.copy(), nc.theta.copy()
+        mujoco.mj_forward(plant.model, plant.data)
+        other = mujoco.MjData(plant.model)
+        mujoco.mj_forward(plant.model, other)
+        assert np.array_equal(plant.data.ctrl, ctrl) and np.array_equal(nc.theta, theta)
+        assert not other.ctrl.any()
+
+    diffs, *_ = _compare(dict(), 0.5, between=between)
+    assert max(diffs.values()) <= TOL, diffs
+
+
+def test_two_controllers_interleaved():
+    """The tables follow the controller whose chunk runs (the newest is bound at construction)."""
+    kws = [dict(euler=True), dict(mode=Mode.COMPUTED_TORQUE, euler=True)]
+    runs = [_setup(**kw) for kw in kws]
+    ctrls = [nm.NativeManipulatorController(p, law, ref, th0, 100) for p, law, ref, th0 in runs]
+    out = [[], []]
+    with runs[0][0].controlled_natively(ctrls[0].callback):
+        for _ in range(3):
+            for i in (0, 1):
+                out[i].append(ctrls[i].chunk(100, None))
+    for i, kw in enumerate(kws):
+        plant, law, ref, th0 = _setup(**kw)
+        traj = run(plant, law, ref, duration=0.3, theta_hat0=th0, native=False)
+        for f, got in zip(FIELDS, (np.concatenate(a) for a in zip(*out[i]))):
+            np.testing.assert_allclose(got, getattr(traj, f), rtol=0, atol=TOL, err_msg=f)
+
+
+def _kernel_arms():
+    arm = mujoco.MjModel.from_xml_string(SMALL_ARM)
+    ur5e = _ur5e_model()
+    return [(arm, "all", True), (arm, "all", False), (arm, ["l3a", "tool"], False),
+            (ur5e, "all", True), (ur5e, "payload", False)]
+
+
+@pytest.mark.parametrize("i", range(5))
+def test_specialised_kernel_gives_regressor_kernel_numbers(i):
+    model, unknown, joints = _kernel_arms()[i]
+    plant = mp.ManipulatorPlant(model, unknown=unknown, joint_params=joints)
+    reg, d = plant.regressor, plant.data
+    fast = nm.kernel()
+    scratch, need = np.zeros(18 * model.nbody), np.ones(reg.n_standard, dtype=np.int64)
+    Y, tau = np.zeros_like(reg.Y_std), np.zeros(model.nv)
+    rng = np.random.default_rng(i)
+    for trial in range(50):
+        d.qpos[:] = rng.uniform(-3, 3, model.nq)
+        mujoco.mj_kinematics(model, d)
+        mujoco.mj_comPos(model, d)
+        v, w, a = (rng.normal(size=model.nv) * 3 for _ in range(3))
+        if trial == 0:
+            v = w = a = np.zeros(model.nv)
+        Y_ref, tau_ref = (arr.copy() for arr in reg(v, w, a))
+        fast(*reg.static_args(), d.cdof, d.xpos, d.xmat, d.subtree_com, d.cinert, model.opt.gravity, v, w, a,
+             Y, tau, scratch, need)
+        assert np.array_equal(Y, Y_ref) and np.array_equal(tau, tau_ref), (np.abs(Y - Y_ref).max(),
+                                                                             np.abs(tau - tau_ref).max())
+    # columns left out (need = 0) stay 0, the others are unchanged
+    need[::3] = 0
+    fast(*reg.static_args(), d.cdof, d.xpos, d.xmat, d.subtree_com, d.cinert, model.opt.gravity, v, w, a,
+         Y, tau, scratch, need)
+    body_cols = np.arange(10 * len(plant.layout.bodies))
+    skipped = body_cols[need[body_cols] == 0]
+    assert not Y[:, skipped].any()
+    kept = np.setdiff1d(np.arange(reg.n_standard), skipped)
+    assert np.array_equal(Y[:, kept], Y_ref[:, kept]) and np.array_equal(tau, tau_ref)
+
+
+def test_supported():
+    from adaptive_mj.laws import SlidingAdaptiveLaw
+    from adaptive_mj.plants import heave
+
+    plant, law, ref, theta0 = _setup()
+    assert nm.supported(plant, law)
+    other = mp.ManipulatorPlant(_ur5e_model(), unknown="payload")
+    assert not nm.supported(other, law)  # the law's regressor is another plant's
+    plant.model.opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    assert nm.supported(plant, law)  # one stage
+    hv = heave.load()
+    assert not nm.supported(hv, SlidingAdaptiveLaw(hv.form, lam=5, k=200, gamma=[1, 1, 1]))
