@@ -37,7 +37,7 @@ def metrics(traj: Trajectory) -> dict:
         "rms_tracking_error_tail": _rms(e[tail]),
         "max_abs_tracking_error_tail": float(np.max(np.abs(e[tail]))) if tail.any() else math.nan,
         "control_rms": _rms(traj.u),
-        "control_total_variation": float(np.sum(np.abs(np.diff(traj.u)))),
+        "control_total_variation": float(np.sum(np.abs(np.diff(traj.u, axis=0)))),
         "rms_s_tail": _rms(traj.s[tail]),
         "param_error_final": {n: float(v) for n, v in zip(traj.names, final_err)},
         "lyapunov_initial": float(traj.V[0]) if len(traj) else math.nan,

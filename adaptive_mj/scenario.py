@@ -468,7 +468,7 @@ def _manipulator(t: _Table, payload: str | None) -> ManipulatorSpec:
             raise t.fail("unknown", "'payload', 'all' or a non-empty array of body names", raw)
         unknown: str | tuple[str, ...] = tuple(raw)
     else:
-        unknown = t.string("unknown", choices=("payload", "all"))
+        unknown = t.string("unknown", "payload" if payload is not None else "all", choices=("payload", "all"))
         if unknown == "payload" and payload is None:
             raise t.fail("unknown", "'all' or an array of body names when there is no payload (plant.payload "
                                     "is 'none')", unknown)

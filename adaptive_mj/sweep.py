@@ -43,10 +43,11 @@ LOG_SPAN = 100.0  # a plotted quantity spanning more than this ratio (2 decades)
 # validator reads every one. The reference keys depend on reference.kind: the validator's own table.
 DOCUMENTED_KEYS: dict[str, tuple[str, ...]] = {
     "plant": ("kind", "backend", "model", "joint", "actuator", "payload", "payload_mass", "site", "theta",
-              "g", "density", "viscosity", "ctrl_range", "thruster_time_constant", "regressor"),
+              "g", "density", "viscosity", "ctrl_range", "thruster_time_constant", "regressor",
+              "unknown", "joint_params", "base_parameters", "servo_to_torque"),
     "simulation": ("integrator", "timestep", "duration", "initial_state", "state_bound"),
     "law": ("kind", "order", "lambda", "k", "gamma", "dead_zone.width", "dead_zone.on", "initial_estimates",
-            "nominal", "K", "boundary_layer"),
+            "nominal", "K", "boundary_layer", "kd"),
     "noise": ("std",) + tuple(f"std.{signal}" for signal in sc.STATE_SIGNALS) + ("seed",),
     "disturbance": ("kind", "magnitude", "t0", "omega", "phase"),
     "log": ("rate_hz",),

@@ -74,6 +74,9 @@ def check_supported(model: mujoco.MjModel, where: str) -> None:
             raise ModelError(f"{where}: actuator {aname!r} is not a torque <motor> (it has a bias, a gain "
                              "function or dynamics, e.g. a position servo); set plant.servo_to_torque = true to "
                              "rebuild servos as torque motors limited to their forcerange")
+        if model.actuator_gainprm[a, 0] != 1.0:
+            raise ModelError(f"{where}: actuator {aname!r} has gain {model.actuator_gainprm[a, 0]:g}; the "
+                             "manipulator plant needs torque = gear * ctrl (a <motor>, or gainprm 1)")
         dof = int(model.jnt_dofadr[model.actuator_trnid[a, 0]])
         if driven[dof] >= 0:
             raise ModelError(f"{where}: joint {_name(model, mujoco.mjtObj.mjOBJ_JOINT, model.dof_jntid[dof])!r} "
