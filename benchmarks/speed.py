@@ -31,7 +31,7 @@ from adaptive_mj.loop import run
 from adaptive_mj.parallel import Job, run_jobs
 
 REPO = Path(__file__).resolve().parents[1]
-CASES = {"heave": "heave_tracking", "arm": "arm_payload_swap"}
+CASES = {"heave": "heave_tracking", "arm": "arm_payload_swap", "ur5e": "ur5e_payload_swap"}
 
 
 def _scenario(name: str, steps: int, extra=()):
@@ -129,9 +129,12 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=20000)
     ap.add_argument("--sweep-runs", type=int, default=8)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--models", default=",".join(CASES), help="which of " + ", ".join(CASES) + " (comma-separated)")
+    ap.add_argument("--no-sweep", action="store_true", help="skip the sweep throughput and peak RSS figures")
     args = ap.parse_args()
     out = {"cores": os.cpu_count(), "steps": args.steps, "reps": args.reps, "models": {}}
-    for plant, name in CASES.items():
+    for plant in args.models.split(","):
+        name = CASES[plant]
         loop(name, 500, True)  # compile the native callback once (numba), outside the timing
         rows = {"a_bare": [], "b_closed_loop": [], "b_py_python_callback": [], "c_logged_100Hz": [],
                 "d_logged_every_step": []}
@@ -152,6 +155,9 @@ def main() -> None:
                        "c/a": stats["c_logged_100Hz"]["median"] / a, "d/a": stats["d_logged_every_step"]["median"] / a},
             "log_bytes_per_sim_second_100Hz": statistics.median(sizes),
         }
+    if args.no_sweep:
+        print(json.dumps(out, indent=2)) if args.json else _print_models(out)
+        return
     t1, t2 = [], []
     for _ in range(max(1, args.reps // 2)):  # interleaved, so slow spells of a shared machine hit both
         t1.append(sweep_throughput(1, args.sweep_runs))
@@ -163,13 +169,7 @@ def main() -> None:
     if args.json:
         print(json.dumps(out, indent=2))
         return
-    print(f"cores: {out['cores']}; {args.steps} steps per figure; median [min, max] of {args.reps} reps")
-    for plant, res in out["models"].items():
-        print(f"\n{plant} (RK4, 1 ms):")
-        for key, v in res["us_per_step"].items():
-            print(f"  {key:24s} {v['median']:8.2f} µs/step  [{v['min']:.2f}, {v['max']:.2f}]")
-        print("  ratios: " + ", ".join(f"{k} = {v:.2f}" for k, v in res["ratios"].items()))
-        print(f"  log size at 100 Hz: {res['log_bytes_per_sim_second_100Hz'] / 1000:.1f} kB per simulated second")
+    _print_models(out)
     sw = out["sweep_runs_per_minute"]
     print(f"\nsweep ({args.sweep_runs} x {SWEEP_SECONDS:g} s heave runs, logged): jobs 1 {sw['jobs1']['median']:.1f} runs/min, "
           f"jobs 2 {sw['jobs2']['median']:.1f} runs/min, speed-up {sw['speedup']:.2f}x")
@@ -177,6 +177,16 @@ def main() -> None:
     print(f"peak RSS of a 600 s heave run at 1 kHz with default logging: {rss['median']:.0f} MB "
           f"[{rss['min']:.0f}, {rss['max']:.0f}] (3 fresh processes, MUJOCO_GL unset); "
           f"{out['peak_rss_mb_600s_heave_logged_with_MUJOCO_GL_egl']:.0f} MB with MUJOCO_GL=egl")
+
+
+def _print_models(out: dict) -> None:
+    print(f"cores: {out['cores']}; {out['steps']} steps per figure; median [min, max] of {out['reps']} reps")
+    for plant, res in out["models"].items():
+        print(f"\n{plant} (RK4, 1 ms):")
+        for key, v in res["us_per_step"].items():
+            print(f"  {key:24s} {v['median']:8.2f} µs/step  [{v['min']:.2f}, {v['max']:.2f}]")
+        print("  ratios: " + ", ".join(f"{k} = {v:.2f}" for k, v in res["ratios"].items()))
+        print(f"  log size at 100 Hz: {res['log_bytes_per_sim_second_100Hz'] / 1000:.1f} kB per simulated second")
 
 
 if __name__ == "__main__":
