@@ -143,10 +143,18 @@ def _model(logged: LoggedRun, where: str) -> mujoco.MjModel:
         model = spec.compile()
     except ValueError as exc:
         raise LogFormatError(f"{where}: the log's model does not compile: {str(exc).strip()}") from None
+    joints = logged.trajectory.joint_names
+    if joints and model.nv == len(joints):
+        return model  # a manipulator run: the whole arm, q (m,) per row
     if model.njnt != 1 or model.nv != 1:
         raise LogFormatError(f"{where}: the log's model has {model.njnt} joints and nv={model.nv}, "
                              f"expected the single joint of a 1-DOF plant")
     return model
+
+
+def _qpos_addresses(model: mujoco.MjModel) -> np.ndarray:
+    """(nv,) qpos address of each dof's joint (hinge/slide: one each)."""
+    return np.array([model.jnt_qposadr[model.dof_jntid[j]] for j in range(model.nv)])
 
 
 def _free_camera(model: mujoco.MjModel, q_values: np.ndarray, aspect: float) -> mujoco.MjvCamera:
@@ -156,10 +164,13 @@ def _free_camera(model: mujoco.MjModel, q_values: np.ndarray, aspect: float) -> 
     horizontally across a slide joint's axis, tilted 12 degrees down."""
     data = mujoco.MjData(model)
     moving = np.flatnonzero(model.body_weldid[model.geom_bodyid] != 0)
-    qadr = int(model.jnt_qposadr[0])
+    multi = model.nv > 1
+    qadr = _qpos_addresses(model) if multi else int(model.jnt_qposadr[0])
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     axis = np.array([0.0, 1.0, 0.0])
-    for q in np.unique(np.quantile(q_values, np.linspace(0.0, 1.0, 41))):
+    samples = (q_values[np.linspace(0, len(q_values) - 1, 41).astype(int)] if multi
+               else np.unique(np.quantile(q_values, np.linspace(0.0, 1.0, 41))))
+    for q in samples:
         data.qpos[qadr] = q
         mujoco.mj_kinematics(model, data)
         axis = data.xaxis[0].copy()
@@ -169,7 +180,9 @@ def _free_camera(model: mujoco.MjModel, q_values: np.ndarray, aspect: float) -> 
     if not np.all(np.isfinite(lo)):     # no moving geom: frame the whole model
         lo = model.stat.center - model.stat.extent
         hi = model.stat.center + model.stat.extent
-    if model.jnt_type[0] == mujoco.mjtJoint.mjJNT_HINGE:
+    if multi:  # an arm: a three-quarter view
+        forward = np.array([1.0, 1.0, 0.6])
+    elif model.jnt_type[0] == mujoco.mjtJoint.mjJNT_HINGE:
         forward = axis
     else:                                # across the slide axis, horizontally if possible
         forward = np.cross(axis, [0.0, 0.0, 1.0])
@@ -274,7 +287,8 @@ class _Panel:
         if keep[-1] != i1:
             keep = np.append(keep, i1)
         self._t = traj.t[keep]
-        series = [(axes[0], traj.y_tilde[keep], dict(color=PANEL_COLORS["error"], lw=1.0))]
+        error = np.linalg.norm(traj.joint_errors, axis=1) if traj.joint_names else traj.y_tilde
+        series = [(axes[0], error[keep], dict(color=PANEL_COLORS["error"], lw=1.0))]
         for i in range(len(names)):
             series.append((axes[1 + i], traj.theta[keep, i],
                            dict(color=PANEL_COLORS["true"], lw=0.9, ls="--")))
@@ -299,7 +313,7 @@ class _Panel:
             ax.tick_params(labelsize=font - 1, length=2, pad=1)
             ax.yaxis.get_offset_text().set_fontsize(font - 1)
             ax.grid(alpha=0.3, lw=0.5)
-        axes[0].set_ylabel(f"ỹ [{unit}]", fontsize=font)
+        axes[0].set_ylabel(f"|q̃| [{unit}]" if traj.joint_names else f"ỹ [{unit}]", fontsize=font)
         for i, name in enumerate(names):
             axes[1 + i].set_ylabel(name, fontsize=font)
         if names:
@@ -387,20 +401,30 @@ def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
     scene_w = scene_width((width, height))
     unit = "rad" if model.jnt_type[0] == mujoco.mjtJoint.mjJNT_HINGE else "m"
     title = str(logged.header.get("scenario_name", where))
-    panel = _Panel(traj, rows, width=width - scene_w, height=height, unit=unit, title=title)
+    if traj.joint_names and len(traj.names) > 4:  # the panel shows the first 4 (a payload: m, m·c)
+        import dataclasses
+
+        panel_traj = dataclasses.replace(traj, names=traj.names[:4], theta=traj.theta[:, :4],
+                                         theta_hat=traj.theta_hat[:, :4])
+    else:
+        panel_traj = traj
+    panel = _Panel(panel_traj, rows, width=width - scene_w, height=height, unit=unit, title=title)
     shown = traj.q[rows[0]:rows[-1] + 1]
     camera = _free_camera(model, np.concatenate([shown, traj.ref[rows[0]:rows[-1] + 1, 0]]),
                           aspect=scene_w / height)
 
     data, ghost = mujoco.MjData(model), mujoco.MjData(model)
-    qadr, dadr = int(model.jnt_qposadr[0]), int(model.jnt_dofadr[0])
+    if traj.joint_names:  # the whole arm; the reference pose as a ghost of the whole arm
+        qadr, dadr = _qpos_addresses(model), np.arange(model.nv)
+    else:
+        qadr, dadr = int(model.jnt_qposadr[0]), int(model.jnt_dofadr[0])
     option, perturb = mujoco.MjvOption(), mujoco.MjvPerturb()
-    label = _Label("green: reference y_d", height=height)
+    label = _Label("green: reference pose q_d" if traj.joint_names else "green: reference y_d", height=height)
     renderer = _renderer(model, scene_w, height)
     try:
         for t_frame, i in zip(times, rows):
             data.qpos[qadr] = traj.x[i, 0]
-            data.qvel[dadr] = traj.x[i, 1] if traj.x.shape[1] > 1 else 0.0
+            data.qvel[dadr] = traj.x[i, 1] if traj.x.shape[1] > 1 else 0.0  # (m,) for an arm
             data.time = traj.t[i]
             mujoco.mj_forward(model, data)
             ghost.qpos[qadr] = traj.ref[i, 0]
