@@ -117,6 +117,9 @@ def load(scenario, *, law=None, log: str | os.PathLike | None = None, seed: int 
     """
     scn = _scenario(scenario, overrides=tuple(overrides), seed=seed)
     setup = build(scn)
+    if scn.plant.kind == "manipulator":
+        raise ScenarioError(f"{scn.source}: adaptive_mj.env supports 1-DOF plants for now; run plant.kind = "
+                            "'manipulator' with adaptive-mj run, sweep or bench")
     if not isinstance(setup.plant, MujocoPlant):
         raise ScenarioError(f"{scn.source}: adaptive_mj.env needs a MuJoCo plant, got plant.kind = "
                             f"{scn.plant.kind!r} with plant.backend = {scn.plant.backend!r}")

@@ -118,3 +118,11 @@ def test_manipulator_scenario_errors_are_one_line(override, match, capsys):
     import re
 
     assert re.search(match, err[0]), err[0]
+
+
+def test_dm_env_refuses_a_manipulator_with_one_line():
+    from adaptive_mj import env
+    from adaptive_mj.errors import ScenarioError
+
+    with pytest.raises(ScenarioError, match=r"adaptive_mj.env supports 1-DOF plants for now.*manipulator"):
+        env.load("ur5e_payload_swap", overrides=("simulation.duration=0.1", "events=[]"))
