@@ -225,6 +225,11 @@ def _prewarm(jobs: Sequence[Job]) -> None:
             setup = build(sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed))
             if native.supported(setup.plant, setup.law):
                 native.compiled(setup.plant.form)
+            elif getattr(setup.plant, "joint_shape", ()):
+                from adaptive_mj import native_manipulator
+
+                if native_manipulator.supported(setup.plant, setup.law):
+                    native_manipulator.compiled()
         except AdaptiveMJError:
             continue  # the worker reports it
 
