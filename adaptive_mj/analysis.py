@@ -163,7 +163,10 @@ def manipulator_response(traj: Trajectory, setup) -> dict:
     sks = np.sum(kd * s * s, axis=1)
     dV = np.diff(traj.V)
     t_e = first_event_time(setup)
-    keep = np.ones(len(dV), dtype=bool) if t_e is None else (traj.t[1:] < t_e) | (traj.t[:-1] >= t_e)
+    events = traj.meta.get("events") or []
+    t_applied = events[0][0] if events else t_e  # the step the event was applied at (t_k >= t_e - dt/2)
+    keep = np.ones(len(dV), dtype=bool) if t_applied is None else \
+        (traj.t[1:] < t_applied) | (traj.t[:-1] >= t_applied)
     scale = float(np.max(sks)) or 1.0
     out["lyapunov_max_increase_rel"] = float(max(0.0, dV[keep].max()) / traj.V[0]) if dV.size and traj.V[0] else 0.0
     out["lyapunov_rate_error_rel"] = float(np.max(np.abs(dV / dt + 0.5 * (sks[:-1] + sks[1:]))[keep]) / scale) \

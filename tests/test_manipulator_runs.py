@@ -35,6 +35,10 @@ def test_payload_swap_scenario_tracks_after_the_swap():
     assert tail.max() <= 1e-3, tail
     # the true parameters follow the swap: 1.5 kg before, 0.5 kg after
     assert traj.theta[0, 0] == 1.5 and traj.theta[-1, 0] == 0.5
+    check = analysis.manipulator_response(traj, setup)
+    assert check["lyapunov_max_increase_rel"] <= 1e-12  # away from the swap, V never increases
+    assert check["lyapunov_rate_error_rel"] < 1e-2  # V' = -sᵀ K_D s (midpoint rule at 1 ms)
+    assert check["recovery_time"] is not None
 
 
 SERVO_ARM = """<mujoco model="two_link_servo">
