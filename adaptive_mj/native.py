@@ -25,9 +25,8 @@ import math
 
 import numpy as np
 
-import types as pytypes
-
 from adaptive_mj.laws.sliding import sliding_law, sliding_terms
+from adaptive_mj.numba_util import with_globals as _with_globals
 
 _CTX = np.zeros(16, dtype=np.int64)  # buffer addresses, see _bind
 _W = np.zeros(32)  # scalars shared with the callback, see W_* below
@@ -37,10 +36,6 @@ W_INC, W_WEIGHTS = 20, 24  # 4 slots each
 _cache: dict = {}
 
 
-def _with_globals(fn, **replace):
-    """The same function (same code object) seeing some globals replaced, e.g. by their numba versions."""
-    return pytypes.FunctionType(fn.__code__, {**fn.__globals__, **replace}, fn.__name__, fn.__defaults__,
-                                fn.__closure__)
 
 
 def compiled(form):

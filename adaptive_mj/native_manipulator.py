@@ -29,6 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from adaptive_mj.numba_util import with_globals as _with_globals
+
 # --- the tables the callback reads -----------------------------------------------
 # _I: int64 addresses of buffers and integer settings; _F: float settings.
 (I_DATA, I_STAGE, I_ROW, I_ROWS, I_NST, I_NV, I_NBODY, I_NTH, I_NSTD, I_NQ, I_NU, I_MAXROWS,
@@ -54,11 +56,6 @@ _CALLBACK = None
 _OWNER = None  # the controller whose buffers the tables point at
 
 
-def _with_globals(fn, **replace):
-    import types
-
-    return types.FunctionType(fn.__code__, {**fn.__globals__, **replace}, fn.__name__, fn.__defaults__,
-                              fn.__closure__)
 
 
 # --- the regressor kernel, specialised -------------------------------------------

@@ -27,7 +27,8 @@ import numpy as np
 
 from adaptive_mj.errors import ModelError
 from adaptive_mj.form import ModelForm
-from adaptive_mj.plants.mujoco_plant import MujocoPlant, compile_xml_path, find_joint_and_actuator
+from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_xml_path, find_joint_and_actuator,
+                                             scale_body_mass)
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 MODEL_PATH = MODELS / "pendulum_arm.xml"
@@ -155,11 +156,7 @@ class ArmPlant(MujocoPlant):
         mj_setConst runs on a scratch MjData afterwards, so "simple" bodies
         (whose inertia is otherwise a compile-time constant) update too.
         """
-        b = self.body_id(name)
-        scale = mass / self.model.body_mass[b]
-        self.model.body_mass[b] = mass
-        self.model.body_inertia[b] *= scale
-        mujoco.mj_setConst(self.model, mujoco.MjData(self.model))
+        scale_body_mass(self.model, self.body_id(name), mass)
         self.model_changed()
 
 

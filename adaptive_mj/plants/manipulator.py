@@ -26,8 +26,9 @@ import mujoco
 import numpy as np
 
 from adaptive_mj.errors import ModelError
+from adaptive_mj.numba_util import with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
-from adaptive_mj.plants.mujoco_plant import control_callback
+from adaptive_mj.plants.mujoco_plant import control_callback, new_warnings, scale_body_mass
 
 
 def _name(model, objtype, i: int) -> str:
@@ -257,13 +258,6 @@ def kernel():
     return _KERNEL
 
 
-def _with_globals(fn, **replace):
-    import types
-
-    return types.FunctionType(fn.__code__, {**fn.__globals__, **replace}, fn.__name__, fn.__defaults__,
-                              fn.__closure__)
-
-
 def base_parameters(regressor: "Regressor", *, samples: int = 30, seed: int = 0, rtol: float = 1e-9):
     """A base (identifiable) parameter set, found numerically (Gautier's method).
 
@@ -360,7 +354,6 @@ class ManipulatorPlant:
         self._warning_total0 = int(self.data.warning.number.sum())
         self._warnings0 = self.data.warning.number.copy()
         self._scratch = mujoco.MjData(model)
-        self._M = np.zeros((self.m, self.m))
 
     # --- state -------------------------------------------------------------
     @property
@@ -451,12 +444,8 @@ class ManipulatorPlant:
             self.first_contact = (self.time, f"contact between geoms {g1!r} and {g2!r}")
 
     def instability(self) -> str | None:
-        if int(self.data.warning.number.sum()) == self._warning_total0:
-            return None
-        new = np.nonzero(self.data.warning.number > self._warnings0)[0]
-        if new.size == 0:
-            return None
-        return "MuJoCo warning " + ", ".join(mujoco.mjtWarning(int(i)).name for i in new)
+        """A MuJoCo warning raised since the state was set, as text, or None."""
+        return new_warnings(self.data, self._warning_total0, self._warnings0)
 
     # --- events ------------------------------------------------------------
     def body_id(self, name: str) -> int:
@@ -467,11 +456,7 @@ class ManipulatorPlant:
 
     def set_body_mass(self, name: str, mass: float) -> None:
         """Set a body's mass [kg], its inertia scaled with it (same shape, denser)."""
-        b = self.body_id(name)
-        scale = mass / self.model.body_mass[b]
-        self.model.body_mass[b] = mass
-        self.model.body_inertia[b] *= scale
-        mujoco.mj_setConst(self.model, mujoco.MjData(self.model))
+        scale_body_mass(self.model, self.body_id(name), mass)
         self.model_changed()
 
     def set_body_inertial(self, name: str, *, mass: float, ipos, iquat, inertia) -> None:

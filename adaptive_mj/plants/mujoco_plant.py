@@ -204,13 +204,29 @@ class MujocoPlant:
 
     def instability(self) -> str | None:
         """A MuJoCo warning raised since the plant was made, as text, or None."""
-        if int(self.data.warning.number.sum()) == self._warning_total0:
-            return None
-        counts = self._warning_counts()
-        new = np.nonzero(counts > self._warnings0)[0]
-        if new.size == 0:
-            return None
-        return "MuJoCo warning " + ", ".join(mujoco.mjtWarning(int(i)).name for i in new)
+        return new_warnings(self.data, self._warning_total0, self._warnings0)
+
+
+def new_warnings(data: mujoco.MjData, total0: int, counts0: np.ndarray) -> str | None:
+    """MuJoCo warnings raised since the counts were (total0, counts0), as text, or None."""
+    if int(data.warning.number.sum()) == total0:
+        return None
+    new = np.nonzero(data.warning.number > counts0)[0]
+    if new.size == 0:
+        return None
+    return "MuJoCo warning " + ", ".join(mujoco.mjtWarning(int(i)).name for i in new)
+
+
+def scale_body_mass(model: mujoco.MjModel, body: int, mass: float) -> None:
+    """Set a body's mass [kg], its inertia scaled with it (same shape, denser).
+
+    mj_setConst runs on a scratch MjData afterwards, so "simple" bodies (whose
+    inertia is otherwise a compile-time constant) update too.
+    """
+    scale = mass / model.body_mass[body]
+    model.body_mass[body] = mass
+    model.body_inertia[body] *= scale
+    mujoco.mj_setConst(model, mujoco.MjData(model))
 
 
 def compile_spec(xml: str, assets: dict | None = None, *, where: str, edit=None) -> tuple[mujoco.MjModel, str]:
