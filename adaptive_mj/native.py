@@ -26,7 +26,7 @@ import math
 import numpy as np
 
 from adaptive_mj.laws.sliding import sliding_law, sliding_terms
-from adaptive_mj.numba_util import with_globals as _with_globals
+from adaptive_mj.numba_util import pointer, with_globals as _with_globals
 
 _CTX = np.zeros(16, dtype=np.int64)  # buffer addresses, see _bind
 _W = np.zeros(32)  # scalars shared with the callback, see W_* below
@@ -46,19 +46,6 @@ def compiled(form):
         return _cache[key]
     import numba
     from numba import carray, types
-    from numba.extending import intrinsic
-
-    def pointer(nbtype):
-        @intrinsic
-        def to_ptr(typingctx, addr):
-            sig = types.CPointer(nbtype)(types.int64)
-
-            def codegen(context, builder, signature, args):
-                return builder.inttoptr(args[0], context.get_value_type(types.CPointer(nbtype)))
-
-            return sig, codegen
-
-        return to_ptr
 
     fptr, iptr = pointer(types.float64), pointer(types.int64)
     ctx_addr, w_addr = _CTX.ctypes.data, _W.ctypes.data

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from adaptive_mj.numba_util import with_globals as _with_globals
+from adaptive_mj.numba_util import pointer, with_globals as _with_globals
 
 # --- the tables the callback reads -----------------------------------------------
 # _I: int64 addresses of buffers and integer settings; _F: float settings.
@@ -310,18 +310,6 @@ def compiled():
     from numba.extending import intrinsic
 
     from adaptive_mj.laws.slotine_li import reference_terms, slotine_li_output
-
-    def pointer(nbtype):
-        @intrinsic
-        def to_ptr(typingctx, addr):
-            sig = types.CPointer(nbtype)(types.int64)
-
-            def codegen(context, builder, signature, args):
-                return builder.inttoptr(args[0], context.get_value_type(types.CPointer(nbtype)))
-
-            return sig, codegen
-
-        return to_ptr
 
     @intrinsic
     def address(typingctx, ptr):

@@ -602,11 +602,7 @@ def _manipulator_law(t: _Table) -> LawSpec:
     gamma = _gamma(t)
     if gamma is None and kind == "slotine_li":
         raise ScenarioError(f"{t.where}: law.gamma is required for law.kind = 'slotine_li'")
-    dz = t.table("dead_zone", None)
-    dead_zone = None
-    if dz is not None:
-        dead_zone = DeadZoneSpec(width=dz.number("width", ge=0), on=dz.string("on", "s", choices=DEAD_ZONE_ON))
-        dz.finish()
+    dead_zone = _dead_zone(t)
     initial = _estimate_table(t, "initial_estimates")
     nominal = _estimate_table(t, "nominal")
     if kind != "slotine_li" and nominal is None and initial is None:
@@ -633,11 +629,7 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
     gamma = _gamma(t)
     if gamma is None and kind in ("sliding_adaptive", "first_order_adaptive"):
         raise ScenarioError(f"{t.where}: law.gamma is required for law.kind = {kind!r}")
-    dz = t.table("dead_zone", None)
-    dead_zone = None
-    if dz is not None:
-        dead_zone = DeadZoneSpec(width=dz.number("width", ge=0), on=dz.string("on", "s", choices=DEAD_ZONE_ON))
-        dz.finish()
+    dead_zone = _dead_zone(t)
     initial = _estimate_table(t, "initial_estimates")
     nominal = _estimate_table(t, "nominal")
     if kind in ("fixed_nominal", "robust_sliding") and nominal is None and initial is None:
@@ -649,6 +641,16 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
     t.finish()
     return LawSpec(kind=kind, order=law_order, lam=lam, k=k, gamma=gamma, dead_zone=dead_zone,
                    initial_estimates=initial, nominal=nominal, K=K, boundary_layer=phi)
+
+
+def _dead_zone(t: _Table) -> DeadZoneSpec | None:
+    """law.dead_zone = {width, on}, or None."""
+    dz = t.table("dead_zone", None)
+    if dz is None:
+        return None
+    spec = DeadZoneSpec(width=dz.number("width", ge=0), on=dz.string("on", "s", choices=DEAD_ZONE_ON))
+    dz.finish()
+    return spec
 
 
 def _estimate_table(t: _Table, name: str):

@@ -16,6 +16,7 @@ from adaptive_mj.loop import run
 from adaptive_mj.plants import manipulator as mp
 from adaptive_mj.plants.arm import MODELS, build_arm_xml
 from adaptive_mj.reference import JointSumOfSines, JointWaypoints
+from test_manipulator import TEST_ARM
 
 UR5E = MODELS / "ur5e_arm.xml"
 FIELDS = ("t", "x", "u", "s", "ref", "theta_hat")
@@ -23,25 +24,7 @@ TOL = 1e-12  # relative to each field's scale; the paths agree bit for bit today
 
 # Slide and hinge joints with skew axes, two joints on one body, a branch, a massless
 # frame body, a welded body, gears and damping/armature (for the kernel comparison).
-SMALL_ARM = """
-<mujoco><option gravity="0.4 -0.7 -9.81" timestep="0.001"/>
-<worldbody><body name="base" pos="0.1 0.2 0.3" quat="0.9 0.1 0.3 0.2">
-  <joint name="j1" type="hinge" axis="0.3 0.5 0.8" armature="0.1" damping="0.7"/>
-  <inertial pos="0.05 -0.1 0.2" quat="0.8 0.3 -0.2 0.4" mass="2.5" diaginertia="0.3 0.2 0.15"/>
-  <body name="l2" pos="0.3 0 0.1" euler="0.3 0.2 0.1">
-    <joint name="j2" type="slide" axis="1 0.2 0" damping="0.3" armature="0.2"/>
-    <joint name="j3" type="hinge" axis="0 1 0.3" armature="0.05"/>
-    <inertial pos="0 0.1 0.05" mass="1" diaginertia="0.1 0.07 0.05" quat="0.3 0.4 0.5 0.6"/>
-    <body name="l3a" pos="0.2 0.1 0"><joint name="j4" type="hinge" axis="0 0 1"/>
-      <inertial pos="0.1 0.1 0" mass="0.5" diaginertia="0.01 0.02 0.03"/></body>
-    <body name="frame" pos="0 0.1 0.3" quat="0.7 0 0.7 0">
-      <body name="l3b"><joint name="j5" type="hinge" axis="1 0 0" damping="0.2"/>
-        <inertial pos="0.1 0.1 0" mass="0.5" diaginertia="0.01 0.02 0.03"/>
-        <body name="tool" pos="0.1 0 0">
-          <inertial pos="0.02 0.03 0.01" mass="0.3" diaginertia="0.001 0.002 0.003" quat="0.5 0.5 0.5 0.1"/>
-        </body></body></body></body></body></worldbody>
-<actuator><motor joint="j1" gear="2"/><motor joint="j2"/><motor joint="j3"/><motor joint="j4"/>
-  <motor joint="j5" gear="0.5"/></actuator></mujoco>"""
+SMALL_ARM = TEST_ARM.replace(' integrator="RK4"', "")  # the same arm as tests/test_manipulator.py
 
 
 UR5E_XML = build_arm_xml(arm=UR5E, payload="tool_offset", site="tip")  # (xml, assets)

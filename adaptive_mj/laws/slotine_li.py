@@ -104,11 +104,12 @@ class SlotineLiLaw:
         self.dead_zone = dead_zone
         self.adapt = self.mode is Mode.ADAPTIVE
         self._zero = np.zeros(self.m)
+        self._dz_width = 0.0 if dead_zone is None else dead_zone.width  # the dead-zone, once (not per call)
+        self._dz_on_s = dead_zone is None or dead_zone.on is DeadZoneOn.S
 
     def native_params(self) -> dict:
-        dz = self.dead_zone
         return {"lam": self.lam, "kd": self.kd, "gamma": self.gamma, "adapt": self.adapt, "mode": int(self.mode),
-                "dz_width": 0.0 if dz is None else dz.width, "dz_on_s": dz is None or dz.on is DeadZoneOn.S}
+                "dz_width": self._dz_width, "dz_on_s": self._dz_on_s}
 
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
         m = self.m
@@ -119,10 +120,9 @@ class SlotineLiLaw:
         else:
             Y, tau_known = self.regressor(x[1], qd_r, qdd_r)
         u, rate = np.empty(m), np.empty(len(self.names))
-        p = self.native_params()
         e_norm = float(np.linalg.norm(ref[0] - x[0]))
-        slotine_li_output(Y, tau_known, theta_hat, s, self.kd, self.gamma, self.adapt, p["dz_width"],
-                          p["dz_on_s"], e_norm, u, rate)
+        slotine_li_output(Y, tau_known, theta_hat, s, self.kd, self.gamma, self.adapt, self._dz_width,
+                          self._dz_on_s, e_norm, u, rate)
         return LawStep(u, rate, s, qdd_r)
 
     def lyapunov(self, s, theta_hat, theta, *, M) -> np.ndarray:
