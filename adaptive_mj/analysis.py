@@ -159,7 +159,7 @@ def manipulator_response(traj: Trajectory, setup) -> dict:
     out: dict = {"tail_rms_per_joint": np.sqrt(np.mean(e[tail] ** 2, axis=0)).tolist()}
     dt = traj.meta["dt"]
     kd = np.asarray(getattr(setup.law, "kd", np.zeros(e.shape[1])))
-    s = np.asarray(traj.s).reshape(len(traj.t), -1)
+    s = np.asarray(traj.s).reshape(e.shape)
     sks = np.sum(kd * s * s, axis=1)
     dV = np.diff(traj.V)
     t_e = first_event_time(setup)

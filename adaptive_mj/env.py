@@ -25,27 +25,35 @@ control or estimate, |x_i| > simulation.state_bound, a MuJoCo warning) with
 discount 0.0. MID steps have discount 1.0.
 
 Action: a ``BoundedArray`` of shape (1,) named "u" with the actuator's
-ctrlrange [N or N*m], held over the control step (zero-order hold at every
-RK4 stage). Finite actions outside the bounds are clipped to them; a wrong
-shape or a non-finite value raises ValueError. With ``law=`` the action is
-ignored (pass anything, e.g. zeros or None).
+ctrlrange [N or N*m]; on a manipulator (plant.kind = "manipulator", m joints)
+shape (m,) named "tau", the joint torques [N*m, or N on a slide joint] in the
+order of ``task.joint_shape``/the plant's joint_names, bounded per joint by
+each motor's ctrlrange times its gear. Held over the control step (zero-order
+hold at every RK4 stage). Finite actions outside the bounds are clipped to
+them; a wrong shape or a non-finite value raises ValueError. With ``law=`` the
+action is ignored (pass anything, e.g. zeros or None).
 
-Observation (an OrderedDict of float64 arrays):
-    "state"      (n,)   [y, y', ...] as measured: the true state plus the
-                        scenario's noise (one draw per physics step, from
-                        noise.seed), exactly what the law sees in a run
-    "reference"  (n+1,) [y_d, y_d', ..., y_d^(n)] at time t
-    "t"          ()     simulation time [s]
+Observation (an OrderedDict of float64 arrays; J = () for 1-DOF plants, (m,) for arms):
+    "state"      (n,)+J   [y, y', ...] as measured: the true state plus the
+                          scenario's noise (one draw per physics step, from
+                          noise.seed), exactly what the law sees in a run;
+                          on an arm (2, m) = [q; q']
+    "reference"  (n+1,)+J [y_d, y_d', ..., y_d^(n)] at time t
+    "t"          ()       simulation time [s]
     "theta"      (n_theta,) true parameters, ordered as ``task.param_names``;
-                        only with ``privileged=True``
+                          only with ``privileged=True``
 n is the plant's order (2, or 3 with a thruster lag); y is in m (heave) or rad (arm).
 
-Reward: -sum over the step's physics steps j of (y_d(t_j+1) - y(t_j+1))^2 * dt,
-the squared tracking error of the true output at the end of each physics
-step times the physics step: the integral of the squared error over the
-control step by the right-endpoint rule [m^2*s or rad^2*s]. So an episode's
-return is about -duration * (RMS tracking error)^2. (It is non-finite if the
-state is; that step is LAST with discount 0.)
+Reward: -sum over the step's physics steps j of |y_d(t_j+1) - y(t_j+1)|^2 * dt,
+the squared tracking error (summed over joints on an arm) of the true output
+at the end of each physics step times the physics step: the integral of the
+squared error over the control step by the right-endpoint rule [m^2*s or
+rad^2*s]. So an episode's return is about -duration * (RMS tracking error)^2.
+(It is non-finite if the state is; that step is LAST with discount 0.)
+
+On an arm the scenario's law (Slotine-Li, computed torque or PD+gravity) is
+rebuilt with every episode's plant, since it reads that plant's regressor;
+``law=`` takes None or "scenario" there, and ``law_policy`` the scenario's law.
 
 The law as the policy (``law="scenario"`` or a law object): the law runs
 inside MuJoCo's control callback at every evaluation of the dynamics, with the
@@ -85,8 +93,9 @@ from dm_env import specs  # noqa: E402
 from adaptive_mj import scenario as scenario_io  # noqa: E402
 from adaptive_mj.build import Setup, build  # noqa: E402
 from adaptive_mj.errors import ScenarioError  # noqa: E402
-from adaptive_mj.loop import _Controller, _divergence  # noqa: E402
+from adaptive_mj.loop import _Controller, _divergence, plant_order  # noqa: E402
 from adaptive_mj.metrics import clean_json, summary as make_summary  # noqa: E402
+from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402
 from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402
 from adaptive_mj.trajectory import Trajectory  # noqa: E402
 
@@ -117,10 +126,7 @@ def load(scenario, *, law=None, log: str | os.PathLike | None = None, seed: int 
     """
     scn = _scenario(scenario, overrides=tuple(overrides), seed=seed)
     setup = build(scn)
-    if scn.plant.kind == "manipulator":
-        raise ScenarioError(f"{scn.source}: adaptive_mj.env supports 1-DOF plants for now; run plant.kind = "
-                            "'manipulator' with adaptive-mj run, sweep or bench")
-    if not isinstance(setup.plant, MujocoPlant):
+    if not isinstance(setup.plant, (MujocoPlant, ManipulatorPlant)):
         raise ScenarioError(f"{scn.source}: adaptive_mj.env needs a MuJoCo plant, got plant.kind = "
                             f"{scn.plant.kind!r} with plant.backend = {scn.plant.backend!r}")
     physics = PlantPhysics.of(setup.plant)
@@ -205,23 +211,35 @@ class TrackingTask(control.Task):
         self.n_sub_steps = int(n_sub_steps)
         self.log_dir = log_dir
         self.log_paths: list[Path] = []
-        self.order = plant.form.order
+        self.order = plant_order(plant)
+        self.joint_shape = tuple(getattr(plant, "joint_shape", ()))  # () for 1-DOF plants, (m,) for arms
         self.param_names = tuple(setup.law.names)
         self.theta_hat0 = np.array(setup.theta_hat0, dtype=float)  # (n_theta,) the law's start
         self.drives_law = law is not None  # the law, not the agent, supplies the control
-        if law is None or (isinstance(law, str) and law == SCENARIO_LAW):
+        # The scenario's law is rebuilt with each episode's plant (an arm's law reads that plant's
+        # regressor); a law object passed in serves every episode (1-DOF laws are pure).
+        self._own_law = law is None or (isinstance(law, str) and law == SCENARIO_LAW)
+        if self._own_law:
             law = setup.law
         elif isinstance(law, str):
             raise ValueError(f"law must be None, {SCENARIO_LAW!r} or a law object, got {law!r}")
+        elif self.joint_shape:
+            raise ValueError(f"on a manipulator, law must be None or {SCENARIO_LAW!r} (the Slotine-Li law is "
+                             "built with each episode's plant, whose regressor it reads); set its gains in the "
+                             "scenario's [law] table")
         elif law.order != self.order:
             raise ValueError(f"law of order {law.order} on a plant of order {self.order}")
         elif tuple(law.names) != self.param_names:
             raise ValueError(f"law parameters {tuple(law.names)} differ from the scenario's "
                              f"{self.param_names}")
-        self.law = law  # laws are pure, so one object serves every episode
+        self.law = law
         lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (-math.inf, math.inf)
-        self._action_spec = specs.BoundedArray((1,), np.float64, np.full(1, lo), np.full(1, hi), name="u")
-        fields = [("state", (self.order,)), ("reference", (self.order + 1,)), ("t", ())]
+        shape = self.joint_shape or (1,)
+        self._action_spec = specs.BoundedArray(shape, np.float64, np.broadcast_to(lo, shape).astype(float),
+                                               np.broadcast_to(hi, shape).astype(float),
+                                               name="tau" if self.joint_shape else "u")
+        fields = [("state", (self.order,) + self.joint_shape), ("reference", (self.order + 1,) + self.joint_shape),
+                  ("t", ())]
         if self.privileged:
             fields.append(("theta", (len(self.param_names),)))
         self._observation_spec = collections.OrderedDict(
@@ -235,6 +253,8 @@ class TrackingTask(control.Task):
     def initialize_episode(self, physics: PlantPhysics) -> None:
         self.close()
         setup = build(self.scenario)
+        if self._own_law:
+            self.law = setup.law
         physics.use(setup.plant)
         recorder = None
         if self.log_dir is not None:
@@ -252,12 +272,16 @@ class TrackingTask(control.Task):
     def before_step(self, action, physics) -> None:
         if self.drives_law:
             return
+        spec = self._action_spec
         u = np.asarray(action, dtype=np.float64)
-        if u.shape != (1,):
-            raise ValueError(f"action must have shape (1,) (the control u), got shape {u.shape}")
-        if not np.isfinite(u[0]):
-            raise ValueError(f"action u must be finite, got {u[0]}")
-        self._episode.hold(float(np.clip(u[0], self._action_spec.minimum[0], self._action_spec.maximum[0])))
+        if u.shape != spec.shape:
+            what = f"the joint torques tau of {', '.join(self._episode.joint_names)}" if self.joint_shape \
+                else "the control u"
+            raise ValueError(f"action must have shape {spec.shape} ({what}), got shape {u.shape}")
+        if not np.all(np.isfinite(u)):
+            raise ValueError(f"action {spec.name} must be finite, got {u.tolist()}")
+        u = np.clip(u, spec.minimum, spec.maximum)
+        self._episode.hold(u if self.joint_shape else float(u[0]))
 
     def get_observation(self, physics) -> collections.OrderedDict:
         ep = self._episode
@@ -310,8 +334,9 @@ class TrackingTask(control.Task):
 class _Episode:
     """One episode of a scenario: ``loop.run``'s step body, driven one agent step at a time.
 
-    Rows are kept per physics step k: t (N,) [s], x (N, n) true state, u (N,)
-    applied control, s (N,), ref (N, n+1), theta_hat and theta (N, n_theta).
+    Rows are kept per physics step k: t (N,) [s], x (N, n)+J true state, u (N,)+J
+    applied control, s (N,)+J, ref (N, n+1)+J, theta_hat and theta (N, n_theta),
+    where J is the plant's joint shape: () for 1-DOF plants, (m,) for an arm.
     """
 
     def __init__(self, scn, setup: Setup, *, law, drive: bool, n_steps: int, control_dt: float,
@@ -321,7 +346,9 @@ class _Episode:
         self.plant = plant
         self.law = law
         self.reference = setup.reference
-        self.order = plant.form.order
+        self.order = plant_order(plant)
+        self.joint_shape = js = tuple(getattr(plant, "joint_shape", ()))
+        self.joint_names = tuple(getattr(plant, "joint_names", ()))
         self.dt = plant.dt
         self.control_dt = control_dt
         self.n_steps = n_steps
@@ -333,15 +360,16 @@ class _Episode:
         self.controller = None
         if drive:
             self.controller = _Controller(law, setup.reference, self.theta_hat0, plant.ctrl_range,
-                                          self.order, plant.stages, plant.dt)
+                                          self.order, plant.stages, plant.dt, js)
             self._policy = self.controller
         else:
             self._policy = lambda t, x: self._u
-        self._u = 0.0
+        self._u = np.zeros(js) if js else 0.0
         self.noise = self._draw()  # the noise of the coming physics step
         n, n_theta = n_steps, len(self.theta_hat0)
-        self.t, self.x, self.u, self.s = np.empty(n), np.empty((n, self.order)), np.empty(n), np.empty(n)
-        self.ref = np.empty((n, self.order + 1))
+        self.t, self.x = np.empty(n), np.empty((n, self.order) + js)
+        self.u, self.s = np.empty((n,) + js), np.empty((n,) + js)
+        self.ref = np.empty((n, self.order + 1) + js)
         self.theta_hat, self.theta = np.empty((n, n_theta)), np.empty((n, n_theta))
         self.k = 0
         self.status, self.reason = "ok", ""
@@ -365,13 +393,16 @@ class _Episode:
     def _draw(self) -> np.ndarray | None:
         return self.rng.normal(0.0, self.noise_std) if self.noise_std is not None else None
 
-    def hold(self, u: float) -> None:
-        """The agent's control [N or N*m] for the coming agent step (already clipped)."""
+    def hold(self, u) -> None:
+        """The agent's control for the coming agent step (already clipped): a float [N or N*m],
+        or (m,) joint torques [N*m or N] for an arm."""
         self._u = u
 
     def measured_state(self) -> np.ndarray:
-        """(n,) the state the law sees at the coming step: true state + that step's noise."""
+        """(n,)+J the state the law sees at the coming step: true state + that step's noise."""
         x = self.plant.observe()
+        if self.joint_shape:  # a law called outside the callback (law_policy) reads Y at this state
+            self.plant.update_kinematics()
         return x + self.noise if self.noise is not None else x
 
     def advance(self, n_sub: int) -> None:
@@ -394,7 +425,7 @@ class _Episode:
             self._flush()
 
     def _one_step(self) -> float:
-        """One physics step, as in loop.run; returns -(y_d - y)^2 * dt at its end."""
+        """One physics step, as in loop.run; returns -|y_d - y|^2 * dt at its end."""
         plant, k, ctrl = self.plant, self.k, self.controller
         t_k = plant.time
         self.t[k] = t_k
@@ -423,12 +454,15 @@ class _Episode:
             self.status, self.reason = "diverged", reason
         elif self.k < self.n_steps:
             self._apply_due_events()
-        y_tilde = float(self.reference(plant.time, 0)[0]) - float(plant.observe()[0])
-        return -(y_tilde * y_tilde) * self.dt
+        y_tilde = np.asarray(self.reference(plant.time, 0)[0]) - plant.observe()[0]
+        return -float(np.sum(y_tilde * y_tilde)) * self.dt
 
     def _V(self, rows: slice) -> np.ndarray:
         if self.controller is None:
             return np.full(rows.stop - rows.start, np.nan)
+        if self.joint_shape:  # V = ½ sᵀ M(q) s + ...: M at the logged q, as loop.run
+            return self.law.lyapunov(self.s[rows], self.theta_hat[rows], self.theta[rows],
+                                     M=self.plant.mass_matrices(self.x[rows, 0]))
         return self.law.lyapunov(self.s[rows], self.theta_hat[rows], self.theta[rows])
 
     def _flush(self) -> None:
@@ -444,7 +478,7 @@ class _Episode:
                           s=self.s[keep].copy(), ref=self.ref[keep].copy(),
                           theta_hat=self.theta_hat[keep].copy(), theta=self.theta[keep].copy(),
                           V=self._V(keep), names=tuple(self.law.names), status=self.status,
-                          reason=self.reason,
+                          reason=self.reason, joint_names=self.joint_names,
                           meta={"dt": self.dt, "order": self.order, "events": list(self.applied)})
 
     def close_log(self, status: str, reason: str) -> None:
@@ -462,7 +496,7 @@ class _Episode:
 
 
 def law_policy(env: control.Environment, law=SCENARIO_LAW) -> LawPolicy:
-    """The scenario's law (or `law`) as an ordinary agent: policy(timestep) -> action (1,)."""
+    """The scenario's law (or `law`) as an ordinary agent: policy(timestep) -> action (1,) or (m,)."""
     return LawPolicy(env, law)
 
 
@@ -481,10 +515,14 @@ class LawPolicy:
         task = env.task
         if task.drives_law:
             raise ValueError("law_policy needs an environment the agent drives (load without law=)")
+        self._task = task
         if isinstance(law, str):
             if law != SCENARIO_LAW:
                 raise ValueError(f"law must be {SCENARIO_LAW!r} or a law object, got {law!r}")
-            law = task.law
+            law = None  # the task's current law, read at each call (an arm's is rebuilt per episode)
+        elif task.joint_shape:
+            raise ValueError(f"on a manipulator, law_policy takes {SCENARIO_LAW!r} only (the Slotine-Li law "
+                             "reads the episode plant's regressor)")
         elif law.order != task.order or tuple(law.names) != task.param_names:
             raise ValueError(f"law of order {law.order} with parameters {tuple(law.names)} does not fit "
                              f"the plant (order {task.order}, parameters {task.param_names})")
@@ -499,6 +537,8 @@ class LawPolicy:
         if timestep.first():
             self.theta_hat = self.theta_hat0.copy()
         obs = timestep.observation
-        out = self.law(float(obs["t"]), obs["state"], obs["reference"], self.theta_hat)
+        law = self.law if self.law is not None else self._task.law
+        out = law(float(obs["t"]), obs["state"], obs["reference"], self.theta_hat)
         self.theta_hat = self.theta_hat + self._h * np.asarray(out.theta_hat_dot, dtype=float)
-        return np.clip(np.array([out.u], dtype=np.float64), self._lo, self._hi)
+        u = np.array(out.u, dtype=np.float64).reshape(self._lo.shape)
+        return np.clip(u, self._lo, self._hi)

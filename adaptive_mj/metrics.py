@@ -55,7 +55,7 @@ def joint_metrics(traj: Trajectory) -> dict:
     e = traj.joint_errors
     tail = tail_mask(traj)
     norm = np.linalg.norm(e, axis=1)
-    u = np.asarray(traj.u).reshape(len(traj.t), -1)
+    u = np.asarray(traj.u).reshape(len(traj.t), max(1, len(traj.joint_names)))
     per = lambda f: {j: f(i) for i, j in enumerate(traj.joint_names)}  # noqa: E731
     return {
         "rms_tracking_error_tail_per_joint": per(lambda i: _rms(e[tail, i])),

@@ -102,7 +102,7 @@ def plot_joints(traj: Trajectory, path: str | Path, *, title: str = "") -> Path:
         ax.legend(fontsize=8)
     fig.axes[0].set_title(title or "tracking error per joint")
     ax = fig.add_subplot(grid[err_rows, :])
-    u = np.asarray(traj.u).reshape(len(t), -1)
+    u = np.asarray(traj.u).reshape(len(t), len(traj.joint_names))
     for i, name in enumerate(traj.joint_names):
         ax.plot(t, u[:, i], lw=0.7, label=name)
     ax.set_ylabel(r"joint torque $\tau$ [N m]")

@@ -51,7 +51,8 @@ class Trajectory:
     @property
     def joint_errors(self) -> np.ndarray:
         """(N, m) tracking error per joint (m = 1 for the 1-DOF plants)."""
-        return self.y_tilde.reshape(len(self.t), -1)
+        y = self.y_tilde
+        return y[:, None] if y.ndim == 1 else y
 
     @property
     def qd(self) -> np.ndarray:

@@ -124,9 +124,66 @@ def test_manipulator_scenario_errors_are_one_line(override, match, capsys):
     assert re.search(match, err[0]), err[0]
 
 
-def test_dm_env_refuses_a_manipulator_with_one_line():
-    from adaptive_mj import env
-    from adaptive_mj.errors import ScenarioError
+ARM_ENV = ("simulation.duration=0.2", "events=[{t = 0.1, kind = 'payload_swap', payload = 'sphere'}]")
 
-    with pytest.raises(ScenarioError, match=r"adaptive_mj.env supports 1-DOF plants for now.*manipulator"):
-        env.load("ur5e_payload_swap", overrides=("simulation.duration=0.1", "events=[]"))
+
+def _arm_python_run(overrides):
+    from adaptive_mj.build import build
+    from adaptive_mj.loop import run
+    from adaptive_mj.scenario import SCENARIOS_DIR, load as load_scenario
+
+    scn = load_scenario(SCENARIOS_DIR / "ur5e_payload_swap.toml", overrides=overrides)
+    s = build(scn)
+    return run(s.plant, s.law, s.reference, duration=scn.simulation.duration, theta_hat0=s.theta_hat0,
+               events=s.events, native=False)
+
+
+def test_dm_env_on_the_arm_has_per_joint_specs_and_runs_the_law_bit_identically():
+    """The action is the 6 joint torques with the motors' ranges; the law as the policy (through
+    the swap event) gives exactly loop.run's rows, V included (M(q) from the plant)."""
+    from adaptive_mj import env as amj_env
+
+    env = amj_env.load("ur5e_payload_swap", overrides=ARM_ENV, law="scenario", n_sub_steps=3)
+    plant = build(scenario.load(scenario.SCENARIOS_DIR / "ur5e_payload_swap.toml", overrides=ARM_ENV)).plant
+    spec = env.action_spec()
+    assert spec.shape == (6,) and spec.name == "tau"
+    np.testing.assert_array_equal(spec.minimum, plant.ctrl_range[0])
+    np.testing.assert_array_equal(spec.maximum, plant.ctrl_range[1])
+    assert env.observation_spec()["state"].shape == (2, 6)
+    assert env.observation_spec()["reference"].shape == (3, 6)
+    ts = env.reset()
+    while not ts.last():
+        ts = env.step(None)
+    assert ts.discount == 1.0
+    got, expected = env.task.trajectory(), _arm_python_run(ARM_ENV)
+    assert got.joint_names == expected.joint_names == plant.joint_names
+    for field in ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V"):
+        np.testing.assert_array_equal(getattr(got, field), getattr(expected, field), err_msg=field)
+    assert got.meta["events"] == expected.meta["events"]
+    assert expected.theta[0, 0] != expected.theta[-1, 0]  # the swap changed the payload mass
+
+
+def test_dm_env_arm_agent_actions_are_checked_and_law_policy_tracks(tmp_path):
+    from adaptive_mj import env as amj_env
+    from adaptive_mj.replay import read_log
+
+    overrides = ("simulation.duration=0.3", "events=[]")
+    env = amj_env.load("ur5e_payload_swap", overrides=overrides, log=tmp_path)
+    env.reset()
+    with pytest.raises(ValueError, match=r"action must have shape \(6,\) \(the joint torques tau of shoulder_pan"):
+        env.step(np.zeros(1))
+    with pytest.raises(ValueError, match="action tau must be finite"):
+        env.step(np.full(6, np.nan))
+    policy = amj_env.law_policy(env)
+    ts = env.reset()
+    rewards = []
+    while not ts.last():
+        ts = env.step(policy(ts))
+        rewards.append(ts.reward)
+    traj = env.task.trajectory()
+    in_loop = np.max(np.abs(_arm_python_run(overrides).y_tilde))  # u held over RK4 stages, Euler estimates
+    assert np.max(np.abs(traj.y_tilde)) < 1.5 * in_loop < 1e-2, (np.max(np.abs(traj.y_tilde)), in_loop)
+    assert sum(rewards) == pytest.approx(-np.sum(traj.y_tilde[1:] ** 2) * 0.001, rel=0.05)
+    logged = read_log(env.task.log_paths[-1])
+    assert logged.status == "ok" and logged.summary["policy"] == "agent"
+    assert logged.trajectory.joint_names == traj.joint_names and logged.trajectory.u.shape[1:] == (6,)

@@ -387,6 +387,13 @@ class ManipulatorPlant:
         self.measure(self.data, x)
         return x
 
+    def update_kinematics(self) -> None:
+        """Bring the position-dependent quantities the regressor reads (xpos, xmat, cdof,
+        subtree_com, cinert) to the current q, for a law evaluated outside the control
+        callback (dm_env's law_policy). Physics is unchanged: mj_step recomputes them."""
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_comPos(self.model, self.data)
+
     def true_theta(self) -> np.ndarray:
         """(n_params,) true π (standard, or base = P π) from the compiled model, re-read after events."""
         if self._theta is None:
