@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from adaptive_mj import analysis, units  # noqa: E402
-from adaptive_mj import scenario as sc  # noqa: E402
+from adaptive_mj.setup import scenario as sc  # noqa: E402
 from adaptive_mj.parallel import Job, JobResult  # noqa: E402
 
 SCN = sc.SCENARIOS_DIR
@@ -258,7 +258,7 @@ NOMINAL_FRACTION = {"d": 0.81, "b": 0.75, "c": 1.5}  # the designer's guess, as 
 def _robust_gain(scn_path: Path, nominal: dict, margin: float = 1.1) -> float:
     """K = margin * bound on |model error| = |d̃| max|ṡ_r| + |b̃| max y'^2 + |c̃| g along y_d = cos t
     (max|ṡ_r| ≈ max|y_d''| = 1, max y' = 1), with the true θ read from the compiled model."""
-    from adaptive_mj.build import build
+    from adaptive_mj.setup.build import build
 
     setup = build(sc.load(scn_path))
     d, b, c = setup.plant.true_theta()
@@ -267,7 +267,7 @@ def _robust_gain(scn_path: Path, nominal: dict, margin: float = 1.1) -> float:
 
 
 def _second_order(quick: bool, logs: Path) -> Section:
-    from adaptive_mj.build import build
+    from adaptive_mj.setup.build import build
 
     path = SCN / "heave_tracking.toml"
     truth = build(sc.load(path)).plant.true_theta()

@@ -77,7 +77,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _scenario_path(arg: str) -> Path:
-    from adaptive_mj.scenario import SCENARIOS_DIR
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR
 
     path = Path(arg)
     if not path.exists() and "/" not in arg:
@@ -122,7 +122,7 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
 
 
 def cmd_list(args) -> int:
-    from adaptive_mj import scenario as sc
+    from adaptive_mj.setup import scenario as sc
 
     for path in sc.bundled():
         try:
@@ -135,7 +135,7 @@ def cmd_list(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from adaptive_mj import scenario as sc
+    from adaptive_mj.setup import scenario as sc
     from adaptive_mj.runner import execute, reserve_log_path
 
     scn = sc.load(_scenario_path(args.scenario), overrides=args.overrides, seed=args.seed)

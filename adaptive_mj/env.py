@@ -5,7 +5,7 @@
     env = adaptive_mj.env.load("heave_tracking", law="scenario")  # the scenario's law does
 
 The physics is the scenario's own plant: each episode calls
-``adaptive_mj.build.build(scenario)`` and the dm_control ``Physics`` wraps that
+``adaptive_mj.setup.build.build(scenario)`` and the dm_control ``Physics`` wraps that
 plant's MjModel and MjData (shared, not copied). The plant stays the only
 code that knows joint and actuator ids and true parameters, and an episode is
 stepped exactly as ``adaptive-mj run`` steps a run (``loop.run``): one
@@ -90,8 +90,8 @@ from dm_control.mujoco import wrapper  # noqa: E402
 from dm_control.rl import control  # noqa: E402
 from dm_env import specs  # noqa: E402
 
-from adaptive_mj import scenario as scenario_io  # noqa: E402
-from adaptive_mj.build import Setup, build  # noqa: E402
+from adaptive_mj.setup import scenario as scenario_io  # noqa: E402
+from adaptive_mj.setup.build import Setup, build  # noqa: E402
 from adaptive_mj.errors import ScenarioError  # noqa: E402
 from adaptive_mj.loop import _Controller, _divergence, plant_order  # noqa: E402
 from adaptive_mj.metrics import clean_json, summary as make_summary  # noqa: E402

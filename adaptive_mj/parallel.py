@@ -78,8 +78,8 @@ def decimate(traj: Trajectory, every: int) -> Trajectory:
 def run_job(job: Job) -> JobResult:
     """Load, run and log one job (in a worker or in-process)."""
     from adaptive_mj import analysis
-    from adaptive_mj import scenario as sc
-    from adaptive_mj.build import build
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.setup.build import build
     from adaptive_mj.runner import execute
 
     try:
@@ -213,8 +213,8 @@ def _worker_context(jobs: Sequence[Job]):
 def _prewarm(jobs: Sequence[Job]) -> None:
     """Compile the native callback of each distinct scenario file among the jobs (in this process)."""
     from adaptive_mj import native
-    from adaptive_mj import scenario as sc
-    from adaptive_mj.build import build
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.setup.build import build
 
     seen = set()
     for job in jobs:

@@ -28,7 +28,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from adaptive_mj import scenario as sc
+from adaptive_mj.setup import scenario as sc
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.metrics import clean_json, metrics as run_metrics
 from adaptive_mj.parallel import Job, JobResult, progress_printer, run_jobs

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from adaptive_mj import scenario as sc
-from adaptive_mj.build import ModelSource
+from adaptive_mj.setup import scenario as sc
+from adaptive_mj.setup.build import ModelSource
 from adaptive_mj.runner import execute
 
 _FIELDS = ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V")

@@ -25,8 +25,8 @@ from pathlib import Path
 
 import mujoco
 
-from adaptive_mj import scenario as sc
-from adaptive_mj.build import build
+from adaptive_mj.setup import scenario as sc
+from adaptive_mj.setup.build import build
 from adaptive_mj.loop import run
 from adaptive_mj.parallel import Job, run_jobs
 
@@ -100,7 +100,7 @@ def sweep_throughput(jobs: int, runs: int) -> float:
 PEAK_RSS_CODE = """
 import sys, tempfile
 from pathlib import Path
-from adaptive_mj import scenario as sc
+from adaptive_mj.setup import scenario as sc
 from adaptive_mj.runner import execute
 scn = sc.load(sys.argv[1], overrides=['simulation.duration=600.0'])
 with tempfile.TemporaryDirectory() as tmp:

@@ -13,13 +13,13 @@ from dm_control.rl import control
 from dm_env import specs, test_utils
 
 from adaptive_mj import env as amj_env
-from adaptive_mj.build import build
+from adaptive_mj.setup.build import build
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.loop import run
 from adaptive_mj.metrics import metrics
 from adaptive_mj.replay import read_log
 from adaptive_mj.runner import execute
-from adaptive_mj.scenario import SCENARIOS_DIR, load as load_scenario
+from adaptive_mj.setup.scenario import SCENARIOS_DIR, load as load_scenario
 
 SHORT = ("simulation.duration=0.05",)  # 50 physics steps of 1 ms
 SWAP_AT_50MS = ("simulation.duration=0.1", "events=[{t = 0.05, kind = 'payload_mass', value = 2.0}]")

@@ -7,7 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from adaptive_mj import record, scenario
+from adaptive_mj import record
+
+from adaptive_mj.setup import scenario
 from adaptive_mj.cli import main
 from adaptive_mj.replay import read_log
 from adaptive_mj.runner import execute

@@ -574,7 +574,7 @@ def test_no_input_bytes_escape_as_another_exception(tmp_path):
 @pytest.fixture(scope="module")
 def real_log(tmp_path_factory):
     """A 3 s log of a real run: the MuJoCo heave vehicle with sensor noise (model attached)."""
-    from adaptive_mj import scenario as sc
+    from adaptive_mj.setup import scenario as sc
     from adaptive_mj.runner import execute
 
     path = tmp_path_factory.mktemp("real") / "heave.mcap"

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from adaptive_mj import scenario as sc
-from adaptive_mj.build import build
+from adaptive_mj.setup import scenario as sc
+from adaptive_mj.setup.build import build
 from adaptive_mj.errors import ModelError, ScenarioError
 
 GOOD = """

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from adaptive_mj import scenario as sc
+from adaptive_mj.setup import scenario as sc
 from adaptive_mj import sweep
 from adaptive_mj.cli import main
 from adaptive_mj.errors import AdaptiveMJError, ScenarioError

@@ -18,7 +18,7 @@ from typing import Any
 from adaptive_mj.errors import ScenarioError
 
 SCHEMA_VERSION = 1
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 MODELS_DIR = REPO / "models"
 SCENARIOS_DIR = REPO / "scenarios"
 
