@@ -34,7 +34,7 @@ def main_table(rows: list[dict]) -> str:
 def main_bench(args) -> int:
     from adaptive_mj.bench_catalogue import catalogue
 
-    from adaptive_mj.runner import new_output_dir
+    from adaptive_mj.sim.runner import new_output_dir
 
     out = new_output_dir(args.output, "bench-quick" if args.quick else "bench")
     sections = catalogue(quick=args.quick, logs=out / "logs")

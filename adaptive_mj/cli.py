@@ -136,7 +136,7 @@ def cmd_list(args) -> int:
 
 def cmd_run(args) -> int:
     from adaptive_mj.setup import scenario as sc
-    from adaptive_mj.runner import execute, reserve_log_path
+    from adaptive_mj.sim.runner import execute, reserve_log_path
 
     scn = sc.load(_scenario_path(args.scenario), overrides=args.overrides, seed=args.seed)
     log = reserve_log_path(scn, out=args.output, force=args.force)
@@ -221,7 +221,7 @@ def _time_range(text: str | None) -> tuple[float, float] | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from adaptive_mj.interrupt import stop_on_signals
+    from adaptive_mj.sim.interrupt import stop_on_signals
 
     args = _parser().parse_args(argv)
     try:

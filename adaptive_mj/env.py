@@ -93,7 +93,7 @@ from dm_env import specs  # noqa: E402
 from adaptive_mj.setup import scenario as scenario_io  # noqa: E402
 from adaptive_mj.setup.build import Setup, build  # noqa: E402
 from adaptive_mj.errors import ScenarioError  # noqa: E402
-from adaptive_mj.loop import _Controller, _divergence, plant_order  # noqa: E402
+from adaptive_mj.sim.loop import _Controller, _divergence, plant_order  # noqa: E402
 from adaptive_mj.metrics import clean_json, summary as make_summary  # noqa: E402
 from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402
 from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402
@@ -259,7 +259,7 @@ class TrackingTask(control.Task):
         recorder = None
         if self.log_dir is not None:
             from adaptive_mj.record import Recorder
-            from adaptive_mj.runner import log_header, reserve_log_path
+            from adaptive_mj.sim.runner import log_header, reserve_log_path
 
             path = reserve_log_path(self.scenario, directory=self.log_dir)
             recorder = Recorder(path, log_header(self.scenario, setup))

@@ -32,7 +32,7 @@ class SimulationDiverged(AdaptiveMJError, RuntimeError):
 
 class Interrupted(KeyboardInterrupt):
     """SIGINT or SIGTERM arrived; the run in progress stops cleanly, its log closed with
-    status "interrupted". adaptive_mj.interrupt's handler raises it for both signals (in the
+    status "interrupted". adaptive_mj.sim.interrupt's handler raises it for both signals (in the
     CLI, and for SIGTERM in bench/sweep workers); loop.run turns a plain KeyboardInterrupt
     into one.
 

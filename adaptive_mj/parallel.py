@@ -28,7 +28,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
-from adaptive_mj import interrupt
+from adaptive_mj.sim import interrupt
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
 from adaptive_mj.trajectory import Trajectory
 
@@ -80,7 +80,7 @@ def run_job(job: Job) -> JobResult:
     from adaptive_mj import analysis
     from adaptive_mj.setup import scenario as sc
     from adaptive_mj.setup.build import build
-    from adaptive_mj.runner import execute
+    from adaptive_mj.sim.runner import execute
 
     try:
         for name in job.extras:
@@ -212,7 +212,7 @@ def _worker_context(jobs: Sequence[Job]):
 
 def _prewarm(jobs: Sequence[Job]) -> None:
     """Compile the native callback of each distinct scenario file among the jobs (in this process)."""
-    from adaptive_mj import native
+    from adaptive_mj.sim import native
     from adaptive_mj.setup import scenario as sc
     from adaptive_mj.setup.build import build
 
@@ -226,7 +226,7 @@ def _prewarm(jobs: Sequence[Job]) -> None:
             if native.supported(setup.plant, setup.law):
                 native.compiled(setup.plant.form)
             elif getattr(setup.plant, "joint_shape", ()):
-                from adaptive_mj import native_manipulator
+                from adaptive_mj.sim import native_manipulator
 
                 if native_manipulator.supported(setup.plant, setup.law):
                     native_manipulator.compiled()

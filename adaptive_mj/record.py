@@ -22,7 +22,7 @@ and flushing the file, so a run killed at any instant leaves a readable file
 that holds every row of every completed `write_rows` call. The loop calls
 `write_rows` every `sink_every` physics steps (1000 by default: 1 s at
 dt = 1 ms), so that block is the most a killed run loses. A stop signal
-(SIGINT, SIGTERM, see adaptive_mj.interrupt) never cuts a write or the close
+(SIGINT, SIGTERM, see adaptive_mj.sim.interrupt) never cuts a write or the close
 in half: it is raised once the call is done.
 """
 from __future__ import annotations
@@ -41,7 +41,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 from mcap.opcode import Opcode
 from mcap.records import MessageIndex
 
-from adaptive_mj.interrupt import deferred
+from adaptive_mj.sim.interrupt import deferred
 
 LOG_FORMAT_VERSION = 2  # 2: joint_names/notes in the header, per-joint fields for m joints (1: 1-DOF only)
 
@@ -312,7 +312,7 @@ def _ns(t: float) -> int:
 
 
 def _whole(method):
-    """A stop signal waits until the method is done (adaptive_mj.interrupt.deferred)."""
+    """A stop signal waits until the method is done (adaptive_mj.sim.interrupt.deferred)."""
     @functools.wraps(method)
     def whole(*args, **kwargs):
         with deferred():

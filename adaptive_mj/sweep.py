@@ -489,7 +489,7 @@ def plan(path: Path, points: Sequence[dict[str, Any]], *, seeds: int, overrides:
 
 def main_sweep(args) -> int:
     """Run the sweep the CLI parsed (see the module docstring); returns the exit code."""
-    from adaptive_mj.runner import new_output_dir
+    from adaptive_mj.sim.runner import new_output_dir
 
     if args.seeds < 1:
         raise ScenarioError(f"--seeds must be an integer >= 1, got {args.seeds}")

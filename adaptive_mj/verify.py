@@ -6,7 +6,7 @@ import numpy as np
 
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import ModelSource
-from adaptive_mj.runner import execute
+from adaptive_mj.sim.runner import execute
 
 _FIELDS = ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V")
 

@@ -27,7 +27,7 @@ import mujoco
 
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
-from adaptive_mj.loop import run
+from adaptive_mj.sim.loop import run
 from adaptive_mj.parallel import Job, run_jobs
 
 REPO = Path(__file__).resolve().parents[1]
@@ -60,7 +60,7 @@ def logged(name: str, steps: int, rate_hz: float | None) -> tuple[float, int]:
     """Closed loop with the MCAP recorder as the sink; times run() + close() like `loop` times
     run(), so set-up (model compile, log header) is outside both. Returns (µs/step, bytes)."""
     from adaptive_mj.record import Recorder
-    from adaptive_mj.runner import log_header
+    from adaptive_mj.sim.runner import log_header
 
     scn = _scenario(name, steps, [f"log.rate_hz={rate_hz!r}"] if rate_hz else [])
     setup = build(scn)
@@ -101,7 +101,7 @@ PEAK_RSS_CODE = """
 import sys, tempfile
 from pathlib import Path
 from adaptive_mj.setup import scenario as sc
-from adaptive_mj.runner import execute
+from adaptive_mj.sim.runner import execute
 scn = sc.load(sys.argv[1], overrides=['simulation.duration=600.0'])
 with tempfile.TemporaryDirectory() as tmp:
     execute(scn, log_path=Path(tmp) / 'run.mcap')

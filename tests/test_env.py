@@ -15,10 +15,10 @@ from dm_env import specs, test_utils
 from adaptive_mj import env as amj_env
 from adaptive_mj.setup.build import build
 from adaptive_mj.errors import ScenarioError
-from adaptive_mj.loop import run
+from adaptive_mj.sim.loop import run
 from adaptive_mj.metrics import metrics
 from adaptive_mj.replay import read_log
-from adaptive_mj.runner import execute
+from adaptive_mj.sim.runner import execute
 from adaptive_mj.setup.scenario import SCENARIOS_DIR, load as load_scenario
 
 SHORT = ("simulation.duration=0.05",)  # 50 physics steps of 1 ms

@@ -32,7 +32,7 @@ def test_law_code_imports_no_mujoco():
         """
         import sys
         import adaptive_mj.laws, adaptive_mj.reference, adaptive_mj.form
-        import adaptive_mj.loop, adaptive_mj.trajectory
+        import adaptive_mj.sim.loop, adaptive_mj.trajectory
         bad = sorted(m for m in sys.modules if m == 'mujoco' or m.startswith('mujoco.')
                      or m.startswith('dm_control'))
         assert not bad, bad
@@ -337,7 +337,7 @@ def _third_order_form() -> ModelForm:
 
 
 def test_s_dot_equals_s_r_dot_minus_highest_derivative_on_a_twin_run():
-    from adaptive_mj.loop import run
+    from adaptive_mj.sim.loop import run
 
     form = _third_order_form()
     theta = np.array([2.0, 0.8, 0.3, 1.1])

@@ -12,7 +12,7 @@ from adaptive_mj import record
 from adaptive_mj.setup import scenario
 from adaptive_mj.cli import main
 from adaptive_mj.replay import read_log
-from adaptive_mj.runner import execute
+from adaptive_mj.sim.runner import execute
 
 DATA = Path(__file__).parent / "data"
 

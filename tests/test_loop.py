@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from adaptive_mj.laws import LawStep, SlidingAdaptiveLaw
-from adaptive_mj.loop import Event, run
+from adaptive_mj.sim.loop import Event, run
 from adaptive_mj.plants import arm, heave, twin
 from adaptive_mj.plants.mujoco_plant import compile_xml_path
 from adaptive_mj.reference import Cosine

@@ -12,7 +12,7 @@ import pytest
 
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws import FirstOrderAdaptiveLaw, SlidingAdaptiveLaw
-from adaptive_mj.loop import run
+from adaptive_mj.sim.loop import run
 from adaptive_mj.plants import twin
 from adaptive_mj.reference import Cosine, SumOfSines
 

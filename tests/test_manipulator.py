@@ -8,7 +8,7 @@ import pytest
 
 from adaptive_mj.errors import ModelError
 from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
-from adaptive_mj.loop import run
+from adaptive_mj.sim.loop import run
 from adaptive_mj.plants import manipulator as mp
 from adaptive_mj.plants.arm import MODELS, build_arm_xml
 from adaptive_mj.reference import JointSumOfSines

@@ -10,7 +10,7 @@ from adaptive_mj import analysis
 from adaptive_mj.setup import scenario
 from adaptive_mj.setup.build import build
 from adaptive_mj.cli import main
-from adaptive_mj.runner import execute
+from adaptive_mj.sim.runner import execute
 
 
 def _run(name, *overrides):
@@ -131,7 +131,7 @@ ARM_ENV = ("simulation.duration=0.2", "events=[{t = 0.1, kind = 'payload_swap', 
 
 def _arm_python_run(overrides):
     from adaptive_mj.setup.build import build
-    from adaptive_mj.loop import run
+    from adaptive_mj.sim.loop import run
     from adaptive_mj.setup.scenario import SCENARIOS_DIR, load as load_scenario
 
     scn = load_scenario(SCENARIOS_DIR / "ur5e_payload_swap.toml", overrides=overrides)

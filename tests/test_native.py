@@ -4,9 +4,11 @@ events, dead-zone, baselines, Euler, and where a run diverges."""
 import numpy as np
 import pytest
 
-from adaptive_mj import native, run
+from adaptive_mj import run
+
+from adaptive_mj.sim import native
 from adaptive_mj.laws import DeadZone, DeadZoneOn, FixedNominalLaw, RobustSlidingLaw, SlidingAdaptiveLaw
-from adaptive_mj.loop import Event
+from adaptive_mj.sim.loop import Event
 from adaptive_mj.plants import arm, heave
 from adaptive_mj.reference import Cosine, SumOfSines
 

@@ -9,10 +9,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from adaptive_mj import native_manipulator as nm
+from adaptive_mj.sim import native_manipulator as nm
 from adaptive_mj.laws import DeadZone, DeadZoneOn
 from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
-from adaptive_mj.loop import run
+from adaptive_mj.sim.loop import run
 from adaptive_mj.plants import manipulator as mp
 from adaptive_mj.plants.arm import MODELS, build_arm_xml
 from adaptive_mj.reference import JointSumOfSines, JointWaypoints

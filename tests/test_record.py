@@ -575,7 +575,7 @@ def test_no_input_bytes_escape_as_another_exception(tmp_path):
 def real_log(tmp_path_factory):
     """A 3 s log of a real run: the MuJoCo heave vehicle with sensor noise (model attached)."""
     from adaptive_mj.setup import scenario as sc
-    from adaptive_mj.runner import execute
+    from adaptive_mj.sim.runner import execute
 
     path = tmp_path_factory.mktemp("real") / "heave.mcap"
     scn = sc.load(sc.SCENARIOS_DIR / "heave_tracking.toml",
@@ -646,7 +646,7 @@ def test_fuzz_random_bytes_and_random_cuts(real_log, tmp_path, data, magic, cut)
 @pytest.mark.skipif(not hasattr(signal, "SIGTERM"), reason="needs POSIX signals")
 def test_a_signal_during_write_rows_is_raised_after_the_whole_block(tmp_path):
     from adaptive_mj.errors import Interrupted
-    from adaptive_mj.interrupt import stop_on_signals
+    from adaptive_mj.sim.interrupt import stop_on_signals
 
     rows = synthetic(2000)
     path = tmp_path / "signalled.mcap"

@@ -186,7 +186,7 @@ def test_sigterm_to_bench_closes_every_log_and_leaves_no_worker(tmp_path):
 # shared 8-byte file, so the test knows how far the run had got when it was killed.
 _TRACED_RUN = textwrap.dedent("""
     import mmap, struct, sys
-    from adaptive_mj import runner
+    from adaptive_mj.sim import runner
     from adaptive_mj.cli import main
 
     with open(sys.argv[1], "r+b") as f:
@@ -251,7 +251,7 @@ def test_run_that_fails_to_start_leaves_no_file(tmp_path, capsys):
 
 
 def test_interrupted_before_the_log_opens_leaves_no_file(tmp_path, capsys, monkeypatch):
-    from adaptive_mj import runner
+    from adaptive_mj.sim import runner
 
     def interrupted_build(scn, **kw):
         raise KeyboardInterrupt
@@ -273,7 +273,7 @@ def test_force_keeps_the_old_log_when_the_new_run_cannot_start(tmp_path, capsys)
 
 
 def test_crash_mid_run_leaves_a_failed_log_that_replay_reports(tmp_path, capsys, monkeypatch):
-    from adaptive_mj import runner
+    from adaptive_mj.sim import runner
 
     build = runner.build
 

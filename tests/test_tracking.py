@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from adaptive_mj.laws import FirstOrderAdaptiveLaw, SlidingAdaptiveLaw
-from adaptive_mj.loop import run
+from adaptive_mj.sim.loop import run
 from adaptive_mj.plants import arm, heave, twin
 from adaptive_mj.reference import Cosine, Sine
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from adaptive_mj.laws import SlidingAdaptiveLaw
-from adaptive_mj.loop import run
+from adaptive_mj.sim.loop import run
 from adaptive_mj.plants import arm, twin
 from adaptive_mj.reference import Cosine, Sine
 

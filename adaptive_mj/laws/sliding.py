@@ -36,7 +36,7 @@ def sliding_terms(coeffs: np.ndarray, x: np.ndarray, ref: np.ndarray) -> tuple[f
 
     s = sum_i c_i ỹ^(i);  ṡ_r = y_d^(n) + sum_{i>=1} c_{i-1} ỹ^(i).
     Written as scalar loops so the same code also compiles with numba
-    (adaptive_mj.native) for MuJoCo's native control callback.
+    (adaptive_mj.sim.native) for MuJoCo's native control callback.
     """
     n = coeffs.shape[0]
     s = 0.0
@@ -62,7 +62,7 @@ def sliding_law(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, bo
         u = h^-1 (d̂ ṡ_r - f - phi p̂ + k s [+ K sat(s/Phi)])
         d̂' = ṡ_r s / gamma_d,   p̂' = -phi^T s / gamma_p
 
-    The Python laws below call it; adaptive_mj.native compiles this same function.
+    The Python laws below call it; adaptive_mj.sim.native compiles this same function.
     """
     s, s_r_dot, y_tilde = sliding_terms(coeffs, x, ref)
     phi = phi_fn(x)

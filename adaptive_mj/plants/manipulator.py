@@ -26,7 +26,7 @@ import mujoco
 import numpy as np
 
 from adaptive_mj.errors import ModelError
-from adaptive_mj.numba_util import with_globals as _with_globals
+from adaptive_mj.sim.numba_util import with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
 from adaptive_mj.plants.mujoco_plant import control_callback, new_warnings, scale_body_mass
 
@@ -222,7 +222,7 @@ class Regressor:
         self._kernel = kernel()
 
     def static_args(self):
-        """The model arrays the kernel takes, in its order (also used by adaptive_mj.native)."""
+        """The model arrays the kernel takes, in its order (also used by adaptive_mj.sim.native)."""
         m = self.model
         return (self.parent, self.dofadr, self.dofnum, self.rootid, self.body_col, self.body_known,
                 self.col_arm, self.col_damp, m.dof_armature, m.dof_damping)

@@ -181,7 +181,7 @@ class MujocoPlant:
 
     @contextlib.contextmanager
     def controlled_natively(self, cfunc) -> Iterator[None]:
-        """Install a compiled (numba cfunc) control callback for the block (see adaptive_mj.native)."""
+        """Install a compiled (numba cfunc) control callback for the block (see adaptive_mj.sim.native)."""
         with control_callback(cfunc.ctypes):
             yield
 

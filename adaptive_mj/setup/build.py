@@ -16,7 +16,7 @@ from adaptive_mj import reference as refs
 from adaptive_mj.errors import ModelError, ScenarioError
 from adaptive_mj.laws import (DeadZone, DeadZoneOn, FirstOrderAdaptiveLaw, FixedNominalLaw,
                               RobustSlidingLaw, SlidingAdaptiveLaw)
-from adaptive_mj.loop import Event
+from adaptive_mj.sim.loop import Event
 from adaptive_mj.setup.scenario import STATE_SIGNALS, Scenario
 
 

@@ -38,7 +38,7 @@ class Event:
 
 # Per stage count: increments a_i (θ̂_i = θ̂_k + h a_i k_{i-1}) and weights b_i. For the
 # classic RK4 tableau a_i are also the stage-time offsets c_i (MuJoCo evaluates stage i at
-# t + c_i h), which adaptive_mj.native uses to evaluate the reference ahead of a chunk.
+# t + c_i h), which adaptive_mj.sim.native uses to evaluate the reference ahead of a chunk.
 TABLEAU = {
     1: ((0.0,), (1.0,)),
     4: ((0.0, 0.5, 0.5, 1.0), (1 / 6, 1 / 3, 1 / 3, 1 / 6)),
@@ -123,7 +123,7 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
     state_bound: |x_i| above this counts as divergence.
     sink: receives the rows every `sink_every` steps and at the end, and each
     event as it is applied, so a killed run loses at most one block.
-    native: run the law as a compiled MuJoCo callback (adaptive_mj.native);
+    native: run the law as a compiled MuJoCo callback (adaptive_mj.sim.native);
     None = whenever the plant and law support it. The two paths agree to
     ~1e-12; on the native path a MuJoCo warning is detected per chunk of
     NATIVE_CHUNK steps instead of per step.
@@ -226,11 +226,11 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
                 sink.write_event(t_k, event.label)
 
     if joint_shape:  # a manipulator: its own compiled callback (regressor inside)
-        from adaptive_mj import native_manipulator as native_mod
-        from adaptive_mj.native_manipulator import NativeManipulatorController as NativeController
+        from adaptive_mj.sim import native_manipulator as native_mod
+        from adaptive_mj.sim.native_manipulator import NativeManipulatorController as NativeController
     else:
-        from adaptive_mj import native as native_mod
-        from adaptive_mj.native import NativeController
+        from adaptive_mj.sim import native as native_mod
+        from adaptive_mj.sim.native import NativeController
     if native is None:
         native = native_mod.supported(plant, law)
     if native:

@@ -1,6 +1,6 @@
 """The native closed loop for manipulators: the Slotine–Li law (and its baselines) with
 the plant's regressor kernel, compiled by numba into one C control callback that MuJoCo
-calls at every stage of every physics step (adaptive_mj.native does the same for the
+calls at every stage of every physics step (adaptive_mj.sim.native does the same for the
 1-DOF plants).
 
 At each stage the callback does what loop._Controller + SlotineLiLaw do in Python:
@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from adaptive_mj.numba_util import pointer, with_globals as _with_globals
+from adaptive_mj.sim.numba_util import pointer, with_globals as _with_globals
 
 # --- the tables the callback reads -----------------------------------------------
 # _I: int64 addresses of buffers and integer settings; _F: float settings.
@@ -454,10 +454,10 @@ def supported(plant, law) -> bool:
 
 class NativeManipulatorController:
     """Owns the buffers of one native manipulator run and steps the plant chunk by chunk
-    (the interface of adaptive_mj.native.NativeController)."""
+    (the interface of adaptive_mj.sim.native.NativeController)."""
 
     def __init__(self, plant, law, reference, theta_hat0, max_rows: int):
-        from adaptive_mj.loop import TABLEAU
+        from adaptive_mj.sim.loop import TABLEAU
 
         self.plant, self.law, self.reference = plant, law, reference
         self.callback = compiled()

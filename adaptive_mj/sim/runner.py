@@ -14,13 +14,13 @@ from pathlib import Path
 from adaptive_mj import __version__
 from adaptive_mj.setup.build import ModelSource, Setup, build
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
-from adaptive_mj.loop import plant_order, run
+from adaptive_mj.sim.loop import plant_order, run
 from adaptive_mj.metrics import clean_json, summary as make_summary
 from adaptive_mj.setup.scenario import Scenario
 from adaptive_mj.trajectory import Trajectory
 
 # Run outputs: the repository's logs/ (ignored by git), or $ADAPTIVE_MJ_LOGS.
-LOGS_DIR = Path(os.environ.get("ADAPTIVE_MJ_LOGS") or Path(__file__).resolve().parents[1] / "logs")
+LOGS_DIR = Path(os.environ.get("ADAPTIVE_MJ_LOGS") or Path(__file__).resolve().parents[2] / "logs")
 
 
 @dataclass(frozen=True)

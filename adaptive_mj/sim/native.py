@@ -26,7 +26,7 @@ import math
 import numpy as np
 
 from adaptive_mj.laws.sliding import sliding_law, sliding_terms
-from adaptive_mj.numba_util import pointer, with_globals as _with_globals
+from adaptive_mj.sim.numba_util import pointer, with_globals as _with_globals
 
 _CTX = np.zeros(16, dtype=np.int64)  # buffer addresses, see _bind
 _W = np.zeros(32)  # scalars shared with the callback, see W_* below
@@ -141,7 +141,7 @@ class NativeController:
         self.noise = np.zeros(max_rows * n)
         self.rec = np.zeros(max_rows * self.ncol)
         lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (-math.inf, math.inf)
-        from adaptive_mj.loop import TABLEAU
+        from adaptive_mj.sim.loop import TABLEAU
 
         inc, weights = TABLEAU[self.nst]
         self.stage_offsets = np.asarray(inc)  # RK4: c_i = a_i (see loop.TABLEAU)
