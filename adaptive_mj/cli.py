@@ -161,7 +161,7 @@ def cmd_run(args) -> int:
 
 def cmd_replay(args) -> int:
     from adaptive_mj.metrics import clean_json, summary as make_summary
-    from adaptive_mj.replay import read_log
+    from adaptive_mj.log.replay import read_log
 
     if not args.log.is_file():
         raise LogFormatError(f"{args.log}: no such log file")
@@ -193,7 +193,7 @@ def cmd_replay(args) -> int:
         raise LogFormatError(f"{args.log}: damaged log: {logged.note}")
     code = EXIT_OK if summary["status"] == "ok" else EXIT_FAILED
     if args.verify:
-        from adaptive_mj.verify import verify
+        from adaptive_mj.log.verify import verify
 
         ok, message = verify(logged)
         print(message, file=sys.stderr if args.json else sys.stdout)

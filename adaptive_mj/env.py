@@ -258,7 +258,7 @@ class TrackingTask(control.Task):
         physics.use(setup.plant)
         recorder = None
         if self.log_dir is not None:
-            from adaptive_mj.record import Recorder
+            from adaptive_mj.log.record import Recorder
             from adaptive_mj.sim.runner import log_header, reserve_log_path
 
             path = reserve_log_path(self.scenario, directory=self.log_dir)

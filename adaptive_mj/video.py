@@ -36,7 +36,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from adaptive_mj.errors import AdaptiveMJError, LogFormatError  # noqa: E402
-from adaptive_mj.replay import LoggedRun, read_log  # noqa: E402
+from adaptive_mj.log.replay import LoggedRun, read_log  # noqa: E402
 from adaptive_mj.trajectory import Trajectory  # noqa: E402
 
 #: Frames per second [1/s] when none is given (frames of simulation time, played in real time).

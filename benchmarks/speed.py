@@ -59,7 +59,7 @@ def loop(name: str, steps: int, native: bool) -> float:
 def logged(name: str, steps: int, rate_hz: float | None) -> tuple[float, int]:
     """Closed loop with the MCAP recorder as the sink; times run() + close() like `loop` times
     run(), so set-up (model compile, log header) is outside both. Returns (µs/step, bytes)."""
-    from adaptive_mj.record import Recorder
+    from adaptive_mj.log.record import Recorder
     from adaptive_mj.sim.runner import log_header
 
     scn = _scenario(name, steps, [f"log.rate_hz={rate_hz!r}"] if rate_hz else [])

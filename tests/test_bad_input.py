@@ -14,7 +14,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from adaptive_mj import record
+from adaptive_mj.log import record
 from adaptive_mj.cli import main
 from adaptive_mj.errors import ScenarioError
 
@@ -226,7 +226,7 @@ def test_replay_of_an_mcap_from_another_tool(tmp_path, capsys):
         w.finish()
     assert main(["replay", str(path)]) == 2
     assert error_line(capsys) == (f"{path}: MCAP file without 'adaptive_mj' metadata, expected a log written by "
-                                  f"adaptive_mj.record (this one was written by 'someone-else')")
+                                  f"adaptive_mj.log.record (this one was written by 'someone-else')")
 
 
 def test_replay_of_a_newer_log_format(tmp_path, capsys, monkeypatch):

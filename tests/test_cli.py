@@ -48,7 +48,7 @@ def test_run_then_replay_gives_identical_summary_and_verify_is_bit_identical(tmp
 
 
 def test_payload_swap_changes_true_theta_in_log(tmp_path):
-    from adaptive_mj.replay import read_log
+    from adaptive_mj.log.replay import read_log
 
     log = tmp_path / "swap.mcap"
     assert main(["run", "arm_payload_swap", "-o", str(log), "--set", "simulation.duration=2.0",

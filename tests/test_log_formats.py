@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from adaptive_mj import record
+from adaptive_mj.log import record
 
 from adaptive_mj.setup import scenario
 from adaptive_mj.cli import main
-from adaptive_mj.replay import read_log
+from adaptive_mj.log.replay import read_log
 from adaptive_mj.sim.runner import execute
 
 DATA = Path(__file__).parent / "data"

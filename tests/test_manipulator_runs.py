@@ -101,7 +101,7 @@ def test_position_servo_arm_runs_through_servo_to_torque(tmp_path, capsys):
     captured = capsys.readouterr()
     assert "note: actuator 'shoulder_servo': servo rebuilt as a torque motor, |tau| <= [-40, 40] N*m" in captured.err
     assert "tail rms per joint [rad]: shoulder" in captured.out
-    from adaptive_mj.replay import read_log
+    from adaptive_mj.log.replay import read_log
 
     run = read_log(log)
     assert run.header["notes"][0].startswith("actuator 'shoulder_servo': servo rebuilt")
@@ -167,7 +167,7 @@ def test_dm_env_on_the_arm_has_per_joint_specs_and_runs_the_law_bit_identically(
 
 def test_dm_env_arm_agent_actions_are_checked_and_law_policy_tracks(tmp_path):
     from adaptive_mj import env as amj_env
-    from adaptive_mj.replay import read_log
+    from adaptive_mj.log.replay import read_log
 
     overrides = ("simulation.duration=0.3", "events=[]")
     env = amj_env.load("ur5e_payload_swap", overrides=overrides, log=tmp_path)

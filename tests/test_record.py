@@ -18,10 +18,10 @@ from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from adaptive_mj import record
+from adaptive_mj.log import record
 from adaptive_mj.errors import LogFormatError
-from adaptive_mj.record import LogHeader, Recorder
-from adaptive_mj.replay import JsonDecoderFactory, read_log
+from adaptive_mj.log.record import LogHeader, Recorder
+from adaptive_mj.log.replay import JsonDecoderFactory, read_log
 
 DT = 0.001          # physics step [s]
 RATE = 100.0        # logging rate [Hz]
@@ -341,7 +341,7 @@ def test_killed_run_leaves_a_readable_prefix_after_every_block(tmp_path):
 _KILLED_WRITER = textwrap.dedent("""
     import sys
     import numpy as np
-    from adaptive_mj.record import LogHeader, Recorder
+    from adaptive_mj.log.record import LogHeader, Recorder
     path = sys.argv[1]
     header = LogHeader(scenario_name="killed", scenario_text="", scenario_source="", overrides=(),
                        seed=0, log_rate_hz=100.0, dt=0.001, order=2, param_names=("d", "b", "c"),
@@ -388,7 +388,7 @@ def test_flush_every_rows_bounds_loss_inside_long_blocks(tmp_path):
     class Killed(BaseException):
         pass
 
-    import adaptive_mj.record as record_mod
+    import adaptive_mj.log.record as record_mod
 
     original = record_mod._add_messages
     written = []
@@ -652,7 +652,7 @@ def test_a_signal_during_write_rows_is_raised_after_the_whole_block(tmp_path):
     path = tmp_path / "signalled.mcap"
     with stop_on_signals():
         rec = Recorder(path, make_header())
-        import adaptive_mj.record as record_mod
+        import adaptive_mj.log.record as record_mod
 
         original = record_mod._add_messages
 
@@ -678,7 +678,7 @@ def test_a_signal_during_write_rows_is_raised_after_the_whole_block(tmp_path):
 
 def test_batched_message_writing_gives_the_same_bytes_as_mcap_add_message(tmp_path):
     """record._add_messages (the fast path) writes exactly what Writer.add_message would."""
-    import adaptive_mj.record as record_mod
+    import adaptive_mj.log.record as record_mod
 
     rows = synthetic(2500)
     header = make_header()

@@ -17,7 +17,7 @@ import pytest
 from mcap.reader import make_reader
 
 from adaptive_mj.cli import main
-from adaptive_mj.replay import JsonDecoderFactory, read_log
+from adaptive_mj.log.replay import JsonDecoderFactory, read_log
 
 pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL") or not Path("/proc").is_dir(),
                                 reason="needs POSIX signals and /proc")

@@ -204,7 +204,7 @@ FAST = ["--set", "simulation.duration=0.5", "--set", "events=[]"]
 
 
 def test_sweep_end_to_end_logs_csv_json_png_match_the_logs(tmp_path, capsys):
-    from adaptive_mj.replay import read_log
+    from adaptive_mj.log.replay import read_log
 
     out = tmp_path / "sweep"
     code = main(["sweep", "arm_payload_swap", "--grid", "payload_mass=0.5:2:2", "--seeds", "2", "--jobs", "2",

@@ -12,7 +12,7 @@ import pytest
 
 from adaptive_mj.cli import main
 from adaptive_mj.errors import AdaptiveMJError, LogFormatError
-from adaptive_mj.replay import read_log
+from adaptive_mj.log.replay import read_log
 from adaptive_mj.video import frame_rows, iter_frames, parse_size, render_log, scene_width
 
 REPO = Path(__file__).resolve().parents[1]

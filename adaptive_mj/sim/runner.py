@@ -73,7 +73,7 @@ def reserve_log_path(scn: Scenario, *, out: Path | None = None, directory: Path 
 
 def log_header(scn: Scenario, setup: Setup):
     """The record.LogHeader of a run of `scn` built as `setup` (also used by adaptive_mj.env)."""
-    from adaptive_mj.record import LogHeader
+    from adaptive_mj.log.record import LogHeader
 
     plant = setup.plant
     return LogHeader(
@@ -122,7 +122,7 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
         traj = run(plant, setup.law, setup.reference, **kwargs)
         return RunResult(traj, clean_json(make_summary(scn.name, traj)), None)
 
-    from adaptive_mj.record import Recorder
+    from adaptive_mj.log.record import Recorder
 
     try:
         recorder = Recorder(log_path, log_header(scn, setup))

@@ -15,7 +15,7 @@ JSON messages, one per topic, stamped with the simulation time:
 
 Every payload carries the exact float `t` (JSON floats are written with
 repr, which round-trips), so replay rebuilds the arrays bit for bit. The
-full layout is in docs/LOG_FORMAT.md; `adaptive_mj.replay.read_log` reads it.
+full layout is in docs/LOG_FORMAT.md; `adaptive_mj.log.replay.read_log` reads it.
 
 Bounded loss: each `write_rows` call ends by closing the chunk in progress
 and flushing the file, so a run killed at any instant leaves a readable file

@@ -25,7 +25,7 @@ from mcap.records import Attachment, Channel, Chunk, Footer, Header, Message, Me
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from adaptive_mj.errors import LogFormatError
-from adaptive_mj.record import (
+from adaptive_mj.log.record import (
     ASSET_ATTACHMENT_PREFIX,
     CLOSE_STATUSES,
     CONTROL_FIELDS,
@@ -361,7 +361,7 @@ def _decode_header(name: str, scan: _Scan) -> dict:
     if meta is None:
         if scan.complete:
             raise LogFormatError(f"{name}: MCAP file without '{HEADER_METADATA}' metadata, "
-                                 f"expected a log written by adaptive_mj.record "
+                                 f"expected a log written by adaptive_mj.log.record "
                                  f"(this one was written by {scan.library!r})")
         raise LogFormatError(f"{name}: no '{HEADER_METADATA}' metadata record "
                              f"({scan.problem}), expected an adaptive-mj log header")
