@@ -152,7 +152,7 @@ def manipulator_response(traj: Trajectory, setup) -> dict:
     rule), after the first event the peak error max_j |q̃_j| and the recovery time (every joint
     stays below SWAP_THRESHOLD), and for a payload body among the unknowns the identification
     errors over time: mass (relative), centre of mass m·c/m [m] and inertia [kg m²]."""
-    from adaptive_mj.metrics import tail_mask
+    from adaptive_mj.report.metrics import tail_mask
 
     e = traj.joint_errors
     tail = tail_mask(traj)

@@ -510,7 +510,7 @@ def _swap_gif(job: Job, t_event: float, out: Path) -> str:
     if job.log is None or not job.log.exists():
         return ""
     from adaptive_mj.errors import AdaptiveMJError
-    from adaptive_mj.video import render_log
+    from adaptive_mj.report.video import render_log
 
     try:
         video = render_log(job.log, out / "figures" / "payload_swap.gif", fps=15, size=(480, 240),

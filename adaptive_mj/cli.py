@@ -150,7 +150,7 @@ def cmd_run(args) -> int:
             exc.note = f"{exc.summary['duration']:.3f} s simulated, log closed with status 'interrupted': {log}"
         raise
     if args.plot:
-        from adaptive_mj.plot import plot_run
+        from adaptive_mj.report.plot import plot_run
 
         plot_run(result.trajectory, args.plot, title=scn.name, kind=scn.plant.kind)
     _print_summary(result.summary, as_json=args.json, log=None if args.json else log, kind=scn.plant.kind)
@@ -160,7 +160,7 @@ def cmd_run(args) -> int:
 
 
 def cmd_replay(args) -> int:
-    from adaptive_mj.metrics import clean_json, summary as make_summary
+    from adaptive_mj.report.metrics import clean_json, summary as make_summary
     from adaptive_mj.log.replay import read_log
 
     if not args.log.is_file():
@@ -178,11 +178,11 @@ def cmd_replay(args) -> int:
     kind = plant_kind_of(logged.scenario_text)
     _print_summary(summary, as_json=args.json, note=logged.note, kind=kind)
     if args.plot:
-        from adaptive_mj.plot import plot_run
+        from adaptive_mj.report.plot import plot_run
 
         plot_run(logged.trajectory, args.plot, title=f"{summary['scenario']} (replay)", kind=kind)
     if args.video:
-        from adaptive_mj.video import render_log
+        from adaptive_mj.report.video import render_log
 
         video = render_log(args.log, args.video, fps=args.video_fps, size=args.video_size,
                            t_range=_time_range(args.video_range))

@@ -94,7 +94,7 @@ from adaptive_mj.setup import scenario as scenario_io  # noqa: E402
 from adaptive_mj.setup.build import Setup, build  # noqa: E402
 from adaptive_mj.errors import ScenarioError  # noqa: E402
 from adaptive_mj.sim.loop import _Controller, _divergence, plant_order  # noqa: E402
-from adaptive_mj.metrics import clean_json, summary as make_summary  # noqa: E402
+from adaptive_mj.report.metrics import clean_json, summary as make_summary  # noqa: E402
 from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402
 from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402
 from adaptive_mj.trajectory import Trajectory  # noqa: E402

@@ -327,7 +327,7 @@ def test_an_analysis_is_picked_from_a_closed_set(tmp_path):
 
 # Reviewed uses: (file, code) -> why no input reaches it.
 REVIEWED = {
-    ("adaptive_mj/video.py", "importlib.import_module(wanted)"):
+    ("adaptive_mj/report/video.py", "importlib.import_module(wanted)"):
         "wanted comes from the module's fixed table of headless GL backends",
 }
 

@@ -16,7 +16,7 @@ from adaptive_mj import env as amj_env
 from adaptive_mj.setup.build import build
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.sim.loop import run
-from adaptive_mj.metrics import metrics
+from adaptive_mj.report.metrics import metrics
 from adaptive_mj.log.replay import read_log
 from adaptive_mj.sim.runner import execute
 from adaptive_mj.setup.scenario import SCENARIOS_DIR, load as load_scenario

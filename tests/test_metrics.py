@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from adaptive_mj import analysis
-from adaptive_mj.metrics import metrics, summary, tail_mask
+from adaptive_mj.report.metrics import metrics, summary, tail_mask
 from adaptive_mj.trajectory import Trajectory
 
 

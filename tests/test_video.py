@@ -1,4 +1,4 @@
-"""Video of a logged run (adaptive_mj.video): headless frames that are not blank and
+"""Video of a logged run (adaptive_mj.report.video): headless frames that are not blank and
 follow the logged motion, MP4 and GIF files that decode, the replay --video command,
 and one-line errors for what cannot be rendered."""
 import os
@@ -13,7 +13,7 @@ import pytest
 from adaptive_mj.cli import main
 from adaptive_mj.errors import AdaptiveMJError, LogFormatError
 from adaptive_mj.log.replay import read_log
-from adaptive_mj.video import frame_rows, iter_frames, parse_size, render_log, scene_width
+from adaptive_mj.report.video import frame_rows, iter_frames, parse_size, render_log, scene_width
 
 REPO = Path(__file__).resolve().parents[1]
 SIZE = (256, 128)   # small frames keep the software renderer fast

@@ -15,7 +15,7 @@ from adaptive_mj import __version__
 from adaptive_mj.setup.build import ModelSource, Setup, build
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
 from adaptive_mj.sim.loop import plant_order, run
-from adaptive_mj.metrics import clean_json, summary as make_summary
+from adaptive_mj.report.metrics import clean_json, summary as make_summary
 from adaptive_mj.setup.scenario import Scenario
 from adaptive_mj.trajectory import Trajectory
 
