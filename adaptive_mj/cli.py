@@ -236,11 +236,11 @@ def main(argv: list[str] | None = None) -> int:
 def _dispatch(args) -> int:
     try:
         if args.command == "bench":
-            from adaptive_mj.bench import main_bench
+            from adaptive_mj.study.bench import main_bench
 
             return main_bench(args)
         if args.command == "sweep":
-            from adaptive_mj.sweep import main_sweep
+            from adaptive_mj.study.sweep import main_sweep
 
             args.scenario = _scenario_path(args.scenario)
             return main_sweep(args)

@@ -28,7 +28,7 @@ import mujoco
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
 from adaptive_mj.sim.loop import run
-from adaptive_mj.parallel import Job, run_jobs
+from adaptive_mj.study.parallel import Job, run_jobs
 
 REPO = Path(__file__).resolve().parents[1]
 CASES = {"heave": "heave_tracking", "arm": "arm_payload_swap", "ur5e": "ur5e_payload_swap"}
@@ -84,7 +84,7 @@ SWEEP_SECONDS = 30.0  # simulated seconds per sweep run
 
 def sweep_throughput(jobs: int, runs: int) -> float:
     """Runs per minute for `runs` logged heave runs of SWEEP_SECONDS through the sweep's own
-    runner (adaptive_mj.parallel.run_jobs): jobs 1 runs in this process, jobs 2 in forked
+    runner (adaptive_mj.study.parallel.run_jobs): jobs 1 runs in this process, jobs 2 in forked
     workers. The native callback is compiled once in this process beforehand (as the sweep
     command does), so neither case pays the numba compile inside the timing."""
     with tempfile.TemporaryDirectory() as tmp:

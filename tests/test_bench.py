@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from adaptive_mj import bench_catalogue
+from adaptive_mj.study import bench_catalogue
 from adaptive_mj.cli import main
 
 

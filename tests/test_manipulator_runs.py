@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from adaptive_mj import analysis
+from adaptive_mj.study import analysis
 
 from adaptive_mj.setup import scenario
 from adaptive_mj.setup.build import build

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from adaptive_mj import analysis
+from adaptive_mj.study import analysis
 from adaptive_mj.report.metrics import metrics, summary, tail_mask
 from adaptive_mj.trajectory import Trajectory
 

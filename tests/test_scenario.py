@@ -167,7 +167,7 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from adaptive_mj.errors import AdaptiveMJError  # noqa: E402
-from adaptive_mj.sweep import DOCUMENTED_KEYS, to_toml  # noqa: E402
+from adaptive_mj.study.sweep import DOCUMENTED_KEYS, to_toml  # noqa: E402
 
 # Every key the validator reads, dotted, and the words it accepts, so random documents often get
 # past the first check and reach the deeper ones.

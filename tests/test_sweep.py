@@ -12,10 +12,10 @@ from pathlib import Path
 import pytest
 
 from adaptive_mj.setup import scenario as sc
-from adaptive_mj import sweep
+from adaptive_mj.study import sweep
 from adaptive_mj.cli import main
 from adaptive_mj.errors import AdaptiveMJError, ScenarioError
-from adaptive_mj.parallel import Job, JobResult
+from adaptive_mj.study.parallel import Job, JobResult
 
 REPO = Path(__file__).resolve().parents[1]
 ARM = REPO / "scenarios" / "arm_payload_swap.toml"

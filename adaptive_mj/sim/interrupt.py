@@ -1,7 +1,7 @@
 """SIGINT and SIGTERM as a clean stop.
 
 Inside `stop_on_signals()` (each CLI command; SIGTERM in each bench/sweep worker,
-see adaptive_mj.parallel) the first of these signals raises errors.Interrupted in
+see adaptive_mj.study.parallel) the first of these signals raises errors.Interrupted in
 the main thread, where the run is going: loop.run hands the recorder every whole
 row and runner.execute closes the log with status "interrupted". Later signals are
 ignored, so that closing is never cut short.

@@ -16,9 +16,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from adaptive_mj import analysis, units  # noqa: E402
+from adaptive_mj import units  # noqa: E402
+
+from adaptive_mj.study import analysis
 from adaptive_mj.setup import scenario as sc  # noqa: E402
-from adaptive_mj.parallel import Job, JobResult  # noqa: E402
+from adaptive_mj.study.parallel import Job, JobResult  # noqa: E402
 
 SCN = sc.SCENARIOS_DIR
 @dataclass

@@ -31,7 +31,7 @@ import numpy as np
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.report.metrics import clean_json, metrics as run_metrics
-from adaptive_mj.parallel import Job, JobResult, progress_printer, run_jobs
+from adaptive_mj.study.parallel import Job, JobResult, progress_printer, run_jobs
 from adaptive_mj.trajectory import Trajectory
 
 EXIT_OK, EXIT_FAILED = 0, 1

@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 import time
 
-from adaptive_mj.parallel import run_jobs, progress_printer
+from adaptive_mj.study.parallel import run_jobs, progress_printer
 
 
 def _fmt(v, spec=".3g") -> str:
@@ -32,7 +32,7 @@ def main_table(rows: list[dict]) -> str:
 
 
 def main_bench(args) -> int:
-    from adaptive_mj.bench_catalogue import catalogue
+    from adaptive_mj.study.bench_catalogue import catalogue
 
     from adaptive_mj.sim.runner import new_output_dir
 

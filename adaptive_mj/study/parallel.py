@@ -37,7 +37,7 @@ from adaptive_mj.trajectory import Trajectory
 class Job:
     """scenario: a scenario file; overrides: --set expressions; seed: noise seed or None;
     log: the MCAP path to write (None: no log); tag: caller's label;
-    extras: names of functions in adaptive_mj.analysis run on the full-rate trajectory (from EXTRAS)."""
+    extras: names of functions in adaptive_mj.study.analysis run on the full-rate trajectory (from EXTRAS)."""
 
     scenario: Path
     overrides: tuple[str, ...] = ()
@@ -77,7 +77,7 @@ def decimate(traj: Trajectory, every: int) -> Trajectory:
 
 def run_job(job: Job) -> JobResult:
     """Load, run and log one job (in a worker or in-process)."""
-    from adaptive_mj import analysis
+    from adaptive_mj.study import analysis
     from adaptive_mj.setup import scenario as sc
     from adaptive_mj.setup.build import build
     from adaptive_mj.sim.runner import execute
