@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from adaptive_mj.setup import scenario as sc
-from adaptive_mj.setup.build import ModelSource
+from adaptive_mj.plants import ModelSource
 from adaptive_mj.sim.runner import execute
 
 _FIELDS = ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V")

@@ -10,4 +10,35 @@ Every plant offers the same small interface to the loop:
   controlled_by(policy)  context manager: policy(t, x) -> u runs at every
                          evaluation of the dynamics (MuJoCo's control callback)
   step()      advance one physics step
+
+Each plant kind (heave, arm, first_order in twin.py, manipulator) builds itself
+from its scenario section: its module has ``model_source(scn) -> ModelSource |
+None`` (the MJCF text to compile) and ``from_scenario(scn, source) -> BuiltPlant``.
+``adaptive_mj.setup.build`` looks the kind up in a table (``PLANT_KINDS`` there)
+and calls those two; it has no branch per kind.
 """
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class ModelSource:
+    """The exact MJCF text compiled for a run, and its assets (name -> bytes)."""
+
+    xml: str
+    assets: dict
+
+
+@dataclass(frozen=True)
+class BuiltPlant:
+    """What a plant kind's ``from_scenario(scn, source)`` returns.
+
+    plant: the plant (interface above); model_xml: the compiled model as MJCF
+    (the log's model.xml), None for an analytic twin; notes: edits made to the
+    model for the run (servo_to_torque), shown on the terminal and logged.
+    """
+
+    plant: object
+    model_xml: str | None = None
+    notes: tuple[str, ...] = ()

@@ -27,8 +27,9 @@ import numpy as np
 
 from adaptive_mj.errors import ModelError
 from adaptive_mj.form import ModelForm
-from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_xml_path, find_joint_and_actuator,
-                                             scale_body_mass)
+from adaptive_mj.plants import BuiltPlant, ModelSource
+from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path,
+                                             find_joint_and_actuator, scale_body_mass)
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 MODEL_PATH = MODELS / "pendulum_arm.xml"
@@ -170,3 +171,26 @@ def load(path: str | Path = MODEL_PATH, *, payload: str | Path | None = "sphere"
 def load_bare(path: str | Path, **kwargs) -> ArmPlant:
     """A user's arm MJCF as it is, with no payload attached."""
     return ArmPlant(compile_xml_path(path), where=str(path), **kwargs)
+
+
+# --- built from a scenario ------------------------------------------------------
+def model_source(scn) -> ModelSource | None:
+    """plant.model with plant.payload attached at plant.site by PyMJCF (also the
+    manipulator's); None for a twin given plant.theta (no model)."""
+    p = scn.plant
+    if p.backend == "twin" and p.theta is not None:
+        return None
+    xml, assets = build_arm_xml(arm=p.model, payload=p.payload, payload_mass=p.payload_mass, site=p.site)
+    return ModelSource(xml, dict(assets))
+
+
+def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
+    """plant.kind = "arm": the pendulum arm of plant.model (joint, actuator), or its twin."""
+    from adaptive_mj.plants import twin
+
+    p = scn.plant
+    if p.backend == "twin" and p.theta is not None:
+        return BuiltPlant(twin.from_theta(scn, arm_form()))
+    model, model_xml = compile_for_scenario(scn, source)
+    plant = ArmPlant(model, joint=p.joint, actuator=p.actuator, where=str(p.model))
+    return BuiltPlant(twin.as_backend(scn, plant), model_xml)

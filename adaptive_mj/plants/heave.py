@@ -36,7 +36,9 @@ import numpy as np
 
 from adaptive_mj.errors import ModelError
 from adaptive_mj.form import ModelForm
-from adaptive_mj.plants.mujoco_plant import MujocoPlant, compile_xml_path, find_joint_and_actuator
+from adaptive_mj.plants import BuiltPlant, ModelSource
+from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path,
+                                             find_joint_and_actuator, read_model_file)
 
 MODEL_PATH = Path(__file__).resolve().parents[2] / "models" / "heave_vehicle.xml"
 THETA_NAMES = ("d", "b", "c")
@@ -183,3 +185,34 @@ class HeavePlant(MujocoPlant):
 def load(path: str | Path = MODEL_PATH, **kwargs) -> HeavePlant:
     """Compile an MJCF heave model and wrap it (joint/actuator by name or the only one)."""
     return HeavePlant(compile_xml_path(path), where=str(path), **kwargs)
+
+
+# --- built from a scenario ------------------------------------------------------
+def model_source(scn) -> ModelSource | None:
+    """plant.model's text; None for a twin given plant.theta (no model)."""
+    if scn.plant.backend == "twin" and scn.plant.theta is not None:
+        return None
+    return read_model_file(scn)
+
+
+def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
+    """plant.kind = "heave": the vehicle of plant.model (joint, actuator, density,
+    thruster_time_constant: the actuator becomes a first-order filter), or its twin."""
+    from adaptive_mj.plants import twin
+
+    p = scn.plant
+    if p.backend == "twin" and p.theta is not None:
+        return BuiltPlant(twin.from_theta(scn, heave_form(p.g)))
+    lag = p.thruster_time_constant
+
+    def thruster_lag(spec):
+        if lag is not None:
+            for act in spec.actuators:
+                act.dyntype = mujoco.mjtDyn.mjDYN_FILTER
+                act.dynprm[0] = lag
+
+    model, model_xml = compile_for_scenario(scn, source, edit=thruster_lag)
+    plant = HeavePlant(model, joint=p.joint, actuator=p.actuator, where=str(p.model), order=scn.law.order or 2)
+    if p.density is not None:
+        plant.set_fluid_density(p.density)
+    return BuiltPlant(twin.as_backend(scn, plant), model_xml)

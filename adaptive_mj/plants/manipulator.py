@@ -28,7 +28,8 @@ import numpy as np
 from adaptive_mj.errors import ModelError
 from adaptive_mj.sim.numba_util import with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
-from adaptive_mj.plants.mujoco_plant import control_callback, new_warnings, scale_body_mass
+from adaptive_mj.plants import BuiltPlant, ModelSource
+from adaptive_mj.plants.mujoco_plant import compile_for_scenario, control_callback, new_warnings, scale_body_mass
 
 
 def _name(model, objtype, i: int) -> str:
@@ -476,3 +477,33 @@ class ManipulatorPlant:
         self.model.body_inertia[b] = inertia
         mujoco.mj_setConst(self.model, mujoco.MjData(self.model))
         self.model_changed()
+
+
+# --- built from a scenario ------------------------------------------------------
+def model_source(scn) -> ModelSource:
+    """plant.model with plant.payload attached at plant.site (as for the 1-DOF arm)."""
+    from adaptive_mj.plants import arm
+
+    return arm.model_source(scn)
+
+
+def from_scenario(scn, source: ModelSource) -> BuiltPlant:
+    """plant.kind = "manipulator": the arm of plant.model, its unknown bodies, joint
+    parameters and base set as the scenario says; with plant.servo_to_torque its
+    position servos rebuilt as torque motors first (reported in the notes)."""
+    from adaptive_mj.errors import ScenarioError
+
+    p = scn.plant
+    notes: list[str] = []
+
+    def edit(spec):
+        if p.manipulator.servo_to_torque:
+            try:
+                notes.extend(servo_to_torque(spec))
+            except ModelError as exc:
+                raise ScenarioError(f"{scn.source}: plant.servo_to_torque: {exc}") from None
+
+    model, model_xml = compile_for_scenario(scn, source, edit=edit)
+    plant = ManipulatorPlant(model, unknown=p.manipulator.unknown, joint_params=p.manipulator.joint_params,
+                             base=p.manipulator.base_parameters, where=str(p.model), notes=tuple(notes))
+    return BuiltPlant(plant, model_xml, tuple(notes))

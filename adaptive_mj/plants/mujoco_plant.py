@@ -14,7 +14,8 @@ from typing import Callable, Iterator
 import mujoco
 import numpy as np
 
-from adaptive_mj.errors import ModelError
+from adaptive_mj.errors import ModelError, ScenarioError
+from adaptive_mj.plants import ModelSource
 
 Policy = Callable[[float, np.ndarray], float]
 
@@ -244,3 +245,36 @@ def compile_spec(xml: str, assets: dict | None = None, *, where: str, edit=None)
         raise ModelError(f"{where}: MuJoCo could not compile the model: {str(exc).strip()}") from None
     return model, spec.to_xml()
 
+
+
+INTEGRATORS = {
+    "rk4": mujoco.mjtIntegrator.mjINT_RK4,
+    "euler": mujoco.mjtIntegrator.mjINT_EULER,
+    "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
+    "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
+}
+
+
+def read_model_file(scn) -> ModelSource:
+    """plant.model's text, as compiled (a plant kind's model_source for a single MJCF file)."""
+    p = scn.plant
+    if not p.model.is_file():
+        raise ModelError(f"{scn.source}: plant.model {str(p.model)!r} not found")
+    return ModelSource(p.model.read_text(encoding="utf-8"), {})
+
+
+def compile_for_scenario(scn, source: ModelSource, *, edit=None) -> tuple[mujoco.MjModel, str]:
+    """(model, compiled MJCF text) with the scenario's simulation options applied:
+    integrator, timestep (checked against the duration) and plant.viscosity.
+    edit(spec), if given, changes the MjSpec before it is compiled."""
+    model, xml = compile_spec(source.xml, source.assets, where=str(scn.plant.model), edit=edit)
+    sim = scn.simulation
+    model.opt.integrator = INTEGRATORS[sim.integrator]
+    if sim.timestep is not None:
+        model.opt.timestep = sim.timestep
+    elif model.opt.timestep > sim.duration:
+        raise ScenarioError(f"{scn.source}: the model's timestep {model.opt.timestep} is larger than "
+                            f"simulation.duration {sim.duration}")
+    if scn.plant.viscosity is not None:
+        model.opt.viscosity = scn.plant.viscosity
+    return model, xml

@@ -20,6 +20,7 @@ from typing import Iterator
 import numpy as np
 
 from adaptive_mj.form import ModelForm
+from adaptive_mj.plants import BuiltPlant
 
 
 class Integrator(enum.Enum):
@@ -136,3 +137,40 @@ def twin_of(plant, *, integrator: Integrator | None = None) -> TwinPlant:
         integrator = Integrator.RK4 if rk4 else Integrator.EULER
     return TwinPlant(plant.form, plant.true_theta().copy(), dt=plant.dt, integrator=integrator,
                      ctrl_range=plant.ctrl_range, x0=plant.observe())
+
+
+# --- built from a scenario ------------------------------------------------------
+def scenario_integrator(scn) -> Integrator:
+    return Integrator.RK4 if scn.simulation.integrator == "rk4" else Integrator.EULER
+
+
+def from_theta(scn, form: ModelForm) -> TwinPlant:
+    """The twin of `form` with the scenario's plant.theta, timestep (default 1 ms),
+    integrator and plant.ctrl_range."""
+    p, sim = scn.plant, scn.simulation
+    dt = sim.timestep if sim.timestep is not None else 0.001
+    return TwinPlant(form, list(p.theta.values()), dt=dt, integrator=scenario_integrator(scn),
+                     ctrl_range=p.ctrl_range)
+
+
+def as_backend(scn, plant):
+    """`plant` itself, or its twin when plant.backend = "twin" (with plant.ctrl_range if given)."""
+    p = scn.plant
+    if p.backend != "twin":
+        return plant
+    twin = twin_of(plant, integrator=scenario_integrator(scn))
+    if p.ctrl_range is not None:
+        twin.ctrl_range = p.ctrl_range
+    return twin
+
+
+def model_source(scn) -> None:
+    """plant.kind = "first_order" has no model."""
+    return None
+
+
+def from_scenario(scn, source) -> BuiltPlant:
+    """plant.kind = "first_order": the lecture's x' = sin x - a x + b x² + u (or the
+    phase-space example x' = sin²x p + u with plant.regressor = "sin_squared")."""
+    form = sin_squared_form() if scn.plant.regressor == "sin_squared" else lecture_first_order_form()
+    return BuiltPlant(from_theta(scn, form))

@@ -1,5 +1,7 @@
 """Scenario -> the objects of a run: plant, law, reference, initial estimates,
 noise, events. One call per box of the data flow; nothing here steps physics.
+Each plant kind builds itself (``plant_kinds()``: its module's ``model_source``
+and ``from_scenario``), and each law kind has one builder (``LAW_KINDS``).
 
 The model is compiled from an XML *string* (`model_source`) so that a log
 can carry that exact string and `replay --verify` recompiles a bit-identical
@@ -13,19 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from adaptive_mj import reference as refs
-from adaptive_mj.errors import ModelError, ScenarioError
+from adaptive_mj.errors import ScenarioError
 from adaptive_mj.laws import (DeadZone, DeadZoneOn, FirstOrderAdaptiveLaw, FixedNominalLaw,
                               RobustSlidingLaw, SlidingAdaptiveLaw)
-from adaptive_mj.sim.loop import Event
-from adaptive_mj.setup.scenario import STATE_SIGNALS, Scenario
-
-
-@dataclass(frozen=True)
-class ModelSource:
-    """The exact MJCF text compiled for a run, and its assets (name -> bytes)."""
-
-    xml: str
-    assets: dict
+from adaptive_mj.plants import ModelSource
+from adaptive_mj.setup.scenario import JOINT_REFERENCE_KINDS, STATE_SIGNALS, Scenario
+from adaptive_mj.sim.loop import Event, plant_order
 
 
 @dataclass
@@ -44,128 +39,60 @@ class Setup:
     notes: tuple[str, ...] = ()  # model edits made for the run (servo_to_torque), shown and logged
 
 
-def model_source(scn: Scenario) -> ModelSource | None:
-    """Read (heave) or compose with PyMJCF (arm + payload) the MJCF text to compile."""
-    p = scn.plant
-    if p.kind == "first_order" or (p.backend == "twin" and p.theta is not None):
-        return None
-    if p.kind in ("arm", "manipulator"):
-        from adaptive_mj.plants import arm
+def plant_kinds() -> dict:
+    """plant.kind -> the module that builds it (``model_source(scn)``, ``from_scenario(scn, source)``)."""
+    from adaptive_mj.plants import arm, heave, manipulator, twin
 
-        xml, assets = arm.build_arm_xml(arm=p.model, payload=p.payload, payload_mass=p.payload_mass, site=p.site)
-        return ModelSource(xml, dict(assets))
-    if not p.model.is_file():
-        raise ModelError(f"{scn.source}: plant.model {str(p.model)!r} not found")
-    return ModelSource(p.model.read_text(encoding="utf-8"), {})
+    return {"heave": heave, "arm": arm, "first_order": twin, "manipulator": manipulator}
+
+
+def model_source(scn: Scenario) -> ModelSource | None:
+    """The MJCF text to compile (read, or composed with PyMJCF), or None for a model-free twin."""
+    return plant_kinds()[scn.plant.kind].model_source(scn)
 
 
 def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     """Build a run's objects. `source` replaces the model files (used by replay --verify)."""
+    kind = plant_kinds()[scn.plant.kind]
     if source is None:
-        source = model_source(scn)
-    if scn.plant.kind == "manipulator":
-        return _manipulator_setup(scn, source)
-    reference = _reference(scn)
-    plant, model_xml = _plant(scn, source, reference)
+        source = kind.model_source(scn)
+    built = kind.from_scenario(scn, source)
+    plant = built.plant
     for e in scn.events:
-        if e.kind == "payload_mass":
-            if scn.plant.payload is None and e.body.startswith("payload/"):
-                raise ScenarioError(f"{scn.source}: events: a payload_mass event on {e.body!r} needs a payload "
-                                    "(plant.payload is 'none'); attach one or name a body of your model with "
-                                    "events[].body")
-            plant.body_id(e.body)  # a missing body fails now, not mid-run
-    order = plant.form.order
-    law = _law(scn, plant.form)
-    names = law.names
-    theta_hat0 = _estimates(scn, names, plant)
+        _check_event(scn, e, plant)  # a missing body or payload fails now, not mid-run
+    reference = _reference(scn, plant)
+    order = plant_order(plant)
+    plant.set_state(_initial_state(scn, reference, order))
+    law = _law(scn, plant)
+    theta_hat0 = _estimates(scn, law.names, plant)
     std = None
     if scn.noise.std:
         std = np.array([scn.noise.std.get(sig, 0.0) for sig in STATE_SIGNALS[:order]])
     rng = np.random.default_rng(scn.noise.seed)
     plant.disturbance = _disturbance(scn)
     return Setup(plant=plant, law=law, reference=reference, theta_hat0=theta_hat0, noise_std=std,
-                 rng=rng, events=[_event(e) for e in scn.events], source=source, model_xml=model_xml)
+                 rng=rng, events=[_event(e, scn) for e in scn.events], source=source,
+                 model_xml=built.model_xml, notes=built.notes)
 
 
-def _compile(scn: Scenario, source: ModelSource, edit=None):
-    """(model, compiled MJCF text). A thruster lag turns the actuator into a first-order filter."""
-    import mujoco
-
-    from adaptive_mj.plants.mujoco_plant import compile_spec
-
-    lag = scn.plant.thruster_time_constant
-
-    def thruster_lag(spec):
-        if lag is not None:
-            for act in spec.actuators:
-                act.dyntype = mujoco.mjtDyn.mjDYN_FILTER
-                act.dynprm[0] = lag
-
-    edit = edit or thruster_lag
-
-    model, xml = compile_spec(source.xml, source.assets, where=str(scn.plant.model), edit=edit)
-    sim = scn.simulation
-    model.opt.integrator = {
-        "rk4": mujoco.mjtIntegrator.mjINT_RK4,
-        "euler": mujoco.mjtIntegrator.mjINT_EULER,
-        "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
-        "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
-    }[sim.integrator]
-    if sim.timestep is not None:
-        model.opt.timestep = sim.timestep
-    elif model.opt.timestep > sim.duration:
-        raise ScenarioError(f"{scn.source}: the model's timestep {model.opt.timestep} is larger than "
-                            f"simulation.duration {sim.duration}")
-    if scn.plant.viscosity is not None:
-        model.opt.viscosity = scn.plant.viscosity
-    return model, xml
+def _initial_state(scn: Scenario, reference, order: int) -> np.ndarray:
+    """x0: (n,) or (n, m); on the reference [y_d(0), ..., y_d^(n-1)(0)], given, or zeros."""
+    x0 = scn.simulation.initial_state
+    if x0 == "reference":
+        return np.asarray(reference(0.0, order)[:order], dtype=float)
+    return np.asarray(x0 if x0 is not None else (0.0,) * order, dtype=float)
 
 
-def _plant(scn: Scenario, source: ModelSource | None, reference):
-    from adaptive_mj.plants import twin
-
-    p, sim = scn.plant, scn.simulation
-    dt = sim.timestep if sim.timestep is not None else 0.001
-    integrator = twin.Integrator.RK4 if sim.integrator == "rk4" else twin.Integrator.EULER
-    model_xml = None
-    if p.kind == "first_order":
-        form = twin.sin_squared_form() if p.regressor == "sin_squared" else twin.lecture_first_order_form()
-        plant = twin.TwinPlant(form, list(p.theta.values()), dt=dt, integrator=integrator, ctrl_range=p.ctrl_range)
-    elif p.backend == "twin" and p.theta is not None:
-        if p.kind == "heave":
-            from adaptive_mj.plants.heave import heave_form
-
-            form = heave_form(p.g)
-        else:
-            from adaptive_mj.plants.arm import arm_form
-
-            form = arm_form()
-        plant = twin.TwinPlant(form, list(p.theta.values()), dt=dt, integrator=integrator, ctrl_range=p.ctrl_range)
-    else:
-        model, model_xml = _compile(scn, source)
-        where = str(p.model)
-        if p.kind == "heave":
-            from adaptive_mj.plants.heave import HeavePlant
-
-            plant = HeavePlant(model, joint=p.joint, actuator=p.actuator, where=where,
-                               order=scn.law.order or 2)
-            if p.density is not None:
-                plant.set_fluid_density(p.density)
-        else:
-            from adaptive_mj.plants.arm import ArmPlant
-
-            plant = ArmPlant(model, joint=p.joint, actuator=p.actuator, where=where)
-        if p.backend == "twin":
-            plant = twin.twin_of(plant, integrator=integrator)
-            if p.ctrl_range is not None:
-                plant.ctrl_range = p.ctrl_range
-    n = plant.form.order
-    if sim.initial_state == "reference":
-        x0 = tuple(float(v) for v in reference(0.0, n)[:n])
-    else:
-        x0 = sim.initial_state if sim.initial_state is not None else (0.0,) * n
-    plant.set_state(x0)
-    return plant, model_xml
+def _check_event(scn: Scenario, e, plant) -> None:
+    if e.kind not in ("payload_mass", "payload_swap"):
+        return
+    if scn.plant.payload is None and e.body.startswith("payload/"):
+        raise ScenarioError(f"{scn.source}: events: a {e.kind} event on {e.body!r} needs a payload "
+                            "(plant.payload is 'none'); attach one or name a body of your model with "
+                            "events[].body")
+    plant.body_id(e.body)
+    if e.kind == "payload_swap":
+        _payload_inertial(scn, e.payload)
 
 
 def _named(scn: Scenario, key: str, values, names: tuple[str, ...], plant=None) -> np.ndarray:
@@ -177,22 +104,59 @@ def _named(scn: Scenario, key: str, values, names: tuple[str, ...], plant=None) 
     return np.array(list(values.values()), dtype=float)
 
 
-def _law(scn: Scenario, form):
-    L = scn.law
+def _law(scn: Scenario, plant):
+    """The law of law.kind for `plant`; a law's own ValueError becomes a one-line ScenarioError."""
     try:
-        if L.kind == "first_order_adaptive":
-            gamma = _gamma(scn, form.names)
-            return FirstOrderAdaptiveLaw(form, k=L.k, gamma=gamma, dead_zone=_dead_zone(L))
-        if L.kind == "sliding_adaptive":
-            return SlidingAdaptiveLaw(form, lam=L.lam, k=L.k, gamma=_gamma(scn, form.names),
-                                      dead_zone=_dead_zone(L))
-        if L.kind == "fixed_nominal":
-            return FixedNominalLaw(form, lam=L.lam, k=L.k)
-        return RobustSlidingLaw(form, lam=L.lam, k=L.k, K=L.K, boundary_layer=L.boundary_layer)
+        return LAW_KINDS[scn.law.kind](scn, plant)
     except ScenarioError:
         raise
     except ValueError as exc:
         raise ScenarioError(f"{scn.source}: law: {exc}") from None
+
+
+def _first_order_adaptive(scn: Scenario, plant):
+    L, form = scn.law, plant.form
+    return FirstOrderAdaptiveLaw(form, k=L.k, gamma=_gamma(scn, form.names), dead_zone=_dead_zone(L))
+
+
+def _sliding_adaptive(scn: Scenario, plant):
+    L, form = scn.law, plant.form
+    return SlidingAdaptiveLaw(form, lam=L.lam, k=L.k, gamma=_gamma(scn, form.names), dead_zone=_dead_zone(L))
+
+
+def _fixed_nominal(scn: Scenario, plant):
+    return FixedNominalLaw(plant.form, lam=scn.law.lam, k=scn.law.k)
+
+
+def _robust_sliding(scn: Scenario, plant):
+    L = scn.law
+    return RobustSlidingLaw(plant.form, lam=L.lam, k=L.k, K=L.K, boundary_layer=L.boundary_layer)
+
+
+def _slotine_li(scn: Scenario, plant):
+    """Slotine-Li (law.kind = "slotine_li") and its baselines on a manipulator plant."""
+    from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
+
+    L = scn.law
+    lam = _per_joint(scn, "law.lambda", L.lam_joints if L.lam_joints is not None else L.lam, plant.joint_names)
+    kd = _per_joint(scn, "law.kd", L.kd, plant.joint_names)
+    mode = {"slotine_li": Mode.ADAPTIVE, "computed_torque": Mode.COMPUTED_TORQUE,
+            "pd_gravity": Mode.PD_GRAVITY}[L.kind]
+    return SlotineLiLaw(plant.regressor, plant.names, plant.m, lam=lam, kd=kd,
+                        gamma=_gamma(scn, plant.names) if L.gamma is not None else 1.0,
+                        dead_zone=_dead_zone(L), mode=mode)
+
+
+#: law.kind -> builder(scn, plant) (the scenario has checked that the kind fits the plant kind)
+LAW_KINDS = {
+    "first_order_adaptive": _first_order_adaptive,
+    "sliding_adaptive": _sliding_adaptive,
+    "fixed_nominal": _fixed_nominal,
+    "robust_sliding": _robust_sliding,
+    "slotine_li": _slotine_li,
+    "computed_torque": _slotine_li,
+    "pd_gravity": _slotine_li,
+}
 
 
 def _gamma(scn: Scenario, names):
@@ -220,8 +184,10 @@ def _estimates(scn: Scenario, names, plant) -> np.ndarray:
     return np.zeros(len(names))
 
 
-def _reference(scn: Scenario):
+def _reference(scn: Scenario, plant):
     r = scn.reference
+    if r.kind in JOINT_REFERENCE_KINDS:
+        return _joint_reference(scn, plant.model, plant.joint_names)
     cls = {"constant": refs.Constant, "cosine": refs.Cosine, "sine": refs.Sine,
            "sum_of_sines": refs.SumOfSines, "smooth_step": refs.SmoothStep}[r.kind]
     return cls(**r.params)
@@ -257,46 +223,7 @@ def _event(e, scn: Scenario | None = None) -> Event:
 
 
 # --------------------------------------------------------------------------
-# manipulators
-def _manipulator_setup(scn: Scenario, source: ModelSource) -> Setup:
-    from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
-    from adaptive_mj.plants.manipulator import ManipulatorPlant, servo_to_torque
-
-    p = scn.plant
-    notes: list[str] = []
-
-    def edit(spec):
-        if p.manipulator.servo_to_torque:
-            try:
-                notes.extend(servo_to_torque(spec))
-            except ModelError as exc:
-                raise ScenarioError(f"{scn.source}: plant.servo_to_torque: {exc}") from None
-
-    model, model_xml = _compile(scn, source, edit=edit)
-    where = str(p.model)
-    plant = ManipulatorPlant(model, unknown=p.manipulator.unknown, joint_params=p.manipulator.joint_params,
-                             base=p.manipulator.base_parameters, where=where, notes=tuple(notes))
-    reference = _joint_reference(scn, model, plant.joint_names)
-    plant.set_state(reference(0.0, 2)[:2])
-    L = scn.law
-    lam = _per_joint(scn, "law.lambda", L.lam_joints if L.lam_joints is not None else L.lam, plant.joint_names)
-    kd = _per_joint(scn, "law.kd", L.kd, plant.joint_names)
-    mode = {"slotine_li": Mode.ADAPTIVE, "computed_torque": Mode.COMPUTED_TORQUE,
-            "pd_gravity": Mode.PD_GRAVITY}[L.kind]
-    try:
-        law = SlotineLiLaw(plant.regressor, plant.names, plant.m, lam=lam, kd=kd,
-                           gamma=_gamma(scn, plant.names) if L.gamma is not None else 1.0,
-                           dead_zone=_dead_zone(L), mode=mode)
-    except ValueError as exc:
-        raise ScenarioError(f"{scn.source}: law: {exc}") from None
-    theta_hat0 = _estimates(scn, plant.names, plant)
-    for e in scn.events:
-        plant.body_id(e.body)  # a missing body fails now, not mid-run
-        if e.kind == "payload_swap":
-            _payload_inertial(scn, e.payload)
-    return Setup(plant=plant, law=law, reference=reference, theta_hat0=theta_hat0, noise_std=None,
-                 rng=np.random.default_rng(scn.noise.seed), events=[_event(e, scn) for e in scn.events],
-                 source=source, model_xml=model_xml, notes=tuple(notes))
+# manipulators: per-joint gains, poses and references
 
 
 def _per_joint(scn: Scenario, key: str, value, joints: tuple[str, ...]) -> np.ndarray:

@@ -12,7 +12,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from adaptive_mj import __version__
-from adaptive_mj.setup.build import ModelSource, Setup, build
+from adaptive_mj.plants import ModelSource
+from adaptive_mj.setup.build import Setup, build
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
 from adaptive_mj.sim.loop import plant_order, run
 from adaptive_mj.report.metrics import clean_json, summary as make_summary
