@@ -5,12 +5,14 @@ bit for bit) for the adaptive law, both baselines, a base-parameter plant, satur
 a dead-zone and measurement noise, under RK4 and Euler."""
 from __future__ import annotations
 
+import dataclasses
+
 import mujoco
 import numpy as np
 import pytest
 
 from adaptive_mj.sim import native_manipulator as nm
-from adaptive_mj.laws import DeadZone, DeadZoneOn
+from adaptive_mj.laws import DeadZone, DeadZoneOn, Modification
 from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
 from adaptive_mj.sim.loop import run
 from adaptive_mj.plants import manipulator as mp
@@ -35,7 +37,7 @@ def _ur5e_model() -> mujoco.MjModel:
 
 
 def _setup(mode=Mode.ADAPTIVE, unknown="payload", base=False, euler=False, limit=None, dead_zone=None,
-           waypoints=False):
+           waypoints=False, modification=None):
     """A UR5e + tool_offset plant, its law, a joint reference and θ̂(0), built the same way each call."""
     model = _ur5e_model()
     if euler:
@@ -53,7 +55,7 @@ def _setup(mode=Mode.ADAPTIVE, unknown="payload", base=False, euler=False, limit
         ref = JointSumOfSines(center=tuple(home), amplitudes=((0.3, 0.2),) * 6,
                               omegas=((0.9, 2.3), (1.1, 2.7), (0.7, 1.9), (1.3, 3.1), (1.7, 2.9), (0.8, 3.7)))
     law = SlotineLiLaw(plant.regressor, plant.names, plant.m, lam=10.0, kd=50.0, gamma=0.5, mode=mode,
-                       dead_zone=dead_zone)
+                       dead_zone=dead_zone, modification=modification(plant) if modification else None)
     x0 = ref(0.0, 2)[:2].copy()
     x0[0] += 0.05  # start off the reference
     plant.set_state(x0)
@@ -118,6 +120,28 @@ def test_native_chunks_reproduce_python_path(case, integrator):
         assert not np.array_equal(nc.theta, rows["theta_hat"][-1])
     else:
         assert np.array_equal(rows["theta_hat"], np.broadcast_to(rows["theta_hat"][0], rows["theta_hat"].shape))
+
+
+def _leak_and_box(plant):
+    """σ- and e-modification toward zero, and the payload's mass, Ixx, Iyy, Izz kept >= 0."""
+    lower = np.array([0.0 if n.rsplit(".", 1)[1] in ("m", "Ixx", "Iyy", "Izz") else -np.inf for n in plant.names])
+    return Modification(sigma=0.05, e_mod=0.5, theta0=np.zeros(len(plant.names)), lower=lower,
+                        upper=np.full(len(plant.names), np.inf))
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "euler"])
+def test_robust_modifications_native_match_python(integrator):
+    """σ, e-modification and projection run in the compiled callback with the Python path's numbers,
+    and the projection holds: the masses and principal inertias never go below 0."""
+    diffs, traj, rows, nc = _compare(dict(modification=_leak_and_box, euler=integrator == "euler"), 1.0)
+    assert max(diffs.values()) <= TOL, diffs
+    plant = _setup()[0]
+    held = [i for i, n in enumerate(plant.names) if n.rsplit(".", 1)[1] in ("m", "Ixx", "Iyy", "Izz")]
+    assert np.min(rows["theta_hat"][:, held]) == 0.0 and np.min(nc.theta[held]) >= 0.0
+    if integrator == "rk4":  # without the box the same run takes some of them below 0
+        free = lambda p: dataclasses.replace(_leak_and_box(p), lower=None, upper=None)  # noqa: E731
+        _, traj, _, _ = _compare(dict(modification=free), 1.0)
+        assert np.min(traj.theta_hat[:, held]) < -1e-3
 
 
 def test_saturation_dead_zone_and_waypoints():

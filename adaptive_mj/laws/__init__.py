@@ -6,7 +6,8 @@ Every law is called as ``law(t, x, ref, theta_hat) -> LawStep`` with
 and returns the control, the estimate derivative and the sliding variable.
 ``law.lyapunov(s, theta_hat, theta)`` evaluates the lecture's V.
 """
-from adaptive_mj.laws.common import DeadZone, DeadZoneOn, LawStep
+from adaptive_mj.laws.common import DeadZone, DeadZoneOn, LawStep, Modification
+from adaptive_mj.laws.composite import CompositeSlidingLaw
 from adaptive_mj.laws.first_order import FirstOrderAdaptiveLaw
 from adaptive_mj.laws.sliding import FixedNominalLaw, RobustSlidingLaw, SlidingAdaptiveLaw
 
@@ -14,6 +15,8 @@ __all__ = [
     "DeadZone",
     "DeadZoneOn",
     "LawStep",
+    "Modification",
+    "CompositeSlidingLaw",
     "FirstOrderAdaptiveLaw",
     "SlidingAdaptiveLaw",
     "FixedNominalLaw",

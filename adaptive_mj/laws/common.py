@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -51,3 +52,74 @@ def as_gamma(gamma, n_theta: int) -> np.ndarray:
     if not np.all(np.isfinite(g)) or np.any(g <= 0):
         raise ValueError(f"gamma must be finite and > 0, got {gamma}")
     return g
+
+
+@dataclass(frozen=True)
+class Modification:
+    """Robust modifications of an adaptive law's estimate rate (docs/THEORY.md, "Robust adaptation").
+
+    With Γ⁻¹ = 1/gamma (the project's gains are adaptation "stiffnesses") and θ₀ a prior:
+      sigma:  σ-modification, θ̂' = (law's θ̂') − σ Γ⁻¹ (θ̂ − θ₀)            σ [gamma-units / s]
+      e_mod:  e-modification, θ̂' = (law's θ̂') − ν |s| Γ⁻¹ (θ̂ − θ₀)        ν [gamma-units / (s · unit of s)]
+      lower, upper: (n_theta,) box of the parameter projection (±inf where free): the rate
+        is cut where it would leave the box, and every estimate (each RK4 stage's and each
+        step's) is clipped into it, so θ̂ never leaves [lower, upper].
+      theta0: (n_theta,) the prior θ₀ the leakage pulls toward.
+    For the manipulator law |s| is the Euclidean norm ‖s‖.
+    """
+
+    sigma: float = 0.0
+    e_mod: float = 0.0
+    theta0: np.ndarray | None = None
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
+
+    def __post_init__(self):
+        for name in ("sigma", "e_mod"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v}")
+        if self.lower is not None and self.upper is not None:
+            lo, hi = np.asarray(self.lower, dtype=float), np.asarray(self.upper, dtype=float)
+            if lo.shape != hi.shape or np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo > hi):
+                raise ValueError(f"projection bounds must satisfy lower <= upper, got {lo} and {hi}")
+
+    @property
+    def leaks(self) -> bool:
+        return self.sigma > 0.0 or self.e_mod > 0.0
+
+    def arrays(self, n_theta: int, theta_hat0=None) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray]:
+        """(sigma, e_mod, theta0, lower, upper) as the compiled laws take them: θ₀ defaults to
+        theta_hat0 (else zeros), the box to (-inf, inf)."""
+        th0 = self.theta0 if self.theta0 is not None else theta_hat0
+        th0 = np.zeros(n_theta) if th0 is None else np.array(th0, dtype=float).reshape(n_theta)
+        lo = np.full(n_theta, -np.inf) if self.lower is None else np.array(self.lower, dtype=float).reshape(n_theta)
+        hi = np.full(n_theta, np.inf) if self.upper is None else np.array(self.upper, dtype=float).reshape(n_theta)
+        return float(self.sigma), float(self.e_mod), th0, lo, hi
+
+
+NO_MODIFICATION = Modification()
+
+
+def modify_rate(rate, theta, s_abs, sigma, e_mod, theta0, gamma, lower, upper):
+    """Apply leakage and projection to an estimate rate, in place (plain loops: numba compiles it).
+
+    rate_i -= (σ + ν |s|) (θ̂_i − θ₀_i) / γ_i;  then rate_i = 0 where θ̂_i <= lower_i and
+    rate_i < 0, or θ̂_i >= upper_i and rate_i > 0 (the box's tangent cone)."""
+    leak = sigma + e_mod * s_abs
+    for i in range(rate.shape[0]):
+        if leak != 0.0:
+            rate[i] -= leak * (theta[i] - theta0[i]) / gamma[i]
+        if theta[i] <= lower[i] and rate[i] < 0.0:
+            rate[i] = 0.0
+        elif theta[i] >= upper[i] and rate[i] > 0.0:
+            rate[i] = 0.0
+
+
+def clip_into(theta, lower, upper):
+    """Clip θ̂ into [lower, upper] in place (a no-op with infinite bounds)."""
+    for i in range(theta.shape[0]):
+        if theta[i] < lower[i]:
+            theta[i] = lower[i]
+        elif theta[i] > upper[i]:
+            theta[i] = upper[i]

@@ -5,6 +5,8 @@
     p̂' = -phi(x)^T x̃ / gamma
     V  = ½ x̃² + ½ gamma p̃^T p̃,   p̃ = p̂ - p,    V' = -k x̃²
 
+With a common.Modification: p̂' -= (σ + ν|x̃|)(p̂ - p₀)/gamma, projected onto a box.
+
 This is the n = 1 sliding law with d = 1 known and s = x̃; it is kept as its
 own class because it is the lecture's first example, written in its notation.
 """
@@ -15,16 +17,18 @@ import math
 import numpy as np
 
 from adaptive_mj.form import ModelForm
-from adaptive_mj.laws.common import DeadZone, LawStep, as_gamma
+from adaptive_mj.laws.common import NO_MODIFICATION, DeadZone, LawStep, Modification, as_gamma, modify_rate
 
 
 class FirstOrderAdaptiveLaw:
     """form: order-1 ModelForm with d_name=None (h is honoured; the lecture has h = 1).
 
-    k: gain on x̃ [u per unit of x]; gamma: scalar or (n_p,).
+    k: gain on x̃ [u per unit of x]; gamma: scalar or (n_p,); dead_zone: None or a
+    DeadZone on |x̃|; modification: σ/e-modification and projection, or None.
     """
 
-    def __init__(self, form: ModelForm, *, k: float, gamma, dead_zone: DeadZone | None = None):
+    def __init__(self, form: ModelForm, *, k: float, gamma, dead_zone: DeadZone | None = None,
+                 modification: Modification | None = None):
         if form.order != 1 or form.d_name is not None:
             raise ValueError("FirstOrderAdaptiveLaw needs an order-1 form with d known (d_name=None)")
         if not (math.isfinite(k) and k >= 0):
@@ -35,6 +39,14 @@ class FirstOrderAdaptiveLaw:
         self.k = float(k)
         self.gamma = as_gamma(gamma, len(self.names))
         self.dead_zone = dead_zone
+        self.modification = modification or NO_MODIFICATION
+        self._mod = self.modification.arrays(len(self.names))
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(lower, upper) of the projection, or None (see loop: estimates are clipped into it)."""
+        mod = self.modification
+        return None if mod.lower is None and mod.upper is None else self._mod[3:]
 
     def __call__(self, t, x, ref, theta_hat) -> LawStep:
         form = self.form
@@ -45,6 +57,8 @@ class FirstOrderAdaptiveLaw:
             rate = -phi * x_tilde / self.gamma
         else:
             rate = np.zeros(len(self.names))
+        sigma, e_mod, theta0, lower, upper = self._mod
+        modify_rate(rate, theta_hat, abs(x_tilde), sigma, e_mod, theta0, self.gamma, lower, upper)
         return LawStep(u, rate, x_tilde, float(ref[1]))
 
     def lyapunov(self, s, theta_hat, theta) -> np.ndarray:

@@ -22,7 +22,8 @@ import math
 import numpy as np
 
 from adaptive_mj.form import ModelForm
-from adaptive_mj.laws.common import DeadZone, DeadZoneOn, LawStep, as_gamma
+from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
+                                     modify_rate)
 
 
 def surface_coefficients(order: int, lam: float) -> np.ndarray:
@@ -50,17 +51,19 @@ def sliding_terms(coeffs: np.ndarray, x: np.ndarray, ref: np.ndarray) -> tuple[f
 
 
 def sliding_law(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, boundary_layer,
-                phi_fn, f_fn, h_fn, rate):
+                sigma, e_mod, theta0, lower, upper, phi_fn, f_fn, h_fn, rate):
     """One evaluation of the sliding laws (adaptive, fixed nominal, robust), as plain array code.
 
     x (n,), ref (n+1,), theta (n_theta,) = [d̂, p̂...], coeffs (n,) surface coefficients,
     k gain on s, gamma (n_theta,) adaptation gains, adapt: estimates move (False for the
     baselines), dead-zone: adaptation off while |s| (dz_on_s) or |ỹ| < dz_width,
-    K, boundary_layer: robust term K sat(s/Phi) (K = 0: none). Writes θ̂' into rate
-    (n_theta,) and returns (u, s, ṡ_r):
+    K, boundary_layer: robust term K sat(s/Phi) (K = 0: none); sigma, e_mod, theta0
+    (n_theta,), lower, upper (n_theta,): the robust modifications (common.modify_rate:
+    leakage toward theta0, projection onto the box). Writes θ̂' into rate (n_theta,)
+    and returns (u, s, ṡ_r):
 
         u = h^-1 (d̂ ṡ_r - f - phi p̂ + k s [+ K sat(s/Phi)])
-        d̂' = ṡ_r s / gamma_d,   p̂' = -phi^T s / gamma_p
+        d̂' = ṡ_r s / gamma_d,   p̂' = -phi^T s / gamma_p   [- (σ + ν|s|)(θ̂ - θ₀)/γ, projected]
 
     The Python laws below call it; adaptive_mj.sim.native compiles this same function.
     """
@@ -81,6 +84,8 @@ def sliding_law(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, bo
     else:
         for j in range(rate.shape[0]):
             rate[j] = 0.0
+    if adapt:  # leakage acts inside the dead-zone too; projection always
+        modify_rate(rate, theta, abs(s), sigma, e_mod, theta0, gamma, lower, upper)
     return u, s, s_r_dot
 
 
@@ -110,20 +115,32 @@ class _SlidingBase:
         self.dead_zone = None
         self.K = 0.0
         self.boundary_layer = 1.0
+        self.modification = NO_MODIFICATION
         self._args = None
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(lower, upper) (n_theta,) of the projection, or None: the loop clips every estimate into it."""
+        mod = self.modification
+        if mod.lower is None and mod.upper is None:
+            return None
+        return mod.arrays(len(self.names))[3:]
 
     def native_params(self) -> dict:
         """The numbers `sliding_law` takes, for the native (numba) callback."""
         dz = self.dead_zone
+        sigma, e_mod, theta0, lower, upper = self.modification.arrays(len(self.names))
         return {"coeffs": self._coeffs, "k": self.k, "gamma": self.gamma, "adapt": self.adapt,
                 "dz_width": 0.0 if dz is None else dz.width, "dz_on_s": dz is None or dz.on is DeadZoneOn.S,
-                "K": self.K, "boundary_layer": self.boundary_layer}
+                "K": self.K, "boundary_layer": self.boundary_layer, "sigma": sigma, "e_mod": e_mod,
+                "theta0": theta0, "lower": lower, "upper": upper}
 
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
         if self._args is None:  # the gains, once (they are fixed after construction)
             p = self.native_params()
             self._args = (p["coeffs"], p["k"], p["gamma"], p["adapt"], p["dz_width"], p["dz_on_s"], p["K"],
-                          p["boundary_layer"], self.form.phi, self.form.f, self.form.h)
+                          p["boundary_layer"], p["sigma"], p["e_mod"], p["theta0"], p["lower"], p["upper"],
+                          self.form.phi, self.form.f, self.form.h)
         rate = np.empty(len(self.names))
         u, s, s_r_dot = sliding_law(x, ref, theta_hat, *self._args, rate)
         return LawStep(u, rate, s, s_r_dot)
@@ -134,13 +151,16 @@ class SlidingAdaptiveLaw(_SlidingBase):
 
     lam: lambda [1/s] of the surface; k: gain on s [u per unit of s];
     gamma: scalar or (n_theta,) adaptation "stiffness" (estimates move at 1/gamma);
-    dead_zone: None, or a DeadZone (default test |s| < eps, the lecture's formula).
+    dead_zone: None, or a DeadZone (default test |s| < eps, the lecture's formula);
+    modification: σ/e-modification and projection (common.Modification), or None.
     """
 
-    def __init__(self, form: ModelForm, *, lam: float, k: float, gamma, dead_zone: DeadZone | None = None):
+    def __init__(self, form: ModelForm, *, lam: float, k: float, gamma, dead_zone: DeadZone | None = None,
+                 modification: Modification | None = None):
         super().__init__(form, lam=lam, k=k)
         self.gamma = as_gamma(gamma, len(self.names))
         self.dead_zone = dead_zone
+        self.modification = modification or NO_MODIFICATION
 
     def lyapunov(self, s, theta_hat, theta) -> np.ndarray:
         """V = ½ d s² + ½ sum_i gamma_i (θ̂_i - θ_i)².  s: (N,), theta*: (N, n_theta)."""

@@ -12,6 +12,8 @@ With q̃ = q_d - q (the project's sign for tracking errors), per joint
 Then M ṡ + C s + K_D s = -Y π̃, and V = ½ sᵀ M(q) s + ½ π̃ᵀ Γ π̃ has V' = -sᵀ K_D s
 (Ṁ - 2C skew). Λ, K_D are scalar or per joint; Γ scalar or per parameter. The
 dead-zone stops adaptation while |s| (Euclidean norm) or |q̃| is below its width.
+With a common.Modification: π̂' -= (σ + ν‖s‖) Γ⁻¹ (π̂ - π₀), projected onto a box
+(per parameter: e.g. masses >= 0; docs/THEORY.md).
 
 Baselines, the same τ with π̂ held at a nominal π_0:
   computed torque:        τ = Y(q, q̇, q̇_r, q̈_r) π_0 + τ_known + K_D s
@@ -28,7 +30,8 @@ import math
 
 import numpy as np
 
-from adaptive_mj.laws.common import DeadZone, DeadZoneOn, LawStep, as_gamma
+from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
+                                     modify_rate)
 
 
 class Mode(enum.IntEnum):
@@ -48,9 +51,11 @@ def reference_terms(x, ref, lam, s, qd_r, qdd_r):
         qdd_r[j] = ref[2, j] + lam[j] * de
 
 
-def slotine_li_output(Y, tau_known, theta, s, kd, gamma, adapt, dz_width, dz_on_s, e_norm, u, rate):
+def slotine_li_output(Y, tau_known, theta, s, kd, gamma, adapt, dz_width, dz_on_s, e_norm,
+                      sigma, e_mod, theta0, lower, upper, u, rate):
     """τ = Y θ + τ_known + K_D s into u (m,); θ' = Γ⁻¹ Yᵀ s into rate (unless not adapt,
-    or the dead-zone signal ‖s‖ (dz_on_s) or ‖q̃‖ = e_norm is below dz_width)."""
+    or the dead-zone signal ‖s‖ (dz_on_s) or ‖q̃‖ = e_norm is below dz_width), then the
+    modifications (common.modify_rate with |s| = ‖s‖) when adapting."""
     m, n = Y.shape[0], Y.shape[1]
     s_norm = 0.0
     for j in range(m):
@@ -70,6 +75,8 @@ def slotine_li_output(Y, tau_known, theta, s, kd, gamma, adapt, dz_width, dz_on_
     else:
         for i in range(n):
             rate[i] = 0.0
+    if adapt:
+        modify_rate(rate, theta, s_norm, sigma, e_mod, theta0, gamma, lower, upper)
 
 
 def _per_joint(value, m: int, what: str) -> np.ndarray:
@@ -85,13 +92,14 @@ class SlotineLiLaw:
     regressor: the plant's regressor(v, w, a) -> (Y, τ_known).
     names: parameter names (n_params,); m: joints.
     lam: Λ [1/s], kd: K_D [N m s/rad], scalar or (m,); gamma: Γ, scalar or (n_params,)
-    (estimates move at 1/γ); dead_zone: None or a DeadZone on ‖s‖ (or ‖q̃‖).
+    (estimates move at 1/γ); dead_zone: None or a DeadZone on ‖s‖ (or ‖q̃‖);
+    modification: σ/e-modification and projection (common.Modification), or None.
     """
 
     order = 2
 
     def __init__(self, regressor, names, m: int, *, lam, kd, gamma=1.0, dead_zone: DeadZone | None = None,
-                 mode: Mode = Mode.ADAPTIVE):
+                 mode: Mode = Mode.ADAPTIVE, modification: Modification | None = None):
         self.regressor = regressor
         self.names = tuple(names)
         self.m = int(m)
@@ -106,10 +114,20 @@ class SlotineLiLaw:
         self._zero = np.zeros(self.m)
         self._dz_width = 0.0 if dead_zone is None else dead_zone.width  # the dead-zone, once (not per call)
         self._dz_on_s = dead_zone is None or dead_zone.on is DeadZoneOn.S
+        self.modification = modification or NO_MODIFICATION
+        self._mod = self.modification.arrays(len(self.names))
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(lower, upper) of the projection, or None (see loop: estimates are clipped into it)."""
+        mod = self.modification
+        return None if mod.lower is None and mod.upper is None else self._mod[3:]
 
     def native_params(self) -> dict:
+        sigma, e_mod, theta0, lower, upper = self._mod
         return {"lam": self.lam, "kd": self.kd, "gamma": self.gamma, "adapt": self.adapt, "mode": int(self.mode),
-                "dz_width": self._dz_width, "dz_on_s": self._dz_on_s}
+                "dz_width": self._dz_width, "dz_on_s": self._dz_on_s, "sigma": sigma, "e_mod": e_mod,
+                "theta0": theta0, "lower": lower, "upper": upper}
 
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
         m = self.m
@@ -121,8 +139,9 @@ class SlotineLiLaw:
             Y, tau_known = self.regressor(x[1], qd_r, qdd_r)
         u, rate = np.empty(m), np.empty(len(self.names))
         e_norm = float(np.linalg.norm(ref[0] - x[0]))
+        sigma, e_mod, theta0, lower, upper = self._mod
         slotine_li_output(Y, tau_known, theta_hat, s, self.kd, self.gamma, self.adapt, self._dz_width,
-                          self._dz_on_s, e_norm, u, rate)
+                          self._dz_on_s, e_norm, sigma, e_mod, theta0, lower, upper, u, rate)
         return LawStep(u, rate, s, qdd_r)
 
     def lyapunov(self, s, theta_hat, theta, *, M) -> np.ndarray:

@@ -16,8 +16,9 @@ import numpy as np
 
 from adaptive_mj import reference as refs
 from adaptive_mj.errors import ScenarioError
-from adaptive_mj.laws import (DeadZone, DeadZoneOn, FirstOrderAdaptiveLaw, FixedNominalLaw,
-                              RobustSlidingLaw, SlidingAdaptiveLaw)
+from adaptive_mj.laws import (CompositeSlidingLaw, DeadZone, DeadZoneOn, FirstOrderAdaptiveLaw, FixedNominalLaw,
+                              Modification, RobustSlidingLaw, SlidingAdaptiveLaw)
+from adaptive_mj.laws.sliding import surface_coefficients
 from adaptive_mj.plants import ModelSource
 from adaptive_mj.setup.scenario import JOINT_REFERENCE_KINDS, STATE_SIGNALS, Scenario
 from adaptive_mj.sim.loop import Event, plant_order
@@ -63,8 +64,9 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     reference = _reference(scn, plant)
     order = plant_order(plant)
     plant.set_state(_initial_state(scn, reference, order))
-    law = _law(scn, plant)
-    theta_hat0 = _estimates(scn, law.names, plant)
+    names = tuple(plant.names) if hasattr(plant, "names") else tuple(plant.form.names)
+    theta_hat0 = _estimates(scn, names, plant)
+    law = _law(scn, plant, _modification(scn, names, theta_hat0))
     std = None
     if scn.noise.std:
         std = np.array([scn.noise.std.get(sig, 0.0) for sig in STATE_SIGNALS[:order]])
@@ -104,36 +106,42 @@ def _named(scn: Scenario, key: str, values, names: tuple[str, ...], plant=None) 
     return np.array(list(values.values()), dtype=float)
 
 
-def _law(scn: Scenario, plant):
+def _law(scn: Scenario, plant, modification: Modification | None = None):
     """The law of law.kind for `plant`; a law's own ValueError becomes a one-line ScenarioError."""
     try:
-        return LAW_KINDS[scn.law.kind](scn, plant)
+        return LAW_KINDS[scn.law.kind](scn, plant, modification)
     except ScenarioError:
         raise
     except ValueError as exc:
         raise ScenarioError(f"{scn.source}: law: {exc}") from None
 
 
-def _first_order_adaptive(scn: Scenario, plant):
+def _first_order_adaptive(scn: Scenario, plant, modification):
     L, form = scn.law, plant.form
-    return FirstOrderAdaptiveLaw(form, k=L.k, gamma=_gamma(scn, form.names), dead_zone=_dead_zone(L))
+    return FirstOrderAdaptiveLaw(form, k=L.k, gamma=_gamma(scn, form.names), dead_zone=_dead_zone(scn, plant),
+                                 modification=modification)
 
 
-def _sliding_adaptive(scn: Scenario, plant):
+def _sliding_adaptive(scn: Scenario, plant, modification):
     L, form = scn.law, plant.form
-    return SlidingAdaptiveLaw(form, lam=L.lam, k=L.k, gamma=_gamma(scn, form.names), dead_zone=_dead_zone(L))
+    if L.robust.composite_gain is not None:
+        return CompositeSlidingLaw(form, lam=L.lam, k=L.k, gamma=_gamma(scn, form.names),
+                                   kappa=L.robust.composite_gain, filter_rate=L.robust.composite_filter,
+                                   dead_zone=_dead_zone(scn, plant), modification=modification)
+    return SlidingAdaptiveLaw(form, lam=L.lam, k=L.k, gamma=_gamma(scn, form.names),
+                              dead_zone=_dead_zone(scn, plant), modification=modification)
 
 
-def _fixed_nominal(scn: Scenario, plant):
+def _fixed_nominal(scn: Scenario, plant, modification):
     return FixedNominalLaw(plant.form, lam=scn.law.lam, k=scn.law.k)
 
 
-def _robust_sliding(scn: Scenario, plant):
+def _robust_sliding(scn: Scenario, plant, modification):
     L = scn.law
     return RobustSlidingLaw(plant.form, lam=L.lam, k=L.k, K=L.K, boundary_layer=L.boundary_layer)
 
 
-def _slotine_li(scn: Scenario, plant):
+def _slotine_li(scn: Scenario, plant, modification):
     """Slotine-Li (law.kind = "slotine_li") and its baselines on a manipulator plant."""
     from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
 
@@ -144,7 +152,8 @@ def _slotine_li(scn: Scenario, plant):
             "pd_gravity": Mode.PD_GRAVITY}[L.kind]
     return SlotineLiLaw(plant.regressor, plant.names, plant.m, lam=lam, kd=kd,
                         gamma=_gamma(scn, plant.names) if L.gamma is not None else 1.0,
-                        dead_zone=_dead_zone(L), mode=mode)
+                        dead_zone=_dead_zone(scn, plant), mode=mode,
+                        modification=modification if mode is Mode.ADAPTIVE else None)
 
 
 #: law.kind -> builder(scn, plant) (the scenario has checked that the kind fits the plant kind)
@@ -164,10 +173,56 @@ def _gamma(scn: Scenario, names):
     return _named(scn, "law.gamma", g, names) if isinstance(g, dict) else g
 
 
-def _dead_zone(L) -> DeadZone | None:
-    if L.dead_zone is None:
+def _dead_zone(scn: Scenario, plant) -> DeadZone | None:
+    """law.dead_zone; with width_in_noise_std = k, ε = k σ where σ is the standard deviation the
+    noise gives the tested signal: σ_s = sqrt(Σ c_i² σ_i²) for s = Σ c_i ỹ^(i) (σ_i: noise.std of
+    the i-th state component), or σ_y for the tracking error."""
+    dz = scn.law.dead_zone
+    if dz is None:
         return None
-    return DeadZone(L.dead_zone.width, DeadZoneOn(L.dead_zone.on))
+    if dz.width_in_noise_std is None:
+        return DeadZone(dz.width, DeadZoneOn(dz.on))
+    std = np.array([scn.noise.std.get(sig, 0.0) for sig in STATE_SIGNALS[:plant_order(plant)]])
+    if not np.any(std > 0):
+        raise ScenarioError(f"{scn.source}: law.dead_zone.width_in_noise_std needs noise.std (the noise its "
+                            "width is a multiple of), got no noise")
+    if dz.on == "s" and scn.law.lam is not None:
+        sigma = float(np.sqrt(np.sum((surface_coefficients(len(std), scn.law.lam) * std) ** 2)))
+    else:
+        sigma = float(std[0])
+    return DeadZone(dz.width_in_noise_std * sigma, DeadZoneOn(dz.on))
+
+
+def _modification(scn: Scenario, names: tuple[str, ...], theta_hat0: np.ndarray) -> Modification | None:
+    """law.sigma, law.e_modification, law.theta0 and law.projection as a laws.Modification."""
+    R = scn.law.robust
+    if R.sigma == 0.0 and R.e_modification == 0.0 and R.projection is None:
+        return None
+    theta0 = _named(scn, "law.theta0", R.theta0, names) if R.theta0 is not None else np.array(theta_hat0)
+    lower = upper = None
+    if R.projection is not None:
+        lower, upper = np.full(len(names), -np.inf), np.full(len(names), np.inf)
+        if R.projection == "physical":  # masses, principal inertias about the body origin, armature, damping
+            for i, name in enumerate(names):
+                if name.rsplit(".", 1)[-1] in PHYSICAL_NONNEGATIVE:
+                    lower[i] = 0.0
+        else:
+            for name, (lo, hi) in R.projection.items():
+                if name not in names:
+                    raise ScenarioError(f"{scn.source}: law.projection names parameter {name!r}, which the law "
+                                        f"does not have (parameters: {', '.join(names)})")
+                lower[names.index(name)], upper[names.index(name)] = lo, hi
+        outside = [i for i in range(len(names)) if not lower[i] <= theta_hat0[i] <= upper[i]]
+        if outside:
+            i = outside[0]
+            raise ScenarioError(f"{scn.source}: law.projection: the initial estimate {names[i]} = "
+                                f"{theta_hat0[i]:g} is outside its box [{lower[i]:g}, {upper[i]:g}]")
+    return Modification(sigma=R.sigma, e_mod=R.e_modification, theta0=theta0, lower=lower, upper=upper)
+
+
+#: parameter-name suffixes kept >= 0 by law.projection = "physical" (manipulators): a convex box
+#: that every physical body satisfies (necessary, not sufficient, for physical consistency)
+PHYSICAL_NONNEGATIVE = ("m", "Ixx", "Iyy", "Izz", "armature", "damping")
 
 
 def _estimates(scn: Scenario, names, plant) -> np.ndarray:

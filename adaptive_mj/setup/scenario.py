@@ -92,8 +92,21 @@ class ReferenceSpec:
 
 @dataclass(frozen=True)
 class DeadZoneSpec:
-    width: float
+    width: float | None  # None: width_in_noise_std times the noise std of the signal
     on: str
+    width_in_noise_std: float | None = None  # ε = k σ (σ_s from noise.std and the surface)
+
+
+@dataclass(frozen=True)
+class RobustSpec:
+    """The robust modifications of an adaptive law (docs/SCENARIOS.md, law.sigma ...)."""
+
+    sigma: float = 0.0
+    e_modification: float = 0.0
+    theta0: dict[str, float] | None = None  # the leakage's prior; None: the initial estimates
+    projection: dict[str, tuple[float, float]] | str | None = None  # {name: (lo, hi)} or "physical"
+    composite_gain: float | None = None  # composite adaptation: κ
+    composite_filter: float | None = None  # its filter λ_f [1/s]
 
 
 @dataclass(frozen=True)
@@ -110,6 +123,7 @@ class LawSpec:
     boundary_layer: float | None
     kd: float | dict[str, float] | None = None  # manipulator laws: K_D, scalar or per joint
     lam_joints: dict[str, float] | None = None  # manipulator laws: Λ per joint (else lam for all)
+    robust: RobustSpec = RobustSpec()  # σ/e-modification, projection, composite adaptation
 
 
 @dataclass(frozen=True)
@@ -251,6 +265,16 @@ class _Table:
                 raise self.fail(f"{name}[{i}]", "a finite number", item)
             out.append(float(item))
         return tuple(out)
+
+    def numbers_with_inf(self, name, *, length: int) -> tuple[float, ...]:
+        """An array of `length` numbers, each finite or ±inf (TOML's inf)."""
+        v = self.get(name)
+        if not isinstance(v, list) or len(v) != length:
+            raise self.fail(name, f"an array of {length} numbers (inf allowed)", v)
+        for i, item in enumerate(v):
+            if isinstance(item, bool) or not isinstance(item, (int, float)) or math.isnan(item):
+                raise self.fail(f"{name}[{i}]", "a number (inf allowed)", item)
+        return tuple(float(item) for item in v)
 
     def named_numbers(self, name, default=_MISSING, *, gt=None) -> dict[str, float] | None:
         sub = self.table(name, default)
@@ -607,10 +631,11 @@ def _manipulator_law(t: _Table) -> LawSpec:
     nominal = _estimate_table(t, "nominal")
     if kind != "slotine_li" and nominal is None and initial is None:
         raise ScenarioError(f"{t.where}: law.nominal (or law.initial_estimates) is required for law.kind = {kind!r}")
+    robust = _robust(t, kind, adaptive=kind == "slotine_li", composite=False, presets=("physical",))
     t.finish()
     return LawSpec(kind=kind, order=2, lam=None if isinstance(lam, dict) else lam, k=0.0, gamma=gamma,
                    dead_zone=dead_zone, initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None,
-                   kd=kd, lam_joints=lam if isinstance(lam, dict) else None)
+                   kd=kd, lam_joints=lam if isinstance(lam, dict) else None, robust=robust)
 
 
 def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
@@ -638,9 +663,50 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
     phi = t.number("boundary_layer", None, gt=0) if kind == "robust_sliding" else None
     if kind == "robust_sliding" and (K is None or phi is None):
         raise ScenarioError(f"{t.where}: law.K and law.boundary_layer are required for law.kind = 'robust_sliding'")
+    robust = _robust(t, kind, adaptive=kind in ("sliding_adaptive", "first_order_adaptive"),
+                     composite=kind == "sliding_adaptive", presets=())
     t.finish()
     return LawSpec(kind=kind, order=law_order, lam=lam, k=k, gamma=gamma, dead_zone=dead_zone,
-                   initial_estimates=initial, nominal=nominal, K=K, boundary_layer=phi)
+                   initial_estimates=initial, nominal=nominal, K=K, boundary_layer=phi, robust=robust)
+
+
+ROBUST_KEYS = ("sigma", "e_modification", "theta0", "projection", "composite")
+
+
+def _robust(t: _Table, kind: str, *, adaptive: bool, composite: bool, presets: tuple[str, ...]) -> RobustSpec:
+    """law.sigma, law.e_modification, law.theta0, law.projection, law.composite (adaptive laws only)."""
+    given = [key for key in ROBUST_KEYS if key in t.data]
+    if given and not adaptive:
+        raise t.fail(given[0], f"absent for law.kind = {kind!r} (a robust modification of an adaptive law)",
+                     t.data[given[0]])
+    sigma = t.number("sigma", 0.0, ge=0)
+    e_mod = t.number("e_modification", 0.0, ge=0)
+    theta0 = t.named_numbers("theta0", None)
+    projection = None
+    if isinstance(t.data.get("projection"), str):
+        if not presets:
+            raise t.fail("projection", "a table {parameter = [lower, upper]}", t.data["projection"])
+        projection = t.string("projection", choices=presets)
+    else:
+        box = t.table("projection", None)
+        if box is not None:
+            projection = {}
+            for name in box.data:
+                lo, hi = box.numbers_with_inf(name, length=2)
+                if not lo <= hi:
+                    raise box.fail(name, "[lower, upper] with lower <= upper", [lo, hi])
+                projection[name] = (lo, hi)
+            box.finish(tuple(box.data))
+    gain = filt = None
+    if "composite" in t.data and not composite:
+        raise t.fail("composite", f"absent for law.kind = {kind!r} (composite adaptation is implemented for "
+                                  "law.kind = 'sliding_adaptive')", t.data["composite"])
+    c = t.table("composite", None)
+    if c is not None:
+        gain, filt = c.number("gain", gt=0), c.number("filter", gt=0)
+        c.finish()
+    return RobustSpec(sigma=sigma, e_modification=e_mod, theta0=theta0, projection=projection,
+                      composite_gain=gain, composite_filter=filt)
 
 
 def _dead_zone(t: _Table) -> DeadZoneSpec | None:
@@ -648,7 +714,13 @@ def _dead_zone(t: _Table) -> DeadZoneSpec | None:
     dz = t.table("dead_zone", None)
     if dz is None:
         return None
-    spec = DeadZoneSpec(width=dz.number("width", ge=0), on=dz.string("on", "s", choices=DEAD_ZONE_ON))
+    if "width_in_noise_std" in dz.data:
+        if "width" in dz.data:
+            raise dz.fail("width", "absent when law.dead_zone.width_in_noise_std is given", dz.data["width"])
+        spec = DeadZoneSpec(width=None, on=dz.string("on", "s", choices=DEAD_ZONE_ON),
+                            width_in_noise_std=dz.number("width_in_noise_std", gt=0))
+    else:
+        spec = DeadZoneSpec(width=dz.number("width", ge=0), on=dz.string("on", "s", choices=DEAD_ZONE_ON))
     dz.finish()
     return spec
 

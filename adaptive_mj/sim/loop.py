@@ -13,6 +13,14 @@ calls since the step began and gives the law the matching stage estimate:
 together as one ODE by the same method, and the estimates advance exactly
 once per physics step. Calls past the last stage (an extra mj_forward) see
 θ̂_k and change nothing.
+
+A law with a parameter projection (``law.bounds`` = (lower, upper)) has every
+stage estimate and every θ̂_{k+1} clipped into its box, so no estimate the law
+sees or the log records ever leaves it. A law with filters of its own
+(composite adaptation: ``law.reset()``, ``law.step_begins(x)``,
+``law.step_ends(xs, us, weights, h)``) is reset when the controller is made, told
+the measured state at each step's start, and given the stage states, stage
+controls and RK4 weights b_i of each step once it is done.
 """
 from __future__ import annotations
 
@@ -66,6 +74,13 @@ class _Controller:
         self.step_out = None
         self.step_ref = None
         self.step_u = 0.0
+        bounds = getattr(law, "bounds", None)
+        self.lower, self.upper = bounds if bounds is not None else (None, None)
+        self.filters = hasattr(law, "step_ends")  # a law with filters of its own (composite)
+        self.stage_xs: list = []
+        self.stage_us: list = []
+        if hasattr(law, "reset"):
+            law.reset()
 
     def arm(self, noise: np.ndarray | None) -> None:
         """Mark the start of a physics step."""
@@ -81,9 +96,19 @@ class _Controller:
             theta_i = self.theta_hat
         else:
             theta_i = self.theta_hat + (self.h * self.inc[i]) * self.prev_rate
-        out = self.law(t, x + self.noise, ref, theta_i)
+            if self.lower is not None:
+                theta_i = np.minimum(np.maximum(theta_i, self.lower), self.upper)
+        seen = x + self.noise
+        if self.filters and i < len(self.inc):
+            if i == 0:
+                self.law.step_begins(seen)
+                self.stage_xs, self.stage_us = [], []
+            self.stage_xs.append(seen)
+        out = self.law(t, seen, ref, theta_i)
         u = np.minimum(np.maximum(out.u, self.lo), self.hi) if self.joints else min(max(out.u, self.lo), self.hi)
         if i < len(self.inc):
+            if self.filters:
+                self.stage_us.append(u)
             self.prev_rate = out.theta_hat_dot
             self.rate_sum = self.rate_sum + self.weights[i] * out.theta_hat_dot
             if i == 0:
@@ -97,6 +122,10 @@ class _Controller:
             raise RuntimeError(f"the plant called the controller {self.stage} times in a step, "
                                f"expected {len(self.inc)}")
         self.theta_hat = self.theta_hat + self.h * self.rate_sum
+        if self.lower is not None:
+            self.theta_hat = np.minimum(np.maximum(self.theta_hat, self.lower), self.upper)
+        if self.filters:
+            self.law.step_ends(self.stage_xs, self.stage_us, self.weights, self.h)
 
 
 class Sink(Protocol):

@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from adaptive_mj.laws.common import clip_into, modify_rate
 from adaptive_mj.laws.sliding import sliding_law, sliding_terms
 from adaptive_mj.sim.numba_util import pointer, with_globals as _with_globals
 
@@ -33,6 +34,7 @@ _W = np.zeros(32)  # scalars shared with the callback, see W_* below
 W_STAGE, W_ROW, W_NSTAGES, W_H, W_LO, W_HI, W_QADR, W_DADR, W_ACT, W_K, W_ADAPT, W_DZW, W_DZS, W_KR, W_PHI, \
     W_T, W_N, W_NTH = range(18)
 W_INC, W_WEIGHTS = 20, 24  # 4 slots each
+W_SIGMA, W_EMOD = 28, 29
 _cache: dict = {}
 
 
@@ -50,7 +52,9 @@ def compiled(form):
     fptr, iptr = pointer(types.float64), pointer(types.int64)
     ctx_addr, w_addr = _CTX.ctypes.data, _W.ctypes.data
     phi_fn, f_fn, h_fn = numba.njit(form.phi), numba.njit(form.f), numba.njit(form.h)
-    law = numba.njit(_with_globals(sliding_law, sliding_terms=numba.njit(sliding_terms)))
+    law = numba.njit(_with_globals(sliding_law, sliding_terms=numba.njit(sliding_terms),
+                                   modify_rate=numba.njit(modify_rate)))
+    clip = numba.njit(clip_into)
 
     @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True)
     def callback(m, d):
@@ -70,6 +74,7 @@ def compiled(form):
         prev = carray(fptr(ctx[8]), nth)
         coeffs = carray(fptr(ctx[9]), n)
         gamma = carray(fptr(ctx[10]), nth)
+        theta0, lower, upper = carray(fptr(ctx[11]), nth), carray(fptr(ctx[12]), nth), carray(fptr(ctx[13]), nth)
         h = W[W_H]
         x = np.empty(n)
         x[0] = qpos[int(W[W_QADR])] + noise[row * n]
@@ -79,9 +84,11 @@ def compiled(form):
         th = np.empty(nth)
         for j in range(nth):
             th[j] = theta[j] + (h * W[W_INC + stage]) * prev[j] if stage > 0 else theta[j]
+        clip(th, lower, upper)  # projection: the stage estimate stays in the box too
         rate = np.empty(nth)
         u, s, s_r_dot = law(x, r, th, coeffs, W[W_K], gamma, W[W_ADAPT] > 0.5, W[W_DZW], W[W_DZS] > 0.5,
-                            W[W_KR], W[W_PHI], phi_fn, f_fn, h_fn, rate)
+                            W[W_KR], W[W_PHI], W[W_SIGMA], W[W_EMOD], theta0, lower, upper, phi_fn, f_fn, h_fn,
+                            rate)
         u = min(max(u, W[W_LO]), W[W_HI])
         ctrl[int(W[W_ACT])] = u
         for j in range(nth):
@@ -104,6 +111,7 @@ def compiled(form):
             for j in range(nth):
                 theta[j] = theta[j] + h * rsum[j]
                 rsum[j] = 0.0
+            clip(theta, lower, upper)
             W[W_ROW] = row + 1
             W[W_T] = W[W_T] + h
             stage = 0
@@ -116,7 +124,8 @@ def compiled(form):
 def supported(plant, law) -> bool:
     """Native path: a MuJoCo plant of order 2 (its state is [q, q'], which the callback reads
     directly), a sliding law, no time-varying disturbance (held per step in Python)."""
-    return (hasattr(plant, "step_native") and getattr(plant, "form", None) is not None and plant.form.order == 2 and hasattr(law, "native_params")
+    return (hasattr(plant, "step_native") and getattr(plant, "form", None) is not None and plant.form.order == 2
+            and hasattr(law, "native_params") and getattr(law, "native", True)
             and plant.stages in (1, 4) and plant.disturbance is None)
 
 
@@ -137,6 +146,9 @@ class NativeController:
         self.prev = np.zeros(nth)
         self.coeffs = np.ascontiguousarray(p["coeffs"], dtype=float)
         self.gamma = np.ascontiguousarray(p["gamma"], dtype=float)
+        self.theta0 = np.ascontiguousarray(p["theta0"], dtype=float)
+        self.lower = np.ascontiguousarray(p["lower"], dtype=float)
+        self.upper = np.ascontiguousarray(p["upper"], dtype=float)
         self.ref = np.zeros(max_rows * self.nst * (n + 1))
         self.noise = np.zeros(max_rows * n)
         self.rec = np.zeros(max_rows * self.ncol)
@@ -151,11 +163,12 @@ class NativeController:
         W[W_QADR], W[W_DADR], W[W_ACT] = plant._qadr, plant._dadr, plant.actuator_id
         W[W_K], W[W_ADAPT], W[W_DZW], W[W_DZS] = p["k"], float(p["adapt"]), p["dz_width"], float(p["dz_on_s"])
         W[W_KR], W[W_PHI], W[W_N], W[W_NTH] = p["K"], p["boundary_layer"], n, nth
+        W[W_SIGMA], W[W_EMOD] = p["sigma"], p["e_mod"]
         W[W_INC:W_INC + len(inc)] = inc
         W[W_WEIGHTS:W_WEIGHTS + len(weights)] = weights
         d = plant.data
         for i, arr in enumerate((d.qpos, d.qvel, d.ctrl, self.ref, self.noise, self.rec, self.theta, self.rsum,
-                                 self.prev, self.coeffs, self.gamma)):
+                                 self.prev, self.coeffs, self.gamma, self.theta0, self.lower, self.upper)):
             _CTX[i] = arr.ctypes.data
 
     def chunk(self, rows: int, noise: np.ndarray | None):

@@ -45,9 +45,11 @@ from adaptive_mj.sim.numba_util import pointer, with_globals as _with_globals
  I_THETA, I_RSUM, I_PREV, I_TH, I_X, I_S, I_QDR, I_QDDR, I_ZERO, I_U, I_RATE, I_YSTD, I_Y, I_TAUK,
  I_REF, I_NOISE, I_SCRATCH, I_NEED,
  # records (one row per physics step)
- I_RT, I_RX, I_RU, I_RS, I_RREF, I_RTH, I_END) = range(71)
+ I_RT, I_RX, I_RU, I_RS, I_RREF, I_RTH,
+ # robust modifications: leakage prior, projection box
+ I_THETA0, I_PLO, I_PHI, I_END) = range(74)
 _I = np.zeros(I_END, dtype=np.int64)
-F_H, F_T, F_DZW, F_INC, F_WEIGHTS, F_END = 0, 1, 2, 4, 8, 12
+F_H, F_T, F_DZW, F_INC, F_WEIGHTS, F_SIGMA, F_EMOD, F_END = 0, 1, 2, 4, 8, 12, 13, 14
 _F = np.zeros(F_END)
 
 MODE_PD_GRAVITY = 2  # laws.slotine_li.Mode.PD_GRAVITY (the regressor at v = w = a = 0)
@@ -309,6 +311,7 @@ def compiled():
     from numba import carray, types
     from numba.extending import intrinsic
 
+    from adaptive_mj.laws.common import clip_into, modify_rate
     from adaptive_mj.laws.slotine_li import reference_terms, slotine_li_output
 
     @intrinsic
@@ -324,7 +327,8 @@ def compiled():
     i_addr, f_addr = _I.ctypes.data, _F.ctypes.data
     regressor = kernel()
     ref_terms = numba.njit(reference_terms)
-    output = numba.njit(slotine_li_output)
+    output = numba.njit(_with_globals(slotine_li_output, modify_rate=numba.njit(modify_rate)))
+    clip = numba.njit(clip_into)
 
     @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True)
     def callback(m, d):
@@ -362,6 +366,8 @@ def compiled():
             c = h * F[F_INC + stage]
             for i in range(nth):
                 th[i] = theta[i] + c * prev[i]
+        theta0, plo, phi = carray(fptr(I[I_THETA0]), nth), carray(fptr(I[I_PLO]), nth), carray(fptr(I[I_PHI]), nth)
+        clip(th, plo, phi)  # projection: the stage estimate stays in the box too
         ref_terms(x, r, carray(fptr(I[I_LAM]), nv), s, qd_r, qdd_r)
 
         Y_std, tau_known = carray(fptr(I[I_YSTD]), (nv, nstd)), carray(fptr(I[I_TAUK]), nv)
@@ -400,7 +406,7 @@ def compiled():
                 e_norm += e * e
             e_norm = np.sqrt(e_norm)
         output(Y, tau_known, th, s, carray(fptr(I[I_KD]), nv), carray(fptr(I[I_GAMMA]), nth), I[I_ADAPT] != 0,
-               F[F_DZW], I[I_DZ_ON_S] != 0, e_norm, u, rate)
+               F[F_DZW], I[I_DZ_ON_S] != 0, e_norm, F[F_SIGMA], F[F_EMOD], theta0, plo, phi, u, rate)
         for j in range(nv):
             v = u[j]
             if v < lo[j]:
@@ -432,6 +438,7 @@ def compiled():
             for i in range(nth):
                 theta[i] = theta[i] + h * rsum[i]
                 rsum[i] = 0.0
+            clip(theta, plo, phi)
             I[I_ROW] = row + 1
             F[F_T] = F[F_T] + h
             stage = 0
@@ -488,6 +495,7 @@ class NativeManipulatorController:
             I_RT: np.zeros(self.max_rows), I_RX: np.zeros((self.max_rows, 2, nv)),
             I_RU: np.zeros((self.max_rows, nv)), I_RS: np.zeros((self.max_rows, nv)),
             I_RREF: np.zeros((self.max_rows, 3, nv)), I_RTH: np.zeros((self.max_rows, nth)),
+            I_THETA0: f64(p["theta0"]), I_PLO: f64(p["lower"]), I_PHI: f64(p["upper"]),
         }
         B = getattr(reg, "base_map", None)
         if B is not None:  # the base map by columns, its nonzero entries only (B is a column selection)
@@ -522,7 +530,7 @@ class NativeManipulatorController:
         it[I_NQ], it[I_NU], it[I_MAXROWS] = model.nq, model.nu, self.max_rows
         it[I_MODE], it[I_ADAPT] = int(p["mode"]), int(bool(p["adapt"]))
         it[I_DZ_ON_S], it[I_HAS_BASE] = int(bool(p["dz_on_s"])), int(B is not None)
-        ft[F_H], ft[F_DZW] = plant.dt, p["dz_width"]
+        ft[F_H], ft[F_DZW], ft[F_SIGMA], ft[F_EMOD] = plant.dt, p["dz_width"], p["sigma"], p["e_mod"]
         ft[F_INC:F_INC + len(inc)] = inc
         ft[F_WEIGHTS:F_WEIGHTS + len(weights)] = weights
         self._tables = it, ft
