@@ -202,7 +202,6 @@ def test_dead_zone_width_in_noise_std():
     ("arm_payload_swap", "law.sigma=-1", r"law.sigma must be >= 0, got -1"),
     ("arm_payload_swap", "law.projection='physical'", r"law.projection must be a table \{parameter = \[lower, "
                                                       r"upper\]\}, got 'physical'"),
-    ("heave_tracking", "law.kind='fixed_nominal'", None),
     ("lecture_first_order", "law.composite={gain=1.0, filter=2.0}",
      r"law.composite must be absent for law.kind = 'first_order_adaptive' \(composite adaptation is implemented "
      r"for law.kind = 'sliding_adaptive'\)"),
@@ -210,15 +209,24 @@ def test_dead_zone_width_in_noise_std():
      r"law.dead_zone.width_in_noise_std needs noise.std \(the noise its width is a multiple of\), got no noise"),
     ("ur5e_payload_swap", "law.composite={gain=1.0, filter=2.0}", r"law.composite must be absent for law.kind = "
                                                                   r"'slotine_li'"),
+    ("ur5e_payload_swap", "law.projection={nope=[0.0, inf]}", r"law.projection names parameter 'nope'"),
 ])
 def test_robust_keys_errors_are_one_line(name, override, match, capsys):
     args = ["run", name, "--set", override, "--set", "simulation.duration=0.01", "--set", "events=[]"]
-    if match is None:  # a modification on a baseline: refused, naming the key
-        args += ["--set", "law.nominal={d=1.0, b=1.0, c=1.0}", "--set", "law.sigma=0.1"]
-        match = r"law.sigma must be absent for law.kind = 'fixed_nominal' \(a robust modification of an adaptive law\)"
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
     import re
 
     assert re.search(match, err[0]), err[0]
+
+
+def test_baselines_ignore_the_modifications_as_they_ignore_gamma():
+    """law.kind = fixed_nominal on a scenario with σ, projection and composite keys: the same run as
+    the baseline without them (so a law grid over kinds needs no per-kind overrides)."""
+    base = ["simulation.duration=1", "events=[]", "law.kind='fixed_nominal'", "law.nominal='model'"]
+    plain, _ = _run("arm_payload_swap", base)
+    keyed, setup = _run("arm_payload_swap", base + ["law.sigma=0.3", "law.projection={J=[0.0, inf]}",
+                                                    "law.composite={gain=1.0, filter=2.0}"])
+    assert type(setup.law).__name__ == "FixedNominalLaw"
+    np.testing.assert_array_equal(keyed.u, plain.u)

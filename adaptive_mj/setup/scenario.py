@@ -674,11 +674,9 @@ ROBUST_KEYS = ("sigma", "e_modification", "theta0", "projection", "composite")
 
 
 def _robust(t: _Table, kind: str, *, adaptive: bool, composite: bool, presets: tuple[str, ...]) -> RobustSpec:
-    """law.sigma, law.e_modification, law.theta0, law.projection, law.composite (adaptive laws only)."""
-    given = [key for key in ROBUST_KEYS if key in t.data]
-    if given and not adaptive:
-        raise t.fail(given[0], f"absent for law.kind = {kind!r} (a robust modification of an adaptive law)",
-                     t.data[given[0]])
+    """law.sigma, law.e_modification, law.theta0, law.projection, law.composite: checked for every
+    law; the baselines ignore them (as they ignore gamma and dead_zone), so law.kind = a baseline
+    turns any adaptive scenario into its baseline."""
     sigma = t.number("sigma", 0.0, ge=0)
     e_mod = t.number("e_modification", 0.0, ge=0)
     theta0 = t.named_numbers("theta0", None)
@@ -698,13 +696,15 @@ def _robust(t: _Table, kind: str, *, adaptive: bool, composite: bool, presets: t
                 projection[name] = (lo, hi)
             box.finish(tuple(box.data))
     gain = filt = None
-    if "composite" in t.data and not composite:
+    if "composite" in t.data and adaptive and not composite:
         raise t.fail("composite", f"absent for law.kind = {kind!r} (composite adaptation is implemented for "
                                   "law.kind = 'sliding_adaptive')", t.data["composite"])
     c = t.table("composite", None)
     if c is not None:
         gain, filt = c.number("gain", gt=0), c.number("filter", gt=0)
         c.finish()
+    if not adaptive:
+        return RobustSpec()
     return RobustSpec(sigma=sigma, e_modification=e_mod, theta0=theta0, projection=projection,
                       composite_gain=gain, composite_filter=filt)
 
