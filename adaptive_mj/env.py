@@ -137,6 +137,9 @@ def load(scenario, *, law=None, log: str | os.PathLike | None = None, seed: int 
     n_sub_steps = 1 if n_sub_steps is None else int(n_sub_steps)
     if n_sub_steps < 1:
         raise ValueError(f"n_sub_steps must be >= 1, got {n_sub_steps}")
+    if scn.simulation.control_delay and law is None:
+        raise ScenarioError(f"{scn.source}: simulation.control_delay delays the scenario's law; with an agent as "
+                            "the policy, delay its actions yourself (or load with law='scenario')")
     task = TrackingTask(scn, setup, law=law, privileged=privileged, n_sub_steps=n_sub_steps,
                         log_dir=None if log is None else Path(log))
     # The task ends episodes itself (an exact step count; dm_control's time_limit
@@ -360,7 +363,7 @@ class _Episode:
         self.controller = None
         if drive:
             self.controller = _Controller(law, setup.reference, self.theta_hat0, plant.ctrl_range,
-                                          self.order, plant.stages, plant.dt, js)
+                                          self.order, plant.stages, plant.dt, js, scn.simulation.control_delay)
             self._policy = self.controller
         else:
             self._policy = lambda t, x: self._u

@@ -230,3 +230,60 @@ def test_baselines_ignore_the_modifications_as_they_ignore_gamma():
                                                     "law.composite={gain=1.0, filter=2.0}"])
     assert type(setup.law).__name__ == "FixedNominalLaw"
     np.testing.assert_array_equal(keyed.u, plain.u)
+
+
+# -- control delay and the lecture's sudden failure -------------------------------------------
+
+def test_control_delay_applies_the_control_computed_D_steps_earlier():
+    """u applied during step k = the clamped stage-0 control the law computed at step k − D (zero
+    before), on both callback paths, bit for bit."""
+    D = 5
+    over = ["simulation.duration=0.5", f"simulation.control_delay={D}"]
+    scn = load(SCENARIOS_DIR / "heave_tracking.toml", overrides=over)
+    runs = []
+    for native in (False, True):
+        s = build(scn)
+        runs.append(run(s.plant, s.law, s.reference, duration=0.5, theta_hat0=s.theta_hat0, native=native,
+                        control_delay=D))
+    py, nat = runs
+    assert nat.meta["native"] and not py.meta["native"] and py.meta["control_delay"] == D
+    for f in ("x", "u", "s", "theta_hat"):
+        np.testing.assert_array_equal(getattr(nat, f), getattr(py, f), err_msg=f)
+    assert np.all(py.u[:D] == 0.0)
+    lo, hi = s.plant.ctrl_range
+    for k in (D, D + 1, 100, 499):
+        j = k - D
+        computed = s.law(py.t[j], py.x[j], py.ref[j], py.theta_hat[j]).u
+        assert py.u[k] == min(max(computed, lo), hi)
+
+
+def test_critical_leading_estimate_is_where_the_phase_margin_vanishes():
+    from adaptive_mj.study.analysis import critical_leading_estimate
+
+    d, k, lam, T = 37.0, 200.0, 20.0, 0.02
+    dc = critical_leading_estimate(d, k, lam, T)
+    kv, kp = k + dc * lam, k * lam
+    w = np.roots([d * d, 0.0, -kv * kv, 0.0, -kp * kp])  # |L(jω)| = 1
+    w = float(max(r.real for r in w if abs(r.imag) < 1e-9 and r.real > 0))
+    assert abs(math.atan2(w * kv, kp) - w * T) < 1e-9
+    assert critical_leading_estimate(d, k, lam, 0.0) == math.inf
+
+
+def test_sudden_failure_happens_where_the_delay_margin_predicts_and_sigma_prevents_it():
+    """heave_sudden_failure (120 s): the drifting d̂/d crosses the predicted critical value, the
+    thrust saturates within 1 % of it and the loop fails about 100 s in; with σ-modification
+    the same seed does not fail."""
+    from adaptive_mj.study.analysis import sudden_failure
+
+    out = {}
+    for name, extra in (("plain", []), ("sigma", ["law.sigma=1e-3"])):
+        scn = load(SCENARIOS_DIR / "heave_sudden_failure.toml", overrides=["simulation.duration=120", *extra])
+        s = build(scn)
+        traj = run(s.plant, s.law, s.reference, duration=120.0, theta_hat0=s.theta_hat0, noise_std=s.noise_std,
+                   rng=s.rng, control_delay=scn.simulation.control_delay)
+        out[name] = sudden_failure(traj, s)
+    f = out["plain"]
+    assert 80.0 < f["t_saturation"] < f["t_fail"] < 115.0, f
+    assert abs(f["ratio_at_saturation"] / f["critical_ratio"] - 1.0) < 0.01, f
+    assert out["sigma"]["t_fail"] is None and out["sigma"]["t_saturation"] is None
+    assert out["sigma"]["ratio_max"] < 1.2

@@ -82,6 +82,7 @@ class SimulationSpec:
     duration: float
     initial_state: tuple[float, ...] | str | None  # or "reference"
     state_bound: float
+    control_delay: int = 0  # whole physics steps between computing a control and applying it
 
 
 @dataclass(frozen=True)
@@ -526,9 +527,10 @@ def _simulation(t: _Table, plant: PlantSpec, order: int) -> SimulationSpec:
     else:
         x0 = t.numbers("initial_state", None, length=order)
     bound = t.number("state_bound", math.inf, gt=0, allow_inf=True)
+    delay = t.integer("control_delay", 0, ge=0)
     t.finish()
     return SimulationSpec(integrator=integrator, timestep=timestep, duration=duration, initial_state=x0,
-                          state_bound=bound)
+                          state_bound=bound, control_delay=delay)
 
 
 _REFERENCE_KEYS = {

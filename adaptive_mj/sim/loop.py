@@ -58,7 +58,7 @@ class _Controller:
     state with the stage's estimate; see the module docstring."""
 
     def __init__(self, law, reference, theta_hat0, ctrl_range, order: int, stages: int, dt: float,
-                 joint_shape: tuple = ()):
+                 joint_shape: tuple = (), delay: int = 0):
         self.law = law
         self.reference = reference
         self.order = order
@@ -76,6 +76,10 @@ class _Controller:
         self.step_u = 0.0
         bounds = getattr(law, "bounds", None)
         self.lower, self.upper = bounds if bounds is not None else (None, None)
+        # A control delay of D >= 1 physics steps: the step's applied control is the (clamped)
+        # stage-0 control computed D steps earlier, held over all its stages; zero before that.
+        self.delay = int(delay)
+        self.sent: list = []  # stage-0 controls of the last D steps, oldest first
         self.filters = hasattr(law, "step_ends")  # a law with filters of its own (composite)
         self.stage_xs: list = []
         self.stage_us: list = []
@@ -106,6 +110,11 @@ class _Controller:
             self.stage_xs.append(seen)
         out = self.law(t, seen, ref, theta_i)
         u = np.minimum(np.maximum(out.u, self.lo), self.hi) if self.joints else min(max(out.u, self.lo), self.hi)
+        if self.delay and i < len(self.inc):
+            if i == 0:
+                self.sent.append(u)
+            held = self.sent[-1 - self.delay] if len(self.sent) > self.delay else 0.0 * u
+            u = held
         if i < len(self.inc):
             if self.filters:
                 self.stage_us.append(u)
@@ -122,6 +131,8 @@ class _Controller:
             raise RuntimeError(f"the plant called the controller {self.stage} times in a step, "
                                f"expected {len(self.inc)}")
         self.theta_hat = self.theta_hat + self.h * self.rate_sum
+        if self.delay and len(self.sent) > self.delay:
+            del self.sent[0]
         if self.lower is not None:
             self.theta_hat = np.minimum(np.maximum(self.theta_hat, self.lower), self.upper)
         if self.filters:
@@ -142,7 +153,8 @@ NATIVE_CHUNK = 250  # physics steps per mj_step(nstep) call on the native path
 def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
         noise_std: Sequence[float] | None = None, rng: np.random.Generator | None = None,
         events: Sequence[Event] = (), state_bound: float = math.inf,
-        sink: Sink | None = None, sink_every: int = 1000, native: bool | None = None) -> Trajectory:
+        sink: Sink | None = None, sink_every: int = 1000, native: bool | None = None,
+        control_delay: int = 0) -> Trajectory:
     """Run plant under law tracking reference for `duration` seconds.
 
     theta_hat0: (n_theta,) initial estimates (the nominal values for baselines).
@@ -152,6 +164,8 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
     state_bound: |x_i| above this counts as divergence.
     sink: receives the rows every `sink_every` steps and at the end, and each
     event as it is applied, so a killed run loses at most one block.
+    control_delay: D >= 0 whole physics steps between computing a control and applying
+    it (the stage-0 control of step k is applied, held, over step k + D; zero before).
     native: run the law as a compiled MuJoCo callback (adaptive_mj.sim.native);
     None = whenever the plant and law support it. The two paths agree to
     ~1e-12; on the native path a MuJoCo warning is detected per chunk of
@@ -208,7 +222,8 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
 
     V = np.empty(n_steps)  # filled block by block (no full-length temporaries at the end)
 
-    ctrl = _Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, dt, joint_shape)
+    ctrl = _Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, dt, joint_shape,
+                       control_delay)
     pending = sorted(events, key=lambda e: e.t)
     applied: list[tuple[float, str]] = []
     status, reason, k = "ok", "", 0
@@ -233,6 +248,8 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
         keep = slice(0, n)
         flush(n)
         meta = {"dt": dt, "order": order, "events": applied, "native": bool(native)}
+        if control_delay:
+            meta["control_delay"] = int(control_delay)  # [physics steps]
         contact = getattr(plant, "first_contact", None)
         if contact is not None:
             meta["warnings"] = [f"t={contact[0]:.6g} s: {contact[1]} (the regressor has no contact forces)"]
@@ -261,9 +278,9 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
         from adaptive_mj.sim import native as native_mod
         from adaptive_mj.sim.native import NativeController
     if native is None:
-        native = native_mod.supported(plant, law)
+        native = native_mod.supported(plant, law) and (not control_delay or not joint_shape)
     if native:
-        nc = NativeController(plant, law, reference, theta_hat0, NATIVE_CHUNK)
+        nc = NativeController(plant, law, reference, theta_hat0, NATIVE_CHUNK, delay=control_delay)
         with _interruptible(stopped), plant.controlled_natively(nc.callback):
             while k < n_steps:
                 t_k = plant.time

@@ -30,11 +30,12 @@ from adaptive_mj.laws.sliding import sliding_law, sliding_terms
 from adaptive_mj.sim.numba_util import pointer, with_globals as _with_globals
 
 _CTX = np.zeros(16, dtype=np.int64)  # buffer addresses, see _bind
-_W = np.zeros(32)  # scalars shared with the callback, see W_* below
+_W = np.zeros(40)  # scalars shared with the callback, see W_* below
 W_STAGE, W_ROW, W_NSTAGES, W_H, W_LO, W_HI, W_QADR, W_DADR, W_ACT, W_K, W_ADAPT, W_DZW, W_DZS, W_KR, W_PHI, \
     W_T, W_N, W_NTH = range(18)
 W_INC, W_WEIGHTS = 20, 24  # 4 slots each
 W_SIGMA, W_EMOD = 28, 29
+W_DELAY, W_STEPK, W_HELD = 30, 31, 32  # control delay D [steps], steps run, the control held over a step
 _cache: dict = {}
 
 
@@ -58,7 +59,7 @@ def compiled(form):
 
     @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True)
     def callback(m, d):
-        W = carray(fptr(w_addr), 32)
+        W = carray(fptr(w_addr), 40)
         ctx = carray(iptr(ctx_addr), 16)
         stage, row, nst = int(W[W_STAGE]), int(W[W_ROW]), int(W[W_NSTAGES])
         if stage >= nst:  # a call outside mj_step's stages (e.g. mj_forward): leave ctrl as it is
@@ -90,6 +91,14 @@ def compiled(form):
                             W[W_KR], W[W_PHI], W[W_SIGMA], W[W_EMOD], theta0, lower, upper, phi_fn, f_fn, h_fn,
                             rate)
         u = min(max(u, W[W_LO]), W[W_HI])
+        delay = int(W[W_DELAY])
+        if delay > 0:  # apply the stage-0 control of D steps ago, held over the step (zero before)
+            if stage == 0:
+                ring = carray(fptr(ctx[14]), delay + 1)
+                k = int(W[W_STEPK])
+                ring[k % (delay + 1)] = u
+                W[W_HELD] = ring[(k - delay) % (delay + 1)] if k >= delay else 0.0
+            u = W[W_HELD]
         ctrl[int(W[W_ACT])] = u
         for j in range(nth):
             rsum[j] += W[W_WEIGHTS + stage] * rate[j]
@@ -113,6 +122,7 @@ def compiled(form):
                 rsum[j] = 0.0
             clip(theta, lower, upper)
             W[W_ROW] = row + 1
+            W[W_STEPK] = W[W_STEPK] + 1.0
             W[W_T] = W[W_T] + h
             stage = 0
         W[W_STAGE] = stage
@@ -133,8 +143,11 @@ class NativeController:
     """Owns the buffers of one native run and steps the plant chunk by chunk."""
 
 
-    def __init__(self, plant, law, reference, theta_hat0, max_rows: int):
+    def __init__(self, plant, law, reference, theta_hat0, max_rows: int, *, delay: int = 0):
         self.plant, self.law, self.reference = plant, law, reference
+        self.delay = int(delay)
+        self.ring = np.zeros(self.delay + 1)  # the last D + 1 stage-0 controls
+        self.steps = 0
         self.callback = compiled(plant.form)
         n, nth = plant.form.order, len(law.names)
         self.n, self.nth = n, nth
@@ -164,11 +177,13 @@ class NativeController:
         W[W_K], W[W_ADAPT], W[W_DZW], W[W_DZS] = p["k"], float(p["adapt"]), p["dz_width"], float(p["dz_on_s"])
         W[W_KR], W[W_PHI], W[W_N], W[W_NTH] = p["K"], p["boundary_layer"], n, nth
         W[W_SIGMA], W[W_EMOD] = p["sigma"], p["e_mod"]
+        W[W_DELAY] = self.delay
         W[W_INC:W_INC + len(inc)] = inc
         W[W_WEIGHTS:W_WEIGHTS + len(weights)] = weights
         d = plant.data
         for i, arr in enumerate((d.qpos, d.qvel, d.ctrl, self.ref, self.noise, self.rec, self.theta, self.rsum,
-                                 self.prev, self.coeffs, self.gamma, self.theta0, self.lower, self.upper)):
+                                 self.prev, self.coeffs, self.gamma, self.theta0, self.lower, self.upper,
+                                 self.ring)):
             _CTX[i] = arr.ctypes.data
 
     def chunk(self, rows: int, noise: np.ndarray | None):
@@ -185,8 +200,9 @@ class NativeController:
             self.noise[: rows * n] = noise.ravel()
         else:
             self.noise[: rows * n] = 0.0
-        _W[W_STAGE], _W[W_ROW], _W[W_T] = 0.0, 0.0, t[0]
+        _W[W_STAGE], _W[W_ROW], _W[W_T], _W[W_STEPK] = 0.0, 0.0, t[0], float(self.steps)
         plant.step_native(rows)
+        self.steps += rows
         if int(_W[W_ROW]) != rows:
             raise RuntimeError(f"native callback ran {int(_W[W_ROW])} steps, expected {rows}")
         rec = self.rec[: rows * self.ncol].reshape(rows, self.ncol)

@@ -463,8 +463,11 @@ class NativeManipulatorController:
     """Owns the buffers of one native manipulator run and steps the plant chunk by chunk
     (the interface of adaptive_mj.sim.native.NativeController)."""
 
-    def __init__(self, plant, law, reference, theta_hat0, max_rows: int):
+    def __init__(self, plant, law, reference, theta_hat0, max_rows: int, *, delay: int = 0):
         from adaptive_mj.sim.loop import TABLEAU
+
+        if delay:
+            raise ValueError("a control delay on a manipulator runs on the Python callback path (native=False)")
 
         self.plant, self.law, self.reference = plant, law, reference
         self.callback = compiled()

@@ -118,7 +118,7 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
     sink_every = max(1, round(1.0 / plant.dt))  # flush about once per simulated second
     kwargs = dict(duration=scn.simulation.duration, theta_hat0=setup.theta_hat0, noise_std=setup.noise_std,
                   rng=setup.rng, events=setup.events, state_bound=scn.simulation.state_bound,
-                  sink_every=sink_every)
+                  sink_every=sink_every, control_delay=scn.simulation.control_delay)
     if log_path is None:
         traj = run(plant, setup.law, setup.reference, **kwargs)
         return RunResult(traj, clean_json(make_summary(scn.name, traj)), None)

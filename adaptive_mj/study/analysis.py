@@ -199,3 +199,69 @@ def manipulator_response(traj: Trajectory, setup) -> dict:
                                                     - traj.theta[-1, i + 4:i + 10]).max())},
         }
     return out
+
+
+def windowed_rms(t: np.ndarray, e: np.ndarray, window: float) -> np.ndarray:
+    """(N,) RMS of e over the trailing `window` seconds at each row (NaN until a window is full)."""
+    dt = float(t[1] - t[0]) if len(t) > 1 else 1.0
+    n = max(1, int(round(window / dt)))
+    c = np.concatenate(([0.0], np.cumsum(np.asarray(e, dtype=float) ** 2)))
+    out = np.full(len(e), np.nan)
+    if len(e) >= n:
+        out[n - 1:] = np.sqrt((c[n:] - c[:-n]) / n)
+    return out
+
+
+def critical_leading_estimate(d: float, k: float, lam: float, delay: float) -> float:
+    """d̂ at which the n = 2 sliding loop on the plant d ÿ = u, with u delayed by `delay` [s],
+    loses its last degree of phase margin (linearised at a set-point, drag slope 0 there).
+
+    With a set-point the law is u = d̂ λ ỹ' + k (ỹ' + λ ỹ) + (terms that cancel the plant's):
+    a PD with K_v = k + d̂ λ and K_p = k λ. The loop L(jω) = (K_p + jω K_v) e^(−jωT) / (−d ω²)
+    crosses |L| = 1 at ω_c and has phase margin atan(ω_c K_v / K_p) − ω_c T; the returned d̂
+    makes that margin 0 (found by bisection). Returns inf if the margin never reaches 0."""
+    from scipy.optimize import brentq
+
+    def margin(dh: float) -> float:
+        kv, kp = k + dh * lam, k * lam
+        w = brentq(lambda w: math.hypot(kp, w * kv) - d * w * w, 1e-9, 1e9)
+        return math.atan2(w * kv, kp) - w * delay
+
+    if delay <= 0 or margin(d * 1e6) > 0:
+        return math.inf
+    lo = 0.0 if margin(0.0) > 0 else None
+    if lo is None:
+        return 0.0
+    return float(brentq(margin, lo, d * 1e6))
+
+
+FAILURE_WINDOW = 1.0  # s: the RMS of ỹ is taken over this trailing window to call a failure
+
+
+def sudden_failure(traj: Trajectory, setup) -> dict:
+    """When a drifting loop fails: the first time the thrust saturates (the loop has left its
+    linear regime: bursting), and the first time the RMS of ỹ over the last FAILURE_WINDOW
+    seconds exceeds the noise std σ_y (the loop's error is as large as what it measures).
+    Also d̂/d at those times and at the end, its maximum, and the predicted critical d̂/d
+    from the delay margin (critical_leading_estimate)."""
+    t, e = traj.t, traj.y_tilde
+    ratio = traj.theta_hat[:, 0] / traj.theta[:, 0]
+    bound = float(setup.noise_std[0]) if setup.noise_std is not None and setup.noise_std[0] > 0 else 1e-3
+    rms = windowed_rms(t, e, FAILURE_WINDOW)
+    fail = np.nonzero(rms > bound)[0]
+    t_fail = float(t[fail[0]]) if len(fail) else None
+    lo, hi = setup.plant.ctrl_range if setup.plant.ctrl_range is not None else (-math.inf, math.inf)
+    sat = np.nonzero((traj.u <= lo) | (traj.u >= hi))[0]
+    t_sat = float(t[sat[0]]) if len(sat) else None
+    law = setup.law
+    d = float(traj.theta[0, 0])
+    delay = traj.meta.get("control_delay", 0) * traj.meta["dt"]
+    crit = critical_leading_estimate(d, law.k, law.lam, delay) / d if hasattr(law, "lam") else math.nan
+    if traj.status == "diverged" and t_fail is None:
+        t_fail = float(t[-1])
+    return {"t_fail": t_fail, "t_saturation": t_sat, "bound": bound,
+            "ratio_at_saturation": float(ratio[sat[0]]) if len(sat) else None,
+            "ratio_max": float(np.max(ratio)), "ratio_final": float(ratio[-1]), "critical_ratio": crit,
+            "t_critical": float(t[np.argmax(ratio > crit)]) if np.any(ratio > crit) else None,
+            "rms_before": float(np.sqrt(np.mean(e[t < (t_sat if t_sat is not None else t[-1] + 1)] ** 2))),
+            "rms_tail": float(np.sqrt(np.mean(e[t >= t[-1] - 0.1 * (t[-1] - t[0])] ** 2)))}

@@ -45,7 +45,7 @@ DOCUMENTED_KEYS: dict[str, tuple[str, ...]] = {
     "plant": ("kind", "backend", "model", "joint", "actuator", "payload", "payload_mass", "site", "theta",
               "g", "density", "viscosity", "ctrl_range", "thruster_time_constant", "regressor",
               "unknown", "joint_params", "base_parameters", "servo_to_torque"),
-    "simulation": ("integrator", "timestep", "duration", "initial_state", "state_bound"),
+    "simulation": ("integrator", "timestep", "duration", "initial_state", "state_bound", "control_delay"),
     "law": ("kind", "order", "lambda", "k", "gamma", "dead_zone.width", "dead_zone.on",
             "dead_zone.width_in_noise_std", "initial_estimates", "nominal", "K", "boundary_layer", "kd",
             "sigma", "e_modification", "theta0", "projection", "composite.gain", "composite.filter"),
