@@ -15,7 +15,7 @@ import signal
 import sys
 from pathlib import Path
 
-from adaptive_mj.errors import AdaptiveMJError, Interrupted, LogFormatError
+from adaptive_mj.errors import AdaptiveMJError, Interrupted, LogFormatError, ScenarioError
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -73,6 +73,15 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
     sw.add_argument("--metric", action="append", default=[],
                     help="metric(s) to plot against the grid (default: rms_tracking_error_tail)")
+    st = sub.add_parser("stress", help="breaking points: every law x stressor x plant, margins by bisection "
+                                       "over seeded runs; report.md and margins.csv")
+    st.add_argument("--seeds", type=int, default=5, help="seeds per stress value (default 5)")
+    st.add_argument("--steps", type=int, default=4, help="bisection steps after the two ends (default 4)")
+    st.add_argument("--duration", type=float, default=20.0, help="seconds per run (default 20)")
+    st.add_argument("--composite", action="store_true",
+                    help="also composite adaptation (runs on the Python callback path: several times slower)")
+    st.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    st.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
     return p
 
 
@@ -244,6 +253,15 @@ def _dispatch(args) -> int:
 
             args.scenario = _scenario_path(args.scenario)
             return main_sweep(args)
+        if args.command == "stress":
+            from adaptive_mj.study.stress import main_stress
+
+            for name, lowest in (("seeds", 1), ("steps", 0), ("jobs", 1)):
+                if getattr(args, name) < lowest:
+                    raise ScenarioError(f"--{name} must be an integer >= {lowest}, got {getattr(args, name)}")
+            if not args.duration > 0:
+                raise ScenarioError(f"--duration must be > 0 [s], got {args.duration}")
+            return main_stress(args)
         return {"list": cmd_list, "run": cmd_run, "replay": cmd_replay}[args.command](args)
     except AdaptiveMJError as exc:
         if args.debug:

@@ -116,9 +116,14 @@ def swap_response(traj: Trajectory, setup) -> dict:
     changed = traj.theta[i_e] != traj.theta[max(0, i_e - 1)]
     rel = np.abs(traj.theta_hat - traj.theta)[:, changed] / np.abs(traj.theta[:, changed])
     ok = np.all(rel <= RELATIVE_PARAM_TOLERANCE, axis=1) if changed.any() else np.ones(len(traj), dtype=bool)
+    neg = traj.theta_hat[:, 0] < 0.0  # a negative leading coefficient (Ĵ or d̂): unphysical
     return {
         "event_time": t_e,
         "peak_error_after": float(e[after].max()) if after.any() else math.nan,
+        "peak_time_after": float(traj.t[after][np.argmax(e[after])] - t_e) if after.any() else math.nan,
+        "estimate_min": {n: float(v) for n, v in zip(traj.names, traj.theta_hat.min(axis=0))},
+        "estimate_min_time": {n: float(traj.t[i]) for n, i in zip(traj.names, traj.theta_hat.argmin(axis=0))},
+        "leading_negative_seconds": float(np.sum(neg) * traj.meta["dt"]),
         "recovery_time": settle_time(traj.t, e < SWAP_THRESHOLD, t_e),
         "reconvergence_time": settle_time(traj.t, ok, t_e),
         "changed": [n for n, c in zip(traj.names, changed) if c],
@@ -143,7 +148,30 @@ def lyapunov_check(traj: Trajectory, setup) -> dict:
         "dissipated": float(np.sum(ks2) * dt),
         "vdot_start": float(np.mean(np.abs(dV[: max(1, dV.size // 10)]))) / dt if dV.size else 0.0,
         "vdot_tail": float(np.mean(np.abs(dV[-max(1, dV.size // 10):]))) / dt if dV.size else 0.0,
+        **_unmodelled_drag_power(traj, setup, k),
     }
+
+
+def _unmodelled_drag_power(traj: Trajectory, setup, k: float) -> dict:
+    """With MuJoCo's viscous drag −c_v y' acting on the vehicle but absent from the regressor,
+    d ṡ gains + c_v y' and V' = −k s² + c_v y' s exactly: V grows where c_v y' s > k s². Returns
+    c_v [N s/m], the total growth of V measured (Σ max(ΔV, 0)) and predicted
+    (∫ max(0, c_v y' s − k s²) dt), and max |ΔV/Δt − (−k s² + c_v y' s)| / max k s²."""
+    model = getattr(setup.plant, "model", None)
+    if model is None or not hasattr(setup.plant, "form") or setup.plant.form.order != 2 or model.opt.viscosity == 0:
+        return {}
+    from adaptive_mj.plants.heave import unmodelled_linear_drag
+
+    cv = unmodelled_linear_drag(model)
+    dt = traj.meta["dt"]
+    s, yd = traj.s, traj.x[:, 1]
+    p = -k * s ** 2 + cv * yd * s  # the predicted V'
+    p_mid = 0.5 * (p[:-1] + p[1:])
+    dV = np.diff(traj.V)
+    scale = float(np.max(k * s ** 2)) or 1.0
+    return {"drag_cv": cv, "growth_measured": float(np.sum(np.maximum(dV, 0.0))),
+            "growth_predicted": float(np.sum(np.maximum(p_mid, 0.0)) * dt),
+            "vdot_residual_rel_with_drag": float(np.max(np.abs(dV / dt - p_mid)) / scale) if dV.size else 0.0}
 
 
 def manipulator_response(traj: Trajectory, setup) -> dict:
@@ -265,3 +293,38 @@ def sudden_failure(traj: Trajectory, setup) -> dict:
             "t_critical": float(t[np.argmax(ratio > crit)]) if np.any(ratio > crit) else None,
             "rms_before": float(np.sqrt(np.mean(e[t < (t_sat if t_sat is not None else t[-1] + 1)] ** 2))),
             "rms_tail": float(np.sqrt(np.mean(e[t >= t[-1] - 0.1 * (t[-1] - t[0])] ** 2)))}
+
+
+CHATTER_CUTOFF_HZ = 5.0  # Hz: u above this counts as chattering (the references are below 1 Hz)
+
+
+def lowpass_zero_phase(u: np.ndarray, dt: float, cutoff_hz: float) -> np.ndarray:
+    """A first-order low-pass run forwards then backwards (no phase lag), cut-off in Hz."""
+    a = math.exp(-2.0 * math.pi * cutoff_hz * dt)
+
+    def once(x):
+        y = np.empty_like(x)
+        acc = x[0]
+        for i, v in enumerate(x):
+            acc = a * acc + (1.0 - a) * v
+            y[i] = acc
+        return y
+
+    u = np.asarray(u, dtype=float)
+    return once(once(u)[::-1])[::-1]
+
+
+def chattering(traj: Trajectory, setup=None) -> dict:
+    """Chattering as the high-frequency part of u, at the full physics rate:
+    total variation of u − lowpass(u) with a zero-phase first-order low-pass at
+    CHATTER_CUTOFF_HZ, over the run and per second [units of u, and per s]; plus the total
+    variation of u itself and of its low-passed part (feed-forward + smooth feedback)."""
+    u = np.asarray(traj.u, dtype=float).reshape(len(traj.t), -1)[:, 0]
+    dt = traj.meta["dt"]
+    slow = lowpass_zero_phase(u, dt, CHATTER_CUTOFF_HZ)
+    fast = u - slow
+    T = max(dt, float(traj.t[-1] - traj.t[0]))
+    tv_fast = float(np.sum(np.abs(np.diff(fast))))
+    return {"cutoff_hz": CHATTER_CUTOFF_HZ, "tv_high_frequency": tv_fast, "tv_high_frequency_per_s": tv_fast / T,
+            "tv_total": float(np.sum(np.abs(np.diff(u)))), "tv_low_frequency": float(np.sum(np.abs(np.diff(slow)))),
+            "window_t": traj.t[-500:].tolist(), "window_u": u[-500:].tolist()}

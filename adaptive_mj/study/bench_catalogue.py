@@ -199,17 +199,28 @@ def _phase(quick: bool, logs: Path) -> Section:
 
 
 # ---------------------------------------------------------------- 3. Lyapunov / Barbalat
+UNMODELLED_DRAG_FRACTION = 0.25  # the Lyapunov section's unmodelled viscous drag: c_v = 25 % of k
+
+
 def _lyapunov(quick: bool, logs: Path) -> Section:
+    from adaptive_mj.plants.heave import unmodelled_linear_drag
+    from adaptive_mj.setup.build import build
+
     dur = ["simulation.duration=15.0"] if quick else []
+    base = sc.load(SCN / "heave_tracking.toml")
+    model = build(base).plant.model
+    cv_per_viscosity = unmodelled_linear_drag(model) / model.opt.viscosity  # [N s/m per Pa s]
+    viscosity = UNMODELLED_DRAG_FRACTION * base.law.k / cv_per_viscosity
     jobs = (_job("lyapunov", "heave_ideal", "heave_tracking", logs, ["plant.viscosity=0.0", *dur], ["lyapunov_check"]),
-            _job("lyapunov", "heave_water", "heave_tracking", logs, dur, ["lyapunov_check"]))
+            _job("lyapunov", "heave_unmodelled_drag", "heave_tracking", logs, [f"plant.viscosity={viscosity!r}", *dur],
+                 ["lyapunov_check"]))
 
     def analyze(res, out):
         fig, ax = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True, constrained_layout=True)
         lines = ["| run | V(0) | V(end) | largest one-step increase of V | max \\|ΔV/Δt + k s²\\| / max k s² | "
                  "mean \\|V'\\| first 10 % | mean \\|V'\\| last 10 % |", "|---|---|---|---|---|---|---|"]
-        rows = []
-        for job, label in zip(jobs, ["ideal (viscosity 0)", "water viscosity 0.0009 Pa s"]):
+        rows, drag = [], None
+        for job, label in zip(jobs, ["ideal (viscosity 0)", f"unmodelled drag (viscosity {viscosity:.3g} Pa s)"]):
             r = res[job.tag]
             if not _ok(r):
                 rows.append(_row("Lyapunov", label, r))
@@ -222,6 +233,11 @@ def _lyapunov(quick: bool, logs: Path) -> Section:
             if "ideal" in label:
                 k = _law_k(job)
                 ax[1].plot(tr.t, -k * tr.s**2, "k--", lw=1, label="$-k s^2$ (ideal)")
+            if "drag_cv" in c:
+                drag = c
+                cv, x1 = c["drag_cv"], tr.x[:, 1]
+                ax[1].plot(tr.t, -_law_k(job) * tr.s ** 2 + cv * x1 * tr.s, ":", lw=1,
+                           label="$-k s^2 + c_v y' s$ (predicted, with drag)")
             lines.append(f"| {label} | {_g(c['V0'])} | {_g(c['V_end'])} | {_g(c['max_increase'])} | "
                          f"{_g(c['vdot_residual_rel'])} | {_g(c['vdot_start'])} | {_g(c['vdot_tail'])} |")
             rows.append(_row("Lyapunov", label, r, f"max V increase {_g(c['max_increase'])}"))
@@ -235,13 +251,22 @@ def _lyapunov(quick: bool, logs: Path) -> Section:
         ax[1].grid(alpha=0.3)
         fig.suptitle("MuJoCo heave vehicle: V = ½ d s² + ½ Σ γᵢ θ̃ᵢ²")
         img = _save(fig, out, "lyapunov")
+        drag_text = ""
+        if drag is not None:
+            drag_text = (f"\n\nWith the unmodelled drag, V' = −k s² + c_v y' s exactly (the drag's power on s), "
+                         f"c_v = {drag['drag_cv']:.4g} N s/m from the compiled model: V grows wherever c_v y' s > "
+                         f"k s². Measured total growth Σ max(ΔV, 0) = {_g(drag['growth_measured'])} J against the "
+                         f"predicted ∫ max(0, c_v y' s − k s²) dt = {_g(drag['growth_predicted'])} J; "
+                         f"max |ΔV/Δt − V'_predicted| / max k s² = {_g(drag['vdot_residual_rel_with_drag'])}. So "
+                         "the ideal argument's V(t) ≤ V(0) no longer holds pointwise; V stays bounded because the "
+                         "drag dissipates on average.")
         text = ("The heave vehicle of `heave_tracking` (estimates from zero), with the lecture's V. Increases are "
                 "per physics step (1 ms, full rate); the V' check uses the midpoint rule at full rate. In the "
                 "ideal case V never rises by more than the table's largest increase and |V'| falls from its "
-                "first-10 % mean to its last-10 % mean (Barbalat: V' → 0). The water case adds a viscous drag "
-                "the regressor does not model (0.0025 N s/m, so the two runs differ only in late digits); it is "
-                "dissipative, and the table shows whether V still never grows beyond round-off.\n\n"
-                + "\n".join(lines) + "\n\n" + img + _status_note(res))
+                "first-10 % mean to its last-10 % mean (Barbalat: V' → 0). The second run adds a viscous drag the "
+                f"regressor does not model, c_v = {UNMODELLED_DRAG_FRACTION:g} k (MuJoCo's fluid viscosity "
+                f"{viscosity:.3g} Pa s, derived from the model's box), large enough to show in V.\n\n"
+                + "\n".join(lines) + "\n\n" + img + drag_text + _status_note(res))
         return SectionReport(text, rows)
 
     return Section("lyapunov", "3. Lyapunov function and Barbalat's lemma",
@@ -282,14 +307,16 @@ def _second_order(quick: bool, logs: Path) -> Section:
                 ("robust_phi0.05", ["law.kind=robust_sliding", f"law.K={K!r}", "law.boundary_layer=0.05"]),
                 ("robust_phi0.005", ["law.kind=robust_sliding", f"law.K={K!r}", "law.boundary_layer=0.005"]),
                 ("robust_phi1e-5", ["law.kind=robust_sliding", f"law.K={K!r}", "law.boundary_layer=1e-05"])]
-    jobs = tuple(_job("second_order", v, "heave_tracking", logs, [nom, *ov, *dur]) for v, ov in variants)
+    jobs = tuple(_job("second_order", v, "heave_tracking", logs, [nom, *ov, *dur], ["chattering"])
+                 for v, ov in variants)
     jobs += (_job("second_order", "lecture_heave_twin", "lecture_heave", logs),)
 
     def analyze(res, out):
-        lines = ["| controller | RMS ỹ [m] | tail RMS ỹ [m] | u RMS [N] | chattering Σ\\|Δu\\| [N] | "
-                 "final d̃ [kg] | final b̃ [kg/m] | final c̃ [kg] |", "|---|---|---|---|---|---|---|---|"]
+        lines = ["| controller | RMS ỹ [m] | tail RMS ỹ [m] | u RMS [N] | chattering: Σ\\|Δu_hf\\| [N/s] | Σ\\|Δu\\| "
+                 "[N] (of which low-frequency) | final d̃ [kg] | final b̃ [kg/m] | final c̃ [kg] |",
+                 "|---|---|---|---|---|---|---|---|---|"]
         rows = []
-        fig, ax = plt.subplots(2, 1, figsize=(9, 6.5), constrained_layout=True)
+        fig, ax = plt.subplots(3, 1, figsize=(9, 9), constrained_layout=True)
         for job, (v, _) in zip(jobs, variants):
             r = res[job.tag]
             rows.append(_row("2nd order", v, r))
@@ -297,21 +324,27 @@ def _second_order(quick: bool, logs: Path) -> Section:
                 lines.append(f"| {v} | {r.status} |||||||")
                 continue
             m, tr = r.summary["metrics"], r.trajectory
-            pe = m["param_error_final"]
+            pe, ch = m["param_error_final"], r.extras["chattering"]
             lines.append(f"| {v} | {_g(m['rms_tracking_error'])} | {_g(m['rms_tracking_error_tail'])} | "
-                         f"{_g(m['control_rms'])} | {_g(m['control_total_variation'])} | {_g(pe['d'], '+.3g')} | "
+                         f"{_g(m['control_rms'])} | {_g(ch['tv_high_frequency_per_s'])} | {_g(ch['tv_total'])} "
+                         f"({_g(ch['tv_low_frequency'])}) | {_g(pe['d'], '+.3g')} | "
                          f"{_g(pe['b'], '+.3g')} | {_g(pe['c'], '+.3g')} |")
             ax[0].semilogy(tr.t, np.abs(tr.y_tilde) + 1e-9, lw=1, label=v)
             win = (tr.t >= tr.t[-1] - 3.0)
             ax[1].plot(tr.t[win], tr.u[win], lw=1, label=v)
+            ax[2].plot(ch["window_t"], ch["window_u"], lw=0.8, label=v)
         ax[0].set_ylabel("|ỹ| [m]")
         ax[0].set_xlabel("time t [s]")
         ax[0].legend(fontsize=8)
         ax[0].grid(alpha=0.3)
-        ax[1].set_ylabel("thrust u [N] (last 3 s)")
+        ax[1].set_ylabel("thrust u [N]\n(last 3 s, 100 Hz log:\naliased)")
         ax[1].set_xlabel("time t [s]")
         ax[1].legend(fontsize=8)
         ax[1].grid(alpha=0.3)
+        ax[2].set_ylabel("thrust u [N]\n(last 0.5 s, every\n1 ms physics step)")
+        ax[2].set_xlabel("time t [s]")
+        ax[2].legend(fontsize=8)
+        ax[2].grid(alpha=0.3)
         fig.suptitle("MuJoCo heave vehicle, y_d = cos t: adaptive vs fixed nominal vs robust sliding")
         img = _save(fig, out, "heave_comparison")
         lec = res["second_order/lecture_heave_twin"]
@@ -320,16 +353,20 @@ def _second_order(quick: bool, logs: Path) -> Section:
             lm = lec.summary["metrics"]
             lec_text = (f"\n\nThe lecture's own numbers (d = 1.5, b = 1.9, c = 5.2, λ = 10, k = 1, γ = 0.5, twin; "
                         f"c > d is not buildable physically): tail RMS ỹ = {_g(lm['rms_tracking_error_tail'])} m, "
-                        f"largest V increase {_g(lm['lyapunov_max_increase'])}.\n\n" + _final_table(lec, "heave"))
+                        f"largest V increase {_g(lm['lyapunov_max_increase'])}.\n\n" + _final_table(lec, "heave")
+                        + _lecture_twin_note(lec, out))
             rows.append(_row("2nd order", "lecture numbers (twin)", lec))
         text = (f"All {len(variants)} start from the same nominal guess θ̂(0) = (d, b, c) = "
                 f"({nominal['d']:.4g}, {nominal['b']:.4g}, {nominal['c']:.4g}) against the true "
                 f"({truth[0]:.4g}, {truth[1]:.4g}, {truth[2]:.4g}) read from the model; λ = 5, k = 200. "
                 f"The robust controller's K = {K:.3g} N is 1.1 × the bound |d̃|·1 + |b̃|·1 + |c̃|·g on the model "
                 "error along y_d = cos t; the boundary layer Φ [m/s] sets how close to switching it gets "
-                "(Φ = 1e-5 m/s is nearly sign(s)). Tail = last 25 % of the run. The thrust curves are drawn "
-                "from the 100 Hz log, so the nearly switching controller's chattering (at the 1 kHz physics "
-                "rate) is aliased in the figure; its Σ|Δu| in the table is computed at the full rate.\n\n" + "\n".join(lines) + "\n\n" + img
+                "(Φ = 1e-5 m/s is nearly sign(s)). Tail = last 25 % of the run. Chattering is the "
+                "high-frequency part of u, at the full 1 kHz physics rate: Σ|Δu_hf| per second with u_hf = u − "
+                f"lowpass(u), a zero-phase first-order low-pass at {analysis.CHATTER_CUTOFF_HZ:g} Hz (the reference "
+                "is at 0.16 Hz); the total variation Σ|Δu| is also shown, with its low-frequency part, because it "
+                "is dominated by the feed-forward that every controller shares. The middle panel is drawn from the "
+                "100 Hz log and aliases any chattering; the bottom panel is u at every physics step.\n\n" + "\n".join(lines) + "\n\n" + img
                 + lec_text + _status_note(res))
         return SectionReport(text, rows)
 
@@ -337,6 +374,42 @@ def _second_order(quick: bool, logs: Path) -> Section:
                    "with s = ỹ' + λỹ, u = d̂ ṡ_r − φp̂ + k s and p̂' = −φᵀs/γ, d̂' = ṡ_r s/γ the vehicle tracks "
                    "perfectly without knowing d, b, c; a fixed nominal controller keeps a steady error, a robust "
                    "sliding controller trades error against chattering through its boundary layer.", jobs, analyze)
+
+
+def _lecture_twin_note(r: JobResult, out: Path) -> str:
+    """Why the lecture's numbers end far from the truth: measured V, its dissipation and the estimates."""
+    tr = r.trajectory
+    if tr is None or len(tr.t) < 3:
+        return ""
+    k = sc.load(SCN / "lecture_heave.toml").law.k
+    i1 = int(np.searchsorted(tr.t, 1.0))
+    dt = np.diff(tr.t)
+    dissipated = float(np.sum(k * tr.s[i1:-1] ** 2 * dt[i1:]))
+    err1, err_end = tr.theta_hat[i1] - tr.theta[i1], tr.theta_hat[-1] - tr.theta[-1]
+    fig, ax = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True, constrained_layout=True)
+    for i, name in enumerate(tr.names):
+        ax[0].plot(tr.t, tr.theta_hat[:, i], color=f"C{i}", lw=1.2, label=f"$\\hat{{{name}}}$")
+        ax[0].axhline(tr.theta[0, i], color=f"C{i}", ls=":", lw=1)
+    ax[0].set_ylabel("estimates (dotted: true)")
+    ax[0].legend(fontsize=8)
+    ax[1].semilogy(tr.t, tr.V, lw=1.2, label="V")
+    ax[1].semilogy(tr.t, np.maximum(k * tr.s ** 2, 1e-12), lw=0.8, label="k s² = −V'")
+    ax[1].set_ylabel("[J], [W]")
+    ax[1].set_xlabel("time t [s]")
+    ax[1].legend(fontsize=8)
+    for a in ax:
+        a.grid(alpha=0.3)
+    fig.suptitle("the lecture's numbers (twin): estimates and V")
+    img = _save(fig, out, "lecture_twin_estimates")
+    return ("\n\nWhy the estimates end far from the truth: the law guarantees only V' = −k s², and with the "
+            f"lecture's k = {k:g} that dissipation is small. Within the first second the fast adaptation (γ = 0.5) "
+            f"moves the estimates to θ̃ = ({', '.join(f'{v:+.3g}' for v in err1)}) and V to {tr.V[i1]:.4g}; from "
+            f"then to the end the loop dissipates only ∫k s² dt = {dissipated:.3g} J, and V ends at "
+            f"{tr.V[-1]:.4g}. The parameter error does not shrink, it turns: θ̃ = "
+            f"({', '.join(f'{v:+.3g}' for v in err_end)}) at the end, a combination of d̃, b̃, c̃ that the closed "
+            "loop's regressor along y_d = cos t hardly sees, so tracking stays good while the estimates are wrong. "
+            "More excitation at these gains would need a larger k (more dissipation per unit s²) or a richer "
+            "reference; the MuJoCo runs above use k = 200.\n\n" + img)
 
 
 # ---------------------------------------------------------------- 5. n-th order
@@ -450,18 +523,24 @@ def _drift_sentence(res) -> str:
 # ---------------------------------------------------------------- 7. payload swap
 def _swap(quick: bool, logs: Path) -> Section:
     dur = ["simulation.duration=30.0"] if quick else []
-    jobs = (_job("payload_swap", "adaptive", "arm_payload_swap", logs, dur, ["swap_response"]),
-            _job("payload_swap", "fixed_nominal", "arm_payload_swap", logs, ["law.kind=fixed_nominal", *dur],
-                 ["swap_response"]))
+    from adaptive_mj.setup.build import build
+
     scn = sc.load(SCN / "arm_payload_swap.toml")
     ev = scn.events[0]
+    J0 = float(build(scn).plant.true_theta()[0])
+    box = f"law.projection={{J=[{0.1 * J0!r}, inf], b=[0.0, inf]}}"  # J >= 10 % of its initial value, b >= 0
+    jobs = (_job("payload_swap", "adaptive", "arm_payload_swap", logs, dur, ["swap_response"]),
+            _job("payload_swap", "fixed_nominal", "arm_payload_swap", logs, ["law.kind=fixed_nominal", *dur],
+                 ["swap_response"]),
+            _job("payload_swap", "adaptive_projection", "arm_payload_swap", logs, [box, *dur], ["swap_response"]))
 
     def analyze(res, out):
         fig, ax = plt.subplots(3, 1, figsize=(9, 8), sharex=True, constrained_layout=True)
-        lines = ["| controller | peak \\|ỹ\\| after swap [rad] | recovery time [s] | estimates re-converged after [s] "
-                 "| tail RMS ỹ [rad] |", "|---|---|---|---|---|"]
+        lines = ["| controller | peak \\|ỹ\\| after swap [rad] (at swap + [s]) | recovery time [s] | estimates "
+                 "re-converged after [s] | tail RMS ỹ [rad] | min Ĵ [kg m²] (time Ĵ < 0 [s]) | min b̂, ĝ_sin, ĝ_cos |",
+                 "|---|---|---|---|---|---|---|"]
         rows = []
-        for job, style in zip(jobs, ["-", "--"]):
+        for job, style in zip(jobs, ["-", "--", "-."]):
             r = res[job.tag]
             v = job.tag.split("/")[1]
             if not _ok(r):
@@ -471,13 +550,16 @@ def _swap(quick: bool, logs: Path) -> Section:
             tr, sw, m = r.trajectory, r.extras["swap_response"], r.summary["metrics"]
             rec = "never" if sw["recovery_time"] is None else f"{sw['recovery_time']:.2f}"
             conv = "never" if sw["reconvergence_time"] is None else f"{sw['reconvergence_time']:.2f}"
-            lines.append(f"| {v} | {sw['peak_error_after']:.4f} | {rec} | {conv} | {_g(m['rms_tracking_error_tail'])} |")
+            mins = sw["estimate_min"]
+            lines.append(f"| {v} | {sw['peak_error_after']:.4f} ({sw['peak_time_after']:.2f}) | {rec} | {conv} | "
+                         f"{_g(m['rms_tracking_error_tail'])} | {mins['J']:.3f} ({sw['leading_negative_seconds']:.2f}) | "
+                         f"{mins['b']:.3g}, {mins['g_sin']:.3g}, {mins['g_cos']:.3g} |")
             rows.append(_row("payload swap", v, r, f"peak {sw['peak_error_after']:.3g} rad, recovery {rec}" + (" s" if rec != "never" else "")))
             ax[0].plot(tr.t, tr.y_tilde, style, lw=1, label=v)
             for i, name in ((0, "J"), (2, "g_sin")):
                 a = ax[1] if name == "J" else ax[2]
                 if style == "-":
-                    a.plot(tr.t, tr.theta[:, i], "k--", lw=1, label=f"true {name}")
+                    a.plot(tr.t, tr.theta[:, i], "k:", lw=1.5, label=f"true {name}")
                 a.plot(tr.t, tr.theta_hat[:, i], style, lw=1.2, label=f"{name} estimate, {v}")
         thr = analysis.SWAP_THRESHOLD
         ax[0].axhspan(-thr, thr, color="g", alpha=0.1, label=f"|ỹ| < {thr} rad")
@@ -494,8 +576,11 @@ def _swap(quick: bool, logs: Path) -> Section:
         fig.suptitle(f"arm: payload mass → {ev.value:g} kg at t = {ev.t:g} s")
         img = _save(fig, out, "payload_swap")
         gif = _swap_gif(jobs[0], ev.t, out)
-        text = (f"`arm_payload_swap`: the 0.5 kg payload becomes {ev.value:g} kg (×4) at t = {ev.t:g} s; both "
-                "controllers start from the true parameters of the arm as compiled; the fixed controller keeps them. "
+        text = (f"`arm_payload_swap`: the 0.5 kg payload becomes {ev.value:g} kg (×4) at t = {ev.t:g} s; all three "
+                "controllers start from the true parameters of the arm as compiled; the fixed controller keeps them; "
+                f"`adaptive_projection` is the same adaptive law with `{box}` (Ĵ at least 10 % of the arm's initial "
+                f"J = {J0:.4g} kg m², b̂ ≥ 0). The table gives each estimate's minimum over the run: the unmodified "
+                "law's Ĵ goes negative (an unphysical inertia) while the error peaks, which projection prevents. "
                 f"Recovery: time after the swap from which |ỹ| < {analysis.SWAP_THRESHOLD} rad to the end; "
                 "re-convergence: from which every parameter the swap changed (J, g_sin) is within 10 % of its new "
                 "value to the end.\n\n"
@@ -541,9 +626,9 @@ def _pe(quick: bool, logs: Path) -> Section:
 
     def analyze(res, out):
         fig, ax = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
-        lines = ["| reference | index λ_min(C) | rate ρ [1/s] | e^(−ρT) | final max \\|θ̂ᵢ−θᵢ\\|/\\|θᵢ\\| | "
-                 "tail RMS ỹ [m] |", "|---|---|---|---|---|---|"]
-        rows = []
+        lines = ["| reference | index λ_min(C) | slow-adaptation rate ρ [1/s] | e^(−ρT) (that approximation) | "
+                 "measured final max \\|θ̂ᵢ−θᵢ\\|/\\|θᵢ\\| | tail RMS ỹ [m] |", "|---|---|---|---|---|---|"]
+        rows, measured = [], []
         for job in jobs:
             r = res[job.tag]
             v = job.tag.split("/")[1]
@@ -554,16 +639,16 @@ def _pe(quick: bool, logs: Path) -> Section:
             tr, idx, rho = r.trajectory, r.extras["excitation_index"], r.extras["excitation_rate"]
             rel = analysis.relative_param_error(tr)
             T = tr.t[-1] - tr.t[0]
+            measured.append((v, idx, rho, float(rel[-1]), math.exp(-rho * T)))
             ax[0].semilogy(tr.t, rel, lw=1.2, label=f"{v} (ρ = {rho:.2g}/s)")
-            ax[0].semilogy(tr.t, np.exp(-rho * (tr.t - tr.t[0])), ":", lw=1, color=ax[0].lines[-1].get_color())
             ax[1].scatter([max(rho, 1e-4)], [rel[-1]], s=40, label=v)
             lines.append(f"| {v} | {idx:.3g} | {rho:.3g} | {math.exp(-rho * T):.2g} | {rel[-1]:.3g} | "
                          f"{_g(r.summary['metrics']['rms_tracking_error_tail'])} |")
             rows.append(_row("excitation", v, r, f"rate {rho:.2g}/s, final rel. error {rel[-1]:.2g}"))
-        lows = [ln.get_ydata().min() for ln in ax[0].lines[::2] if len(ln.get_ydata())]
+        lows = [ln.get_ydata().min() for ln in ax[0].lines if len(ln.get_ydata())]
         ax[0].set_ylim(max(1e-9, 0.1 * min(lows)) if lows else 1e-9, 10.0)
         ax[0].set_xlabel("time t [s]")
-        ax[0].set_ylabel("max relative parameter error [-]\n(dotted: e^(−ρt))")
+        ax[0].set_ylabel("max relative parameter error [-]")
         ax[0].legend(fontsize=8)
         ax[0].grid(alpha=0.3)
         ax[1].set_xscale("log")
@@ -582,14 +667,40 @@ def _pe(quick: bool, logs: Path) -> Section:
                 "regressor ψ = [y_d'', −y_d'|y_d'|, −g] (D = diag M), so 0 = a direction never excited and 1 = "
                 "orthogonal regressor columns. It is scale-free, so it says whether every direction is excited, "
                 "not how fast: the rate ρ = λ_min(Γ^-½ M Γ^-½)/k adds the gains (from the slow-adaptation "
-                "approximation s ≈ ψᵀθ̃/k, θ̃' ≈ −Γ⁻¹ψψᵀθ̃/k), and e^(−ρT) is that approximation's prediction of "
-                "the fraction of the initial parameter error left after T — compare it with the measured column: "
-                "it ranks the references, but for fast adaptation (large ρ) the approximation no longer holds.\n\n" + "\n".join(lines) + "\n\n" + img + _status_note(res))
+                "approximation s ≈ ψᵀθ̃/k, θ̃' ≈ −Γ⁻¹ψψᵀθ̃/k), and e^(−ρT) is what that approximation predicts "
+                "for the fraction of the initial parameter error left after T.\n\n" + "\n".join(lines) + "\n\n"
+                + _pe_verdict(measured) + "\n\n" + img + _status_note(res))
         return SectionReport(text, rows)
 
     return Section("excitation", "8. Persistent excitation",
                    "tracking converges for any reference, but the estimates converge to the true values only "
                    "when the regressor is persistently exciting.", jobs, analyze)
+
+
+def _pe_verdict(measured: list[tuple[str, float, float, float, float]]) -> str:
+    """What the measured rows support: whether λ_min > 0 separates converged from not, whether ρ
+    orders the references as their measured final errors do, and how far e^(−ρT) is off."""
+    if len(measured) < 2:
+        return ""
+    excited = [m for m in measured if m[1] > 1e-6]
+    flat = [m for m in measured if m[1] <= 1e-6]
+    worst_excited = max((m[3] for m in excited), default=math.nan)
+    best_flat = min((m[3] for m in flat), default=math.nan)
+    out = [f"What these runs support: the references with λ_min(C) > 0 ended with parameter errors of at most "
+           f"{worst_excited:.2g}" + (f", the unexciting one(s) at {best_flat:.2g}" if flat else "") + "."]
+    by_rho = [m[0] for m in sorted(excited, key=lambda m: -m[2])]
+    by_err = [m[0] for m in sorted(excited, key=lambda m: m[3])]
+    if by_rho == by_err:
+        out.append(f"Here ρ orders the exciting references as their final errors do ({', '.join(by_rho)}).")
+    else:
+        out.append(f"ρ does not rank them: by ρ the order is {', '.join(by_rho)}, by the measured final error "
+                   f"{', '.join(by_err)}.")
+    ratios = [abs(math.log10(max(m[4], 1e-300) / max(m[3], 1e-300))) for m in excited]
+    if ratios:
+        out.append(f"e^(−ρT) misses the measured error by up to {max(ratios):.1f} orders of magnitude: with these "
+                   "gains adaptation is not slow against the tracking loop, so the approximation behind ρ does not "
+                   "hold, and only λ_min(C) > 0 (every direction excited) is a claim the data bear out.")
+    return " ".join(out)
 
 
 # ---------------------------------------------------------------- 9. manipulator

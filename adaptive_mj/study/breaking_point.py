@@ -1,0 +1,222 @@
+"""Breaking points: raise one stressor until a law fails, by bisection over runs.
+
+A run *fails* when it diverges (or cannot run) or when its tail RMS tracking error
+exceeds a stated bound. A stress value *passes* when every seed passes. For one
+(scenario, law, stressor) the search
+
+  1. runs every seed at the low end and at the high end of the range;
+  2. if the low end fails, the margin is "below the range"; if the high end passes,
+     it is "at least the high end";
+  3. otherwise bisects (geometrically when the range spans a decade or more and the
+     low end is > 0, linearly otherwise, to whole numbers for integer stressors) for
+     a fixed number of steps, keeping the largest passing value `margin` and the
+     smallest failing value `first_fail`; the resolution is first_fail − margin.
+
+Across seeds, at the margin: the mean tail error and its CVaR at 10 % (the mean of the
+worst ⌈10 %⌉ of seeds: with 5 seeds, the worst one); at first_fail: the failure rate.
+
+Searches for many (scenario, law, stressor) triples run in lockstep: every bisection
+level of every search is one batch of parallel runs (adaptive_mj.study.parallel), so
+the study takes (2 + steps) batches whatever its size. Every run's MCAP log is kept.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from adaptive_mj.study.parallel import Job, JobResult, run_jobs
+
+CVAR_LEVEL = 0.10  # the worst 10 % of seeds
+
+
+@dataclass(frozen=True)
+class Stressor:
+    """name: a label; overrides(v) -> the --set expressions that apply stress value v;
+    lo, hi: the range searched; integer: round to whole numbers (e.g. delay steps);
+    unit: the value's unit for reports."""
+
+    name: str
+    overrides: Callable[[float], list[str]]
+    lo: float
+    hi: float
+    integer: bool = False
+    unit: str = ""
+
+    @classmethod
+    def key(cls, key: str, lo: float, hi: float, *, integer: bool = False, unit: str = "") -> "Stressor":
+        """The stressor that sets one scenario key (`sweep --breaking-point KEY=LO:HI`)."""
+        fmt = (lambda v: str(int(v))) if integer else repr
+        return cls(key, lambda v: [f"{key}={fmt(v)}"], lo, hi, integer, unit)
+
+
+@dataclass(frozen=True)
+class Search:
+    """One breaking-point search: scenario file, fixed overrides (the law), the stressor."""
+
+    scenario: Path
+    label: str  # e.g. "heave/sigma"
+    overrides: tuple[str, ...]
+    stressor: Stressor
+    tail_bound: float  # [m or rad] tail RMS above this is a failure
+
+
+@dataclass
+class Evaluation:
+    value: float
+    tails: list[float]  # per seed, inf for a run that diverged or failed
+    statuses: list[str]
+    raw: list[float] = field(default_factory=list)  # per seed, the tail error even beyond the bound
+
+    @property
+    def passes(self) -> bool:
+        return all(np.isfinite(self.tails))
+
+    def failure_rate(self) -> float:
+        return float(np.mean([not np.isfinite(x) for x in self.tails]))
+
+
+@dataclass
+class Margin:
+    search: Search
+    margin: float | None  # largest passing value (None: the low end fails)
+    first_fail: float | None  # smallest failing value (None: the high end passes)
+    evaluations: list[Evaluation] = field(default_factory=list)
+
+    @property
+    def resolution(self) -> float | None:
+        if self.margin is None or self.first_fail is None:
+            return None
+        return self.first_fail - self.margin
+
+    def at(self, value: float | None) -> Evaluation | None:
+        return next((e for e in self.evaluations if value is not None and e.value == value), None)
+
+    def stats(self) -> dict:
+        """Mean and CVaR(10 %) of the tail error over seeds at the margin; failure rate at first_fail."""
+        ok, bad = self.at(self.margin), self.at(self.first_fail)
+        out = {"margin": self.margin, "first_fail": self.first_fail, "resolution": self.resolution,
+               "tail_mean": None, "tail_cvar10": None, "failure_rate_beyond": None}
+        if ok is not None:
+            t = np.sort(np.asarray(ok.tails))[::-1]
+            out["tail_mean"] = float(np.mean(t))
+            out["tail_cvar10"] = float(np.mean(t[:max(1, math.ceil(CVAR_LEVEL * len(t)))]))
+        if bad is not None:
+            out["failure_rate_beyond"] = bad.failure_rate()
+        return out
+
+
+def _tail(result: JobResult, bound: float) -> float:
+    if result.status != "ok" or result.summary is None:
+        return math.inf
+    tail = (result.summary.get("metrics") or {}).get("rms_tracking_error_tail")
+    if tail is None:
+        tail = (result.summary.get("metrics") or {}).get("rms_tracking_error_norm_tail")
+    if tail is None or not math.isfinite(tail) or tail > bound:
+        return math.inf
+    return float(tail)
+
+
+def _raw_tail(result: JobResult) -> float:
+    m = (result.summary or {}).get("metrics") or {}
+    v = m.get("rms_tracking_error_tail", m.get("rms_tracking_error_norm_tail"))
+    return math.inf if v is None or result.status != "ok" else float(v)
+
+
+def _mid(lo: float, hi: float, st: Stressor) -> float:
+    if lo > 0 and hi / lo >= 10.0:
+        v = math.sqrt(lo * hi)
+    else:
+        v = 0.5 * (lo + hi)
+    if st.integer:
+        v = float(round(v))
+        if v <= lo:
+            v = lo + 1
+        if v >= hi:
+            v = hi - 1
+    return v
+
+
+def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path, n_jobs: int = 1,
+               on_batch: Callable[[int, int], None] | None = None,
+               on_done: Callable[[JobResult], None] | None = None) -> list[Margin]:
+    """Run every search to its margin, in lockstep batches (see the module docstring).
+
+    seeds: seeds 0..seeds-1 per stress value; steps: bisection steps after the two ends;
+    logs: every run's MCAP log goes to logs/<label>/<stressor>=<value>-seed<k>.mcap."""
+    margins = [Margin(s, None, None) for s in searches]
+    brackets: list[tuple[float, float] | None] = [None] * len(searches)
+
+    def jobs_for(i: int, value: float) -> list[Job]:
+        s = searches[i]
+        safe = s.label.replace("/", "-")
+        text = str(int(value)) if s.stressor.integer else f"{value:.6g}"
+        return [Job(s.scenario, overrides=(*s.overrides, *s.stressor.overrides(value)), seed=k,
+                    log=logs / safe / f"{s.stressor.name.replace('.', '_')}={text}-seed{k}.mcap",
+                    tag=f"{s.label} {s.stressor.name}={text} seed {k}") for k in range(seeds)]
+
+    def evaluate(wanted: list[tuple[int, float]]) -> list[Evaluation]:
+        jobs = [job for i, v in wanted for job in jobs_for(i, v)]
+        results = run_jobs(jobs, n_jobs=n_jobs, on_done=on_done) if jobs else []
+        out = []
+        for n, (i, v) in enumerate(wanted):
+            chunk = results[n * seeds:(n + 1) * seeds]
+            ev = Evaluation(v, [_tail(r, searches[i].tail_bound) for r in chunk], [r.status for r in chunk],
+                            [_raw_tail(r) for r in chunk])
+            margins[i].evaluations.append(ev)
+            out.append(ev)
+        return out
+
+    total = 2 + steps
+    ends = [(i, s.stressor.lo) for i, s in enumerate(searches)] + [(i, s.stressor.hi) for i, s in enumerate(searches)]
+    evs = evaluate(ends)
+    if on_batch:
+        on_batch(1, total)
+    n = len(searches)
+    for i in range(n):
+        low, high = evs[i], evs[n + i]
+        if not low.passes:
+            margins[i].first_fail = low.value
+        elif high.passes:
+            margins[i].margin = high.value
+        else:
+            margins[i].margin, margins[i].first_fail = low.value, high.value
+            brackets[i] = (low.value, high.value)
+    for step in range(steps):
+        wanted = []
+        for i, br in enumerate(brackets):
+            if br is None:
+                continue
+            lo, hi = br
+            st = searches[i].stressor
+            if st.integer and hi - lo <= 1:
+                brackets[i] = None
+                continue
+            wanted.append((i, _mid(lo, hi, st)))
+        if not wanted:
+            break
+        for (i, v), ev in zip(wanted, evaluate(wanted)):
+            lo, hi = brackets[i]
+            if ev.passes:
+                brackets[i] = (v, hi)
+                margins[i].margin = v
+            else:
+                brackets[i] = (lo, v)
+                margins[i].first_fail = v
+        if on_batch:
+            on_batch(2 + step, total)
+    return margins
+
+
+def margin_text(m: Margin) -> str:
+    """The margin as a table cell: value ± resolution, or a bound."""
+    st = m.search.stressor
+    unit = f" {st.unit}" if st.unit else ""
+    if m.margin is None:
+        return f"< {st.lo:g}{unit}"
+    if m.first_fail is None:
+        return f"≥ {st.hi:g}{unit}"
+    return f"{m.margin:.3g}{unit} (next {m.first_fail:.3g})"

@@ -1,0 +1,196 @@
+"""The breaking-point study: every law × stressor × plant, margins by bisection over
+seeded runs (adaptive_mj.study.breaking_point), written as its own report
+(`adaptive-mj stress`) and as a section of the full bench.
+
+Plants (each starts on its reference with the estimates at the truth, so the laws are
+compared on robustness, not on their first transient, under a nominal sensor noise so
+that seeds differ):
+  heave: heave_tracking (y_d = cos t), σ_y = 0.5 mm, σ_y' = 5 mm/s;
+  arm:   arm_payload_swap without its swap (a sum of sines), σ_y = 0.5 mrad, σ_y' = 5 mrad/s.
+Failure: divergence, or tail RMS ỹ above the plant's bound (TAIL_BOUND).
+
+Laws: the lecture's adaptive law with no modification; the dead-zone (ε = 3σ_s at the
+nominal noise); σ-modification and e-modification (leakage time constant 5 s on the first
+parameter, toward the true θ); projection onto [θ/2, 2θ] for the positive parameters;
+composite adaptation (Python callback path: slow, so only with `--composite`); and the two
+baselines, fixed nominal parameters (the truth) and robust sliding control (K = 10 % of the
+actuator limit, Φ = 0.05).
+Stressors: noise σ (y', 10× y), a sinusoidal disturbance force (ω = 2 rad/s), an unmodelled
+thruster lag τ (heave), a payload ratio (arm), a
+control delay of whole physics steps. (arm: the payload's mass × ratio at half the run.)
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from adaptive_mj.setup import scenario as sc
+from adaptive_mj.study.breaking_point import Margin, Search, Stressor, margin_text, search_all
+
+TAIL_BOUND = {"heave": 0.01, "arm": 0.05}  # [m], [rad]: tail RMS above this is a failure
+NOMINAL_NOISE = {"heave": 5e-4, "arm": 5e-4}  # σ_y [m], [rad]; σ_y' = 10 σ_y [per s]
+LEAK_TIME = 5.0  # s: σ = γ_1 / LEAK_TIME; ν = γ_1 / (LEAK_TIME σ_s)
+DURATION = 20.0  # s per run (tail: the last 20 %)
+BENCH_SETTINGS = {"seeds": 5, "steps": 2, "duration": 10.0}  # the full bench's reduced study
+ROBUST_K_FRACTION = 0.1  # robust sliding: K = 10 % of the actuator's limit, boundary layer Φ = 0.05
+
+
+@dataclass(frozen=True)
+class Plant:
+    name: str
+    scenario: str
+    base: tuple[str, ...]
+
+
+def plants(duration: float = DURATION) -> list[Plant]:
+    def noise(p):
+        return f"noise.std={{y={NOMINAL_NOISE[p]!r}, y_dot={10 * NOMINAL_NOISE[p]!r}}}"
+
+    return [Plant("heave", "heave_tracking", (f"simulation.duration={duration}", "simulation.initial_state='reference'",
+                                              "law.initial_estimates='model'", noise("heave"))),
+            Plant("arm", "arm_payload_swap", (f"simulation.duration={duration}", "events=[]",
+                                              "law.initial_estimates='model'", noise("arm")))]
+
+
+def _setup(p: Plant):
+    from adaptive_mj.setup.build import build
+
+    scn = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml", overrides=list(p.base))
+    return scn, build(scn)
+
+
+def laws(p: Plant, *, composite: bool) -> list[tuple[str, list[str]]]:
+    """(law name, overrides) for plant p; every number derived from the scenario and its model."""
+    scn, s = _setup(p)
+    names, theta = s.law.names, s.plant.true_theta()
+    gamma1 = float(s.law.gamma[0])
+    sig_y = NOMINAL_NOISE[p.name]
+    sig_s = math.hypot(10 * sig_y, scn.law.lam * sig_y)
+    theta0 = "{" + ", ".join(f"{n}={float(v)!r}" for n, v in zip(names, theta)) + "}"
+    box = "{" + ", ".join(f"{n}=[{0.5 * float(v)!r}, {2.0 * float(v)!r}]" for n, v in zip(names, theta) if v > 0) + "}"
+    K = ROBUST_K_FRACTION * float(s.plant.ctrl_range[1])
+    out = [("adaptive", []),
+           ("dead_zone", [f"law.dead_zone={{width={3.0 * sig_s!r}}}"]),
+           ("sigma", [f"law.sigma={gamma1 / LEAK_TIME!r}", f"law.theta0={theta0}"]),
+           ("e_modification", [f"law.e_modification={gamma1 / (LEAK_TIME * sig_s)!r}", f"law.theta0={theta0}"]),
+           ("projection", [f"law.projection={box}"])]
+    if composite:
+        out.append(("composite", ["law.composite={gain=1.0, filter=2.0}" if p.name == "arm"
+                                  else "law.composite={gain=3e-4, filter=1.0}"]))
+    out += [("fixed_nominal", ["law.kind='fixed_nominal'", "law.nominal='model'"]),
+            ("robust_sliding", ["law.kind='robust_sliding'", "law.nominal='model'", f"law.K={K!r}",
+                                "law.boundary_layer=0.05"])]
+    return out
+
+
+def stressors(p: Plant, duration: float = DURATION) -> list[Stressor]:
+    unit_y = "m" if p.name == "heave" else "rad"
+    unit_u = "N" if p.name == "heave" else "N m"
+    out = [Stressor("noise σ_y", lambda v: [f"noise.std={{y={v!r}, y_dot={10 * v!r}}}"], 1e-4, 0.1, unit=unit_y),
+           Stressor("disturbance", lambda v: [f"disturbance={{kind='sine', magnitude={v!r}, omega=2.0}}"],
+                    1.0 if p.name == "heave" else 0.1, 1000.0 if p.name == "heave" else 100.0, unit=unit_u)]
+    if p.name == "heave":
+        out.append(Stressor("lag τ", lambda v: [f"plant.thruster_time_constant={v!r}"], 1e-3, 1.0, unit="s"))
+    else:
+        m0 = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml").plant.payload_mass
+        t_swap = 0.5 * duration
+        out.append(Stressor("payload ratio",
+                            lambda v: [f"events=[{{t={t_swap!r}, kind='payload_mass', value={v * m0!r}}}]"],
+                            1.0, 100.0, unit="×"))
+    out.append(Stressor("delay", lambda v: [f"simulation.control_delay={int(v)}"], 0, 200, integer=True,
+                        unit="steps"))
+    return out
+
+
+def study(*, composite: bool, duration: float = DURATION) -> list[Search]:
+    out = []
+    for p in plants(duration):
+        path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
+        for law, over in laws(p, composite=composite):
+            for st in stressors(p, duration):
+                out.append(Search(path, f"{p.name}/{law}", (*p.base, *over), st, TAIL_BOUND[p.name]))
+    return out
+
+
+def table(margins: list[Margin], *, seeds: int) -> str:
+    """Markdown: one row per plant/law, one column per stressor: margin (next failing value),
+    and below it, at the margin over the seeds, mean / CVaR10 % of the tail error and the
+    failure rate at the next value."""
+    stressor_names: list[str] = []
+    for m in margins:
+        if m.search.stressor.name not in stressor_names:
+            stressor_names.append(m.search.stressor.name)
+    by = {(m.search.label, m.search.stressor.name): m for m in margins}
+    labels = list(dict.fromkeys(m.search.label for m in margins))
+    lines = ["| plant / law | " + " | ".join(stressor_names) + " |", "|---|" + "---|" * len(stressor_names)]
+    for label in labels:
+        cells = []
+        for name in stressor_names:
+            m = by.get((label, name))
+            if m is None:
+                cells.append("n/a")
+                continue
+            st = m.stats()
+            extra = []
+            if st["tail_mean"] is not None:
+                extra.append(f"tail {st['tail_mean']:.2g}/{st['tail_cvar10']:.2g}")
+            if st["failure_rate_beyond"] is not None:
+                extra.append(f"fail {100 * st['failure_rate_beyond']:.0f} %")
+            cells.append(margin_text(m) + ("<br>" + ", ".join(extra) if extra else ""))
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int,
+              duration: float = DURATION) -> tuple[list[Margin], str, float]:
+    """Run the study; returns the margins, the report text and the wall time [s]."""
+    import sys
+
+    from adaptive_mj.study.parallel import progress_printer
+
+    searches = study(composite=composite, duration=duration)
+    t0 = time.perf_counter()
+    per_batch = len(searches) * seeds * 2
+
+    def batch(k, total):
+        print(f"\nstress: batch {k}/{total} done ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
+
+    margins = search_all(searches, seeds=seeds, steps=steps, logs=out / "logs", n_jobs=n_jobs,
+                         on_batch=batch, on_done=progress_printer(per_batch, label="runs"))
+    wall = time.perf_counter() - t0
+    runs = sum(len(e.tails) for m in margins for e in m.evaluations)
+    text = (f"{len(searches)} breaking-point searches (plant × law × stressor), {seeds} seeds per value, "
+            f"the two ends and {steps} bisection steps: {runs} runs of {duration:g} s in {wall:.0f} s. "
+            f"A run fails when it diverges or its tail RMS ỹ exceeds {TAIL_BOUND['heave']:g} m (heave) or "
+            f"{TAIL_BOUND['arm']:g} rad (arm); a value passes when every seed passes. Each cell: the margin (the "
+            "largest value that passed) and, in brackets, the smallest that failed: their gap is the resolution; "
+            "then, over the seeds at the margin, the mean / CVaR at 10 % (the worst seed of "
+            f"{seeds}) of the tail error, and the failure rate at the failing value. n/a: the stressor does not "
+            "apply to that plant. Every run's log is in `logs/`.\n\n" + table(margins, seeds=seeds))
+    return margins, text, wall
+
+
+def main_stress(args) -> int:
+    from adaptive_mj.sim.runner import new_output_dir
+
+    out = new_output_dir(args.output, "stress")
+    margins, text, wall = run_study(out, seeds=args.seeds, steps=args.steps, composite=args.composite,
+                                    n_jobs=max(1, args.jobs), duration=args.duration)
+    report = "# adaptive-mj breaking points\n\n" + text + "\n"
+    (out / "report.md").write_text(report, encoding="utf-8")
+    rows = []
+    for m in margins:
+        st = m.stats()
+        rows.append({"plant_law": m.search.label, "stressor": m.search.stressor.name, "unit": m.search.stressor.unit,
+                     **st})
+    import csv
+
+    with (out / "margins.csv").open("w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    print(text)
+    print(f"\nreport: {out / 'report.md'}  ({wall:.0f} s)")
+    return 0

@@ -1,0 +1,80 @@
+"""Breaking points by bisection over seeded runs (adaptive_mj.study.breaking_point) and the
+`adaptive-mj stress` command's input checks."""
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from adaptive_mj.cli import main
+from adaptive_mj.setup.scenario import SCENARIOS_DIR
+from adaptive_mj.study.breaking_point import Evaluation, Margin, Search, Stressor, margin_text, search_all
+from adaptive_mj.study import stress
+
+HEAVE = SCENARIOS_DIR / "heave_tracking.toml"
+BASE = ("simulation.duration=3.0", "simulation.initial_state='reference'", "law.initial_estimates='model'",
+        "noise.std={y=0.0005, y_dot=0.005}")
+
+
+def test_bisection_brackets_the_delay_margin(tmp_path):
+    """The heave law against a control delay of 0..200 steps, 2 seeds: the margin passes on every
+    seed, the next value fails on at least one, the bracket is at most 200 / 2^steps wide (whole
+    steps), and every run left its log."""
+    search = Search(HEAVE, "heave/adaptive", BASE,
+                    Stressor.key("simulation.control_delay", 0, 200, integer=True, unit="steps"), 0.01)
+    (m,) = search_all([search], seeds=2, steps=4, logs=tmp_path)
+    assert m.margin is not None and m.first_fail is not None
+    assert 0 <= m.margin < m.first_fail <= 200
+    assert m.resolution <= math.ceil(200 / 2 ** 4)
+    assert m.at(m.margin).passes and not m.at(m.first_fail).passes
+    for e in m.evaluations:  # monotone in this search: every value above the margin failed
+        assert e.passes == (e.value <= m.margin)
+    stats = m.stats()
+    assert 0 < stats["failure_rate_beyond"] <= 1.0
+    assert stats["tail_cvar10"] == max(m.at(m.margin).tails) >= stats["tail_mean"]
+    assert len(list(tmp_path.rglob("*.mcap"))) == 2 * len(m.evaluations)
+
+
+def test_margin_beyond_the_range_and_below_it(tmp_path):
+    low = Search(HEAVE, "heave/low", BASE, Stressor.key("simulation.control_delay", 0, 3, integer=True), 0.01)
+    none = Search(HEAVE, "heave/none", BASE, Stressor.key("simulation.control_delay", 0, 3, integer=True), 1e-12)
+    ok, bad = search_all([low, none], seeds=1, steps=2, logs=tmp_path)
+    assert ok.margin == 3 and ok.first_fail is None and margin_text(ok) == "≥ 3"
+    assert bad.margin is None and bad.first_fail == 0 and margin_text(bad) == "< 0"
+
+
+def test_cvar_is_the_mean_of_the_worst_tenth():
+    m = Margin(Search(HEAVE, "x", (), Stressor.key("k", 0, 1), 1.0), 0.5, 1.0,
+               [Evaluation(0.5, list(np.arange(1.0, 21.0)), ["ok"] * 20), Evaluation(1.0, [1, math.inf], ["ok"] * 2)])
+    st = m.stats()
+    assert st["tail_cvar10"] == pytest.approx(19.5)  # worst 2 of 20
+    assert st["tail_mean"] == pytest.approx(10.5)
+    assert st["failure_rate_beyond"] == 0.5
+
+
+def test_the_study_derives_its_laws_from_the_models():
+    """Every plant gets the eight laws minus composite unless asked, each with numbers read from
+    the scenario and the compiled model (projection box around the true θ, leak toward it)."""
+    plants = stress.plants(10.0)
+    heave_laws = dict(stress.laws(plants[0], composite=False))
+    assert list(heave_laws) == ["adaptive", "dead_zone", "sigma", "e_modification", "projection", "fixed_nominal",
+                                "robust_sliding"]
+    (box,) = heave_laws["projection"]  # c = 1.0000000000000009 kg as MuJoCo computes it
+    assert box.startswith("law.projection={d=[18.5, 74.0], b=[30.0, 120.0], c=[0.500000000000000")
+    assert "composite" in dict(stress.laws(plants[1], composite=True))
+    names = [s.name for s in stress.stressors(plants[1], 10.0)]
+    assert names == ["noise σ_y", "disturbance", "payload ratio", "delay"]
+    assert stress.stressors(plants[1], 10.0)[2].overrides(4.0) == ["events=[{t=5.0, kind='payload_mass', value=2.0}]"]
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--seeds", "0"], r"--seeds must be an integer >= 1, got 0"),
+    (["--steps", "-1"], r"--steps must be an integer >= 0, got -1"),
+    (["--duration", "0"], r"--duration must be > 0 \[s\], got 0.0"),
+])
+def test_stress_refuses_bad_numbers_with_one_line(args, match, capsys, tmp_path):
+    assert main(["stress", "-o", str(tmp_path / "x"), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and re.search(match, err[0]), err
