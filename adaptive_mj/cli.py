@@ -73,6 +73,12 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
     sw.add_argument("--metric", action="append", default=[],
                     help="metric(s) to plot against the grid (default: rms_tracking_error_tail)")
+    sw.add_argument("--breaking-point", metavar="KEY=LO:HI",
+                    help="instead of a grid: bisect KEY between LO and HI for the largest value at which every "
+                         "seed passes (integers when LO and HI are); needs --tail-bound")
+    sw.add_argument("--tail-bound", type=float, metavar="B",
+                    help="with --breaking-point: a run fails when it diverges or its tail RMS error exceeds B")
+    sw.add_argument("--steps", type=int, default=5, help="with --breaking-point: bisection steps (default 5)")
     st = sub.add_parser("stress", help="breaking points: every law x stressor x plant, margins by bisection "
                                        "over seeded runs; report.md and margins.csv")
     st.add_argument("--seeds", type=int, default=5, help="seeds per stress value (default 5)")

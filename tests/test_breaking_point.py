@@ -78,3 +78,29 @@ def test_stress_refuses_bad_numbers_with_one_line(args, match, capsys, tmp_path)
     assert main(["stress", "-o", str(tmp_path / "x"), *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and re.search(match, err[0]), err
+
+
+def test_sweep_breaking_point_finds_the_delay_margin(tmp_path, capsys):
+    out = tmp_path / "bp"
+    assert main(["sweep", "heave_tracking", "--breaking-point", "simulation.control_delay=0:200", "--tail-bound",
+                 "0.01", "--seeds", "1", "--steps", "3", "--set", "simulation.duration=3", "-o", str(out)]) == 0
+    import json
+
+    record = json.loads((out / "breaking_point.json").read_text())
+    assert record["integer"] and 0 <= record["margin"] < record["first_fail"] <= 200
+    assert record["resolution"] == record["first_fail"] - record["margin"] <= 25
+    assert len(list((out / "logs").rglob("*.mcap"))) == len(record["evaluations"]) == 5
+    assert "simulation.control_delay: margin" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--breaking-point", "k=0:1"], r"--breaking-point needs --tail-bound B > 0"),
+    (["--breaking-point", "k=1:0", "--tail-bound", "1"], r"--breaking-point 'k=1:0': LO must be < HI, got 1 and 0"),
+    (["--breaking-point", "k=0:1", "--tail-bound", "1", "--grid", "lambda=1,2"],
+     r"--breaking-point and --grid cannot be combined"),
+    (["--breaking-point", "nope=0:1", "--tail-bound", "1"], r"nope"),
+])
+def test_sweep_breaking_point_errors_are_one_line(args, match, capsys, tmp_path):
+    assert main(["sweep", "heave_tracking", "-o", str(tmp_path / "x"), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and re.search(match, err[0]), err

@@ -488,6 +488,61 @@ def plan(path: Path, points: Sequence[dict[str, Any]], *, seeds: int, overrides:
     return planned
 
 
+def parse_breaking_point(expr: str, doc: dict) -> tuple[str, float, float, bool]:
+    """--breaking-point KEY=LO:HI -> (dotted key, lo, hi, integer: both ends written as integers)."""
+    if "=" not in expr:
+        raise ScenarioError(f"--breaking-point {expr!r}: expected KEY=LO:HI")
+    key, raw = (part.strip() for part in expr.split("=", 1))
+    key = resolve_key(key, doc, expr=expr)
+    parts = raw.split(":")
+    if len(parts) != 2:
+        raise ScenarioError(f"--breaking-point {expr!r}: expected KEY=LO:HI, got {raw!r}")
+    lo, hi = (_number(x, expr=expr, what=w) for x, w in zip(parts, ("LO", "HI")))
+    if not lo < hi:
+        raise ScenarioError(f"--breaking-point {expr!r}: LO must be < HI, got {lo:g} and {hi:g}")
+    integer = all(re.fullmatch(r"[+-]?\d+", x.strip()) for x in parts)
+    return key, lo, hi, integer
+
+
+def main_breaking_point(args, path: Path, doc: dict, base) -> int:
+    """`sweep --breaking-point KEY=LO:HI --tail-bound B`: the largest value of KEY at which every seed
+    passes (no divergence, tail RMS error <= B), by bisection (adaptive_mj.study.breaking_point)."""
+    from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.study.breaking_point import Search, Stressor, margin_text, search_all
+
+    if args.grid:
+        raise ScenarioError("--breaking-point and --grid cannot be combined (one stressor at a time)")
+    if args.tail_bound is None or not args.tail_bound > 0:
+        raise ScenarioError(f"--breaking-point needs --tail-bound B > 0 (the tail RMS tracking error above which "
+                            f"a run fails, in the scenario's output unit), got {args.tail_bound}")
+    if args.steps < 0:
+        raise ScenarioError(f"--steps must be an integer >= 0, got {args.steps}")
+    key, lo, hi, integer = parse_breaking_point(args.breaking_point, doc)
+    for v in (lo, hi):  # both ends must make a valid scenario before anything runs
+        sc.load(path, overrides=[*args.overrides, f"{key}={int(v) if integer else v!r}"])
+    out = new_output_dir(args.output, f"breaking-point-{base.name}")
+    search = Search(path, base.name, tuple(args.overrides), Stressor.key(key, lo, hi, integer=integer),
+                    float(args.tail_bound))
+    print(f"breaking point of {key} in [{lo:g}, {hi:g}] for {base.name}: {args.seeds} seed(s), "
+          f"{args.steps} bisection step(s) -> {out}", file=sys.stderr)
+    (m,) = search_all([search], seeds=args.seeds, steps=args.steps, logs=out / "logs", n_jobs=args.jobs,
+                      on_done=progress_printer(args.seeds * (2 + args.steps), label="runs"))
+    stats = m.stats()
+    record = {"scenario": str(path), "key": key, "lo": lo, "hi": hi, "integer": integer, "seeds": args.seeds,
+              "steps": args.steps, "tail_bound": args.tail_bound, "overrides": list(args.overrides), **stats,
+              "evaluations": [{"value": e.value, "passes": e.passes, "statuses": e.statuses,
+                               "tail": [x if math.isfinite(x) else None for x in e.raw]} for e in m.evaluations]}
+    (out / "breaking_point.json").write_text(json.dumps(clean_json(record), indent=1), encoding="utf-8")
+    print(f"\n{key}: margin {margin_text(m)}"
+          + (f", resolution {m.resolution:.3g}" if m.resolution is not None else "")
+          + (f"; at the margin over {args.seeds} seed(s): tail error mean {stats['tail_mean']:.3g}, CVaR10% "
+             f"{stats['tail_cvar10']:.3g}" if stats["tail_mean"] is not None else "")
+          + (f"; failure rate at {m.first_fail:g}: {100 * stats['failure_rate_beyond']:.0f} %"
+             if stats["failure_rate_beyond"] is not None else ""))
+    print(f"output: {out}")
+    return EXIT_OK
+
+
 def main_sweep(args) -> int:
     """Run the sweep the CLI parsed (see the module docstring); returns the exit code."""
     from adaptive_mj.sim.runner import new_output_dir
@@ -498,6 +553,8 @@ def main_sweep(args) -> int:
         raise ScenarioError(f"--jobs must be an integer >= 1, got {args.jobs}")
     path = Path(args.scenario)
     doc, base = _document(path, args.overrides)
+    if getattr(args, "breaking_point", None):
+        return main_breaking_point(args, path, doc, base)
     axes = _axes(args.grid, doc)
     keys = [key for key, _ in axes]
     metrics = _metrics(args.metric)
