@@ -58,7 +58,7 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("--video-size", metavar="WxH", help="video frame size in pixels (default 800x400)")
     rp.add_argument("--video-range", metavar="T0:T1", help="only simulation times T0..T1 [s], e.g. 18:26")
     b = sub.add_parser("bench", help="run the benchmark catalogue: report.md, figures, logs, summary.json")
-    b.add_argument("--quick", action="store_true", help="shorter runs and fewer variants (about 2 minutes)")
+    b.add_argument("--quick", action="store_true", help="shorter runs and fewer variants, no breaking-point study (under a minute on 2 cores)")
     b.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
     b.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: all cores)")
 
