@@ -287,3 +287,27 @@ def test_sudden_failure_happens_where_the_delay_margin_predicts_and_sigma_preven
     assert abs(f["ratio_at_saturation"] / f["critical_ratio"] - 1.0) < 0.01, f
     assert out["sigma"]["t_fail"] is None and out["sigma"]["t_saturation"] is None
     assert out["sigma"]["ratio_max"] < 1.2
+
+
+def test_composite_update_is_its_defining_equation():
+    """θ̂' = (sliding law's θ̂') − κ Γ⁻¹ Y_f (Y_f θ̂ − τ_f), with Y_f = [z_a, −z_φ] and τ_f = z_τ the
+    filtered per-step a = Δy'/h, φ̄ and τ̄ = f̄ + h̄ u (one step by hand: the filters start at it)."""
+    form = heave.heave_form(9.81)
+    plain = SlidingAdaptiveLaw(form, lam=5.0, k=200.0, gamma=GAMMA)
+    comp = CompositeSlidingLaw(form, lam=5.0, k=200.0, gamma=GAMMA, kappa=0.3, filter_rate=2.0)
+    comp.reset()
+    rng = np.random.default_rng(11)
+    xs = [rng.normal(size=2) for _ in range(4)]
+    us = list(rng.normal(size=4) * 50)
+    w = [1 / 6, 1 / 3, 1 / 3, 1 / 6]
+    h = 0.001
+    comp.step_ends(xs, us, w, h)
+    x_next = rng.normal(size=2)
+    comp.step_begins(x_next)
+    a = (x_next[1] - xs[0][1]) / h
+    phi_bar = sum(wi * form.phi(x) for wi, x in zip(w, xs))
+    tau_bar = sum(wi * (form.f(x) + form.h(x) * u) for wi, x, u in zip(w, xs, us))
+    Yf = np.concatenate(([a], -phi_bar))
+    theta, ref = rng.normal(size=3) * 10, rng.normal(size=3)
+    expected = plain(0.0, x_next, ref, theta).theta_hat_dot - 0.3 * Yf * (Yf @ theta - tau_bar) / GAMMA
+    np.testing.assert_allclose(comp(0.0, x_next, ref, theta).theta_hat_dot, expected, rtol=1e-12, atol=1e-12)
