@@ -99,6 +99,15 @@ def _scenario_path(arg: str) -> Path:
         bundled = SCENARIOS_DIR / (arg if arg.endswith(".toml") else f"{arg}.toml")
         if bundled.exists():
             return bundled
+        if arg.endswith(".toml"):  # a file name: the loader says it is not found
+            return path
+        import difflib
+
+        names = sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
+        close = difflib.get_close_matches(Path(arg).stem, names, n=1, cutoff=0.6)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        raise ScenarioError(f"{arg}: no such scenario file, nor a bundled scenario ({hint}`adaptive-mj list` shows "
+                            "the bundled ones)")
     return path
 
 

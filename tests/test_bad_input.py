@@ -27,6 +27,13 @@ ARM = GOOD.replace('kind = "heave"', 'kind = "arm"').replace(
 BROKEN_XML = "<mujoco><worldbody><body><geom type='sphere'/></body></worldbody></mujoco2>"
 NO_JOINT_XML = ("<mujoco><option density='1000'/><worldbody><body><geom type='box' size='.1 .1 .1' mass='1'/>"
                 "</body></worldbody></mujoco>")
+TWO_JOINT_XML = ("<mujoco><worldbody><body><joint name='a' type='hinge'/><geom type='capsule' fromto='0 0 0 .3 0 0' "
+                 "size='.02' mass='1'/><body pos='.3 0 0'><joint name='b' type='hinge'/><geom type='capsule' "
+                 "fromto='0 0 0 .3 0 0' size='.02' mass='1'/></body></body></worldbody><actuator>"
+                 "<motor joint='a'/><motor joint='b'/></actuator></mujoco>")
+HINGE_XML = ("<mujoco><option density='1000'/><worldbody><body><joint name='heave' type='hinge'/>"
+             "<geom type='box' size='.1 .1 .1' mass='1'/></body></worldbody><actuator><motor joint='heave'/>"
+             "</actuator></mujoco>")
 
 
 def error_line(capsys) -> str:
@@ -58,6 +65,8 @@ SCENARIO_CASES = [
      [], r"plant\.theta\.d must be > 0, got -1\.0"),
     ("gamma <= 0", GOOD, ["--set", "law.gamma=-1"], r"law\.gamma must be > 0, got -1\.0"),
     ("one gamma <= 0", GOOD, ["--set", "law.gamma.c=0.0"], r"law\.gamma\.c must be > 0, got 0\.0"),
+    ("gamma a string", GOOD, ["--set", "law.gamma='fast'"],
+     r"law\.gamma must be a number > 0, or a table \{parameter = number > 0\}, got 'fast'"),
     ("timestep = 0", GOOD, ["--set", "simulation.timestep=0"], r"simulation\.timestep must be > 0, got 0\.0"),
     ("timestep < 0", GOOD, ["--set", "simulation.timestep=-0.001"], r"simulation\.timestep must be > 0, got -0\.001"),
     ("timestep > duration", GOOD, ["--set", "simulation.timestep=5.0"],
@@ -97,7 +106,13 @@ MODEL_CASES = [
      r"{dir}/model\.xml: MuJoCo could not compile the model: XML parse error 14: "
      r"Error=XML_ERROR_MISMATCHED_ELEMENT ErrorID=14 \(0xe\) Line number=1: XMLElement name=mujoco"),
     ("model without a joint", NO_JOINT_XML, ["plant.model='model.xml'"],
-     r"{dir}/model\.xml: the model has 0 joints; name the one to use"),
+     r"{dir}/model\.xml: this plant is one slide joint driven by one motor \(1 degree of freedom\), the model "
+     r"has 0; for a multi-joint arm use plant\.kind = \"manipulator\""),
+    ("a two-joint arm as a 1-DOF plant", TWO_JOINT_XML, ["plant.model='model.xml'"],
+     r"{dir}/model\.xml: this plant is one slide joint driven by one motor \(1 degree of freedom\), the model "
+     r"has 2; for a multi-joint arm use plant\.kind = \"manipulator\""),
+    ("a hinge where the plant needs a slide", HINGE_XML, ["plant.model='model.xml'"],
+     r"{dir}/model\.xml: joint 'heave' must be a slide joint, got a hinge joint"),
     ("model without the named joint", None, ["plant.joint=lift"],
      r"{models}/heave_vehicle\.xml: no joint named 'lift' \(the model has \['heave'\]\)"),
     ("model without the named actuator", None, ["plant.actuator=rudder"],
@@ -345,3 +360,25 @@ def test_no_input_is_ever_executed():
                 code = code.replace(snippet, "")
         hit = forbidden.search(code)
         assert not hit, f"{name}: {hit.group(0)}"
+
+
+def test_a_misspelt_bundled_scenario_gets_a_suggestion(capsys):
+    assert main(["run", "heave_trackin"]) == 2
+    line = error_line(capsys)
+    assert line == ("heave_trackin: no such scenario file, nor a bundled scenario (did you mean "
+                    "'heave_tracking'? `adaptive-mj list` shows the bundled ones)")
+
+
+def test_a_model_given_on_the_command_line_is_found_from_the_current_directory(tmp_path, monkeypatch, capsys):
+    """--set plant.model=my.xml resolves against the current directory (then next to the scenario);
+    found in neither, one line names both places."""
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "my_vehicle.xml").write_text((SCENARIOS_DIR.parent / "models" / "heave_vehicle.xml").read_text())
+    scn = load(SCENARIOS_DIR / "heave_tracking.toml", overrides=["plant.model=my_vehicle.xml"])
+    assert scn.plant.model == tmp_path / "my_vehicle.xml"
+    assert main(["run", "heave_tracking", "--set", "plant.model=nope.xml", "--set", "simulation.duration=0.01"]) == 2
+    line = error_line(capsys)
+    assert line.endswith(f"plant.model 'nope.xml' (from --set) not found in the current directory "
+                         f"({tmp_path / 'nope.xml'}) nor next to the scenario ({SCENARIOS_DIR / 'nope.xml'})")

@@ -290,3 +290,48 @@ def test_sweep_refuses_a_non_empty_output_folder(tmp_path, capsys):
     assert main(["sweep", "arm_payload_swap", "--grid", "law.k=1", "-o", str(out), *FAST]) == 2
     assert "exists and is not an empty folder" in capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == ["old.csv"]
+
+
+def test_progress_is_plain_lines_when_not_a_terminal():
+    """Redirected output gets no carriage returns: a line at most every few seconds, and one at the end."""
+    import io
+    from pathlib import Path
+
+    from adaptive_mj.study.parallel import PLAIN_PROGRESS_EVERY, Job, JobResult, progress_printer
+
+    class Pipe(io.StringIO):
+        def isatty(self):
+            return False
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    now = [0.0]
+    pipe = Pipe()
+    update = progress_printer(5, stream=pipe, clock=lambda: now[0])
+    job = Job(Path("x.toml"), tag="run")
+    for t in (0.1, 0.2, PLAIN_PROGRESS_EVERY + 0.3, PLAIN_PROGRESS_EVERY + 0.4, PLAIN_PROGRESS_EVERY + 0.5):
+        now[0] = t
+        update(JobResult(job, "ok", None))
+    lines = pipe.getvalue().splitlines()
+    assert "\r" not in pipe.getvalue() and len(lines) == 2
+    assert lines[0].startswith("3/5 runs done after 5 s") and lines[1].startswith("5/5 runs")
+    term = Terminal()
+    update = progress_printer(2, stream=term)
+    update(JobResult(job, "ok", None))
+    assert term.getvalue().startswith("\r[")
+
+
+def test_sweep_notes_what_the_grid_will_not_do():
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
+    from adaptive_mj.study.sweep import sweep_notes
+
+    arm = load(SCENARIOS_DIR / "arm_payload_swap.toml")
+    notes = sweep_notes(arm, ["plant.payload_mass"], 2)
+    assert len(notes) == 2
+    assert notes[0].startswith("--seeds 2 on a scenario without noise (noise.std is empty): the seed changes nothing")
+    assert notes[1] == ("plant.payload_mass sets the payload's initial mass only: events[0] still sets it to 2 kg "
+                        "at t = 20 s in every run (override `events` to change or remove it)")
+    assert sweep_notes(arm, ["noise.std.y"], 3) == []
+    assert sweep_notes(load(SCENARIOS_DIR / "heave_drift.toml"), ["law.k"], 3) == []  # it has noise

@@ -131,3 +131,30 @@ def test_bad_video_arguments(logs, tmp_path):
     with pytest.raises(AdaptiveMJError, match="does not overlap the run"):
         render_log(logs["heave"], tmp_path / "x.gif", t_range=(5.0, 6.0))
     assert not (tmp_path / "x.gif").exists()
+
+
+def test_the_reference_pose_shows_when_tracking_is_exact(tmp_path):
+    """The arm starts on its reference (ỹ = 0): the green ghost of the reference pose is still seen,
+    as a translucent shell around the body; and the estimate axes carry units."""
+    log = tmp_path / "arm.mcap"
+    assert main(["run", "arm_payload_swap", "-o", str(log), "--set", "simulation.duration=0.3",
+                 "--set", "events=[]"]) == 0
+    frame = next(iter(iter_frames(log, fps=10, size=SIZE))).astype(int)
+    scene = frame[:, :scene_width(SIZE)]
+    green = (scene[..., 1] > scene[..., 0] + 40) & (scene[..., 1] > scene[..., 2] + 20)
+    assert green.sum() > 100, green.sum()
+    from adaptive_mj.report import video
+
+    labels = []
+    real = video._Panel.__init__
+
+    def spy(self, traj, rows, **kw):
+        real(self, traj, rows, **kw)
+        labels.extend(ax.get_ylabel() for ax in self._fig.axes)
+
+    video._Panel.__init__ = spy
+    try:
+        next(iter(iter_frames(log, fps=10, size=SIZE)))
+    finally:
+        video._Panel.__init__ = real
+    assert "J [kg m²]" in labels and "g_sin [N m]" in labels, labels

@@ -54,6 +54,11 @@ def _find(model, objtype, kind: str, name: str | None, count: int, where: str) -
     return 0
 
 
+def joint_words(joint_type) -> str:
+    """'hinge joint', 'slide joint', 'ball joint', 'free joint' (not MuJoCo's enum name)."""
+    return mujoco.mjtJoint(joint_type).name.removeprefix("mjJNT_").lower() + " joint"
+
+
 def find_joint_and_actuator(model, *, joint: str | None, actuator: str | None,
                             joint_type: mujoco.mjtJoint, where: str,
                             allow_filter: bool = False) -> tuple[int, int]:
@@ -63,14 +68,16 @@ def find_joint_and_actuator(model, *, joint: str | None, actuator: str | None,
     freedom, and the actuator is a direct-drive motor (gain fixed, no bias, no
     activation dynamics, or a first-order filter when allow_filter) on that joint.
     """
+    want = joint_words(joint_type)
+    if model.nv != 1:  # first: whether this plant can use the model at all, and what to use instead
+        raise ModelError(f"{where}: this plant is one {want} driven by one motor (1 degree of freedom), the "
+                         f"model has {model.nv}; for a multi-joint arm use plant.kind = \"manipulator\"")
     j = _find(model, mujoco.mjtObj.mjOBJ_JOINT, "joint", joint, model.njnt, where)
     a = _find(model, mujoco.mjtObj.mjOBJ_ACTUATOR, "actuator", actuator, model.nu, where)
     jname = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
     if model.jnt_type[j] != joint_type:
-        raise ModelError(f"{where}: joint {jname!r} must be of type {joint_type.name}, "
-                         f"got {mujoco.mjtJoint(model.jnt_type[j]).name}")
-    if model.nv != 1:
-        raise ModelError(f"{where}: the plant needs exactly 1 degree of freedom, got nv={model.nv}")
+        raise ModelError(f"{where}: joint {jname!r} must be a {want}, got a "
+                         f"{joint_words(mujoco.mjtJoint(model.jnt_type[j]))}")
     aname = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
     if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT or model.actuator_trnid[a, 0] != j:
         raise ModelError(f"{where}: actuator {aname!r} must drive joint {jname!r}")

@@ -50,7 +50,7 @@ _MAX_SIDE = 4096            # [pixels]
 _GHOST_RGBA = (0.1, 0.85, 0.3, 0.45)    # the reference pose: translucent green
 #: Panel line colours (RGB in 0..1): tracking error, estimate, true value.
 PANEL_COLORS = {"error": (0.84, 0.15, 0.16), "estimate": (0.12, 0.47, 0.71), "true": (0.0, 0.0, 0.0)}
-_GHOST_SCALE = 0.97         # shrunk so it hides inside the body when tracking is exact
+_GHOST_SCALE = 1.12         # grown: a translucent green shell that stays visible around the body when tracking is exact
 _SHADOW_SIZE = 1024         # [texels]
 _SKY_RGB = ([0.62, 0.74, 0.86], [0.16, 0.2, 0.28])   # backdrop gradient, top and bottom
 _EVENT_SHOWN_S = 3.0        # how long an event's label stays in the panel [s]
@@ -263,7 +263,7 @@ class _Panel:
     growing lines and the time text (matplotlib blitting on the Agg canvas)."""
 
     def __init__(self, traj: Trajectory, rows: np.ndarray, *, width: int, height: int,
-                 unit: str, title: str):
+                 unit: str, title: str, plant_kind: str | None = None):
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
 
@@ -314,8 +314,11 @@ class _Panel:
             ax.yaxis.get_offset_text().set_fontsize(font - 1)
             ax.grid(alpha=0.3, lw=0.5)
         axes[0].set_ylabel(f"|q̃| [{unit}]" if traj.joint_names else f"ỹ [{unit}]", fontsize=font)
+        from adaptive_mj import units
+
         for i, name in enumerate(names):
-            axes[1 + i].set_ylabel(name, fontsize=font)
+            u = units.param(plant_kind, name)
+            axes[1 + i].set_ylabel(f"{name} [{u}]" if u else name, fontsize=font)
         if names:
             axes[1].plot([], [], color=PANEL_COLORS["estimate"], lw=1.1, label="estimate")
             axes[1].plot([], [], color=PANEL_COLORS["true"], lw=0.9, ls="--", label="true")
@@ -408,7 +411,11 @@ def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
                                          theta_hat=traj.theta_hat[:, :4])
     else:
         panel_traj = traj
-    panel = _Panel(panel_traj, rows, width=width - scene_w, height=height, unit=unit, title=title)
+    from adaptive_mj import units
+
+    kind = units.plant_kind_of(logged.scenario_text or "") or (
+        "manipulator" if traj.joint_names else ("arm" if unit == "rad" else "heave"))
+    panel = _Panel(panel_traj, rows, width=width - scene_w, height=height, unit=unit, title=title, plant_kind=kind)
     shown = traj.q[rows[0]:rows[-1] + 1]
     camera = _free_camera(model, np.concatenate([shown, traj.ref[rows[0]:rows[-1] + 1, 0]]),
                           aspect=scene_w / height)

@@ -334,6 +334,7 @@ def loads(text: str, *, where: str = "<string>", base_dir: Path | None = None, d
         raise ScenarioError(f"{where}: TOML syntax error: {exc}") from None
     for expr in overrides:
         apply_override(doc, expr, where=where)
+    _model_from_command_line(doc, overrides, base_dir, where)
     if seed is not None:
         doc.setdefault("noise", {})
         if not isinstance(doc["noise"], dict):
@@ -412,6 +413,23 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
     return Scenario(name=name, description=description, plant=plant, simulation=sim, reference=reference,
                     law=law, noise=noise, disturbance=disturbance, events=events, log_rate_hz=log_rate,
                     source=where, text=text, overrides=overrides)
+
+
+def _model_from_command_line(doc: dict, overrides, base_dir: Path | None, where: str) -> None:
+    """A plant.model path given with --set is the user's, typed from where they stand: resolve it
+    against the current directory first, then next to the scenario; neither is an error naming both."""
+    if not any(expr.split("=", 1)[0].strip() == "plant.model" for expr in overrides):
+        return
+    plant = doc.get("plant")
+    name = plant.get("model") if isinstance(plant, dict) else None
+    if not isinstance(name, str) or not (name.endswith(".xml") or "/" in name) or Path(name).is_absolute():
+        return
+    here, there = Path.cwd() / name, (base_dir or Path.cwd()) / name
+    if here.is_file():
+        plant["model"] = str(here.resolve())
+    elif not there.is_file():
+        raise ScenarioError(f"{where}: plant.model {name!r} (from --set) not found in the current directory "
+                            f"({here}) nor next to the scenario ({there})")
 
 
 def _resolve_model(name: str, base_dir: Path) -> Path:
@@ -614,6 +632,8 @@ def _gamma(t: _Table):
         return None
     if isinstance(v, dict):
         return t.named_numbers("gamma", gt=0)
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise t.fail("gamma", "a number > 0, or a table {parameter = number > 0}", v)
     return t.number("gamma", gt=0)
 
 

@@ -238,22 +238,36 @@ def _interrupted_note(finished: int, total: int) -> str:
     return f"{finished} of {total} runs had finished; the run(s) in progress closed their logs as 'interrupted'"
 
 
-def progress_printer(total: int, *, label: str = "runs", stream=None) -> Callable[[JobResult], None]:
-    """A text progress bar on stderr, one update per finished job."""
+PLAIN_PROGRESS_EVERY = 5.0  # s between progress lines when stderr is not a terminal
+
+
+def progress_printer(total: int, *, label: str = "runs", stream=None,
+                     clock: Callable[[], float] | None = None) -> Callable[[JobResult], None]:
+    """Progress on stderr, one update per finished job: a bar redrawn in place on a terminal;
+    otherwise (a file, a pipe, CI) a plain line at most every PLAIN_PROGRESS_EVERY seconds and
+    one at the end, so redirected output holds no carriage returns."""
     import sys
+    import time
 
     stream = stream or sys.stderr
-    done = {"n": 0}
+    clock = clock or time.monotonic
+    tty = bool(getattr(stream, "isatty", lambda: False)())
+    state = {"n": 0, "last": clock(), "t0": clock()}
 
     def update(result: JobResult) -> None:
-        done["n"] += 1
-        n = done["n"]
-        bar = "#" * int(30 * n / total)
-        mark = result.status
-        stream.write(f"\r[{bar:<30s}] {n}/{total} {label}  last: {result.job.tag or result.job.scenario.stem} "
-                     f"({mark})".ljust(100)[:100])
-        if n == total:
-            stream.write("\n")
+        state["n"] += 1
+        n = state["n"]
+        last = f"last: {result.job.tag or result.job.scenario.stem} ({result.status})"
+        if tty:
+            bar = "#" * min(30, int(30 * n / max(1, total)))
+            stream.write(f"\r[{bar:<30s}] {n}/{total} {label}  {last}".ljust(100)[:100])
+            if n == total:
+                stream.write("\n")
+        else:
+            now = clock()
+            if n == total or now - state["last"] >= PLAIN_PROGRESS_EVERY:
+                state["last"] = now
+                stream.write(f"{n}/{total} {label} done after {now - state['t0']:.0f} s; {last}\n")
         stream.flush()
 
     return update

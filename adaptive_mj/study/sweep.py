@@ -504,6 +504,24 @@ def parse_breaking_point(expr: str, doc: dict) -> tuple[str, float, float, bool]
     return key, lo, hi, integer
 
 
+def sweep_notes(base, keys: Sequence[str], seeds: int) -> list[str]:
+    """What a sweep's grid will not do that its user may expect: seeds that change nothing (no
+    noise anywhere in the grid), and a payload mass that an event overrides mid-run."""
+    notes = []
+    noisy = any(v > 0 for v in (base.noise.std or {}).values()) or any(k.startswith("noise.std") for k in keys)
+    if seeds > 1 and not noisy:
+        notes.append(f"--seeds {seeds} on a scenario without noise (noise.std is empty): the seed changes nothing, "
+                     f"so the {seeds} runs of each point are identical; set noise.std (--set or --grid) or use "
+                     "--seeds 1")
+    if "plant.payload_mass" in keys:
+        for i, e in enumerate(base.events):
+            if e.kind in ("payload_mass", "payload_swap"):
+                what = f"{e.value:g} kg" if e.kind == "payload_mass" else f"payload {e.payload!r}"
+                notes.append(f"plant.payload_mass sets the payload's initial mass only: events[{i}] still sets it "
+                             f"to {what} at t = {e.t:g} s in every run (override `events` to change or remove it)")
+    return notes
+
+
 def main_breaking_point(args, path: Path, doc: dict, base) -> int:
     """`sweep --breaking-point KEY=LO:HI --tail-bound B`: the largest value of KEY at which every seed
     passes (no divergence, tail RMS error <= B), by bisection (adaptive_mj.study.breaking_point)."""
@@ -520,6 +538,8 @@ def main_breaking_point(args, path: Path, doc: dict, base) -> int:
     key, lo, hi, integer = parse_breaking_point(args.breaking_point, doc)
     for v in (lo, hi):  # both ends must make a valid scenario before anything runs
         sc.load(path, overrides=[*args.overrides, f"{key}={int(v) if integer else v!r}"])
+    for note in sweep_notes(base, [key], args.seeds):
+        print(f"sweep: note: {note}", file=sys.stderr)
     out = new_output_dir(args.output, f"breaking-point-{base.name}")
     search = Search(path, base.name, tuple(args.overrides), Stressor.key(key, lo, hi, integer=integer),
                     float(args.tail_bound))
@@ -561,6 +581,8 @@ def main_sweep(args) -> int:
     points = grid_points(axes)
     _validate_points(path, args.overrides, points)
 
+    for note in sweep_notes(base, keys, args.seeds):
+        print(f"sweep: note: {note}", file=sys.stderr)
     out = new_output_dir(args.output, f"sweep-{base.name}")
     planned = plan(path, points, seeds=args.seeds, overrides=args.overrides, logs=out / "logs")
     total = len(planned)
