@@ -34,7 +34,9 @@ def _parser() -> argparse.ArgumentParser:
     _add = sub.add_parser
     sub.add_parser = lambda *a, **kw: _add(*a, parents=[debug], **kw)  # type: ignore[method-assign]
 
-    sub.add_parser("list", help="the bundled scenarios, one line each")
+    ls = sub.add_parser("list", help="the bundled scenarios, one line each (--laws: the laws)")
+    ls.add_argument("--laws", action="store_true",
+                    help="the law kinds: built in, and installed plugins with where each comes from and its keys")
 
     r = sub.add_parser("run", help="run a scenario headless and write an MCAP log")
     r.add_argument("scenario", help="a scenario file, or the name of a bundled one")
@@ -45,6 +47,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--json", action="store_true", help="print the summary object as JSON")
     r.add_argument("--force", action="store_true", help="overwrite -o FILE if it exists")
     r.add_argument("--plot", type=Path, metavar="FILE.png", help="also draw the run")
+    r.add_argument("--python-callback", action="store_true",
+                   help="run the law in the Python control callback, not the compiled one (for debugging a law; "
+                        "the same as --set simulation.python_callback=true)")
 
     rp = sub.add_parser("replay", help="read a log: summary, plot, bit-identical re-simulation")
     rp.add_argument("log", type=Path)
@@ -148,6 +153,23 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
 def cmd_list(args) -> int:
     from adaptive_mj.setup import scenario as sc
 
+    if getattr(args, "laws", False):
+        from adaptive_mj.laws.plugin import ENTRY_POINT_GROUP, installed
+
+        for kind in (*sc.LAW_KINDS, *sc.MANIPULATOR_LAW_KINDS):
+            print(f"{kind:24s} built in")
+        plugins = installed()
+        for name, inst in sorted(plugins.items()):
+            keys = ", ".join(f"{p.name}" + (f" [{p.unit}]" if p.unit else "") + ("" if p.default is None
+                                                                                 else f" = {p.default:g}")
+                             for p in inst.plugin.params)
+            print(f"{name:24s} plugin from {inst.distribution} {inst.version} (source {inst.source_sha256[:12]}): "
+                  f"{inst.plugin.doc}; keys: {keys or 'none'}")
+        if not plugins:
+            print(f"(no law plugins installed: a package registers one under the entry-point group "
+                  f"{ENTRY_POINT_GROUP!r}; see docs/ADDING_A_LAW.md)")
+        return EXIT_OK
+
     for path in sc.bundled():
         try:
             s = sc.load(path)
@@ -162,7 +184,8 @@ def cmd_run(args) -> int:
     from adaptive_mj.setup import scenario as sc
     from adaptive_mj.sim.runner import execute, reserve_log_path
 
-    scn = sc.load(_scenario_path(args.scenario), overrides=args.overrides, seed=args.seed)
+    overrides = [*args.overrides, *(["simulation.python_callback=true"] if args.python_callback else [])]
+    scn = sc.load(_scenario_path(args.scenario), overrides=overrides, seed=args.seed)
     log = reserve_log_path(scn, out=args.output, force=args.force)
     try:
         result = execute(scn, log_path=log)

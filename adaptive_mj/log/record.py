@@ -43,7 +43,7 @@ from mcap.records import MessageIndex
 
 from adaptive_mj.sim.interrupt import deferred
 
-LOG_FORMAT_VERSION = 2  # 2: joint_names/notes in the header, per-joint fields for m joints (1: 1-DOF only)
+LOG_FORMAT_VERSION = 3  # 3: law_plugin in the header; 2: joint_names/notes, per-joint fields (1: 1-DOF only)
 
 #: Statuses a run can be closed with (replay adds "truncated" for a log that was never closed).
 CLOSE_STATUSES = ("ok", "diverged", "interrupted", "failed")
@@ -138,6 +138,7 @@ class LogHeader:
     created_unix: float = 0.0
     joint_names: tuple[str, ...] = ()  # () for a 1-DOF plant; the m joint names otherwise
     notes: tuple[str, ...] = ()  # edits made to the model for the run (e.g. servo_to_torque)
+    law_plugin: dict | None = None  # a plugin law: {name, distribution, version, source_sha256}
 
     @property
     def log_every(self) -> int:
@@ -396,6 +397,7 @@ class Recorder:
             "overrides": json.dumps(list(h.overrides)),
             "joint_names": json.dumps(list(self.joint_names)),
             "notes": json.dumps(list(h.notes)),
+            "law_plugin": json.dumps(h.law_plugin),
             "created_unix": repr(float(h.created_unix)),
         }
         meta.update({VERSION_KEY_PREFIX + k: v for k, v in sorted(h.versions.items())})

@@ -388,6 +388,7 @@ def _decode_header(name: str, scan: _Scan) -> dict:
         "log_format_version": int, "seed": int, "log_every": int, "order": int,
         "log_rate_hz": float, "dt": float, "created_unix": float,
         "param_names": str_list, "overrides": str_list, "joint_names": str_list, "notes": str_list,
+        "law_plugin": json.loads,  # format 3: {name, distribution, version, source_sha256} or null
     }
     header: dict[str, Any] = {}
     versions: dict[str, str] = {}

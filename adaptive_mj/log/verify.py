@@ -14,6 +14,20 @@ _FIELDS = ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V")
 def verify(logged) -> tuple[bool, str]:
     """(identical?, one-line message). Compares every logged row with the re-run's same step."""
     header = logged.header
+    note = ""
+    plugin = header.get("law_plugin")  # format 3: the run's law came from an installed plugin
+    if plugin:
+        from adaptive_mj.laws.plugin import installed
+
+        inst = installed().get(plugin["name"])
+        if inst is None:
+            return False, (f"verify: cannot re-simulate: the log's law plugin {plugin['name']!r} "
+                           f"({plugin['distribution']} {plugin['version']}) is not installed; install that "
+                           "version and verify again")
+        if inst.describe() != plugin:
+            note = (f"; note: the installed law plugin {plugin['name']!r} ({inst.distribution} {inst.version}, "
+                    f"source {inst.source_sha256[:12]}) differs from the log's ({plugin['distribution']} "
+                    f"{plugin['version']}, source {plugin['source_sha256'][:12]})")
     scn = sc.loads(logged.scenario_text, where=f"{header.get('scenario_source', 'log')} (from the log)",
                    default_name=header["scenario_name"], overrides=list(logged.overrides),
                    seed=int(header["seed"]))
@@ -25,13 +39,13 @@ def verify(logged) -> tuple[bool, str]:
     every = int(header.get("log_every", 1))
     rows = np.arange(len(logged_traj)) * every
     if len(logged_traj) and rows[-1] >= len(rerun):
-        return False, f"verify: MISMATCH: the log has more rows than the re-run ({len(rerun)} steps)"
+        return False, f"verify: MISMATCH: the log has more rows than the re-run ({len(rerun)} steps){note}"
     for name in _FIELDS:
         a = getattr(logged_traj, name)
         b = getattr(rerun, name)[rows]
-        if not np.array_equal(a, b):
-            bad = np.argwhere(a != b)[0]
+        if not np.array_equal(a, b, equal_nan=True):  # NaN = NaN: a plugin law declares no V
+            bad = np.argwhere((a != b) & ~(np.isnan(a) & np.isnan(b)))[0]
             i = int(bad[0])
             return False, (f"verify: MISMATCH in {name} at row {i} (t={logged_traj.t[i]!r}): "
-                           f"log {a[tuple(bad)]!r} vs re-run {b[tuple(bad)]!r}")
-    return True, f"verify: bit-identical ({len(logged_traj)} logged rows of {len(rerun)} steps re-simulated)"
+                           f"log {a[tuple(bad)]!r} vs re-run {b[tuple(bad)]!r}{note}")
+    return True, f"verify: bit-identical ({len(logged_traj)} logged rows of {len(rerun)} steps re-simulated){note}"

@@ -109,7 +109,7 @@ def _named(scn: Scenario, key: str, values, names: tuple[str, ...], plant=None) 
 def _law(scn: Scenario, plant, modification: Modification | None = None):
     """The law of law.kind for `plant`; a law's own ValueError becomes a one-line ScenarioError."""
     try:
-        return LAW_KINDS[scn.law.kind](scn, plant, modification)
+        return LAW_KINDS.get(scn.law.kind, _plugin)(scn, plant, modification)
     except ScenarioError:
         raise
     except ValueError as exc:
@@ -154,6 +154,17 @@ def _slotine_li(scn: Scenario, plant, modification):
                         gamma=_gamma(scn, plant.names) if L.gamma is not None else 1.0,
                         dead_zone=_dead_zone(scn, plant), mode=mode,
                         modification=modification if mode is Mode.ADAPTIVE else None)
+
+
+def _plugin(scn: Scenario, plant, modification):
+    """law.kind = an installed law plugin (adaptive_mj.laws.plugin), with its declared keys."""
+    from adaptive_mj.laws.plugin import PluginLaw, installed
+
+    inst = installed().get(scn.law.kind)
+    if inst is None:
+        raise ScenarioError(f"{scn.source}: law.kind {scn.law.kind!r} is not an installed law plugin")
+    params = [scn.law.plugin_params[p.name] for p in inst.plugin.params]
+    return PluginLaw(inst, plant.form, np.array(params, dtype=float))
 
 
 #: law.kind -> builder(scn, plant) (the scenario has checked that the kind fits the plant kind)

@@ -83,6 +83,7 @@ class SimulationSpec:
     initial_state: tuple[float, ...] | str | None  # or "reference"
     state_bound: float
     control_delay: int = 0  # whole physics steps between computing a control and applying it
+    python_callback: bool = False  # force the Python control callback (debugging a law), not the native one
 
 
 @dataclass(frozen=True)
@@ -125,6 +126,7 @@ class LawSpec:
     kd: float | dict[str, float] | None = None  # manipulator laws: K_D, scalar or per joint
     lam_joints: dict[str, float] | None = None  # manipulator laws: Λ per joint (else lam for all)
     robust: RobustSpec = RobustSpec()  # σ/e-modification, projection, composite adaptation
+    plugin_params: dict[str, float] | None = None  # a law plugin's declared keys (law.kind = its name)
 
 
 @dataclass(frozen=True)
@@ -546,9 +548,10 @@ def _simulation(t: _Table, plant: PlantSpec, order: int) -> SimulationSpec:
         x0 = t.numbers("initial_state", None, length=order)
     bound = t.number("state_bound", math.inf, gt=0, allow_inf=True)
     delay = t.integer("control_delay", 0, ge=0)
+    python_callback = t.boolean("python_callback", False)
     t.finish()
     return SimulationSpec(integrator=integrator, timestep=timestep, duration=duration, initial_state=x0,
-                          state_bound=bound, control_delay=delay)
+                          state_bound=bound, control_delay=delay, python_callback=python_callback)
 
 
 _REFERENCE_KEYS = {
@@ -664,7 +667,15 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
     if plant.kind == "manipulator":
         return _manipulator_law(t)
     default_kind = "first_order_adaptive" if plant.kind == "first_order" else "sliding_adaptive"
-    kind = t.string("kind", default_kind, choices=LAW_KINDS)
+    raw_kind = t.data.get("kind")
+    plugins = {}
+    if isinstance(raw_kind, str) and raw_kind not in LAW_KINDS:
+        from adaptive_mj.laws.plugin import installed
+
+        plugins = installed()
+        if raw_kind in plugins:
+            return _plugin_law(t, raw_kind, plugins[raw_kind], plant, order)
+    kind = t.string("kind", default_kind, choices=LAW_KINDS + tuple(sorted(plugins)))
     if (kind == "first_order_adaptive") != (plant.kind == "first_order"):
         raise t.fail("kind", "'first_order_adaptive' exactly when plant.kind = 'first_order'", kind)
     law_order = t.integer("order", order, ge=1)
@@ -690,6 +701,27 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
     t.finish()
     return LawSpec(kind=kind, order=law_order, lam=lam, k=k, gamma=gamma, dead_zone=dead_zone,
                    initial_estimates=initial, nominal=nominal, K=K, boundary_layer=phi, robust=robust)
+
+
+def _plugin_law(t: _Table, kind: str, inst, plant: PlantSpec, order: int) -> LawSpec:
+    """law.kind = an installed plugin: its declared keys (adaptive_mj.laws.plugin.Param), checked
+    like built-in ones, plus initial_estimates and nominal."""
+    t.string("kind")
+    law_order = t.integer("order", order, ge=1)
+    if law_order != order:
+        raise t.fail("order", f"{order} for plant.kind = {plant.kind!r}", law_order)
+    params = {}
+    for p in inst.plugin.params:
+        value = t.number(p.name, p.default, gt=p.gt, ge=p.ge)
+        if value is None:
+            raise ScenarioError(f"{t.where}: law.{p.name} is required for law.kind = {kind!r} "
+                                f"({inst.distribution} {inst.version})" + (f": {p.doc}" if p.doc else ""))
+        params[p.name] = value
+    initial = _estimate_table(t, "initial_estimates")
+    nominal = _estimate_table(t, "nominal")
+    t.finish()
+    return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=None, dead_zone=None,
+                   initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None, plugin_params=params)
 
 
 ROBUST_KEYS = ("sigma", "e_modification", "theta0", "projection", "composite")

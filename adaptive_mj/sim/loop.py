@@ -279,8 +279,21 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
         from adaptive_mj.sim.native import NativeController
     if native is None:
         native = native_mod.supported(plant, law) and (not control_delay or not joint_shape)
+    nc = None
     if native:
-        nc = NativeController(plant, law, reference, theta_hat0, NATIVE_CHUNK, delay=control_delay)
+        try:
+            nc = NativeController(plant, law, reference, theta_hat0, NATIVE_CHUNK, delay=control_delay)
+        except Exception as exc:  # a user's law numba cannot compile: say why, run it in Python
+            plugin = getattr(law, "installed", None)
+            if plugin is None:
+                raise
+            import sys
+
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            print(f"adaptive-mj: note: law plugin {plugin.name!r} could not be compiled for the native callback "
+                  f"({type(exc).__name__}: {first[:200]}); running it through the Python callback", file=sys.stderr)
+            native = False
+    if native:
         with _interruptible(stopped), plant.controlled_natively(nc.callback):
             while k < n_steps:
                 t_k = plant.time

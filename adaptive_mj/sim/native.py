@@ -11,7 +11,8 @@ references at the stage times t_k + c_i h are evaluated in Python, vectorised,
 before each chunk (MuJoCo's stage times are reproduced bit for bit).
 
 Used automatically by loop.run for MuJoCo plants of order 2 whose law has
-`native_params` (the sliding laws); other laws and plants run in Python.
+`native_params` (the sliding laws, and law plugins: their function is compiled the same
+way, see adaptive_mj.laws.plugin); other laws and plants run in Python.
 tests/test_native.py shows the two paths agree to 1e-12.
 
 The callback finds its buffers through one module-level table of addresses
@@ -41,10 +42,14 @@ _cache: dict = {}
 
 
 
-def compiled(form):
-    """The cfunc for one regressor (cached by the functions' code and closure values)."""
-    key = tuple((fn.__code__, tuple(c.cell_contents for c in (fn.__closure__ or ())))
-                for fn in (form.phi, form.f, form.h))
+def compiled(form, plugin=None):
+    """The cfunc for one regressor and law (cached by the functions' code and closure values).
+
+    plugin: None for the built-in sliding laws (laws.sliding.sliding_law), or a plugin's law
+    function (adaptive_mj.laws.plugin: law(x, ref, theta, phi, f, h, params, rate) -> (u, s)),
+    compiled with numba the same way."""
+    fns = (form.phi, form.f, form.h) + ((plugin,) if plugin is not None else ())
+    key = tuple((fn.__code__, tuple(c.cell_contents for c in (fn.__closure__ or ()))) for fn in fns)
     if key in _cache:
         return _cache[key]
     import numba
@@ -53,9 +58,27 @@ def compiled(form):
     fptr, iptr = pointer(types.float64), pointer(types.int64)
     ctx_addr, w_addr = _CTX.ctypes.data, _W.ctypes.data
     phi_fn, f_fn, h_fn = numba.njit(form.phi), numba.njit(form.f), numba.njit(form.h)
-    law = numba.njit(_with_globals(sliding_law, sliding_terms=numba.njit(sliding_terms),
-                                   modify_rate=numba.njit(modify_rate)))
     clip = numba.njit(clip_into)
+    if plugin is None:
+        sliding = numba.njit(_with_globals(sliding_law, sliding_terms=numba.njit(sliding_terms),
+                                           modify_rate=numba.njit(modify_rate)))
+
+        @numba.njit
+        def law(x, r, th, W, coeffs, gamma, theta0, lower, upper, params, rate):
+            u, s, _ = sliding(x, r, th, coeffs, W[W_K], gamma, W[W_ADAPT] > 0.5, W[W_DZW], W[W_DZS] > 0.5,
+                              W[W_KR], W[W_PHI], W[W_SIGMA], W[W_EMOD], theta0, lower, upper, phi_fn, f_fn, h_fn,
+                              rate)
+            return u, s
+    else:
+        user = numba.njit(plugin)
+
+        @numba.njit
+        def law(x, r, th, W, coeffs, gamma, theta0, lower, upper, params, rate):
+            u, s = user(x, r, th, phi_fn(x), f_fn(x), h_fn(x), params, rate)
+            if W[W_ADAPT] < 0.5:
+                for j in range(rate.shape[0]):
+                    rate[j] = 0.0
+            return float(u), float(s)
 
     @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True)
     def callback(m, d):
@@ -86,10 +109,8 @@ def compiled(form):
         for j in range(nth):
             th[j] = theta[j] + (h * W[W_INC + stage]) * prev[j] if stage > 0 else theta[j]
         clip(th, lower, upper)  # projection: the stage estimate stays in the box too
-        rate = np.empty(nth)
-        u, s, s_r_dot = law(x, r, th, coeffs, W[W_K], gamma, W[W_ADAPT] > 0.5, W[W_DZW], W[W_DZS] > 0.5,
-                            W[W_KR], W[W_PHI], W[W_SIGMA], W[W_EMOD], theta0, lower, upper, phi_fn, f_fn, h_fn,
-                            rate)
+        rate = np.zeros(nth)
+        u, s = law(x, r, th, W, coeffs, gamma, theta0, lower, upper, carray(fptr(ctx[15]), 1 << 30), rate)
         u = min(max(u, W[W_LO]), W[W_HI])
         delay = int(W[W_DELAY])
         if delay > 0:  # apply the stage-0 control of D steps ago, held over the step (zero before)
@@ -148,12 +169,13 @@ class NativeController:
         self.delay = int(delay)
         self.ring = np.zeros(self.delay + 1)  # the last D + 1 stage-0 controls
         self.steps = 0
-        self.callback = compiled(plant.form)
+        p = law.native_params()
+        self.callback = compiled(plant.form, plugin=p.get("plugin_law"))
+        self.params = np.ascontiguousarray(p.get("plugin_params", np.zeros(1)), dtype=float)
         n, nth = plant.form.order, len(law.names)
         self.n, self.nth = n, nth
         self.nst = plant.stages
         self.ncol = 1 + n + 2 + (n + 1) + nth
-        p = law.native_params()
         self.theta = np.array(theta_hat0, dtype=float)
         self.rsum = np.zeros(nth)
         self.prev = np.zeros(nth)
@@ -183,7 +205,7 @@ class NativeController:
         d = plant.data
         for i, arr in enumerate((d.qpos, d.qvel, d.ctrl, self.ref, self.noise, self.rec, self.theta, self.rsum,
                                  self.prev, self.coeffs, self.gamma, self.theta0, self.lower, self.upper,
-                                 self.ring)):
+                                 self.ring, self.params)):
             _CTX[i] = arr.ctypes.data
 
     def chunk(self, rows: int, noise: np.ndarray | None):

@@ -84,7 +84,8 @@ def log_header(scn: Scenario, setup: Setup):
         param_names=tuple(setup.law.names), model_xml=setup.model_xml,
         model_source=setup.source.xml if setup.source else None,
         model_assets=dict(setup.source.assets) if setup.source else {},
-        versions=versions(), created_unix=time.time())
+        versions=versions(), created_unix=time.time(),
+        law_plugin=setup.law.installed.describe() if hasattr(setup.law, "installed") else None)
 
 
 def new_output_dir(requested: Path | None, name: str, *, logs_dir: Path | None = None) -> Path:
@@ -118,7 +119,8 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
     sink_every = max(1, round(1.0 / plant.dt))  # flush about once per simulated second
     kwargs = dict(duration=scn.simulation.duration, theta_hat0=setup.theta_hat0, noise_std=setup.noise_std,
                   rng=setup.rng, events=setup.events, state_bound=scn.simulation.state_bound,
-                  sink_every=sink_every, control_delay=scn.simulation.control_delay)
+                  sink_every=sink_every, control_delay=scn.simulation.control_delay,
+                  native=False if scn.simulation.python_callback else None)
     if log_path is None:
         traj = run(plant, setup.law, setup.reference, **kwargs)
         return RunResult(traj, clean_json(make_summary(scn.name, traj)), None)

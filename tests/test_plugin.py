@@ -1,0 +1,168 @@
+"""Users' laws as installed plugins (entry-point group adaptive_mj.laws): the example package
+in examples/emod_law is built and installed into a temporary folder, then found by name and
+run through run, sweep, replay --verify and list --laws, compiled into the native callback
+(bit-identical to its Python path), with its keys validated like built-in ones."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLE = REPO / "examples" / "emod_law"
+SCENARIO = EXAMPLE / "heave_emod.toml"
+
+BROKEN = '''
+from fractions import Fraction
+
+from adaptive_mj.laws.plugin import LawPlugin, Param
+
+
+def slow(x, ref, theta, phi, f, h, params, rate):
+    half = float(Fraction(1, 2))  # a Python object: plain Python, which numba cannot compile
+    s = (ref[1] - x[1]) + 5.0 * (ref[0] - x[0])
+    for j in range(rate.shape[0]):
+        rate[j] = 0.0
+    return (theta[0] * ref[2] - f + 2.0 * half * params[0] * s) / h, s
+
+
+LAW = LawPlugin(law=slow, params=(Param("k", ge=0.0),), adapts=False, doc="not compilable")
+'''
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    """A temporary site folder with the example plugin, built from its own folder by pip, and a
+    second plugin whose law numba cannot compile."""
+    target = tmp_path_factory.mktemp("plugin_site")
+    pip = [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation", "--target", str(target)]
+    subprocess.run([*pip, str(EXAMPLE)], check=True, timeout=300)
+    broken = tmp_path_factory.mktemp("broken_plugin")
+    (broken / "broken_law.py").write_text(BROKEN)
+    (broken / "pyproject.toml").write_text(
+        '[build-system]\nrequires = ["setuptools>=61"]\nbuild-backend = "setuptools.build_meta"\n'
+        '[project]\nname = "broken-law"\nversion = "0.0.1"\n'
+        '[project.entry-points."adaptive_mj.laws"]\nbroken = "broken_law:LAW"\n'
+        '[tool.setuptools]\npy-modules = ["broken_law"]\n')
+    subprocess.run([*pip, str(broken)], check=True, timeout=300)
+    return target
+
+
+def cli(site, *args, cwd=None):
+    env = dict(os.environ, PYTHONPATH=str(site), MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    return subprocess.run([sys.executable, "-m", "adaptive_mj", *args], capture_output=True, text=True, env=env,
+                          cwd=cwd or REPO, timeout=600)
+
+
+@pytest.fixture
+def on_path(site, monkeypatch):
+    monkeypatch.syspath_prepend(str(site))
+    return site
+
+
+def test_list_laws_shows_where_each_comes_from(site):
+    r = cli(site, "list", "--laws")
+    assert r.returncode == 0, r.stderr
+    line = next(ln for ln in r.stdout.splitlines() if ln.startswith("emod "))
+    assert "plugin from adaptive-mj-emod-law 0.1.0" in line and "keys: lambda [1/s], k [N s/m]" in line
+    assert "sliding_adaptive" in r.stdout and "built in" in r.stdout
+
+
+def test_run_then_replay_verify_is_bit_identical_and_the_log_names_the_plugin(site, tmp_path):
+    log = tmp_path / "emod.mcap"
+    r = cli(site, "run", str(SCENARIO), "-o", str(log), "--set", "simulation.duration=2", "--json")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout)
+    assert summary["metrics"]["rms_tracking_error_tail"] < 0.05
+    r = cli(site, "replay", str(log), "--verify")
+    assert r.returncode == 0 and "verify: bit-identical" in r.stdout, r.stdout + r.stderr
+    from adaptive_mj.log.replay import read_log
+
+    plugin = read_log(log).header["law_plugin"]
+    assert plugin["name"] == "emod" and plugin["distribution"] == "adaptive-mj-emod-law"
+    assert plugin["version"] == "0.1.0" and len(plugin["source_sha256"]) == 64
+    # without the plugin installed, verify says so instead of failing on the scenario
+    env = dict(os.environ, MUJOCO_GL="egl")
+    env.pop("PYTHONPATH", None)
+    r = subprocess.run([sys.executable, "-m", "adaptive_mj", "replay", str(log), "--verify"], capture_output=True,
+                       text=True, env=env, cwd=REPO, timeout=600)
+    assert "the log's law plugin 'emod' (adaptive-mj-emod-law 0.1.0) is not installed" in r.stdout + r.stderr
+
+
+def test_sweep_runs_the_plugin_by_name(site, tmp_path):
+    out = tmp_path / "sweep"
+    r = cli(site, "sweep", str(SCENARIO), "--grid", "nu=0.0,0.05", "--set", "simulation.duration=1",
+            "--jobs", "2", "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    rows = list(csv_rows(out / "sweep.csv"))
+    assert [float(r["law.nu"]) for r in rows] == [0.0, 0.05] and all(r["status"] == "ok" for r in rows)
+    assert rows[0]["rms_tracking_error"] != rows[1]["rms_tracking_error"]  # ν changes the run
+
+
+def csv_rows(path):
+    import csv
+
+    with open(path, newline="") as f:
+        yield from csv.DictReader(f)
+
+
+def test_plugin_runs_natively_and_matches_its_python_path(on_path):
+    from adaptive_mj import run
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.scenario import load
+
+    out = []
+    for native in (False, True):
+        scn = load(SCENARIO, overrides=["simulation.duration=1"])
+        s = build(scn)
+        out.append(run(s.plant, s.law, s.reference, duration=1.0, theta_hat0=s.theta_hat0, native=native))
+    py, nat = out
+    assert nat.meta["native"] and not py.meta["native"]
+    for f in ("x", "u", "s", "theta_hat"):
+        np.testing.assert_array_equal(getattr(nat, f), getattr(py, f), err_msg=f)
+    assert np.all(np.isnan(py.V))  # a plugin declares no Lyapunov function
+    assert np.abs(py.theta_hat[-1] - py.theta_hat[0]).max() > 0  # it adapts
+
+
+def test_a_law_numba_cannot_compile_runs_in_python_with_one_line(on_path, capsys):
+    from adaptive_mj import run
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.scenario import load
+
+    scn = load(SCENARIO, overrides=["law={kind='broken', k=200.0, initial_estimates={d=37.0, b=60.0, c=1.0}}",
+                                    "simulation.duration=0.2"])
+    s = build(scn)
+    traj = run(s.plant, s.law, s.reference, duration=0.2, theta_hat0=s.theta_hat0)
+    assert not traj.meta["native"] and traj.status == "ok"
+    err = [ln for ln in capsys.readouterr().err.splitlines() if "could not be compiled" in ln]
+    assert len(err) == 1 and err[0].startswith("adaptive-mj: note: law plugin 'broken' could not be compiled")
+    assert err[0].endswith("running it through the Python callback")
+
+
+def test_python_callback_flag_forces_the_python_path(on_path):
+    from adaptive_mj.setup.scenario import load
+    from adaptive_mj.sim.runner import execute
+
+    scn = load(SCENARIO, overrides=["simulation.duration=0.2", "simulation.python_callback=true"])
+    assert execute(scn).trajectory.meta["native"] is False
+
+
+@pytest.mark.parametrize("override, match", [
+    ("law.lambda=-1", r"law\.lambda must be > 0\.0, got -1\.0"),
+    ("law.gamma=1.0", r"unknown key 'law\.gamma'"),
+    ("law={kind='emod', k=1.0, gamma_d=1.0, gamma_p=1.0}", r"law\.lambda is required for law\.kind = 'emod' "
+                                                           r"\(adaptive-mj-emod-law 0\.1\.0\): surface slope λ"),
+    ("law.kind='emodd'", r"law\.kind must be one of .*'emod'.*, got 'emodd'"),
+])
+def test_plugin_keys_are_checked_like_built_in_ones(site, override, match):
+    r = cli(site, "run", str(SCENARIO), "--set", override, "--set", "simulation.duration=0.1")
+    assert r.returncode == 2
+    err = r.stderr.strip().splitlines()
+    import re
+
+    assert len(err) == 1 and re.search(match, err[0]), err
