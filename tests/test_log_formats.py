@@ -1,5 +1,5 @@
-"""Formats are promises: logs written in format 1 (by adaptive-mj before multi-joint runs)
-still read and replay bit for bit; a multi-joint run round-trips in format 2."""
+"""Formats are promises: logs written in format 1 (by adaptive-mj before multi-joint runs) and
+format 2 (before law plugins) still read and replay bit for bit; a multi-joint run round-trips."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -27,13 +27,24 @@ def test_format1_logs_read_and_verify(name, capsys):
     assert "verify: bit-identical" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("name, joints", [("heave_tracking_format2.mcap", 0), ("ur5e_payload_swap_format2.mcap", 6)])
+def test_format2_logs_read_and_verify(name, joints, capsys):
+    """Written by adaptive-mj before law plugins (format 2, no law_plugin in the header)."""
+    run = read_log(DATA / name)
+    assert run.header["log_format_version"] == 2 < record.LOG_FORMAT_VERSION
+    assert run.header.get("law_plugin") is None
+    assert run.status == "ok" and len(run.trajectory.joint_names) == joints
+    assert main(["replay", str(DATA / name), "--verify"]) == 0
+    assert "verify: bit-identical" in capsys.readouterr().out
+
+
 def test_multi_joint_log_round_trips(tmp_path):
     scn = scenario.load(scenario.SCENARIOS_DIR / "ur5e_payload_swap.toml",
                         overrides=["simulation.duration=0.5", "events=[{t=0.25, kind='payload_swap', payload='sphere'}]"])
     path = tmp_path / "arm.mcap"
     live = execute(scn, log_path=path).trajectory
     run = read_log(path)
-    assert run.header["log_format_version"] == 2
+    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 3
     assert run.header["joint_names"] == list(live.joint_names) and len(live.joint_names) == 6
     tr = run.trajectory
     every = run.header["log_every"]
