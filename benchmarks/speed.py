@@ -7,6 +7,7 @@ with 1 and 2 jobs; log size per simulated second; peak memory of a 600 s run.
   b_py  the same law through the Python callback (the path users' own laws take)
   c  closed loop with MCAP logging at the default rate (100 Hz)
   d  closed loop with MCAP logging of every physics step
+  e  the example law plugin (pip install examples/emod_law): compiled, and through the Python callback
 
 Every figure is the median of --reps repetitions, with [min, max].
 Usage: python benchmarks/speed.py [--reps 5] [--steps 20000] [--json] [--quick]
@@ -53,6 +54,32 @@ def loop(name: str, steps: int, native: bool) -> float:
     t0 = time.perf_counter()
     run(setup.plant, setup.law, setup.reference, duration=scn.simulation.duration, theta_hat0=setup.theta_hat0,
         native=native)
+    return (time.perf_counter() - t0) / steps * 1e6
+
+
+# The example law plugin (examples/emod_law, installed with pip) on each 1-DOF model: its
+# native row is the issue-12 target (<= 2x bare), its Python row the path a law takes that
+# numba cannot compile.
+PLUGIN_LAW = {
+    "heave": "law={kind='emod', lambda=5.0, k=200.0, gamma_d=0.0025, gamma_p=0.1, nu=0.01, "
+             "initial_estimates={d=0.0, b=0.0, c=0.0}}",
+    "arm": "law={kind='emod', lambda=10.0, k=5.0, gamma_d=0.048, gamma_p=0.02, nu=0.0, initial_estimates='model'}",
+}
+
+
+def plugin_installed() -> bool:
+    from adaptive_mj.laws.plugin import installed
+
+    return "emod" in installed()
+
+
+def plugin_loop(plant: str, steps: int, native: bool) -> float:
+    scn = _scenario(CASES[plant], steps, [PLUGIN_LAW[plant]])
+    setup = build(scn)
+    t0 = time.perf_counter()
+    traj = run(setup.plant, setup.law, setup.reference, duration=scn.simulation.duration,
+               theta_hat0=setup.theta_hat0, native=native)
+    assert traj.meta["native"] is native
     return (time.perf_counter() - t0) / steps * 1e6
 
 
@@ -147,12 +174,20 @@ def main() -> None:
             rows["c_logged_100Hz"].append(c)
             sizes.append(size / (args.steps * 0.001))
             rows["d_logged_every_step"].append(logged(name, args.steps, 1000.0)[0])
+        if plant in PLUGIN_LAW and plugin_installed():
+            plugin_loop(plant, 500, True)  # compile once, outside the timing
+            rows["e_plugin_native"], rows["e_plugin_python"] = [], []
+            for _ in range(args.reps):
+                rows["e_plugin_native"].append(plugin_loop(plant, args.steps, True))
+                rows["e_plugin_python"].append(plugin_loop(plant, max(2000, args.steps // 5), False))
         stats = {k: med(v) for k, v in rows.items()}
         a = stats["a_bare"]["median"]
         out["models"][plant] = {
             "integrator": "RK4", "us_per_step": stats,
             "ratios": {"b/a": stats["b_closed_loop"]["median"] / a, "b_py/a": stats["b_py_python_callback"]["median"] / a,
-                       "c/a": stats["c_logged_100Hz"]["median"] / a, "d/a": stats["d_logged_every_step"]["median"] / a},
+                       "c/a": stats["c_logged_100Hz"]["median"] / a, "d/a": stats["d_logged_every_step"]["median"] / a,
+                       **({"e_native/a": stats["e_plugin_native"]["median"] / a,
+                           "e_python/a": stats["e_plugin_python"]["median"] / a} if "e_plugin_native" in stats else {})},
             "log_bytes_per_sim_second_100Hz": statistics.median(sizes),
         }
     if args.no_sweep:
