@@ -80,6 +80,7 @@ class _Controller:
         # stage-0 control computed D steps earlier, held over all its stages; zero before that.
         self.delay = int(delay)
         self.sent: list = []  # stage-0 controls of the last D steps, oldest first
+        self._ref_t, self._ref_v = (math.nan, math.nan), (None, None)  # see __call__
         self.filters = hasattr(law, "step_ends")  # a law with filters of its own (composite)
         self.stage_xs: list = []
         self.stage_us: list = []
@@ -95,7 +96,16 @@ class _Controller:
 
     def __call__(self, t: float, x: np.ndarray) -> float:
         i = self.stage
-        ref = self.reference(t, self.order)
+        # RK4 evaluates stages 2 and 3 at the same t + h/2, and stage 4 at the next step's t:
+        # the last two reference evaluations are kept (same t, same numbers)
+        if t == self._ref_t[0]:
+            ref = self._ref_v[0]
+        elif t == self._ref_t[1]:
+            ref = self._ref_v[1]
+        else:
+            ref = self.reference(t, self.order)
+            self._ref_t = (t, self._ref_t[0])
+            self._ref_v = (ref, self._ref_v[0])
         if i == 0 or i >= len(self.inc):
             theta_i = self.theta_hat
         else:
@@ -392,9 +402,21 @@ def _first_divergence(plant, x, u, theta_hat, theta_next, bound):
     return None, ""
 
 
+def _all_within(values, bound: float) -> bool:
+    """Every entry finite and |v| <= bound (plain floats: cheaper than numpy on a few entries)."""
+    for v in values:
+        if not (math.isfinite(v) and -bound <= v <= bound):
+            return False
+    return True
+
+
 def _divergence(plant, x_k, u_k, theta_hat, bound) -> str:
     """Text naming the first sign of divergence after a step, or ''."""
     x_next = plant.observe()
+    if (_all_within(x_next.ravel().tolist(), bound) and _all_within(np.ravel(u_k).tolist(), math.inf)
+            and _all_within(theta_hat.tolist(), math.inf)):  # the usual case, decided on plain floats
+        warning = plant.instability()
+        return warning or ""
     if not np.all(np.isfinite(x_next)):
         return f"non-finite state {x_next.tolist()}"
     if not np.all(np.isfinite(u_k)):
