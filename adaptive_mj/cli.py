@@ -66,6 +66,8 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--quick", action="store_true", help="shorter runs and fewer variants, no breaking-point study (under a minute on 2 cores)")
     b.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
     b.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: all cores)")
+    b.add_argument("--scenario", action="append", default=[], metavar="FILE",
+                   help="also run your own scenario in a section of its own (repeatable; any law, a plugin too)")
 
     sw = sub.add_parser("sweep", help="run a scenario over a grid of keys and seeds, in parallel")
     sw.add_argument("scenario", help="a scenario file, or the name of a bundled one")
@@ -283,7 +285,12 @@ def main(argv: list[str] | None = None) -> int:
 def _dispatch(args) -> int:
     try:
         if args.command == "bench":
+            from adaptive_mj.setup import scenario as sc
             from adaptive_mj.study.bench import main_bench
+
+            args.scenario = [_scenario_path(p) for p in args.scenario]
+            for p in args.scenario:  # a bad one fails now, with one line, before anything runs
+                sc.load(p)
 
             return main_bench(args)
         if args.command == "sweep":

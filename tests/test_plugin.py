@@ -166,3 +166,20 @@ def test_plugin_keys_are_checked_like_built_in_ones(site, override, match):
     import re
 
     assert len(err) == 1 and re.search(match, err[0]), err
+
+
+def test_bench_runs_the_plugin_in_a_section_of_its_own(site, tmp_path, monkeypatch):
+    """bench --scenario FILE: the plugin's scenario beside the catalogue (reduced here to that
+    section alone), logged and reported."""
+    monkeypatch.syspath_prepend(str(site))
+    from adaptive_mj.cli import main
+    from adaptive_mj.study import bench_catalogue
+
+    monkeypatch.setattr(bench_catalogue, "catalogue", lambda *, quick, logs: [])
+    short = tmp_path / "emod_short.toml"
+    short.write_text(SCENARIO.read_text().replace("duration = 30.0", "duration = 1.0"))
+    out = tmp_path / "bench"
+    assert main(["bench", "--quick", "-o", str(out), "--jobs", "1", "--scenario", str(short)]) == 0
+    report = (out / "report.md").read_text()
+    assert "## Your scenarios" in report and "| `emod_short.toml` | emod | ok |" in report
+    assert (out / "logs" / "user-0-emod_short.mcap").stat().st_size > 1000

@@ -38,6 +38,10 @@ def main_bench(args) -> int:
 
     out = new_output_dir(args.output, "bench-quick" if args.quick else "bench")
     sections = catalogue(quick=args.quick, logs=out / "logs")
+    if getattr(args, "scenario", None):
+        from adaptive_mj.study.bench_catalogue import user_section
+
+        sections.append(user_section(list(args.scenario), out / "logs"))
     jobs = [job for s in sections for job in s.jobs]
     t0 = time.perf_counter()
     results = run_jobs(jobs, n_jobs=max(1, args.jobs), on_done=progress_printer(len(jobs)))

@@ -884,6 +884,38 @@ def _failure(quick: bool, logs: Path) -> Section:
                    analyze)
 
 
+# ---------------------------------------------------------------- your scenarios (bench --scenario FILE)
+def user_section(paths: list[Path], logs: Path) -> Section:
+    """A section of the user's own scenarios (any law: built in, or an installed plugin), each
+    run as the catalogue's runs are: logged, summarised, its estimates drawn."""
+    jobs = tuple(Job(scenario=Path(p), log=logs / f"user-{i}-{Path(p).stem}.mcap", tag=f"user/{i}-{Path(p).stem}")
+                 for i, p in enumerate(paths))
+
+    def analyze(res, out):
+        lines = ["| scenario | law | status | RMS ỹ | tail RMS ỹ | control RMS |", "|---|---|---|---|---|---|"]
+        rows, parts = [], []
+        for job in jobs:
+            r = res[job.tag]
+            scn = sc.load(job.scenario)
+            kind = scn.plant.kind
+            rows.append(_row("user", job.tag.split("/")[1], r))
+            if not _ok(r):
+                lines.append(f"| `{job.scenario}` | {scn.law.kind} | {r.status} {r.error} |||")
+                continue
+            m = r.summary["metrics"]
+            yu, uu = units.OUTPUT.get(kind, ""), units.CONTROL.get(kind, "")
+            lines.append(f"| `{job.scenario.name}` | {scn.law.kind} | {r.status} | {_g(m.get('rms_tracking_error'))} {yu} "
+                         f"| {_g(m.get('rms_tracking_error_tail'))} {yu} | {_g(m.get('control_rms'))} {uu} |")
+            if kind != "manipulator":
+                parts.append(f"`{job.scenario.name}` (law `{scn.law.kind}`), final estimates:\n\n"
+                             + _final_table(r, kind))
+        return SectionReport(f"{len(jobs)} scenario(s) given with `bench --scenario`, each logged in `logs/` "
+                             "like the catalogue's runs.\n\n" + "\n".join(lines) + "\n\n" + "\n\n".join(parts)
+                             + _status_note(res), rows)
+
+    return Section("user", "Your scenarios", "(your own runs, beside the lecture's)", jobs, analyze)
+
+
 def catalogue(*, quick: bool, logs: Path) -> list[Section]:
     """Every section, in the lecture's order, then the manipulator."""
     return [_first_order(quick, logs), _phase(quick, logs), _lyapunov(quick, logs), _second_order(quick, logs),
