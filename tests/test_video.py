@@ -158,3 +158,19 @@ def test_the_reference_pose_shows_when_tracking_is_exact(tmp_path):
     finally:
         video._Panel.__init__ = real
     assert "J [kg m²]" in labels and "g_sin [N m]" in labels, labels
+
+
+def test_gif_plays_in_real_time(logs, tmp_path):
+    """GIF delays are whole centiseconds: at 30 fps they alternate 30/40 ms so that the video lasts
+    the simulated time to within 10 ms (not 30 ms frames, which would play 10 % fast)."""
+    from PIL import Image
+
+    video = render_log(logs["heave"], tmp_path / "h.gif", fps=30, size=SIZE)
+    with Image.open(video.path) as im:
+        durations = []
+        for i in range(im.n_frames):
+            im.seek(i)
+            durations.append(im.info["duration"])
+    assert len(durations) == video.frames
+    assert abs(sum(durations) / 1000.0 - video.frames / 30.0) <= 0.010
+    assert set(durations) <= {30, 40}
