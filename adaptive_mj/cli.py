@@ -37,6 +37,8 @@ def _parser() -> argparse.ArgumentParser:
     ls = sub.add_parser("list", help="the bundled scenarios, one line each (--laws: the laws)")
     ls.add_argument("--laws", action="store_true",
                     help="the law kinds: built in, and installed plugins with where each comes from and its keys")
+    ls.add_argument("--plants", action="store_true",
+                    help="the plant kinds: built in, and installed plugins with where each comes from and its keys")
 
     r = sub.add_parser("run", help="run a scenario headless and write an MCAP log")
     r.add_argument("scenario", help="a scenario file, or the name of a bundled one")
@@ -155,6 +157,19 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
 def cmd_list(args) -> int:
     from adaptive_mj.setup import scenario as sc
 
+    if getattr(args, "plants", False):
+        from adaptive_mj.plants.plugin import ENTRY_POINT_GROUP as PLANT_GROUP, installed as installed_plants
+
+        for kind in sc.PLANT_KINDS:
+            print(f"{kind:24s} built in")
+        plants = installed_plants()
+        for name, inst in sorted(plants.items()):
+            keys = ", ".join(p.name + (f" [{p.unit}]" if p.unit else "") for p in inst.plugin.params)
+            print(f"{name:24s} plugin from {inst.distribution} {inst.version} (source {inst.source_sha256[:12]}): "
+                  f"{inst.plugin.doc}; model {inst.plugin.model}; keys: {keys or 'none'}")
+        if not plants:
+            print(f"(no plant plugins installed: a package registers one under {PLANT_GROUP!r})")
+        return EXIT_OK
     if getattr(args, "laws", False):
         from adaptive_mj.laws.plugin import ENTRY_POINT_GROUP, installed
 

@@ -43,7 +43,7 @@ from mcap.records import MessageIndex
 
 from adaptive_mj.sim.interrupt import deferred
 
-LOG_FORMAT_VERSION = 3  # 3: law_plugin in the header; 2: joint_names/notes, per-joint fields (1: 1-DOF only)
+LOG_FORMAT_VERSION = 3  # 3: law_plugin, plant_plugin in the header; 2: joint_names/notes, per-joint fields (1: 1-DOF only)
 
 #: Statuses a run can be closed with (replay adds "truncated" for a log that was never closed).
 CLOSE_STATUSES = ("ok", "diverged", "interrupted", "failed")
@@ -139,6 +139,7 @@ class LogHeader:
     joint_names: tuple[str, ...] = ()  # () for a 1-DOF plant; the m joint names otherwise
     notes: tuple[str, ...] = ()  # edits made to the model for the run (e.g. servo_to_torque)
     law_plugin: dict | None = None  # a plugin law: {name, distribution, version, source_sha256}
+    plant_plugin: dict | None = None  # a plugin plant: the same fields
 
     @property
     def log_every(self) -> int:
@@ -398,6 +399,7 @@ class Recorder:
             "joint_names": json.dumps(list(self.joint_names)),
             "notes": json.dumps(list(h.notes)),
             "law_plugin": json.dumps(h.law_plugin),
+            "plant_plugin": json.dumps(h.plant_plugin),
             "created_unix": repr(float(h.created_unix)),
         }
         meta.update({VERSION_KEY_PREFIX + k: v for k, v in sorted(h.versions.items())})

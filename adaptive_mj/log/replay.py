@@ -389,6 +389,7 @@ def _decode_header(name: str, scan: _Scan) -> dict:
         "log_rate_hz": float, "dt": float, "created_unix": float,
         "param_names": str_list, "overrides": str_list, "joint_names": str_list, "notes": str_list,
         "law_plugin": json.loads,  # format 3: {name, distribution, version, source_sha256} or null
+        "plant_plugin": json.loads,  # format 3: the same, or null
     }
     header: dict[str, Any] = {}
     versions: dict[str, str] = {}

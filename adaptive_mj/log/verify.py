@@ -15,19 +15,22 @@ def verify(logged) -> tuple[bool, str]:
     """(identical?, one-line message). Compares every logged row with the re-run's same step."""
     header = logged.header
     note = ""
-    plugin = header.get("law_plugin")  # format 3: the run's law came from an installed plugin
-    if plugin:
-        from adaptive_mj.laws.plugin import installed
+    from adaptive_mj.laws import plugin as law_plugins
+    from adaptive_mj.plants import plugin as plant_plugins
 
-        inst = installed().get(plugin["name"])
+    for what, registry in (("law", law_plugins), ("plant", plant_plugins)):
+        plugin = header.get(f"{what}_plugin")  # format 3: the run's law or plant came from a plugin
+        if not plugin:
+            continue
+        inst = registry.installed().get(plugin["name"])
         if inst is None:
-            return False, (f"verify: cannot re-simulate: the log's law plugin {plugin['name']!r} "
+            return False, (f"verify: cannot re-simulate: the log's {what} plugin {plugin['name']!r} "
                            f"({plugin['distribution']} {plugin['version']}) is not installed; install that "
                            "version and verify again")
         if inst.describe() != plugin:
-            note = (f"; note: the installed law plugin {plugin['name']!r} ({inst.distribution} {inst.version}, "
-                    f"source {inst.source_sha256[:12]}) differs from the log's ({plugin['distribution']} "
-                    f"{plugin['version']}, source {plugin['source_sha256'][:12]})")
+            note += (f"; note: the installed {what} plugin {plugin['name']!r} ({inst.distribution} {inst.version}, "
+                     f"source {inst.source_sha256[:12]}) differs from the log's ({plugin['distribution']} "
+                     f"{plugin['version']}, source {plugin['source_sha256'][:12]})")
     scn = sc.loads(logged.scenario_text, where=f"{header.get('scenario_source', 'log')} (from the log)",
                    default_name=header["scenario_name"], overrides=list(logged.overrides),
                    seed=int(header["seed"]))

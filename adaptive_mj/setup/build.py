@@ -40,21 +40,28 @@ class Setup:
     notes: tuple[str, ...] = ()  # model edits made for the run (servo_to_torque), shown and logged
 
 
-def plant_kinds() -> dict:
-    """plant.kind -> the module that builds it (``model_source(scn)``, ``from_scenario(scn, source)``)."""
+def plant_kinds(kind: str | None = None) -> dict:
+    """plant.kind -> what builds it (``model_source(scn)``, ``from_scenario(scn, source)``): the
+    bundled kinds' modules, and installed plant plugins (adaptive_mj.plants.plugin) when `kind` is
+    not a bundled one."""
     from adaptive_mj.plants import arm, heave, manipulator, twin
 
-    return {"heave": heave, "arm": arm, "first_order": twin, "manipulator": manipulator}
+    kinds = {"heave": heave, "arm": arm, "first_order": twin, "manipulator": manipulator}
+    if kind is not None and kind not in kinds:
+        from adaptive_mj.plants.plugin import installed
+
+        kinds.update(installed())
+    return kinds
 
 
 def model_source(scn: Scenario) -> ModelSource | None:
     """The MJCF text to compile (read, or composed with PyMJCF), or None for a model-free twin."""
-    return plant_kinds()[scn.plant.kind].model_source(scn)
+    return plant_kinds(scn.plant.kind)[scn.plant.kind].model_source(scn)
 
 
 def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     """Build a run's objects. `source` replaces the model files (used by replay --verify)."""
-    kind = plant_kinds()[scn.plant.kind]
+    kind = plant_kinds(scn.plant.kind)[scn.plant.kind]
     if source is None:
         source = kind.model_source(scn)
     built = kind.from_scenario(scn, source)

@@ -58,6 +58,7 @@ class PlantSpec:
     thruster_time_constant: float | None = None  # heave: first-order thruster lag tau [s]
     regressor: str = "lecture"  # first_order: "lecture" (sin x - a x + b x²) or "sin_squared"
     manipulator: "ManipulatorSpec | None" = None  # kind = "manipulator" only
+    plugin_params: dict[str, float] | None = None  # kind = an installed plant plugin: its declared keys
 
 
 @dataclass(frozen=True)
@@ -443,7 +444,15 @@ def _resolve_model(name: str, base_dir: Path) -> Path:
 
 
 def _plant(t: _Table, base_dir: Path) -> PlantSpec:
-    kind = t.string("kind", choices=PLANT_KINDS)
+    raw_kind = t.data.get("kind")
+    plugins = {}
+    if isinstance(raw_kind, str) and raw_kind not in PLANT_KINDS:
+        from adaptive_mj.plants.plugin import installed
+
+        plugins = installed()
+        if raw_kind in plugins:
+            return _plugin_plant(t, raw_kind, plugins[raw_kind], base_dir)
+    kind = t.string("kind", choices=PLANT_KINDS + tuple(sorted(plugins)))
     backend = t.string("backend", "mujoco", choices=BACKENDS)
     if kind == "first_order" and backend != "twin":
         raise t.fail("backend", "'twin' for plant.kind = 'first_order' (it is not a mechanical system)", backend)
@@ -504,6 +513,26 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:
                      payload_mass=payload_mass, site=site, theta=theta, g=g, density=density,
                      viscosity=viscosity, ctrl_range=ctrl, thruster_time_constant=lag, regressor=regressor,
                      manipulator=manipulator)
+
+
+def _plugin_plant(t: _Table, kind: str, inst, base_dir: Path) -> PlantSpec:
+    """plant.kind = an installed plant plugin: plant.model (default: the plugin's own MJCF),
+    plant.viscosity, and the plugin's declared keys."""
+    t.string("kind")
+    backend = t.string("backend", "mujoco", choices=("mujoco",))
+    model = _resolve_model(t.string("model", str(inst.plugin.model)), base_dir)
+    viscosity = t.number("viscosity", None, ge=0)
+    params = {}
+    for p in inst.plugin.params:
+        value = t.number(p.name, p.default, gt=p.gt, ge=p.ge)
+        if value is None:
+            raise ScenarioError(f"{t.where}: plant.{p.name} is required for plant.kind = {kind!r} "
+                                f"({inst.distribution} {inst.version})" + (f": {p.doc}" if p.doc else ""))
+        params[p.name] = value
+    t.finish()
+    return PlantSpec(kind=kind, backend=backend, model=model, joint=None, actuator=None, payload=None,
+                     payload_mass=None, site="tip", theta=None, g=9.81, density=None, viscosity=viscosity,
+                     ctrl_range=None, plugin_params=params)
 
 
 def _manipulator(t: _Table, payload: str | None) -> ManipulatorSpec:

@@ -85,7 +85,18 @@ def log_header(scn: Scenario, setup: Setup):
         model_source=setup.source.xml if setup.source else None,
         model_assets=dict(setup.source.assets) if setup.source else {},
         versions=versions(), created_unix=time.time(),
-        law_plugin=setup.law.installed.describe() if hasattr(setup.law, "installed") else None)
+        law_plugin=setup.law.installed.describe() if hasattr(setup.law, "installed") else None,
+        plant_plugin=_plant_plugin(scn))
+
+
+def _plant_plugin(scn: Scenario) -> dict | None:
+    """{name, distribution, version, source_sha256} of an installed plant plugin, else None."""
+    if scn.plant.plugin_params is None:
+        return None
+    from adaptive_mj.plants.plugin import installed
+
+    inst = installed().get(scn.plant.kind)
+    return inst.describe() if inst is not None else None
 
 
 def new_output_dir(requested: Path | None, name: str, *, logs_dir: Path | None = None) -> Path:

@@ -1,0 +1,85 @@
+"""Users' own 1-DOF plants, installed as packages: the entry-point group ``adaptive_mj.plants``.
+
+A package registers a ``PlantPlugin`` under a name:
+
+    [project.entry-points."adaptive_mj.plants"]
+    my_cart = "my_cart_plant:PLANT"
+
+and a scenario names it: ``plant.kind = "my_cart"`` (with ``plant.model`` to use another
+MJCF than the plugin's own, and the plugin's declared keys). The plugin's ``make(model,
+params, where)`` turns the compiled model into a plant with the interface of
+adaptive_mj.plants (a ``MujocoPlant`` subclass is the easy way: it needs the plant's
+ModelForm and a function reading the true θ from the compiled model). Every law for
+1-DOF plants, built in or a plugin, then runs on it, natively when its form compiles.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from adaptive_mj.laws.plugin import Param, _source_hash
+
+ENTRY_POINT_GROUP = "adaptive_mj.plants"
+
+
+@dataclass(frozen=True)
+class PlantPlugin:
+    """model: the plugin's MJCF file; make(model, params, where) -> plant; params: its scenario
+    keys (plant.<name>); units: {"output": "m", "control": "N", <param name>: unit} for reports."""
+
+    model: Path
+    make: Callable
+    params: tuple[Param, ...] = ()
+    units: dict = field(default_factory=dict)
+    doc: str = ""
+
+
+@dataclass(frozen=True)
+class InstalledPlant:
+    name: str
+    plugin: PlantPlugin
+    distribution: str
+    version: str
+    source_sha256: str
+
+    def describe(self) -> dict:
+        return {"name": self.name, "distribution": self.distribution, "version": self.version,
+                "source_sha256": self.source_sha256}
+
+    # -- a plant kind (adaptive_mj.setup.build.plant_kinds) ---------------------------------
+    def model_source(self, scn):
+        from adaptive_mj.plants.mujoco_plant import read_model_file
+
+        return read_model_file(scn)
+
+    def from_scenario(self, scn, source):
+        from adaptive_mj.plants import BuiltPlant
+        from adaptive_mj.plants.mujoco_plant import compile_for_scenario
+
+        model, model_xml = compile_for_scenario(scn, source)
+        plant = self.plugin.make(model, dict(scn.plant.plugin_params or {}), str(scn.plant.model))
+        return BuiltPlant(plant, model_xml)
+
+
+def installed() -> dict[str, InstalledPlant]:
+    """Every plant registered under ENTRY_POINT_GROUP, by name (broken ones skipped, said on stderr)."""
+    import sys
+    from importlib.metadata import entry_points
+
+    out: dict[str, InstalledPlant] = {}
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            obj = ep.load()
+        except Exception as exc:
+            print(f"adaptive-mj: note: plant plugin {ep.name!r} ({ep.value}) could not be loaded: "
+                  f"{type(exc).__name__}: {exc}", file=sys.stderr)
+            continue
+        if not isinstance(obj, PlantPlugin):
+            print(f"adaptive-mj: note: plant plugin {ep.name!r} ({ep.value}) is not an "
+                  "adaptive_mj.plants.plugin.PlantPlugin; skipped", file=sys.stderr)
+            continue
+        dist = ep.dist
+        out[ep.name] = InstalledPlant(ep.name, obj, dist.name if dist else "?", dist.version if dist else "?",
+                                      _source_hash(obj.make))
+    return out
