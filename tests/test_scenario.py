@@ -128,7 +128,8 @@ def test_model_without_the_needed_joint(tmp_path):
         "<mujoco><option density='1000'/><worldbody><body><geom type='box' size='.1 .1 .1' mass='1'/>"
         "</body></worldbody></mujoco>")
     s = load_text(tmp_path, GOOD.replace('backend = "mujoco"', 'backend = "mujoco"\nmodel = "nojoint.xml"'))
-    with pytest.raises(ModelError, match=r"nojoint\.xml: the model has 0 joints"):
+    with pytest.raises(ModelError, match=r"nojoint\.xml: this plant is one slide joint driven by one motor \(1 degree "
+                                         r"of freedom\), the model has 0"):
         build(s)
     s = load_text(tmp_path, GOOD.replace('backend = "mujoco"', 'backend = "mujoco"\njoint = "lift"'))
     with pytest.raises(ModelError, match=r"no joint named 'lift' \(the model has \['heave'\]\)"):
