@@ -88,6 +88,13 @@ class Modification:
     def leaks(self) -> bool:
         return self.sigma > 0.0 or self.e_mod > 0.0
 
+    def box(self, n_theta: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """(lower, upper) (n_theta,) of the projection, or None without one: a law's `bounds`,
+        into which the loop clips every stage's and step's estimate."""
+        if self.lower is None and self.upper is None:
+            return None
+        return self.arrays(n_theta)[3:]
+
     def arrays(self, n_theta: int, theta_hat0=None) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray]:
         """(sigma, e_mod, theta0, lower, upper) as the compiled laws take them: θ₀ defaults to
         theta_hat0 (else zeros), the box to (-inf, inf)."""

@@ -44,9 +44,8 @@ class FirstOrderAdaptiveLaw:
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """(lower, upper) of the projection, or None (see loop: estimates are clipped into it)."""
-        mod = self.modification
-        return None if mod.lower is None and mod.upper is None else self._mod[3:]
+        """(lower, upper) of the projection, or None (common.Modification.box)."""
+        return self.modification.box(len(self.names))
 
     def __call__(self, t, x, ref, theta_hat) -> LawStep:
         form = self.form

@@ -26,8 +26,6 @@ source; ``replay --verify`` says when the installed plugin differs or is missing
 """
 from __future__ import annotations
 
-import hashlib
-import inspect
 import math
 from dataclasses import dataclass
 from typing import Callable
@@ -35,6 +33,7 @@ from typing import Callable
 import numpy as np
 
 from adaptive_mj.laws.common import LawStep
+from adaptive_mj.plugins import Installed, discover
 
 ENTRY_POINT_GROUP = "adaptive_mj.laws"
 
@@ -63,51 +62,9 @@ class LawPlugin:
     doc: str = ""
 
 
-@dataclass(frozen=True)
-class Installed:
-    """An installed plugin: its entry-point name, the object, and where it comes from."""
-
-    name: str
-    plugin: LawPlugin
-    distribution: str
-    version: str
-    source_sha256: str  # of the law function's module source
-
-    def describe(self) -> dict:
-        return {"name": self.name, "distribution": self.distribution, "version": self.version,
-                "source_sha256": self.source_sha256}
-
-
-def _source_hash(fn: Callable) -> str:
-    try:
-        text = inspect.getsource(inspect.getmodule(fn))
-    except (OSError, TypeError):
-        text = getattr(fn, "__qualname__", repr(fn))
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
 def installed() -> dict[str, Installed]:
-    """Every law registered under ENTRY_POINT_GROUP, by name (a broken one is skipped with a
-    one-line note on stderr, so one bad package does not stop the others)."""
-    import sys
-    from importlib.metadata import entry_points
-
-    out: dict[str, Installed] = {}
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            obj = ep.load()
-        except Exception as exc:  # a user's package: say which and go on
-            print(f"adaptive-mj: note: law plugin {ep.name!r} ({ep.value}) could not be loaded: "
-                  f"{type(exc).__name__}: {exc}", file=sys.stderr)
-            continue
-        if not isinstance(obj, LawPlugin) or not callable(obj.law):
-            print(f"adaptive-mj: note: law plugin {ep.name!r} ({ep.value}) is not an "
-                  "adaptive_mj.laws.plugin.LawPlugin; skipped", file=sys.stderr)
-            continue
-        dist = ep.dist
-        out[ep.name] = Installed(ep.name, obj, dist.name if dist else "?", dist.version if dist else "?",
-                                 _source_hash(obj.law))
-    return out
+    """Every law registered under ENTRY_POINT_GROUP, by name (adaptive_mj.plugins.discover)."""
+    return discover(ENTRY_POINT_GROUP, LawPlugin, "law", lambda p: p.law)
 
 
 class PluginLaw:

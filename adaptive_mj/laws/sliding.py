@@ -120,11 +120,8 @@ class _SlidingBase:
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """(lower, upper) (n_theta,) of the projection, or None: the loop clips every estimate into it."""
-        mod = self.modification
-        if mod.lower is None and mod.upper is None:
-            return None
-        return mod.arrays(len(self.names))[3:]
+        """(lower, upper) of the projection, or None (common.Modification.box)."""
+        return self.modification.box(len(self.names))
 
     def native_params(self) -> dict:
         """The numbers `sliding_law` takes, for the native (numba) callback."""

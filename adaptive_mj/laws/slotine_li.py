@@ -119,9 +119,8 @@ class SlotineLiLaw:
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """(lower, upper) of the projection, or None (see loop: estimates are clipped into it)."""
-        mod = self.modification
-        return None if mod.lower is None and mod.upper is None else self._mod[3:]
+        """(lower, upper) of the projection, or None (common.Modification.box)."""
+        return self.modification.box(len(self.names))
 
     def native_params(self) -> dict:
         sigma, e_mod, theta0, lower, upper = self._mod

@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from adaptive_mj.laws.plugin import Param, _source_hash
+from adaptive_mj.laws.plugin import Param
+from adaptive_mj.plugins import Installed, discover
 
 ENTRY_POINT_GROUP = "adaptive_mj.plants"
 
@@ -34,21 +35,9 @@ class PlantPlugin:
     units: dict = field(default_factory=dict)
     doc: str = ""
 
-
-@dataclass(frozen=True)
-class InstalledPlant:
-    name: str
-    plugin: PlantPlugin
-    distribution: str
-    version: str
-    source_sha256: str
-
-    def describe(self) -> dict:
-        return {"name": self.name, "distribution": self.distribution, "version": self.version,
-                "source_sha256": self.source_sha256}
-
     # -- a plant kind (adaptive_mj.setup.build.plant_kinds) ---------------------------------
     def model_source(self, scn):
+        """plant.model's text (the plugin's own MJCF unless the scenario names another)."""
         from adaptive_mj.plants.mujoco_plant import read_model_file
 
         return read_model_file(scn)
@@ -58,28 +47,10 @@ class InstalledPlant:
         from adaptive_mj.plants.mujoco_plant import compile_for_scenario
 
         model, model_xml = compile_for_scenario(scn, source)
-        plant = self.plugin.make(model, dict(scn.plant.plugin_params or {}), str(scn.plant.model))
+        plant = self.make(model, dict(scn.plant.plugin_params or {}), str(scn.plant.model))
         return BuiltPlant(plant, model_xml)
 
 
-def installed() -> dict[str, InstalledPlant]:
-    """Every plant registered under ENTRY_POINT_GROUP, by name (broken ones skipped, said on stderr)."""
-    import sys
-    from importlib.metadata import entry_points
-
-    out: dict[str, InstalledPlant] = {}
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            obj = ep.load()
-        except Exception as exc:
-            print(f"adaptive-mj: note: plant plugin {ep.name!r} ({ep.value}) could not be loaded: "
-                  f"{type(exc).__name__}: {exc}", file=sys.stderr)
-            continue
-        if not isinstance(obj, PlantPlugin):
-            print(f"adaptive-mj: note: plant plugin {ep.name!r} ({ep.value}) is not an "
-                  "adaptive_mj.plants.plugin.PlantPlugin; skipped", file=sys.stderr)
-            continue
-        dist = ep.dist
-        out[ep.name] = InstalledPlant(ep.name, obj, dist.name if dist else "?", dist.version if dist else "?",
-                                      _source_hash(obj.make))
-    return out
+def installed() -> dict[str, Installed]:
+    """Every plant registered under ENTRY_POINT_GROUP, by name (adaptive_mj.plugins.discover)."""
+    return discover(ENTRY_POINT_GROUP, PlantPlugin, "plant", lambda p: p.make)

@@ -50,7 +50,7 @@ def plant_kinds(kind: str | None = None) -> dict:
     if kind is not None and kind not in kinds:
         from adaptive_mj.plants.plugin import installed
 
-        kinds.update(installed())
+        kinds.update({name: inst.plugin for name, inst in installed().items()})
     return kinds
 
 
