@@ -1,5 +1,5 @@
 """Users' laws as installed plugins (entry-point group adaptive_mj.laws): the example package
-in examples/emod_law is built and installed into a temporary folder, then found by name and
+in examples/emod_law is built and installed by pip into a clean virtual environment, then found by name and
 run through run, sweep, replay --verify and list --laws, compiled into the native callback
 (bit-identical to its Python path), with its keys validated like built-in ones."""
 from __future__ import annotations
@@ -93,12 +93,21 @@ initial_estimates = { d = 1.0, b = 0.0 }
 
 
 @pytest.fixture(scope="module")
-def site(tmp_path_factory):
-    """A temporary site folder with the example plugin, built from its own folder by pip, and a
-    second plugin whose law numba cannot compile."""
-    target = tmp_path_factory.mktemp("plugin_site")
-    pip = [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation", "--target", str(target)]
-    subprocess.run([*pip, str(EXAMPLE)], check=True, timeout=300)
+def env(tmp_path_factory):
+    """A clean virtual environment: adaptive-mj installed (editable, from this checkout), the example
+    plugin built from its own folder and installed by pip, plus a plant plugin and a law numba
+    cannot compile. Third-party dependencies (mujoco, numba, ...) are shared read-only from the
+    test environment through a .pth file, so nothing is downloaded."""
+    root = tmp_path_factory.mktemp("clean_env")
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(root)], check=True, timeout=300)
+    python = root / "bin" / "python"
+    purelib = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                                  check=True, capture_output=True, text=True).stdout.strip())
+    import sysconfig
+
+    (purelib / "_shared_dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    probe = subprocess.run([str(python), "-c", "import adaptive_mj"], capture_output=True, text=True, cwd=root)
+    assert probe.returncode != 0  # clean: adaptive-mj is not there until pip installs it
     broken = tmp_path_factory.mktemp("broken_plugin")
     (broken / "broken_law.py").write_text(BROKEN)
     (broken / "pyproject.toml").write_text(
@@ -106,23 +115,32 @@ def site(tmp_path_factory):
         '[project]\nname = "broken-law"\nversion = "0.0.1"\n'
         '[project.entry-points."adaptive_mj.laws"]\nbroken = "broken_law:LAW"\n'
         '[tool.setuptools]\npy-modules = ["broken_law"]\n')
-    subprocess.run([*pip, str(broken)], check=True, timeout=300)
     cart = tmp_path_factory.mktemp("cart_plant")
     (cart / "cart_plant.py").write_text(CART)
-    (cart / "cart.xml").write_text(CART_XML)
     (cart / "pyproject.toml").write_text(
         '[build-system]\nrequires = ["setuptools>=61"]\nbuild-backend = "setuptools.build_meta"\n'
         '[project]\nname = "cart-plant"\nversion = "0.2.0"\n'
         '[project.entry-points."adaptive_mj.plants"]\ncart = "cart_plant:PLANT"\n'
-        '[tool.setuptools]\npy-modules = ["cart_plant"]\n[tool.setuptools.data-files]\n"." = []\n')
-    subprocess.run([*pip, str(cart)], check=True, timeout=300)
-    (target / "cart.xml").write_text(CART_XML)  # beside the module, as a package would ship it
-    return target
+        '[tool.setuptools]\npy-modules = ["cart_plant"]\n')
+    subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps",
+                    "--no-build-isolation", "-e", str(REPO), str(EXAMPLE), str(broken), str(cart)],
+                   check=True, timeout=600)
+    (purelib / "cart.xml").write_text(CART_XML)  # beside the module, as a package would ship it
+    return {"python": python, "purelib": purelib}
+
+
+@pytest.fixture(scope="module")
+def site(env):
+    """The clean environment's site-packages, with the plugins' distributions."""
+    return env["purelib"]
 
 
 def cli(site, *args, cwd=None):
-    env = dict(os.environ, PYTHONPATH=str(site), MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
-    return subprocess.run([sys.executable, "-m", "adaptive_mj", *args], capture_output=True, text=True, env=env,
+    """adaptive-mj run by the clean environment's interpreter (which finds its plugins itself)."""
+    python = site.parents[2] / "bin" / "python"  # site = <env>/lib/python3.X/site-packages
+    env = dict(os.environ, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    env.pop("PYTHONPATH", None)
+    return subprocess.run([str(python), "-m", "adaptive_mj", *args], capture_output=True, text=True, env=env,
                           cwd=cwd or REPO, timeout=600)
 
 
