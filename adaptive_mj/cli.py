@@ -78,6 +78,9 @@ def _parser() -> argparse.ArgumentParser:
                          "KEY is a dotted scenario key or a bare key that names one uniquely")
     sw.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     sw.add_argument("--seeds", type=int, default=1, help="seeds 0..N-1 per grid point")
+    sw.add_argument("--resume", type=Path, metavar="DIR",
+                    help="finish the study in DIR (the same command that started it): runs whose log is complete "
+                         "are read back, the rest (missing, truncated or interrupted logs) run again")
     sw.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     sw.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
     sw.add_argument("--metric", action="append", default=[],

@@ -335,3 +335,44 @@ def test_sweep_notes_what_the_grid_will_not_do():
                         "at t = 20 s in every run (override `events` to change or remove it)")
     assert sweep_notes(arm, ["noise.std.y"], 3) == []
     assert sweep_notes(load(SCENARIOS_DIR / "heave_drift.toml"), ["law.k"], 3) == []  # it has noise
+
+
+def test_resume_finishes_a_killed_study_with_an_identical_table(tmp_path, capsys):
+    """A study whose folder lost runs (missing logs, a log cut short as by SIGKILL, no table yet) is
+    finished by --resume: only those runs run again, and sweep.csv is byte-identical to the
+    uninterrupted study's. A resume with another grid is refused with one line."""
+    from adaptive_mj.cli import main
+
+    args = ["sweep", "heave_drift", "--grid", "law.k=100,200,300", "--seeds", "2", "--set", "simulation.duration=0.5",
+            "--jobs", "2"]
+    full = tmp_path / "full"
+    assert main([*args, "-o", str(full)]) == 0
+    assert (full / "manifest.json").is_file()
+    study = tmp_path / "killed"
+    import shutil
+
+    shutil.copytree(full, study)
+    (study / "sweep.csv").unlink()
+    (study / "sweep.json").unlink()
+    logs = sorted((study / "logs").glob("*.mcap"))
+    assert len(logs) == 6
+    logs[1].unlink()
+    logs[4].unlink()
+    data = logs[2].read_bytes()
+    logs[2].write_bytes(data[: len(data) // 2])  # killed mid-write
+    capsys.readouterr()
+    assert main([*args, "--resume", str(study)]) == 0
+    err = capsys.readouterr().err
+    assert "(3 already finished, 3 to run)" in err
+    assert (study / "sweep.csv").read_text() == (full / "sweep.csv").read_text()
+    for a, b in zip(sorted((full / "logs").glob("*.mcap")), sorted((study / "logs").glob("*.mcap"))):
+        from adaptive_mj.log.replay import read_log
+
+        import numpy as np
+
+        np.testing.assert_array_equal(read_log(a).trajectory.x, read_log(b).trajectory.x)
+    assert main(["sweep", "heave_drift", "--grid", "law.k=100,200", "--seeds", "2", "--set",
+                 "simulation.duration=0.5", "--resume", str(study)]) == 2
+    line = capsys.readouterr().err.strip().splitlines()
+    assert len(line) == 1 and "the study was started with grid ['law.k=100,200,300'], this command has " \
+                               "['law.k=100,200']" in line[0]

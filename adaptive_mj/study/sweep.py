@@ -564,6 +564,49 @@ def main_breaking_point(args, path: Path, doc: dict, base) -> int:
     return EXIT_OK
 
 
+MANIFEST = "manifest.json"  # the study's inputs, written before any run
+MANIFEST_FORMAT = 1
+
+
+def check_manifest(out: Path, manifest: dict) -> None:
+    """--resume DIR: DIR holds a study started with the same scenario, grid, seeds and overrides."""
+    path = out / MANIFEST
+    if not path.is_file():
+        raise ScenarioError(f"sweep --resume {out}: no {MANIFEST} there (not a sweep folder, or one from before "
+                            "resumable sweeps)")
+    try:
+        old = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ScenarioError(f"sweep --resume {out}: {MANIFEST} cannot be read ({exc})") from None
+    for key in ("scenario_text", "grid", "seeds", "overrides"):
+        if old.get(key) != manifest[key]:
+            shown = "the scenario file's text" if key == "scenario_text" else f"{key} {old.get(key)!r}"
+            now = "" if key == "scenario_text" else f", this command has {manifest[key]!r}"
+            raise ScenarioError(f"sweep --resume {out}: the study was started with {shown}{now}; resume it with the "
+                                "same scenario, --grid, --seeds and --set, or start a new folder")
+
+
+def finished_results(jobs: Sequence[Job]) -> dict[str, JobResult]:
+    """The jobs whose log is complete (closed with a summary: ok, diverged or failed), read back as
+    results; a missing, truncated or interrupted log is removed so that its run starts afresh."""
+    from adaptive_mj.errors import LogFormatError
+    from adaptive_mj.log.replay import read_log
+
+    done = {}
+    for job in jobs:
+        if job.log is None or not job.log.is_file():
+            continue
+        try:
+            logged = read_log(job.log)
+        except LogFormatError:
+            logged = None
+        if logged is not None and logged.summary is not None and logged.status in ("ok", "diverged", "failed"):
+            done[job.tag] = JobResult(job, logged.status, logged.summary)
+        else:
+            job.log.unlink()
+    return done
+
+
 def main_sweep(args) -> int:
     """Run the sweep the CLI parsed (see the module docstring); returns the exit code."""
     from adaptive_mj.sim.runner import new_output_dir
@@ -584,13 +627,26 @@ def main_sweep(args) -> int:
 
     for note in sweep_notes(base, keys, args.seeds):
         print(f"sweep: note: {note}", file=sys.stderr)
-    out = new_output_dir(args.output, f"sweep-{base.name}")
+    manifest = {"format": MANIFEST_FORMAT, "scenario": str(path), "scenario_text": base.text, "grid": list(args.grid),
+                "seeds": args.seeds, "overrides": list(args.overrides)}
+    resume = getattr(args, "resume", None)
+    if resume is not None:
+        out = Path(resume)
+        check_manifest(out, manifest)
+    else:
+        out = new_output_dir(args.output, f"sweep-{base.name}")
+        (out / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")  # first: a study
+        # killed at any point can be resumed
     planned = plan(path, points, seeds=args.seeds, overrides=args.overrides, logs=out / "logs")
     total = len(planned)
+    done = finished_results([job for _, job in planned]) if resume is not None else {}
+    todo = [job for _, job in planned if job.tag not in done]
     print(f"sweep: {len(points)} grid point(s) x {args.seeds} seed(s) = {total} runs of {base.name} "
-          f"in {min(args.jobs, total)} processes -> {out}", file=sys.stderr)
-    results = run_jobs([job for _, job in planned], n_jobs=min(args.jobs, total),
-                       on_done=progress_printer(total, label="runs"))
+          + (f"({len(done)} already finished, {len(todo)} to run) " if resume is not None else "")
+          + f"in {min(args.jobs, max(1, len(todo)))} processes -> {out}", file=sys.stderr)
+    fresh = iter(run_jobs(todo, n_jobs=min(args.jobs, max(1, len(todo))),
+                          on_done=progress_printer(len(todo), label="runs")) if todo else [])
+    results = [done[job.tag] if job.tag in done else next(fresh) for _, job in planned]
 
     table = rows([(point, result) for (point, _), result in zip(planned, results)], root=out)
     inputs = {"scenario": str(path), "scenario_name": base.name,
