@@ -209,6 +209,13 @@ def cmd_run(args) -> int:
     log = reserve_log_path(scn, out=args.output, force=args.force)
     try:
         result = execute(scn, log_path=log)
+    except OSError as exc:  # the log could not be written (disk full, a file-size limit)
+        if args.debug:
+            raise
+        from adaptive_mj.study.parallel import log_write_error
+
+        print(f"adaptive-mj: error: {log_write_error(log, exc)}", file=sys.stderr)
+        return EXIT_FAILED
     except BaseException as exc:
         if log.is_file() and log.stat().st_size == 0:
             log.unlink()  # the run never started: leave no file that looks like a log
@@ -331,6 +338,13 @@ def _dispatch(args) -> int:
             raise
         print(f"adaptive-mj: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except OSError as exc:  # a log or report could not be written: not a bug, not bad input
+        if args.debug:
+            raise
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"adaptive-mj: error: {where}could not write ({exc.strerror or exc}); a log cut short reads as "
+              "truncated with `adaptive-mj replay`", file=sys.stderr)
+        return EXIT_FAILED
     except KeyboardInterrupt as exc:
         if not isinstance(exc, Interrupted):
             exc = Interrupted(signal.SIGINT)

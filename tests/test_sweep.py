@@ -376,3 +376,30 @@ def test_resume_finishes_a_killed_study_with_an_identical_table(tmp_path, capsys
     line = capsys.readouterr().err.strip().splitlines()
     assert len(line) == 1 and "the study was started with grid ['law.k=100,200,300'], this command has " \
                                "['law.k=100,200']" in line[0]
+
+
+def test_a_log_that_cannot_be_written_is_reported_and_the_study_goes_on(tmp_path):
+    """A file-size limit (as a full disk) stops the long run's log: that run is reported as an error
+    naming the log, the short run is ok, the table is written, and the cut log replays as truncated;
+    `run` says it in one line with exit 1."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "out"
+    script = (f"ulimit -f 60; exec {sys.executable} -m adaptive_mj sweep heave_tracking "
+              f"--grid simulation.duration=1,20 -o {out} --jobs 1")
+    r = subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 1, r.stderr
+    assert "Traceback" not in r.stderr
+    cut = out / "logs" / "0001-duration=20-seed0.mcap"
+    assert f"{cut}: the log could not be written (File too large); what was written reads as truncated" in r.stderr
+    rows = (out / "sweep.csv").read_text().splitlines()
+    assert len(rows) == 3 and ",ok," in rows[1] and ",error," in rows[2]
+    from adaptive_mj.log.replay import read_log
+
+    logged = read_log(cut)
+    assert logged.status == "truncated" and len(logged.trajectory) >= 100
+    r = subprocess.run(["bash", "-c", f"ulimit -f 30; exec {sys.executable} -m adaptive_mj run heave_tracking "
+                                      f"-o {tmp_path / 'run.mcap'}"], capture_output=True, text=True, timeout=300)
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 1 and len(err) == 1 and "the log could not be written (File too large)" in err[0]

@@ -75,6 +75,14 @@ def decimate(traj: Trajectory, every: int) -> Trajectory:
                    theta_hat=traj.theta_hat[rows], theta=traj.theta[rows], V=traj.V[rows], meta=meta)
 
 
+def log_write_error(log: Path | None, exc: OSError) -> str:
+    """One line for a run whose log could not be written: what failed, and what is left."""
+    what = exc.strerror or type(exc).__name__
+    left = (f"; what was written reads as truncated (adaptive-mj replay {log})" if log is not None and log.is_file()
+            and log.stat().st_size > 0 else "")
+    return f"{log}: the log could not be written ({what}){left}"
+
+
 def run_job(job: Job) -> JobResult:
     """Load, run and log one job (in a worker or in-process)."""
     from adaptive_mj.study import analysis
@@ -103,6 +111,8 @@ def run_job(job: Job) -> JobResult:
         return JobResult(job, result.summary["status"], result.summary, extras, decimate(traj, every))
     except AdaptiveMJError as exc:
         return JobResult(job, "error", None, error=str(exc))
+    except OSError as exc:  # the log could not be written (disk full, a file-size limit, a read-only folder)
+        return JobResult(job, "error", None, error=log_write_error(job.log, exc))
 
 
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
