@@ -22,6 +22,7 @@ the study takes (2 + steps) batches whatever its size. Every run's MCAP log is k
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
@@ -126,6 +127,11 @@ def _raw_tail(result: JobResult) -> float:
     return math.inf if v is None or result.status != "ok" else float(v)
 
 
+def _file_name(text: str) -> str:
+    """A label as a plain file name: letters, digits and - _ . kept, anything else one "_"."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "x"
+
+
 def _mid(lo: float, hi: float, st: Stressor) -> float:
     if lo > 0 and hi / lo >= 10.0:
         v = math.sqrt(lo * hi)
@@ -152,10 +158,10 @@ def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path
 
     def jobs_for(i: int, value: float) -> list[Job]:
         s = searches[i]
-        safe = s.label.replace("/", "-")
+        safe = _file_name(s.label.replace("/", "-"))
         text = str(int(value)) if s.stressor.integer else f"{value:.6g}"
         return [Job(s.scenario, overrides=(*s.overrides, *s.stressor.overrides(value)), seed=k,
-                    log=logs / safe / f"{s.stressor.name.replace('.', '_')}={text}-seed{k}.mcap",
+                    log=logs / safe / f"{_file_name(s.stressor.name)}={text}-seed{k}.mcap",
                     tag=f"{s.label} {s.stressor.name}={text} seed {k}") for k in range(seeds)]
 
     def evaluate(wanted: list[tuple[int, float]]) -> list[Evaluation]:
