@@ -92,6 +92,17 @@ initial_estimates = { d = 1.0, b = 0.0 }
 """
 
 
+def _package(folder: Path, module: str, source: str, dist: str, version: str, group: str, entry: str) -> Path:
+    """A one-module package in `folder` registering `entry` under the entry-point `group`."""
+    (folder / f"{module}.py").write_text(source)
+    (folder / "pyproject.toml").write_text(
+        '[build-system]\nrequires = ["setuptools>=61"]\nbuild-backend = "setuptools.build_meta"\n'
+        f'[project]\nname = "{dist}"\nversion = "{version}"\n'
+        f'[project.entry-points."{group}"]\n{entry}\n'
+        f'[tool.setuptools]\npy-modules = ["{module}"]\n')
+    return folder
+
+
 @pytest.fixture(scope="module")
 def env(tmp_path_factory):
     """A clean virtual environment: adaptive-mj installed (editable, from this checkout), the example
@@ -108,20 +119,10 @@ def env(tmp_path_factory):
     (purelib / "_shared_dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     probe = subprocess.run([str(python), "-c", "import adaptive_mj"], capture_output=True, text=True, cwd=root)
     assert probe.returncode != 0  # clean: adaptive-mj is not there until pip installs it
-    broken = tmp_path_factory.mktemp("broken_plugin")
-    (broken / "broken_law.py").write_text(BROKEN)
-    (broken / "pyproject.toml").write_text(
-        '[build-system]\nrequires = ["setuptools>=61"]\nbuild-backend = "setuptools.build_meta"\n'
-        '[project]\nname = "broken-law"\nversion = "0.0.1"\n'
-        '[project.entry-points."adaptive_mj.laws"]\nbroken = "broken_law:LAW"\n'
-        '[tool.setuptools]\npy-modules = ["broken_law"]\n')
-    cart = tmp_path_factory.mktemp("cart_plant")
-    (cart / "cart_plant.py").write_text(CART)
-    (cart / "pyproject.toml").write_text(
-        '[build-system]\nrequires = ["setuptools>=61"]\nbuild-backend = "setuptools.build_meta"\n'
-        '[project]\nname = "cart-plant"\nversion = "0.2.0"\n'
-        '[project.entry-points."adaptive_mj.plants"]\ncart = "cart_plant:PLANT"\n'
-        '[tool.setuptools]\npy-modules = ["cart_plant"]\n')
+    broken = _package(tmp_path_factory.mktemp("broken_plugin"), "broken_law", BROKEN, "broken-law", "0.0.1",
+                      "adaptive_mj.laws", "broken = \"broken_law:LAW\"")
+    cart = _package(tmp_path_factory.mktemp("cart_plant"), "cart_plant", CART, "cart-plant", "0.2.0",
+                    "adaptive_mj.plants", "cart = \"cart_plant:PLANT\"")
     subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps",
                     "--no-build-isolation", "-e", str(REPO), str(EXAMPLE), str(broken), str(cart)],
                    check=True, timeout=600)

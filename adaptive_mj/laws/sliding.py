@@ -32,6 +32,12 @@ def surface_coefficients(order: int, lam: float) -> np.ndarray:
     return np.array([math.comb(n - 1, i) * lam ** (n - 1 - i) for i in range(n)])
 
 
+def surface_noise_std(order: int, lam: float, std) -> float:
+    """σ_s: the standard deviation that independent measurement noise of std (n,) [per state
+    component] gives s = Σ c_i ỹ^(i): √(Σ c_i² σ_i²) (n = 2: √(σ_y'² + λ² σ_y²))."""
+    return float(np.sqrt(np.sum((surface_coefficients(order, lam) * np.asarray(std, dtype=float)) ** 2)))
+
+
 def sliding_terms(coeffs: np.ndarray, x: np.ndarray, ref: np.ndarray) -> tuple[float, float, float]:
     """(s, ṡ_r, ỹ) for state x (n,) and reference ref (n+1,).
 

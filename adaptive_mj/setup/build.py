@@ -18,7 +18,7 @@ from adaptive_mj import reference as refs
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.laws import (CompositeSlidingLaw, DeadZone, DeadZoneOn, FirstOrderAdaptiveLaw, FixedNominalLaw,
                               Modification, RobustSlidingLaw, SlidingAdaptiveLaw)
-from adaptive_mj.laws.sliding import surface_coefficients
+from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.plants import ModelSource
 from adaptive_mj.setup.scenario import JOINT_REFERENCE_KINDS, STATE_SIGNALS, Scenario
 from adaptive_mj.sim.loop import Event, plant_order
@@ -205,7 +205,7 @@ def _dead_zone(scn: Scenario, plant) -> DeadZone | None:
         raise ScenarioError(f"{scn.source}: law.dead_zone.width_in_noise_std needs noise.std (the noise its "
                             "width is a multiple of), got no noise")
     if dz.on == "s" and scn.law.lam is not None:
-        sigma = float(np.sqrt(np.sum((surface_coefficients(len(std), scn.law.lam) * std) ** 2)))
+        sigma = surface_noise_std(len(std), scn.law.lam, std)
     else:
         sigma = float(std[0])
     return DeadZone(dz.width_in_noise_std * sigma, DeadZoneOn(dz.on))

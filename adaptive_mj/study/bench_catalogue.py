@@ -18,6 +18,7 @@ import numpy as np  # noqa: E402
 
 from adaptive_mj import units  # noqa: E402
 
+from adaptive_mj.laws.sliding import surface_noise_std  # noqa: E402
 from adaptive_mj.study import analysis
 from adaptive_mj.setup import scenario as sc  # noqa: E402
 from adaptive_mj.study.parallel import Job, JobResult  # noqa: E402
@@ -458,7 +459,7 @@ def _nth(quick: bool, logs: Path) -> Section:
 def _drift(quick: bool, logs: Path) -> Section:
     path = SCN / "heave_drift.toml"
     base = sc.load(path)
-    sig_s = math.hypot(base.noise.std.get("y_dot", 0.0), base.law.lam * base.noise.std.get("y", 0.0))
+    sig_s = surface_noise_std(2, base.law.lam, [base.noise.std.get(k, 0.0) for k in sc.STATE_SIGNALS[:2]])
     width = 3.0 * sig_s
     dur = ["simulation.duration=60.0"] if quick else []
     jobs = (_job("drift", "no_dead_zone", "heave_drift", logs, dur, ["drift_rate"]),

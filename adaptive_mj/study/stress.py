@@ -21,11 +21,11 @@ control delay of whole physics steps. (arm: the payload's mass × ratio at half 
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.breaking_point import Margin, Search, Stressor, margin_text, search_all
 
@@ -67,7 +67,7 @@ def laws(p: Plant, *, composite: bool) -> list[tuple[str, list[str]]]:
     names, theta = s.law.names, s.plant.true_theta()
     gamma1 = float(s.law.gamma[0])
     sig_y = NOMINAL_NOISE[p.name]
-    sig_s = math.hypot(10 * sig_y, scn.law.lam * sig_y)
+    sig_s = surface_noise_std(2, scn.law.lam, [sig_y, 10 * sig_y])  # the noise of s at the nominal noise
     theta0 = "{" + ", ".join(f"{n}={float(v)!r}" for n, v in zip(names, theta)) + "}"
     box = "{" + ", ".join(f"{n}=[{0.5 * float(v)!r}, {2.0 * float(v)!r}]" for n, v in zip(names, theta) if v > 0) + "}"
     K = ROBUST_K_FRACTION * float(s.plant.ctrl_range[1])
