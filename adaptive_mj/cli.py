@@ -70,6 +70,7 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: all cores)")
     b.add_argument("--scenario", action="append", default=[], metavar="FILE",
                    help="also run your own scenario in a section of its own (repeatable; any law, a plugin too)")
+    _backend_arguments(b)
 
     sw = sub.add_parser("sweep", help="run a scenario over a grid of keys and seeds, in parallel")
     sw.add_argument("scenario", help="a scenario file, or the name of a bundled one")
@@ -91,6 +92,7 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("--tail-bound", type=float, metavar="B",
                     help="with --breaking-point: a run fails when it diverges or its tail RMS error exceeds B")
     sw.add_argument("--steps", type=int, default=5, help="with --breaking-point: bisection steps (default 5)")
+    _backend_arguments(sw)
     st = sub.add_parser("stress", help="breaking points: every law x stressor x plant, margins by bisection "
                                        "over seeded runs; report.md and margins.csv")
     st.add_argument("--seeds", type=int, default=5, help="seeds per stress value (default 5)")
@@ -101,6 +103,22 @@ def _parser() -> argparse.ArgumentParser:
     st.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     st.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
     return p
+
+
+def _backend_arguments(p: argparse.ArgumentParser) -> None:
+    """--backend, --address, --ray-logs, --retries (adaptive_mj.study.parallel.Backend)."""
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="local: worker processes on this machine (default); ray: one Ray task per run "
+                        "(needs the [ray] extra)")
+    p.add_argument("--address", metavar="ADDR",
+                   help="with --backend ray: 'auto' or ray://host:port joins a running cluster (default: start "
+                        "Ray here with --jobs CPUs)")
+    p.add_argument("--ray-logs", choices=("bytes", "shared"), default="bytes",
+                   help="with --backend ray: bytes (each log is sent back to this machine; default) or shared "
+                        "(each node writes its logs itself: the output folder must be on shared storage)")
+    p.add_argument("--retries", type=int, default=3,
+                   help="with --backend ray: times a run is submitted again when its worker or node dies "
+                        "(default 3)")
 
 
 def _scenario_path(arg: str) -> Path:

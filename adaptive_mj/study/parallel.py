@@ -26,7 +26,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 from adaptive_mj.sim import interrupt
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
@@ -37,7 +37,8 @@ from adaptive_mj.trajectory import Trajectory
 class Job:
     """scenario: a scenario file; overrides: --set expressions; seed: noise seed or None;
     log: the MCAP path to write (None: no log); tag: caller's label;
-    extras: names of functions in adaptive_mj.study.analysis run on the full-rate trajectory (from EXTRAS)."""
+    extras: names of functions in adaptive_mj.study.analysis run on the full-rate trajectory (from EXTRAS);
+    keep_trajectory: send the decimated trajectory back (False: the summary only, as a sweep needs)."""
 
     scenario: Path
     overrides: tuple[str, ...] = ()
@@ -45,6 +46,7 @@ class Job:
     log: Path | None = None
     tag: str = ""
     extras: tuple[str, ...] = ()
+    keep_trajectory: bool = True
 
 
 #: The analyses a Job may name (a closed set, so no text from a scenario or log picks a function).
@@ -108,7 +110,8 @@ def run_job(job: Job) -> JobResult:
                 setup = build(scn)  # law and form, for analyses that need them (no run)
             extras[name] = getattr(analysis, name)(traj, setup)
         every = max(1, round(1.0 / (scn.log_rate_hz * traj.meta["dt"])))
-        return JobResult(job, result.summary["status"], result.summary, extras, decimate(traj, every))
+        return JobResult(job, result.summary["status"], result.summary, extras,
+                         decimate(traj, every) if job.keep_trajectory else None)
     except AdaptiveMJError as exc:
         return JobResult(job, "error", None, error=str(exc))
     except OSError as exc:  # the log could not be written (disk full, a file-size limit, a read-only folder)
@@ -167,21 +170,77 @@ def _stop_workers(pool: cf.ProcessPoolExecutor, *, timeout: float = STOP_TIMEOUT
             p.join()
 
 
-def run_jobs(jobs: Sequence[Job], *, n_jobs: int = 1,
-             on_done: Callable[[JobResult], None] | None = None) -> list[JobResult]:
-    """Run jobs (in n_jobs processes when > 1); results in the order of `jobs`."""
-    results: list[JobResult | None] = [None] * len(jobs)
-    if n_jobs <= 1:
+@dataclass(frozen=True)
+class Backend:
+    """Where the runs go. kind "local": worker processes on this machine (`jobs` of them; 1 runs
+    in this process). kind "ray": one Ray task per run (adaptive_mj.study.ray_backend): `address`
+    None starts Ray on this machine with `jobs` CPUs, "auto" or "ray://host:port" joins a cluster;
+    `logs` "bytes" (each log comes back to the driver as bytes) or "shared" (each task writes its
+    log itself, on storage every node sees); `retries`: how often a run whose worker or node died
+    is submitted again."""
+
+    kind: str = "local"
+    jobs: int = 1
+    address: str | None = None
+    logs: str = "bytes"
+    retries: int = 3
+
+
+    @classmethod
+    def from_args(cls, args) -> "Backend":
+        """The Backend a command line asks for (--jobs, --backend, --address, --ray-logs, --retries;
+        absent ones at their defaults); a Ray option without --backend ray is refused with one line."""
+        from adaptive_mj.errors import ScenarioError
+
+        kind = getattr(args, "backend", "local")
+        address, logs, retries = (getattr(args, "address", None), getattr(args, "ray_logs", "bytes"),
+                                  getattr(args, "retries", 3))
+        if kind != "ray":
+            for opt, value, default in (("--address", address, None), ("--ray-logs", logs, "bytes"),
+                                        ("--retries", retries, 3)):
+                if value != default:
+                    raise ScenarioError(f"{opt} is for --backend ray (this command runs on --backend {kind})")
+        if retries < 0:
+            raise ScenarioError(f"--retries must be an integer >= 0, got {retries}")
+        return cls(kind=kind, jobs=max(1, args.jobs), address=address, logs=logs, retries=retries)
+
+
+def iter_results(jobs: Sequence[Job], backend: Backend | None = None, *,
+                 on_retry: Callable[[Job, str], None] | None = None) -> Iterator[tuple[int, JobResult]]:
+    """(index into `jobs`, result) for each job as it finishes, exactly once per job.
+
+    on_retry(job, why) is called when the Ray backend submits a run again (its worker died)."""
+    backend = backend or Backend()
+    if backend.kind == "ray":
+        from adaptive_mj.study import ray_backend
+
+        yield from ray_backend.iter_results(jobs, backend, on_retry=on_retry)
+    elif backend.jobs <= 1:
         for i, job in enumerate(jobs):
             try:
-                results[i] = run_job(job)
+                result = run_job(job)
             except KeyboardInterrupt as exc:
                 if isinstance(exc, Interrupted):
                     exc.note = _interrupted_note(i, len(jobs))
                 raise
-            if on_done:
-                on_done(results[i])
-        return results  # type: ignore[return-value]
+            yield i, result
+    else:
+        yield from _iter_local_pool(jobs, backend.jobs)
+
+
+def run_jobs(jobs: Sequence[Job], *, n_jobs: int = 1, on_done: Callable[[JobResult], None] | None = None,
+             backend: Backend | None = None) -> list[JobResult]:
+    """Run jobs (on `backend`, default local processes, n_jobs of them); results in the order of `jobs`."""
+    backend = backend or Backend(jobs=n_jobs)
+    results: list[JobResult | None] = [None] * len(jobs)
+    for i, result in iter_results(jobs, backend, on_retry=getattr(on_done, "retried", None)):
+        results[i] = result
+        if on_done:
+            on_done(result)
+    return results  # type: ignore[return-value]
+
+
+def _iter_local_pool(jobs: Sequence[Job], n_jobs: int) -> Iterator[tuple[int, JobResult]]:
     ctx = _worker_context(jobs)
     finished = 0
     with cf.ProcessPoolExecutor(max_workers=n_jobs, mp_context=ctx, initializer=_init_worker) as pool:
@@ -189,24 +248,22 @@ def run_jobs(jobs: Sequence[Job], *, n_jobs: int = 1,
             with _stop_signals_blocked():  # the workers are spawned by submit
                 futures = {pool.submit(_run_in_worker, job): i for i, job in enumerate(jobs)}
             for fut in cf.as_completed(futures):
-                i = futures[fut]
+                i = futures.pop(fut)  # the future (and its result) is not kept once handed on
                 try:
-                    results[i] = fut.result()
+                    result = fut.result()
                 except Exception as exc:  # a worker crashed: record it, go on
-                    results[i] = JobResult(jobs[i], "error", None, error=f"{type(exc).__name__}: {exc}")
-                if results[i].status == "interrupted":  # a worker was told to stop: stop them all
+                    result = JobResult(jobs[i], "error", None, error=f"{type(exc).__name__}: {exc}")
+                if result.status == "interrupted":  # a worker was told to stop: stop them all
                     raise Interrupted(signal.SIGTERM)
                 finished += 1
-                if on_done:
-                    on_done(results[i])
+                yield i, result
         except KeyboardInterrupt as exc:
             _stop_workers(pool)
-            if on_done and finished:
+            if finished:
                 sys.stderr.write("\n")  # end the progress line
             if isinstance(exc, Interrupted):
                 exc.note = _interrupted_note(finished, len(jobs))
             raise
-    return results  # type: ignore[return-value]
 
 
 def _worker_context(jobs: Sequence[Job]):
@@ -251,33 +308,48 @@ def _interrupted_note(finished: int, total: int) -> str:
 PLAIN_PROGRESS_EVERY = 5.0  # s between progress lines when stderr is not a terminal
 
 
-def progress_printer(total: int, *, label: str = "runs", stream=None,
-                     clock: Callable[[], float] | None = None) -> Callable[[JobResult], None]:
-    """Progress on stderr, one update per finished job: a bar redrawn in place on a terminal;
-    otherwise (a file, a pipe, CI) a plain line at most every PLAIN_PROGRESS_EVERY seconds and
-    one at the end, so redirected output holds no carriage returns."""
-    import sys
-    import time
+class Progress:
+    """Progress on stderr: runs done (and how many of them failed: any status but ok), runs
+    retried, and the rate. On a terminal a bar redrawn in place after each run; otherwise (a
+    file, a pipe, CI) a plain line at most every PLAIN_PROGRESS_EVERY seconds and one at the end,
+    so redirected output holds no carriage returns. Call it with each JobResult; `retried(job, why)`
+    counts a run submitted again (the Ray backend, when a worker died)."""
 
-    stream = stream or sys.stderr
-    clock = clock or time.monotonic
-    tty = bool(getattr(stream, "isatty", lambda: False)())
-    state = {"n": 0, "last": clock(), "t0": clock()}
+    def __init__(self, total: int, *, label: str = "runs", stream=None, clock: Callable[[], float] | None = None):
+        self.total, self.label = total, label
+        self.stream = stream or sys.stderr
+        self.clock = clock or time.monotonic
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.n = self.failed = self.n_retried = 0
+        self.t0 = self.last = self.clock()
 
-    def update(result: JobResult) -> None:
-        state["n"] += 1
-        n = state["n"]
+    def _counts(self, now: float) -> str:
+        rate = 60.0 * self.n / (now - self.t0) if now > self.t0 else 0.0
+        extra = "".join(f", {k} {v}" for k, v in (("failed", self.failed), ("retried", self.n_retried)) if v)
+        return f"{self.n}/{self.total} {self.label} done{extra}, {rate:.1f}/min"
+
+    def __call__(self, result: JobResult) -> None:
+        self.n += 1
+        self.failed += result.status != "ok"
+        now = self.clock()
         last = f"last: {result.job.tag or result.job.scenario.stem} ({result.status})"
-        if tty:
-            bar = "#" * min(30, int(30 * n / max(1, total)))
-            stream.write(f"\r[{bar:<30s}] {n}/{total} {label}  {last}".ljust(100)[:100])
-            if n == total:
-                stream.write("\n")
-        else:
-            now = clock()
-            if n == total or now - state["last"] >= PLAIN_PROGRESS_EVERY:
-                state["last"] = now
-                stream.write(f"{n}/{total} {label} done after {now - state['t0']:.0f} s; {last}\n")
-        stream.flush()
+        if self.tty:
+            bar = "#" * min(30, int(30 * self.n / max(1, self.total)))
+            self.stream.write(f"\r[{bar:<30s}] {self._counts(now)}  {last}".ljust(110)[:110])
+            if self.n == self.total:
+                self.stream.write("\n")
+        elif self.n == self.total or now - self.last >= PLAIN_PROGRESS_EVERY:
+            self.last = now
+            self.stream.write(f"{self._counts(now)} after {now - self.t0:.0f} s; {last}\n")
+        self.stream.flush()
 
-    return update
+    def retried(self, job: Job, why: str) -> None:
+        self.n_retried += 1
+        self.stream.write(("\n" if self.tty else "") + f"retrying {job.tag or job.scenario.stem}: {why}\n")
+        self.stream.flush()
+
+
+def progress_printer(total: int, *, label: str = "runs", stream=None,
+                     clock: Callable[[], float] | None = None) -> Progress:
+    """A Progress for `total` runs (see Progress)."""
+    return Progress(total, label=label, stream=stream, clock=clock)

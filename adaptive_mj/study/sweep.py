@@ -1,8 +1,9 @@
 """`adaptive-mj sweep`: one scenario over a grid of keys × seeds, in parallel.
 
     --grid exprs ──► parse_grid (one axis each) ──► grid_points ──► each point validated (scenario.load)
-                 ──► one Job per point × seed, each logging to DIR/logs/ ──► parallel.run_jobs
-                 ──► rows ──► DIR/sweep.csv, DIR/sweep.json, DIR/sweep.png, a table on stdout
+                 ──► one Job per point × seed, each logging to DIR/logs/ ──► parallel.iter_results
+                 ──► a row per run as it finishes, appended to DIR/rows.jsonl (the driver keeps none)
+                 ──► DIR/sweep.csv, DIR/sweep.json in the planned order, DIR/sweep.png, a table on stdout
 
 A grid axis is ``KEY=LO:HI:N`` (N values linearly spaced from LO to HI, both
 included; N = 1 gives LO) or ``KEY=V1,V2,...`` (TOML values). KEY is a dotted
@@ -21,17 +22,17 @@ import math
 import re
 import sys
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.report.metrics import clean_json, metrics as run_metrics
-from adaptive_mj.study.parallel import Job, JobResult, progress_printer, run_jobs
+from adaptive_mj.study.parallel import Backend, Job, JobResult, iter_results, progress_printer
 from adaptive_mj.trajectory import Trajectory
 
 EXIT_OK, EXIT_FAILED = 0, 1
@@ -484,7 +485,7 @@ def plan(path: Path, points: Sequence[dict[str, Any]], *, seeds: int, overrides:
         for seed in range(seeds):
             name = run_name(p * seeds + seed, point, seed, names=names, width=width)
             job = Job(path, overrides=(*overrides, *_grid_overrides(point)), seed=seed, log=logs / f"{name}.mcap",
-                      tag=name)
+                      tag=name, keep_trajectory=False)
             planned.append((point, job))
     return planned
 
@@ -586,25 +587,80 @@ def check_manifest(out: Path, manifest: dict) -> None:
                                 "same scenario, --grid, --seeds and --set, or start a new folder")
 
 
-def finished_results(jobs: Sequence[Job]) -> dict[str, JobResult]:
-    """The jobs whose log is complete (closed with a summary: ok, diverged or failed), read back as
-    results; a missing, truncated or interrupted log is removed so that its run starts afresh."""
+def finished_results(jobs: Sequence[Job]) -> Iterator[tuple[int, JobResult]]:
+    """(index, result) for each job whose log is complete (closed with a summary: ok, diverged or
+    failed), read back from the log; a missing, truncated or interrupted log (or one a dead Ray
+    worker left as NAME.partial) is removed so that its run starts afresh."""
     from adaptive_mj.errors import LogFormatError
     from adaptive_mj.log.replay import read_log
+    from adaptive_mj.study.ray_backend import partial_path
 
-    done = {}
-    for job in jobs:
-        if job.log is None or not job.log.is_file():
+    for i, job in enumerate(jobs):
+        if job.log is None:
+            continue
+        partial_path(job.log).unlink(missing_ok=True)
+        if not job.log.is_file():
             continue
         try:
             logged = read_log(job.log)
         except LogFormatError:
             logged = None
         if logged is not None and logged.summary is not None and logged.status in ("ok", "diverged", "failed"):
-            done[job.tag] = JobResult(job, logged.status, logged.summary)
+            yield i, JobResult(job, logged.status, logged.summary)
         else:
             job.log.unlink()
-    return done
+
+
+ROWS_STREAM = "rows.jsonl"  # one line per finished run, written as it arrives: {"index": i, "row": {...}}
+
+
+def _append_row(stream, index: int, row: dict[str, Any]) -> None:
+    stream.write(json.dumps(clean_json({"index": index, "row": row}), ensure_ascii=False, default=str) + "\n")
+    stream.flush()
+
+
+def write_tables(stream_path: Path, n: int, inputs: dict[str, Any], out: Path, *,
+                 keep: Sequence[str]) -> tuple[list[dict[str, Any]], list[str]]:
+    """sweep.csv and sweep.json in the planned order, from the rows streamed to `stream_path` in the
+    order they finished (one line per run index 0..n-1), holding one row at a time plus each line's
+    offset; returns the rows cut to the columns in `keep` (+ run, status, reason) for the summary,
+    and every column's name."""
+    offsets: dict[int, int] = {}
+    with open(stream_path, "rb") as f:
+        pos = 0
+        for line in f:
+            offsets[json.loads(line)["index"]] = pos
+            pos += len(line)
+    missing = [i for i in range(n) if i not in offsets]
+    if missing:
+        raise AssertionError(f"{stream_path}: no row for run(s) {missing[:5]}")
+
+    def ordered():
+        with open(stream_path, "rb") as f:
+            for i in range(n):
+                f.seek(offsets[i])
+                yield json.loads(f.readline())["row"]
+
+    cols: dict[str, None] = {}
+    counts: dict[str, int] = {}
+    for row in ordered():
+        cols.update(dict.fromkeys(k for k in row if k != "log"))
+        counts[row["status"]] = counts.get(row["status"], 0) + 1
+    fieldnames = [*cols, "log"]
+    short = []
+    with open(out / "sweep.csv", "w", newline="", encoding="utf-8") as fc, \
+            open(out / "sweep.json", "w", encoding="utf-8") as fj:
+        writer = csv.DictWriter(fc, fieldnames=fieldnames)
+        writer.writeheader()
+        head = json.dumps(clean_json({"inputs": inputs, "counts": counts}), indent=1, ensure_ascii=False, default=str)
+        fj.write(head[:-2] + ',\n "rows": [')
+        for i, row in enumerate(ordered()):
+            writer.writerow({k: "" if v is None else v if isinstance(v, (str, int, float)) else to_toml(v)
+                             for k, v in row.items()})
+            fj.write(("," if i else "") + "\n  " + json.dumps(row, ensure_ascii=False))
+            short.append({k: row[k] for k in ("run", "status", "reason", *keep) if k in row})
+        fj.write("\n ]\n}\n")
+    return short, fieldnames
 
 
 def main_sweep(args) -> int:
@@ -639,26 +695,38 @@ def main_sweep(args) -> int:
         # killed at any point can be resumed
     planned = plan(path, points, seeds=args.seeds, overrides=args.overrides, logs=out / "logs")
     total = len(planned)
-    done = finished_results([job for _, job in planned]) if resume is not None else {}
-    todo = [job for _, job in planned if job.tag not in done]
-    print(f"sweep: {len(points)} grid point(s) x {args.seeds} seed(s) = {total} runs of {base.name} "
-          + (f"({len(done)} already finished, {len(todo)} to run) " if resume is not None else "")
-          + f"in {min(args.jobs, max(1, len(todo)))} processes -> {out}", file=sys.stderr)
-    fresh = iter(run_jobs(todo, n_jobs=min(args.jobs, max(1, len(todo))),
-                          on_done=progress_printer(len(todo), label="runs")) if todo else [])
-    results = [done[job.tag] if job.tag in done else next(fresh) for _, job in planned]
+    backend = Backend.from_args(args)
+    if backend.kind == "local":
+        backend = replace(backend, jobs=min(backend.jobs, total))
+    stream_path = out / ROWS_STREAM
+    finished: set[int] = set()
+    with open(stream_path, "w", encoding="utf-8") as stream:  # rows as they arrive (bounded driver memory)
+        if resume is not None:
+            for i, result in finished_results([job for _, job in planned]):
+                _append_row(stream, i, rows([(planned[i][0], result)], root=out)[0])
+                finished.add(i)
+        todo = [i for i in range(total) if i not in finished]
+        where = (f"on Ray ({backend.address or 'started here'}, logs as {backend.logs})" if backend.kind == "ray"
+                 else f"in {min(backend.jobs, max(1, len(todo)))} processes")
+        print(f"sweep: {len(points)} grid point(s) x {args.seeds} seed(s) = {total} runs of {base.name} "
+              + (f"({len(finished)} already finished, {len(todo)} to run) " if resume is not None else "")
+              + f"{where} -> {out}", file=sys.stderr)
+        progress = progress_printer(len(todo), label="runs")
+        if todo:
+            for k, result in iter_results([planned[i][1] for i in todo], backend, on_retry=progress.retried):
+                i = todo[k]
+                progress(result)
+                _append_row(stream, i, rows([(planned[i][0], result)], root=out)[0])
+        del todo, finished
 
-    table = rows([(point, result) for (point, _), result in zip(planned, results)], root=out)
     inputs = {"scenario": str(path), "scenario_name": base.name,
               "grid": [{"expr": expr, "key": key, "values": values} for expr, (key, values) in zip(args.grid, axes)],
               "overrides": list(args.overrides), "seeds": args.seeds, "metrics": metrics,
-              "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
-    write_csv(table, out / "sweep.csv")
-    write_json(inputs, table, out / "sweep.json")
+              "backend": backend.kind, "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+    table, present = write_tables(stream_path, total, inputs, out, keep=[*keys, "seed", *metrics])
     plot_sweep(table, keys, metrics, out / "sweep.png", plant_kind=base.plant.kind, title=base.name)
 
     print(summary_table(table, keys, metrics))
-    present = set(columns(table))
     for name in metrics:
         if name not in present:
             have = [c for c in present if c.startswith("param_error_final.")]

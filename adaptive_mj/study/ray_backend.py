@@ -1,0 +1,253 @@
+"""The Ray backend of bench and sweep: each Job is one Ray task (`--backend ray`).
+
+    driver ── submit (at most WINDOW_PER_CPU × cluster CPUs in flight) ──► task: run_job on a node
+           ◄── (JobResult, log bytes | None) ──  as each finishes: the log written, the result yielded
+
+Ray is an optional extra (``pip install -e '.[ray]'``). With no address Ray starts on this
+machine with `jobs` CPUs (and is shut down afterwards); ``--address auto`` or
+``ray://host:port`` joins a running cluster. Every node must have adaptive-mj (the same
+version) installed and see the scenario files (and the models they name) at the same paths.
+
+Logs (`Backend.logs`):
+- "bytes": the task writes its MCAP log in its node's temporary folder and returns the bytes;
+  the driver writes them to the job's path (to NAME.partial first, renamed when complete).
+- "shared": the task writes the job's path itself (NAME.partial, renamed when closed), so the
+  output folder must be on storage every node sees; nothing but the summary travels back.
+Either way the log's messages are the same bytes as the local backend's (tests/test_ray.py).
+
+Faults. A task whose worker process or node dies (any Ray error but an exception raised by the
+run itself) is submitted again, at most `Backend.retries` times (default 3), after removing what
+its last attempt left; then the run is recorded as an error naming the cause. A run that raises,
+diverges or fails is a result and is never retried. The driver takes one result per job, so no
+run appears twice.
+
+Interruption (SIGINT or SIGTERM in the driver). Every task not finished is cancelled: Ray raises
+SIGINT in a running task, where adaptive_mj.sim.interrupt turns it into a clean stop, so its log is
+closed as "interrupted" (and, with "bytes", still comes back and is written); queued tasks never
+start. The driver waits up to parallel.STOP_TIMEOUT s for them, force-cancels what remains (its
+log then stays NAME.partial), shuts down a Ray it started, and re-raises.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import signal
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable, Iterator, Sequence
+
+from adaptive_mj.errors import AdaptiveMJError, Interrupted
+from adaptive_mj.study.parallel import STOP_TIMEOUT, Backend, Job, JobResult, run_job
+
+#: Tasks in flight per CPU of the cluster: enough to keep every worker busy while results come
+#: back, few enough that the driver holds a bounded number of results and arguments.
+WINDOW_PER_CPU = 2
+PARTIAL = ".partial"
+
+
+def partial_path(log: Path) -> Path:
+    """Where a log is written until it is complete (then renamed to `log`)."""
+    return log.with_name(log.name + PARTIAL)
+
+
+def _ray():
+    try:
+        import ray
+    except ImportError:
+        raise AdaptiveMJError("--backend ray needs Ray, an optional extra: pip install -e '.[ray]' "
+                              "(or pip install 'adaptive-mj[ray]')") from None
+    return ray
+
+
+# --------------------------------------------------------------------------
+# the task (runs on a cluster node)
+def _scratch(job: Job) -> Path:
+    """The task's temporary folder on its node: one per job, so a retry on the same node removes
+    what a killed attempt left."""
+    digest = hashlib.sha256(repr(job).encode()).hexdigest()[:16]
+    return Path(tempfile.gettempdir()) / "adaptive-mj-ray" / digest
+
+
+def run_task(job: Job, logs: str) -> tuple[JobResult, bytes | None]:
+    """One job on a Ray worker: (its result with the caller's job, the log's bytes with logs="bytes").
+
+    SIGINT (ray.cancel) and SIGTERM stop the run cleanly: the log is closed as "interrupted"."""
+    from adaptive_mj.sim import interrupt
+
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    if not job.scenario.is_file():
+        import socket
+
+        return JobResult(job, "error", None, error=f"{job.scenario}: no such file on the Ray node {socket.gethostname()} "
+                                                   "(every node must see the scenarios and models at the same paths)"), None
+    data = None
+    where = None
+    if job.log is not None and logs == "bytes":
+        scratch = _scratch(job)
+        shutil.rmtree(scratch, ignore_errors=True)
+        scratch.mkdir(parents=True)
+        where = scratch / job.log.name
+    elif job.log is not None:
+        if job.log.exists():
+            return JobResult(job, "error", None, error=f"{job.log}: file exists"), None
+        where = partial_path(job.log)
+        where.unlink(missing_ok=True)  # left by an attempt whose worker died
+    try:
+        with interrupt.stop_on_signals((signal.SIGINT, signal.SIGTERM)):
+            try:
+                result = run_job(replace(job, log=where))
+            except KeyboardInterrupt as exc:
+                result = JobResult(job, "interrupted", getattr(exc, "summary", None),
+                                   error=str(exc) or "interrupted")
+        if where is not None and where.is_file():
+            if logs == "bytes":
+                data = where.read_bytes()
+            else:
+                os.replace(where, job.log)
+    finally:
+        if job.log is not None and logs == "bytes":
+            shutil.rmtree(where.parent, ignore_errors=True)
+    error = result.error.replace(str(where), str(job.log)) if where is not None else result.error
+    return replace(result, job=job, error=error), data
+
+
+# --------------------------------------------------------------------------
+# the driver
+def _connect(ray, backend: Backend) -> bool:
+    """Connect to (or start) Ray; True when this call started it (and so must shut it down)."""
+    if ray.is_initialized():
+        return False
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    kwargs = dict(include_dashboard=False, logging_level="ERROR", log_to_driver=True,
+                  configure_logging=True)
+    try:
+        if backend.address is None:
+            ray.init(num_cpus=backend.jobs, **kwargs)
+        else:
+            ray.init(address=backend.address, **kwargs)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        where = "a local Ray" if backend.address is None else f"the Ray cluster at {backend.address!r}"
+        raise AdaptiveMJError(f"--backend ray: cannot start or reach {where}: {str(exc).splitlines()[0]}") from None
+    return True
+
+
+def _write_log(job: Job, data: bytes) -> str:
+    """The returned log bytes to job.log (through NAME.partial); "" or the error's one line."""
+    from adaptive_mj.study.parallel import log_write_error
+
+    part = partial_path(job.log)
+    try:
+        job.log.parent.mkdir(parents=True, exist_ok=True)
+        part.write_bytes(data)
+    except OSError as exc:  # disk full, a file-size limit: what was written reads as truncated
+        if part.is_file():
+            os.replace(part, job.log)
+        return log_write_error(job.log, exc)
+    os.replace(part, job.log)
+    return ""
+
+
+def _system_failure(ray, exc: BaseException) -> bool:
+    """A Ray error that is not the run's own exception: the worker or node died, an object was lost."""
+    return isinstance(exc, ray.exceptions.RayError) and not isinstance(exc, ray.exceptions.RayTaskError)
+
+
+def iter_results(jobs: Sequence[Job], backend: Backend, *,
+                 on_retry: Callable[[Job, str], None] | None = None) -> Iterator[tuple[int, JobResult]]:
+    """(index, result) for each job as it finishes on Ray, exactly once per job (see the module docstring)."""
+    ray = _ray()
+    started = _connect(ray, backend)
+    remote = ray.remote(run_task).options(num_cpus=1, max_retries=0, name="adaptive-mj-run")
+    cpus = max(1, int(ray.cluster_resources().get("CPU", backend.jobs)))
+    window = WINDOW_PER_CPU * cpus
+    pending: dict = {}  # ObjectRef -> job index
+    attempts = [0] * len(jobs)
+    nxt = finished = 0
+
+    def submit(i: int) -> None:
+        pending[remote.remote(jobs[i], backend.logs)] = i
+
+    try:
+        while pending or nxt < len(jobs):
+            while nxt < len(jobs) and len(pending) < window:
+                if jobs[nxt].log is not None and jobs[nxt].log.exists():
+                    yield nxt, JobResult(jobs[nxt], "error", None, error=f"{jobs[nxt].log}: file exists")
+                    finished += 1
+                else:
+                    submit(nxt)
+                nxt += 1
+            if not pending:
+                continue
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)  # a timeout: signals get through
+            for ref in ready:
+                i = pending.pop(ref)
+                try:
+                    result, data = ray.get(ref)
+                except Exception as exc:  # noqa: BLE001 (a Ray error: sorted below)
+                    why = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"
+                    if _system_failure(ray, exc) and attempts[i] < backend.retries:
+                        attempts[i] += 1
+                        _remove_leftovers(jobs[i], backend)
+                        if on_retry:
+                            on_retry(jobs[i], f"attempt {attempts[i] + 1} of {backend.retries + 1} ({why})")
+                        submit(i)
+                        continue
+                    tried = f" (tried {attempts[i] + 1} times)" if attempts[i] else ""
+                    result, data = JobResult(jobs[i], "error", None, error=f"the Ray task failed{tried}: {why}"), None
+                if result.status == "interrupted":  # the run was stopped from outside (a node shutting down)
+                    if data is not None:
+                        _write_log(jobs[i], data)
+                    raise Interrupted(signal.SIGTERM)
+                if data is not None:
+                    error = _write_log(jobs[i], data)
+                    if error:
+                        result = replace(result, status="error", error=error)
+                finished += 1
+                yield i, result
+    except KeyboardInterrupt as exc:
+        _stop(ray, pending, jobs, backend)
+        stop = exc if isinstance(exc, Interrupted) else Interrupted(signal.SIGINT)
+        stop.note = (f"{finished} of {len(jobs)} runs had finished; the run(s) in progress closed their logs "
+                     "as 'interrupted'")
+        if stop is exc:
+            raise
+        raise stop from exc
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _remove_leftovers(job: Job, backend: Backend) -> None:
+    """What a dead attempt may have left on shared storage (its NAME.partial)."""
+    if job.log is not None and backend.logs == "shared":
+        partial_path(job.log).unlink(missing_ok=True)
+
+
+def _stop(ray, pending: dict, jobs: Sequence[Job], backend: Backend, *, timeout: float = STOP_TIMEOUT) -> None:
+    """Cancel every outstanding task (a running one closes its log as "interrupted"), write the
+    logs that come back, and force-cancel what has not ended after `timeout` s."""
+    for ref in pending:
+        ray.cancel(ref)
+    deadline = time.monotonic() + timeout
+    left = dict(pending)
+    while left and time.monotonic() < deadline:
+        ready, _ = ray.wait(list(left), num_returns=len(left), timeout=max(0.0, deadline - time.monotonic()))
+        for ref in ready:
+            i = left.pop(ref)
+            try:
+                _, data = ray.get(ref)
+            except Exception:  # noqa: BLE001 (cancelled before it started)
+                continue
+            if data is not None:
+                _write_log(jobs[i], data)
+        if not ready:
+            break
+    for ref in left:
+        ray.cancel(ref, force=True)
+    if left:
+        print(f"{len(left)} Ray task(s) did not stop within {timeout:g} s and were killed; their logs stay as "
+              f"*{PARTIAL}", file=sys.stderr)
