@@ -102,6 +102,7 @@ def _parser() -> argparse.ArgumentParser:
                     help="also composite adaptation (runs on the Python callback path: several times slower)")
     st.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     st.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
+    _backend_arguments(st)
     return p
 
 

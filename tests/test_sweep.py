@@ -316,7 +316,7 @@ def test_progress_is_plain_lines_when_not_a_terminal():
         update(JobResult(job, "ok", None))
     lines = pipe.getvalue().splitlines()
     assert "\r" not in pipe.getvalue() and len(lines) == 2
-    assert lines[0].startswith("3/5 runs done after 5 s") and lines[1].startswith("5/5 runs")
+    assert lines[0].startswith("3/5 runs done, 34.0/min after 5 s") and lines[1].startswith("5/5 runs")
     term = Terminal()
     update = progress_printer(2, stream=term)
     update(JobResult(job, "ok", None))

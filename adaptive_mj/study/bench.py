@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 import time
 
-from adaptive_mj.study.parallel import run_jobs, progress_printer
+from adaptive_mj.study.parallel import Backend, progress_printer, run_jobs, session
 
 
 def _fmt(v, spec=".3g") -> str:
@@ -36,6 +36,7 @@ def main_bench(args) -> int:
 
     from adaptive_mj.sim.runner import new_output_dir
 
+    backend = Backend.from_args(args)  # a bad option fails before any folder is made
     out = new_output_dir(args.output, "bench-quick" if args.quick else "bench")
     sections = catalogue(quick=args.quick, logs=out / "logs")
     if getattr(args, "scenario", None):
@@ -43,8 +44,13 @@ def main_bench(args) -> int:
 
         sections.append(user_section(list(args.scenario), out / "logs"))
     jobs = [job for s in sections for job in s.jobs]
+    with session(backend):
+        return _bench(args, out, sections, jobs, backend)
+
+
+def _bench(args, out, sections, jobs, backend) -> int:
     t0 = time.perf_counter()
-    results = run_jobs(jobs, n_jobs=max(1, args.jobs), on_done=progress_printer(len(jobs)))
+    results = run_jobs(jobs, backend=backend, on_done=progress_printer(len(jobs)))
     run_seconds = time.perf_counter() - t0
     by_tag = {r.job.tag: r for r in results}
     parts, rows = [], []
@@ -56,7 +62,8 @@ def main_bench(args) -> int:
     if not args.quick:  # the breaking-point study: its own batches (bisection), a reduced `adaptive-mj stress`
         from adaptive_mj.study.stress import BENCH_SETTINGS, run_study
 
-        margins, text, _ = run_study(out / "stress", n_jobs=max(1, args.jobs), composite=False, **BENCH_SETTINGS)
+        margins, text, _ = run_study(out / "stress", n_jobs=max(1, args.jobs), composite=False, backend=backend,
+                                     **BENCH_SETTINGS)
         n_runs += sum(len(e.tails) for m in margins for e in m.evaluations)
         parts.append("## 11. Breaking points: law × stressor margins\n\n**The lecture:** the modifications make "
                      "adaptation robust to noise, disturbances and unmodelled dynamics; here is how far each law "
@@ -67,7 +74,7 @@ def main_bench(args) -> int:
     header = (f"# adaptive-mj benchmark report{' (quick)' if args.quick else ''}\n\n"
               f"{n_runs} runs ({sum(r.status == 'ok' for r in results)} of the {len(results)} catalogue runs ok) "
               f"on MuJoCo physics and "
-              f"the analytic twin, {max(1, args.jobs)} worker processes: runs took {run_seconds:.1f} s, "
+              f"the analytic twin, {_where(backend)}: runs took {run_seconds:.1f} s, "
               f"the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
               f"every run's MCAP log is in `logs/` (replay with `adaptive-mj replay logs/<run>.mcap --verify`).\n\n"
               + ("**Quick mode:** runs are shorter (15–60 s instead of 20–200 s), so estimates that need "
@@ -83,6 +90,12 @@ def main_bench(args) -> int:
     print(main_table(rows))
     print(f"\nreport: {out / 'report.md'}  ({n_runs} runs, {elapsed:.1f} s)")
     return 0 if not failed else 1
+
+
+def _where(backend: Backend) -> str:
+    if backend.kind == "ray":
+        return f"one Ray task per run ({backend.address or 'Ray started on this machine'})"
+    return f"{backend.jobs} worker process{'es' if backend.jobs > 1 else ''}"
 
 
 def _json_default(o):

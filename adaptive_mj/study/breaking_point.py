@@ -29,7 +29,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from adaptive_mj.study.parallel import Job, JobResult, run_jobs
+from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
 
 CVAR_LEVEL = 0.10  # the worst 10 % of seeds
 
@@ -147,7 +147,7 @@ def _mid(lo: float, hi: float, st: Stressor) -> float:
 
 
 def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path, n_jobs: int = 1,
-               on_batch: Callable[[int, int], None] | None = None,
+               backend: Backend | None = None, on_batch: Callable[[int, int], None] | None = None,
                on_done: Callable[[JobResult], None] | None = None) -> list[Margin]:
     """Run every search to its margin, in lockstep batches (see the module docstring).
 
@@ -166,7 +166,7 @@ def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path
 
     def evaluate(wanted: list[tuple[int, float]]) -> list[Evaluation]:
         jobs = [job for i, v in wanted for job in jobs_for(i, v)]
-        results = run_jobs(jobs, n_jobs=n_jobs, on_done=on_done) if jobs else []
+        results = run_jobs(jobs, n_jobs=n_jobs, on_done=on_done, backend=backend) if jobs else []
         out = []
         for n, (i, v) in enumerate(wanted):
             chunk = results[n * seeds:(n + 1) * seeds]

@@ -205,6 +205,18 @@ class Backend:
         return cls(kind=kind, jobs=max(1, args.jobs), address=address, logs=logs, retries=retries)
 
 
+@contextmanager
+def session(backend: Backend):
+    """The backend ready for several batches of runs (Ray: connected once); nothing for local processes."""
+    if backend.kind == "ray":
+        from adaptive_mj.study import ray_backend
+
+        with ray_backend.session(backend):
+            yield
+    else:
+        yield
+
+
 def iter_results(jobs: Sequence[Job], backend: Backend | None = None, *,
                  on_retry: Callable[[Job, str], None] | None = None) -> Iterator[tuple[int, JobResult]]:
     """(index into `jobs`, result) for each job as it finishes, exactly once per job.

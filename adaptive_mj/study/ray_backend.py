@@ -36,6 +36,7 @@ import signal
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
@@ -135,6 +136,19 @@ def _connect(ray, backend: Backend) -> bool:
     return True
 
 
+@contextmanager
+def session(backend: Backend):
+    """Ray connected (or started) for the whole block, so that a command running several batches
+    (the bench's breaking-point study) starts it once; shut down at the end if this block started it."""
+    ray = _ray()
+    started = _connect(ray, backend)
+    try:
+        yield
+    finally:
+        if started:
+            ray.shutdown()
+
+
 def _write_log(job: Job, data: bytes) -> str:
     """The returned log bytes to job.log (through NAME.partial); "" or the error's one line."""
     from adaptive_mj.study.parallel import log_write_error
@@ -197,7 +211,8 @@ def iter_results(jobs: Sequence[Job], backend: Backend, *,
                         submit(i)
                         continue
                     tried = f" (tried {attempts[i] + 1} times)" if attempts[i] else ""
-                    result, data = JobResult(jobs[i], "error", None, error=f"the Ray task failed{tried}: {why}"), None
+                    result, data = JobResult(jobs[i], "error", None, error=f"the Ray task failed{tried}: {why}"
+                                             + _keep_leftovers(jobs[i], backend)), None
                 if result.status == "interrupted":  # the run was stopped from outside (a node shutting down)
                     if data is not None:
                         _write_log(jobs[i], data)
@@ -225,6 +240,15 @@ def _remove_leftovers(job: Job, backend: Backend) -> None:
     """What a dead attempt may have left on shared storage (its NAME.partial)."""
     if job.log is not None and backend.logs == "shared":
         partial_path(job.log).unlink(missing_ok=True)
+
+
+def _keep_leftovers(job: Job, backend: Backend) -> str:
+    """A run given up: what its last attempt wrote on shared storage becomes its log (it reads as
+    truncated); the text to add to the error."""
+    if job.log is None or backend.logs != "shared" or not partial_path(job.log).is_file():
+        return ""
+    os.replace(partial_path(job.log), job.log)
+    return f"; what its last attempt wrote reads as truncated ({job.log})"
 
 
 def _stop(ray, pending: dict, jobs: Sequence[Job], backend: Backend, *, timeout: float = STOP_TIMEOUT) -> None:

@@ -144,8 +144,9 @@ def table(margins: list[Margin], *, seeds: int) -> str:
 
 
 def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int,
-              duration: float = DURATION) -> tuple[list[Margin], str, float]:
-    """Run the study; returns the margins, the report text and the wall time [s]."""
+              duration: float = DURATION, backend=None) -> tuple[list[Margin], str, float]:
+    """Run the study (on `backend`: a parallel.Backend, default n_jobs local processes); returns the
+    margins, the report text and the wall time [s]."""
     import sys
 
     from adaptive_mj.study.parallel import progress_printer
@@ -157,7 +158,7 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
     def batch(k, total):
         print(f"\nstress: batch {k}/{total} done ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
 
-    margins = search_all(searches, seeds=seeds, steps=steps, logs=out / "logs", n_jobs=n_jobs,
+    margins = search_all(searches, seeds=seeds, steps=steps, logs=out / "logs", n_jobs=n_jobs, backend=backend,
                          on_batch=batch, on_done=progress_printer(at_most, label="runs (at most)"))
     wall = time.perf_counter() - t0
     runs = sum(len(e.tails) for m in margins for e in m.evaluations)
@@ -175,9 +176,13 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
 def main_stress(args) -> int:
     from adaptive_mj.sim.runner import new_output_dir
 
+    from adaptive_mj.study.parallel import Backend, session
+
+    backend = Backend.from_args(args)  # a bad option fails before any folder is made
     out = new_output_dir(args.output, "stress")
-    margins, text, wall = run_study(out, seeds=args.seeds, steps=args.steps, composite=args.composite,
-                                    n_jobs=max(1, args.jobs), duration=args.duration)
+    with session(backend):
+        margins, text, wall = run_study(out, seeds=args.seeds, steps=args.steps, composite=args.composite,
+                                        n_jobs=max(1, args.jobs), duration=args.duration, backend=backend)
     report = "# adaptive-mj breaking points\n\n" + text + "\n"
     (out / "report.md").write_text(report, encoding="utf-8")
     rows = []

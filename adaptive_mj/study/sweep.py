@@ -32,7 +32,7 @@ import numpy as np
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.report.metrics import clean_json, metrics as run_metrics
-from adaptive_mj.study.parallel import Backend, Job, JobResult, iter_results, progress_printer
+from adaptive_mj.study.parallel import Backend, Job, JobResult, iter_results, progress_printer, session
 from adaptive_mj.trajectory import Trajectory
 
 EXIT_OK, EXIT_FAILED = 0, 1
@@ -524,7 +524,7 @@ def sweep_notes(base, keys: Sequence[str], seeds: int) -> list[str]:
     return notes
 
 
-def main_breaking_point(args, path: Path, doc: dict, base) -> int:
+def main_breaking_point(args, path: Path, doc: dict, base, backend: Backend | None = None) -> int:
     """`sweep --breaking-point KEY=LO:HI --tail-bound B`: the largest value of KEY at which every seed
     passes (no divergence, tail RMS error <= B), by bisection (adaptive_mj.study.breaking_point)."""
     from adaptive_mj.sim.runner import new_output_dir
@@ -548,6 +548,7 @@ def main_breaking_point(args, path: Path, doc: dict, base) -> int:
     print(f"breaking point of {key} in [{lo:g}, {hi:g}] for {base.name}: {args.seeds} seed(s), "
           f"{args.steps} bisection step(s) -> {out}", file=sys.stderr)
     (m,) = search_all([search], seeds=args.seeds, steps=args.steps, logs=out / "logs", n_jobs=args.jobs,
+                      backend=backend,
                       on_done=progress_printer(args.seeds * (2 + args.steps), label="runs"))
     stats = m.stats()
     record = {"scenario": str(path), "key": key, "lo": lo, "hi": hi, "integer": integer, "seeds": args.seeds,
@@ -673,8 +674,16 @@ def main_sweep(args) -> int:
         raise ScenarioError(f"--jobs must be an integer >= 1, got {args.jobs}")
     path = Path(args.scenario)
     doc, base = _document(path, args.overrides)
-    if getattr(args, "breaking_point", None):
-        return main_breaking_point(args, path, doc, base)
+    backend = Backend.from_args(args)
+    with session(backend):
+        if getattr(args, "breaking_point", None):
+            return main_breaking_point(args, path, doc, base, backend)
+        return _sweep(args, path, doc, base, backend)
+
+
+def _sweep(args, path: Path, doc: dict, base, backend: Backend) -> int:
+    from adaptive_mj.sim.runner import new_output_dir
+
     axes = _axes(args.grid, doc)
     keys = [key for key, _ in axes]
     metrics = _metrics(args.metric)
@@ -695,7 +704,6 @@ def main_sweep(args) -> int:
         # killed at any point can be resumed
     planned = plan(path, points, seeds=args.seeds, overrides=args.overrides, logs=out / "logs")
     total = len(planned)
-    backend = Backend.from_args(args)
     if backend.kind == "local":
         backend = replace(backend, jobs=min(backend.jobs, total))
     stream_path = out / ROWS_STREAM
