@@ -403,3 +403,46 @@ def test_a_log_that_cannot_be_written_is_reported_and_the_study_goes_on(tmp_path
                                       f"-o {tmp_path / 'run.mcap'}"], capture_output=True, text=True, timeout=300)
     err = r.stderr.strip().splitlines()
     assert r.returncode == 1 and len(err) == 1 and "the log could not be written (File too large)" in err[0]
+
+
+def test_a_killed_local_worker_loses_no_run(tmp_path):
+    """SIGKILL of a local worker process mid-run breaks the process pool: the runs it held are
+    submitted again to a new pool (their half-written logs removed), the sweep completes with every
+    run ok exactly once, and the table equals an undisturbed sweep's."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    args = ["sweep", "heave_tracking", "--grid", "law.k=150,250,350", "--set", "simulation.duration=100",
+            "--jobs", "2"]
+    env = dict(os.environ, MUJOCO_GL="egl")
+    out = tmp_path / "killed"
+    driver = subprocess.Popen([sys.executable, "-m", "adaptive_mj", *args, "-o", str(out)], cwd=REPO, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    log = str(out / "logs" / "0000-k=150-seed0.mcap")
+    deadline = time.monotonic() + 120
+    victim = None
+    while victim is None:
+        assert time.monotonic() < deadline, "no worker wrote the first log"
+        for child in Path(f"/proc/{driver.pid}/task/{driver.pid}/children").read_text().split():
+            try:
+                if any(os.readlink(fd) == log for fd in Path(f"/proc/{child}/fd").iterdir()):
+                    victim = int(child)
+            except OSError:
+                continue
+        time.sleep(0.02)
+    time.sleep(0.2)
+    os.kill(victim, signal.SIGKILL)
+    _, stderr = driver.communicate(timeout=300)
+    assert driver.returncode == 0, stderr
+    assert "retrying 0000-k=150-seed0: attempt 2 of 4 (a worker process died)" in stderr
+    rows = (out / "sweep.csv").read_text().splitlines()[1:]
+    assert [r.split(",")[0] for r in rows] == ["0000-k=150-seed0", "0001-k=250-seed0", "0002-k=350-seed0"]
+    assert all(",ok," in r for r in rows)
+    clean = tmp_path / "clean"
+    r = subprocess.run([sys.executable, "-m", "adaptive_mj", *args, "-o", str(clean)], cwd=REPO, env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert (out / "sweep.csv").read_bytes() == (clean / "sweep.csv").read_bytes()

@@ -18,11 +18,13 @@ their handlers are in place, so no signal can kill one half set up.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import concurrent.futures.process  # noqa: F401  (cf.process.BrokenProcessPool)
 import multiprocessing as mp
 import os
 import signal
 import sys
 import time
+from collections import deque
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -176,8 +178,8 @@ class Backend:
     in this process). kind "ray": one Ray task per run (adaptive_mj.study.ray_backend): `address`
     None starts Ray on this machine with `jobs` CPUs, "auto" or "ray://host:port" joins a cluster;
     `logs` "bytes" (each log comes back to the driver as bytes) or "shared" (each task writes its
-    log itself, on storage every node sees); `retries`: how often a run whose worker or node died
-    is submitted again."""
+    log itself, on storage every node sees); `retries` (both kinds): how often a run whose worker
+    process or node died is submitted again."""
 
     kind: str = "local"
     jobs: int = 1
@@ -196,8 +198,7 @@ class Backend:
         address, logs, retries = (getattr(args, "address", None), getattr(args, "ray_logs", "bytes"),
                                   getattr(args, "retries", 3))
         if kind != "ray":
-            for opt, value, default in (("--address", address, None), ("--ray-logs", logs, "bytes"),
-                                        ("--retries", retries, 3)):
+            for opt, value, default in (("--address", address, None), ("--ray-logs", logs, "bytes")):
                 if value != default:
                     raise ScenarioError(f"{opt} is for --backend ray (this command runs on --backend {kind})")
         if retries < 0:
@@ -237,7 +238,7 @@ def iter_results(jobs: Sequence[Job], backend: Backend | None = None, *,
                 raise
             yield i, result
     else:
-        yield from _iter_local_pool(jobs, backend.jobs)
+        yield from _iter_local_pool(jobs, backend.jobs, retries=backend.retries, on_retry=on_retry)
 
 
 def run_jobs(jobs: Sequence[Job], *, n_jobs: int = 1, on_done: Callable[[JobResult], None] | None = None,
@@ -252,30 +253,68 @@ def run_jobs(jobs: Sequence[Job], *, n_jobs: int = 1, on_done: Callable[[JobResu
     return results  # type: ignore[return-value]
 
 
-def _iter_local_pool(jobs: Sequence[Job], n_jobs: int) -> Iterator[tuple[int, JobResult]]:
+#: Runs submitted ahead per worker process: keeps the workers busy while bounding what the
+#: parent holds (futures, pickled jobs) however long the study.
+WINDOW_PER_WORKER = 4
+
+
+def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
+                     on_retry: Callable[[Job, str], None] | None = None) -> Iterator[tuple[int, JobResult]]:
+    """Results from n_jobs forked workers as they finish. A worker that dies (SIGKILL, out of memory)
+    breaks the pool: every run it held in flight is submitted again to a new pool, at most `retries`
+    times each, after removing its half-written log; then it is recorded as an error."""
     ctx = _worker_context(jobs)
     finished = 0
-    with cf.ProcessPoolExecutor(max_workers=n_jobs, mp_context=ctx, initializer=_init_worker) as pool:
-        try:
-            with _stop_signals_blocked():  # the workers are spawned by submit
-                futures = {pool.submit(_run_in_worker, job): i for i, job in enumerate(jobs)}
-            for fut in cf.as_completed(futures):
-                i = futures.pop(fut)  # the future (and its result) is not kept once handed on
-                try:
-                    result = fut.result()
-                except Exception as exc:  # a worker crashed: record it, go on
-                    result = JobResult(jobs[i], "error", None, error=f"{type(exc).__name__}: {exc}")
-                if result.status == "interrupted":  # a worker was told to stop: stop them all
-                    raise Interrupted(signal.SIGTERM)
+    attempts = [0] * len(jobs)
+    queue = deque(range(len(jobs)))
+    while queue:
+        lost: list[int] = []
+        with cf.ProcessPoolExecutor(max_workers=n_jobs, mp_context=ctx, initializer=_init_worker) as pool:
+            futures: dict[cf.Future, int] = {}
+            try:
+                while queue or futures:
+                    with _stop_signals_blocked():  # the first submits spawn the workers
+                        while queue and len(futures) < WINDOW_PER_WORKER * n_jobs:
+                            i = queue.popleft()
+                            futures[pool.submit(_run_in_worker, jobs[i])] = i
+                    done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
+                    for fut in done:
+                        i = futures.pop(fut)  # the future (and its result) is not kept once handed on
+                        try:
+                            result = fut.result()
+                        except cf.process.BrokenProcessPool:
+                            lost.append(i)
+                            continue
+                        except Exception as exc:  # noqa: BLE001 (the job could not be sent or returned)
+                            result = JobResult(jobs[i], "error", None, error=f"{type(exc).__name__}: {exc}")
+                        if result.status == "interrupted":  # a worker was told to stop: stop them all
+                            raise Interrupted(signal.SIGTERM)
+                        finished += 1
+                        yield i, result
+                    if lost:  # the pool is broken: what it still held is lost too
+                        lost += futures.values()
+                        futures.clear()
+                        break
+            except KeyboardInterrupt as exc:
+                _stop_workers(pool)
+                if finished:
+                    sys.stderr.write("\n")  # end the progress line
+                if isinstance(exc, Interrupted):
+                    exc.note = _interrupted_note(finished, len(jobs))
+                raise
+        for i in sorted(lost, reverse=True):
+            job = jobs[i]
+            if attempts[i] < retries:
+                attempts[i] += 1
+                if job.log is not None:
+                    job.log.unlink(missing_ok=True)  # cut short when its worker died
+                if on_retry:
+                    on_retry(job, f"attempt {attempts[i] + 1} of {retries + 1} (a worker process died)")
+                queue.appendleft(i)
+            else:
                 finished += 1
-                yield i, result
-        except KeyboardInterrupt as exc:
-            _stop_workers(pool)
-            if finished:
-                sys.stderr.write("\n")  # end the progress line
-            if isinstance(exc, Interrupted):
-                exc.note = _interrupted_note(finished, len(jobs))
-            raise
+                yield i, JobResult(job, "error", None, error=f"a worker process died running it (tried "
+                                                            f"{attempts[i] + 1} times)")
 
 
 def _worker_context(jobs: Sequence[Job]):

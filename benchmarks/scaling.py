@@ -1,0 +1,291 @@
+"""Scaling benchmark (issue 13): how sweeps use cores and clusters, measured on this machine.
+
+  ceiling   the machine's own parallel ceiling: a pure-Python CPU loop in 2 processes at
+            once against 1 (the most any 2-process sweep can gain here)
+  local     sweep throughput (runs per minute) on --runs logged 30 s heave runs, 1 job against
+            2, through the sweep's runner (parallel.iter_results), interleaved repetitions;
+            and what is serial in `adaptive-mj sweep`: import, validating the grid, compiling
+            the native callback, forking the workers, collecting results, writing the tables
+  ray       the same runs on Ray started here with 2 CPUs (the workers warmed by one batch
+            first), and Ray's own cost per task: --tasks no-op tasks through the same driver
+            loop shape (submit window, ray.wait, ray.get)
+  study     a --study-runs study of 2 s runs through `adaptive-mj sweep` (local, 2 jobs):
+            wall time, runs/s, and the driver's peak RSS (VmHWM, polled) for it and for a
+            study 10× smaller (bounded memory: the two should be close)
+
+Every figure is the median of --reps repetitions with [min, max] where repeated.
+Usage: python benchmarks/scaling.py [--reps 3] [--runs 8] [--only local,ray,...] [--study-runs 10000] [--json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+HEAVE = REPO / "scenarios" / "heave_tracking.toml"
+SECONDS = 30.0  # simulated seconds per run in the throughput figures (the issue's 30 s heave runs)
+
+
+def med(xs):
+    return {"median": statistics.median(xs), "min": min(xs), "max": max(xs), "n": len(xs)}
+
+
+def _busy(n: int) -> None:
+    x = 0
+    for i in range(n):
+        x += i * i
+
+
+def ceiling(reps: int) -> dict:
+    """Speed-up of 2 processes each doing the work of 1 (pure Python, no I/O, no shared state)."""
+    import multiprocessing as mp
+
+    n = 15_000_000
+    ctx = mp.get_context("fork")
+    ratios, one = [], []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        _busy(n)
+        t1 = time.perf_counter() - t0
+        procs = [ctx.Process(target=_busy, args=(n,)) for _ in range(2)]
+        t0 = time.perf_counter()
+        for p in procs:
+            p.start()
+        for p in procs:
+            p.join()
+        t2 = time.perf_counter() - t0
+        ratios.append(2 * t1 / t2)
+        one.append(t1)
+    return {"ratio_2_over_1": med(ratios), "seconds_1": med(one)}
+
+
+def _jobs(folder: Path, runs: int, tag: str):
+    from adaptive_mj.study.parallel import Job
+
+    return [Job(HEAVE, (f"simulation.duration={SECONDS}", f"law.k={150.0 + i}"), seed=0,
+                log=folder / f"{tag}-{i}.mcap", tag=f"{tag}-{i}", keep_trajectory=False) for i in range(runs)]
+
+
+def _throughput(backend, runs: int, tag: str) -> tuple[float, float]:
+    """(runs per minute, the driver's CPU seconds) for `runs` logged heave runs on `backend`."""
+    from adaptive_mj.study.parallel import iter_results
+
+    with tempfile.TemporaryDirectory() as tmp:
+        jobs = _jobs(Path(tmp), runs, tag)
+        c0 = time.process_time()
+        t0 = time.perf_counter()
+        statuses = [r.status for _, r in iter_results(jobs, backend)]
+        el = time.perf_counter() - t0
+        cpu = time.process_time() - c0
+    assert statuses == ["ok"] * runs, statuses
+    return runs / el * 60.0, cpu
+
+
+def serial_parts(runs: int) -> dict:
+    """Seconds of each serial part of `adaptive-mj sweep` (measured in a fresh interpreter)."""
+    code = f"""
+import json, sys, time, tempfile
+from pathlib import Path
+t0 = time.perf_counter()
+from adaptive_mj.study import sweep, parallel
+t_import = time.perf_counter() - t0
+from adaptive_mj.setup import scenario as sc
+p = Path({str(HEAVE)!r})
+t0 = time.perf_counter()
+doc, base = sweep._document(p, ['simulation.duration={SECONDS}'])
+axes = sweep._axes(['law.k=150:250:{runs}'], doc)
+points = sweep.grid_points(axes)
+sweep._validate_points(p, ['simulation.duration={SECONDS}'], points)
+t_validate = time.perf_counter() - t0
+with tempfile.TemporaryDirectory() as tmp:
+    out = Path(tmp)
+    planned = sweep.plan(p, points, seeds=1, overrides=['simulation.duration={SECONDS}'], logs=out / 'logs')
+    jobs = [j for _, j in planned]
+    t0 = time.perf_counter(); parallel._prewarm(jobs); t_compile = time.perf_counter() - t0
+    import concurrent.futures as cf, multiprocessing as mp
+    t0 = time.perf_counter()
+    with cf.ProcessPoolExecutor(2, mp_context=mp.get_context('fork'), initializer=parallel._init_worker) as pool:
+        list(pool.map(int, [0, 1]))
+    t_fork = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    with open(out / 'rows.jsonl', 'w') as stream:
+        for i, r in parallel.iter_results(jobs, parallel.Backend(jobs=2)):
+            sweep._append_row(stream, i, sweep.rows([(planned[i][0], r)], root=out)[0])
+    t_runs = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    table, _ = sweep.write_tables(out / 'rows.jsonl', len(jobs), {{}}, out, keep=['law.k', 'seed', 'rms_tracking_error_tail'])
+    sweep.plot_sweep(table, ['law.k'], ['rms_tracking_error_tail'], out / 'sweep.png', plant_kind='heave')
+    t_tables = time.perf_counter() - t0
+print(json.dumps(dict(import_s=t_import, validate_grid_s=t_validate, compile_native_s=t_compile,
+                      fork_workers_s=t_fork, runs_s=t_runs, tables_and_plot_s=t_tables)))
+"""
+    r = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
+    if r.returncode:
+        raise SystemExit(r.stderr[-3000:])
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def local(reps: int, runs: int) -> dict:
+    from adaptive_mj.study.parallel import Backend, _prewarm
+
+    with tempfile.TemporaryDirectory() as tmp:
+        _prewarm(_jobs(Path(tmp), 1, "warm"))  # compiled once here, as the sweep command does
+    one, two, ratio, cpu2 = [], [], [], []
+    for _ in range(reps):  # interleaved, so a slow spell of the shared machine hits both
+        a, _ = _throughput(Backend(jobs=1), runs, "one")
+        b, c = _throughput(Backend(jobs=2), runs, "two")
+        one.append(a)
+        two.append(b)
+        ratio.append(b / a)
+        cpu2.append(c)
+    return {"runs": runs, "seconds_per_run": SECONDS, "jobs1_runs_per_min": med(one), "jobs2_runs_per_min": med(two),
+            "ratio": med(ratio), "driver_cpu_s_jobs2": med(cpu2), "serial_parts_s": serial_parts(runs)}
+
+
+def ray_figures(reps: int, runs: int, tasks: int) -> dict:
+    import ray
+
+    from adaptive_mj.study.parallel import Backend
+    from adaptive_mj.study.ray_backend import WINDOW_PER_CPU
+
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    t0 = time.perf_counter()
+    ray.init(num_cpus=2, include_dashboard=False, logging_level="ERROR")
+    start_s = time.perf_counter() - t0
+    try:
+        @ray.remote(num_cpus=1, max_retries=0)
+        def noop(x):
+            return x
+
+        ray.get([noop.remote(i) for i in range(50)])  # workers up
+        per_task = []
+        for _ in range(reps):
+            pending, n, t0 = {}, 0, time.perf_counter()
+            while pending or n < tasks:
+                while n < tasks and len(pending) < WINDOW_PER_CPU * 2:
+                    pending[noop.remote(n)] = n
+                    n += 1
+                ready, _ = ray.wait(list(pending), num_returns=1)
+                for ref in ready:
+                    pending.pop(ref)
+                    ray.get(ref)
+            per_task.append((time.perf_counter() - t0) / tasks * 1e3)
+        backend = Backend(kind="ray", jobs=2)
+        t0 = time.perf_counter()
+        _throughput(backend, 4, "warm")  # each worker compiles the native callback once
+        warm_s = time.perf_counter() - t0
+        thr, cpu, thr_shared, cpu_shared, loc = [], [], [], [], []
+        for _ in range(reps):  # interleaved with the local backend (2 processes) beside the idle Ray
+            a, c = _throughput(backend, runs, "ray")
+            thr.append(a)
+            cpu.append(c)
+            a, c = _throughput(Backend(kind="ray", jobs=2, logs="shared"), runs, "shared")
+            thr_shared.append(a)
+            cpu_shared.append(c)
+            loc.append(_throughput(Backend(jobs=2), runs, "local")[0])
+    finally:
+        ray.shutdown()
+    return {"ray_start_s": start_s, "noop_task_ms": med(per_task), "tasks": tasks,
+            "first_batch_s_4_runs": warm_s, "runs_per_min": med(thr), "driver_cpu_s": med(cpu),
+            "runs_per_min_shared_logs": med(thr_shared), "driver_cpu_s_shared_logs": med(cpu_shared),
+            "runs": runs, "local_runs_per_min": med(loc),
+            "ratio_to_local": med([a / b for a, b in zip(thr, loc)]),
+            "overhead_per_run_ms": med([60e3 / a - 60e3 / b for a, b in zip(thr, loc)])}
+
+
+def _peak_rss_kb(pid: int, stop: threading.Event, out: list) -> None:
+    while not stop.is_set():
+        try:
+            for line in open(f"/proc/{pid}/status"):
+                if line.startswith("VmHWM:"):
+                    out.append(int(line.split()[1]))
+        except OSError:
+            pass
+        stop.wait(0.2)
+
+
+def study(n: int, jobs: int = 2) -> dict:
+    """`adaptive-mj sweep` over n 2-s runs of heave_drift (noise: the seeds differ); driver peak RSS."""
+    points = 100 if n >= 1000 else 10
+    seeds = n // points
+    folder = Path(tempfile.mkdtemp(prefix="scaling-study-"))
+    try:
+        cmd = [sys.executable, "-m", "adaptive_mj", "sweep", "heave_drift", "--grid", f"law.k=100:300:{points}",
+               "--seeds", str(seeds), "--set", "simulation.duration=2.0", "--jobs", str(jobs), "-o", str(folder / "out")]
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                                env=dict(os.environ, MUJOCO_GL="egl"))
+        stop, rss = threading.Event(), []
+        th = threading.Thread(target=_peak_rss_kb, args=(proc.pid, stop, rss))
+        th.start()
+        _, err = proc.communicate()
+        stop.set()
+        th.join()
+        wall = time.perf_counter() - t0
+        assert proc.returncode == 0, err[-2000:]
+        lines = (folder / "out" / "sweep.csv").read_text().count("\n") - 1
+        size = sum(p.stat().st_size for p in (folder / "out" / "logs").glob("*.mcap"))
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    return {"runs": points * seeds, "rows": lines, "wall_s": wall, "runs_per_s": points * seeds / wall,
+            "driver_peak_rss_mb": max(rss) / 1024 if rss else None, "logs_mb": size / 2**20}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--reps", type=int, default=3)
+    ap.add_argument("--runs", type=int, default=8, help="runs per throughput measurement (default 8)")
+    ap.add_argument("--tasks", type=int, default=2000, help="no-op Ray tasks per overhead measurement")
+    ap.add_argument("--study-runs", type=int, default=10000)
+    ap.add_argument("--only", default="ceiling,local,ray,study")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    parts = set(args.only.split(","))
+    res = {"cpus": os.cpu_count()}
+    if "ceiling" in parts:
+        res["ceiling"] = ceiling(args.reps)
+    if "local" in parts:
+        res["local"] = local(args.reps, args.runs)
+    if "ray" in parts:
+        res["ray"] = ray_figures(args.reps, args.runs, args.tasks)
+    if "study" in parts:
+        res["study_small"] = study(max(100, args.study_runs // 10))
+        res["study"] = study(args.study_runs)
+    if args.json:
+        print(json.dumps(res, indent=1))
+        return
+    f = lambda m, fmt="{:.1f}": f"{fmt.format(m['median'])} [{fmt.format(m['min'])}, {fmt.format(m['max'])}]"  # noqa: E731
+    if "ceiling" in res:
+        print(f"ceiling: 2 busy processes vs 1: {f(res['ceiling']['ratio_2_over_1'], '{:.2f}')}x")
+    if "local" in res:
+        lo = res["local"]
+        print(f"local: {lo['runs']} logged {SECONDS:g} s heave runs: 1 job {f(lo['jobs1_runs_per_min'])} runs/min, "
+              f"2 jobs {f(lo['jobs2_runs_per_min'])} runs/min, ratio {f(lo['ratio'], '{:.2f}')}x; driver CPU "
+              f"{f(lo['driver_cpu_s_jobs2'], '{:.3f}')} s with 2 jobs")
+        print("  serial parts of a sweep [s]: " + ", ".join(f"{k} {v:.3f}" for k, v in lo["serial_parts_s"].items()))
+    if "ray" in res:
+        r = res["ray"]
+        print(f"ray (started here, 2 CPUs): start {r['ray_start_s']:.1f} s; no-op task {f(r['noop_task_ms'], '{:.2f}')} ms "
+              f"each; first batch of 4 runs {r['first_batch_s_4_runs']:.1f} s (worker start + compile); then "
+              f"{f(r['runs_per_min'])} runs/min (logs as bytes; shared logs {f(r['runs_per_min_shared_logs'])}), "
+              f"driver CPU for {r['runs']} runs {f(r['driver_cpu_s'], '{:.3f}')} s (shared logs "
+              f"{f(r['driver_cpu_s_shared_logs'], '{:.3f}')} s); local backend meanwhile {f(r['local_runs_per_min'])} "
+              f"runs/min: Ray/local {f(r['ratio_to_local'], '{:.2f}')}, {f(r['overhead_per_run_ms'])} ms more per run")
+    for key in ("study_small", "study"):
+        if key in res:
+            s = res[key]
+            print(f"study: {s['runs']} runs of 2 s ({s['rows']} rows): {s['wall_s']:.0f} s, {s['runs_per_s']:.1f} runs/s, "
+                  f"driver peak RSS {s['driver_peak_rss_mb']:.0f} MB, logs {s['logs_mb']:.0f} MB")
+
+
+if __name__ == "__main__":
+    main()
