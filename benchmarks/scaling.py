@@ -213,14 +213,15 @@ def _peak_rss_kb(pid: int, stop: threading.Event, out: list) -> None:
         stop.wait(0.2)
 
 
-def study(n: int, jobs: int = 2) -> dict:
+def study(n: int, jobs: int = 2, backend: str = "local") -> dict:
     """`adaptive-mj sweep` over n 2-s runs of heave_drift (noise: the seeds differ); driver peak RSS."""
     points = 100 if n >= 1000 else 10
     seeds = n // points
     folder = Path(tempfile.mkdtemp(prefix="scaling-study-"))
     try:
         cmd = [sys.executable, "-m", "adaptive_mj", "sweep", "heave_drift", "--grid", f"law.k=100:300:{points}",
-               "--seeds", str(seeds), "--set", "simulation.duration=2.0", "--jobs", str(jobs), "-o", str(folder / "out")]
+               "--seeds", str(seeds), "--set", "simulation.duration=2.0", "--jobs", str(jobs), "-o", str(folder / "out"),
+               "--backend", backend]
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                                 env=dict(os.environ, MUJOCO_GL="egl"))
@@ -236,7 +237,7 @@ def study(n: int, jobs: int = 2) -> dict:
         size = sum(p.stat().st_size for p in (folder / "out" / "logs").glob("*.mcap"))
     finally:
         shutil.rmtree(folder, ignore_errors=True)
-    return {"runs": points * seeds, "rows": lines, "wall_s": wall, "runs_per_s": points * seeds / wall,
+    return {"backend": backend, "runs": points * seeds, "rows": lines, "wall_s": wall, "runs_per_s": points * seeds / wall,
             "driver_peak_rss_mb": max(rss) / 1024 if rss else None, "logs_mb": size / 2**20}
 
 
@@ -246,6 +247,7 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=8, help="runs per throughput measurement (default 8)")
     ap.add_argument("--tasks", type=int, default=2000, help="no-op Ray tasks per overhead measurement")
     ap.add_argument("--study-runs", type=int, default=10000)
+    ap.add_argument("--study-backend", default="local", choices=("local", "ray"))
     ap.add_argument("--only", default="ceiling,local,ray,study")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
@@ -258,8 +260,8 @@ def main() -> None:
     if "ray" in parts:
         res["ray"] = ray_figures(args.reps, args.runs, args.tasks)
     if "study" in parts:
-        res["study_small"] = study(max(100, args.study_runs // 10))
-        res["study"] = study(args.study_runs)
+        res["study_small"] = study(max(100, args.study_runs // 10), backend=args.study_backend)
+        res["study"] = study(args.study_runs, backend=args.study_backend)
     if args.json:
         print(json.dumps(res, indent=1))
         return
@@ -283,7 +285,7 @@ def main() -> None:
     for key in ("study_small", "study"):
         if key in res:
             s = res[key]
-            print(f"study: {s['runs']} runs of 2 s ({s['rows']} rows): {s['wall_s']:.0f} s, {s['runs_per_s']:.1f} runs/s, "
+            print(f"study ({s['backend']} backend): {s['runs']} runs of 2 s ({s['rows']} rows): {s['wall_s']:.0f} s, {s['runs_per_s']:.1f} runs/s, "
                   f"driver peak RSS {s['driver_peak_rss_mb']:.0f} MB, logs {s['logs_mb']:.0f} MB")
 
 

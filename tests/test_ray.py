@@ -234,3 +234,23 @@ def test_ray_options_need_the_ray_backend():
     r = cli("sweep", *SHORT, "--address", "auto")
     assert r.returncode == 2
     assert r.stderr.strip() == "adaptive-mj: error: --address is for --backend ray (this command runs on --backend local)"
+
+
+def test_runs_that_fail_or_diverge_are_recorded_once_and_not_retried(cluster, tmp_path):
+    """Through the Python API on the cluster: a scenario file no node has is an error naming the node
+    and the remedy; a run that diverges is a result; neither is submitted again."""
+    from adaptive_mj.study.parallel import Backend, Job, iter_results
+
+    retried = []
+    jobs = [Job(tmp_path / "nowhere.toml", tag="missing"),
+            Job(REPO / "scenarios" / "heave_tracking.toml", ("simulation.state_bound=0.5",
+                                                            "simulation.initial_state=[1.0, 0.0]"), tag="diverges"),
+            Job(REPO / "scenarios" / "heave_tracking.toml", ("simulation.duration=0.2",), tag="fine")]
+    results = dict(iter_results(jobs, Backend(kind="ray", address=cluster),
+                                on_retry=lambda job, why: retried.append(job.tag)))
+    assert sorted(results) == [0, 1, 2] and retried == []
+    assert results[0].status == "error"
+    assert results[0].error.startswith(f"{tmp_path / 'nowhere.toml'}: no such file on the Ray node ")
+    assert "every node must see the scenarios and models at the same paths" in results[0].error
+    assert results[1].status == "diverged" and results[1].summary["reason"]
+    assert results[2].status == "ok" and results[2].trajectory is not None
