@@ -74,12 +74,13 @@ def task_processes() -> dict[int, list[str]]:
     return out
 
 
-def writer_of(name: str, *, not_pid: int | None = None, timeout: float = 120.0) -> int:
-    """The pid of the task process that has the log NAME.partial open (shared logs)."""
+def writer_of(name: str, *, not_pid: int | None = None, timeout: float = 120.0, written: int = 0) -> int:
+    """The pid of the task process that has the log NAME.partial open (shared logs), once it holds
+    more than `written` bytes."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         for pid, files in task_processes().items():
-            if pid != not_pid and any(f.endswith(name + ".partial") for f in files):
+            if pid != not_pid and any(f.endswith(name + ".partial") and _size(f) > written for f in files):
                 return pid
         time.sleep(0.05)
     raise AssertionError(f"no task process wrote {name}.partial within {timeout} s")
@@ -127,12 +128,11 @@ def test_ray_sweep_gives_the_local_table_and_logs(cluster, local_short, tmp_path
 def test_a_killed_worker_loses_no_run(cluster, tmp_path):
     """SIGKILL of the worker process running a run: the run is submitted again, the sweep completes
     with every run ok exactly once, and the logs equal the local backend's."""
-    args = ["heave_tracking", "--grid", "law.k=150,250", "--seeds", "1", "--set", "simulation.duration=150"]
+    args = ["heave_tracking", "--grid", "law.k=150,250", "--seeds", "1", "--set", "simulation.duration=60"]
     out = tmp_path / "ray"
     driver = start("sweep", *args, "--backend", "ray", "--address", cluster, "--ray-logs", "shared",
                    "-o", str(out))
-    victim = writer_of("0000-k=150-seed0.mcap")
-    time.sleep(0.3)  # mid-run
+    victim = writer_of("0000-k=150-seed0.mcap", written=50_000)  # mid-run: rows logged
     os.kill(victim, signal.SIGKILL)
     stdout, stderr = driver.communicate(timeout=300)
     assert driver.returncode == 0, stderr
@@ -151,12 +151,12 @@ def test_a_killed_worker_loses_no_run(cluster, tmp_path):
 def test_a_run_whose_worker_keeps_dying_is_recorded_after_the_retry_limit(cluster, tmp_path):
     """--retries 1: a run killed twice is an error naming the cause and the attempts; the other run is ok."""
     out = tmp_path / "ray"
-    driver = start("sweep", "heave_tracking", "--grid", "law.k=150,250", "--set", "simulation.duration=150",
+    driver = start("sweep", "heave_tracking", "--grid", "law.k=150,250", "--set", "simulation.duration=60",
                    "--backend", "ray", "--address", cluster, "--ray-logs", "shared", "--retries", "1", "-o", str(out))
     name = "0000-k=150-seed0.mcap"
     first = writer_of(name)
     os.kill(first, signal.SIGKILL)
-    second = writer_of(name, not_pid=first)
+    second = writer_of(name, not_pid=first, written=50_000)  # rows logged: its log reads as truncated
     os.kill(second, signal.SIGKILL)
     stdout, stderr = driver.communicate(timeout=300)
     assert driver.returncode == 1, stderr

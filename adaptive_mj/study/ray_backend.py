@@ -83,8 +83,9 @@ def run_task(job: Job, logs: str) -> tuple[JobResult, bytes | None]:
     if not job.scenario.is_file():
         import socket
 
-        return JobResult(job, "error", None, error=f"{job.scenario}: no such file on the Ray node {socket.gethostname()} "
-                                                   "(every node must see the scenarios and models at the same paths)"), None
+        why = (f"{job.scenario}: no such file on the Ray node {socket.gethostname()} (every node must see the "
+               "scenarios and models at the same paths)")
+        return JobResult(job, "error", None, error=why), None
     data = None
     where = None
     if job.log is not None and logs == "bytes":
@@ -245,9 +246,13 @@ def _remove_leftovers(job: Job, backend: Backend) -> None:
 def _keep_leftovers(job: Job, backend: Backend) -> str:
     """A run given up: what its last attempt wrote on shared storage becomes its log (it reads as
     truncated); the text to add to the error."""
-    if job.log is None or backend.logs != "shared" or not partial_path(job.log).is_file():
+    part = partial_path(job.log) if job.log is not None else None
+    if part is None or backend.logs != "shared" or not part.is_file():
         return ""
-    os.replace(partial_path(job.log), job.log)
+    if part.stat().st_size == 0:  # killed before its first write
+        part.unlink()
+        return "; its last attempt wrote no log"
+    os.replace(part, job.log)
     return f"; what its last attempt wrote reads as truncated ({job.log})"
 
 
