@@ -67,7 +67,7 @@ def _parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="run the benchmark catalogue: report.md, figures, logs, summary.json")
     b.add_argument("--quick", action="store_true", help="shorter runs and fewer variants, no breaking-point study (under a minute on 2 cores)")
     b.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
-    b.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: all cores)")
+    b.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help=JOBS_HELP)
     b.add_argument("--scenario", action="append", default=[], metavar="FILE",
                    help="also run your own scenario in a section of its own (repeatable; any law, a plugin too)")
     _backend_arguments(b)
@@ -82,7 +82,7 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("--resume", type=Path, metavar="DIR",
                     help="finish the study in DIR (the same command that started it): runs whose log is complete "
                          "are read back, the rest (missing, truncated or interrupted logs) run again")
-    sw.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    sw.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help=JOBS_HELP)
     sw.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
     sw.add_argument("--metric", action="append", default=[],
                     help="metric(s) to plot against the grid (default: rms_tracking_error_tail)")
@@ -100,10 +100,14 @@ def _parser() -> argparse.ArgumentParser:
     st.add_argument("--duration", type=float, default=20.0, help="seconds per run (default 20)")
     st.add_argument("--composite", action="store_true",
                     help="also composite adaptation (runs on the Python callback path: several times slower)")
-    st.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    st.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help=JOBS_HELP)
     st.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
     _backend_arguments(st)
     return p
+
+
+JOBS_HELP = ("worker processes (default: all cores); with --backend ray and no --address, the CPUs of the Ray "
+             "started here")
 
 
 def _backend_arguments(p: argparse.ArgumentParser) -> None:
@@ -112,8 +116,9 @@ def _backend_arguments(p: argparse.ArgumentParser) -> None:
                    help="local: worker processes on this machine (default); ray: one Ray task per run "
                         "(needs the [ray] extra)")
     p.add_argument("--address", metavar="ADDR",
-                   help="with --backend ray: 'auto' or ray://host:port joins a running cluster (default: start "
-                        "Ray here with --jobs CPUs)")
+                   help="with --backend ray: 'auto' (the cluster `ray start` runs on this machine), HOST:PORT (its "
+                        "GCS address) or ray://HOST:PORT (Ray Client) joins a running cluster; default: start a "
+                        "new Ray here with --jobs CPUs")
     p.add_argument("--ray-logs", choices=("bytes", "shared"), default="bytes",
                    help="with --backend ray: bytes (each log is sent back to this machine; default) or shared "
                         "(each node writes its logs itself: the output folder must be on shared storage)")

@@ -168,23 +168,25 @@ def test_a_run_whose_worker_keeps_dying_is_recorded_after_the_retry_limit(cluste
     assert read_log(out / "logs" / name).status == "truncated" and not (out / "logs" / (name + ".partial")).exists()
 
 
-def test_interrupting_a_ray_sweep_closes_the_logs_and_leaves_no_task(cluster, tmp_path):
-    """SIGINT to the driver: every running task stops, its log closed as "interrupted" (bytes: sent
-    back and written by the driver), exit 130, and no task process is left running."""
+@pytest.mark.parametrize("signum, logs", [(signal.SIGINT, "bytes"), (signal.SIGTERM, "shared")])
+def test_interrupting_a_ray_sweep_closes_the_logs_and_leaves_no_task(cluster, tmp_path, signum, logs):
+    """SIGINT or SIGTERM to the driver: every running task stops, its log closed as "interrupted"
+    (bytes: sent back and written by the driver), exit 128 + signal, and no task process is left
+    running. (Ray's driver installs its own SIGTERM handler: the CLI's clean stop must win.)"""
     out = tmp_path / "ray"
     driver = start("sweep", "heave_tracking", "--grid", "law.k=150,250,350", "--set", "simulation.duration=3000",
-                   "--backend", "ray", "--address", cluster, "-o", str(out))
+                   "--backend", "ray", "--address", cluster, "--ray-logs", logs, "-o", str(out))
     deadline = time.monotonic() + 120  # until both running tasks have logged rows (in their scratch folders)
-    while sum(any(f.endswith(".mcap") and _size(f) > 50_000 for f in files)
+    while sum(any(".mcap" in f and _size(f) > 50_000 for f in files)
               for files in task_processes().values()) < 2:
         assert time.monotonic() < deadline, "the tasks did not start logging"
         time.sleep(0.05)
-    driver.send_signal(signal.SIGINT)
+    driver.send_signal(signum)
     stdout, stderr = driver.communicate(timeout=120)
-    assert driver.returncode == 130, stderr
-    assert "interrupted by SIGINT; 0 of 3 runs had finished" in stderr
+    assert driver.returncode == 128 + signum, stderr
+    assert f"interrupted by {signal.Signals(signum).name}; 0 of 3 runs had finished" in stderr
     logs = sorted((out / "logs").glob("*.mcap"))
-    assert len(logs) == 2  # the two that ran; the third never started
+    assert len(logs) == 2 and not list((out / "logs").glob("*.partial"))  # the two that ran; the third never started
     for log in logs:
         logged = read_log(log)
         assert logged.status == "interrupted" and len(logged.trajectory.t) > 10
@@ -196,7 +198,8 @@ def test_interrupting_a_ray_sweep_closes_the_logs_and_leaves_no_task(cluster, tm
 
 def test_resume_on_ray_finishes_a_killed_study_with_the_same_table(cluster, local_short, tmp_path):
     """A study that lost runs (logs missing, one cut short, one left as NAME.partial by a dead worker)
-    is finished on Ray by --resume: only those run again, and sweep.csv is the uninterrupted one's."""
+    is finished on Ray by --resume: only those run again, and sweep.csv is the uninterrupted one's.
+    With no --address a new Ray starts here, even with another cluster running on the machine."""
     study = tmp_path / "killed"
     shutil.copytree(local_short, study)
     for name in ("sweep.csv", "sweep.json", "rows.jsonl"):
@@ -206,8 +209,9 @@ def test_resume_on_ray_finishes_a_killed_study_with_the_same_table(cluster, loca
     data = logs[3].read_bytes()
     logs[3].write_bytes(data[: len(data) // 2])
     logs[5].rename(logs[5].with_name(logs[5].name + ".partial"))
-    r = cli("sweep", *SHORT, "--backend", "ray", "--address", cluster, "--resume", str(study))
+    r = cli("sweep", *SHORT, "--backend", "ray", "--jobs", "2", "--resume", str(study))
     assert r.returncode == 0, r.stderr
+    assert "on Ray (started here, logs as bytes)" in r.stderr
     assert "(3 already finished, 3 to run)" in r.stderr
     assert (study / "sweep.csv").read_bytes() == (local_short / "sweep.csv").read_bytes()
     same_logs(study, local_short)
@@ -230,10 +234,18 @@ def test_a_log_the_driver_cannot_write_is_reported_and_replays_truncated(cluster
     assert logged.status == "truncated" and len(logged.trajectory.t) >= 100
 
 
-def test_ray_options_need_the_ray_backend():
+def test_ray_options_are_checked_in_one_line(tmp_path):
     r = cli("sweep", *SHORT, "--address", "auto")
     assert r.returncode == 2
     assert r.stderr.strip() == "adaptive-mj: error: --address is for --backend ray (this command runs on --backend local)"
+    r = cli("sweep", *SHORT, "--backend", "ray", "--address", "127.0.0.1:1", "-o", str(tmp_path / "a"), timeout=60)
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines()[-1].startswith("adaptive-mj: error: --address '127.0.0.1:1': nothing answers "
+                                                        "at 127.0.0.1:1 (")
+    r = cli("sweep", *SHORT, "--backend", "ray", "--address", "headnode", "-o", str(tmp_path / "b"), timeout=60)
+    assert r.returncode == 2 and "expected auto, HOST:PORT" in r.stderr
+    r = cli("sweep", *SHORT, "--resume", str(tmp_path), "-o", str(tmp_path / "c"))
+    assert r.returncode == 2 and f"-o {tmp_path / 'c'} cannot be combined with it" in r.stderr
 
 
 def test_runs_that_fail_or_diverge_are_recorded_once_and_not_retried(cluster, tmp_path):

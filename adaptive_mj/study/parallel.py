@@ -203,6 +203,10 @@ class Backend:
                     raise ScenarioError(f"{opt} is for --backend ray (this command runs on --backend {kind})")
         if retries < 0:
             raise ScenarioError(f"--retries must be an integer >= 0, got {retries}")
+        if kind == "ray":
+            from adaptive_mj.study.ray_backend import _ray
+
+            _ray()  # not installed: one line now, before any folder is made
         return cls(kind=kind, jobs=max(1, args.jobs), address=address, logs=logs, retries=retries)
 
 

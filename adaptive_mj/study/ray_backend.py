@@ -119,21 +119,55 @@ def run_task(job: Job, logs: str) -> tuple[JobResult, bytes | None]:
 
 # --------------------------------------------------------------------------
 # the driver
+def _check_reachable(address: str) -> None:
+    """host:port or ray://host:port answers a TCP connection within 5 s (Ray itself would wait
+    without end for an address where nothing listens)."""
+    import socket
+
+    hostport = address.removeprefix("ray://")
+    host, _, port = hostport.rpartition(":")
+    if not host or not port.isdigit():
+        raise AdaptiveMJError(f"--address {address!r}: expected auto, HOST:PORT (the cluster's GCS, as `ray start "
+                              "--head` prints it) or ray://HOST:PORT (Ray Client)")
+    try:
+        socket.create_connection((host, int(port)), timeout=5.0).close()
+    except OSError as exc:
+        raise AdaptiveMJError(f"--address {address!r}: nothing answers at {host}:{port} ({exc.strerror or exc}); "
+                              "start the cluster (ray start --head) or check the address") from None
+
+
 def _connect(ray, backend: Backend) -> bool:
-    """Connect to (or start) Ray; True when this call started it (and so must shut it down)."""
+    """Connect to (or start) Ray; True when this call started it (and so must shut it down).
+
+    With no address a new local Ray is always started (address="local"), never a cluster that happens
+    to run on this machine. Ray's driver installs its own SIGINT/SIGTERM handlers; the ones in place
+    before (the CLI's clean stop, adaptive_mj.sim.interrupt) are put back."""
+    import threading
+
     if ray.is_initialized():
         return False
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-    kwargs = dict(include_dashboard=False, logging_level="ERROR", log_to_driver=True,
-                  configure_logging=True)
+    if not getattr(sys.stderr, "isatty", lambda: False)():
+        os.environ.setdefault("RAY_COLOR_PREFIX", "0")  # workers' output forwarded without colour codes
+    if backend.address not in (None, "auto"):
+        _check_reachable(backend.address)
+    main = threading.current_thread() is threading.main_thread()
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)} if main else {}
+    kwargs = dict(include_dashboard=False, logging_level="ERROR", log_to_driver=True, configure_logging=True)
     try:
         if backend.address is None:
-            ray.init(num_cpus=backend.jobs, **kwargs)
+            ray.init(address="local", num_cpus=backend.jobs, **kwargs)
         else:
             ray.init(address=backend.address, **kwargs)
     except (ConnectionError, RuntimeError, ValueError) as exc:
         where = "a local Ray" if backend.address is None else f"the Ray cluster at {backend.address!r}"
-        raise AdaptiveMJError(f"--backend ray: cannot start or reach {where}: {str(exc).splitlines()[0]}") from None
+        hint = (" (Ray Client needs the ray[client] extra: pip install -e '.[ray]')"
+                if "ray[client]" in str(exc) else "")
+        raise AdaptiveMJError(f"--backend ray: cannot start or reach {where}: {str(exc).splitlines()[0]}{hint}") from None
+    finally:
+        for sig, handler in handlers.items():
+            if handler is not None:
+                signal.signal(sig, handler)
     return True
 
 
@@ -226,7 +260,10 @@ def iter_results(jobs: Sequence[Job], backend: Backend, *,
                 yield i, result
     except KeyboardInterrupt as exc:
         _stop(ray, pending, jobs, backend)
-        stop = exc if isinstance(exc, Interrupted) else Interrupted(signal.SIGINT)
+        from adaptive_mj.sim import interrupt
+
+        # Ray's wait may re-raise the CLI's Interrupted as a plain KeyboardInterrupt: the signal is on record
+        stop = exc if isinstance(exc, Interrupted) else Interrupted(interrupt.requested() or signal.SIGINT)
         stop.note = (f"{finished} of {len(jobs)} runs had finished; the run(s) in progress closed their logs "
                      "as 'interrupted'")
         if stop is exc:

@@ -524,6 +524,14 @@ def sweep_notes(base, keys: Sequence[str], seeds: int) -> list[str]:
     return notes
 
 
+def where_text(backend: Backend | None, runs: int) -> str:
+    """Where the runs go, for the opening line: "on Ray (ADDR, logs as bytes)" or "in N processes"."""
+    if backend is not None and backend.kind == "ray":
+        return f"on Ray ({backend.address or 'started here'}, logs as {backend.logs})"
+    jobs = backend.jobs if backend is not None else 1
+    return f"in {min(jobs, max(1, runs))} processes"
+
+
 def main_breaking_point(args, path: Path, doc: dict, base, backend: Backend | None = None) -> int:
     """`sweep --breaking-point KEY=LO:HI --tail-bound B`: the largest value of KEY at which every seed
     passes (no divergence, tail RMS error <= B), by bisection (adaptive_mj.study.breaking_point)."""
@@ -546,7 +554,7 @@ def main_breaking_point(args, path: Path, doc: dict, base, backend: Backend | No
     search = Search(path, base.name, tuple(args.overrides), Stressor.key(key, lo, hi, integer=integer),
                     float(args.tail_bound))
     print(f"breaking point of {key} in [{lo:g}, {hi:g}] for {base.name}: {args.seeds} seed(s), "
-          f"{args.steps} bisection step(s) -> {out}", file=sys.stderr)
+          f"{args.steps} bisection step(s) {where_text(backend, args.jobs)} -> {out}", file=sys.stderr)
     (m,) = search_all([search], seeds=args.seeds, steps=args.steps, logs=out / "logs", n_jobs=args.jobs,
                       backend=backend,
                       on_done=progress_printer(args.seeds * (2 + args.steps), label="runs"))
@@ -675,10 +683,13 @@ def main_sweep(args) -> int:
     path = Path(args.scenario)
     doc, base = _document(path, args.overrides)
     backend = Backend.from_args(args)
-    with session(backend):
-        if getattr(args, "breaking_point", None):
+    if getattr(args, "resume", None) is not None and args.output is not None:
+        raise ScenarioError(f"sweep --resume {args.resume} writes into that folder; -o {args.output} cannot be "
+                            "combined with it")
+    if getattr(args, "breaking_point", None):
+        with session(backend):  # several batches, one Ray session
             return main_breaking_point(args, path, doc, base, backend)
-        return _sweep(args, path, doc, base, backend)
+    return _sweep(args, path, doc, base, backend)  # Ray (if asked for) starts only when a run is left to do
 
 
 def _sweep(args, path: Path, doc: dict, base, backend: Backend) -> int:
@@ -714,8 +725,7 @@ def _sweep(args, path: Path, doc: dict, base, backend: Backend) -> int:
                 _append_row(stream, i, rows([(planned[i][0], result)], root=out)[0])
                 finished.add(i)
         todo = [i for i in range(total) if i not in finished]
-        where = (f"on Ray ({backend.address or 'started here'}, logs as {backend.logs})" if backend.kind == "ray"
-                 else f"in {min(backend.jobs, max(1, len(todo)))} processes")
+        where = where_text(backend, len(todo))
         print(f"sweep: {len(points)} grid point(s) x {args.seeds} seed(s) = {total} runs of {base.name} "
               + (f"({len(finished)} already finished, {len(todo)} to run) " if resume is not None else "")
               + f"{where} -> {out}", file=sys.stderr)
