@@ -24,6 +24,7 @@ else:
 
 from adaptive_mj.log.replay import read_log  # noqa: E402
 
+from test_bench import small_catalogue  # noqa: E402,F401  (a fixture)
 from test_determinism import messages  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -266,3 +267,21 @@ def test_runs_that_fail_or_diverge_are_recorded_once_and_not_retried(cluster, tm
     assert "every node must see the scenarios and models at the same paths" in results[0].error
     assert results[1].status == "diverged" and results[1].summary["reason"]
     assert results[2].status == "ok" and results[2].trajectory is not None
+
+
+def test_bench_on_ray_writes_the_local_report(cluster, small_catalogue, tmp_path, capsys):
+    """`bench --backend ray` (a reduced catalogue, in this process, on the cluster): the report, apart
+    from its line of timings, summary.json and every log's messages equal the local backend's."""
+    import json
+
+    from adaptive_mj.cli import main
+
+    ray_out, local_out = tmp_path / "ray", tmp_path / "local"
+    assert main(["bench", "--quick", "-o", str(ray_out), "--backend", "ray", "--address", cluster]) == 0
+    assert main(["bench", "--quick", "-o", str(local_out), "--jobs", "2"]) == 0
+    reports = [(d / "report.md").read_text().splitlines() for d in (ray_out, local_out)]
+    assert "one Ray task per run" in reports[0][2] and "2 worker processes" in reports[1][2]
+    assert reports[0][3:] == reports[1][3:] and len(reports[0]) > 20
+    summaries = [json.loads((d / "summary.json").read_text()) for d in (ray_out, local_out)]
+    assert summaries[0] == summaries[1]
+    same_logs(ray_out, local_out)
