@@ -131,8 +131,8 @@ def _init_worker() -> None:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)  # blocked by the parent for the spawn
 
 
-def _run_in_worker(job: Job) -> JobResult:
-    """run_job in a worker: SIGTERM interrupts the run (its log closed as "interrupted");
+def run_in_worker(job: Job) -> JobResult:
+    """run_job in a worker process or a Ray task: a stop signal interrupts the run (its log closed as "interrupted");
     once one came, jobs still queued are not started."""
     if interrupt.requested() is not None:
         return JobResult(job, "interrupted", None, error="not started: the runs were interrupted")
@@ -238,7 +238,7 @@ def iter_results(jobs: Sequence[Job], backend: Backend | None = None, *,
                 result = run_job(job)
             except KeyboardInterrupt as exc:
                 if isinstance(exc, Interrupted):
-                    exc.note = _interrupted_note(i, len(jobs))
+                    exc.note = interrupted_note(i, len(jobs))
                 raise
             yield i, result
     else:
@@ -280,7 +280,7 @@ def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
                     with _stop_signals_blocked():  # the first submits spawn the workers
                         while queue and len(futures) < WINDOW_PER_WORKER * n_jobs:
                             i = queue.popleft()
-                            futures[pool.submit(_run_in_worker, jobs[i])] = i
+                            futures[pool.submit(run_in_worker, jobs[i])] = i
                     done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
                     for fut in done:
                         i = futures.pop(fut)  # the future (and its result) is not kept once handed on
@@ -304,7 +304,7 @@ def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
                 if finished:
                     sys.stderr.write("\n")  # end the progress line
                 if isinstance(exc, Interrupted):
-                    exc.note = _interrupted_note(finished, len(jobs))
+                    exc.note = interrupted_note(finished, len(jobs))
                 raise
         for i in sorted(lost, reverse=True):
             job = jobs[i]
@@ -356,7 +356,7 @@ def _prewarm(jobs: Sequence[Job]) -> None:
             continue  # the worker reports it
 
 
-def _interrupted_note(finished: int, total: int) -> str:
+def interrupted_note(finished: int, total: int) -> str:
     return f"{finished} of {total} runs had finished; the run(s) in progress closed their logs as 'interrupted'"
 
 

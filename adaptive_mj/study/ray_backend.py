@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
-from adaptive_mj.study.parallel import STOP_TIMEOUT, Backend, Job, JobResult, run_job
+from adaptive_mj.study.parallel import STOP_TIMEOUT, Backend, Job, JobResult, interrupted_note, run_in_worker
 
 #: Tasks in flight per CPU of the cluster: enough to keep every worker busy while results come
 #: back, few enough that the driver holds a bounded number of results and arguments.
@@ -100,11 +100,7 @@ def run_task(job: Job, logs: str) -> tuple[JobResult, bytes | None]:
         where.unlink(missing_ok=True)  # left by an attempt whose worker died
     try:
         with interrupt.stop_on_signals((signal.SIGINT, signal.SIGTERM)):
-            try:
-                result = run_job(replace(job, log=where))
-            except KeyboardInterrupt as exc:
-                result = JobResult(job, "interrupted", getattr(exc, "summary", None),
-                                   error=str(exc) or "interrupted")
+            result = run_in_worker(replace(job, log=where))
         if where is not None and where.is_file():
             if logs == "bytes":
                 data = where.read_bytes()
@@ -264,8 +260,7 @@ def iter_results(jobs: Sequence[Job], backend: Backend, *,
 
         # Ray's wait may re-raise the CLI's Interrupted as a plain KeyboardInterrupt: the signal is on record
         stop = exc if isinstance(exc, Interrupted) else Interrupted(interrupt.requested() or signal.SIGINT)
-        stop.note = (f"{finished} of {len(jobs)} runs had finished; the run(s) in progress closed their logs "
-                     "as 'interrupted'")
+        stop.note = interrupted_note(finished, len(jobs))
         if stop is exc:
             raise
         raise stop from exc
