@@ -123,7 +123,8 @@ def _backend_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --backend ray: bytes (each log is sent back to this machine; default) or shared "
                         "(each node writes its logs itself: the output folder must be on shared storage)")
     p.add_argument("--retries", type=int, default=3,
-                   help="times a run is submitted again when its worker process (or Ray node) dies (default 3)")
+                   help="times a run is submitted again when its worker process (or Ray node) dies (default 3; "
+                        "local --jobs 1 runs in this process, where there is no worker to lose)")
 
 
 def _scenario_path(arg: str) -> Path:

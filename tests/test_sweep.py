@@ -446,3 +446,64 @@ def test_a_killed_local_worker_loses_no_run(tmp_path):
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert (out / "sweep.csv").read_bytes() == (clean / "sweep.csv").read_bytes()
+
+
+def test_a_run_that_keeps_killing_its_worker_is_blamed_alone(tmp_path, monkeypatch):
+    """Local pool, a run that kills its worker every time (as a segfault would): it is recorded as an
+    error after the retry limit; every other run is ok exactly once (runs that had not started are
+    never charged; the one beside it at the first death is re-run alone and passes)."""
+    import os
+    import time
+
+    from adaptive_mj.study import parallel
+
+    def fake_run_job(job):  # forked workers inherit this
+        job.log.write_bytes(b"started")
+        if job.tag == "crash":
+            os._exit(1)
+        time.sleep(0.05)
+        return parallel.JobResult(job, "ok", {"tag": job.tag})
+
+    monkeypatch.setattr(parallel, "run_job", fake_run_job)
+    monkeypatch.setattr(parallel, "_prewarm", lambda jobs: None)
+    jobs = [parallel.Job(Path("unused.toml"), log=tmp_path / f"{k}.mcap", tag="crash" if k == 3 else f"run{k}")
+            for k in range(12)]
+    retried = []
+    results = list(parallel.iter_results(jobs, parallel.Backend(jobs=2, retries=2),
+                                         on_retry=lambda job, why: retried.append(job.tag)))
+    assert sorted(i for i, _ in results) == list(range(12))
+    by_index = dict(results)
+    assert by_index[3].status == "error" and by_index[3].error == "a worker process died running it (tried 3 times)"
+    assert all(by_index[k].status == "ok" and by_index[k].summary == {"tag": f"run{k}"} for k in range(12) if k != 3)
+    assert retried.count("crash") == 2 and len(retried) <= 3, retried
+
+
+def test_a_worker_dying_while_the_caller_is_busy_loses_no_run(tmp_path, monkeypatch):
+    """The pool breaks while the caller handles a result, so the next submit finds it broken: that
+    run goes back to the queue, nothing is lost, no exception reaches the caller."""
+    import os
+    import time
+
+    from adaptive_mj.study import parallel
+
+    marker = tmp_path / "crashed-once"
+
+    def fake_run_job(job):
+        job.log.write_bytes(b"started")
+        if job.tag == "crash" and not marker.exists():
+            marker.write_text("x")
+            time.sleep(0.3)
+            os._exit(1)
+        return parallel.JobResult(job, "ok", {"tag": job.tag})
+
+    monkeypatch.setattr(parallel, "run_job", fake_run_job)
+    monkeypatch.setattr(parallel, "_prewarm", lambda jobs: None)
+    jobs = [parallel.Job(Path("unused.toml"), log=tmp_path / f"{k}.mcap", tag="crash" if k == 1 else f"run{k}")
+            for k in range(20)]
+    results = []
+    for i, result in parallel.iter_results(jobs, parallel.Backend(jobs=2)):
+        if not results:
+            time.sleep(1.0)  # the crash happens meanwhile
+        results.append((i, result))
+    assert sorted(i for i, _ in results) == list(range(20))
+    assert all(r.status == "ok" for _, r in results)

@@ -264,57 +264,83 @@ WINDOW_PER_WORKER = 4
 
 def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
                      on_retry: Callable[[Job, str], None] | None = None) -> Iterator[tuple[int, JobResult]]:
-    """Results from n_jobs forked workers as they finish. A worker that dies (SIGKILL, out of memory)
-    breaks the pool: every run it held in flight is submitted again to a new pool, at most `retries`
-    times each, after removing its half-written log; then it is recorded as an error."""
+    """Results from n_jobs forked workers as they finish.
+
+    A worker that dies (SIGKILL, out of memory) breaks the pool. Runs that had not started go back
+    to the queue as they were; runs that had started (their log exists) lose their half-written log
+    and are run again, one at a time in a pool of one worker, so that a further death is blamed on
+    its own run alone. Each started run is charged an attempt per death it was in; after `retries`
+    more attempts it is recorded as an error."""
     ctx = _worker_context(jobs)
     finished = 0
     attempts = [0] * len(jobs)
     queue = deque(range(len(jobs)))
-    while queue:
+    suspects: deque[int] = deque()  # in flight when a worker died: run alone next
+
+    def take(fut: cf.Future, i: int) -> JobResult:
+        try:
+            result = fut.result()
+        except Exception as exc:  # noqa: BLE001 (the job could not be sent or returned)
+            result = JobResult(jobs[i], "error", None, error=f"{type(exc).__name__}: {exc}")
+        if result.status == "interrupted":  # a worker was told to stop: stop them all
+            raise Interrupted(signal.SIGTERM)
+        return result
+
+    while queue or suspects:
+        alone = bool(suspects)
+        source, width = (suspects, 1) if alone else (queue, n_jobs)
         lost: list[int] = []
-        with cf.ProcessPoolExecutor(max_workers=n_jobs, mp_context=ctx, initializer=_init_worker) as pool:
+        with cf.ProcessPoolExecutor(max_workers=width, mp_context=ctx, initializer=_init_worker) as pool:
             futures: dict[cf.Future, int] = {}
             try:
-                while queue or futures:
+                while source or futures:
                     with _stop_signals_blocked():  # the first submits spawn the workers
-                        while queue and len(futures) < WINDOW_PER_WORKER * n_jobs:
-                            i = queue.popleft()
-                            futures[pool.submit(run_in_worker, jobs[i])] = i
+                        while source and len(futures) < (1 if alone else WINDOW_PER_WORKER * n_jobs):
+                            i = source.popleft()
+                            try:
+                                futures[pool.submit(run_in_worker, jobs[i])] = i
+                            except cf.process.BrokenProcessPool:  # a worker died since the last wait
+                                source.appendleft(i)
+                                break
+                    if not futures:
+                        break
                     done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
                     for fut in done:
                         i = futures.pop(fut)  # the future (and its result) is not kept once handed on
-                        try:
-                            result = fut.result()
-                        except cf.process.BrokenProcessPool:
+                        if isinstance(fut.exception(), cf.process.BrokenProcessPool):
                             lost.append(i)
                             continue
-                        except Exception as exc:  # noqa: BLE001 (the job could not be sent or returned)
-                            result = JobResult(jobs[i], "error", None, error=f"{type(exc).__name__}: {exc}")
-                        if result.status == "interrupted":  # a worker was told to stop: stop them all
-                            raise Interrupted(signal.SIGTERM)
                         finished += 1
-                        yield i, result
-                    if lost:  # the pool is broken: what it still held is lost too
-                        lost += futures.values()
+                        yield i, take(fut, i)
+                    if lost:  # the pool is broken: what it still holds is lost too, unless it finished
+                        for fut, i in futures.items():
+                            if fut.done() and fut.exception() is None:
+                                finished += 1
+                                yield i, take(fut, i)
+                            else:
+                                lost.append(i)
                         futures.clear()
                         break
-            except KeyboardInterrupt as exc:
+            except (KeyboardInterrupt, GeneratorExit) as exc:  # a signal, or the caller stopped reading
                 _stop_workers(pool)
-                if finished:
-                    sys.stderr.write("\n")  # end the progress line
                 if isinstance(exc, Interrupted):
+                    if finished:
+                        sys.stderr.write("\n")  # end the progress line
                     exc.note = interrupted_note(finished, len(jobs))
                 raise
+        started = {i for i in lost if jobs[i].log is None or jobs[i].log.exists()}
         for i in sorted(lost, reverse=True):
             job = jobs[i]
+            if started and i not in started:
+                queue.appendleft(i)  # never started, and a started run is there to blame: not its fault
+                continue
             if attempts[i] < retries:
                 attempts[i] += 1
                 if job.log is not None:
                     job.log.unlink(missing_ok=True)  # cut short when its worker died
                 if on_retry:
                     on_retry(job, f"attempt {attempts[i] + 1} of {retries + 1} (a worker process died)")
-                queue.appendleft(i)
+                suspects.appendleft(i)
             else:
                 finished += 1
                 yield i, JobResult(job, "error", None, error=f"a worker process died running it (tried "

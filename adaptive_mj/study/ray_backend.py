@@ -204,6 +204,8 @@ def _system_failure(ray, exc: BaseException) -> bool:
 def iter_results(jobs: Sequence[Job], backend: Backend, *,
                  on_retry: Callable[[Job, str], None] | None = None) -> Iterator[tuple[int, JobResult]]:
     """(index, result) for each job as it finishes on Ray, exactly once per job (see the module docstring)."""
+    from adaptive_mj.sim import interrupt
+
     ray = _ray()
     started = _connect(ray, backend)
     remote = ray.remote(run_task).options(num_cpus=1, max_retries=0, name="adaptive-mj-run")
@@ -244,20 +246,30 @@ def iter_results(jobs: Sequence[Job], backend: Backend, *,
                     tried = f" (tried {attempts[i] + 1} times)" if attempts[i] else ""
                     result, data = JobResult(jobs[i], "error", None, error=f"the Ray task failed{tried}: {why}"
                                              + _keep_leftovers(jobs[i], backend)), None
-                if result.status == "interrupted":  # the run was stopped from outside (a node shutting down)
+                if result.status == "interrupted" and interrupt.requested() is not None:  # Ctrl-C reached it too
                     if data is not None:
                         _write_log(jobs[i], data)
-                    raise Interrupted(signal.SIGTERM)
+                    raise Interrupted(interrupt.requested())
+                if result.status == "interrupted":  # stopped from outside: a node shutting down, preempted
+                    if attempts[i] < backend.retries:
+                        attempts[i] += 1
+                        _remove_leftovers(jobs[i], backend)
+                        if on_retry:
+                            on_retry(jobs[i], f"attempt {attempts[i] + 1} of {backend.retries + 1} (its node stopped "
+                                              f"it: {result.error})")
+                        submit(i)
+                        continue
                 if data is not None:
                     error = _write_log(jobs[i], data)
                     if error:
                         result = replace(result, status="error", error=error)
                 finished += 1
                 yield i, result
+    except GeneratorExit:  # the caller stopped reading (its own error): stop the tasks, keep what they wrote
+        _stop(ray, pending, jobs, backend)
+        raise
     except KeyboardInterrupt as exc:
         _stop(ray, pending, jobs, backend)
-        from adaptive_mj.sim import interrupt
-
         # Ray's wait may re-raise the CLI's Interrupted as a plain KeyboardInterrupt: the signal is on record
         stop = exc if isinstance(exc, Interrupted) else Interrupted(interrupt.requested() or signal.SIGINT)
         stop.note = interrupted_note(finished, len(jobs))
@@ -270,9 +282,12 @@ def iter_results(jobs: Sequence[Job], backend: Backend, *,
 
 
 def _remove_leftovers(job: Job, backend: Backend) -> None:
-    """What a dead attempt may have left on shared storage (its NAME.partial)."""
+    """What a dead or stopped attempt may have left on shared storage: its NAME.partial, or the log it
+    renamed before its result was lost (the driver checked that no log was there before the first
+    attempt, so whatever is there now came from one)."""
     if job.log is not None and backend.logs == "shared":
         partial_path(job.log).unlink(missing_ok=True)
+        job.log.unlink(missing_ok=True)
 
 
 def _keep_leftovers(job: Job, backend: Backend) -> str:

@@ -2,7 +2,8 @@
 
     --grid exprs ──► parse_grid (one axis each) ──► grid_points ──► each point validated (scenario.load)
                  ──► one Job per point × seed, each logging to DIR/logs/ ──► parallel.iter_results
-                 ──► a row per run as it finishes, appended to DIR/rows.jsonl (the driver keeps none)
+                 ──► a row per run as it finishes, appended to DIR/rows.jsonl (the driver keeps only the
+                     few columns the summary table and plot need)
                  ──► DIR/sweep.csv, DIR/sweep.json in the planned order, DIR/sweep.png, a table on stdout
 
 A grid axis is ``KEY=LO:HI:N`` (N values linearly spaced from LO to HI, both
@@ -265,33 +266,6 @@ def rows(results: Sequence[tuple[dict[str, Any], JobResult]], *, root: Path) -> 
         row["log"] = log.relative_to(root).as_posix() if log is not None and log.is_file() else ""
         out.append(row)
     return out
-
-
-def columns(table: Sequence[dict[str, Any]]) -> list[str]:
-    """Every column in first-seen order, with `log` last."""
-    cols = list(dict.fromkeys(k for row in table for k in row if k != "log"))
-    return cols + ["log"]
-
-
-def write_csv(table: Sequence[dict[str, Any]], path: Path) -> Path:
-    """sweep.csv: numbers as Python writes them (exact floats), missing as empty, tables as TOML."""
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=columns(table))
-        writer.writeheader()
-        for row in table:
-            writer.writerow({k: "" if v is None else v if isinstance(v, (str, int, float)) else to_toml(v)
-                             for k, v in row.items()})
-    return path
-
-
-def write_json(inputs: dict[str, Any], table: Sequence[dict[str, Any]], path: Path) -> Path:
-    """sweep.json: {"inputs": ..., "counts": {status: n}, "rows": [...]} (non-finite numbers as null)."""
-    counts: dict[str, int] = {}
-    for row in table:
-        counts[row["status"]] = counts.get(row["status"], 0) + 1
-    doc = clean_json({"inputs": inputs, "counts": counts, "rows": list(table)})
-    path.write_text(json.dumps(doc, indent=1, ensure_ascii=False, default=str) + "\n", encoding="utf-8")
-    return path
 
 
 @dataclass(frozen=True)
@@ -632,7 +606,8 @@ def write_tables(stream_path: Path, n: int, inputs: dict[str, Any], out: Path, *
                  keep: Sequence[str]) -> tuple[list[dict[str, Any]], list[str]]:
     """sweep.csv and sweep.json in the planned order, from the rows streamed to `stream_path` in the
     order they finished (one line per run index 0..n-1), holding one row at a time plus each line's
-    offset; returns the rows cut to the columns in `keep` (+ run, status, reason) for the summary,
+    offset. Numbers as Python writes them (exact floats); NaN, inf and missing values as empty cells
+    (JSON null); tables as TOML; returns the rows cut to the columns in `keep` (+ run, status, reason) for the summary,
     and every column's name."""
     offsets: dict[int, int] = {}
     with open(stream_path, "rb") as f:
@@ -715,8 +690,6 @@ def _sweep(args, path: Path, doc: dict, base, backend: Backend) -> int:
         # killed at any point can be resumed
     planned = plan(path, points, seeds=args.seeds, overrides=args.overrides, logs=out / "logs")
     total = len(planned)
-    if backend.kind == "local":
-        backend = replace(backend, jobs=min(backend.jobs, total))
     stream_path = out / ROWS_STREAM
     finished: set[int] = set()
     with open(stream_path, "w", encoding="utf-8") as stream:  # rows as they arrive (bounded driver memory)
@@ -725,6 +698,8 @@ def _sweep(args, path: Path, doc: dict, base, backend: Backend) -> int:
                 _append_row(stream, i, rows([(planned[i][0], result)], root=out)[0])
                 finished.add(i)
         todo = [i for i in range(total) if i not in finished]
+        if backend.kind == "local":
+            backend = replace(backend, jobs=min(backend.jobs, max(1, len(todo))))
         where = where_text(backend, len(todo))
         print(f"sweep: {len(points)} grid point(s) x {args.seeds} seed(s) = {total} runs of {base.name} "
               + (f"({len(finished)} already finished, {len(todo)} to run) " if resume is not None else "")
