@@ -310,13 +310,15 @@ def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
                         if isinstance(fut.exception(), cf.process.BrokenProcessPool):
                             lost.append(i)
                             continue
+                        result = take(fut, i)
                         finished += 1
-                        yield i, take(fut, i)
+                        yield i, result
                     if lost:  # the pool is broken: what it still holds is lost too, unless it finished
                         for fut, i in futures.items():
                             if fut.done() and fut.exception() is None:
+                                result = take(fut, i)
                                 finished += 1
-                                yield i, take(fut, i)
+                                yield i, result
                             else:
                                 lost.append(i)
                         futures.clear()
