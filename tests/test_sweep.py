@@ -448,6 +448,17 @@ def test_a_killed_local_worker_loses_no_run(tmp_path):
     assert (out / "sweep.csv").read_bytes() == (clean / "sweep.csv").read_bytes()
 
 
+
+def _fake_jobs(monkeypatch, fake_run_job, folder: Path, *, n: int, crash: int):
+    """n jobs for the local pool, job `crash` tagged "crash", each run by fake_run_job (the forked
+    workers inherit the patch) with no scenario compiled beforehand."""
+    from adaptive_mj.study import parallel
+
+    monkeypatch.setattr(parallel, "run_job", fake_run_job)
+    monkeypatch.setattr(parallel, "_prewarm", lambda jobs: None)
+    return [parallel.Job(Path("unused.toml"), log=folder / f"{k}.mcap", tag="crash" if k == crash else f"run{k}")
+            for k in range(n)]
+
 def test_a_run_that_keeps_killing_its_worker_is_blamed_alone(tmp_path, monkeypatch):
     """Local pool, a run that kills its worker every time (as a segfault would): it is recorded as an
     error after the retry limit; every other run is ok exactly once (runs that had not started are
@@ -464,10 +475,7 @@ def test_a_run_that_keeps_killing_its_worker_is_blamed_alone(tmp_path, monkeypat
         time.sleep(0.05)
         return parallel.JobResult(job, "ok", {"tag": job.tag})
 
-    monkeypatch.setattr(parallel, "run_job", fake_run_job)
-    monkeypatch.setattr(parallel, "_prewarm", lambda jobs: None)
-    jobs = [parallel.Job(Path("unused.toml"), log=tmp_path / f"{k}.mcap", tag="crash" if k == 3 else f"run{k}")
-            for k in range(12)]
+    jobs = _fake_jobs(monkeypatch, fake_run_job, tmp_path, n=12, crash=3)
     retried = []
     results = list(parallel.iter_results(jobs, parallel.Backend(jobs=2, retries=2),
                                          on_retry=lambda job, why: retried.append(job.tag)))
@@ -496,10 +504,7 @@ def test_a_worker_dying_while_the_caller_is_busy_loses_no_run(tmp_path, monkeypa
             os._exit(1)
         return parallel.JobResult(job, "ok", {"tag": job.tag})
 
-    monkeypatch.setattr(parallel, "run_job", fake_run_job)
-    monkeypatch.setattr(parallel, "_prewarm", lambda jobs: None)
-    jobs = [parallel.Job(Path("unused.toml"), log=tmp_path / f"{k}.mcap", tag="crash" if k == 1 else f"run{k}")
-            for k in range(20)]
+    jobs = _fake_jobs(monkeypatch, fake_run_job, tmp_path, n=20, crash=1)
     results = []
     for i, result in parallel.iter_results(jobs, parallel.Backend(jobs=2)):
         if not results:

@@ -515,6 +515,20 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:
                      manipulator=manipulator)
 
 
+
+def _plugin_params(t, inst, section: str, kind: str) -> dict[str, float]:
+    """A plugin's declared keys read from its table (section "plant" or "law"), each checked against
+    its declared range; a key without a default must be given."""
+    params = {}
+    for p in inst.plugin.params:
+        value = t.number(p.name, p.default, gt=p.gt, ge=p.ge)
+        if value is None:
+            raise ScenarioError(f"{t.where}: {section}.{p.name} is required for {section}.kind = {kind!r} "
+                                f"({inst.distribution} {inst.version})" + (f": {p.doc}" if p.doc else ""))
+        params[p.name] = value
+    return params
+
+
 def _plugin_plant(t: _Table, kind: str, inst, base_dir: Path) -> PlantSpec:
     """plant.kind = an installed plant plugin: plant.model (default: the plugin's own MJCF),
     plant.viscosity, and the plugin's declared keys."""
@@ -522,13 +536,7 @@ def _plugin_plant(t: _Table, kind: str, inst, base_dir: Path) -> PlantSpec:
     backend = t.string("backend", "mujoco", choices=("mujoco",))
     model = _resolve_model(t.string("model", str(inst.plugin.model)), base_dir)
     viscosity = t.number("viscosity", None, ge=0)
-    params = {}
-    for p in inst.plugin.params:
-        value = t.number(p.name, p.default, gt=p.gt, ge=p.ge)
-        if value is None:
-            raise ScenarioError(f"{t.where}: plant.{p.name} is required for plant.kind = {kind!r} "
-                                f"({inst.distribution} {inst.version})" + (f": {p.doc}" if p.doc else ""))
-        params[p.name] = value
+    params = _plugin_params(t, inst, "plant", kind)
     t.finish()
     return PlantSpec(kind=kind, backend=backend, model=model, joint=None, actuator=None, payload=None,
                      payload_mass=None, site="tip", theta=None, g=9.81, density=None, viscosity=viscosity,
@@ -739,13 +747,7 @@ def _plugin_law(t: _Table, kind: str, inst, plant: PlantSpec, order: int) -> Law
     law_order = t.integer("order", order, ge=1)
     if law_order != order:
         raise t.fail("order", f"{order} for plant.kind = {plant.kind!r}", law_order)
-    params = {}
-    for p in inst.plugin.params:
-        value = t.number(p.name, p.default, gt=p.gt, ge=p.ge)
-        if value is None:
-            raise ScenarioError(f"{t.where}: law.{p.name} is required for law.kind = {kind!r} "
-                                f"({inst.distribution} {inst.version})" + (f": {p.doc}" if p.doc else ""))
-        params[p.name] = value
+    params = _plugin_params(t, inst, "law", kind)
     initial = _estimate_table(t, "initial_estimates")
     nominal = _estimate_table(t, "nominal")
     t.finish()
