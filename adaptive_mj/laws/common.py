@@ -23,6 +23,20 @@ class LawStep(NamedTuple):
     s_r_dot: float
 
 
+def dead_zone_open(signal: float, width: float) -> bool:
+    """The dead-zone of every law: adaptation is on while |signal| >= width (off while
+    |signal| < width; width 0 never stops it). signal: s for the 1-DOF laws with the
+    lecture's formula (DeadZoneOn.S), ‖s‖ (Euclidean norm) for Slotine–Li, ỹ = y_d - y
+    (‖q̃‖ for Slotine–Li, x̃ for the first-order law) with the lecture's code
+    (DeadZoneOn.TRACKING_ERROR). A NaN signal never adapts.
+
+    The one place the boundary is decided: DeadZone.adapting, laws.sliding.sliding_law,
+    laws.slotine_li.slotine_li_output and the first-order law call it (the laws as a
+    module global, so that adaptive_mj.sim.native* compiles it with them: plain scalar
+    code, numba nopython)."""
+    return abs(signal) >= width
+
+
 class DeadZoneOn(enum.Enum):
     """Which signal switches adaptation off when it is small."""
 
@@ -42,8 +56,7 @@ class DeadZone:
             raise ValueError(f"dead-zone width must be finite and >= 0, got {self.width}")
 
     def adapting(self, s: float, y_tilde: float) -> bool:
-        signal = s if self.on is DeadZoneOn.S else y_tilde
-        return abs(signal) >= self.width
+        return dead_zone_open(s if self.on is DeadZoneOn.S else y_tilde, self.width)
 
 
 def as_gamma(gamma, n_theta: int) -> np.ndarray:

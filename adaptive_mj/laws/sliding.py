@@ -23,7 +23,7 @@ import numpy as np
 
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
-                                     modify_rate)
+                                     dead_zone_open, modify_rate)
 
 
 def surface_coefficients(order: int, lam: float) -> np.ndarray:
@@ -62,7 +62,7 @@ def sliding_law(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, bo
 
     x (n,), ref (n+1,), theta (n_theta,) = [d̂, p̂...], coeffs (n,) surface coefficients,
     k gain on s, gamma (n_theta,) adaptation gains, adapt: estimates move (False for the
-    baselines), dead-zone: adaptation off while |s| (dz_on_s) or |ỹ| < dz_width,
+    baselines), dead-zone: adaptation off while |s| (dz_on_s) or |ỹ| < dz_width (common.dead_zone_open),
     K, boundary_layer: robust term K sat(s/Phi) (K = 0: none); sigma, e_mod, theta0
     (n_theta,), lower, upper (n_theta,): the robust modifications (common.modify_rate:
     leakage toward theta0, projection onto the box). Writes θ̂' into rate (n_theta,)
@@ -83,7 +83,7 @@ def sliding_law(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, bo
         acc += K * min(1.0, max(-1.0, z))
     u = acc / h_fn(x)
     signal = s if dz_on_s else y_tilde
-    if adapt and abs(signal) >= dz_width:
+    if adapt and dead_zone_open(signal, dz_width):
         rate[0] = s_r_dot * s / gamma[0]
         for j in range(phi.shape[0]):
             rate[j + 1] = -phi[j] * s / gamma[j + 1]

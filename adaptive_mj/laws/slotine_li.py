@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
-                                     modify_rate)
+                                     dead_zone_open, modify_rate)
 
 
 class Mode(enum.IntEnum):
@@ -54,7 +54,7 @@ def reference_terms(x, ref, lam, s, qd_r, qdd_r):
 def slotine_li_output(Y, tau_known, theta, s, kd, gamma, adapt, dz_width, dz_on_s, e_norm,
                       sigma, e_mod, theta0, lower, upper, u, rate):
     """τ = Y θ + τ_known + K_D s into u (m,); θ' = Γ⁻¹ Yᵀ s into rate (unless not adapt,
-    or the dead-zone signal ‖s‖ (dz_on_s) or ‖q̃‖ = e_norm is below dz_width), then the
+    or the dead-zone signal ‖s‖ (dz_on_s) or ‖q̃‖ = e_norm is below dz_width: common.dead_zone_open), then the
     modifications (common.modify_rate with |s| = ‖s‖) when adapting."""
     m, n = Y.shape[0], Y.shape[1]
     s_norm = 0.0
@@ -66,7 +66,7 @@ def slotine_li_output(Y, tau_known, theta, s, kd, gamma, adapt, dz_width, dz_on_
         s_norm += s[j] * s[j]
     s_norm = math.sqrt(s_norm)
     signal = s_norm if dz_on_s else e_norm
-    if adapt and signal >= dz_width:
+    if adapt and dead_zone_open(signal, dz_width):  # signal >= 0: abs() changes nothing
         for i in range(n):
             acc = 0.0
             for j in range(m):
