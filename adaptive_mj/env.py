@@ -58,7 +58,7 @@ rebuilt with every episode's plant, since it reads that plant's regressor;
 The law as the policy (``law="scenario"`` or a law object): the law runs
 inside MuJoCo's control callback at every evaluation of the dynamics, with the
 estimates staged through the integrator's stages and advanced once per
-physics step by ``loop._Controller`` itself (loop.run's Python path; its
+physics step by ``loop.ControlStep`` itself (loop.run's Python path; its
 native numba path computes the same numbers), so an episode is step for step
 the computation ``adaptive-mj run`` does: the tests find bit-identical rows.
 ``law_policy(env)`` (a ``LawPolicy``) is the other design: the law as an
@@ -93,7 +93,7 @@ from dm_env import specs  # noqa: E402
 from adaptive_mj.setup import scenario as scenario_io  # noqa: E402
 from adaptive_mj.setup.build import Setup, build  # noqa: E402
 from adaptive_mj.errors import ScenarioError  # noqa: E402
-from adaptive_mj.sim.loop import _Controller, _divergence, plant_order  # noqa: E402
+from adaptive_mj.sim.loop import Controller, ControlStep, EventQueue, divergence, plant_order  # noqa: E402
 from adaptive_mj.report.metrics import clean_json, summary as make_summary  # noqa: E402
 from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402
 from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402
@@ -119,8 +119,9 @@ def load(scenario, *, law=None, log: str | os.PathLike | None = None, seed: int 
     log: a directory; every episode writes an MCAP log there.
     seed: noise seed (replaces noise.seed); overrides: "key=value" scenario overrides.
     privileged: also observe the true parameters ("theta").
-    n_sub_steps / control_timestep [s]: physics steps per agent step (default 1),
-      or the agent's step, a whole multiple of the physics step; not both.
+    n_sub_steps / control_timestep [s]: physics steps per agent step (default 1, or the
+      scenario's control period under control.mode = "sampled"), or the agent's step, a whole
+      multiple of the physics step; not both.
 
     Raises ScenarioError for a scenario without a MuJoCo plant (first_order, twin backend).
     """
@@ -134,6 +135,10 @@ def load(scenario, *, law=None, log: str | os.PathLike | None = None, seed: int 
         raise ValueError("pass n_sub_steps or control_timestep, not both")
     if control_timestep is not None:
         n_sub_steps = control.compute_n_steps(control_timestep, physics.timestep())
+    if n_sub_steps is None and scn.control.mode == "sampled":  # the agent acts once per control period
+        from adaptive_mj.sim.runner import control_timing
+
+        n_sub_steps = control_timing(scn, setup).steps
     n_sub_steps = 1 if n_sub_steps is None else int(n_sub_steps)
     if n_sub_steps < 1:
         raise ValueError(f"n_sub_steps must be >= 1, got {n_sub_steps}")
@@ -357,13 +362,16 @@ class _Episode:
         self.n_steps = n_steps
         self.state_bound = scn.simulation.state_bound
         self.theta_hat0 = np.asarray(setup.theta_hat0, dtype=float)
-        self.pending = sorted(setup.events, key=lambda e: e.t)
-        self.applied: list[tuple[float, str]] = []
+        self.events = EventQueue(setup.events, plant.dt)
         self.noise_std, self.rng = setup.noise_std, setup.rng
-        self.controller = None
+        self.controller = self.step = None
         if drive:
-            self.controller = _Controller(law, setup.reference, self.theta_hat0, plant.ctrl_range,
-                                          self.order, plant.stages, plant.dt, js, scn.simulation.control_delay)
+            from adaptive_mj.sim.runner import control_timing
+
+            self.controller = Controller(law, setup.reference, self.theta_hat0, plant.ctrl_range, self.order,
+                                         plant.stages, plant.dt, js, control_timing(scn, setup))
+            self.step = ControlStep(plant, self.controller, self.events, state_bound=self.state_bound,
+                                    noise=self._next_noise)
             self._policy = self.controller
         else:
             self._policy = lambda t, x: self._u
@@ -385,13 +393,12 @@ class _Episode:
     def _apply_due_events(self) -> None:
         """Events due at the coming step's start (t_k >= t_event - dt/2), as loop.run applies
         them; applied now, before the observation, so an observation at t_k already sees them."""
-        t_k = self.plant.time
-        while self.pending and t_k >= self.pending[0].t - 0.5 * self.dt:
-            event = self.pending.pop(0)
-            event.apply(self.plant)
-            self.applied.append((t_k, event.label))
-            if self.recorder is not None:
-                self.recorder.write_event(t_k, event.label)
+        self.events.due(self.plant.time, self.plant, self.recorder)
+
+    def _next_noise(self) -> np.ndarray | None:
+        """The noise of the step that starts now (drawn one step ahead: measured_state shows it)."""
+        noise, self.noise = self.noise, self._draw()
+        return noise
 
     def _draw(self) -> np.ndarray | None:
         return self.rng.normal(0.0, self.noise_std) if self.noise_std is not None else None
@@ -429,19 +436,14 @@ class _Episode:
 
     def _one_step(self) -> float:
         """One physics step, as in loop.run; returns -|y_d - y|^2 * dt at its end."""
-        plant, k, ctrl = self.plant, self.k, self.controller
-        t_k = plant.time
-        self.t[k] = t_k
-        self.x[k] = plant.observe()
-        self.theta[k] = plant.true_theta()
-        if ctrl is not None:
-            self.theta_hat[k] = ctrl.theta_hat
-            ctrl.arm(self.noise)
-            plant.step()
-            self.u[k], self.s[k], self.ref[k] = ctrl.step_u, ctrl.step_out.s, ctrl.step_ref
-            ctrl.finish_step()
-            estimates = ctrl.theta_hat
-        else:
+        plant, k = self.plant, self.k
+        if self.step is not None:  # the law: loop.ControlStep, the step adaptive-mj run takes
+            row = self.step.step()
+            self.t[k], self.x[k], self.theta[k], self.theta_hat[k] = row.t, row.x, row.theta, row.theta_hat
+            self.u[k], self.s[k], self.ref[k], reason = row.u, row.s, row.ref, row.reason
+        else:  # the agent: its held action over the step
+            t_k = plant.time
+            self.t[k], self.x[k], self.theta[k] = t_k, plant.observe(), plant.true_theta()
             self.theta_hat[k] = np.nan
             ref = self.reference(t_k, self.order)
             seen = self.x[k] + self.noise if self.noise is not None else self.x[k]
@@ -449,10 +451,9 @@ class _Episode:
             self.ref[k] = ref
             plant.step()
             self.u[k] = self._u
-            estimates = self.theta_hat0
+            self.noise = self._draw()
+            reason = divergence(plant, self.x[k], self.u[k], self.theta_hat0, self.state_bound)
         self.k = k + 1
-        self.noise = self._draw()
-        reason = _divergence(plant, self.x[k], self.u[k], estimates, self.state_bound)
         if reason:
             self.status, self.reason = "diverged", reason
         elif self.k < self.n_steps:
@@ -482,7 +483,7 @@ class _Episode:
                           theta_hat=self.theta_hat[keep].copy(), theta=self.theta[keep].copy(),
                           V=self._V(keep), names=tuple(self.law.names), status=self.status,
                           reason=self.reason, joint_names=self.joint_names,
-                          meta={"dt": self.dt, "order": self.order, "events": list(self.applied)})
+                          meta={"dt": self.dt, "order": self.order, "events": list(self.events.applied)})
 
     def close_log(self, status: str, reason: str) -> None:
         """Write the remaining rows and the summary, and finish the log (no-op without an open log)."""

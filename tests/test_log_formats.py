@@ -40,11 +40,12 @@ def test_format2_logs_read_and_verify(name, joints, capsys):
 
 def test_multi_joint_log_round_trips(tmp_path):
     scn = scenario.load(scenario.SCENARIOS_DIR / "ur5e_payload_swap.toml",
-                        overrides=["simulation.duration=0.5", "events=[{t=0.25, kind='payload_swap', payload='sphere'}]"])
+                        overrides=["simulation.duration=0.5",
+                                   "events=[{t=0.25, kind='payload_swap', payload='sphere'}]"])
     path = tmp_path / "arm.mcap"
     live = execute(scn, log_path=path).trajectory
     run = read_log(path)
-    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 3
+    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 4
     assert run.header["joint_names"] == list(live.joint_names) and len(live.joint_names) == 6
     tr = run.trajectory
     every = run.header["log_every"]

@@ -17,6 +17,7 @@ from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
 from adaptive_mj.sim.loop import run
 from adaptive_mj.plants import manipulator as mp
 from adaptive_mj.plants.arm import MODELS, build_arm_xml
+from adaptive_mj.plants.mujoco_plant import with_userdata
 from adaptive_mj.reference import JointSumOfSines, JointWaypoints
 from test_manipulator import TEST_ARM
 
@@ -32,8 +33,13 @@ SMALL_ARM = TEST_ARM.replace(' integrator="RK4"', "")  # the same arm as tests/t
 UR5E_XML = build_arm_xml(arm=UR5E, payload="tool_offset", site="tip")  # (xml, assets)
 
 
+def _compile(xml: str, assets=None) -> mujoco.MjModel:
+    """As the plants compile a model: with the userdata slot the native callback's context needs."""
+    return with_userdata(mujoco.MjSpec.from_string(xml, assets=assets)).compile()
+
+
 def _ur5e_model() -> mujoco.MjModel:
-    return mujoco.MjModel.from_xml_string(*UR5E_XML)
+    return _compile(*UR5E_XML)
 
 
 def _setup(mode=Mode.ADAPTIVE, unknown="payload", base=False, euler=False, limit=None, dead_zone=None,
@@ -195,7 +201,7 @@ def test_two_controllers_interleaved():
 
 
 def _kernel_arms():
-    arm = mujoco.MjModel.from_xml_string(SMALL_ARM)
+    arm = _compile(SMALL_ARM)
     ur5e = _ur5e_model()
     return [(arm, "all", True), (arm, "all", False), (arm, ["l3a", "tool"], False),
             (ur5e, "all", True), (ur5e, "payload", False)]

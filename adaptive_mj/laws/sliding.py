@@ -73,15 +73,22 @@ def sliding_law(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, bo
 
     The Python laws below call it; adaptive_mj.sim.native compiles this same function.
     """
+    return sliding_law_values(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, boundary_layer,
+                              sigma, e_mod, theta0, lower, upper, phi_fn(x), f_fn(x), h_fn(x), rate)
+
+
+def sliding_law_values(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, boundary_layer,
+                       sigma, e_mod, theta0, lower, upper, phi, f, h, rate):
+    """sliding_law with the regressor's values at x: phi (n_p,), f, h (floats), not its functions
+    (the compiled callback evaluates the plant's functions itself and calls this)."""
     s, s_r_dot, y_tilde = sliding_terms(coeffs, x, ref)
-    phi = phi_fn(x)
-    acc = theta[0] * s_r_dot - f_fn(x) + k * s
+    acc = theta[0] * s_r_dot - f + k * s
     for j in range(phi.shape[0]):
         acc -= phi[j] * theta[j + 1]
     if K > 0.0:
         z = s / boundary_layer
         acc += K * min(1.0, max(-1.0, z))
-    u = acc / h_fn(x)
+    u = acc / h
     signal = s if dz_on_s else y_tilde
     if adapt and dead_zone_open(signal, dz_width):
         rate[0] = s_r_dot * s / gamma[0]

@@ -43,7 +43,7 @@ from mcap.records import MessageIndex
 
 from adaptive_mj.sim.interrupt import deferred
 
-LOG_FORMAT_VERSION = 3  # 3: law_plugin, plant_plugin in the header; 2: joint_names/notes, per-joint fields (1: 1-DOF only)
+LOG_FORMAT_VERSION = 4  # 4: control_mode, control_period in the header; 3: law_plugin, plant_plugin; 2: joint_names/notes, per-joint fields (1: 1-DOF only)
 
 #: Statuses a run can be closed with (replay adds "truncated" for a log that was never closed).
 CLOSE_STATUSES = ("ok", "diverged", "interrupted", "failed")
@@ -140,6 +140,8 @@ class LogHeader:
     notes: tuple[str, ...] = ()  # edits made to the model for the run (e.g. servo_to_torque)
     law_plugin: dict | None = None  # a plugin law: {name, distribution, version, source_sha256}
     plant_plugin: dict | None = None  # a plugin plant: the same fields
+    control_mode: str = "continuous"  # format 4: "continuous" (the law at every stage) or "sampled"
+    control_period: float = 0.0  # format 4: [s] the law's sampling period (continuous: dt)
 
     @property
     def log_every(self) -> int:
@@ -400,6 +402,8 @@ class Recorder:
             "notes": json.dumps(list(h.notes)),
             "law_plugin": json.dumps(h.law_plugin),
             "plant_plugin": json.dumps(h.plant_plugin),
+            "control_mode": h.control_mode,
+            "control_period": repr(float(h.control_period or h.dt)),
             "created_unix": repr(float(h.created_unix)),
         }
         meta.update({VERSION_KEY_PREFIX + k: v for k, v in sorted(h.versions.items())})

@@ -390,6 +390,7 @@ def _decode_header(name: str, scan: _Scan) -> dict:
         "param_names": str_list, "overrides": str_list, "joint_names": str_list, "notes": str_list,
         "law_plugin": json.loads,  # format 3: {name, distribution, version, source_sha256} or null
         "plant_plugin": json.loads,  # format 3: the same, or null
+        "control_period": float,  # format 4: [s]
     }
     header: dict[str, Any] = {}
     versions: dict[str, str] = {}
@@ -404,6 +405,9 @@ def _decode_header(name: str, scan: _Scan) -> dict:
                                  f"is invalid ({e})") from None
     header["versions"] = versions
     header.setdefault("overrides", [])
+    header.setdefault("control_mode", "continuous")  # formats 1-3: the law ran at every stage
+    if "dt" in header:
+        header.setdefault("control_period", header["dt"])
     for key, ok, expected in (
             ("order", lambda v: v >= 1, "an integer >= 1"),
             ("log_every", lambda v: v >= 1, "an integer >= 1"),

@@ -28,7 +28,7 @@ import numpy as np
 from adaptive_mj.errors import ModelError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant, ModelSource
-from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path,
+from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path, with_userdata,
                                              find_joint_and_actuator, scale_body_mass)
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
@@ -128,7 +128,7 @@ def compile_arm(**kwargs) -> mujoco.MjModel:
     """build_arm_xml(...) compiled to an MjModel."""
     xml, assets = build_arm_xml(**kwargs)
     try:
-        return mujoco.MjModel.from_xml_string(xml, assets)
+        return with_userdata(mujoco.MjSpec.from_string(xml, assets=assets)).compile()
     except ValueError as exc:
         raise ModelError(f"{kwargs.get('arm', MODEL_PATH)}: MuJoCo could not compile the model: "
                          f"{str(exc).strip()}") from None

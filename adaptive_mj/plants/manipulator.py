@@ -26,7 +26,7 @@ import mujoco
 import numpy as np
 
 from adaptive_mj.errors import ModelError
-from adaptive_mj.sim.numba_util import with_globals as _with_globals
+from adaptive_mj.numba_util import with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
 from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.mujoco_plant import compile_for_scenario, control_callback, new_warnings, scale_body_mass

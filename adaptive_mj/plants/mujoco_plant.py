@@ -19,6 +19,17 @@ from adaptive_mj.plants import ModelSource
 
 Policy = Callable[[float, np.ndarray], float]
 
+# mjData.userdata slots every plant's model is compiled with: slot 0 holds the address of the
+# compiled control callback's context block (adaptive_mj.sim.native_context), so the callback
+# finds its run's state through the MjData it is given and no address is compiled into it.
+USERDATA_SLOTS = 1
+
+
+def with_userdata(spec: mujoco.MjSpec) -> mujoco.MjSpec:
+    """The spec with at least USERDATA_SLOTS userdata numbers (see above); returns spec."""
+    spec.nuserdata = max(int(spec.nuserdata), USERDATA_SLOTS)
+    return spec
+
 
 @contextlib.contextmanager
 def control_callback(fn) -> Iterator[None]:
@@ -37,7 +48,7 @@ def compile_xml_path(path: str | Path) -> mujoco.MjModel:
     if not path.is_file():
         raise ModelError(f"{path}: model file not found")
     try:
-        return mujoco.MjModel.from_xml_path(str(path))
+        return with_userdata(mujoco.MjSpec.from_file(str(path))).compile()
     except ValueError as exc:  # MuJoCo raises ValueError with its own message
         raise ModelError(f"{path}: MuJoCo could not compile the model: {str(exc).strip()}") from None
 
@@ -247,7 +258,7 @@ def compile_spec(xml: str, assets: dict | None = None, *, where: str, edit=None)
         spec = mujoco.MjSpec.from_string(xml, assets=assets or None)
         if edit is not None:
             edit(spec)
-        model = spec.compile()
+        model = with_userdata(spec).compile()
     except ValueError as exc:
         raise ModelError(f"{where}: MuJoCo could not compile the model: {str(exc).strip()}") from None
     return model, spec.to_xml()

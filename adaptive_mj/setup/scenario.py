@@ -88,6 +88,17 @@ class SimulationSpec:
 
 
 @dataclass(frozen=True)
+class ControlSpec:
+    """[control]: when the law runs. mode "continuous" (at every integrator stage: the lecture's
+    continuous-time law) or "sampled" (once per period [s], a whole multiple of the physics timestep,
+    None = the timestep; the output held by a zero-order hold, hold = "zoh")."""
+
+    mode: str = "continuous"
+    period: float | None = None
+    hold: str = "zoh"
+
+
+@dataclass(frozen=True)
 class ReferenceSpec:
     kind: str
     params: dict[str, Any]
@@ -171,6 +182,7 @@ class Scenario:
     source: str
     text: str
     overrides: tuple[str, ...] = field(default=())
+    control: ControlSpec = ControlSpec()
 
 
 # --------------------------------------------------------------------------
@@ -409,13 +421,14 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
             raise ScenarioError(f"{where}: disturbance is not supported for plant.kind = 'manipulator' yet; "
                                 "remove it")
     events = _events(top.get("events", []), top, plant, sim)
+    control = _control(top.table("control", {}), sim)
     log = top.table("log", {})
     log_rate = log.number("rate_hz", 100.0, gt=0)
     log.finish()
     top.finish()
     return Scenario(name=name, description=description, plant=plant, simulation=sim, reference=reference,
                     law=law, noise=noise, disturbance=disturbance, events=events, log_rate_hz=log_rate,
-                    source=where, text=text, overrides=overrides)
+                    source=where, text=text, overrides=overrides, control=control)
 
 
 def _model_from_command_line(doc: dict, overrides, base_dir: Path | None, where: str) -> None:
@@ -589,6 +602,19 @@ def _simulation(t: _Table, plant: PlantSpec, order: int) -> SimulationSpec:
     t.finish()
     return SimulationSpec(integrator=integrator, timestep=timestep, duration=duration, initial_state=x0,
                           state_bound=bound, control_delay=delay, python_callback=python_callback)
+
+
+def _control(t: _Table, sim: SimulationSpec) -> ControlSpec:
+    period = t.number("period", None, gt=0)
+    mode = t.string("mode", "continuous" if period is None else "sampled", choices=("continuous", "sampled"))
+    hold = t.string("hold", "zoh", choices=("zoh",))
+    if mode == "continuous" and period is not None and period != sim.timestep:
+        raise t.fail("period", "left out under control.mode = 'continuous' (the law runs at every integrator "
+                               "stage); set control.mode = 'sampled' for a sampled-data controller", period)
+    if period is not None and period > sim.duration:
+        raise t.fail("period", f"<= simulation.duration ({sim.duration})", period)
+    t.finish()
+    return ControlSpec(mode=mode, period=period, hold=hold)
 
 
 _REFERENCE_KEYS = {

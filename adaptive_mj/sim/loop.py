@@ -1,38 +1,43 @@
-"""The closed loop: the law runs on plant state at every evaluation of the
-dynamics (inside MuJoCo's control callback for MuJoCo plants), and the
-estimates advance exactly once per physics step.
+"""The closed loop: one definition of a control step, driven on the Python path (the policy inside
+MuJoCo's control callback, or an analytic twin's stages), on the native path (a compiled
+callback, adaptive_mj.sim.native / native_manipulator) and by adaptive_mj.env.
 
-How the estimates are integrated. MuJoCo calls the control callback once
-per step with Euler/implicit integrators and four times with RK4, at the
-stage states of the classic Runge-Kutta tableau. The controller counts the
-calls since the step began and gives the law the matching stage estimate:
-    RK4:   θ̂_1 = θ̂_k,  θ̂_2 = θ̂_k + h/2 k_1,  θ̂_3 = θ̂_k + h/2 k_2,  θ̂_4 = θ̂_k + h k_3
-           θ̂_{k+1} = θ̂_k + h/6 (k_1 + 2 k_2 + 2 k_3 + k_4)
-    Euler: θ̂_{k+1} = θ̂_k + h k_1
-(k_i: the law's θ̂' at stage i). So plant and estimates are integrated
-together as one ODE by the same method, and the estimates advance exactly
-once per physics step. Calls past the last stage (an extra mj_forward) see
-θ̂_k and change nothing.
+The order of a control step, written once:
+    events due → measure (true state + the step's noise) → reference → law (at the integrator's
+    stages, or once per control period) → limits (clamp) → delay line → apply → physics →
+    advance the estimates → divergence check → the step's row
+`ControlStep.step` runs it on the Python path; inside the callback, `Controller.__call__` runs
+"measure … apply" with the functions of adaptive_mj.sim.stage, which the compiled callbacks also
+run (the same source compiled by numba). The native path runs the callback over chunks of steps
+and does the events, divergence check and rows between chunks, in the same order.
 
-A law with a parameter projection (``law.bounds`` = (lower, upper)) has every
-stage estimate and every θ̂_{k+1} clipped into its box, so no estimate the law
-sees or the log records ever leaves it. A law with filters of its own
-(composite adaptation: ``law.reset()``, ``law.step_begins(x)``,
-``law.step_ends(xs, us, weights, h)``) is reset when the controller is made, told
-the measured state at each step's start, and given the stage states, stage
-controls and RK4 weights b_i of each step once it is done.
+How the estimates are integrated (adaptive_mj.sim.stage): under continuous control the law is
+evaluated at every stage MuJoCo's integrator calls the callback at, with the stage estimate of the
+classic Runge-Kutta tableau, and θ̂ advances once per step with the tableau's weights; under
+sampled-data control (`ControlTiming.mode`), once per control period, the output held.
+
+A law with a parameter projection (``law.bounds`` = (lower, upper)) has every stage estimate and
+every θ̂_{k+1} clipped into its box. A law with filters of its own (composite adaptation:
+``law.reset()``, ``law.step_begins(x)``, ``law.step_ends(xs, us, weights, h)``) is reset when the
+controller is made, told the measured state at each step's start, and given the stage states,
+stage controls and RK4 weights of each step once it is done (continuous control only).
 """
 from __future__ import annotations
 
 import math
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Callable, Protocol, Sequence
+from typing import Callable, NamedTuple, Protocol, Sequence
 
 import numpy as np
 
 from adaptive_mj.errors import Interrupted
+from adaptive_mj.sim import stage as st
+from adaptive_mj.sim.stage import TABLEAU, ControlTiming
 from adaptive_mj.trajectory import Trajectory
+
+__all__ = ["Event", "ControlTiming", "Controller", "ControlStep", "StepRow", "Sink", "run", "plant_order",
+           "divergence", "TABLEAU", "NATIVE_CHUNK"]
 
 
 @dataclass(frozen=True)
@@ -44,109 +49,171 @@ class Event:
     apply: Callable[[object], None]
 
 
-# Per stage count: increments a_i (θ̂_i = θ̂_k + h a_i k_{i-1}) and weights b_i. For the
-# classic RK4 tableau a_i are also the stage-time offsets c_i (MuJoCo evaluates stage i at
-# t + c_i h), which adaptive_mj.sim.native uses to evaluate the reference ahead of a chunk.
-TABLEAU = {
-    1: ((0.0,), (1.0,)),
-    4: ((0.0, 0.5, 0.5, 1.0), (1 / 6, 1 / 3, 1 / 3, 1 / 6)),
-}
+class Controller:
+    """The policy the plant calls at every stage: see the module docstring and adaptive_mj.sim.stage.
 
-
-class _Controller:
-    """The policy the plant calls at every stage: the law on (noisy) measured
-    state with the stage's estimate; see the module docstring."""
+    theta_hat: (n_theta,) the estimate at the step's start; after each step, step_u (the applied
+    control), step_s and step_ref hold what the step's row records."""
 
     def __init__(self, law, reference, theta_hat0, ctrl_range, order: int, stages: int, dt: float,
-                 joint_shape: tuple = (), delay: int = 0):
-        self.law = law
-        self.reference = reference
-        self.order = order
+                 joint_shape: tuple = (), timing: ControlTiming | None = None):
+        self.law, self.reference, self.order = law, reference, order
+        self.timing = timing or ControlTiming(period=dt)
         self.theta_hat = np.array(theta_hat0, dtype=float)
+        n_theta = self.theta_hat.shape[0]
         self.lo, self.hi = ctrl_range if ctrl_range is not None else (-math.inf, math.inf)
         self.joints = bool(joint_shape)
         self.noise = np.zeros((order,) + tuple(joint_shape))
         self.inc, self.weights = TABLEAU[stages]
         self.h = dt
-        self.stage = len(self.inc)
-        self.prev_rate = None
-        self.rate_sum = np.zeros_like(self.theta_hat)
-        self.step_out = None
-        self.step_ref = None
+        self.stage, self.step_index = len(self.inc), 0
+        self.prev, self.rsum, self.th = np.zeros(n_theta), np.zeros(n_theta), np.zeros(n_theta)
+        box = getattr(law, "bounds", None)
+        self.lower, self.upper = box if box is not None else (np.full(n_theta, -np.inf), np.full(n_theta, np.inf))
+        self.held = self.step_out = self.step_ref = None
         self.step_u = 0.0
-        bounds = getattr(law, "bounds", None)
-        self.lower, self.upper = bounds if bounds is not None else (None, None)
-        # A control delay of D >= 1 physics steps: the step's applied control is the (clamped)
-        # stage-0 control computed D steps earlier, held over all its stages; zero before that.
-        self.delay = int(delay)
-        self.sent: list = []  # stage-0 controls of the last D steps, oldest first
-        self._ref_t, self._ref_v = (math.nan, math.nan), (None, None)  # see __call__
+        self.ring: list = [None] * (self.timing.delay + 1)  # the last D + 1 stage-0 controls
+        self.delayed = None
+        self._ref_t, self._ref_v = (math.nan, math.nan), (None, None)
         self.filters = hasattr(law, "step_ends")  # a law with filters of its own (composite)
+        if self.filters and self.timing.sampled:
+            raise ValueError("composite adaptation runs under continuous control only")
         self.stage_xs: list = []
         self.stage_us: list = []
         if hasattr(law, "reset"):
             law.reset()
 
     def arm(self, noise: np.ndarray | None) -> None:
-        """Mark the start of a physics step."""
+        """Mark the start of a physics step; noise: that step's measurement noise (None: none)."""
         if noise is not None:
             self.noise = noise
         self.stage = 0
-        self.rate_sum = np.zeros_like(self.theta_hat)
 
-    def __call__(self, t: float, x: np.ndarray) -> float:
-        i = self.stage
+    def _ref(self, t: float):
         # RK4 evaluates stages 2 and 3 at the same t + h/2, and stage 4 at the next step's t:
         # the last two reference evaluations are kept (same t, same numbers)
         if t == self._ref_t[0]:
-            ref = self._ref_v[0]
-        elif t == self._ref_t[1]:
-            ref = self._ref_v[1]
-        else:
-            ref = self.reference(t, self.order)
-            self._ref_t = (t, self._ref_t[0])
-            self._ref_v = (ref, self._ref_v[0])
-        if i == 0 or i >= len(self.inc):
-            theta_i = self.theta_hat
-        else:
-            theta_i = self.theta_hat + (self.h * self.inc[i]) * self.prev_rate
-            if self.lower is not None:
-                theta_i = np.minimum(np.maximum(theta_i, self.lower), self.upper)
+            return self._ref_v[0]
+        if t == self._ref_t[1]:
+            return self._ref_v[1]
+        ref = self.reference(t, self.order)
+        self._ref_t, self._ref_v = (t, self._ref_t[0]), (ref, self._ref_v[0])
+        return ref
+
+    def __call__(self, t: float, x: np.ndarray):
+        i = self.stage
+        if i >= len(self.inc):  # a call past the step's stages (an extra mj_forward): change nothing
+            return self.step_u
+        sampled = self.timing.sampled
+        if not sampled or (i == 0 and st.is_sample_step(self.step_index, self.timing.steps)):
+            self.held = self._evaluate(t, x, i)
+        u = self.held[0]
+        if self.timing.delay:
+            if i == 0:
+                put, get = st.delay_slot(self.step_index, self.timing.delay)
+                self.ring[put] = u
+                self.delayed = self.ring[get] if get >= 0 else 0.0 * u
+            u = self.delayed
+        if self.filters:
+            self.stage_us.append(u)
+        if i == 0:
+            self.step_u, self.step_out, self.step_ref = u, self.held[1], self.held[2]
+        self.stage = i + 1
+        return u
+
+    def _evaluate(self, t: float, x: np.ndarray, i: int):
+        """The law at stage i on the measured state: (clamped u, its LawStep, the reference)."""
+        ref = self._ref(t)
+        st.stage_estimate(self.theta_hat, self.prev, self.inc[i], self.h, self.lower, self.upper, self.th)
         seen = x + self.noise
-        if self.filters and i < len(self.inc):
+        if self.filters:
             if i == 0:
                 self.law.step_begins(seen)
                 self.stage_xs, self.stage_us = [], []
             self.stage_xs.append(seen)
-        out = self.law(t, seen, ref, theta_i)
+        out = self.law(t, seen, ref, self.th.copy())
         u = np.minimum(np.maximum(out.u, self.lo), self.hi) if self.joints else min(max(out.u, self.lo), self.hi)
-        if self.delay and i < len(self.inc):
-            if i == 0:
-                self.sent.append(u)
-            held = self.sent[-1 - self.delay] if len(self.sent) > self.delay else 0.0 * u
-            u = held
-        if i < len(self.inc):
-            if self.filters:
-                self.stage_us.append(u)
-            self.prev_rate = out.theta_hat_dot
-            self.rate_sum = self.rate_sum + self.weights[i] * out.theta_hat_dot
-            if i == 0:
-                self.step_out, self.step_ref, self.step_u = out, ref, u
-            self.stage = i + 1
-        return u
+        weight = 1.0 if self.timing.sampled else self.weights[i]
+        st.accumulate_rate(self.rsum, self.prev, np.asarray(out.theta_hat_dot, dtype=float), weight)
+        return u, out, ref
 
     def finish_step(self) -> None:
-        """Advance the estimates once, with the stages' weighted rates."""
+        """Advance the estimates: every step (continuous), or at the end of a control period (sampled)."""
         if self.stage != len(self.inc):
             raise RuntimeError(f"the plant called the controller {self.stage} times in a step, "
                                f"expected {len(self.inc)}")
-        self.theta_hat = self.theta_hat + self.h * self.rate_sum
-        if self.delay and len(self.sent) > self.delay:
-            del self.sent[0]
-        if self.lower is not None:
-            self.theta_hat = np.minimum(np.maximum(self.theta_hat, self.lower), self.upper)
+        if not self.timing.sampled:
+            st.advance_estimates(self.theta_hat, self.rsum, self.h, self.lower, self.upper)
+        elif st.period_ends(self.step_index, self.timing.steps):
+            st.advance_estimates(self.theta_hat, self.rsum, self.timing.period, self.lower, self.upper)
+        self.step_index += 1
         if self.filters:
             self.law.step_ends(self.stage_xs, self.stage_us, self.weights, self.h)
+
+
+class StepRow(NamedTuple):
+    """One physics step's row: t [s]; x (n,)+J true state at the step's start; theta (n_theta,) true
+    parameters; theta_hat (n_theta,) estimate at the step's start; u (J) applied control; s (J);
+    ref (n+1,)+J; reason: '' or the divergence found after the step."""
+
+    t: float
+    x: np.ndarray
+    theta: np.ndarray
+    theta_hat: np.ndarray
+    u: object
+    s: object
+    ref: np.ndarray
+    reason: str
+
+
+class EventQueue:
+    """Events not yet applied, in time order; `due` applies those due at a step's start."""
+
+    def __init__(self, events: Sequence[Event], dt: float):
+        self.pending = sorted(events, key=lambda e: e.t)
+        self.applied: list[tuple[float, str]] = []
+        self.dt = dt
+
+    def due(self, t_k: float, plant, sink=None) -> None:
+        """Apply every event with t_k >= t_event - dt/2 (told to sink as it is applied)."""
+        while self.pending and t_k >= self.pending[0].t - 0.5 * self.dt:
+            event = self.pending.pop(0)
+            event.apply(plant)
+            self.applied.append((t_k, event.label))
+            if sink is not None:
+                sink.write_event(t_k, event.label)
+
+    def steps_to_next(self, t_k: float) -> int | None:
+        """Whole steps from t_k until the next event is due (at least 1), or None without one."""
+        if not self.pending:
+            return None
+        return max(1, math.ceil((self.pending[0].t - 0.5 * self.dt - t_k) / self.dt))
+
+
+class ControlStep:
+    """The control step on the Python path (see the module docstring): `step()` runs one physics
+    step of `plant` under `controller` and returns its StepRow. adaptive_mj.env drives it one agent
+    step at a time; `run` drives it to the end."""
+
+    def __init__(self, plant, controller: Controller, events: EventQueue, *, state_bound: float,
+                 noise: Callable[[], np.ndarray | None], sink=None):
+        self.plant, self.controller, self.events = plant, controller, events
+        self.state_bound, self.noise, self.sink = state_bound, noise, sink
+
+    def apply_due_events(self) -> None:
+        self.events.due(self.plant.time, self.plant, self.sink)
+
+    def step(self) -> StepRow:
+        """Events due must have been applied (apply_due_events) before the step's state is read."""
+        plant, ctrl = self.plant, self.controller
+        t_k, x_k, theta = plant.time, plant.observe(), plant.true_theta()
+        theta_hat = ctrl.theta_hat.copy()
+        ctrl.arm(self.noise())
+        plant.step()
+        u = ctrl.step_u
+        row = StepRow(t_k, x_k, theta, theta_hat, u, ctrl.step_out.s, ctrl.step_ref, "")
+        ctrl.finish_step()
+        return row._replace(reason=divergence(plant, x_k, u, ctrl.theta_hat, self.state_bound))
 
 
 class Sink(Protocol):
@@ -164,197 +231,209 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
         noise_std: Sequence[float] | None = None, rng: np.random.Generator | None = None,
         events: Sequence[Event] = (), state_bound: float = math.inf,
         sink: Sink | None = None, sink_every: int = 1000, native: bool | None = None,
-        control_delay: int = 0) -> Trajectory:
+        control_delay: int = 0, control_mode: str = "continuous", control_period: float | None = None) -> Trajectory:
     """Run plant under law tracking reference for `duration` seconds.
 
     theta_hat0: (n_theta,) initial estimates (the nominal values for baselines).
-    noise_std: (n,) std of Gaussian noise added to each measured state
-    component the law sees (drawn once per physics step from rng).
-    events: applied at the first step whose start time is >= event.t.
-    state_bound: |x_i| above this counts as divergence.
-    sink: receives the rows every `sink_every` steps and at the end, and each
-    event as it is applied, so a killed run loses at most one block.
-    control_delay: D >= 0 whole physics steps between computing a control and applying
-    it (the stage-0 control of step k is applied, held, over step k + D; zero before).
-    native: run the law as a compiled MuJoCo callback (adaptive_mj.sim.native);
-    None = whenever the plant and law support it. The two paths agree to
-    ~1e-12; on the native path a MuJoCo warning is detected per chunk of
-    NATIVE_CHUNK steps instead of per step.
+    noise_std: (n,) std of Gaussian noise added to each measured state component the law sees
+    (drawn once per physics step from rng). events: applied at the first step whose start time is
+    >= event.t. state_bound: |x_i| above this counts as divergence. sink: receives the rows every
+    `sink_every` steps and at the end, and each event as it is applied, so a killed run loses at
+    most one block. control_delay: D >= 0 whole physics steps between computing a control and
+    applying it (zero before). control_mode: "continuous" (the law at every integrator stage) or
+    "sampled" (once per control_period [s], a whole multiple of the timestep; default the timestep).
+    native: run the law as a compiled MuJoCo callback; None = whenever the plant and law support it.
 
-    Returns a Trajectory with one row per physics step (the state at the step's
-    start and what was applied during it). A run that diverges stops at that
-    step and comes back with status "diverged" and the reason. A KeyboardInterrupt
-    (SIGINT, or SIGTERM through the CLI) first hands the sink every whole row, then
-    comes out as errors.Interrupted carrying them (status "interrupted").
+    Returns a Trajectory with one row per physics step (the state at the step's start and what was
+    applied during it). A run that diverges stops at that step with status "diverged" and the
+    reason. A KeyboardInterrupt (SIGINT, or SIGTERM through the CLI) first hands the sink every
+    whole row, then comes out as errors.Interrupted carrying them (status "interrupted").
     """
     order = plant_order(plant)
-    joint_shape = tuple(getattr(plant, "joint_shape", ()))  # () for 1-DOF plants, (m,) for m joints
     if order != law.order:
         raise ValueError(f"law of order {law.order} on a plant of order {order}")
-    names = tuple(law.names)
-    n_theta = len(names)
     theta_hat0 = np.asarray(theta_hat0, dtype=float)
-    if theta_hat0.shape != (n_theta,):
-        raise ValueError(f"theta_hat0 must have {n_theta} entries {names}, got {theta_hat0.shape}")
-    dt = plant.dt
-    n_steps = int(round(duration / dt))
-    if noise_std is not None:
-        noise_std = np.asarray(noise_std, dtype=float)
-        if rng is None:
-            raise ValueError("noise_std needs an rng (np.random.Generator)")
+    if theta_hat0.shape != (len(law.names),):
+        raise ValueError(f"theta_hat0 must have {len(law.names)} entries {tuple(law.names)}, got {theta_hat0.shape}")
+    if noise_std is not None and rng is None:
+        raise ValueError("noise_std needs an rng (np.random.Generator)")
+    timing = ControlTiming.of(plant.dt, mode=control_mode, period=control_period, delay=control_delay)
+    rows = _Rows(plant, law, int(round(duration / plant.dt)), sink, sink_every)
+    queue = EventQueue(events, plant.dt)
+    rows.events = queue.applied
+    noise = _NoiseSource(noise_std, rng, (order,) + tuple(getattr(plant, "joint_shape", ())))
+    nc = _native_controller(plant, law, reference, theta_hat0, timing, native)
+    with _interruptible(rows.stopped):
+        if nc is not None:
+            status, reason = _run_native(plant, nc, rows, queue, noise, state_bound)
+        else:
+            ctrl = Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, plant.dt,
+                              tuple(getattr(plant, "joint_shape", ())), timing)
+            step = ControlStep(plant, ctrl, queue, state_bound=state_bound, noise=noise.draw, sink=sink)
+            status, reason = _run_python(plant, step, rows)
+    meta = {"native": nc is not None, "events": queue.applied, **timing.describe()}
+    if control_delay:
+        meta["control_delay"] = int(control_delay)  # [physics steps]
+    return rows.result(rows.k, status, reason, meta)
 
-    t = np.empty(n_steps)
-    x = np.empty((n_steps, order) + joint_shape)
-    u = np.empty((n_steps,) + joint_shape)
-    s = np.empty((n_steps,) + joint_shape)
-    ref = np.empty((n_steps, order + 1) + joint_shape)
-    theta_hat = np.empty((n_steps, n_theta))
-    # True θ is piecewise constant (it changes only at events): kept as segments
-    # (first row, value) and expanded only where asked, so a long run does not hold an
-    # (n_steps, n_theta) copy of a constant.
-    segments: list[tuple[int, np.ndarray]] = []
 
-    def note_theta(row: int, value: np.ndarray) -> None:
-        if not segments or (segments[-1][1] is not value and not np.array_equal(segments[-1][1], value)):
-            segments.append((row, np.array(value, dtype=float)))
+def _run_python(plant, step: ControlStep, rows: _Rows) -> tuple[str, str]:
+    """Drive the Python control step to the end or the first divergence: (status, reason)."""
+    with plant.controlled_by(step.controller):
+        while rows.k < rows.n:
+            step.apply_due_events()
+            row = step.step()
+            rows.put(row)
+            if row.reason:
+                return "diverged", row.reason
+    return "ok", ""
 
-    def theta_rows(a: int, b: int) -> np.ndarray:
+
+def _run_native(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
+    """Drive the native callback chunk by chunk: (status, reason)."""
+    with plant.controlled_natively(nc.callback):
+        while rows.k < rows.n:
+            k, t_k = rows.k, plant.time
+            queue.due(t_k, plant, rows.sink)
+            n = min(NATIVE_CHUNK, rows.n - k, rows.every - k % rows.every)
+            to_event = queue.steps_to_next(t_k)
+            if to_event is not None:  # stop at the step where the next event applies
+                n = min(n, to_event)
+            theta_now = plant.true_theta()
+            block = nc.chunk(n, noise.draw_block(n))
+            bad, reason = first_divergence(plant, block[1], block[2], block[5], nc.theta, state_bound)
+            rows.put_block(block, theta_now, n if bad is None else bad)
+            if bad is not None:
+                return "diverged", reason
+    return "ok", ""
+
+
+def _native_controller(plant, law, reference, theta_hat0, timing: ControlTiming, native: bool | None):
+    """The native controller for this run, or None for the Python path (native False, or not supported;
+    a law plugin numba cannot compile falls back with one line on stderr)."""
+    if getattr(plant, "joint_shape", ()):  # a manipulator: its own compiled callback (regressor inside)
+        from adaptive_mj.sim import native_manipulator as native_mod
+        make = native_mod.NativeManipulatorController
+    else:
+        from adaptive_mj.sim import native as native_mod
+        make = native_mod.NativeController
+    if native is None:
+        native = native_mod.supported(plant, law)
+    if not native:
+        return None
+    try:
+        return make(plant, law, reference, theta_hat0, NATIVE_CHUNK, control=timing)
+    except Exception as exc:  # a user's law numba cannot compile: say why, run it in Python
+        plugin = getattr(law, "installed", None)
+        if plugin is None:
+            raise
+        import sys
+
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        print(f"adaptive-mj: note: law plugin {plugin.name!r} could not be compiled for the native callback "
+              f"({type(exc).__name__}: {first[:200]}); running it through the Python callback", file=sys.stderr)
+        return None
+
+
+class _NoiseSource:
+    """Measurement noise of shape `shape` per physics step from rng (None without noise_std)."""
+
+    def __init__(self, std, rng, shape: tuple):
+        self.std = None if std is None else np.asarray(std, dtype=float)
+        self.rng, self.shape = rng, shape
+
+    def draw(self) -> np.ndarray | None:
+        return self.rng.normal(0.0, self.std) if self.std is not None else None
+
+    def draw_block(self, rows: int) -> np.ndarray | None:
+        return self.rng.normal(0.0, self.std, size=(rows,) + self.shape) if self.std is not None else None
+
+
+class _Rows:
+    """A run's rows (one per physics step), flushed to the sink in blocks with V computed on the way.
+
+    True θ is piecewise constant (it changes only at events): kept as segments (first row, value)
+    and expanded only where asked, so a long run holds no (n_steps, n_theta) copy of a constant."""
+
+    def __init__(self, plant, law, n: int, sink, every: int):
+        order, js, nth = plant_order(plant), tuple(getattr(plant, "joint_shape", ())), len(law.names)
+        self.plant, self.law, self.n, self.sink, self.every, self.nth = plant, law, n, sink, every, nth
+        self.t, self.x = np.empty(n), np.empty((n, order) + js)
+        self.u, self.s = np.empty((n,) + js), np.empty((n,) + js)
+        self.ref, self.theta_hat = np.empty((n, order + 1) + js), np.empty((n, nth))
+        self.V = np.empty(n)  # filled block by block (no full-length temporaries at the end)
+        self.segments: list[tuple[int, np.ndarray]] = []
+        self.k = self.flushed = 0
+        self.events: list[tuple[float, str]] = []  # the events applied so far (the run's EventQueue.applied)
+
+    def note_theta(self, row: int, value: np.ndarray) -> None:
+        last = self.segments[-1][1] if self.segments else None
+        if last is None or (last is not value and not np.array_equal(last, value)):
+            self.segments.append((row, np.array(value, dtype=float)))
+
+    def put(self, row: StepRow) -> None:
+        k = self.k
+        self.t[k], self.x[k], self.u[k], self.s[k], self.ref[k] = row.t, row.x, row.u, row.s, row.ref
+        self.theta_hat[k] = row.theta_hat
+        self.note_theta(k, row.theta)
+        self.k = k + 1
+        if self.k % self.every == 0:
+            self.flush(self.k)
+
+    def put_block(self, block, theta: np.ndarray, keep: int) -> None:
+        """A native chunk's (t, x, u, s, ref, theta_hat) rows, of which the first `keep` count."""
+        k, n = self.k, len(block[0])
+        rows = slice(k, k + n)
+        self.t[rows], self.x[rows], self.u[rows], self.s[rows], self.ref[rows], self.theta_hat[rows] = block
+        self.note_theta(k, theta)
+        self.k = k + keep
+        if self.k % self.every == 0:
+            self.flush(self.k)
+
+    def theta_rows(self, a: int, b: int) -> np.ndarray:
         """(b - a, n_theta) true θ of rows a..b-1."""
-        if len(segments) == 1:
-            return np.broadcast_to(segments[0][1], (b - a, n_theta))
-        out = np.empty((b - a, n_theta))
-        for i, (start, value) in enumerate(segments):
-            end = segments[i + 1][0] if i + 1 < len(segments) else b
+        if len(self.segments) == 1:
+            return np.broadcast_to(self.segments[0][1], (b - a, self.nth))
+        out = np.empty((b - a, self.nth))
+        for i, (start, value) in enumerate(self.segments):
+            end = self.segments[i + 1][0] if i + 1 < len(self.segments) else b
             lo, hi = max(start, a), min(end, b)
             if lo < hi:
                 out[lo - a:hi - a] = value
         return out
 
-    V = np.empty(n_steps)  # filled block by block (no full-length temporaries at the end)
-
-    ctrl = _Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, dt, joint_shape,
-                       control_delay)
-    pending = sorted(events, key=lambda e: e.t)
-    applied: list[tuple[float, str]] = []
-    status, reason, k = "ok", "", 0
-    flushed = 0
-
-    def flush(upto: int) -> None:
+    def flush(self, upto: int) -> None:
         """Compute V for rows not yet flushed and hand them to the sink."""
-        nonlocal flushed
-        if upto > flushed:
-            rows = slice(flushed, upto)
-            flushed = upto  # first: a write cut short by an interruption is never repeated
-            theta = theta_rows(rows.start, rows.stop)
-            if joint_shape:  # V = ½ sᵀ M(q) s + ...: the plant gives M at the logged q
-                V[rows] = law.lyapunov(s[rows], theta_hat[rows], theta, M=plant.mass_matrices(x[rows, 0]))
-            else:
-                V[rows] = law.lyapunov(s[rows], theta_hat[rows], theta)
-            if sink is not None:
-                sink.write_rows(rows.start, t[rows], x[rows], u[rows], s[rows], ref[rows],
-                                theta_hat[rows], theta, V[rows])
+        if upto <= self.flushed:
+            return
+        rows = slice(self.flushed, upto)
+        self.flushed = upto  # first: a write cut short by an interruption is never repeated
+        theta = self.theta_rows(rows.start, rows.stop)
+        if self.x.ndim > 2:  # V = ½ sᵀ M(q) s + ...: the plant gives M at the logged q
+            M = self.plant.mass_matrices(self.x[rows, 0])
+            self.V[rows] = self.law.lyapunov(self.s[rows], self.theta_hat[rows], theta, M=M)
+        else:
+            self.V[rows] = self.law.lyapunov(self.s[rows], self.theta_hat[rows], theta)
+        if self.sink is not None:
+            self.sink.write_rows(rows.start, self.t[rows], self.x[rows], self.u[rows], self.s[rows], self.ref[rows],
+                                 self.theta_hat[rows], theta, self.V[rows])
 
-    def result(n: int, status: str, reason: str) -> Trajectory:
+    def result(self, n: int, status: str, reason: str, meta: dict) -> Trajectory:
+        self.flush(n)
         keep = slice(0, n)
-        flush(n)
-        meta = {"dt": dt, "order": order, "events": applied, "native": bool(native)}
-        if control_delay:
-            meta["control_delay"] = int(control_delay)  # [physics steps]
-        contact = getattr(plant, "first_contact", None)
+        meta = {"dt": self.plant.dt, "order": self.x.shape[1], **meta}
+        contact = getattr(self.plant, "first_contact", None)
         if contact is not None:
             meta["warnings"] = [f"t={contact[0]:.6g} s: {contact[1]} (the regressor has no contact forces)"]
-        return Trajectory(t=t[keep], x=x[keep], u=u[keep], s=s[keep], ref=ref[keep],
-                          theta_hat=theta_hat[keep], theta=theta_rows(0, n), V=V[keep], names=names,
-                          status=status, reason=reason, joint_names=tuple(getattr(plant, "joint_names", ())),
-                          meta=meta)
+        return Trajectory(t=self.t[keep], x=self.x[keep], u=self.u[keep], s=self.s[keep], ref=self.ref[keep],
+                          theta_hat=self.theta_hat[keep], theta=self.theta_rows(0, n), V=self.V[keep],
+                          names=tuple(self.law.names), status=status, reason=reason,
+                          joint_names=tuple(getattr(self.plant, "joint_names", ())), meta=meta)
 
-    def stopped(reason: str) -> Trajectory:  # rows 0..k-1 (and all flushed) are whole when an interruption comes
-        n = max(k, flushed)
-        flush(n)
-        return result(n, "interrupted", reason)
-
-    def apply_events(t_k: float) -> None:
-        while pending and t_k >= pending[0].t - 0.5 * dt:
-            event = pending.pop(0)
-            event.apply(plant)
-            applied.append((t_k, event.label))
-            if sink is not None:
-                sink.write_event(t_k, event.label)
-
-    if joint_shape:  # a manipulator: its own compiled callback (regressor inside)
-        from adaptive_mj.sim import native_manipulator as native_mod
-        from adaptive_mj.sim.native_manipulator import NativeManipulatorController as NativeController
-    else:
-        from adaptive_mj.sim import native as native_mod
-        from adaptive_mj.sim.native import NativeController
-    if native is None:
-        native = native_mod.supported(plant, law) and (not control_delay or not joint_shape)
-    nc = None
-    if native:
-        try:
-            nc = NativeController(plant, law, reference, theta_hat0, NATIVE_CHUNK, delay=control_delay)
-        except Exception as exc:  # a user's law numba cannot compile: say why, run it in Python
-            plugin = getattr(law, "installed", None)
-            if plugin is None:
-                raise
-            import sys
-
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            print(f"adaptive-mj: note: law plugin {plugin.name!r} could not be compiled for the native callback "
-                  f"({type(exc).__name__}: {first[:200]}); running it through the Python callback", file=sys.stderr)
-            native = False
-    if native:
-        with _interruptible(stopped), plant.controlled_natively(nc.callback):
-            while k < n_steps:
-                t_k = plant.time
-                apply_events(t_k)
-                rows = min(NATIVE_CHUNK, n_steps - k, sink_every - k % sink_every)
-                if pending:  # stop at the step where the next event applies
-                    rows = min(rows, max(1, math.ceil((pending[0].t - 0.5 * dt - t_k) / dt)))
-                noise = rng.normal(0.0, noise_std, size=(rows, order) + joint_shape) if noise_std is not None \
-                    else None
-                theta_now = plant.true_theta()
-                block = slice(k, k + rows)
-                t[block], x[block], u[block], s[block], ref[block], theta_hat[block] = nc.chunk(rows, noise)
-                note_theta(k, theta_now)
-                bad, reason = _first_divergence(plant, x[block], u[block], theta_hat[block], nc.theta,
-                                                state_bound)
-                if bad is not None:
-                    k, status = k + bad, "diverged"
-                    break
-                k += rows
-                if k % sink_every == 0:
-                    flush(k)
-        flush(k)
-        return result(k, status, reason)
-
-    with _interruptible(stopped), plant.controlled_by(ctrl):
-        for k in range(n_steps):
-            t_k = plant.time
-            apply_events(t_k)
-            t[k] = t_k
-            x[k] = plant.observe()
-            note_theta(k, plant.true_theta())
-            theta_hat[k] = ctrl.theta_hat
-            noise = rng.normal(0.0, noise_std) if noise_std is not None else None
-            ctrl.arm(noise)
-            plant.step()
-            out = ctrl.step_out
-            u[k] = ctrl.step_u
-            s[k] = out.s
-            ref[k] = ctrl.step_ref
-            ctrl.finish_step()
-            reason = _divergence(plant, x[k], u[k], ctrl.theta_hat, state_bound)
-            if reason:
-                status = "diverged"
-                k += 1
-                break
-            if (k + 1) % sink_every == 0:
-                flush(k + 1)
-        else:
-            k = n_steps
-    flush(k)
-    return result(k, status, reason)
+    def stopped(self, reason: str) -> Trajectory:
+        """Rows 0..k-1 (and all flushed) are whole when an interruption comes."""
+        n = max(self.k, self.flushed)
+        return self.result(n, "interrupted", reason, {"events": self.events})
 
 
 def plant_order(plant) -> int:
@@ -376,11 +455,11 @@ def _interruptible(stopped: Callable[[str], Trajectory]):
         raise interrupted from exc
 
 
-def _first_divergence(plant, x, u, theta_hat, theta_next, bound):
+def first_divergence(plant, x, u, theta_hat, theta_next, bound):
     """For a native chunk: (rows to keep, reason) at the first step that diverged, or (None, '').
 
     Row j's state and estimate are the result of step j-1; the state after the chunk's
-    last step is read from the plant. Mirrors `_divergence`, step by step."""
+    last step is read from the plant. Mirrors `divergence`, step by step."""
     n = len(x)
     x_next = np.concatenate([x[1:], plant.observe()[None]]).reshape(n, -1)
     th_next = np.vstack([theta_hat[1:], theta_next[None, :]])
@@ -389,13 +468,7 @@ def _first_divergence(plant, x, u, theta_hat, theta_next, bound):
            | ~np.all(np.isfinite(th_next), axis=1) | np.any(np.abs(x_next) > bound, axis=1))
     if bad.any():
         j = int(np.argmax(bad))
-        if not np.all(np.isfinite(x_next[j])):
-            return j + 1, f"non-finite state {x_next[j].tolist()}"
-        if not np.all(np.isfinite(u[j])):
-            return j + 1, f"non-finite control {np.asarray(u[j]).tolist()}"
-        if not np.all(np.isfinite(th_next[j])):
-            return j + 1, f"non-finite estimate {th_next[j].tolist()}"
-        return j + 1, f"state {x_next[j].tolist()} beyond the bound {bound}"
+        return j + 1, _what_diverged(x_next[j], u[j], th_next[j], bound)
     warning = plant.instability()
     if warning:
         return len(u), f"{warning} (within the {len(u)} steps before t={plant.time:.6g} s)"
@@ -410,20 +483,20 @@ def _all_within(values, bound: float) -> bool:
     return True
 
 
-def _divergence(plant, x_k, u_k, theta_hat, bound) -> str:
-    """Text naming the first sign of divergence after a step, or ''."""
-    x_next = plant.observe()
-    if (_all_within(x_next.ravel().tolist(), bound) and _all_within(np.ravel(u_k).tolist(), math.inf)
-            and _all_within(theta_hat.tolist(), math.inf)):  # the usual case, decided on plain floats
-        warning = plant.instability()
-        return warning or ""
+def _what_diverged(x_next, u_k, theta_hat, bound) -> str:
     if not np.all(np.isfinite(x_next)):
-        return f"non-finite state {x_next.tolist()}"
+        return f"non-finite state {np.asarray(x_next).tolist()}"
     if not np.all(np.isfinite(u_k)):
         return f"non-finite control {np.asarray(u_k).tolist()}"
     if not np.all(np.isfinite(theta_hat)):
-        return f"non-finite estimate {theta_hat.tolist()}"
-    if np.any(np.abs(x_next) > bound):
-        return f"state {x_next.tolist()} beyond the bound {bound}"
-    warning = plant.instability()
-    return warning or ""
+        return f"non-finite estimate {np.asarray(theta_hat).tolist()}"
+    return f"state {np.asarray(x_next).tolist()} beyond the bound {bound}"
+
+
+def divergence(plant, x_k, u_k, theta_hat, bound) -> str:
+    """Text naming the first sign of divergence after a step, or ''."""
+    x_next = plant.observe()
+    if not (_all_within(x_next.ravel().tolist(), bound) and _all_within(np.ravel(u_k).tolist(), math.inf)
+            and _all_within(np.ravel(theta_hat).tolist(), math.inf)):
+        return _what_diverged(x_next, u_k, theta_hat, bound)
+    return plant.instability() or ""

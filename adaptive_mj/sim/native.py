@@ -1,24 +1,24 @@
-"""The native closed loop: the same `laws.sliding.sliding_law` (and the plant's
-regressor functions) compiled with numba into a C control callback, which
-MuJoCo calls without the GIL; physics advances with mj_step(m, d, nstep)
-in chunks, and Python only works between chunks (events, noise, logging,
-divergence checks).
+"""The native closed loop for 1-DOF plants: the sliding law (`laws.sliding.sliding_law`, or a
+law plugin's function) and the plant's regressor functions, compiled with numba into a C control
+callback that MuJoCo calls without the GIL; physics advances with mj_step(m, d, nstep) in chunks,
+and Python only works between chunks (events, noise, logging, divergence checks).
 
-What the callback does at every call is exactly what loop._Controller does
-in Python: measure [q, q'] (+ noise), give the law the RK4 stage estimate,
-clamp u, and after the last stage advance θ̂ once with the RK4 weights. The
-references at the stage times t_k + c_i h are evaluated in Python, vectorised,
-before each chunk (MuJoCo's stage times are reproduced bit for bit).
+At every call the callback does what the Python controller (adaptive_mj.sim.loop.Controller)
+does, with the same functions from adaptive_mj.sim.stage: measure [q, q'] (+ noise), take the
+stage estimate, evaluate the law (continuous control: at every stage; sampled-data control: at the
+first stage of each control period, its output held), clamp u, apply the control delay, and advance
+θ̂ at the end of the step (or of the control period). The references at the stage times
+t_k + c_i h are evaluated in Python, vectorised, before each chunk (MuJoCo's stage times are
+reproduced bit for bit).
 
-Used automatically by loop.run for MuJoCo plants of order 2 whose law has
-`native_params` (the sliding laws, and law plugins: their function is compiled the same
-way, see adaptive_mj.laws.plugin); other laws and plants run in Python.
-tests/test_native.py shows the two paths agree to 1e-12.
-
-The callback finds its buffers through one module-level table of addresses
-(CTX), so it is compiled once per process and regressor, not per run. Only
-one native run can be active per process (MuJoCo's control callback is a
-process-wide global anyway).
+The callback finds its run through mjData.userdata (adaptive_mj.sim.native_context): the context
+block `CONTEXT` (named fields) holds the run's settings, its state (stage, row, the held control)
+and the addresses of its buffers. Nothing is compiled in but the law, the plant's form and
+MuJoCo's struct layout, so the compiled callback is cached on disk and reused by every process.
+The 1-DOF and the manipulator callbacks are two functions because what the law needs differs: here
+a ModelForm's phi/f/h on the 2-vector [q, q'], there the regressor of a kinematic tree read from
+MjData's kinematics (adaptive_mj.sim.native_manipulator); the stage logic is the same code.
+tests/test_native.py shows the Python and native paths give the same rows bit for bit.
 """
 from __future__ import annotations
 
@@ -26,187 +26,219 @@ import math
 
 import numpy as np
 
-from adaptive_mj.laws.common import clip_into, modify_rate
-from adaptive_mj.laws.sliding import sliding_law, sliding_terms
-from adaptive_mj.sim.numba_util import pointer, with_globals as _with_globals
+from adaptive_mj.laws.sliding import sliding_law_values
+from adaptive_mj.sim import stage as stage_code
+from adaptive_mj.sim.native_context import addr, bind_context, mujoco_offsets, source_key
 
-_CTX = np.zeros(16, dtype=np.int64)  # buffer addresses, see _bind
-_W = np.zeros(40)  # scalars shared with the callback, see W_* below
-W_STAGE, W_ROW, W_NSTAGES, W_H, W_LO, W_HI, W_QADR, W_DADR, W_ACT, W_K, W_ADAPT, W_DZW, W_DZS, W_KR, W_PHI, \
-    W_T, W_N, W_NTH = range(18)
-W_INC, W_WEIGHTS = 20, 24  # 4 slots each
-W_SIGMA, W_EMOD = 28, 29
-W_DELAY, W_STEPK, W_HELD = 30, 31, 32  # control delay D [steps], steps run, the control held over a step
-_cache: dict = {}
+_i8, _f8 = np.int64, np.float64
+CONTEXT = np.dtype([
+    # run state
+    ("stage", _i8), ("row", _i8), ("rows", _i8), ("step", _i8), ("t", _f8), ("u_hold", _f8), ("s_hold", _f8),
+    ("held", _f8),
+    # settings
+    ("nstages", _i8), ("n", _i8), ("nth", _i8), ("qadr", _i8), ("dadr", _i8), ("act", _i8), ("delay", _i8),
+    ("mode", _i8), ("period_steps", _i8), ("h", _f8), ("period", _f8), ("lo", _f8), ("hi", _f8),
+    ("inc", _f8, 4), ("weights", _f8, 4),
+    # the law's numbers (sliding_law's scalars)
+    ("k", _f8), ("adapt", _i8), ("dz_width", _f8), ("dz_on_s", _i8), ("K", _f8), ("boundary_layer", _f8),
+    ("sigma", _f8), ("e_mod", _f8),
+    # buffers (addresses)
+    ("ref", _i8), ("noise", _i8), ("rec", _i8), ("theta", _i8), ("rsum", _i8), ("prev", _i8), ("th", _i8),
+    ("rate", _i8), ("coeffs", _i8), ("gamma", _i8), ("theta0", _i8), ("lower", _i8), ("upper", _i8),
+    ("ring", _i8), ("params", _i8),
+])
+_compiled: dict = {}
 
 
+def _callback_factory(off, key):
+    """The callback's Python source, closed over MuJoCo's struct offsets and the cache key only;
+    `law`, `phi_fn`, `f_fn`, `h_fn`, the stage functions and the pointer intrinsics are globals that
+    compiled() replaces by their numba versions (numba, types, carray likewise)."""
+    off_ud, off_qpos, off_qvel, off_ctrl = off
 
-
-def compiled(form, plugin=None):
-    """The cfunc for one regressor and law (cached by the functions' code and closure values).
-
-    plugin: None for the built-in sliding laws (laws.sliding.sliding_law), or a plugin's law
-    function (adaptive_mj.laws.plugin: law(x, ref, theta, phi, f, h, params, rate) -> (u, s)),
-    compiled with numba the same way."""
-    fns = (form.phi, form.f, form.h) + ((plugin,) if plugin is not None else ())
-    key = tuple((fn.__code__, tuple(c.cell_contents for c in (fn.__closure__ or ()))) for fn in fns)
-    if key in _cache:
-        return _cache[key]
-    import numba
-    from numba import carray, types
-
-    fptr, iptr = pointer(types.float64), pointer(types.int64)
-    ctx_addr, w_addr = _CTX.ctypes.data, _W.ctypes.data
-    phi_fn, f_fn, h_fn = numba.njit(form.phi), numba.njit(form.f), numba.njit(form.h)
-    clip = numba.njit(clip_into)
-    if plugin is None:
-        sliding = numba.njit(_with_globals(sliding_law, sliding_terms=numba.njit(sliding_terms),
-                                           modify_rate=numba.njit(modify_rate)))
-
-        @numba.njit
-        def law(x, r, th, W, coeffs, gamma, theta0, lower, upper, params, rate):
-            u, s, _ = sliding(x, r, th, coeffs, W[W_K], gamma, W[W_ADAPT] > 0.5, W[W_DZW], W[W_DZS] > 0.5,
-                              W[W_KR], W[W_PHI], W[W_SIGMA], W[W_EMOD], theta0, lower, upper, phi_fn, f_fn, h_fn,
-                              rate)
-            return u, s
-    else:
-        user = numba.njit(plugin)
-
-        @numba.njit
-        def law(x, r, th, W, coeffs, gamma, theta0, lower, upper, params, rate):
-            u, s = user(x, r, th, phi_fn(x), f_fn(x), h_fn(x), params, rate)
-            if W[W_ADAPT] < 0.5:
-                for j in range(rate.shape[0]):
-                    rate[j] = 0.0
-            return float(u), float(s)
-
-    @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True)
+    @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True, cache=True)  # noqa: F821 (injected)
     def callback(m, d):
-        W = carray(fptr(w_addr), 40)
-        ctx = carray(iptr(ctx_addr), 16)
-        stage, row, nst = int(W[W_STAGE]), int(W[W_ROW]), int(W[W_NSTAGES])
-        if stage >= nst:  # a call outside mj_step's stages (e.g. mj_forward): leave ctrl as it is
+        if key == 0:  # never: keeps the cache key in the closure
             return
-        n, nth = int(W[W_N]), int(W[W_NTH])
-        qpos, qvel, ctrl = carray(fptr(ctx[0]), 1 + int(W[W_QADR])), carray(fptr(ctx[1]), 1 + int(W[W_DADR])), \
-            carray(fptr(ctx[2]), 1 + int(W[W_ACT]))
-        ref = carray(fptr(ctx[3]), 1 << 30)
-        noise = carray(fptr(ctx[4]), 1 << 30)
-        rec = carray(fptr(ctx[5]), 1 << 30)
-        theta = carray(fptr(ctx[6]), nth)
-        rsum = carray(fptr(ctx[7]), nth)
-        prev = carray(fptr(ctx[8]), nth)
-        coeffs = carray(fptr(ctx[9]), n)
-        gamma = carray(fptr(ctx[10]), nth)
-        theta0, lower, upper = carray(fptr(ctx[11]), nth), carray(fptr(ctx[12]), nth), carray(fptr(ctx[13]), nth)
-        h = W[W_H]
-        x = np.empty(n)
-        x[0] = qpos[int(W[W_QADR])] + noise[row * n]
-        x[1] = qvel[int(W[W_DADR])] + noise[row * n + 1]
+        base = address(d)  # noqa: F821 (injected)
+        ud = carray(iptr(base + off_ud), 1)[0]  # noqa: F821 (injected)
+        if ud == 0:
+            return
+        c = carray(iptr(ud), 1)[0]  # noqa: F821 (injected)
+        if c == 0:  # an MjData no native run owns (a scratch copy): leave it alone
+            return
+        ctx = carray(cptr(c), 1)[0]  # noqa: F821 (injected)
+        stage, row, nst = ctx.stage, ctx.row, ctx.nstages
+        if stage >= nst or row >= ctx.rows:  # past the step's stages (an extra mj_forward) or the chunk
+            return
+        n, nth = ctx.n, ctx.nth
+        qpos = carray(fptr(carray(iptr(base + off_qpos), 1)[0]), ctx.qadr + 1)  # noqa: F821 (injected)
+        qvel = carray(fptr(carray(iptr(base + off_qvel), 1)[0]), ctx.dadr + 1)  # noqa: F821 (injected)
+        ctrl = carray(fptr(carray(iptr(base + off_ctrl), 1)[0]), ctx.act + 1)  # noqa: F821 (injected)
+        theta, rsum, prev = carray(fptr(ctx.theta), nth), carray(fptr(ctx.rsum), nth), carray(fptr(ctx.prev), nth)  # noqa: F821,E501
+        th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
+        lower, upper = carray(fptr(ctx.lower), nth), carray(fptr(ctx.upper), nth)  # noqa: F821 (injected)
         r0 = (row * nst + stage) * (n + 1)
-        r = ref[r0:r0 + n + 1]
-        th = np.empty(nth)
-        for j in range(nth):
-            th[j] = theta[j] + (h * W[W_INC + stage]) * prev[j] if stage > 0 else theta[j]
-        clip(th, lower, upper)  # projection: the stage estimate stays in the box too
-        rate = np.zeros(nth)
-        u, s = law(x, r, th, W, coeffs, gamma, theta0, lower, upper, carray(fptr(ctx[15]), 1 << 30), rate)
-        u = min(max(u, W[W_LO]), W[W_HI])
-        delay = int(W[W_DELAY])
-        if delay > 0:  # apply the stage-0 control of D steps ago, held over the step (zero before)
+        r = carray(fptr(ctx.ref), r0 + n + 1)[r0:r0 + n + 1]  # noqa: F821 (injected)
+        sampled = ctx.mode == SAMPLED  # noqa: F821 (injected)
+        evaluate = is_sample_step(ctx.step, ctx.period_steps) and stage == 0 if sampled else True  # noqa: F821
+        if evaluate:
+            noise = carray(fptr(ctx.noise), (row + 1) * n)  # noqa: F821 (injected)
+            x = np.empty(n)
+            x[0] = qpos[ctx.qadr] + noise[row * n]
+            x[1] = qvel[ctx.dadr] + noise[row * n + 1]
+            stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
+            u, s = law(x, r, th, ctx, carray(fptr(ctx.coeffs), n), carray(fptr(ctx.gamma), nth),  # noqa: F821
+                       carray(fptr(ctx.theta0), nth), lower, upper, carray(fptr(ctx.params), 1 << 30), rate)  # noqa: F821,E501
+            u = min(max(u, ctx.lo), ctx.hi)
+            accumulate_rate(rsum, prev, rate, 1.0 if sampled else ctx.weights[stage])  # noqa: F821 (injected)
+            ctx.u_hold, ctx.s_hold = u, s
+        u = ctx.u_hold
+        if ctx.delay > 0:  # apply the stage-0 control of D steps ago, held over the step (zero before)
             if stage == 0:
-                ring = carray(fptr(ctx[14]), delay + 1)
-                k = int(W[W_STEPK])
-                ring[k % (delay + 1)] = u
-                W[W_HELD] = ring[(k - delay) % (delay + 1)] if k >= delay else 0.0
-            u = W[W_HELD]
-        ctrl[int(W[W_ACT])] = u
-        for j in range(nth):
-            rsum[j] += W[W_WEIGHTS + stage] * rate[j]
-            prev[j] = rate[j]
-        if stage == 0:  # the step's row: t, true x, u, s, ref, theta_hat
+                ring = carray(fptr(ctx.ring), ctx.delay + 1)  # noqa: F821 (injected)
+                put, get = delay_slot(ctx.step, ctx.delay)  # noqa: F821 (injected)
+                ring[put] = u
+                ctx.held = ring[get] if get >= 0 else 0.0
+            u = ctx.held
+        ctrl[ctx.act] = u
+        if stage == 0:  # the step's row: t, true x, u, s, ref, θ̂ at the step's start
             ncol = 1 + n + 2 + (n + 1) + nth
+            rec = carray(fptr(ctx.rec), (row + 1) * ncol)  # noqa: F821 (injected)
             o = row * ncol
-            rec[o] = W[W_T]
-            rec[o + 1] = qpos[int(W[W_QADR])]
-            rec[o + 2] = qvel[int(W[W_DADR])]
+            rec[o] = ctx.t
+            rec[o + 1] = qpos[ctx.qadr]
+            rec[o + 2] = qvel[ctx.dadr]
             rec[o + 1 + n] = u
-            rec[o + 2 + n] = s
+            rec[o + 2 + n] = ctx.s_hold
             for i in range(n + 1):
                 rec[o + 3 + n + i] = r[i]
             for j in range(nth):
                 rec[o + 4 + 2 * n + j] = theta[j]
         stage += 1
-        if stage == nst:  # end of the physics step: advance the estimates once
-            for j in range(nth):
-                theta[j] = theta[j] + h * rsum[j]
-                rsum[j] = 0.0
-            clip(theta, lower, upper)
-            W[W_ROW] = row + 1
-            W[W_STEPK] = W[W_STEPK] + 1.0
-            W[W_T] = W[W_T] + h
+        if stage == nst:  # end of the physics step: advance the estimates (continuous: every step)
+            if not sampled:
+                advance_estimates(theta, rsum, ctx.h, lower, upper)  # noqa: F821 (injected)
+            elif period_ends(ctx.step, ctx.period_steps):  # noqa: F821 (injected)
+                advance_estimates(theta, rsum, ctx.period, lower, upper)  # noqa: F821 (injected)
+            ctx.row = row + 1
+            ctx.step = ctx.step + 1
+            ctx.t = ctx.t + ctx.h
             stage = 0
-        W[W_STAGE] = stage
+        ctx.stage = stage
 
-    _cache[key] = callback
+    return callback
+
+
+def _builtin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rate):
+    """laws.sliding.sliding_law with its scalars read from the context (the plant's functions are
+called here, as globals, so no function is passed as a value: numba could not cache that)."""
+    u, s, _ = sliding_law_values(x, r, th, coeffs, ctx.k, gamma, ctx.adapt != 0, ctx.dz_width, ctx.dz_on_s != 0,
+                                 ctx.K, ctx.boundary_layer, ctx.sigma, ctx.e_mod, theta0, lower, upper,
+                                 phi_fn(x), f_fn(x), h_fn(x), rate)  # noqa: F821 (injected)
+    return u, s
+
+
+def _plugin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rate):
+    """A law plugin's function (laws.plugin: law(x, ref, theta, phi, f, h, params, rate) -> (u, s));
+    the baselines' 'estimates hold still' is applied here."""
+    u, s = user_law(x, r, th, phi_fn(x), f_fn(x), h_fn(x), params, rate)  # noqa: F821 (injected)
+    if ctx.adapt == 0:
+        for j in range(rate.shape[0]):
+            rate[j] = 0.0
+    return float(u), float(s)
+
+
+def compiled(form, plugin=None):
+    """The cfunc for one plant form and law (in memory per process, on disk across processes).
+
+    plugin: None for the built-in sliding laws (laws.sliding.sliding_law), or a plugin's law
+    function (adaptive_mj.laws.plugin), compiled with numba the same way."""
+    fns = (form.phi, form.f, form.h) + ((plugin,) if plugin is not None else ())
+    mem_key = tuple((fn.__code__, tuple(c.cell_contents for c in (fn.__closure__ or ()))) for fn in fns)
+    if mem_key in _compiled:
+        return _compiled[mem_key]
+    import numba
+    from numba import carray, types
+
+    from adaptive_mj.numba_util import address_of, jit_tree, pointer
+
+    offsets = mujoco_offsets()
+    off = (offsets["userdata"], offsets["qpos"], offsets["qvel"], offsets["ctrl"])
+    forms = {"phi_fn": jit_tree(form.phi, numba.njit), "f_fn": jit_tree(form.f, numba.njit),
+             "h_fn": jit_tree(form.h, numba.njit)}
+    if plugin is None:
+        law = jit_tree(_builtin_law, numba.njit, **forms)
+    else:
+        law = jit_tree(_plugin_law, numba.njit, user_law=jit_tree(plugin, numba.njit), **forms)
+    stage_fns = {name: jit_tree(getattr(stage_code, name), numba.njit) for name in
+                 ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
+                  "delay_slot")}
+    key = source_key(*fns, _callback_factory, _builtin_law, sliding_law_values, stage_code.stage_estimate,
+                     extra=(off, numba.__version__))
+    g = {**_callback_factory.__globals__, **stage_fns, "numba": numba, "types": types, "carray": carray,
+         "law": law, "address": address_of(), "iptr": pointer(types.int64), "fptr": pointer(types.float64),
+         "cptr": pointer(numba.from_dtype(CONTEXT)), "SAMPLED": stage_code.SAMPLED}
+    import types as pytypes
+
+    factory = pytypes.FunctionType(_callback_factory.__code__, g, "_callback_factory")
+    callback = factory(off, key)
+    _compiled[mem_key] = callback
     return callback
 
 
 def supported(plant, law) -> bool:
     """Native path: a MuJoCo plant of order 2 (its state is [q, q'], which the callback reads
-    directly), a sliding law, no time-varying disturbance (held per step in Python)."""
+    directly) compiled with a userdata slot, a sliding law (or a law plugin), no time-varying
+    disturbance (held per step in Python), no filters of the law's own (composite)."""
+    from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS
+
     return (hasattr(plant, "step_native") and getattr(plant, "form", None) is not None and plant.form.order == 2
             and hasattr(law, "native_params") and getattr(law, "native", True)
-            and plant.stages in (1, 4) and plant.disturbance is None)
+            and plant.stages in (1, 4) and plant.disturbance is None
+            and plant.model.nuserdata >= USERDATA_SLOTS)
 
 
 class NativeController:
-    """Owns the buffers of one native run and steps the plant chunk by chunk."""
+    """Owns the context and buffers of one native run and steps the plant chunk by chunk.
 
+    control: the run's ControlTiming (adaptive_mj.sim.loop): mode, period in physics steps, delay."""
 
-    def __init__(self, plant, law, reference, theta_hat0, max_rows: int, *, delay: int = 0):
+    def __init__(self, plant, law, reference, theta_hat0, max_rows: int, *, control=None):
         self.plant, self.law, self.reference = plant, law, reference
-        self.delay = int(delay)
-        self.ring = np.zeros(self.delay + 1)  # the last D + 1 stage-0 controls
-        self.steps = 0
+        control = control if control is not None else stage_code.ControlTiming(period=plant.dt)
         p = law.native_params()
         self.callback = compiled(plant.form, plugin=p.get("plugin_law"))
-        self.params = np.ascontiguousarray(p.get("plugin_params", np.zeros(1)), dtype=float)
         n, nth = plant.form.order, len(law.names)
-        self.n, self.nth = n, nth
-        self.nst = plant.stages
+        self.n, self.nth, self.nst = n, nth, plant.stages
         self.ncol = 1 + n + 2 + (n + 1) + nth
-        self.theta = np.array(theta_hat0, dtype=float)
-        self.rsum = np.zeros(nth)
-        self.prev = np.zeros(nth)
-        self.coeffs = np.ascontiguousarray(p["coeffs"], dtype=float)
-        self.gamma = np.ascontiguousarray(p["gamma"], dtype=float)
-        self.theta0 = np.ascontiguousarray(p["theta0"], dtype=float)
-        self.lower = np.ascontiguousarray(p["lower"], dtype=float)
-        self.upper = np.ascontiguousarray(p["upper"], dtype=float)
-        self.ref = np.zeros(max_rows * self.nst * (n + 1))
-        self.noise = np.zeros(max_rows * n)
-        self.rec = np.zeros(max_rows * self.ncol)
+        f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731 (a short local converter)
+        self.buffers = {
+            "theta": f64(np.array(theta_hat0, dtype=float).reshape(nth)), "rsum": np.zeros(nth),
+            "prev": np.zeros(nth), "th": np.zeros(nth), "rate": np.zeros(nth), "coeffs": f64(p["coeffs"]),
+            "gamma": f64(p["gamma"]), "theta0": f64(p["theta0"]), "lower": f64(p["lower"]), "upper": f64(p["upper"]),
+            "ring": np.zeros(control.delay + 1), "params": f64(p.get("plugin_params", np.zeros(1))),
+            "ref": np.zeros(max_rows * self.nst * (n + 1)), "noise": np.zeros(max_rows * n),
+            "rec": np.zeros(max_rows * self.ncol),
+        }
+        self.theta = self.buffers["theta"]
         lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (-math.inf, math.inf)
-        from adaptive_mj.sim.loop import TABLEAU
-
-        inc, weights = TABLEAU[self.nst]
-        self.stage_offsets = np.asarray(inc)  # RK4: c_i = a_i (see loop.TABLEAU)
-        W = _W
-        W[:] = 0.0
-        W[W_NSTAGES], W[W_H], W[W_LO], W[W_HI] = self.nst, plant.dt, lo, hi
-        W[W_QADR], W[W_DADR], W[W_ACT] = plant._qadr, plant._dadr, plant.actuator_id
-        W[W_K], W[W_ADAPT], W[W_DZW], W[W_DZS] = p["k"], float(p["adapt"]), p["dz_width"], float(p["dz_on_s"])
-        W[W_KR], W[W_PHI], W[W_N], W[W_NTH] = p["K"], p["boundary_layer"], n, nth
-        W[W_SIGMA], W[W_EMOD] = p["sigma"], p["e_mod"]
-        W[W_DELAY] = self.delay
-        W[W_INC:W_INC + len(inc)] = inc
-        W[W_WEIGHTS:W_WEIGHTS + len(weights)] = weights
-        d = plant.data
-        for i, arr in enumerate((d.qpos, d.qvel, d.ctrl, self.ref, self.noise, self.rec, self.theta, self.rsum,
-                                 self.prev, self.coeffs, self.gamma, self.theta0, self.lower, self.upper,
-                                 self.ring, self.params)):
-            _CTX[i] = arr.ctypes.data
+        inc, weights = stage_code.TABLEAU[self.nst]
+        self.stage_offsets = np.asarray(inc)  # RK4: c_i = a_i (see stage.TABLEAU)
+        ctx = np.zeros(1, dtype=CONTEXT)
+        c = ctx[0]
+        c["nstages"], c["n"], c["nth"], c["h"], c["lo"], c["hi"] = self.nst, n, nth, plant.dt, lo, hi
+        c["qadr"], c["dadr"], c["act"] = plant._qadr, plant._dadr, plant.actuator_id
+        c["delay"], c["mode"], c["period_steps"], c["period"] = control.delay, control.mode, control.steps, \
+            control.period
+        c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
+        c["k"], c["adapt"], c["dz_width"], c["dz_on_s"] = p["k"], int(bool(p["adapt"])), p["dz_width"], \
+            int(bool(p["dz_on_s"]))
+        c["K"], c["boundary_layer"], c["sigma"], c["e_mod"] = p["K"], p["boundary_layer"], p["sigma"], p["e_mod"]
+        for name, buf in self.buffers.items():
+            c[name] = addr(buf)
+        self.context = ctx
+        bind_context(plant.data, ctx)
 
     def chunk(self, rows: int, noise: np.ndarray | None):
         """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat) rows, each (rows, ...)."""
@@ -217,20 +249,15 @@ class NativeController:
             t[i] = t[i - 1] + h
         stage_t = t[:, None] + h * self.stage_offsets[None, :]
         refs = self.reference(stage_t.ravel(), n)  # (n+1, rows*nst)
-        self.ref[: refs.size] = refs.T.ravel()
-        if noise is not None:
-            self.noise[: rows * n] = noise.ravel()
-        else:
-            self.noise[: rows * n] = 0.0
-        _W[W_STAGE], _W[W_ROW], _W[W_T], _W[W_STEPK] = 0.0, 0.0, t[0], float(self.steps)
+        self.buffers["ref"][: refs.size] = refs.T.ravel()
+        self.buffers["noise"][: rows * n] = 0.0 if noise is None else noise.ravel()
+        c = self.context[0]
+        c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
+        bind_context(plant.data, self.context)  # the newest run on this MjData owns it
         plant.step_native(rows)
-        self.steps += rows
-        if int(_W[W_ROW]) != rows:
-            raise RuntimeError(f"native callback ran {int(_W[W_ROW])} steps, expected {rows}")
-        rec = self.rec[: rows * self.ncol].reshape(rows, self.ncol)
-        x = rec[:, 1:1 + n].copy()
-        u = rec[:, 1 + n].copy()
-        s = rec[:, 2 + n].copy()
-        ref = rec[:, 3 + n:4 + 2 * n].copy()
-        theta_hat = rec[:, 4 + 2 * n:].copy()
-        return rec[:, 0].copy(), x, u, s, ref, theta_hat
+        if int(c["row"]) != rows or int(c["stage"]) != 0:
+            raise RuntimeError(f"native callback ran {int(c['row'])} steps (stage {int(c['stage'])}), "
+                               f"expected {rows}")
+        rec = self.buffers["rec"][: rows * self.ncol].reshape(rows, self.ncol)
+        return (rec[:, 0].copy(), rec[:, 1:1 + n].copy(), rec[:, 1 + n].copy(), rec[:, 2 + n].copy(),
+                rec[:, 3 + n:4 + 2 * n].copy(), rec[:, 4 + 2 * n:].copy())

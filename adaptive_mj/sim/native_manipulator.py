@@ -3,7 +3,9 @@ the plant's regressor kernel, compiled by numba into one C control callback that
 calls at every stage of every physics step (adaptive_mj.sim.native does the same for the
 1-DOF plants).
 
-At each stage the callback does what loop._Controller + SlotineLiLaw do in Python:
+At each stage the callback does what loop.Controller + SlotineLiLaw do in Python, with the
+stage functions of adaptive_mj.sim.stage (the same source, compiled; sampled-data control
+evaluates the law once per control period and holds it, as there):
 measure x = [q; q̇] (+ noise), take the stage estimate θ̂_i = θ̂_k + h a_i k_{i-1},
 evaluate reference_terms, the regressor on the live MjData (cdof, xpos, xmat,
 subtree_com, cinert: MuJoCo has just computed them for this stage), the base map,
@@ -19,45 +21,57 @@ error compares ‖q̃‖, a plain sum here and np.linalg.norm in Python, with it
 Cost on the 6-joint UR5e with an unknown payload, RK4: about 1.6-1.7x a bare mj_step
 (the Python path: ~60-80x); most of the difference is the regressor, see below.
 
-Buffers are reached through module-level tables (_I: addresses and integers, _F:
-scalars), so the callback is compiled once per process. Only one native run can be
-active per process (MuJoCo's control callback is a process-wide global anyway).
-The callback ignores calls for any other MjData, calls past the step's stages (an
-extra mj_forward) and calls past the chunk's rows: ctrl is left as it is.
+The callback finds its run through mjData.userdata: the context block CONTEXT (named fields)
+holds the run's state, settings and the addresses of its buffers, and MjData's and MjModel's
+own arrays are read through the pointers MuJoCo hands the callback (adaptive_mj.sim.native_context).
+Nothing run-specific is compiled in, so the callback is cached on disk and loaded by every
+process, and several runs (each on its own MjData) can be stepped in one process. The callback
+ignores an MjData without a context (a scratch copy), calls past the step's stages (an extra
+mj_forward) and calls past the chunk's rows: ctrl is left as it is.
+
+Why a second callback rather than one with m as a parameter: the 1-DOF plants' law needs a
+ModelForm's phi/f/h on [q, q'] (any ODE-shaped plant, including plugins), this one the regressor
+of a kinematic tree read from MjData's kinematics; the stage logic is shared (adaptive_mj.sim.stage).
 """
 from __future__ import annotations
 
+import types as pytypes
+
 import numpy as np
 
-from adaptive_mj.sim.numba_util import pointer, with_globals as _with_globals
+from adaptive_mj.numba_util import address_of, jit_tree, pointer
+from adaptive_mj.sim import stage as stage_code
+from adaptive_mj.sim.native_context import addr, bind_context, mujoco_offsets, source_key
 
-# --- the tables the callback reads -----------------------------------------------
-# _I: int64 addresses of buffers and integer settings; _F: float settings.
-(I_DATA, I_STAGE, I_ROW, I_ROWS, I_NST, I_NV, I_NBODY, I_NTH, I_NSTD, I_NQ, I_NU, I_MAXROWS,
- I_MODE, I_ADAPT, I_DZ_ON_S, I_HAS_BASE,
- # MjData / MjModel arrays (live)
- I_QPOS, I_QVEL, I_CTRL, I_CDOF, I_XPOS, I_XMAT, I_SUBCOM, I_CINERT, I_GRAVITY, I_ARM, I_DAMP,
- # regressor's static arrays
- I_PARENT, I_DOFADR, I_DOFNUM, I_ROOTID, I_BODYCOL, I_BODYKNOWN, I_COLARM, I_COLDAMP,
- # plant / law constants
- I_QADR, I_ACT, I_GEAR, I_LO, I_HI, I_LAM, I_KD, I_GAMMA, I_BPTR, I_BIDX, I_BVAL,
- # run state and work buffers
- I_THETA, I_RSUM, I_PREV, I_TH, I_X, I_S, I_QDR, I_QDDR, I_ZERO, I_U, I_RATE, I_YSTD, I_Y, I_TAUK,
- I_REF, I_NOISE, I_SCRATCH, I_NEED,
- # records (one row per physics step)
- I_RT, I_RX, I_RU, I_RS, I_RREF, I_RTH,
- # robust modifications: leakage prior, projection box
- I_THETA0, I_PLO, I_PHI, I_END) = range(74)
-_I = np.zeros(I_END, dtype=np.int64)
-F_H, F_T, F_DZW, F_INC, F_WEIGHTS, F_SIGMA, F_EMOD, F_END = 0, 1, 2, 4, 8, 12, 13, 14
-_F = np.zeros(F_END)
+_i8, _f8 = np.int64, np.float64
+# The context block a run's MjData points at (userdata[0], see adaptive_mj.sim.native_context):
+# run state, settings, and the addresses of the run's buffers and of the regressor's static arrays.
+CONTEXT = np.dtype([
+    # run state
+    ("stage", _i8), ("row", _i8), ("rows", _i8), ("step", _i8), ("t", _f8),
+    # settings
+    ("nstages", _i8), ("nv", _i8), ("nbody", _i8), ("nth", _i8), ("nstd", _i8), ("nq", _i8), ("nu", _i8),
+    ("maxrows", _i8), ("mode_law", _i8), ("adapt", _i8), ("dz_on_s", _i8), ("has_base", _i8),
+    ("mode", _i8), ("period_steps", _i8), ("delay", _i8),
+    ("h", _f8), ("period", _f8), ("dz_width", _f8), ("sigma", _f8), ("e_mod", _f8),
+    ("inc", _f8, 4), ("weights", _f8, 4),
+    # the regressor's static arrays
+    ("parent", _i8), ("dofadr", _i8), ("dofnum", _i8), ("rootid", _i8), ("body_col", _i8), ("body_known", _i8),
+    ("col_arm", _i8), ("col_damp", _i8), ("need", _i8), ("bptr", _i8), ("bidx", _i8), ("bval", _i8),
+    # plant and law constants
+    ("qadr", _i8), ("act", _i8), ("gear", _i8), ("lo", _i8), ("hi", _i8), ("lam", _i8), ("kd", _i8),
+    ("gamma", _i8), ("theta0", _i8), ("lower", _i8), ("upper", _i8),
+    # run state and work buffers
+    ("theta", _i8), ("rsum", _i8), ("prev", _i8), ("th", _i8), ("x", _i8), ("s", _i8), ("qd_r", _i8),
+    ("qdd_r", _i8), ("zero", _i8), ("u", _i8), ("u_hold", _i8), ("s_hold", _i8), ("delayed", _i8),
+    ("ring", _i8), ("rate", _i8), ("y_std", _i8), ("y", _i8), ("tau_known", _i8), ("ref", _i8), ("noise", _i8),
+    ("scratch", _i8),
+    # records (one row per physics step)
+    ("rec_t", _i8), ("rec_x", _i8), ("rec_u", _i8), ("rec_s", _i8), ("rec_ref", _i8), ("rec_theta", _i8),
+])
 
 MODE_PD_GRAVITY = 2  # laws.slotine_li.Mode.PD_GRAVITY (the regressor at v = w = a = 0)
-
-_CALLBACK = None
-_OWNER = None  # the controller whose buffers the tables point at
-
-
+_compiled: dict = {}
 
 
 # --- the regressor kernel, specialised -------------------------------------------
@@ -287,264 +301,289 @@ _KERNEL = None
 
 
 def kernel():
-    """_regressor compiled with numba (once per process); called as regressor_kernel.regressor
-    with two more arguments: scratch (18 nbody,) float64 and need (n_standard,) int64."""
+    """_regressor compiled with numba (once per process; the helpers it calls with it); called as
+    regressor_kernel.regressor with two more arguments: scratch (18 nbody,) float64 and need
+    (n_standard,) int64."""
     global _KERNEL
-    if _KERNEL is not None:
-        return _KERNEL
-    import numba
+    if _KERNEL is None:
+        import numba
 
-    helpers = {"_imul": numba.njit(_imul), "_project": numba.njit(_project)}
-    helpers["_force"] = numba.njit(_with_globals(_force, **helpers))
-    helpers["_force_rot"] = numba.njit(_force_rot)
-    helpers["_unit_column"] = numba.njit(_with_globals(_unit_column, **helpers))
-    _KERNEL = numba.njit(_with_globals(_regressor, **helpers))
+        _KERNEL = jit_tree(_regressor, numba.njit)
     return _KERNEL
 
 
-def compiled():
-    """The control callback (a numba cfunc), compiled once per process."""
-    global _CALLBACK
-    if _CALLBACK is not None:
-        return _CALLBACK
-    import numba
-    from numba import carray, types
-    from numba.extending import intrinsic
+def _callback_factory(off, key):
+    """The callback's Python source, closed over MuJoCo's struct offsets and the cache key only; the
+    functions it calls (regressor, ref_terms, output, the stage functions, pointer intrinsics) are
+    globals that compiled() replaces by their numba versions."""
+    off_ud, off_qpos, off_qvel, off_ctrl, off_cdof, off_xpos, off_xmat, off_subcom, off_cinert, \
+        off_arm, off_damp, off_gravity = off
 
-    from adaptive_mj.laws.common import clip_into, modify_rate
-    from adaptive_mj.laws.slotine_li import reference_terms, slotine_li_output
-
-    @intrinsic
-    def address(typingctx, ptr):
-        sig = types.int64(types.voidptr)
-
-        def codegen(context, builder, signature, args):
-            return builder.ptrtoint(args[0], context.get_value_type(types.int64))
-
-        return sig, codegen
-
-    fptr, iptr = pointer(types.float64), pointer(types.int64)
-    i_addr, f_addr = _I.ctypes.data, _F.ctypes.data
-    regressor = kernel()
-    ref_terms = numba.njit(reference_terms)
-    output = numba.njit(_with_globals(slotine_li_output, modify_rate=numba.njit(modify_rate)))
-    clip = numba.njit(clip_into)
-
-    @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True)
+    @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True, cache=True)  # noqa: F821 (injected)
     def callback(m, d):
-        I = carray(iptr(i_addr), I_END)
-        F = carray(fptr(f_addr), F_END)
-        if address(d) != I[I_DATA]:  # another MjData (a scratch copy): not ours
+        if key == 0:  # never: keeps the cache key in the closure
             return
-        stage, row, nst = I[I_STAGE], I[I_ROW], I[I_NST]
-        if stage >= nst or row >= I[I_ROWS]:  # past the step's stages or the chunk: leave ctrl as it is
+        base, mbase = address(d), address(m)  # noqa: F821 (injected)
+        ud = carray(iptr(base + off_ud), 1)[0]  # noqa: F821 (injected)
+        if ud == 0:
             return
-        nv, nb, nth, nstd = I[I_NV], I[I_NBODY], I[I_NTH], I[I_NSTD]
-        qpos, qvel, ctrl = carray(fptr(I[I_QPOS]), I[I_NQ]), carray(fptr(I[I_QVEL]), nv), \
-            carray(fptr(I[I_CTRL]), I[I_NU])
-        qadr, act = carray(iptr(I[I_QADR]), nv), carray(iptr(I[I_ACT]), nv)
-        gear, lo, hi = carray(fptr(I[I_GEAR]), nv), carray(fptr(I[I_LO]), nv), carray(fptr(I[I_HI]), nv)
-        theta, rsum, prev = carray(fptr(I[I_THETA]), nth), carray(fptr(I[I_RSUM]), nth), \
-            carray(fptr(I[I_PREV]), nth)
-        th, rate = carray(fptr(I[I_TH]), nth), carray(fptr(I[I_RATE]), nth)
-        x = carray(fptr(I[I_X]), (2, nv))
-        s, qd_r, qdd_r, u = carray(fptr(I[I_S]), nv), carray(fptr(I[I_QDR]), nv), carray(fptr(I[I_QDDR]), nv), \
-            carray(fptr(I[I_U]), nv)
-        maxrows = I[I_MAXROWS]
-        noise = carray(fptr(I[I_NOISE]), (maxrows, 2, nv))
-        refs = carray(fptr(I[I_REF]), (maxrows * nst, 3, nv))
+        c = carray(iptr(ud), 1)[0]  # noqa: F821 (injected)
+        if c == 0:  # an MjData no native run owns (a scratch copy): leave it alone
+            return
+        ctx = carray(cptr(c), 1)[0]  # noqa: F821 (injected)
+        stage, row, nst = ctx.stage, ctx.row, ctx.nstages
+        if stage >= nst or row >= ctx.rows:  # past the step's stages or the chunk: leave ctrl as it is
+            return
+        nv, nth = ctx.nv, ctx.nth
+        qpos = carray(fptr(field(base, off_qpos)), ctx.nq)  # noqa: F821 (injected)
+        qvel = carray(fptr(field(base, off_qvel)), nv)  # noqa: F821 (injected)
+        ctrl = carray(fptr(field(base, off_ctrl)), ctx.nu)  # noqa: F821 (injected)
+        qadr, act = carray(iptr(ctx.qadr), nv), carray(iptr(ctx.act), nv)  # noqa: F821 (injected)
+        theta, rsum, prev = carray(fptr(ctx.theta), nth), carray(fptr(ctx.rsum), nth), carray(fptr(ctx.prev), nth)  # noqa: F821,E501
+        lower, upper = carray(fptr(ctx.lower), nth), carray(fptr(ctx.upper), nth)  # noqa: F821 (injected)
+        u_hold, s_hold = carray(fptr(ctx.u_hold), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
+        refs = carray(fptr(ctx.ref), (ctx.maxrows * nst, 3, nv))  # noqa: F821 (injected)
         r = refs[row * nst + stage]
-        h = F[F_H]
-
+        sampled = ctx.mode == SAMPLED  # noqa: F821 (injected)
+        if (is_sample_step(ctx.step, ctx.period_steps) and stage == 0) if sampled else True:  # noqa: F821
+            law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower, upper, r)  # noqa: F821
+            rate = carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
+            accumulate_rate(rsum, prev, rate, 1.0 if sampled else ctx.weights[stage])  # noqa: F821 (injected)
+        u = u_hold
+        if ctx.delay > 0:  # the stage-0 control of D steps ago, held over the step (zero before)
+            delayed = carray(fptr(ctx.delayed), nv)  # noqa: F821 (injected)
+            if stage == 0:
+                ring = carray(fptr(ctx.ring), (ctx.delay + 1, nv))  # noqa: F821 (injected)
+                put, get = delay_slot(ctx.step, ctx.delay)  # noqa: F821 (injected)
+                for j in range(nv):
+                    ring[put, j] = u_hold[j]
+                    delayed[j] = ring[get, j] if get >= 0 else 0.0
+            u = delayed
+        gear = carray(fptr(ctx.gear), nv)  # noqa: F821 (injected)
         for j in range(nv):
-            x[0, j] = qpos[qadr[j]] + noise[row, 0, j]
-            x[1, j] = qvel[j] + noise[row, 1, j]
-        if stage == 0:
-            for i in range(nth):
-                th[i] = theta[i]
-        else:
-            c = h * F[F_INC + stage]
-            for i in range(nth):
-                th[i] = theta[i] + c * prev[i]
-        theta0, plo, phi = carray(fptr(I[I_THETA0]), nth), carray(fptr(I[I_PLO]), nth), carray(fptr(I[I_PHI]), nth)
-        clip(th, plo, phi)  # projection: the stage estimate stays in the box too
-        ref_terms(x, r, carray(fptr(I[I_LAM]), nv), s, qd_r, qdd_r)
-
-        Y_std, tau_known = carray(fptr(I[I_YSTD]), (nv, nstd)), carray(fptr(I[I_TAUK]), nv)
-        cdof, xpos = carray(fptr(I[I_CDOF]), (nv, 6)), carray(fptr(I[I_XPOS]), (nb, 3))
-        xmat, subcom = carray(fptr(I[I_XMAT]), (nb, 9)), carray(fptr(I[I_SUBCOM]), (nb, 3))
-        cinert, gravity = carray(fptr(I[I_CINERT]), (nb, 10)), carray(fptr(I[I_GRAVITY]), 3)
-        parent, dofadr = carray(iptr(I[I_PARENT]), nb), carray(iptr(I[I_DOFADR]), nb)
-        dofnum, rootid = carray(iptr(I[I_DOFNUM]), nb), carray(iptr(I[I_ROOTID]), nb)
-        body_col, body_known = carray(iptr(I[I_BODYCOL]), nb), carray(iptr(I[I_BODYKNOWN]), nb)
-        col_arm, col_damp = carray(iptr(I[I_COLARM]), nv), carray(iptr(I[I_COLDAMP]), nv)
-        arm, damp = carray(fptr(I[I_ARM]), nv), carray(fptr(I[I_DAMP]), nv)
-        scratch, need = carray(fptr(I[I_SCRATCH]), 18 * nb), carray(iptr(I[I_NEED]), nstd)
-        if I[I_MODE] == MODE_PD_GRAVITY:
-            zero = carray(fptr(I[I_ZERO]), nv)
-            regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, arm, damp,
-                      cdof, xpos, xmat, subcom, cinert, gravity, zero, zero, zero, Y_std, tau_known, scratch, need)
-        else:
-            regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, arm, damp,
-                      cdof, xpos, xmat, subcom, cinert, gravity, x[1], qd_r, qdd_r, Y_std, tau_known, scratch, need)
-        if I[I_HAS_BASE] != 0:  # Y = Y_std B, B stored by columns as (pointer, row index, value)
-            Y = carray(fptr(I[I_Y]), (nv, nth))
-            bptr, bidx, bval = carray(iptr(I[I_BPTR]), nth + 1), carray(iptr(I[I_BIDX]), 1 << 30), \
-                carray(fptr(I[I_BVAL]), 1 << 30)
-            for j in range(nv):
-                for c in range(nth):
-                    acc = 0.0
-                    for p in range(bptr[c], bptr[c + 1]):
-                        acc += Y_std[j, bidx[p]] * bval[p]
-                    Y[j, c] = acc
-        else:
-            Y = Y_std
-        e_norm = 0.0
-        if I[I_DZ_ON_S] == 0:
-            for j in range(nv):
-                e = r[0, j] - x[0, j]
-                e_norm += e * e
-            e_norm = np.sqrt(e_norm)
-        output(Y, tau_known, th, s, carray(fptr(I[I_KD]), nv), carray(fptr(I[I_GAMMA]), nth), I[I_ADAPT] != 0,
-               F[F_DZW], I[I_DZ_ON_S] != 0, e_norm, F[F_SIGMA], F[F_EMOD], theta0, plo, phi, u, rate)
-        for j in range(nv):
-            v = u[j]
-            if v < lo[j]:
-                v = lo[j]
-            if v > hi[j]:
-                v = hi[j]
-            u[j] = v
-            ctrl[act[j]] = v / gear[j]
-        w = F[F_WEIGHTS + stage]
-        for i in range(nth):
-            rsum[i] += w * rate[i]
-            prev[i] = rate[i]
+            ctrl[act[j]] = u[j] / gear[j]
         if stage == 0:  # the step's row: t, true x, u, s, ref, θ̂ at the step's start
-            carray(fptr(I[I_RT]), maxrows)[row] = F[F_T]
-            rx = carray(fptr(I[I_RX]), (maxrows, 2, nv))
-            ru, rs = carray(fptr(I[I_RU]), (maxrows, nv)), carray(fptr(I[I_RS]), (maxrows, nv))
-            rref, rth = carray(fptr(I[I_RREF]), (maxrows, 3, nv)), carray(fptr(I[I_RTH]), (maxrows, nth))
+            maxrows = ctx.maxrows
+            carray(fptr(ctx.rec_t), maxrows)[row] = ctx.t  # noqa: F821 (injected)
+            rx = carray(fptr(ctx.rec_x), (maxrows, 2, nv))  # noqa: F821 (injected)
+            ru, rs = carray(fptr(ctx.rec_u), (maxrows, nv)), carray(fptr(ctx.rec_s), (maxrows, nv))  # noqa: F821
+            rref, rth = carray(fptr(ctx.rec_ref), (maxrows, 3, nv)), carray(fptr(ctx.rec_theta), (maxrows, nth))  # noqa: F821,E501
             for j in range(nv):
                 rx[row, 0, j] = qpos[qadr[j]]
                 rx[row, 1, j] = qvel[j]
                 ru[row, j] = u[j]
-                rs[row, j] = s[j]
+                rs[row, j] = s_hold[j]
                 for k in range(3):
                     rref[row, k, j] = r[k, j]
             for i in range(nth):
                 rth[row, i] = theta[i]
         stage += 1
-        if stage == nst:  # end of the physics step: advance the estimates once
-            for i in range(nth):
-                theta[i] = theta[i] + h * rsum[i]
-                rsum[i] = 0.0
-            clip(theta, plo, phi)
-            I[I_ROW] = row + 1
-            F[F_T] = F[F_T] + h
+        if stage == nst:  # end of the physics step: advance the estimates (continuous: every step)
+            if not sampled:
+                advance_estimates(theta, rsum, ctx.h, lower, upper)  # noqa: F821 (injected)
+            elif period_ends(ctx.step, ctx.period_steps):  # noqa: F821 (injected)
+                advance_estimates(theta, rsum, ctx.period, lower, upper)  # noqa: F821 (injected)
+            ctx.row = row + 1
+            ctx.step = ctx.step + 1
+            ctx.t = ctx.t + ctx.h
             stage = 0
-        I[I_STAGE] = stage
+        ctx.stage = stage
 
-    _CALLBACK = callback
     return callback
 
 
+def _field(base, offset):
+    """The pointer stored at base + offset (an MjData/MjModel pointer field), as an int64."""
+    return carray(iptr(base + offset), 1)[0]  # noqa: F821 (injected)
+
+
+def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower, upper, r):
+    """One evaluation of the Slotine–Li law at a stage: measure x (+ noise), the stage estimate, the
+    regressor on the live MjData, τ clamped into u_hold (and s into s_hold), the rate into ctx.rate."""
+    nv, nb, nth, nstd = ctx.nv, ctx.nbody, ctx.nth, ctx.nstd
+    _, _, _, _, off_cdof, off_xpos, off_xmat, off_subcom, off_cinert, off_arm, off_damp, off_gravity = off
+    th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
+    x = carray(fptr(ctx.x), (2, nv))  # noqa: F821 (injected)
+    s, qd_r, qdd_r = carray(fptr(ctx.s), nv), carray(fptr(ctx.qd_r), nv), carray(fptr(ctx.qdd_r), nv)  # noqa: F821
+    noise = carray(fptr(ctx.noise), (ctx.maxrows, 2, nv))  # noqa: F821 (injected)
+    qadr = carray(iptr(ctx.qadr), nv)  # noqa: F821 (injected)
+    for j in range(nv):
+        x[0, j] = qpos[qadr[j]] + noise[row, 0, j]
+        x[1, j] = qvel[j] + noise[row, 1, j]
+    stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
+    ref_terms(x, r, carray(fptr(ctx.lam), nv), s, qd_r, qdd_r)  # noqa: F821 (injected)
+    Y_std, tau_known = carray(fptr(ctx.y_std), (nv, nstd)), carray(fptr(ctx.tau_known), nv)  # noqa: F821
+    cdof, xpos = carray(fptr(_field(base, off_cdof)), (nv, 6)), carray(fptr(_field(base, off_xpos)), (nb, 3))  # noqa: F821,E501
+    xmat, subcom = carray(fptr(_field(base, off_xmat)), (nb, 9)), carray(fptr(_field(base, off_subcom)), (nb, 3))  # noqa: F821,E501
+    cinert = carray(fptr(_field(base, off_cinert)), (nb, 10))  # noqa: F821 (injected)
+    gravity = carray(fptr(mbase + off_gravity), 3)  # noqa: F821 (injected)
+    arm, damp = carray(fptr(_field(mbase, off_arm)), nv), carray(fptr(_field(mbase, off_damp)), nv)  # noqa: F821
+    parent, dofadr = carray(iptr(ctx.parent), nb), carray(iptr(ctx.dofadr), nb)  # noqa: F821 (injected)
+    dofnum, rootid = carray(iptr(ctx.dofnum), nb), carray(iptr(ctx.rootid), nb)  # noqa: F821 (injected)
+    body_col, body_known = carray(iptr(ctx.body_col), nb), carray(iptr(ctx.body_known), nb)  # noqa: F821
+    col_arm, col_damp = carray(iptr(ctx.col_arm), nv), carray(iptr(ctx.col_damp), nv)  # noqa: F821 (injected)
+    scratch, need = carray(fptr(ctx.scratch), 18 * nb), carray(iptr(ctx.need), nstd)  # noqa: F821 (injected)
+    if ctx.mode_law == MODE_PD_GRAVITY:
+        zero = carray(fptr(ctx.zero), nv)  # noqa: F821 (injected)
+        regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, arm, damp,  # noqa: F821
+                  cdof, xpos, xmat, subcom, cinert, gravity, zero, zero, zero, Y_std, tau_known, scratch, need)
+    else:
+        regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, arm, damp,  # noqa: F821
+                  cdof, xpos, xmat, subcom, cinert, gravity, x[1], qd_r, qdd_r, Y_std, tau_known, scratch, need)
+    if ctx.has_base != 0:  # Y = Y_std B, B stored by columns as (pointer, row index, value)
+        Y = carray(fptr(ctx.y), (nv, nth))  # noqa: F821 (injected)
+        bptr, bidx = carray(iptr(ctx.bptr), nth + 1), carray(iptr(ctx.bidx), 1 << 30)  # noqa: F821 (injected)
+        bval = carray(fptr(ctx.bval), 1 << 30)  # noqa: F821 (injected)
+        for j in range(nv):
+            for c in range(nth):
+                acc = 0.0
+                for p in range(bptr[c], bptr[c + 1]):
+                    acc += Y_std[j, bidx[p]] * bval[p]
+                Y[j, c] = acc
+    else:
+        Y = Y_std
+    e_norm = 0.0
+    if ctx.dz_on_s == 0:
+        for j in range(nv):
+            e = r[0, j] - x[0, j]
+            e_norm += e * e
+        e_norm = np.sqrt(e_norm)
+    u = carray(fptr(ctx.u), nv)  # noqa: F821 (injected)
+    output(Y, tau_known, th, s, carray(fptr(ctx.kd), nv), carray(fptr(ctx.gamma), nth), ctx.adapt != 0,  # noqa: F821
+           ctx.dz_width, ctx.dz_on_s != 0, e_norm, ctx.sigma, ctx.e_mod, carray(fptr(ctx.theta0), nth),  # noqa: F821
+           lower, upper, u, rate)
+    lo, hi = carray(fptr(ctx.lo), nv), carray(fptr(ctx.hi), nv)  # noqa: F821 (injected)
+    u_hold, s_hold = carray(fptr(ctx.u_hold), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
+    for j in range(nv):
+        v = u[j]
+        if v < lo[j]:
+            v = lo[j]
+        if v > hi[j]:
+            v = hi[j]
+        u_hold[j] = v
+        s_hold[j] = s[j]
+
+
+def compiled():
+    """The control callback (a numba cfunc): in memory once per process, on disk across processes."""
+    if "callback" in _compiled:
+        return _compiled["callback"]
+    import numba
+    from numba import carray, types
+
+    from adaptive_mj.laws.slotine_li import reference_terms, slotine_li_output
+
+    offsets = mujoco_offsets()
+    off = tuple(offsets[k] for k in ("userdata", "qpos", "qvel", "ctrl", "cdof", "xpos", "xmat", "subtree_com",
+                                     "cinert", "model.dof_armature", "model.dof_damping", "model.gravity"))
+    common = {"carray": carray, "iptr": pointer(types.int64), "fptr": pointer(types.float64), "np": np,
+              "MODE_PD_GRAVITY": MODE_PD_GRAVITY}
+    field = jit_tree(_field, numba.njit, **common)
+    stage_fns = {name: jit_tree(getattr(stage_code, name), numba.njit) for name in
+                 ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
+                  "delay_slot")}
+    law_stage = jit_tree(_law_stage, numba.njit, regressor=kernel(), ref_terms=jit_tree(reference_terms, numba.njit),
+                         output=jit_tree(slotine_li_output, numba.njit), _field=field, **common, **stage_fns)
+    key = source_key(_callback_factory, _law_stage, _regressor, reference_terms, slotine_li_output,
+                     stage_code.stage_estimate, extra=(off, numba.__version__))
+    g = {**_callback_factory.__globals__, **common, **stage_fns, "numba": numba, "types": types,
+         "law_stage": law_stage, "field": field, "address": address_of(), "cptr": pointer(numba.from_dtype(CONTEXT)),
+         "SAMPLED": stage_code.SAMPLED}
+    factory = pytypes.FunctionType(_callback_factory.__code__, g, "_callback_factory")
+    _compiled["callback"] = factory(off, key)
+    return _compiled["callback"]
+
+
 def supported(plant, law) -> bool:
-    """Native path for manipulators: a ManipulatorPlant (joint axis and regressor), a Slotine–Li
-    law (or baseline) using that plant's regressor, RK4 or a one-stage integrator."""
+    """Native path for manipulators: a ManipulatorPlant (joint axis and regressor) compiled with a
+    userdata slot, a Slotine–Li law (or baseline) using that plant's regressor, RK4 or a one-stage
+    integrator."""
+    from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS
+
     if not (hasattr(plant, "joint_shape") and hasattr(plant, "regressor") and hasattr(plant, "step_native")):
         return False
     if not hasattr(law, "native_params") or "mode" not in law.native_params():
         return False
     return (plant.stages in (1, 4) and getattr(law, "regressor", None) is plant.regressor
-            and len(law.names) == len(plant.names) and int(law.m) == int(plant.m))
+            and len(law.names) == len(plant.names) and int(law.m) == int(plant.m)
+            and plant.model.nuserdata >= USERDATA_SLOTS)
+
+
+def _base_map_columns(B, nstd: int, nth: int) -> dict:
+    """The base map B (nstd, nth) by columns, its nonzero entries only (B is a column selection):
+    {bptr, bidx, bval, need} as the callback reads them."""
+    B = np.asarray(B, dtype=float)
+    if B.shape != (nstd, nth):
+        raise ValueError(f"base map of shape {B.shape}, expected {(nstd, nth)}")
+    rows_, vals, ptr = [], [], [0]
+    for c in range(nth):
+        nz = np.nonzero(B[:, c])[0]
+        rows_ += nz.tolist()
+        vals += B[nz, c].tolist()
+        ptr.append(len(rows_))
+    return {"bptr": np.asarray(ptr, dtype=np.int64), "bidx": np.asarray(rows_ or [0], dtype=np.int64),
+            "bval": np.asarray(vals or [0.0], dtype=float), "need": np.any(B != 0, axis=1).astype(np.int64)}
 
 
 class NativeManipulatorController:
-    """Owns the buffers of one native manipulator run and steps the plant chunk by chunk
+    """Owns the context and buffers of one native manipulator run and steps the plant chunk by chunk
     (the interface of adaptive_mj.sim.native.NativeController)."""
 
-    def __init__(self, plant, law, reference, theta_hat0, max_rows: int, *, delay: int = 0):
-        from adaptive_mj.sim.loop import TABLEAU
-
-        if delay:
-            raise ValueError("a control delay on a manipulator runs on the Python callback path (native=False)")
-
+    def __init__(self, plant, law, reference, theta_hat0, max_rows: int, *, control=None):
         self.plant, self.law, self.reference = plant, law, reference
+        control = control if control is not None else stage_code.ControlTiming(period=plant.dt)
         self.callback = compiled()
-        model, data, reg = plant.model, plant.data, plant.regressor
+        model, reg = plant.model, plant.regressor
         nv, nb = int(model.nv), int(model.nbody)
         nth, nstd = len(law.names), int(reg.n_standard)
         self.m, self.nth, self.nst, self.max_rows = nv, nth, plant.stages, int(max_rows)
         p = law.native_params()
-        inc, weights = TABLEAU[self.nst]
-        self.stage_offsets = np.asarray(inc)  # RK4: c_i = a_i (see loop.TABLEAU)
-
-        f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
-        i64 = lambda a: np.ascontiguousarray(a, dtype=np.int64)  # noqa: E731
+        inc, weights = stage_code.TABLEAU[self.nst]
+        self.stage_offsets = np.asarray(inc)  # RK4: c_i = a_i (see stage.TABLEAU)
+        f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731 (a short local converter)
+        i64 = lambda a: np.ascontiguousarray(a, dtype=np.int64)  # noqa: E731 (a short local converter)
         self.theta = f64(np.array(theta_hat0, dtype=float).reshape(nth))
         lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (np.full(nv, -np.inf), np.full(nv, np.inf))
-        keep = {  # everything the callback reaches by address: held here for the run's lifetime
-            I_PARENT: i64(reg.parent), I_DOFADR: i64(reg.dofadr), I_DOFNUM: i64(reg.dofnum),
-            I_ROOTID: i64(reg.rootid), I_BODYCOL: i64(reg.body_col), I_BODYKNOWN: i64(reg.body_known),
-            I_COLARM: i64(reg.col_arm), I_COLDAMP: i64(reg.col_damp),
-            I_QADR: i64(plant._qadr), I_ACT: i64(plant._act), I_GEAR: f64(plant._gear),
-            I_LO: f64(np.broadcast_to(lo, (nv,))), I_HI: f64(np.broadcast_to(hi, (nv,))),
-            I_LAM: f64(p["lam"]), I_KD: f64(p["kd"]), I_GAMMA: f64(p["gamma"]),
-            I_THETA: self.theta, I_RSUM: np.zeros(nth), I_PREV: np.zeros(nth), I_TH: np.zeros(nth),
-            I_X: np.zeros((2, nv)), I_S: np.zeros(nv), I_QDR: np.zeros(nv), I_QDDR: np.zeros(nv),
-            I_ZERO: np.zeros(nv), I_U: np.zeros(nv), I_RATE: np.zeros(nth), I_YSTD: np.zeros((nv, nstd)),
-            I_Y: np.zeros((nv, nth)), I_TAUK: np.zeros(nv), I_SCRATCH: np.zeros(18 * nb),
-            I_REF: np.zeros((self.max_rows * self.nst, 3, nv)), I_NOISE: np.zeros((self.max_rows, 2, nv)),
-            I_RT: np.zeros(self.max_rows), I_RX: np.zeros((self.max_rows, 2, nv)),
-            I_RU: np.zeros((self.max_rows, nv)), I_RS: np.zeros((self.max_rows, nv)),
-            I_RREF: np.zeros((self.max_rows, 3, nv)), I_RTH: np.zeros((self.max_rows, nth)),
-            I_THETA0: f64(p["theta0"]), I_PLO: f64(p["lower"]), I_PHI: f64(p["upper"]),
+        rows, d = self.max_rows, control.delay
+        buf = {  # everything the callback reaches by address: held here for the run's lifetime
+            "parent": i64(reg.parent), "dofadr": i64(reg.dofadr), "dofnum": i64(reg.dofnum),
+            "rootid": i64(reg.rootid), "body_col": i64(reg.body_col), "body_known": i64(reg.body_known),
+            "col_arm": i64(reg.col_arm), "col_damp": i64(reg.col_damp),
+            "qadr": i64(plant._qadr), "act": i64(plant._act), "gear": f64(plant._gear),
+            "lo": f64(np.broadcast_to(lo, (nv,))), "hi": f64(np.broadcast_to(hi, (nv,))),
+            "lam": f64(p["lam"]), "kd": f64(p["kd"]), "gamma": f64(p["gamma"]),
+            "theta0": f64(p["theta0"]), "lower": f64(p["lower"]), "upper": f64(p["upper"]),
+            "theta": self.theta, "rsum": np.zeros(nth), "prev": np.zeros(nth), "th": np.zeros(nth),
+            "x": np.zeros((2, nv)), "s": np.zeros(nv), "qd_r": np.zeros(nv), "qdd_r": np.zeros(nv),
+            "zero": np.zeros(nv), "u": np.zeros(nv), "u_hold": np.zeros(nv), "s_hold": np.zeros(nv),
+            "delayed": np.zeros(nv), "ring": np.zeros((d + 1, nv)), "rate": np.zeros(nth),
+            "y_std": np.zeros((nv, nstd)), "y": np.zeros((nv, nth)), "tau_known": np.zeros(nv),
+            "scratch": np.zeros(18 * nb), "ref": np.zeros((rows * self.nst, 3, nv)), "noise": np.zeros((rows, 2, nv)),
+            "rec_t": np.zeros(rows), "rec_x": np.zeros((rows, 2, nv)), "rec_u": np.zeros((rows, nv)),
+            "rec_s": np.zeros((rows, nv)), "rec_ref": np.zeros((rows, 3, nv)), "rec_theta": np.zeros((rows, nth)),
         }
         B = getattr(reg, "base_map", None)
-        if B is not None:  # the base map by columns, its nonzero entries only (B is a column selection)
-            B = np.asarray(B, dtype=float)
-            if B.shape != (nstd, nth):
-                raise ValueError(f"base map of shape {B.shape}, expected {(nstd, nth)}")
-            rows_, vals, ptr = [], [], [0]
-            for c in range(nth):
-                nz = np.nonzero(B[:, c])[0]
-                rows_ += nz.tolist()
-                vals += B[nz, c].tolist()
-                ptr.append(len(rows_))
-            keep[I_BPTR], keep[I_BIDX], keep[I_BVAL] = i64(ptr), i64(rows_ or [0]), f64(vals or [0.0])
-            keep[I_NEED] = i64(np.any(B != 0, axis=1))  # standard columns the base map reads
+        if B is not None:
+            buf.update(_base_map_columns(B, nstd, nth))
         elif nstd != nth:
             raise ValueError(f"the law has {nth} parameters, the regressor {nstd}")
         else:
-            keep[I_NEED] = np.ones(max(nstd, 1), dtype=np.int64)
-        self._keep = keep
-        live = {I_QPOS: data.qpos, I_QVEL: data.qvel, I_CTRL: data.ctrl, I_CDOF: data.cdof, I_XPOS: data.xpos,
-                I_XMAT: data.xmat, I_SUBCOM: data.subtree_com, I_CINERT: data.cinert,
-                I_GRAVITY: model.opt.gravity, I_ARM: model.dof_armature, I_DAMP: model.dof_damping}
-        for slot, arr in live.items():  # MuJoCo's own arrays (stable addresses; events edit them in place)
-            if arr.dtype != np.float64 or not arr.flags.c_contiguous:
-                raise TypeError(f"unexpected MuJoCo array layout for table slot {slot}")
-        self._live = live
-        it, ft = np.zeros(I_END, dtype=np.int64), np.zeros(F_END)
-        for slot, arr in (*keep.items(), *live.items()):
-            it[slot] = arr.ctypes.data
-        it[I_DATA] = data._address
-        it[I_NST], it[I_NV], it[I_NBODY], it[I_NTH], it[I_NSTD] = self.nst, nv, nb, nth, nstd
-        it[I_NQ], it[I_NU], it[I_MAXROWS] = model.nq, model.nu, self.max_rows
-        it[I_MODE], it[I_ADAPT] = int(p["mode"]), int(bool(p["adapt"]))
-        it[I_DZ_ON_S], it[I_HAS_BASE] = int(bool(p["dz_on_s"])), int(B is not None)
-        ft[F_H], ft[F_DZW], ft[F_SIGMA], ft[F_EMOD] = plant.dt, p["dz_width"], p["sigma"], p["e_mod"]
-        ft[F_INC:F_INC + len(inc)] = inc
-        ft[F_WEIGHTS:F_WEIGHTS + len(weights)] = weights
-        self._tables = it, ft
-        self._bind()
-
-    def _bind(self) -> None:
-        """Point the callback's tables at this controller's buffers (the newest controller owns them;
-        an older one takes them back at its next chunk)."""
-        global _OWNER
-        _I[:], _F[:] = self._tables
-        _OWNER = self
+            buf.update(need=np.ones(max(nstd, 1), dtype=np.int64), bptr=np.zeros(1, dtype=np.int64),
+                       bidx=np.zeros(1, dtype=np.int64), bval=np.zeros(1))
+        self.buffers = buf
+        ctx = np.zeros(1, dtype=CONTEXT)
+        c = ctx[0]
+        for name, arr in buf.items():
+            c[name] = addr(arr)
+        c["nstages"], c["nv"], c["nbody"], c["nth"], c["nstd"] = self.nst, nv, nb, nth, nstd
+        c["nq"], c["nu"], c["maxrows"] = model.nq, model.nu, rows
+        c["mode_law"], c["adapt"] = int(p["mode"]), int(bool(p["adapt"]))
+        c["dz_on_s"], c["has_base"] = int(bool(p["dz_on_s"])), int(B is not None)
+        c["mode"], c["period_steps"], c["delay"], c["period"] = control.mode, control.steps, d, control.period
+        c["h"], c["dz_width"], c["sigma"], c["e_mod"] = plant.dt, p["dz_width"], p["sigma"], p["e_mod"]
+        c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
+        self.context = ctx
+        bind_context(plant.data, ctx)
 
     def chunk(self, rows: int, noise: np.ndarray | None):
         """Step `rows` physics steps; return (t (rows,), x (rows, 2, m), u (rows, m), s (rows, m),
@@ -568,20 +607,15 @@ class NativeManipulatorController:
         else:
             times, which = np.unique(stage_t, return_inverse=True)
         refs = self.reference(times, 2)  # (3, len(times), m)
-        self._keep[I_REF][: rows * nst] = np.moveaxis(refs, 1, 0)[which]
-        buf = self._keep[I_NOISE]
-        if noise is not None:
-            buf[:rows] = np.asarray(noise, dtype=float).reshape(rows, 2, m)
-        else:
-            buf[:rows] = 0.0
-        if _OWNER is not self:
-            self._bind()
-        _F[F_H], _F[F_T] = h, t[0]
-        _I[I_STAGE], _I[I_ROW], _I[I_ROWS] = 0, 0, rows
+        b = self.buffers
+        b["ref"][: rows * nst] = np.moveaxis(refs, 1, 0)[which]
+        b["noise"][:rows] = 0.0 if noise is None else np.asarray(noise, dtype=float).reshape(rows, 2, m)
+        c = self.context[0]
+        c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
+        bind_context(plant.data, self.context)  # the newest run on this MjData owns it
         plant.step_native(rows)
-        done = int(_I[I_ROW])
-        if done != rows or _I[I_STAGE] != 0:
-            raise RuntimeError(f"native callback ran {done} steps (stage {int(_I[I_STAGE])}), expected {rows}")
-        k = self._keep
-        return (k[I_RT][:rows].copy(), k[I_RX][:rows].copy(), k[I_RU][:rows].copy(), k[I_RS][:rows].copy(),
-                k[I_RREF][:rows].copy(), k[I_RTH][:rows].copy())
+        done = int(c["row"])
+        if done != rows or c["stage"] != 0:
+            raise RuntimeError(f"native callback ran {done} steps (stage {int(c['stage'])}), expected {rows}")
+        return (b["rec_t"][:rows].copy(), b["rec_x"][:rows].copy(), b["rec_u"][:rows].copy(),
+                b["rec_s"][:rows].copy(), b["rec_ref"][:rows].copy(), b["rec_theta"][:rows].copy())

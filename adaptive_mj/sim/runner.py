@@ -14,8 +14,9 @@ from pathlib import Path
 from adaptive_mj import __version__
 from adaptive_mj.plants import ModelSource
 from adaptive_mj.setup.build import Setup, build
-from adaptive_mj.errors import AdaptiveMJError, Interrupted
+from adaptive_mj.errors import AdaptiveMJError, Interrupted, ScenarioError
 from adaptive_mj.sim.loop import plant_order, run
+from adaptive_mj.sim.stage import ControlTiming
 from adaptive_mj.report.metrics import clean_json, summary as make_summary
 from adaptive_mj.setup.scenario import Scenario
 from adaptive_mj.trajectory import Trajectory
@@ -72,11 +73,27 @@ def reserve_log_path(scn: Scenario, *, out: Path | None = None, directory: Path 
     raise AdaptiveMJError(f"{directory}: could not find a free log name for {stem}")
 
 
+def control_timing(scn: Scenario, setup: Setup) -> ControlTiming:
+    """The run's ControlTiming from [control] and simulation.control_delay, checked against the
+    plant's timestep and the law (a ScenarioError naming the key otherwise)."""
+    c = scn.control
+    try:
+        timing = ControlTiming.of(setup.plant.dt, mode=c.mode, period=c.period, delay=scn.simulation.control_delay)
+    except ValueError:
+        raise ScenarioError(f"{scn.source}: control.period must be a whole multiple of the physics timestep "
+                            f"{setup.plant.dt!r} s, got {c.period!r}") from None
+    if timing.sampled and hasattr(setup.law, "step_ends"):
+        raise ScenarioError(f"{scn.source}: law.composite runs under control.mode = 'continuous' only "
+                            "(its filters integrate the stage states), got control.mode = 'sampled'")
+    return timing
+
+
 def log_header(scn: Scenario, setup: Setup):
     """The record.LogHeader of a run of `scn` built as `setup` (also used by adaptive_mj.env)."""
     from adaptive_mj.log.record import LogHeader
 
     plant = setup.plant
+    timing = control_timing(scn, setup)
     return LogHeader(
         scenario_name=scn.name, scenario_text=scn.text, scenario_source=scn.source, overrides=scn.overrides,
         seed=scn.noise.seed, log_rate_hz=scn.log_rate_hz, dt=plant.dt, order=plant_order(plant),
@@ -86,7 +103,8 @@ def log_header(scn: Scenario, setup: Setup):
         model_assets=dict(setup.source.assets) if setup.source else {},
         versions=versions(), created_unix=time.time(),
         law_plugin=setup.law.installed.describe() if hasattr(setup.law, "installed") else None,
-        plant_plugin=_plant_plugin(scn))
+        plant_plugin=_plant_plugin(scn), control_mode=timing.describe()["control_mode"],
+        control_period=timing.period)
 
 
 def _plant_plugin(scn: Scenario) -> dict | None:
@@ -131,6 +149,7 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
     kwargs = dict(duration=scn.simulation.duration, theta_hat0=setup.theta_hat0, noise_std=setup.noise_std,
                   rng=setup.rng, events=setup.events, state_bound=scn.simulation.state_bound,
                   sink_every=sink_every, control_delay=scn.simulation.control_delay,
+                  control_mode=scn.control.mode, control_period=control_timing(scn, setup).period,
                   native=False if scn.simulation.python_callback else None)
     if log_path is None:
         traj = run(plant, setup.law, setup.reference, **kwargs)

@@ -1,0 +1,79 @@
+"""Helpers for compiling plain-array Python functions with numba (numba is imported only when
+they are called)."""
+from __future__ import annotations
+
+import types as pytypes
+from typing import Callable, Iterable
+
+
+def with_globals(fn, **replace):
+    """The same function (same code object) seeing some globals replaced, e.g. by their numba versions."""
+    return pytypes.FunctionType(fn.__code__, {**fn.__globals__, **replace}, fn.__name__, fn.__defaults__,
+                                fn.__closure__)
+
+
+def jit_tree(fn: Callable, njit: Callable, *, seen: dict | None = None, **replace) -> Callable:
+    """fn compiled by njit, with every plain Python function it calls through its module globals
+    compiled the same way (recursively), and globals in `replace` replaced. So a law written as
+    plain array code, and the functions it calls, compile without a hand-kept list."""
+    seen = {} if seen is None else seen
+    if id(fn) in seen:
+        return seen[id(fn)]
+    names = set(global_names(fn.__code__))
+    g = dict(fn.__globals__)
+    for name in names:
+        if name in replace:
+            g[name] = replace[name]
+            continue
+        value = g.get(name)
+        if isinstance(value, pytypes.FunctionType) and not _is_jitted(value):
+            g[name] = jit_tree(value, njit, seen=seen)
+    out = njit(pytypes.FunctionType(fn.__code__, g, fn.__name__, fn.__defaults__, fn.__closure__))
+    seen[id(fn)] = out
+    return out
+
+
+def global_names(code) -> Iterable[str]:
+    """The global names a code object (and the code objects nested in it) reads."""
+    yield from code.co_names
+    for const in code.co_consts:
+        if isinstance(const, pytypes.CodeType):
+            yield from global_names(const)
+
+
+def _is_jitted(value) -> bool:
+    return hasattr(value, "py_func")
+
+
+def pointer(nbtype):
+    """A numba intrinsic turning an int64 address into a typed pointer (for carray)."""
+    from numba import types
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def to_ptr(typingctx, address):
+        sig = types.CPointer(nbtype)(types.int64)
+
+        def codegen(context, builder, signature, args):
+            return builder.inttoptr(args[0], context.get_value_type(types.CPointer(nbtype)))
+
+        return sig, codegen
+
+    return to_ptr
+
+
+def address_of():
+    """A numba intrinsic: the int64 address a voidptr holds."""
+    from numba import types
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def address(typingctx, ptr):
+        sig = types.int64(types.voidptr)
+
+        def codegen(context, builder, signature, args):
+            return builder.ptrtoint(args[0], context.get_value_type(types.int64))
+
+        return sig, codegen
+
+    return address

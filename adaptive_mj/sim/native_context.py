@@ -1,0 +1,166 @@
+"""What the compiled control callbacks share: how a callback finds its run, how plain-array
+Python code is compiled for it, and the on-disk cache that makes the compile a one-time cost.
+
+Finding the run. MuJoCo calls a control callback with (const mjModel*, mjData*) only. Each
+plant's model is compiled with mjData.userdata (adaptive_mj.plants.mujoco_plant.USERDATA_SLOTS);
+a native run writes the address of its context block (a numpy structured array: named fields,
+one dtype per callback) into userdata[0] of its MjData. The callback reads the userdata pointer
+from the mjData struct, then the context, then MjData's own arrays (qpos, qvel, ctrl, ...)
+through their pointer fields: nothing is reached through an address compiled into the code.
+An MjData whose userdata[0] is 0 (a scratch copy, a fresh MjData) is left alone.
+
+The byte offsets of those pointer fields in mjData/mjModel are a property of the MuJoCo build;
+they are found once per process (struct_offsets) and compiled in as constants, and they are part
+of the cache key, so another MuJoCo build gets its own compiled callback.
+
+Compiling and caching. The callbacks are numba cfuncs with numba's on-disk cache
+(``cache=True``). numba keys a cached function by its own code and closure values, not by the
+code of the functions it calls, so each callback's closure carries `source_key`: a hash of the
+source of every module whose functions it compiles in (laws, plant forms, plugins, this
+package's stage code) and of those functions' closure values. Edit any of them and the next run
+compiles afresh; otherwise a new process loads the machine code from the cache (numba also keys
+by its version and the CPU). Set NUMBA_CACHE_DIR to move the cache.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import inspect
+import types as pytypes
+from typing import Callable, Iterable
+
+import numpy as np
+
+from adaptive_mj.numba_util import global_names
+
+_PAGE = 4096
+
+
+def struct_offsets(base: int, targets: dict[str, int], *, limit: int = 1 << 21) -> dict[str, set[int]]:
+    """Every byte offset, from `base` (the address of a MuJoCo struct), of a pointer field whose value
+    is one of `targets` {name: address}: the struct is read page by page up to the last page
+    after the one where every name has matched (a zero-size array shares its address with the
+    next field, so a name may have several candidates; block_offsets resolves them)."""
+    want = {int(v): k for k, v in targets.items()}
+    if len(want) != len(targets):
+        raise RuntimeError(f"ambiguous struct fields (shared addresses): {sorted(targets)}")
+    keys = np.array(list(want), dtype=np.uint64)
+    out: dict[str, set[int]] = {k: set() for k in targets}
+    page, last = base - base % _PAGE, base + limit
+    while page < last:
+        words = np.frombuffer(ctypes.string_at(page, _PAGE), dtype=np.uint64)
+        for i in np.nonzero(np.isin(words, keys))[0]:
+            off = page + 8 * int(i) - base
+            if off >= 0:
+                out[want[int(words[i])]].add(off)
+        page += _PAGE
+        if all(out.values()):  # every name matched: read one page more (a block can straddle two)
+            last = min(last, page + _PAGE)
+    return out
+
+
+_DATA_FIELDS = ("userdata", "qpos", "qvel", "ctrl", "cdof", "xpos", "xmat", "subtree_com", "cinert")
+_PROBE = ('<mujoco><size nuserdata="1"/><worldbody><body><joint name="j" type="hinge"/><geom size="0.1"/></body>'
+          '</worldbody><actuator><motor joint="j"/></actuator></mujoco>')
+_offsets: dict[str, int] | None = None
+
+
+def pointer_block(struct: str) -> list[str]:
+    """The names of the struct's array pointers in declaration order (MuJoCo's own introspection,
+    shipped with the bindings): the 8-byte fields from `buffer` on, up to the first non-pointer."""
+    from mujoco.introspect import ast_nodes, structs
+
+    fields = structs.STRUCTS[struct].fields
+    names = [f.name for f in fields]
+    out = []
+    for f in fields[names.index("buffer"):]:
+        if not isinstance(f.type, ast_nodes.PointerType):
+            break
+        out.append(f.name)
+    return out
+
+
+def block_offsets(base: int, arrays: dict[str, int], block: list[str]) -> dict[str, int]:
+    """{name: byte offset} of the pointer fields in `block` (consecutive 8-byte pointers, in order)
+    given the addresses `arrays` {name: address} some of them hold. The block's start is the one
+    offset at which every given pointer sits at its place in the order: a zero-size array shares
+    its address with its neighbour, so matching single values is ambiguous, the pattern is not."""
+    cands = struct_offsets(base, arrays)
+    index = {n: i for i, n in enumerate(block)}
+    starts: set[int] | None = None
+    for name, offs in cands.items():
+        here = {off - 8 * index[name] for off in offs}
+        starts = here if starts is None else starts & here
+    if not starts or len(starts) != 1:
+        raise RuntimeError(f"could not place MuJoCo's array pointers {sorted(arrays)} unambiguously "
+                           f"(block starts {sorted(starts or ())})")
+    start = starts.pop()
+    return {n: start + 8 * index[n] for n in block}
+
+
+def mujoco_offsets() -> dict[str, int]:
+    """{field: byte offset} of every mjData array pointer, every mjModel array pointer ("model."
+    prefix) and of mjModel.opt.gravity (inline), for this process's MuJoCo (found once)."""
+    global _offsets
+    if _offsets is None:
+        import mujoco
+
+        m = mujoco.MjModel.from_xml_string(_PROBE)
+        d = mujoco.MjData(m)
+        data_arrays = {n: getattr(d, n).ctypes.data for n in ("qpos", "qvel", "qacc_warmstart", "ctrl", "qfrc_applied",
+                                                              "xfrc_applied", "qacc", "userdata", "xpos", "xmat")}
+        out = block_offsets(d._address, data_arrays, pointer_block("mjData"))
+        model_arrays = {n: getattr(m, n).ctypes.data for n in ("qpos0", "body_parentid", "body_mass", "dof_armature",
+                                                               "dof_damping", "jnt_qposadr")}
+        out.update({f"model.{k}": v for k, v in block_offsets(m._address, model_arrays, pointer_block("mjModel")).items()})
+        out["model.gravity"] = m.opt.gravity.ctypes.data - m._address
+        _offsets = out
+    return _offsets
+
+
+def bind_context(data, context: np.ndarray) -> None:
+    """Point data's callback at `context` (a (1,) structured array the caller keeps alive):
+    userdata[0] holds its address (as the bits of an int64)."""
+    if data.userdata.size < 1:
+        raise ValueError("the model has no mjData.userdata slot for the native callback's context "
+                         "(compile it through adaptive_mj.plants.mujoco_plant, which adds one)")
+    data.userdata.view(np.int64)[0] = context.ctypes.data
+
+
+def unbind_context(data) -> None:
+    """Detach data from any context (userdata[0] = 0): the callback leaves it alone."""
+    if data.userdata.size >= 1:
+        data.userdata.view(np.int64)[0] = 0
+
+
+def addr(array: np.ndarray) -> int:
+    """The address of a C-contiguous float64/int64 array's first element (checked)."""
+    if not array.flags.c_contiguous or array.dtype not in (np.float64, np.int64):
+        raise TypeError(f"a buffer shared with compiled code must be C-contiguous float64/int64, got "
+                        f"{array.dtype} (contiguous: {array.flags.c_contiguous})")
+    return array.ctypes.data
+
+
+def source_key(*fns: Callable, extra: Iterable = ()) -> int:
+    """A 60-bit key of the source of the modules defining fns (and the modules of the functions they
+    call, one level of globals), of the functions' closure values, and of `extra`."""
+    h = hashlib.sha256()
+    files: set[str] = set()
+    todo = list(fns)
+    for fn in list(todo):
+        todo += [v for n in global_names(fn.__code__) if isinstance(v := fn.__globals__.get(n), pytypes.FunctionType)]
+    for fn in todo:
+        try:
+            files.add(inspect.getsourcefile(fn) or fn.__code__.co_filename)
+        except TypeError:
+            files.add(fn.__code__.co_filename)
+        h.update(fn.__code__.co_code)
+        h.update(repr([c.cell_contents for c in (fn.__closure__ or ())]).encode())
+    for path in sorted(files):
+        try:
+            with open(path, "rb") as f:
+                h.update(f.read())
+        except OSError:
+            h.update(path.encode())
+    h.update(repr(list(extra)).encode())
+    return int(h.hexdigest()[:15], 16) or 1

@@ -1,0 +1,114 @@
+"""The pieces of one control step that run at every call of the control callback, as plain
+array code: the Python controller (adaptive_mj.sim.loop) calls them as they are, and the
+compiled callbacks (adaptive_mj.sim.native, adaptive_mj.sim.native_manipulator) call the same
+functions compiled by numba. Nothing here imports mujoco or numba.
+
+Continuous control (``control.mode = "continuous"``, the lecture's): the law is evaluated at
+every integrator stage i with the stage estimate θ̂_i = θ̂_k + h a_i k_{i-1}, and after the last
+stage the estimates advance once with the tableau's weights b_i:
+    θ̂_{k+1} = θ̂_k + h Σ b_i k_i          (TABLEAU: RK4 or a one-stage integrator)
+Sampled-data control (``control.mode = "sampled"``, period T = N h): the law is evaluated once per
+control period, at the first stage of the period's first physics step, on the state measured
+there; its output is held (zero-order hold) over the period's N steps and all their stages, and
+the estimates advance once per period with the rate computed at the sample,
+    θ̂_{j+1} = θ̂_j + T θ̂'_j,
+which is Euler's rule and, because the rate is held over the period exactly as the control is,
+also the exact integral of the held rate (docs/THEORY.md, "Sampled-data control").
+
+Every estimate the law sees and every estimate the step ends with is clipped into the
+projection box [lower, upper] (±inf where a parameter is free).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from adaptive_mj.laws.common import clip_into
+
+# Per stage count: increments a_i (θ̂_i = θ̂_k + h a_i k_{i-1}) and weights b_i. For the
+# classic RK4 tableau a_i are also the stage-time offsets c_i (MuJoCo evaluates stage i at
+# t + c_i h), which the compiled paths use to evaluate the reference ahead of a chunk.
+TABLEAU = {
+    1: ((0.0,), (1.0,)),
+    4: ((0.0, 0.5, 0.5, 1.0), (1 / 6, 1 / 3, 1 / 3, 1 / 6)),
+}
+
+CONTINUOUS, SAMPLED = 0, 1  # control modes, as the compiled callbacks store them
+
+__all__ = ["ControlTiming", "TABLEAU", "CONTINUOUS", "SAMPLED", "clip_into", "stage_estimate", "accumulate_rate",
+           "advance_estimates", "is_sample_step", "period_ends", "delay_slot"]
+
+
+@dataclass(frozen=True)
+class ControlTiming:
+    """When the law runs. mode: CONTINUOUS (at every integrator stage) or SAMPLED (once per
+    control period, output held: zero-order hold); steps: the control period in physics steps;
+    period: the same in seconds (steps · dt); delay: whole physics steps between computing a
+    control and applying it."""
+
+    mode: int = CONTINUOUS
+    steps: int = 1
+    period: float = 0.0
+    delay: int = 0
+
+    @classmethod
+    def of(cls, dt: float, *, mode: str = "continuous", period: float | None = None, delay: int = 0) -> ControlTiming:
+        """From scenario terms: mode "continuous" | "sampled", period [s] (None: dt), delay [steps]."""
+        steps = 1 if period is None else int(round(period / dt))
+        if steps < 1 or abs(steps * dt - (period if period is not None else dt)) > 1e-9 * max(1.0, steps * dt):
+            raise ValueError(f"the control period {period} s is not a whole multiple of the timestep {dt} s")
+        if mode not in ("continuous", "sampled"):
+            raise ValueError(f"control mode must be 'continuous' or 'sampled', got {mode!r}")
+        if mode == "continuous" and steps != 1:
+            raise ValueError("a control period longer than the timestep needs sampled-data control (mode 'sampled')")
+        return cls(SAMPLED if mode == "sampled" else CONTINUOUS, steps, steps * dt, int(delay))
+
+    @property
+    def sampled(self) -> bool:
+        return self.mode == SAMPLED
+
+    def describe(self) -> dict:
+        """For a log's header and a trajectory's meta."""
+        return {"control_mode": "sampled" if self.sampled else "continuous", "control_period": self.period,
+                "control_period_steps": self.steps}
+
+
+def stage_estimate(theta, prev, step_fraction, h, lower, upper, out):
+    """out (n_theta,) = the estimate a stage sees: θ̂_k + (h a_i) k_{i-1} (θ̂_k itself when
+    step_fraction a_i is 0), clipped into the box. prev: k_{i-1}, the previous stage's rate."""
+    c = h * step_fraction
+    for i in range(theta.shape[0]):
+        out[i] = theta[i] + c * prev[i] if step_fraction != 0.0 else theta[i]
+    clip_into(out, lower, upper)
+
+
+def accumulate_rate(rsum, prev, rate, weight):
+    """After a stage: rsum += b_i k_i and prev = k_i (both (n_theta,), in place)."""
+    for i in range(rate.shape[0]):
+        rsum[i] += weight * rate[i]
+        prev[i] = rate[i]
+
+
+def advance_estimates(theta, rsum, h, lower, upper):
+    """End of a step (or of a control period): θ̂ += h Σ b_i k_i, clipped; rsum reset to 0.
+    For a sampled law h is the control period T and rsum the rate at the sample."""
+    for i in range(theta.shape[0]):
+        theta[i] = theta[i] + h * rsum[i]
+        rsum[i] = 0.0
+    clip_into(theta, lower, upper)
+
+
+def is_sample_step(step: int, period_steps: int) -> bool:
+    """Whether physics step `step` (counted from the run's start) begins a control period."""
+    return step % period_steps == 0
+
+
+def period_ends(step: int, period_steps: int) -> bool:
+    """Whether physics step `step` is the last of its control period."""
+    return (step + 1) % period_steps == 0
+
+
+def delay_slot(step: int, delay: int) -> tuple[int, int]:
+    """(slot to store step's control in, slot holding the control of step - delay) of a ring of
+    delay + 1 controls; the second is -1 while step < delay (nothing sent yet: zero applied)."""
+    size = delay + 1
+    return step % size, ((step - delay) % size if step >= delay else -1)
