@@ -116,13 +116,13 @@ class Controller:
             u = self.delayed
         if self.filters:
             self.stage_us.append(u)
-        if i == 0:
-            self.step_u, self.step_out, self.step_ref = u, self.held[1], self.held[2]
+        if i == 0:  # the row: the applied control, the law's (held) output, the reference at t_k
+            self.step_u, self.step_out, self.step_ref = u, self.held[1], self._ref(t)
         self.stage = i + 1
         return u
 
     def _evaluate(self, t: float, x: np.ndarray, i: int):
-        """The law at stage i on the measured state: (clamped u, its LawStep, the reference)."""
+        """The law at stage i on the measured state: (clamped u, its LawStep)."""
         ref = self._ref(t)
         st.stage_estimate(self.theta_hat, self.prev, self.inc[i], self.h, self.lower, self.upper, self.th)
         seen = x + self.noise
@@ -135,7 +135,7 @@ class Controller:
         u = np.minimum(np.maximum(out.u, self.lo), self.hi) if self.joints else min(max(out.u, self.lo), self.hi)
         weight = 1.0 if self.timing.sampled else self.weights[i]
         st.accumulate_rate(self.rsum, self.prev, np.asarray(out.theta_hat_dot, dtype=float), weight)
-        return u, out, ref
+        return u, out
 
     def finish_step(self) -> None:
         """Advance the estimates: every step (continuous), or at the end of a control period (sampled)."""

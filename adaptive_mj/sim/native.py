@@ -28,7 +28,7 @@ import numpy as np
 
 from adaptive_mj.laws.sliding import sliding_law_values
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_context import addr, bind_context, mujoco_offsets, source_key
+from adaptive_mj.sim.native_context import addr, bind_context, mujoco_offsets, source_key, unique_factory
 
 _i8, _f8 = np.int64, np.float64
 CONTEXT = np.dtype([
@@ -179,9 +179,7 @@ def compiled(form, plugin=None):
     g = {**_callback_factory.__globals__, **stage_fns, "numba": numba, "types": types, "carray": carray,
          "law": law, "address": address_of(), "iptr": pointer(types.int64), "fptr": pointer(types.float64),
          "cptr": pointer(numba.from_dtype(CONTEXT)), "SAMPLED": stage_code.SAMPLED}
-    import types as pytypes
-
-    factory = pytypes.FunctionType(_callback_factory.__code__, g, "_callback_factory")
+    factory = unique_factory(_callback_factory, g, key)
     callback = factory(off, key)
     _compiled[mem_key] = callback
     return callback

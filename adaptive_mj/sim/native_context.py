@@ -164,3 +164,17 @@ def source_key(*fns: Callable, extra: Iterable = ()) -> int:
             h.update(path.encode())
     h.update(repr(list(extra)).encode())
     return int(h.hexdigest()[:15], 16) or 1
+
+
+def unique_factory(factory: Callable, globals_: dict, key: int) -> Callable:
+    """factory (a module-level function defining a cfunc named `callback`) with the given globals,
+    its own name and its callback's qualified name made unique by `key`. numba names a compiled
+    function's symbols, and its cache files, after the qualified name: two variants of one
+    callback (two plant forms) loaded from the cache into one process would otherwise define the
+    same symbol twice, which LLVM refuses (abort)."""
+    tag = f"_{key:x}"
+    code = factory.__code__
+    consts = tuple(c.replace(co_name=c.co_name + tag, co_qualname=code.co_name + tag + ".<locals>." + c.co_name + tag)
+                   if isinstance(c, pytypes.CodeType) and c.co_name == "callback" else c for c in code.co_consts)
+    code = code.replace(co_consts=consts, co_name=code.co_name + tag, co_qualname=code.co_qualname + tag)
+    return pytypes.FunctionType(code, globals_, code.co_name)

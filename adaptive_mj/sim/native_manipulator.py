@@ -41,7 +41,7 @@ import numpy as np
 
 from adaptive_mj.numba_util import address_of, jit_tree, pointer
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_context import addr, bind_context, mujoco_offsets, source_key
+from adaptive_mj.sim.native_context import addr, bind_context, mujoco_offsets, source_key, unique_factory
 
 _i8, _f8 = np.int64, np.float64
 # The context block a run's MjData points at (userdata[0], see adaptive_mj.sim.native_context):
@@ -489,7 +489,7 @@ def compiled():
     g = {**_callback_factory.__globals__, **common, **stage_fns, "numba": numba, "types": types,
          "law_stage": law_stage, "field": field, "address": address_of(), "cptr": pointer(numba.from_dtype(CONTEXT)),
          "SAMPLED": stage_code.SAMPLED}
-    factory = pytypes.FunctionType(_callback_factory.__code__, g, "_callback_factory")
+    factory = unique_factory(_callback_factory, g, key)
     _compiled["callback"] = factory(off, key)
     return _compiled["callback"]
 
