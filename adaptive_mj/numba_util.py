@@ -12,10 +12,16 @@ def with_globals(fn, **replace):
                                 fn.__closure__)
 
 
-def jit_tree(fn: Callable, njit: Callable, *, seen: dict | None = None, **replace) -> Callable:
+def jit_tree(fn: Callable, njit: Callable, *, tag: str = "", seen: dict | None = None, **replace) -> Callable:
     """fn compiled by njit, with every plain Python function it calls through its module globals
     compiled the same way (recursively), and globals in `replace` replaced. So a law written as
-    plain array code, and the functions it calls, compile without a hand-kept list."""
+    plain array code, and the functions it calls, compile without a hand-kept list.
+
+    tag: appended to every compiled function's name and qualified name. numba names a function's
+    machine-code symbols after its qualified name and a counter that restarts in every process, so
+    two variants of the same functions (other globals: another plant's phi) compiled in two
+    processes and loaded from the disk cache into a third would define one symbol twice, and the
+    JIT would link one variant's calls to the other's code. A tag per variant keeps them apart."""
     seen = {} if seen is None else seen
     if id(fn) in seen:
         return seen[id(fn)]
@@ -27,8 +33,11 @@ def jit_tree(fn: Callable, njit: Callable, *, seen: dict | None = None, **replac
             continue
         value = g.get(name)
         if isinstance(value, pytypes.FunctionType) and not _is_jitted(value):
-            g[name] = jit_tree(value, njit, seen=seen)
-    out = njit(pytypes.FunctionType(fn.__code__, g, fn.__name__, fn.__defaults__, fn.__closure__))
+            g[name] = jit_tree(value, njit, tag=tag, seen=seen)
+    code = fn.__code__
+    if tag:
+        code = code.replace(co_name=code.co_name + tag, co_qualname=code.co_qualname + tag)
+    out = njit(pytypes.FunctionType(code, g, code.co_name, fn.__defaults__, fn.__closure__))
     seen[id(fn)] = out
     return out
 

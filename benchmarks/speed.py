@@ -8,6 +8,10 @@ with 1 and 2 jobs; log size per simulated second; peak memory of a 600 s run.
   c  closed loop with MCAP logging at the default rate (100 Hz)
   d  closed loop with MCAP logging of every physics step
   e  the example law plugin (pip install examples/emod_law): compiled, and through the Python callback
+  f  closed loop under sampled-data control at 250 Hz (control.period = 4 ms), native path
+  start-up: wall time of `adaptive-mj run <scenario> --set simulation.duration=0.01` in a fresh
+     process: the first call with an empty numba cache (it compiles the callback) and the second
+     (it loads it from the cache), heave vehicle and 6-joint arm
 
 Every figure is the median of --reps repetitions, with [min, max].
 Usage: python benchmarks/speed.py [--reps 5] [--steps 20000] [--json] [--quick]
@@ -48,13 +52,27 @@ def bare(name: str, steps: int) -> float:
     return (time.perf_counter() - t0) / steps * 1e6
 
 
-def loop(name: str, steps: int, native: bool) -> float:
+def loop(name: str, steps: int, native: bool, *, period: float | None = None) -> float:
     scn = _scenario(name, steps)
     setup = build(scn)
     t0 = time.perf_counter()
     run(setup.plant, setup.law, setup.reference, duration=scn.simulation.duration, theta_hat0=setup.theta_hat0,
-        native=native)
+        native=native, **({} if period is None else {"control_mode": "sampled", "control_period": period}))
     return (time.perf_counter() - t0) / steps * 1e6
+
+
+def startup(name: str, reps: int) -> dict:
+    """Wall seconds of a 0.01 s run through the CLI in fresh processes: the first with an empty
+    numba cache (NUMBA_CACHE_DIR a new folder), then `reps` more with the cache filled."""
+    with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as logs:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache, ADAPTIVE_MJ_LOGS=logs)
+        cmd = [sys.executable, "-m", "adaptive_mj", "run", name, "--set", "simulation.duration=0.01"]
+        times = []
+        for _ in range(1 + reps):
+            t0 = time.perf_counter()
+            subprocess.run(cmd, env=env, check=True, capture_output=True)
+            times.append(time.perf_counter() - t0)
+    return {"first": times[0], "second": med(times[1:])}
 
 
 # The example law plugin (examples/emod_law, installed with pip) on each 1-DOF model: its
@@ -164,7 +182,7 @@ def main() -> None:
         name = CASES[plant]
         loop(name, 500, True)  # compile the native callback once (numba), outside the timing
         rows = {"a_bare": [], "b_closed_loop": [], "b_py_python_callback": [], "c_logged_100Hz": [],
-                "d_logged_every_step": []}
+                "d_logged_every_step": [], "f_sampled_250Hz": []}
         sizes = []
         for _ in range(args.reps):
             rows["a_bare"].append(bare(name, args.steps))
@@ -174,6 +192,7 @@ def main() -> None:
             rows["c_logged_100Hz"].append(c)
             sizes.append(size / (args.steps * 0.001))
             rows["d_logged_every_step"].append(logged(name, args.steps, 1000.0)[0])
+            rows["f_sampled_250Hz"].append(loop(name, args.steps, True, period=0.004))
         if plant in PLUGIN_LAW and plugin_installed():
             plugin_loop(plant, 500, True)  # compile once, outside the timing
             rows["e_plugin_native"], rows["e_plugin_python"] = [], []
@@ -184,12 +203,19 @@ def main() -> None:
         a = stats["a_bare"]["median"]
         out["models"][plant] = {
             "integrator": "RK4", "us_per_step": stats,
-            "ratios": {"b/a": stats["b_closed_loop"]["median"] / a, "b_py/a": stats["b_py_python_callback"]["median"] / a,
-                       "c/a": stats["c_logged_100Hz"]["median"] / a, "d/a": stats["d_logged_every_step"]["median"] / a,
+            "ratios": {"b/a": stats["b_closed_loop"]["median"] / a,
+                       "b_py/a": stats["b_py_python_callback"]["median"] / a,
+                       "c/a": stats["c_logged_100Hz"]["median"] / a,
+                       "d/a": stats["d_logged_every_step"]["median"] / a,
+                       "f/a": stats["f_sampled_250Hz"]["median"] / a,
                        **({"e_native/a": stats["e_plugin_native"]["median"] / a,
-                           "e_python/a": stats["e_plugin_python"]["median"] / a} if "e_plugin_native" in stats else {})},
+                           "e_python/a": stats["e_plugin_python"]["median"] / a}
+                          if "e_plugin_native" in stats else {})},
             "log_bytes_per_sim_second_100Hz": statistics.median(sizes),
         }
+        if plant in ("heave", "ur5e"):
+            out["models"][plant]["startup_s"] = startup(name if plant == "heave" else "ur5e_identification",
+                                                        max(3, args.reps))
     if args.no_sweep:
         print(json.dumps(out, indent=2)) if args.json else _print_models(out)
         return
@@ -206,8 +232,9 @@ def main() -> None:
         return
     _print_models(out)
     sw = out["sweep_runs_per_minute"]
-    print(f"\nsweep ({args.sweep_runs} x {SWEEP_SECONDS:g} s heave runs, logged): jobs 1 {sw['jobs1']['median']:.1f} runs/min, "
-          f"jobs 2 {sw['jobs2']['median']:.1f} runs/min, speed-up {sw['speedup']:.2f}x")
+    print(f"\nsweep ({args.sweep_runs} x {SWEEP_SECONDS:g} s heave runs, logged): "
+          f"jobs 1 {sw['jobs1']['median']:.1f} runs/min, jobs 2 {sw['jobs2']['median']:.1f} runs/min, "
+          f"speed-up {sw['speedup']:.2f}x")
     rss = out["peak_rss_mb_600s_heave_logged"]
     print(f"peak RSS of a 600 s heave run at 1 kHz with default logging: {rss['median']:.0f} MB "
           f"[{rss['min']:.0f}, {rss['max']:.0f}] (3 fresh processes, MUJOCO_GL unset); "
@@ -222,6 +249,10 @@ def _print_models(out: dict) -> None:
             print(f"  {key:24s} {v['median']:8.2f} µs/step  [{v['min']:.2f}, {v['max']:.2f}]")
         print("  ratios: " + ", ".join(f"{k} = {v:.2f}" for k, v in res["ratios"].items()))
         print(f"  log size at 100 Hz: {res['log_bytes_per_sim_second_100Hz'] / 1000:.1f} kB per simulated second")
+        if "startup_s" in res:
+            st = res["startup_s"]
+            print(f"  start-up (CLI, 0.01 s run): first call {st['first']:.2f} s (compiles), second call "
+                  f"{st['second']['median']:.2f} s [{st['second']['min']:.2f}, {st['second']['max']:.2f}] (cache)")
 
 
 if __name__ == "__main__":

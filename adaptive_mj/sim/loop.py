@@ -291,7 +291,7 @@ def _run_python(plant, step: ControlStep, rows: _Rows) -> tuple[str, str]:
 
 def _run_native(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
     """Drive the native callback chunk by chunk: (status, reason)."""
-    with plant.controlled_natively(nc.callback):
+    with plant.controlled_natively(nc.callback), nc:
         while rows.k < rows.n:
             k, t_k = rows.k, plant.time
             queue.due(t_k, plant, rows.sink)

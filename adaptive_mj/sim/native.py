@@ -28,7 +28,8 @@ import numpy as np
 
 from adaptive_mj.laws.sliding import sliding_law_values
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_context import addr, bind_context, mujoco_offsets, source_key, unique_factory
+from adaptive_mj.sim.native_context import (addr, bind_context, mujoco_offsets, source_key, unbind_context,
+                                            unique_factory)
 
 _i8, _f8 = np.int64, np.float64
 CONTEXT = np.dtype([
@@ -165,17 +166,18 @@ def compiled(form, plugin=None):
 
     offsets = mujoco_offsets()
     off = (offsets["userdata"], offsets["qpos"], offsets["qvel"], offsets["ctrl"])
-    forms = {"phi_fn": jit_tree(form.phi, numba.njit), "f_fn": jit_tree(form.f, numba.njit),
-             "h_fn": jit_tree(form.h, numba.njit)}
+    key = source_key(*fns, _callback_factory, _builtin_law, _plugin_law, sliding_law_values,
+                     stage_code.stage_estimate, extra=(off, numba.__version__))
+    tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
+    forms = {"phi_fn": jit_tree(form.phi, numba.njit, tag=tag), "f_fn": jit_tree(form.f, numba.njit, tag=tag),
+             "h_fn": jit_tree(form.h, numba.njit, tag=tag)}
     if plugin is None:
-        law = jit_tree(_builtin_law, numba.njit, **forms)
+        law = jit_tree(_builtin_law, numba.njit, tag=tag, **forms)
     else:
-        law = jit_tree(_plugin_law, numba.njit, user_law=jit_tree(plugin, numba.njit), **forms)
-    stage_fns = {name: jit_tree(getattr(stage_code, name), numba.njit) for name in
+        law = jit_tree(_plugin_law, numba.njit, tag=tag, user_law=jit_tree(plugin, numba.njit, tag=tag), **forms)
+    stage_fns = {name: jit_tree(getattr(stage_code, name), numba.njit, tag=tag) for name in
                  ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
                   "delay_slot")}
-    key = source_key(*fns, _callback_factory, _builtin_law, sliding_law_values, stage_code.stage_estimate,
-                     extra=(off, numba.__version__))
     g = {**_callback_factory.__globals__, **stage_fns, "numba": numba, "types": types, "carray": carray,
          "law": law, "address": address_of(), "iptr": pointer(types.int64), "fptr": pointer(types.float64),
          "cptr": pointer(numba.from_dtype(CONTEXT)), "SAMPLED": stage_code.SAMPLED}
@@ -237,6 +239,17 @@ class NativeController:
             c[name] = addr(buf)
         self.context = ctx
         bind_context(plant.data, ctx)
+        plant.native_owner = self  # the context lives as long as the plant that points at it
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """The run is over: its MjData no longer points at the context (a later mj_step or mj_forward
+        on it under a native callback changes nothing)."""
+        unbind_context(self.plant.data)
+        if getattr(self.plant, "native_owner", None) is self:
+            self.plant.native_owner = None
 
     def chunk(self, rows: int, noise: np.ndarray | None):
         """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat) rows, each (rows, ...)."""
@@ -252,6 +265,7 @@ class NativeController:
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
         bind_context(plant.data, self.context)  # the newest run on this MjData owns it
+        plant.native_owner = self
         plant.step_native(rows)
         if int(c["row"]) != rows or int(c["stage"]) != 0:
             raise RuntimeError(f"native callback ran {int(c['row'])} steps (stage {int(c['stage'])}), "

@@ -41,7 +41,8 @@ import numpy as np
 
 from adaptive_mj.numba_util import address_of, jit_tree, pointer
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_context import addr, bind_context, mujoco_offsets, source_key, unique_factory
+from adaptive_mj.sim.native_context import (addr, bind_context, mujoco_offsets, source_key, unbind_context,
+                                            unique_factory)
 
 _i8, _f8 = np.int64, np.float64
 # The context block a run's MjData points at (userdata[0], see adaptive_mj.sim.native_context):
@@ -476,16 +477,18 @@ def compiled():
     offsets = mujoco_offsets()
     off = tuple(offsets[k] for k in ("userdata", "qpos", "qvel", "ctrl", "cdof", "xpos", "xmat", "subtree_com",
                                      "cinert", "model.dof_armature", "model.dof_damping", "model.gravity"))
-    common = {"carray": carray, "iptr": pointer(types.int64), "fptr": pointer(types.float64), "np": np,
-              "MODE_PD_GRAVITY": MODE_PD_GRAVITY}
-    field = jit_tree(_field, numba.njit, **common)
-    stage_fns = {name: jit_tree(getattr(stage_code, name), numba.njit) for name in
-                 ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
-                  "delay_slot")}
-    law_stage = jit_tree(_law_stage, numba.njit, regressor=kernel(), ref_terms=jit_tree(reference_terms, numba.njit),
-                         output=jit_tree(slotine_li_output, numba.njit), _field=field, **common, **stage_fns)
     key = source_key(_callback_factory, _law_stage, _regressor, reference_terms, slotine_li_output,
                      stage_code.stage_estimate, extra=(off, numba.__version__))
+    tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
+    common = {"carray": carray, "iptr": pointer(types.int64), "fptr": pointer(types.float64), "np": np,
+              "MODE_PD_GRAVITY": MODE_PD_GRAVITY}
+    field = jit_tree(_field, numba.njit, tag=tag, **common)
+    stage_fns = {name: jit_tree(getattr(stage_code, name), numba.njit, tag=tag) for name in
+                 ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
+                  "delay_slot")}
+    law_stage = jit_tree(_law_stage, numba.njit, tag=tag, regressor=jit_tree(_regressor, numba.njit, tag=tag),
+                         ref_terms=jit_tree(reference_terms, numba.njit, tag=tag),
+                         output=jit_tree(slotine_li_output, numba.njit, tag=tag), _field=field, **common, **stage_fns)
     g = {**_callback_factory.__globals__, **common, **stage_fns, "numba": numba, "types": types,
          "law_stage": law_stage, "field": field, "address": address_of(), "cptr": pointer(numba.from_dtype(CONTEXT)),
          "SAMPLED": stage_code.SAMPLED}
@@ -584,6 +587,17 @@ class NativeManipulatorController:
         c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
         self.context = ctx
         bind_context(plant.data, ctx)
+        plant.native_owner = self  # the context lives as long as the plant that points at it
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """The run is over: its MjData no longer points at the context (a later mj_step or mj_forward
+        on it under a native callback changes nothing)."""
+        unbind_context(self.plant.data)
+        if getattr(self.plant, "native_owner", None) is self:
+            self.plant.native_owner = None
 
     def chunk(self, rows: int, noise: np.ndarray | None):
         """Step `rows` physics steps; return (t (rows,), x (rows, 2, m), u (rows, m), s (rows, m),
@@ -613,6 +627,7 @@ class NativeManipulatorController:
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
         bind_context(plant.data, self.context)  # the newest run on this MjData owns it
+        plant.native_owner = self
         plant.step_native(rows)
         done = int(c["row"])
         if done != rows or c["stage"] != 0:
