@@ -1,5 +1,6 @@
-"""Formats are promises: logs written in format 1 (by adaptive-mj before multi-joint runs) and
-format 2 (before law plugins) still read and replay bit for bit; a multi-joint run round-trips."""
+"""Formats are promises: logs written in format 1 (by adaptive-mj before multi-joint runs), format 2
+(before law plugins) and format 3 (before sampled-data control) still read and replay bit for bit; a
+multi-joint run round-trips."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -36,6 +37,30 @@ def test_format2_logs_read_and_verify(name, joints, capsys):
     assert run.status == "ok" and len(run.trajectory.joint_names) == joints
     assert main(["replay", str(DATA / name), "--verify"]) == 0
     assert "verify: bit-identical" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("name, joints", [("heave_drift_delay_format3.mcap", 0),
+                                          ("ur5e_payload_swap_delay_format3.mcap", 6)])
+def test_format3_logs_read_and_verify(name, joints, capsys):
+    """Written by adaptive-mj 0.1.0 before sampled-data control (format 3, no control_mode): read as
+    continuous control at the physics step, and re-simulated bit for bit. Both ran with a control
+    delay; the 6-joint one ran it on the Python callback then and runs it natively now."""
+    run = read_log(DATA / name)
+    assert run.header["log_format_version"] == 3 < record.LOG_FORMAT_VERSION
+    assert run.header["control_mode"] == "continuous" and run.header["control_period"] == run.header["dt"]
+    assert run.status == "ok" and len(run.trajectory.joint_names) == joints
+    assert main(["replay", str(DATA / name), "--verify"]) == 0
+    assert "verify: bit-identical" in capsys.readouterr().out
+
+
+def test_format4_header_records_the_control_mode(tmp_path):
+    scn = scenario.load(scenario.SCENARIOS_DIR / "heave_tracking.toml",
+                        overrides=["simulation.duration=0.1", "control.period=0.005"])
+    path = tmp_path / "sampled.mcap"
+    execute(scn, log_path=path)
+    run = read_log(path)
+    assert (run.header["log_format_version"], run.header["control_mode"], run.header["control_period"]) == \
+        (4, "sampled", 0.005)
 
 
 def test_multi_joint_log_round_trips(tmp_path):
