@@ -121,7 +121,8 @@ def test_a_scratch_mjdata_is_left_alone_by_the_native_callback():
     (("control.period=0.0015",), r"control\.period must be a whole multiple of the physics timestep 0\.001"),
     (("control.mode='continuous'", "control.period=0.002"), r"control\.period must be left out under"),
     (("control.hold='foh'",), r"control\.hold must be one of"),
-    (("control.mode='sampled'", "law.composite={gain=1.0, filter=10.0}"), r"law\.composite runs under control\.mode = 'continuous'"),
+    (("control.mode='sampled'", "law.composite={gain=1.0, filter=10.0}"),
+     r"law\.composite runs under control\.mode = 'continuous'"),
 ])
 def test_bad_control_keys_are_one_line_errors(overrides, match):
     with pytest.raises(ScenarioError, match=match):

@@ -59,7 +59,7 @@ def test_heave_adaptive_native_matches_python(integrator):
 
 def test_noise_dead_zone_and_tracking_error_variant():
     for on in (DeadZoneOn.S, DeadZoneOn.TRACKING_ERROR):
-        a, b = both(heave_plant(x0=(0.0, 0.0)), lambda p: SlidingAdaptiveLaw(
+        a, b = both(heave_plant(x0=(0.0, 0.0)), lambda p, on=on: SlidingAdaptiveLaw(
             p.form, lam=5, k=200, gamma=GAMMA, dead_zone=DeadZone(0.02, on)), Cosine(amplitude=0.0),
             duration=2.0, theta_hat0=[37, 60, 1], noise_std=[0.001, 0.01])
         assert_same(a, b)

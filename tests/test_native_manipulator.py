@@ -83,7 +83,7 @@ def _native(plant, law, ref, theta0, duration, *, chunk=250, noise_std=None, rng
             k += rows
             if between is not None:
                 between(plant, nc)
-    return dict(zip(FIELDS, (np.concatenate(f) for f in zip(*parts)))), nc
+    return dict(zip(FIELDS, (np.concatenate(f) for f in zip(*parts, strict=True)), strict=True)), nc
 
 
 def _compare(setup_kw, duration, **native_kw):
@@ -196,7 +196,7 @@ def test_two_controllers_interleaved():
     for i, kw in enumerate(kws):
         plant, law, ref, th0 = _setup(**kw)
         traj = run(plant, law, ref, duration=0.3, theta_hat0=th0, native=False)
-        for f, got in zip(FIELDS, (np.concatenate(a) for a in zip(*out[i]))):
+        for f, got in zip(FIELDS, (np.concatenate(a) for a in zip(*out[i], strict=True)), strict=True):
             np.testing.assert_allclose(got, getattr(traj, f), rtol=0, atol=TOL, err_msg=f)
 
 

@@ -68,8 +68,8 @@ class CompositeSlidingLaw(SlidingAdaptiveLaw):
         """After a physics step: xs, us the measured stage states (n,) and applied controls the
         controller saw, weights the integrator's b_i, h the step [s]."""
         form = self.form
-        phi_bar = sum(w * np.asarray(form.phi(x), dtype=float) for w, x in zip(weights, xs))
-        tau_bar = sum(w * (form.f(x) + form.h(x) * u) for w, x, u in zip(weights, xs, us))
+        phi_bar = sum(w * np.asarray(form.phi(x), dtype=float) for w, x in zip(weights, xs, strict=True))
+        tau_bar = sum(w * (form.f(x) + form.h(x) * u) for w, x, u in zip(weights, xs, us, strict=True))
         self._pending = (float(xs[0][self.order - 1]), phi_bar, float(tau_bar), float(h))
 
     def step_begins(self, x: np.ndarray) -> None:

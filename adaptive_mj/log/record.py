@@ -43,7 +43,8 @@ from mcap.records import MessageIndex
 
 from adaptive_mj.sim.interrupt import deferred
 
-LOG_FORMAT_VERSION = 4  # 4: control_mode, control_period in the header; 3: law_plugin, plant_plugin; 2: joint_names/notes, per-joint fields (1: 1-DOF only)
+# 4: control_mode, control_period in the header; 3: law_plugin, plant_plugin;
+LOG_FORMAT_VERSION = 4  # 2: joint_names/notes, per-joint fields (1: 1-DOF only)
 
 #: Statuses a run can be closed with (replay adds "truncated" for a log that was never closed).
 CLOSE_STATUSES = ("ok", "diverged", "interrupted", "failed")
@@ -271,7 +272,7 @@ def _slow_payload(fields: tuple[str, ...], values: list[float]) -> bytes:
     (JSON has no inf/nan, and an absent field is a gap in a Foxglove plot)."""
     payload: dict[str, Any] = {"t": values[0]}
     nonfinite = {}
-    for name, v in zip(fields, values[1:]):
+    for name, v in zip(fields, values[1:], strict=True):
         if math.isfinite(v):
             payload[name] = v
         else:
@@ -473,7 +474,7 @@ class Recorder:
         channels = self._row_fields
         templates = self._templates
         batch: list[tuple[int, int, bytes]] = []
-        for i, (ti, ns) in enumerate(zip(t_list, log_ns)):
+        for i, (ti, ns) in enumerate(zip(t_list, log_ns, strict=True)):
             for j, (channel_id, fields) in enumerate(channels):
                 values = rows[j][i]
                 if finite[j][i]:

@@ -36,7 +36,7 @@ def _name(model, objtype, i: int) -> str:
     return mujoco.mj_id2name(model, objtype, i) or f"#{i}"
 
 
-def check_supported(model: mujoco.MjModel, where: str) -> None:
+def check_supported(model: mujoco.MjModel, where: str) -> None:  # noqa: C901 (one check per unsupported feature)
     """Refuse, with one line, what the manipulator regressor does not cover."""
     for j in range(model.njnt):
         t = mujoco.mjtJoint(model.jnt_type[j])
@@ -102,7 +102,9 @@ def servo_to_torque(spec) -> list[str]:
                 and act.dyntype == mujoco.mjtDyn.mjDYN_NONE:
             continue
         lo, hi = act.forcerange
-        if not (act.forcelimited == mujoco.mjtLimited.mjLIMITED_TRUE or (act.forcelimited == mujoco.mjtLimited.mjLIMITED_AUTO and lo < hi)) or not lo < hi:
+        limited = act.forcelimited == mujoco.mjtLimited.mjLIMITED_TRUE or (
+            act.forcelimited == mujoco.mjtLimited.mjLIMITED_AUTO and lo < hi)
+        if not limited or not lo < hi:
             raise ModelError(f"actuator {act.name!r}: servo_to_torque needs a forcerange to limit the torque motor")
         act.gaintype = mujoco.mjtGain.mjGAIN_FIXED
         act.gainprm = np.zeros_like(act.gainprm)

@@ -112,13 +112,13 @@ def cinert_of_params(p, xmat, r, out):
     out[9] = m
 
 
-def _inert_mul(I, x, out):
+def _inert_mul(inert, x, out):
     """out (6,) = spatial inertia I (cinert layout) times motion x (6,) [ang; lin]."""
     w0, w1, w2, l0, l1, l2 = x[0], x[1], x[2], x[3], x[4], x[5]
-    h0, h1, h2, m = I[6], I[7], I[8], I[9]
-    out[0] = I[0] * w0 + I[3] * w1 + I[4] * w2 + (h1 * l2 - h2 * l1)
-    out[1] = I[3] * w0 + I[1] * w1 + I[5] * w2 + (h2 * l0 - h0 * l2)
-    out[2] = I[4] * w0 + I[5] * w1 + I[2] * w2 + (h0 * l1 - h1 * l0)
+    h0, h1, h2, m = inert[6], inert[7], inert[8], inert[9]
+    out[0] = inert[0] * w0 + inert[3] * w1 + inert[4] * w2 + (h1 * l2 - h2 * l1)
+    out[1] = inert[3] * w0 + inert[1] * w1 + inert[5] * w2 + (h2 * l0 - h0 * l2)
+    out[2] = inert[4] * w0 + inert[5] * w1 + inert[2] * w2 + (h0 * l1 - h1 * l0)
     out[3] = m * l0 - (h1 * w2 - h2 * w1)
     out[4] = m * l1 - (h2 * w0 - h0 * w2)
     out[5] = m * l2 - (h0 * w1 - h1 * w0)
@@ -146,17 +146,17 @@ def _cross_motion_add(v, c, scale, out):
     out[5] += scale * (w0 * c[4] - w1 * c[3] + l0 * c[1] - l1 * c[0])
 
 
-def _body_force(I, ca, cv, cw, out):
+def _body_force(inert, ca, cv, cw, out):
     """out (6,) = I ca + ½ [cv ×* (I cw) + cw ×* (I cv)]."""
     tmp = np.empty(6)
-    _inert_mul(I, ca, out)
-    _inert_mul(I, cw, tmp)
+    _inert_mul(inert, ca, out)
+    _inert_mul(inert, cw, tmp)
     _cross_force_add(cv, tmp, 0.5, out)
-    _inert_mul(I, cv, tmp)
+    _inert_mul(inert, cv, tmp)
     _cross_force_add(cw, tmp, 0.5, out)
 
 
-def regressor(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp,
+def regressor(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp,  # noqa: C901 (compiled kernel)
               arm_known, damp_known, cdof, xpos, xmat, subtree_com, cinert, gravity,
               v, w, a, Y, tau_known):
     """Fill Y (nv, n_params) and tau_known (nv,) at the state MuJoCo's kinematics describe.

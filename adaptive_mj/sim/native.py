@@ -253,7 +253,7 @@ class NativeController:
 
     def chunk(self, rows: int, noise: np.ndarray | None):
         """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat) rows, each (rows, ...)."""
-        plant, n, nst, h = self.plant, self.n, self.nst, self.plant.dt
+        plant, n, h = self.plant, self.n, self.plant.dt
         t = np.empty(rows)
         t[0] = plant.time
         for i in range(1, rows):  # MuJoCo's own time accumulation, bit for bit

@@ -112,7 +112,8 @@ def mujoco_offsets() -> dict[str, int]:
         out = block_offsets(d._address, data_arrays, pointer_block("mjData"))
         model_arrays = {n: getattr(m, n).ctypes.data for n in ("qpos0", "body_parentid", "body_mass", "dof_armature",
                                                                "dof_damping", "jnt_qposadr")}
-        out.update({f"model.{k}": v for k, v in block_offsets(m._address, model_arrays, pointer_block("mjModel")).items()})
+        in_model = block_offsets(m._address, model_arrays, pointer_block("mjModel"))
+        out.update({f"model.{k}": v for k, v in in_model.items()})
         out["model.gravity"] = m.opt.gravity.ctypes.data - m._address
         _offsets = out
     return _offsets

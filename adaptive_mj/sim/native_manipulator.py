@@ -35,8 +35,6 @@ of a kinematic tree read from MjData's kinematics; the stage logic is shared (ad
 """
 from __future__ import annotations
 
-import types as pytypes
-
 import numpy as np
 
 from adaptive_mj.numba_util import address_of, jit_tree, pointer
@@ -155,7 +153,7 @@ def _unit_column(parent, dofadr, dofnum, cdof, b, I0, I1, I2, I3, I4, I5, h0, h1
     _project(parent, dofadr, dofnum, cdof, b, f0, f1, f2, f3, f4, f5, Y, col)
 
 
-def _regressor(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp,
+def _regressor(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp,  # noqa: C901 (a compiled kernel)
               arm_known, damp_known, cdof, xpos, xmat, subtree_com, cinert, gravity,
               v, w, a, Y, tau_known, scratch, need):
     """regressor_kernel.regressor (same arguments and numbers) with its work arrays in scratch (18 nbody).
@@ -227,8 +225,8 @@ def _regressor(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm
             continue
         cab, cvb, cwb = ca[b], cv[b], cw[b]
         if body_known[b] != 0:
-            I = cinert[b]
-            f0, f1, f2, f3, f4, f5 = _force(I[0], I[1], I[2], I[3], I[4], I[5], I[6], I[7], I[8], I[9],
+            ib = cinert[b]
+            f0, f1, f2, f3, f4, f5 = _force(ib[0], ib[1], ib[2], ib[3], ib[4], ib[5], ib[6], ib[7], ib[8], ib[9],
                                             cab, cvb, cwb)
             x = b
             while x > 0:
@@ -313,7 +311,7 @@ def kernel():
     return _KERNEL
 
 
-def _callback_factory(off, key):
+def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step's order read top to bottom)
     """The callback's Python source, closed over MuJoCo's struct offsets and the cache key only; the
     functions it calls (regressor, ref_terms, output, the stage functions, pointer intrinsics) are
     globals that compiled() replaces by their numba versions."""
@@ -321,7 +319,7 @@ def _callback_factory(off, key):
         off_arm, off_damp, off_gravity = off
 
     @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True, cache=True)  # noqa: F821 (injected)
-    def callback(m, d):
+    def callback(m, d):  # noqa: C901 (see above)
         if key == 0:  # never: keeps the cache key in the closure
             return
         base, mbase = address(d), address(m)  # noqa: F821 (injected)
