@@ -65,7 +65,8 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("--video-size", metavar="WxH", help="video frame size in pixels (default 800x400)")
     rp.add_argument("--video-range", metavar="T0:T1", help="only simulation times T0..T1 [s], e.g. 18:26")
     b = sub.add_parser("bench", help="run the benchmark catalogue: report.md, figures, logs, summary.json")
-    b.add_argument("--quick", action="store_true", help="shorter runs and fewer variants, no breaking-point study (under a minute on 2 cores)")
+    b.add_argument("--quick", action="store_true",
+                   help="shorter runs and fewer variants, no breaking-point study (under a minute on 2 cores)")
     b.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
     b.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help=JOBS_HELP)
     b.add_argument("--scenario", action="append", default=[], metavar="FILE",
@@ -236,7 +237,7 @@ def cmd_run(args) -> int:
     except OSError as exc:  # the log could not be written (disk full, a file-size limit)
         if args.debug:
             raise
-        from adaptive_mj.study.parallel import log_write_error
+        from adaptive_mj.study.job import log_write_error
 
         print(f"adaptive-mj: error: {log_write_error(log, exc)}", file=sys.stderr)
         return EXIT_FAILED

@@ -90,7 +90,7 @@ class SumOfSines:
     def __call__(self, t, order: int) -> np.ndarray:
         out = sum(
             _harmonic(t, a, w, p, order, np.sin)
-            for a, w, p in zip(self.amplitudes, self.omegas, self.phases)
+            for a, w, p in zip(self.amplitudes, self.omegas, self.phases, strict=True)
         )
         out = np.array(out, dtype=float)
         out[0] += self.offset
@@ -236,7 +236,7 @@ class JointSumOfSines:
         for i in range(self.m):
             joint = sum(
                 (_harmonic(tf, a, w, p, order, np.sin)
-                 for a, w, p in zip(self.amplitudes[i], self.omegas[i], self.phases[i])),
+                 for a, w, p in zip(self.amplitudes[i], self.omegas[i], self.phases[i], strict=True)),
                 np.zeros((order + 1, tf.size)))
             joint[0] += self.center[i]
             out[:, :, i] = joint

@@ -122,7 +122,8 @@ with tempfile.TemporaryDirectory() as tmp:
             sweep._append_row(stream, i, sweep.rows([(planned[i][0], r)], root=out)[0])
     t_runs = time.perf_counter() - t0
     t0 = time.perf_counter()
-    table, _ = sweep.write_tables(out / 'rows.jsonl', len(jobs), {{}}, out, keep=['law.k', 'seed', 'rms_tracking_error_tail'])
+    table, _ = sweep.write_tables(out / 'rows.jsonl', len(jobs), {{}}, out,
+                                  keep=['law.k', 'seed', 'rms_tracking_error_tail'])
     sweep.plot_sweep(table, ['law.k'], ['rms_tracking_error_tail'], out / 'sweep.png', plant_kind='heave')
     t_tables = time.perf_counter() - t0
 print(json.dumps(dict(import_s=t_import, validate_grid_s=t_validate, compile_native_s=t_compile,
@@ -198,8 +199,8 @@ def ray_figures(reps: int, runs: int, tasks: int) -> dict:
             "first_batch_s_4_runs": warm_s, "runs_per_min": med(thr), "driver_cpu_s": med(cpu),
             "runs_per_min_shared_logs": med(thr_shared), "driver_cpu_s_shared_logs": med(cpu_shared),
             "runs": runs, "local_runs_per_min": med(loc),
-            "ratio_to_local": med([a / b for a, b in zip(thr, loc)]),
-            "overhead_per_run_ms": med([60e3 / a - 60e3 / b for a, b in zip(thr, loc)])}
+            "ratio_to_local": med([a / b for a, b in zip(thr, loc, strict=True)]),
+            "overhead_per_run_ms": med([60e3 / a - 60e3 / b for a, b in zip(thr, loc, strict=True)])}
 
 
 def _peak_rss_kb(pid: int, stop: threading.Event, out: list) -> None:
@@ -220,8 +221,8 @@ def study(n: int, jobs: int = 2, backend: str = "local") -> dict:
     folder = Path(tempfile.mkdtemp(prefix="scaling-study-"))
     try:
         cmd = [sys.executable, "-m", "adaptive_mj", "sweep", "heave_drift", "--grid", f"law.k=100:300:{points}",
-               "--seeds", str(seeds), "--set", "simulation.duration=2.0", "--jobs", str(jobs), "-o", str(folder / "out"),
-               "--backend", backend]
+               "--seeds", str(seeds), "--set", "simulation.duration=2.0", "--jobs", str(jobs),
+               "-o", str(folder / "out"), "--backend", backend]
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                                 env=dict(os.environ, MUJOCO_GL="egl"))
@@ -237,8 +238,9 @@ def study(n: int, jobs: int = 2, backend: str = "local") -> dict:
         size = sum(p.stat().st_size for p in (folder / "out" / "logs").glob("*.mcap"))
     finally:
         shutil.rmtree(folder, ignore_errors=True)
-    return {"backend": backend, "runs": points * seeds, "rows": lines, "wall_s": wall, "runs_per_s": points * seeds / wall,
-            "driver_peak_rss_mb": max(rss) / 1024 if rss else None, "logs_mb": size / 2**20}
+    return {"backend": backend, "runs": points * seeds, "rows": lines, "wall_s": wall,
+            "runs_per_s": points * seeds / wall, "driver_peak_rss_mb": max(rss) / 1024 if rss else None,
+            "logs_mb": size / 2**20}
 
 
 def main() -> None:
@@ -265,7 +267,10 @@ def main() -> None:
     if args.json:
         print(json.dumps(res, indent=1))
         return
-    f = lambda m, fmt="{:.1f}": f"{fmt.format(m['median'])} [{fmt.format(m['min'])}, {fmt.format(m['max'])}]"  # noqa: E731
+
+    def f(m, fmt="{:.1f}"):
+        return f"{fmt.format(m['median'])} [{fmt.format(m['min'])}, {fmt.format(m['max'])}]"
+
     if "ceiling" in res:
         print(f"ceiling: 2 busy processes vs 1: {f(res['ceiling']['ratio_2_over_1'], '{:.2f}')}x")
     if "local" in res:
@@ -276,8 +281,9 @@ def main() -> None:
         print("  serial parts of a sweep [s]: " + ", ".join(f"{k} {v:.3f}" for k, v in lo["serial_parts_s"].items()))
     if "ray" in res:
         r = res["ray"]
-        print(f"ray (started here, 2 CPUs): start {r['ray_start_s']:.1f} s; no-op task {f(r['noop_task_ms'], '{:.2f}')} ms "
-              f"each; first batch of 4 runs {r['first_batch_s_4_runs']:.1f} s (worker start + compile); then "
+        print(f"ray (started here, 2 CPUs): start {r['ray_start_s']:.1f} s; "
+              f"no-op task {f(r['noop_task_ms'], '{:.2f}')} ms each; "
+              f"first batch of 4 runs {r['first_batch_s_4_runs']:.1f} s (worker start + compile); then "
               f"{f(r['runs_per_min'])} runs/min (logs as bytes; shared logs {f(r['runs_per_min_shared_logs'])}), "
               f"driver CPU for {r['runs']} runs {f(r['driver_cpu_s'], '{:.3f}')} s (shared logs "
               f"{f(r['driver_cpu_s_shared_logs'], '{:.3f}')} s); local backend meanwhile {f(r['local_runs_per_min'])} "
@@ -285,8 +291,9 @@ def main() -> None:
     for key in ("study_small", "study"):
         if key in res:
             s = res[key]
-            print(f"study ({s['backend']} backend): {s['runs']} runs of 2 s ({s['rows']} rows): {s['wall_s']:.0f} s, {s['runs_per_s']:.1f} runs/s, "
-                  f"driver peak RSS {s['driver_peak_rss_mb']:.0f} MB, logs {s['logs_mb']:.0f} MB")
+            print(f"study ({s['backend']} backend): {s['runs']} runs of 2 s ({s['rows']} rows): {s['wall_s']:.0f} s, "
+                  f"{s['runs_per_s']:.1f} runs/s, driver peak RSS {s['driver_peak_rss_mb']:.0f} MB, "
+                  f"logs {s['logs_mb']:.0f} MB")
 
 
 if __name__ == "__main__":

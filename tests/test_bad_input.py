@@ -18,9 +18,10 @@ from adaptive_mj.log import record
 from adaptive_mj.cli import main
 from adaptive_mj.errors import ScenarioError
 
+from test_scenario import GOOD  # the same valid scenario, edited case by case
+
 REPO = Path(__file__).resolve().parents[1]
 
-from test_scenario import GOOD  # noqa: E402  the same valid scenario, edited case by case
 ARM = GOOD.replace('kind = "heave"', 'kind = "arm"').replace(
     "gamma = { d = 0.0025, b = 0.002, c = 0.5 }", "gamma = 1.0")
 
@@ -77,7 +78,8 @@ SCENARIO_CASES = [
      r"events\[0\]\.t must be <= simulation\.duration \(2\.0\), got 3\.0"),
     ("unknown reference kind", GOOD, ["--set", "reference.kind=square"],
      r"reference\.kind must be one of 'constant', 'cosine', 'sine', 'sum_of_sines', 'smooth_step', got 'square'"),
-    ("unknown law kind", GOOD, ["--set", "law.kind=mrac"], r"law\.kind must be one of 'sliding_adaptive', .*, got 'mrac'"),
+    ("unknown law kind", GOOD, ["--set", "law.kind=mrac"],
+     r"law\.kind must be one of 'sliding_adaptive', .*, got 'mrac'"),
     ("schema version", GOOD.replace("schema_version = 1", "schema_version = 7"), [],
      r"schema_version must be 1 \(this adaptive-mj reads version 1\), got 7"),
     ("name with a path", GOOD, ["--set", 'name="../../outside"'],
@@ -329,7 +331,7 @@ def test_bench_and_sweep_never_write_into_a_used_folder(tmp_path, capsys):
 
 
 def test_an_analysis_is_picked_from_a_closed_set(tmp_path):
-    from adaptive_mj.study.parallel import EXTRAS, Job, run_job
+    from adaptive_mj.study.job import EXTRAS, Job, run_job
 
     result = run_job(Job(REPO / "scenarios" / "lecture_first_order.toml", overrides=("simulation.duration=0.2",),
                          extras=("__class__",)))

@@ -17,9 +17,9 @@ def small_catalogue(monkeypatch):
         keep = {s.key: s for s in sections if s.key in ("first_order", "phase", "payload_swap")}
         out = []
         for s in keep.values():
+            swap = ("simulation.duration=2.0", "events=[{t=1.0, kind='payload_mass', value=2.0}]")
             jobs = tuple(type(j)(scenario=j.scenario, overrides=j.overrides + ("simulation.duration=1.0",)
-                                 if s.key != "payload_swap" else j.overrides + ("simulation.duration=2.0",
-                                                                                 "events=[{t=1.0, kind='payload_mass', value=2.0}]"),
+                                 if s.key != "payload_swap" else j.overrides + swap,
                                  log=j.log, tag=j.tag, extras=j.extras) for j in s.jobs)
             out.append(bench_catalogue.Section(s.key, s.title, s.claim, jobs, s.analyze))
         # one run that diverges on purpose: the bench must go on

@@ -32,7 +32,7 @@ def test_adding_a_law_example_runs_and_its_claim_holds():
 
 
 def test_adding_a_plant_example_runs(tmp_path):
-    for lang, info, body in blocks(REPO / "docs" / "ADDING_A_PLANT.md"):
+    for _lang, info, body in blocks(REPO / "docs" / "ADDING_A_PLANT.md"):
         m = re.match(r"file=(\S+)", info)
         if m:
             (tmp_path / m.group(1)).write_text(body)
@@ -45,7 +45,8 @@ def test_adding_a_plant_example_runs(tmp_path):
             r = subprocess.run([sys.executable, "-c", body], cwd=tmp_path, capture_output=True, text=True,
                                env=env(), timeout=120)
             assert r.returncode == 0, r.stderr
-            assert r.stdout.strip() == "{'J': 0.0458, 'b': 0.02, 'g_sin': 0.0, 'g_cos': 1.7658}"  # horizontal at q = 0: gravity through cos q
+            # horizontal at q = 0: gravity through cos q
+            assert r.stdout.strip() == "{'J': 0.0458, 'b': 0.02, 'g_sin': 0.0, 'g_cos': 1.7658}"
     assert (tmp_path / "my_arm.mcap").stat().st_size > 10_000
 
 

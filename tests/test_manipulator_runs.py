@@ -118,7 +118,8 @@ def test_position_servo_arm_runs_through_servo_to_torque(tmp_path, capsys):
     ("noise.std.y=0.01", r"noise.std is not supported for plant.kind = 'manipulator'"),
 ])
 def test_manipulator_scenario_errors_are_one_line(override, match, capsys):
-    assert main(["run", "ur5e_payload_swap", "--set", override, "--set", "simulation.duration=0.1", "--set", "events=[]"]) == 2
+    assert main(["run", "ur5e_payload_swap", "--set", override, "--set", "simulation.duration=0.1",
+                 "--set", "events=[]"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
     import re

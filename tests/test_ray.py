@@ -17,15 +17,15 @@ from pathlib import Path
 
 import pytest
 
+from adaptive_mj.log.replay import read_log
+
+from test_bench import small_catalogue  # noqa: F401 (a fixture: pytest finds it by name in this module)
+from test_determinism import messages
+
 if os.environ.get("CI"):
-    import ray  # noqa: F401  (CI installs the [ray] extra: these tests must run there)
+    import ray  # noqa: F401 (CI installs the [ray] extra: these tests must run there)
 else:
     pytest.importorskip("ray")
-
-from adaptive_mj.log.replay import read_log  # noqa: E402
-
-from test_bench import small_catalogue  # noqa: E402,F401  (a fixture)
-from test_determinism import messages  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 TASK_TITLE = "ray::adaptive-mj-run"  # the process title Ray gives a worker while it runs one of our tasks
@@ -238,7 +238,8 @@ def test_a_log_the_driver_cannot_write_is_reported_and_replays_truncated(cluster
 def test_ray_options_are_checked_in_one_line(tmp_path):
     r = cli("sweep", *SHORT, "--address", "auto")
     assert r.returncode == 2
-    assert r.stderr.strip() == "adaptive-mj: error: --address is for --backend ray (this command runs on --backend local)"
+    assert r.stderr.strip() == ("adaptive-mj: error: --address is for --backend ray "
+                                "(this command runs on --backend local)")
     r = cli("sweep", *SHORT, "--backend", "ray", "--address", "127.0.0.1:1", "-o", str(tmp_path / "a"), timeout=60)
     assert r.returncode == 2
     assert r.stderr.strip().splitlines()[-1].startswith("adaptive-mj: error: --address '127.0.0.1:1': nothing answers "
@@ -269,7 +270,8 @@ def test_runs_that_fail_or_diverge_are_recorded_once_and_not_retried(cluster, tm
     assert results[2].status == "ok" and results[2].trajectory is not None
 
 
-def test_bench_on_ray_writes_the_local_report(cluster, small_catalogue, tmp_path, capsys):
+@pytest.mark.usefixtures("small_catalogue")
+def test_bench_on_ray_writes_the_local_report(cluster, tmp_path, capsys):
     """`bench --backend ray` (a reduced catalogue, in this process, on the cluster): the report, apart
     from its line of timings, summary.json and every log's messages equal the local backend's."""
     import json

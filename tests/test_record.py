@@ -248,7 +248,7 @@ def test_channels_have_json_schemas(full_log):
         topics = {ch.topic: ch for ch in summary.channels.values()}
         assert set(topics) == {*ROW_TOPICS, "/events", "/summary"}
         first = {}
-        for schema, channel, message, decoded in reader.iter_decoded_messages():
+        for _schema, channel, message, decoded in reader.iter_decoded_messages():
             assert message.log_time == message.publish_time
             if "t" in decoded:
                 assert message.log_time == round(decoded["t"] * 1e9)

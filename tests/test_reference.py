@@ -67,7 +67,7 @@ def test_sine_and_sum_of_sines_closed_forms():
     np.testing.assert_allclose(y, [0.8 * np.sin(1.5 * t), 1.2 * np.cos(1.5 * t), -1.8 * np.sin(1.5 * t)],
                                atol=1e-14)
     s = SumOfSines()(t, 1)
-    expected = sum(a * np.sin(w * t) for a, w in zip((0.5, 0.3, 0.2), (0.7, 1.9, 3.1)))
+    expected = sum(a * np.sin(w * t) for a, w in zip((0.5, 0.3, 0.2), (0.7, 1.9, 3.1), strict=True))
     np.testing.assert_allclose(s[0], expected, atol=1e-14)
     with pytest.raises(ValueError, match="same length"):
         SumOfSines(amplitudes=(1.0,), omegas=(1.0, 2.0), phases=(0.0,))

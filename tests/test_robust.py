@@ -15,7 +15,6 @@ from adaptive_mj.laws.common import modify_rate
 from adaptive_mj.laws.slotine_li import SlotineLiLaw
 from adaptive_mj.plants import heave
 from adaptive_mj.plants.twin import lecture_first_order_form
-from adaptive_mj.reference import Cosine
 from adaptive_mj.setup.build import build
 from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
 from adaptive_mj.sim.runner import execute
@@ -47,7 +46,7 @@ def test_leakage_is_its_defining_equation(kind):
     theta0 = {n: RNG.normal(size=n) for n in (2, 3, 4)}
     plain = _laws(lambda n: None)
     modified = _laws(lambda n: Modification(sigma=sigma, e_mod=nu, theta0=theta0[n]))
-    for (law0, *_), (law1, x, ref, th) in zip(plain, modified):
+    for (law0, *_), (law1, x, ref, th) in zip(plain, modified, strict=True):
         law0_step = law0(0.0, x, ref, th)
         step = law1(0.0, x, ref, th)
         s_abs = float(np.linalg.norm(step.s))
@@ -119,7 +118,10 @@ def test_sigma_modification_bounds_the_lecture_drift():
     plain = execute(load(SCENARIOS_DIR / "heave_drift.toml", overrides=["simulation.duration=60"])).trajectory
     sigma = execute(load(SCENARIOS_DIR / "heave_drift.toml",
                          overrides=["simulation.duration=60", "law.sigma=0.01"])).trajectory
-    ratio = lambda tr: tr.theta_hat[-1, 0] / tr.theta[-1, 0]  # noqa: E731
+
+    def ratio(tr):
+        return tr.theta_hat[-1, 0] / tr.theta[-1, 0]
+
     assert ratio(plain) > 1.05
     assert abs(ratio(sigma) - 1.0) < 0.05, ratio(sigma)
 
@@ -305,8 +307,8 @@ def test_composite_update_is_its_defining_equation():
     x_next = rng.normal(size=2)
     comp.step_begins(x_next)
     a = (x_next[1] - xs[0][1]) / h
-    phi_bar = sum(wi * form.phi(x) for wi, x in zip(w, xs))
-    tau_bar = sum(wi * (form.f(x) + form.h(x) * u) for wi, x, u in zip(w, xs, us))
+    phi_bar = sum(wi * form.phi(x) for wi, x in zip(w, xs, strict=True))
+    tau_bar = sum(wi * (form.f(x) + form.h(x) * u) for wi, x, u in zip(w, xs, us, strict=True))
     Yf = np.concatenate(([a], -phi_bar))
     theta, ref = rng.normal(size=3) * 10, rng.normal(size=3)
     expected = plain(0.0, x_next, ref, theta).theta_hat_dot - 0.3 * Yf * (Yf @ theta - tau_bar) / GAMMA

@@ -5,10 +5,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
-from adaptive_mj.errors import ModelError, ScenarioError
+from adaptive_mj.errors import AdaptiveMJError, ModelError, ScenarioError
+from adaptive_mj.study.sweep import DOCUMENTED_KEYS, to_toml
 
 GOOD = """
 schema_version = 1
@@ -67,16 +70,20 @@ def test_toml_syntax_error_names_line(tmp_path):
     (("c = 0.5", "c = 0.0"), r"bad\.toml: law\.gamma\.c must be > 0, got 0\.0"),
     (("gamma = { d = 0.0025, b = 0.002, c = 0.5 }", "gamma = -1"), r"law\.gamma must be > 0, got -1"),
     (("timestep = 0.001", "timestep = 0.0"), r"simulation\.timestep must be > 0, got 0\.0"),
-    (("timestep = 0.001", "timestep = 5.0"), r"simulation\.timestep must be <= simulation\.duration \(2\.0\), got 5\.0"),
+    (("timestep = 0.001", "timestep = 5.0"),
+     r"simulation\.timestep must be <= simulation\.duration \(2\.0\), got 5\.0"),
     (("duration = 2.0", "duration = 0"), r"simulation\.duration must be > 0, got 0"),
     (("duration = 2.0", "duration = -3.0"), r"simulation\.duration must be > 0, got -3\.0"),
-    (("initial_state = [1.0, 0.0]", "initial_state = [1.0]"), r"simulation\.initial_state must be an array of 2 numbers"),
+    (("initial_state = [1.0, 0.0]", "initial_state = [1.0]"),
+     r"simulation\.initial_state must be an array of 2 numbers"),
     (('kind = "cosine"', 'kind = "square"'), r"reference\.kind must be one of 'constant', .*got 'square'"),
     (('kind = "sliding_adaptive"', 'kind = "mrac"'), r"law\.kind must be one of .*got 'mrac'"),
     (("schema_version = 1", "schema_version = 7"), r"schema_version must be 1 .*got 7"),
     (("schema_version = 1", ""), r"schema_version is required but missing"),
-    (('backend = "mujoco"', 'backend = "mujoco"\npayload_mass = 1.0'), r"plant\.payload_mass must be absent unless plant\.kind = 'arm'"),
-    (('backend = "mujoco"', 'backend = "mujoco"\ntheta = {d=1.0, b=1.0, c=1.0}'), r"plant\.theta must be absent for backend 'mujoco'"),
+    (('backend = "mujoco"', 'backend = "mujoco"\npayload_mass = 1.0'),
+     r"plant\.payload_mass must be absent unless plant\.kind = 'arm'"),
+    (('backend = "mujoco"', 'backend = "mujoco"\ntheta = {d=1.0, b=1.0, c=1.0}'),
+     r"plant\.theta must be absent for backend 'mujoco'"),
     (("[law]", "[noise]\nstd = { y = -0.1 }\n[law]"), r"noise\.std\.y must be >= 0, got -0\.1"),
     (("[law]", "[noise]\nstd = { z = 0.1 }\n[law]"), r"unknown key 'noise\.std\.z'"),
     (("[law]", "[[events]]\nt = 3.0\nkind = 'constant_force'\nvalue = 1.0\n[law]"),
@@ -163,12 +170,6 @@ def test_initial_state_reference_and_model_estimates(tmp_path):
 
 
 # -- fuzzing: random documents and values raise only the project's own errors --------------------
-
-from hypothesis import HealthCheck, given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
-
-from adaptive_mj.errors import AdaptiveMJError  # noqa: E402
-from adaptive_mj.study.sweep import DOCUMENTED_KEYS, to_toml  # noqa: E402
 
 # Every key the validator reads, dotted, and the words it accepts, so random documents often get
 # past the first check and reach the deeper ones.

@@ -3,6 +3,7 @@ expression), the grid is the product of its axes, every point is validated
 before anything runs, and an end-to-end sweep writes one log per run and a
 CSV/JSON whose metrics are the ones stored in each log."""
 import csv
+import itertools
 import json
 import math
 import re
@@ -38,7 +39,7 @@ def test_linear_grid_includes_both_endpoints_evenly_spaced(arm_doc):
     assert key == "law.k"
     assert len(values) == 8
     assert values[0] == 0.25 and values[-1] == 4.0
-    steps = [b - a for a, b in zip(values, values[1:])]
+    steps = [b - a for a, b in itertools.pairwise(values)]
     assert all(math.isclose(d, 3.75 / 7) for d in steps)
 
 
@@ -365,7 +366,7 @@ def test_resume_finishes_a_killed_study_with_an_identical_table(tmp_path, capsys
     err = capsys.readouterr().err
     assert "(3 already finished, 3 to run)" in err
     assert (study / "sweep.csv").read_text() == (full / "sweep.csv").read_text()
-    for a, b in zip(sorted((full / "logs").glob("*.mcap")), sorted((study / "logs").glob("*.mcap"))):
+    for a, b in zip(sorted((full / "logs").glob("*.mcap")), sorted((study / "logs").glob("*.mcap")), strict=True):
         from adaptive_mj.log.replay import read_log
 
         import numpy as np
@@ -451,10 +452,11 @@ def test_a_killed_local_worker_loses_no_run(tmp_path):
 
 def _fake_jobs(monkeypatch, fake_run_job, folder: Path, *, n: int, crash: int):
     """n jobs for the local pool, job `crash` tagged "crash", each run by fake_run_job (the forked
-    workers inherit the patch) with no scenario compiled beforehand."""
-    from adaptive_mj.study import parallel
+    workers inherit the patch; a worker runs job.run_in_worker, which calls job.run_job) with no
+    scenario compiled beforehand."""
+    from adaptive_mj.study import job, parallel
 
-    monkeypatch.setattr(parallel, "run_job", fake_run_job)
+    monkeypatch.setattr(job, "run_job", fake_run_job)
     monkeypatch.setattr(parallel, "_prewarm", lambda jobs: None)
     return [parallel.Job(Path("unused.toml"), log=folder / f"{k}.mcap", tag="crash" if k == crash else f"run{k}")
             for k in range(n)]

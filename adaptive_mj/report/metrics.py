@@ -39,7 +39,7 @@ def metrics(traj: Trajectory) -> dict:
         "control_rms": _rms(traj.u),
         "control_total_variation": float(np.sum(np.abs(np.diff(traj.u, axis=0)))),
         "rms_s_tail": _rms(traj.s[tail]),
-        "param_error_final": {n: float(v) for n, v in zip(traj.names, final_err)},
+        "param_error_final": {n: float(v) for n, v in zip(traj.names, final_err, strict=True)},
         "lyapunov_initial": float(traj.V[0]) if len(traj) else math.nan,
         "lyapunov_final": float(traj.V[-1]) if len(traj) else math.nan,
         "lyapunov_max_increase": float(max(0.0, dV.max())) if dV.size else 0.0,
@@ -56,7 +56,10 @@ def joint_metrics(traj: Trajectory) -> dict:
     tail = tail_mask(traj)
     norm = np.linalg.norm(e, axis=1)
     u = np.asarray(traj.u).reshape(len(traj.t), max(1, len(traj.joint_names)))
-    per = lambda f: {j: f(i) for i, j in enumerate(traj.joint_names)}  # noqa: E731
+
+    def per(f):
+        return {j: f(i) for i, j in enumerate(traj.joint_names)}
+
     return {
         "rms_tracking_error_tail_per_joint": per(lambda i: _rms(e[tail, i])),
         "max_abs_tracking_error_tail_per_joint": per(
@@ -79,8 +82,8 @@ def summary(name: str, traj: Trajectory, *, steps: int | None = None) -> dict:
             "t": float(traj.t[-1]),
             "q": np.atleast_1d(traj.x[-1, 0]).astype(float).tolist(),
             "qd": np.atleast_1d(traj.qd[-1]).astype(float).tolist(),
-            "theta_hat": {n: float(v) for n, v in zip(traj.names, traj.theta_hat[-1])},
-            "theta": {n: float(v) for n, v in zip(traj.names, traj.theta[-1])},
+            "theta_hat": {n: float(v) for n, v in zip(traj.names, traj.theta_hat[-1], strict=True)},
+            "theta": {n: float(v) for n, v in zip(traj.names, traj.theta[-1], strict=True)},
         }
     else:
         last = {"t": 0.0, "q": [], "qd": [], "theta_hat": {}, "theta": {}}

@@ -4,12 +4,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
+import numpy as np
+
+from adaptive_mj.trajectory import Trajectory
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from adaptive_mj.trajectory import Trajectory  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402 (after matplotlib.use("Agg"): figures are drawn headless)
 
 
 def plot_run(traj: Trajectory, path: str | Path, *, title: str = "", kind: str | None = None) -> Path:
@@ -64,7 +64,7 @@ def plot_run(traj: Trajectory, path: str | Path, *, title: str = "", kind: str |
         ax.set_yscale("log")
     for a in fig.axes:
         a.grid(alpha=0.3)
-        for (te, label) in traj.meta.get("events", []):
+        for (te, _label) in traj.meta.get("events", []):
             a.axvline(te, color="grey", lw=0.8, ls=":")
     for a in fig.axes:
         if a.get_subplotspec() is not None and a.get_subplotspec().is_last_row():

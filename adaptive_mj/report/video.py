@@ -17,27 +17,28 @@ that the imageio-ffmpeg wheel bundles; GIF by Pillow.
 """
 from __future__ import annotations
 
+import contextlib
+import importlib
+import math
 import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from adaptive_mj.errors import AdaptiveMJError, LogFormatError
+from adaptive_mj.trajectory import Trajectory
 
 # Before mujoco is imported: mujoco picks its OpenGL backend at import time.
 # If something imported mujoco earlier without MUJOCO_GL, _headless_gl() below
 # still gives the renderer a context of this backend.
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-import contextlib  # noqa: E402
-import importlib  # noqa: E402
-import math  # noqa: E402
-import time  # noqa: E402
-from dataclasses import dataclass  # noqa: E402
-from pathlib import Path  # noqa: E402
-from typing import Iterator  # noqa: E402
+import mujoco  # noqa: E402 (after MUJOCO_GL is set, see above)
 
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-
-from adaptive_mj.errors import AdaptiveMJError, LogFormatError  # noqa: E402
-from adaptive_mj.log.replay import LoggedRun, read_log  # noqa: E402
-from adaptive_mj.trajectory import Trajectory  # noqa: E402
+from adaptive_mj.log.replay import LoggedRun, read_log  # noqa: E402 (after MUJOCO_GL too, should it import mujoco)
 
 #: Frames per second [1/s] when none is given (frames of simulation time, played in real time).
 DEFAULT_FPS = 30.0
@@ -429,7 +430,7 @@ def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
     label = _Label("green: reference pose q_d" if traj.joint_names else "green: reference y_d", height=height)
     renderer = _renderer(model, scene_w, height)
     try:
-        for t_frame, i in zip(times, rows):
+        for t_frame, i in zip(times, rows, strict=True):
             data.qpos[qadr] = traj.x[i, 0]
             data.qvel[dadr] = traj.x[i, 1] if traj.x.shape[1] > 1 else 0.0  # (m,) for an arm
             data.time = traj.t[i]

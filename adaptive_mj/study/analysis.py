@@ -121,12 +121,13 @@ def swap_response(traj: Trajectory, setup) -> dict:
         "event_time": t_e,
         "peak_error_after": float(e[after].max()) if after.any() else math.nan,
         "peak_time_after": float(traj.t[after][np.argmax(e[after])] - t_e) if after.any() else math.nan,
-        "estimate_min": {n: float(v) for n, v in zip(traj.names, traj.theta_hat.min(axis=0))},
-        "estimate_min_time": {n: float(traj.t[i]) for n, i in zip(traj.names, traj.theta_hat.argmin(axis=0))},
+        "estimate_min": {n: float(v) for n, v in zip(traj.names, traj.theta_hat.min(axis=0), strict=True)},
+        "estimate_min_time": {n: float(traj.t[i])
+                              for n, i in zip(traj.names, traj.theta_hat.argmin(axis=0), strict=True)},
         "leading_negative_seconds": float(np.sum(neg) * traj.meta["dt"]),
         "recovery_time": settle_time(traj.t, e < SWAP_THRESHOLD, t_e),
         "reconvergence_time": settle_time(traj.t, ok, t_e),
-        "changed": [n for n, c in zip(traj.names, changed) if c],
+        "changed": [n for n, c in zip(traj.names, changed, strict=True) if c],
         "threshold": SWAP_THRESHOLD,
     }
 

@@ -27,7 +27,8 @@ def main_table(rows: list[dict]) -> str:
     for r in rows:
         yu, uu = r.get("y_unit", ""), r.get("u_unit", "")
         lines.append(f"{r['section']:14s} {r['run']:30s} {r['status']:9s} {_fmt(r.get('tail')) + ' ' + yu:>16s} "
-                     f"{_fmt(r.get('u_rms')) + ' ' + uu:>12s} {_fmt(r.get('u_tv')) + ' ' + uu:>14s}  {r.get('key', '')}")
+                     f"{_fmt(r.get('u_rms')) + ' ' + uu:>12s} {_fmt(r.get('u_tv')) + ' ' + uu:>14s}  "
+                     f"{r.get('key', '')}")
     return "\n".join(lines)
 
 

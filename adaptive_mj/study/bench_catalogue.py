@@ -11,17 +11,16 @@ from pathlib import Path
 from typing import Callable
 
 import matplotlib
+import numpy as np
+
+from adaptive_mj import units
+from adaptive_mj.laws.sliding import surface_noise_std
+from adaptive_mj.study import analysis
+from adaptive_mj.setup import scenario as sc
+from adaptive_mj.study.parallel import Job, JobResult
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from adaptive_mj import units  # noqa: E402
-
-from adaptive_mj.laws.sliding import surface_noise_std  # noqa: E402
-from adaptive_mj.study import analysis
-from adaptive_mj.setup import scenario as sc  # noqa: E402
-from adaptive_mj.study.parallel import Job, JobResult  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402 (after matplotlib.use("Agg"): figures are drawn headless)
 
 SCN = sc.SCENARIOS_DIR
 @dataclass
@@ -64,8 +63,8 @@ def _row(section: str, variant: str, r: JobResult, key: str = "") -> dict:
 
 
 def _status_note(results: dict[str, JobResult]) -> str:
-    bad = [f"`{tag}`: {r.status}" + (f" ({r.error or (r.summary or {}).get('reason', '')})") for tag, r in results.items()
-           if r.status != "ok"]
+    bad = [f"`{tag}`: {r.status}" + (f" ({r.error or (r.summary or {}).get('reason', '')})")
+           for tag, r in results.items() if r.status != "ok"]
     return ("\n\nRuns that did not finish normally: " + "; ".join(bad) + ".\n") if bad else ""
 
 
@@ -95,15 +94,6 @@ def _final_table(r: JobResult, plant: str) -> str:
         u = _unit(n, plant)
         lines.append(f"| {n} [{u}] | {_g(true, '.4g')} | {_g(v, '.4g')} | {_g(v - true, '+.3g')} |")
     return "\n".join(lines)
-
-
-def _estimates_axes(axes, traj, plant: str, label: str = "", style="-"):
-    for i, (ax, name) in enumerate(zip(axes, traj.names)):
-        ax.plot(traj.t, traj.theta[:, i], "k--", lw=1, label=f"true {name}" if not label else None)
-        ax.plot(traj.t, traj.theta_hat[:, i], style, lw=1.2, label=f"{name} estimate {label}".strip())
-        ax.set_ylabel(f"{name} [{_unit(name, plant)}]")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="best")
 
 
 # ---------------------------------------------------------------- 1. first order
@@ -167,7 +157,7 @@ def _phase(quick: bool, logs: Path) -> Section:
         ax.streamplot(X, P, U, V, color="0.8", density=1.0, linewidth=0.6)
         lines = ["| start (x̃, p̃) | final x̃ | final p̃ |", "|---|---|---|"]
         rows = []
-        for (xe, pe), job in zip(points, jobs):
+        for (xe, pe), job in zip(points, jobs, strict=True):
             r = res[job.tag]
             if not _ok(r):
                 lines.append(f"| ({xe:g}, {pe:g}) | {r.status} | |")
@@ -221,7 +211,8 @@ def _lyapunov(quick: bool, logs: Path) -> Section:
         lines = ["| run | V(0) | V(end) | largest one-step increase of V | max \\|ΔV/Δt + k s²\\| / max k s² | "
                  "mean \\|V'\\| first 10 % | mean \\|V'\\| last 10 % |", "|---|---|---|---|---|---|---|"]
         rows, drag = [], None
-        for job, label in zip(jobs, ["ideal (viscosity 0)", f"unmodelled drag (viscosity {viscosity:.3g} Pa s)"]):
+        labels = ["ideal (viscosity 0)", f"unmodelled drag (viscosity {viscosity:.3g} Pa s)"]
+        for job, label in zip(jobs, labels, strict=True):
             r = res[job.tag]
             if not _ok(r):
                 rows.append(_row("Lyapunov", label, r))
@@ -299,7 +290,7 @@ def _second_order(quick: bool, logs: Path) -> Section:
 
     path = SCN / "heave_tracking.toml"
     truth = build(sc.load(path)).plant.true_theta()
-    nominal = {n: float(NOMINAL_FRACTION[n] * v) for n, v in zip(("d", "b", "c"), truth)}
+    nominal = {n: float(NOMINAL_FRACTION[n] * v) for n, v in zip(("d", "b", "c"), truth, strict=True)}
     K = _robust_gain(path, nominal)
     nom = "law.initial_estimates={" + ", ".join(f"{n}={v!r}" for n, v in nominal.items()) + "}"
     dur = ["simulation.duration=15.0"] if quick else []
@@ -318,7 +309,7 @@ def _second_order(quick: bool, logs: Path) -> Section:
                  "|---|---|---|---|---|---|---|---|---|"]
         rows = []
         fig, ax = plt.subplots(3, 1, figsize=(9, 9), constrained_layout=True)
-        for job, (v, _) in zip(jobs, variants):
+        for job, (v, _) in zip(jobs, variants, strict=False):  # the last job, the twin, is shown below
             r = res[job.tag]
             rows.append(_row("2nd order", v, r))
             if not _ok(r):
@@ -367,8 +358,8 @@ def _second_order(quick: bool, logs: Path) -> Section:
                 f"lowpass(u), a zero-phase first-order low-pass at {analysis.CHATTER_CUTOFF_HZ:g} Hz (the reference "
                 "is at 0.16 Hz); the total variation Σ|Δu| is also shown, with its low-frequency part, because it "
                 "is dominated by the feed-forward that every controller shares. The middle panel is drawn from the "
-                "100 Hz log and aliases any chattering; the bottom panel is u at every physics step.\n\n" + "\n".join(lines) + "\n\n" + img
-                + lec_text + _status_note(res))
+                "100 Hz log and aliases any chattering; the bottom panel is u at every physics step.\n\n"
+                + "\n".join(lines) + "\n\n" + img + lec_text + _status_note(res))
         return SectionReport(text, rows)
 
     return Section("second_order", "4. Sliding adaptive control of the MuJoCo heave vehicle vs baselines",
@@ -435,7 +426,8 @@ def _nth(quick: bool, logs: Path) -> Section:
             m, f, tr = r.summary["metrics"], r.summary["final"], r.trajectory
             ratio = {n: f["theta_hat"][n] / f["theta"][n] for n in ("d", "b", "c")}
             lines.append(f"| {v} | {_g(m['rms_tracking_error_tail'])} | {_g(m['control_rms'])} | "
-                         f"{_g(m['control_total_variation'])} | {ratio['d']:.3f} | {ratio['b']:.3f} | {ratio['c']:.3f} |")
+                         f"{_g(m['control_total_variation'])} | {ratio['d']:.3f} | {ratio['b']:.3f} | "
+                         f"{ratio['c']:.3f} |")
             ax.semilogy(tr.t, np.abs(tr.y_tilde) + 1e-9, lw=1, label=v)
         ax.set_xlabel("time t [s]")
         ax.set_ylabel("|ỹ| [m]")
@@ -471,7 +463,7 @@ def _drift(quick: bool, logs: Path) -> Section:
         lines = ["| run | drift rate [‖Δθ̂/θ‖ per 100 s] | RMS ỹ [m] | final d̂ / d | final b̂ / b | final ĉ / c |",
                  "|---|---|---|---|---|---|"]
         rows = []
-        for job, style in zip(jobs, ["-", "--"]):
+        for job, style in zip(jobs, ["-", "--"], strict=True):
             r = res[job.tag]
             v = job.tag.split("/")[1]
             if not _ok(r):
@@ -504,7 +496,8 @@ def _drift(quick: bool, logs: Path) -> Section:
                 f"formula, on |s|) has width ε = 3σ_s = {width:.4g} m/s, σ_s = √(σ_y'² + λ²σ_y²) the noise in s. "
                 "How the noise and horizon were chosen: 1 mm on depth and 1 cm/s on heave rate are ordinary sensor "
                 "noise for a small vehicle, and the horizon is long enough for the drift to exceed 10 % of d "
-                f"while ỹ stays sub-millimetre: {_drift_sentence(res)}\n\n" + "\n".join(lines) + "\n\n" + img + _status_note(res))
+                f"while ỹ stays sub-millimetre: {_drift_sentence(res)}\n\n" + "\n".join(lines) + "\n\n" + img
+                + _status_note(res))
         return SectionReport(text, rows)
 
     return Section("drift", "6. Parameter drift and the dead-zone",
@@ -517,8 +510,8 @@ def _drift_sentence(res) -> str:
     if r is None or not _ok(r):
         return "the run without dead-zone did not finish."
     tr = r.trajectory
-    return (f"here d̂/d went from {tr.theta_hat[0, 0] / tr.theta[0, 0]:.3f} to {tr.theta_hat[-1, 0] / tr.theta[-1, 0]:.3f} "
-            f"while max |ỹ| was {np.max(np.abs(tr.y_tilde)) * 1e3:.2f} mm.")
+    return (f"here d̂/d went from {tr.theta_hat[0, 0] / tr.theta[0, 0]:.3f} to "
+            f"{tr.theta_hat[-1, 0] / tr.theta[-1, 0]:.3f} while max |ỹ| was {np.max(np.abs(tr.y_tilde)) * 1e3:.2f} mm.")
 
 
 # ---------------------------------------------------------------- 7. payload swap
@@ -541,7 +534,7 @@ def _swap(quick: bool, logs: Path) -> Section:
                  "re-converged after [s] | tail RMS ỹ [rad] | min Ĵ [kg m²] (time Ĵ < 0 [s]) | min b̂, ĝ_sin, ĝ_cos |",
                  "|---|---|---|---|---|---|---|"]
         rows = []
-        for job, style in zip(jobs, ["-", "--", "-."]):
+        for job, style in zip(jobs, ["-", "--", "-."], strict=True):
             r = res[job.tag]
             v = job.tag.split("/")[1]
             if not _ok(r):
@@ -553,9 +546,11 @@ def _swap(quick: bool, logs: Path) -> Section:
             conv = "never" if sw["reconvergence_time"] is None else f"{sw['reconvergence_time']:.2f}"
             mins = sw["estimate_min"]
             lines.append(f"| {v} | {sw['peak_error_after']:.4f} ({sw['peak_time_after']:.2f}) | {rec} | {conv} | "
-                         f"{_g(m['rms_tracking_error_tail'])} | {mins['J']:.3f} ({sw['leading_negative_seconds']:.2f}) | "
+                         f"{_g(m['rms_tracking_error_tail'])} | {mins['J']:.3f} "
+                         f"({sw['leading_negative_seconds']:.2f}) | "
                          f"{mins['b']:.3g}, {mins['g_sin']:.3g}, {mins['g_cos']:.3g} |")
-            rows.append(_row("payload swap", v, r, f"peak {sw['peak_error_after']:.3g} rad, recovery {rec}" + (" s" if rec != "never" else "")))
+            rows.append(_row("payload swap", v, r, f"peak {sw['peak_error_after']:.3g} rad, recovery {rec}"
+                             + (" s" if rec != "never" else "")))
             ax[0].plot(tr.t, tr.y_tilde, style, lw=1, label=v)
             for i, name in ((0, "J"), (2, "g_sin")):
                 a = ax[1] if name == "J" else ax[2]
@@ -718,8 +713,8 @@ def _manipulator(quick: bool, logs: Path) -> Section:
     ex = ["manipulator_response"]
     base = ["law.nominal='model'"]
     jobs = (_job("manipulator", "slotine_li", "ur5e_payload_swap", logs, over, ex),
-            _job("manipulator", "computed_torque", "ur5e_payload_swap", logs, ["law.kind=computed_torque", *base, *over],
-                 ex),
+            _job("manipulator", "computed_torque", "ur5e_payload_swap", logs,
+                 ["law.kind=computed_torque", *base, *over], ex),
             _job("manipulator", "pd_gravity", "ur5e_payload_swap", logs, ["law.kind=pd_gravity", *base, *over], ex),
             _job("manipulator", "identification", "ur5e_identification", logs,
                  ["simulation.duration=15.0"] if quick else [], ex))
@@ -730,7 +725,7 @@ def _manipulator(quick: bool, logs: Path) -> Section:
             j for j in ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3")) +
             ") | peak max_j \\|q̃_j\\| after swap [rad] | recovery [s] |", "|---|---|---|---|"]
         fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True, constrained_layout=True)
-        for job, style in zip(jobs[:3], ["-", "--", ":"]):
+        for job, style in zip(jobs[:3], ["-", "--", ":"], strict=True):
             r, v = res[job.tag], job.tag.split("/")[1]
             if not _ok(r):
                 rows.append(_row("manipulator", v, r))
@@ -905,8 +900,9 @@ def user_section(paths: list[Path], logs: Path) -> Section:
                 continue
             m = r.summary["metrics"]
             yu, uu = units.OUTPUT.get(kind, ""), units.CONTROL.get(kind, "")
-            lines.append(f"| `{job.scenario.name}` | {scn.law.kind} | {r.status} | {_g(m.get('rms_tracking_error'))} {yu} "
-                         f"| {_g(m.get('rms_tracking_error_tail'))} {yu} | {_g(m.get('control_rms'))} {uu} |")
+            lines.append(f"| `{job.scenario.name}` | {scn.law.kind} | {r.status} | "
+                         f"{_g(m.get('rms_tracking_error'))} {yu} | {_g(m.get('rms_tracking_error_tail'))} {yu} | "
+                         f"{_g(m.get('control_rms'))} {uu} |")
             if kind != "manipulator":
                 parts.append(f"`{job.scenario.name}` (law `{scn.law.kind}`), final estimates:\n\n"
                              + _final_table(r, kind))

@@ -146,6 +146,22 @@ def _mid(lo: float, hi: float, st: Stressor) -> float:
     return v
 
 
+def _midpoints(searches: Sequence[Search], brackets: list[tuple[float, float] | None]) -> list[tuple[int, float]]:
+    """(search index, value to try next) for each search still bracketed; an integer search whose
+    bracket is down to neighbouring values is done (its bracket set to None)."""
+    wanted = []
+    for i, br in enumerate(brackets):
+        if br is None:
+            continue
+        lo, hi = br
+        st = searches[i].stressor
+        if st.integer and hi - lo <= 1:
+            brackets[i] = None
+            continue
+        wanted.append((i, _mid(lo, hi, st)))
+    return wanted
+
+
 def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path, n_jobs: int = 1,
                backend: Backend | None = None, on_batch: Callable[[int, int], None] | None = None,
                on_done: Callable[[JobResult], None] | None = None) -> list[Margin]:
@@ -192,19 +208,10 @@ def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path
             margins[i].margin, margins[i].first_fail = low.value, high.value
             brackets[i] = (low.value, high.value)
     for step in range(steps):
-        wanted = []
-        for i, br in enumerate(brackets):
-            if br is None:
-                continue
-            lo, hi = br
-            st = searches[i].stressor
-            if st.integer and hi - lo <= 1:
-                brackets[i] = None
-                continue
-            wanted.append((i, _mid(lo, hi, st)))
+        wanted = _midpoints(searches, brackets)
         if not wanted:
             break
-        for (i, v), ev in zip(wanted, evaluate(wanted)):
+        for (i, v), ev in zip(wanted, evaluate(wanted), strict=True):
             lo, hi = brackets[i]
             if ev.passes:
                 brackets[i] = (v, hi)

@@ -1,6 +1,7 @@
 """Run many scenarios in parallel worker processes (bench and sweep).
 
-A Job names a scenario file plus overrides and a seed; each worker loads,
+A Job (adaptive_mj.study.job, shared with the Ray backend) names a scenario
+file plus overrides and a seed; each worker loads,
 validates, runs and logs it, and sends back a small JobResult: the summary,
 extra metrics computed on the full-rate trajectory, and the trajectory
 decimated to the logging rate (for figures). One run that diverges or fails
@@ -18,107 +19,20 @@ their handlers are in place, so no signal can kill one half set up.
 from __future__ import annotations
 
 import concurrent.futures as cf
-import concurrent.futures.process  # noqa: F401  (cf.process.BrokenProcessPool)
 import multiprocessing as mp
 import os
 import signal
 import sys
 import time
 from collections import deque
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 from adaptive_mj.sim import interrupt
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
-from adaptive_mj.trajectory import Trajectory
-
-
-@dataclass(frozen=True)
-class Job:
-    """scenario: a scenario file; overrides: --set expressions; seed: noise seed or None;
-    log: the MCAP path to write (None: no log); tag: caller's label;
-    extras: names of functions in adaptive_mj.study.analysis run on the full-rate trajectory (from EXTRAS);
-    keep_trajectory: send the decimated trajectory back (False: the summary only, as a sweep needs)."""
-
-    scenario: Path
-    overrides: tuple[str, ...] = ()
-    seed: int | None = None
-    log: Path | None = None
-    tag: str = ""
-    extras: tuple[str, ...] = ()
-    keep_trajectory: bool = True
-
-
-#: The analyses a Job may name (a closed set, so no text from a scenario or log picks a function).
-EXTRAS = ("excitation_index", "excitation_rate", "drift_rate", "swap_response", "lyapunov_check",
-          "manipulator_response", "sudden_failure", "chattering")
-
-#: Seconds the parent waits, after SIGTERM, for the workers to close their logs and exit.
-STOP_TIMEOUT = 30.0
-
-
-@dataclass(frozen=True)
-class JobResult:
-    job: Job
-    status: str  # the summary status, "error" when the run could not be set up, or "interrupted"
-    summary: dict | None
-    extras: dict = field(default_factory=dict)
-    trajectory: Trajectory | None = None  # decimated to the scenario's logging rate
-    error: str = ""
-
-
-def decimate(traj: Trajectory, every: int) -> Trajectory:
-    """Every `every`-th row of a trajectory (the logging rate)."""
-    if every <= 1:
-        return traj
-    rows = slice(None, None, every)
-    meta = dict(traj.meta, log_every=every)
-    return replace(traj, t=traj.t[rows], x=traj.x[rows], u=traj.u[rows], s=traj.s[rows], ref=traj.ref[rows],
-                   theta_hat=traj.theta_hat[rows], theta=traj.theta[rows], V=traj.V[rows], meta=meta)
-
-
-def log_write_error(log: Path | None, exc: OSError) -> str:
-    """One line for a run whose log could not be written: what failed, and what is left."""
-    what = exc.strerror or type(exc).__name__
-    left = (f"; what was written reads as truncated (adaptive-mj replay {log})" if log is not None and log.is_file()
-            and log.stat().st_size > 0 else "")
-    return f"{log}: the log could not be written ({what}){left}"
-
-
-def run_job(job: Job) -> JobResult:
-    """Load, run and log one job (in a worker or in-process)."""
-    from adaptive_mj.study import analysis
-    from adaptive_mj.setup import scenario as sc
-    from adaptive_mj.setup.build import build
-    from adaptive_mj.sim.runner import execute
-
-    try:
-        for name in job.extras:
-            if name not in EXTRAS:
-                raise AdaptiveMJError(f"unknown analysis {name!r}; expected one of {', '.join(EXTRAS)}")
-        scn = sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed)
-        if job.log is not None:
-            job.log.parent.mkdir(parents=True, exist_ok=True)
-            if job.log.exists():
-                raise AdaptiveMJError(f"{job.log}: file exists")
-        result = execute(scn, log_path=job.log)
-        traj = result.trajectory
-        setup = None
-        extras = {}
-        for name in job.extras:
-            if setup is None:
-                setup = build(scn)  # law and form, for analyses that need them (no run)
-            extras[name] = getattr(analysis, name)(traj, setup)
-        every = max(1, round(1.0 / (scn.log_rate_hz * traj.meta["dt"])))
-        return JobResult(job, result.summary["status"], result.summary, extras,
-                         decimate(traj, every) if job.keep_trajectory else None)
-    except AdaptiveMJError as exc:
-        return JobResult(job, "error", None, error=str(exc))
-    except OSError as exc:  # the log could not be written (disk full, a file-size limit, a read-only folder)
-        return JobResult(job, "error", None, error=log_write_error(job.log, exc))
-
+# Job, JobResult and Backend are imported from here by the study's commands, tests and benchmarks
+from adaptive_mj.study.job import STOP_TIMEOUT, Backend, Job, JobResult, interrupted_note, run_in_worker, run_job
 
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
@@ -129,18 +43,6 @@ def _init_worker() -> None:
     interrupt.install([signal.SIGTERM])  # raised only inside a run (interrupt.armed)
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)  # blocked by the parent for the spawn
-
-
-def run_in_worker(job: Job) -> JobResult:
-    """run_job in a worker process or a Ray task: a stop signal interrupts the run (its log closed as "interrupted");
-    once one came, jobs still queued are not started."""
-    if interrupt.requested() is not None:
-        return JobResult(job, "interrupted", None, error="not started: the runs were interrupted")
-    try:
-        with interrupt.armed():
-            return run_job(job)
-    except KeyboardInterrupt as exc:
-        return JobResult(job, "interrupted", getattr(exc, "summary", None), error=str(exc) or "interrupted")
 
 
 @contextmanager
@@ -170,44 +72,6 @@ def _stop_workers(pool: cf.ProcessPoolExecutor, *, timeout: float = STOP_TIMEOUT
         if p.is_alive():
             p.kill()
             p.join()
-
-
-@dataclass(frozen=True)
-class Backend:
-    """Where the runs go. kind "local": worker processes on this machine (`jobs` of them; 1 runs
-    in this process). kind "ray": one Ray task per run (adaptive_mj.study.ray_backend): `address`
-    None starts Ray on this machine with `jobs` CPUs, "auto" or "ray://host:port" joins a cluster;
-    `logs` "bytes" (each log comes back to the driver as bytes) or "shared" (each task writes its
-    log itself, on storage every node sees); `retries` (both kinds): how often a run whose worker
-    process or node died is submitted again."""
-
-    kind: str = "local"
-    jobs: int = 1
-    address: str | None = None
-    logs: str = "bytes"
-    retries: int = 3
-
-
-    @classmethod
-    def from_args(cls, args) -> "Backend":
-        """The Backend a command line asks for (--jobs, --backend, --address, --ray-logs, --retries;
-        absent ones at their defaults); a Ray option without --backend ray is refused with one line."""
-        from adaptive_mj.errors import ScenarioError
-
-        kind = getattr(args, "backend", "local")
-        address, logs, retries = (getattr(args, "address", None), getattr(args, "ray_logs", "bytes"),
-                                  getattr(args, "retries", 3))
-        if kind != "ray":
-            for opt, value, default in (("--address", address, None), ("--ray-logs", logs, "bytes")):
-                if value != default:
-                    raise ScenarioError(f"{opt} is for --backend ray (this command runs on --backend {kind})")
-        if retries < 0:
-            raise ScenarioError(f"--retries must be an integer >= 0, got {retries}")
-        if kind == "ray":
-            from adaptive_mj.study.ray_backend import _ray
-
-            _ray()  # not installed: one line now, before any folder is made
-        return cls(kind=kind, jobs=max(1, args.jobs), address=address, logs=logs, retries=retries)
 
 
 @contextmanager
@@ -277,15 +141,6 @@ def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
     queue = deque(range(len(jobs)))
     suspects: deque[int] = deque()  # in flight when a worker died: run alone next
 
-    def take(fut: cf.Future, i: int) -> JobResult:
-        try:
-            result = fut.result()
-        except Exception as exc:  # noqa: BLE001 (the job could not be sent or returned)
-            result = JobResult(jobs[i], "error", None, error=f"{type(exc).__name__}: {exc}")
-        if result.status == "interrupted":  # a worker was told to stop: stop them all
-            raise Interrupted(signal.SIGTERM)
-        return result
-
     while queue or suspects:
         alone = bool(suspects)
         source, width = (suspects, 1) if alone else (queue, n_jobs)
@@ -299,7 +154,7 @@ def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
                             i = source.popleft()
                             try:
                                 futures[pool.submit(run_in_worker, jobs[i])] = i
-                            except cf.process.BrokenProcessPool:  # a worker died since the last wait
+                            except BrokenProcessPool:  # a worker died since the last wait
                                 source.appendleft(i)
                                 break
                     if not futures:
@@ -307,16 +162,16 @@ def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
                     done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
                     for fut in done:
                         i = futures.pop(fut)  # the future (and its result) is not kept once handed on
-                        if isinstance(fut.exception(), cf.process.BrokenProcessPool):
+                        if isinstance(fut.exception(), BrokenProcessPool):
                             lost.append(i)
                             continue
-                        result = take(fut, i)
+                        result = _take(fut, jobs[i])
                         finished += 1
                         yield i, result
                     if lost:  # the pool is broken: what it still holds is lost too, unless it finished
                         for fut, i in futures.items():
                             if fut.done() and fut.exception() is None:
-                                result = take(fut, i)
+                                result = _take(fut, jobs[i])
                                 finished += 1
                                 yield i, result
                             else:
@@ -330,23 +185,44 @@ def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
                         sys.stderr.write("\n")  # end the progress line
                     exc.note = interrupted_note(finished, len(jobs))
                 raise
-        started = {i for i in lost if jobs[i].log is None or jobs[i].log.exists()}
-        for i in sorted(lost, reverse=True):
-            job = jobs[i]
-            if started and i not in started:
-                queue.appendleft(i)  # never started, and a started run is there to blame: not its fault
-                continue
-            if attempts[i] < retries:
-                attempts[i] += 1
-                if job.log is not None:
-                    job.log.unlink(missing_ok=True)  # cut short when its worker died
-                if on_retry:
-                    on_retry(job, f"attempt {attempts[i] + 1} of {retries + 1} (a worker process died)")
-                suspects.appendleft(i)
-            else:
-                finished += 1
-                yield i, JobResult(job, "error", None, error=f"a worker process died running it (tried "
-                                                            f"{attempts[i] + 1} times)")
+        for i, result in _put_back_lost(lost, jobs, attempts, retries, queue, suspects, on_retry):
+            finished += 1
+            yield i, result
+
+
+def _take(fut: cf.Future, job: Job) -> JobResult:
+    """The result of a finished future (an error result if the job could not be sent or returned)."""
+    try:
+        result = fut.result()
+    except Exception as exc:  # noqa: BLE001 (the job could not be sent or returned)
+        result = JobResult(job, "error", None, error=f"{type(exc).__name__}: {exc}")
+    if result.status == "interrupted":  # a worker was told to stop: stop them all
+        raise Interrupted(signal.SIGTERM)
+    return result
+
+
+def _put_back_lost(lost: list[int], jobs: Sequence[Job], attempts: list[int], retries: int, queue: deque[int],
+                   suspects: deque[int],
+                   on_retry: Callable[[Job, str], None] | None) -> Iterator[tuple[int, JobResult]]:
+    """The runs a broken pool lost (indices into `jobs`): one that had not started goes back to
+    `queue` when a started one is there to blame; a started one is charged an attempt and goes to
+    `suspects` (run alone next), or, its retries spent, is yielded as an error."""
+    started = {i for i in lost if jobs[i].log is None or jobs[i].log.exists()}
+    for i in sorted(lost, reverse=True):
+        job = jobs[i]
+        if started and i not in started:
+            queue.appendleft(i)  # never started, and a started run is there to blame: not its fault
+            continue
+        if attempts[i] < retries:
+            attempts[i] += 1
+            if job.log is not None:
+                job.log.unlink(missing_ok=True)  # cut short when its worker died
+            if on_retry:
+                on_retry(job, f"attempt {attempts[i] + 1} of {retries + 1} (a worker process died)")
+            suspects.appendleft(i)
+        else:
+            yield i, JobResult(job, "error", None, error=f"a worker process died running it (tried "
+                                                        f"{attempts[i] + 1} times)")
 
 
 def _worker_context(jobs: Sequence[Job]):
@@ -382,10 +258,6 @@ def _prewarm(jobs: Sequence[Job]) -> None:
                     native_manipulator.compiled()
         except AdaptiveMJError:
             continue  # the worker reports it
-
-
-def interrupted_note(finished: int, total: int) -> str:
-    return f"{finished} of {total} runs had finished; the run(s) in progress closed their logs as 'interrupted'"
 
 
 PLAIN_PROGRESS_EVERY = 5.0  # s between progress lines when stderr is not a terminal

@@ -24,7 +24,7 @@ run appears twice.
 Interruption (SIGINT or SIGTERM in the driver). Every task not finished is cancelled: Ray raises
 SIGINT in a running task, where adaptive_mj.sim.interrupt turns it into a clean stop, so its log is
 closed as "interrupted" (and, with "bytes", still comes back and is written); queued tasks never
-start. The driver waits up to parallel.STOP_TIMEOUT s for them, force-cancels what remains (its
+start. The driver waits up to job.STOP_TIMEOUT s for them, force-cancels what remains (its
 log then stays NAME.partial), shuts down a Ray it started, and re-raises.
 """
 from __future__ import annotations
@@ -42,7 +42,8 @@ from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
-from adaptive_mj.study.parallel import STOP_TIMEOUT, Backend, Job, JobResult, interrupted_note, run_in_worker
+from adaptive_mj.study.job import (STOP_TIMEOUT, Backend, Job, JobResult, interrupted_note, log_write_error, ray_module,
+                                   run_in_worker)
 
 #: Tasks in flight per CPU of the cluster: enough to keep every worker busy while results come
 #: back, few enough that the driver holds a bounded number of results and arguments.
@@ -53,15 +54,6 @@ PARTIAL = ".partial"
 def partial_path(log: Path) -> Path:
     """Where a log is written until it is complete (then renamed to `log`)."""
     return log.with_name(log.name + PARTIAL)
-
-
-def _ray():
-    try:
-        import ray
-    except ImportError:
-        raise AdaptiveMJError("--backend ray needs Ray, an optional extra: pip install -e '.[ray]' "
-                              "(or pip install 'adaptive-mj[ray]')") from None
-    return ray
 
 
 # --------------------------------------------------------------------------
@@ -159,7 +151,8 @@ def _connect(ray, backend: Backend) -> bool:
         where = "a local Ray" if backend.address is None else f"the Ray cluster at {backend.address!r}"
         hint = (" (Ray Client needs the ray[client] extra: pip install -e '.[ray]')"
                 if "ray[client]" in str(exc) else "")
-        raise AdaptiveMJError(f"--backend ray: cannot start or reach {where}: {str(exc).splitlines()[0]}{hint}") from None
+        raise AdaptiveMJError(f"--backend ray: cannot start or reach {where}: "
+                              f"{str(exc).splitlines()[0]}{hint}") from None
     finally:
         for sig, handler in handlers.items():
             if handler is not None:
@@ -171,7 +164,7 @@ def _connect(ray, backend: Backend) -> bool:
 def session(backend: Backend):
     """Ray connected (or started) for the whole block, so that a command running several batches
     (the bench's breaking-point study) starts it once; shut down at the end if this block started it."""
-    ray = _ray()
+    ray = ray_module()
     started = _connect(ray, backend)
     try:
         yield
@@ -182,8 +175,6 @@ def session(backend: Backend):
 
 def _write_log(job: Job, data: bytes) -> str:
     """The returned log bytes to job.log (through NAME.partial); "" or the error's one line."""
-    from adaptive_mj.study.parallel import log_write_error
-
     part = partial_path(job.log)
     try:
         job.log.parent.mkdir(parents=True, exist_ok=True)
@@ -196,6 +187,15 @@ def _write_log(job: Job, data: bytes) -> str:
     return ""
 
 
+def _write_returned_log(job: Job, result: JobResult, data: bytes | None) -> JobResult:
+    """The log bytes that came back with a result (None: none) written to job.log; the result, made
+    an error if its log could not be written."""
+    if data is None:
+        return result
+    error = _write_log(job, data)
+    return replace(result, status="error", error=error) if error else result
+
+
 def _system_failure(ray, exc: BaseException) -> bool:
     """A Ray error that is not the run's own exception: the worker or node died, an object was lost."""
     return isinstance(exc, ray.exceptions.RayError) and not isinstance(exc, ray.exceptions.RayTaskError)
@@ -206,7 +206,7 @@ def iter_results(jobs: Sequence[Job], backend: Backend, *,
     """(index, result) for each job as it finishes on Ray, exactly once per job (see the module docstring)."""
     from adaptive_mj.sim import interrupt
 
-    ray = _ray()
+    ray = ray_module()
     started = _connect(ray, backend)
     remote = ray.remote(run_task).options(num_cpus=1, max_retries=0, name="adaptive-mj-run")
     cpus = max(1, int(ray.cluster_resources().get("CPU", backend.jobs)))
@@ -236,33 +236,20 @@ def iter_results(jobs: Sequence[Job], backend: Backend, *,
                     result, data = ray.get(ref)
                 except Exception as exc:  # noqa: BLE001 (a Ray error: sorted below)
                     why = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"
-                    if _system_failure(ray, exc) and attempts[i] < backend.retries:
-                        attempts[i] += 1
-                        _remove_leftovers(jobs[i], backend)
-                        if on_retry:
-                            on_retry(jobs[i], f"attempt {attempts[i] + 1} of {backend.retries + 1} ({why})")
+                    if _system_failure(ray, exc) and _retry(jobs[i], i, attempts, backend, on_retry, why):
                         submit(i)
                         continue
                     tried = f" (tried {attempts[i] + 1} times)" if attempts[i] else ""
                     result, data = JobResult(jobs[i], "error", None, error=f"the Ray task failed{tried}: {why}"
                                              + _keep_leftovers(jobs[i], backend)), None
                 if result.status == "interrupted" and interrupt.requested() is not None:  # Ctrl-C reached it too
-                    if data is not None:
-                        _write_log(jobs[i], data)
+                    _write_returned_log(jobs[i], result, data)
                     raise Interrupted(interrupt.requested())
-                if result.status == "interrupted":  # stopped from outside: a node shutting down, preempted
-                    if attempts[i] < backend.retries:
-                        attempts[i] += 1
-                        _remove_leftovers(jobs[i], backend)
-                        if on_retry:
-                            on_retry(jobs[i], f"attempt {attempts[i] + 1} of {backend.retries + 1} (its node stopped "
-                                              f"it: {result.error})")
-                        submit(i)
-                        continue
-                if data is not None:
-                    error = _write_log(jobs[i], data)
-                    if error:
-                        result = replace(result, status="error", error=error)
+                if result.status == "interrupted" and _retry(jobs[i], i, attempts, backend, on_retry,
+                                                             f"its node stopped it: {result.error}"):
+                    submit(i)  # stopped from outside: a node shutting down, preempted
+                    continue
+                result = _write_returned_log(jobs[i], result, data)
                 finished += 1
                 yield i, result
     except GeneratorExit:  # the caller stopped reading (its own error): stop the tasks, keep what they wrote
@@ -279,6 +266,19 @@ def iter_results(jobs: Sequence[Job], backend: Backend, *,
     finally:
         if started:
             ray.shutdown()
+
+
+def _retry(job: Job, i: int, attempts: list[int], backend: Backend, on_retry: Callable[[Job, str], None] | None,
+           why: str) -> bool:
+    """Whether job i (jobs[i] is `job`) has an attempt left; if so it is charged one, what its last
+    attempt left is removed and on_retry is told why, for the caller to submit it again."""
+    if attempts[i] >= backend.retries:
+        return False
+    attempts[i] += 1
+    _remove_leftovers(job, backend)
+    if on_retry:
+        on_retry(job, f"attempt {attempts[i] + 1} of {backend.retries + 1} ({why})")
+    return True
 
 
 def _remove_leftovers(job: Job, backend: Backend) -> None:

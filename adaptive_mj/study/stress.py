@@ -68,8 +68,9 @@ def laws(p: Plant, *, composite: bool) -> list[tuple[str, list[str]]]:
     gamma1 = float(s.law.gamma[0])
     sig_y = NOMINAL_NOISE[p.name]
     sig_s = surface_noise_std(2, scn.law.lam, [sig_y, 10 * sig_y])  # the noise of s at the nominal noise
-    theta0 = "{" + ", ".join(f"{n}={float(v)!r}" for n, v in zip(names, theta)) + "}"
-    box = "{" + ", ".join(f"{n}=[{0.5 * float(v)!r}, {2.0 * float(v)!r}]" for n, v in zip(names, theta) if v > 0) + "}"
+    theta0 = "{" + ", ".join(f"{n}={float(v)!r}" for n, v in zip(names, theta, strict=True)) + "}"
+    box = "{" + ", ".join(f"{n}=[{0.5 * float(v)!r}, {2.0 * float(v)!r}]"
+                          for n, v in zip(names, theta, strict=True) if v > 0) + "}"
     K = ROBUST_K_FRACTION * float(s.plant.ctrl_range[1])
     out = [("adaptive", []),
            ("dead_zone", [f"law.dead_zone={{width={3.0 * sig_s!r}}}"]),

@@ -190,7 +190,7 @@ def parse_grid(expr: str, doc: dict) -> tuple[str, list[Any]]:
 def grid_points(axes: Sequence[tuple[str, Sequence[Any]]]) -> list[dict[str, Any]]:
     """The product of the axes, first axis slowest: [{key: value, ...}, ...]."""
     keys = [key for key, _ in axes]
-    return [dict(zip(keys, combo)) for combo in itertools.product(*(values for _, values in axes))]
+    return [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*(values for _, values in axes))]
 
 
 # --------------------------------------------------------------------------
@@ -223,7 +223,7 @@ def label(value: Any) -> str:
 def short_names(keys: Sequence[str]) -> dict[str, str]:
     """key without its section (law.gamma.J -> gamma.J), or the whole key where two axes would clash."""
     last = [k.split(".", 1)[-1] for k in keys]
-    return {k: (n if last.count(n) == 1 else k) for k, n in zip(keys, last)}
+    return {k: (n if last.count(n) == 1 else k) for k, n in zip(keys, last, strict=True)}
 
 
 def run_name(index: int, point: dict[str, Any], seed: int, *, names: dict[str, str], width: int = 4) -> str:
@@ -341,7 +341,7 @@ def plot_sweep(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Se
     seeds = len({r["seed"] for r in table})
     fig, axes = plt.subplots(len(metrics), 1, figsize=(8, 3.6 * len(metrics) + 0.6), sharex=True,
                              constrained_layout=True, squeeze=False)
-    for ax, metric in zip(axes[:, 0], metrics):
+    for ax, metric in zip(axes[:, 0], metrics, strict=True):
         stats = point_stats(table, keys, metric)
         series: dict[str, list[PointStats]] = {}
         for st in stats:
@@ -398,7 +398,7 @@ def summary_table(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics:
         cells += ["n/a" if math.isnan(stats[m][i].mean) else f"{stats[m][i].mean:.4g}" for m in metrics]
         lines.append(cells + [f"{st.n_ok}/{st.n}"])
     widths = [max(len(r[c]) for r in [head, *lines]) for c in range(len(head))]
-    return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths)) for r in [head, *lines])
+    return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths, strict=True)) for r in [head, *lines])
 
 
 # --------------------------------------------------------------------------
@@ -473,7 +473,7 @@ def parse_breaking_point(expr: str, doc: dict) -> tuple[str, float, float, bool]
     parts = raw.split(":")
     if len(parts) != 2:
         raise ScenarioError(f"--breaking-point {expr!r}: expected KEY=LO:HI, got {raw!r}")
-    lo, hi = (_number(x, expr=expr, what=w) for x, w in zip(parts, ("LO", "HI")))
+    lo, hi = (_number(x, expr=expr, what=w) for x, w in zip(parts, ("LO", "HI"), strict=True))
     if not lo < hi:
         raise ScenarioError(f"--breaking-point {expr!r}: LO must be < HI, got {lo:g} and {hi:g}")
     integer = all(re.fullmatch(r"[+-]?\d+", x.strip()) for x in parts)
@@ -649,8 +649,6 @@ def write_tables(stream_path: Path, n: int, inputs: dict[str, Any], out: Path, *
 
 def main_sweep(args) -> int:
     """Run the sweep the CLI parsed (see the module docstring); returns the exit code."""
-    from adaptive_mj.sim.runner import new_output_dir
-
     if args.seeds < 1:
         raise ScenarioError(f"--seeds must be an integer >= 1, got {args.seeds}")
     if args.jobs < 1:
@@ -713,7 +711,8 @@ def _sweep(args, path: Path, doc: dict, base, backend: Backend) -> int:
         del todo, finished
 
     inputs = {"scenario": str(path), "scenario_name": base.name,
-              "grid": [{"expr": expr, "key": key, "values": values} for expr, (key, values) in zip(args.grid, axes)],
+              "grid": [{"expr": expr, "key": key, "values": values}
+                       for expr, (key, values) in zip(args.grid, axes, strict=True)],
               "overrides": list(args.overrides), "seeds": args.seeds, "metrics": metrics,
               "backend": backend.kind, "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
     table, present = write_tables(stream_path, total, inputs, out, keep=[*keys, "seed", *metrics])

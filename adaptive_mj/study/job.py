@@ -1,0 +1,162 @@
+"""One run of a study, as both backends see it: the Job (a scenario file, overrides, a seed, where
+to log), the JobResult sent back, the Backend the runs go to, and run_job / run_in_worker, which
+run one job in this process, a worker process (adaptive_mj.study.parallel) or a Ray task
+(adaptive_mj.study.ray_backend).
+
+The two backends share these pieces through this module: parallel.py dispatches to ray_backend.py
+for `--backend ray`, and ray_backend.py imports nothing from parallel.py (no import cycle).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from adaptive_mj.errors import AdaptiveMJError
+from adaptive_mj.sim import interrupt
+from adaptive_mj.trajectory import Trajectory
+
+
+@dataclass(frozen=True)
+class Job:
+    """scenario: a scenario file; overrides: --set expressions; seed: noise seed or None;
+    log: the MCAP path to write (None: no log); tag: caller's label;
+    extras: names of functions in adaptive_mj.study.analysis run on the full-rate trajectory (from EXTRAS);
+    keep_trajectory: send the decimated trajectory back (False: the summary only, as a sweep needs)."""
+
+    scenario: Path
+    overrides: tuple[str, ...] = ()
+    seed: int | None = None
+    log: Path | None = None
+    tag: str = ""
+    extras: tuple[str, ...] = ()
+    keep_trajectory: bool = True
+
+
+#: The analyses a Job may name (a closed set, so no text from a scenario or log picks a function).
+EXTRAS = ("excitation_index", "excitation_rate", "drift_rate", "swap_response", "lyapunov_check",
+          "manipulator_response", "sudden_failure", "chattering")
+
+#: Seconds the parent waits, after SIGTERM, for the workers to close their logs and exit.
+STOP_TIMEOUT = 30.0
+
+
+@dataclass(frozen=True)
+class JobResult:
+    job: Job
+    status: str  # the summary status, "error" when the run could not be set up, or "interrupted"
+    summary: dict | None
+    extras: dict = field(default_factory=dict)
+    trajectory: Trajectory | None = None  # decimated to the scenario's logging rate
+    error: str = ""
+
+
+def decimate(traj: Trajectory, every: int) -> Trajectory:
+    """Every `every`-th row of a trajectory (the logging rate)."""
+    if every <= 1:
+        return traj
+    rows = slice(None, None, every)
+    meta = dict(traj.meta, log_every=every)
+    return replace(traj, t=traj.t[rows], x=traj.x[rows], u=traj.u[rows], s=traj.s[rows], ref=traj.ref[rows],
+                   theta_hat=traj.theta_hat[rows], theta=traj.theta[rows], V=traj.V[rows], meta=meta)
+
+
+def log_write_error(log: Path | None, exc: OSError) -> str:
+    """One line for a run whose log could not be written: what failed, and what is left."""
+    what = exc.strerror or type(exc).__name__
+    left = (f"; what was written reads as truncated (adaptive-mj replay {log})" if log is not None and log.is_file()
+            and log.stat().st_size > 0 else "")
+    return f"{log}: the log could not be written ({what}){left}"
+
+
+def run_job(job: Job) -> JobResult:
+    """Load, run and log one job (in a worker or in-process)."""
+    from adaptive_mj.study import analysis
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.sim.runner import execute
+
+    try:
+        for name in job.extras:
+            if name not in EXTRAS:
+                raise AdaptiveMJError(f"unknown analysis {name!r}; expected one of {', '.join(EXTRAS)}")
+        scn = sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed)
+        if job.log is not None:
+            job.log.parent.mkdir(parents=True, exist_ok=True)
+            if job.log.exists():
+                raise AdaptiveMJError(f"{job.log}: file exists")
+        result = execute(scn, log_path=job.log)
+        traj = result.trajectory
+        setup = None
+        extras = {}
+        for name in job.extras:
+            if setup is None:
+                setup = build(scn)  # law and form, for analyses that need them (no run)
+            extras[name] = getattr(analysis, name)(traj, setup)
+        every = max(1, round(1.0 / (scn.log_rate_hz * traj.meta["dt"])))
+        return JobResult(job, result.summary["status"], result.summary, extras,
+                         decimate(traj, every) if job.keep_trajectory else None)
+    except AdaptiveMJError as exc:
+        return JobResult(job, "error", None, error=str(exc))
+    except OSError as exc:  # the log could not be written (disk full, a file-size limit, a read-only folder)
+        return JobResult(job, "error", None, error=log_write_error(job.log, exc))
+
+
+def run_in_worker(job: Job) -> JobResult:
+    """run_job in a worker process or a Ray task: a stop signal interrupts the run (its log closed as "interrupted");
+    once one came, jobs still queued are not started."""
+    if interrupt.requested() is not None:
+        return JobResult(job, "interrupted", None, error="not started: the runs were interrupted")
+    try:
+        with interrupt.armed():
+            return run_job(job)
+    except KeyboardInterrupt as exc:
+        return JobResult(job, "interrupted", getattr(exc, "summary", None), error=str(exc) or "interrupted")
+
+
+def interrupted_note(finished: int, total: int) -> str:
+    return f"{finished} of {total} runs had finished; the run(s) in progress closed their logs as 'interrupted'"
+
+
+@dataclass(frozen=True)
+class Backend:
+    """Where the runs go. kind "local": worker processes on this machine (`jobs` of them; 1 runs
+    in this process). kind "ray": one Ray task per run (adaptive_mj.study.ray_backend): `address`
+    None starts Ray on this machine with `jobs` CPUs, "auto" or "ray://host:port" joins a cluster;
+    `logs` "bytes" (each log comes back to the driver as bytes) or "shared" (each task writes its
+    log itself, on storage every node sees); `retries` (both kinds): how often a run whose worker
+    process or node died is submitted again."""
+
+    kind: str = "local"
+    jobs: int = 1
+    address: str | None = None
+    logs: str = "bytes"
+    retries: int = 3
+
+    @classmethod
+    def from_args(cls, args) -> "Backend":
+        """The Backend a command line asks for (--jobs, --backend, --address, --ray-logs, --retries;
+        absent ones at their defaults); a Ray option without --backend ray is refused with one line."""
+        from adaptive_mj.errors import ScenarioError
+
+        kind = getattr(args, "backend", "local")
+        address, logs, retries = (getattr(args, "address", None), getattr(args, "ray_logs", "bytes"),
+                                  getattr(args, "retries", 3))
+        if kind != "ray":
+            for opt, value, default in (("--address", address, None), ("--ray-logs", logs, "bytes")):
+                if value != default:
+                    raise ScenarioError(f"{opt} is for --backend ray (this command runs on --backend {kind})")
+        if retries < 0:
+            raise ScenarioError(f"--retries must be an integer >= 0, got {retries}")
+        if kind == "ray":
+            ray_module()  # not installed: one line now, before any folder is made
+        return cls(kind=kind, jobs=max(1, args.jobs), address=address, logs=logs, retries=retries)
+
+
+def ray_module():
+    """The ray module, or one line saying how to install it (Ray is an optional extra)."""
+    try:
+        import ray
+    except ImportError:
+        raise AdaptiveMJError("--backend ray needs Ray, an optional extra: pip install -e '.[ray]' "
+                              "(or pip install 'adaptive-mj[ray]')") from None
+    return ray
