@@ -84,20 +84,20 @@ from pathlib import Path
 import numpy as np
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # dm_control probes a GL backend on import
-import dm_env  # noqa: E402
-from dm_control import mujoco as dm_mujoco  # noqa: E402
-from dm_control.mujoco import wrapper  # noqa: E402
-from dm_control.rl import control  # noqa: E402
-from dm_env import specs  # noqa: E402
+import dm_env  # noqa: E402 (imported after MUJOCO_GL is set above)
+from dm_control import mujoco as dm_mujoco  # noqa: E402 (imported after MUJOCO_GL is set above)
+from dm_control.mujoco import wrapper  # noqa: E402 (imported after MUJOCO_GL is set above)
+from dm_control.rl import control  # noqa: E402 (imported after MUJOCO_GL is set above)
+from dm_env import specs  # noqa: E402 (imported after MUJOCO_GL is set above)
 
-from adaptive_mj.setup import scenario as scenario_io  # noqa: E402
-from adaptive_mj.setup.build import Setup, build  # noqa: E402
-from adaptive_mj.errors import ScenarioError  # noqa: E402
-from adaptive_mj.sim.loop import Controller, ControlStep, EventQueue, divergence, plant_order  # noqa: E402
-from adaptive_mj.report.metrics import clean_json, summary as make_summary  # noqa: E402
-from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402
-from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402
-from adaptive_mj.trajectory import Trajectory  # noqa: E402
+from adaptive_mj.setup import scenario as scenario_io  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.setup.build import Setup, build  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.errors import ScenarioError  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.sim.loop import Controller, ControlStep, EventQueue, divergence, plant_order  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.report.metrics import clean_json, summary as make_summary  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.trajectory import Trajectory  # noqa: E402 (imported after MUJOCO_GL is set above)
 
 #: ``law=`` value that runs the scenario's own law (the one ``adaptive-mj run`` runs).
 SCENARIO_LAW = "scenario"

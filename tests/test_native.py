@@ -80,7 +80,7 @@ def test_arm_with_payload_swap_event():
         return p
 
     theta0 = arm.load().true_theta()
-    events = lambda: [Event(0.7, "swap", lambda p: p.set_body_mass("payload/body", 2.0))]  # noqa: E731
+    events = lambda: [Event(0.7, "swap", lambda p: p.set_body_mass("payload/body", 2.0))]  # noqa: E731 (a one-line local converter)
     a, b = both(plant, lambda p: SlidingAdaptiveLaw(p.form, lam=10, k=5, gamma=[0.16, 0.07, 0.025, 0.075]),
                 SumOfSines((0.4, 0.3, 0.2), (0.8, 1.9, 3.7), (0.0, 0.0, 0.0)), duration=1.5, theta_hat0=theta0,
                 events=events)

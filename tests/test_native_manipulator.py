@@ -145,7 +145,7 @@ def test_robust_modifications_native_match_python(integrator):
     held = [i for i, n in enumerate(plant.names) if n.rsplit(".", 1)[1] in ("m", "Ixx", "Iyy", "Izz")]
     assert np.min(rows["theta_hat"][:, held]) == 0.0 and np.min(nc.theta[held]) >= 0.0
     if integrator == "rk4":  # without the box the same run takes some of them below 0
-        free = lambda p: dataclasses.replace(_leak_and_box(p), lower=None, upper=None)  # noqa: E731
+        free = lambda p: dataclasses.replace(_leak_and_box(p), lower=None, upper=None)  # noqa: E731 (a one-line local converter)
         _, traj, _, _ = _compare(dict(modification=free), 1.0)
         assert np.min(traj.theta_hat[:, held]) < -1e-3
 

@@ -20,6 +20,7 @@ and calls those two; it has no branch per kind.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 
 @dataclass(frozen=True)
@@ -42,3 +43,18 @@ class BuiltPlant:
     plant: object
     model_xml: str | None = None
     notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Event:
+    """At time t [s] (first step with t_k >= t), call apply(plant). label: text for logs."""
+
+    t: float
+    label: str
+    apply: Callable[[object], None]
+
+
+def plant_order(plant) -> int:
+    """n: the order of the plant's output dynamics (2 for a manipulator: x = [q; q̇])."""
+    form = getattr(plant, "form", None)
+    return form.order if form is not None else plant.order

@@ -21,7 +21,7 @@ from adaptive_mj.laws import (CompositeSlidingLaw, DeadZone, DeadZoneOn, FirstOr
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.plants import ModelSource
 from adaptive_mj.setup.scenario import JOINT_REFERENCE_KINDS, STATE_SIGNALS, Scenario
-from adaptive_mj.sim.loop import Event, plant_order
+from adaptive_mj.plants import Event, plant_order
 
 
 @dataclass

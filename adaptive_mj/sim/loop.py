@@ -26,27 +26,18 @@ from __future__ import annotations
 
 import math
 from contextlib import contextmanager
-from dataclasses import dataclass
 from typing import Callable, NamedTuple, Protocol, Sequence
 
 import numpy as np
 
 from adaptive_mj.errors import Interrupted
+from adaptive_mj.plants import Event, plant_order
 from adaptive_mj.sim import stage as st
 from adaptive_mj.sim.stage import TABLEAU, ControlTiming
 from adaptive_mj.trajectory import Trajectory
 
 __all__ = ["Event", "ControlTiming", "Controller", "ControlStep", "StepRow", "Sink", "run", "plant_order",
            "divergence", "TABLEAU", "NATIVE_CHUNK"]
-
-
-@dataclass(frozen=True)
-class Event:
-    """At time t [s] (first step with t_k >= t), call apply(plant). label: text for logs."""
-
-    t: float
-    label: str
-    apply: Callable[[object], None]
 
 
 class Controller:
@@ -434,12 +425,6 @@ class _Rows:
         """Rows 0..k-1 (and all flushed) are whole when an interruption comes."""
         n = max(self.k, self.flushed)
         return self.result(n, "interrupted", reason, {"events": self.events})
-
-
-def plant_order(plant) -> int:
-    """n: the order of the plant's output dynamics (2 for a manipulator: x = [q; q̇])."""
-    form = getattr(plant, "form", None)
-    return form.order if form is not None else plant.order
 
 
 @contextmanager

@@ -76,21 +76,21 @@ def _callback_factory(off, key):
         qpos = carray(fptr(carray(iptr(base + off_qpos), 1)[0]), ctx.qadr + 1)  # noqa: F821 (injected)
         qvel = carray(fptr(carray(iptr(base + off_qvel), 1)[0]), ctx.dadr + 1)  # noqa: F821 (injected)
         ctrl = carray(fptr(carray(iptr(base + off_ctrl), 1)[0]), ctx.act + 1)  # noqa: F821 (injected)
-        theta, rsum, prev = carray(fptr(ctx.theta), nth), carray(fptr(ctx.rsum), nth), carray(fptr(ctx.prev), nth)  # noqa: F821,E501
+        theta, rsum, prev = carray(fptr(ctx.theta), nth), carray(fptr(ctx.rsum), nth), carray(fptr(ctx.prev), nth)  # noqa: F821,E501 (injected globals; one carray per line)
         th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
         lower, upper = carray(fptr(ctx.lower), nth), carray(fptr(ctx.upper), nth)  # noqa: F821 (injected)
         r0 = (row * nst + stage) * (n + 1)
         r = carray(fptr(ctx.ref), r0 + n + 1)[r0:r0 + n + 1]  # noqa: F821 (injected)
         sampled = ctx.mode == SAMPLED  # noqa: F821 (injected)
-        evaluate = is_sample_step(ctx.step, ctx.period_steps) and stage == 0 if sampled else True  # noqa: F821
+        evaluate = is_sample_step(ctx.step, ctx.period_steps) and stage == 0 if sampled else True  # noqa: F821 (injected)
         if evaluate:
             noise = carray(fptr(ctx.noise), (row + 1) * n)  # noqa: F821 (injected)
             x = np.empty(n)
             x[0] = qpos[ctx.qadr] + noise[row * n]
             x[1] = qvel[ctx.dadr] + noise[row * n + 1]
             stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
-            u, s = law(x, r, th, ctx, carray(fptr(ctx.coeffs), n), carray(fptr(ctx.gamma), nth),  # noqa: F821
-                       carray(fptr(ctx.theta0), nth), lower, upper, carray(fptr(ctx.params), 1 << 30), rate)  # noqa: F821,E501
+            u, s = law(x, r, th, ctx, carray(fptr(ctx.coeffs), n), carray(fptr(ctx.gamma), nth),  # noqa: F821 (injected)
+                       carray(fptr(ctx.theta0), nth), lower, upper, carray(fptr(ctx.params), 1 << 30), rate)  # noqa: F821,E501 (injected globals; one carray per line)
             u = min(max(u, ctx.lo), ctx.hi)
             accumulate_rate(rsum, prev, rate, 1.0 if sampled else ctx.weights[stage])  # noqa: F821 (injected)
             ctx.u_hold, ctx.s_hold = u, s

@@ -105,7 +105,12 @@ def mujoco_offsets() -> dict[str, int]:
     if _offsets is None:
         import mujoco
 
-        m = mujoco.MjModel.from_xml_string(_PROBE)
+        previous = mujoco.get_mjcb_control()  # a Python callback installed makes compiling fail
+        mujoco.set_mjcb_control(None)
+        try:
+            m = mujoco.MjModel.from_xml_string(_PROBE)
+        finally:
+            mujoco.set_mjcb_control(previous)
         d = mujoco.MjData(m)
         data_arrays = {n: getattr(d, n).ctypes.data for n in ("qpos", "qvel", "qacc_warmstart", "ctrl", "qfrc_applied",
                                                               "xfrc_applied", "qacc", "userdata", "xpos", "xmat")}

@@ -338,14 +338,14 @@ def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step'
         qvel = carray(fptr(field(base, off_qvel)), nv)  # noqa: F821 (injected)
         ctrl = carray(fptr(field(base, off_ctrl)), ctx.nu)  # noqa: F821 (injected)
         qadr, act = carray(iptr(ctx.qadr), nv), carray(iptr(ctx.act), nv)  # noqa: F821 (injected)
-        theta, rsum, prev = carray(fptr(ctx.theta), nth), carray(fptr(ctx.rsum), nth), carray(fptr(ctx.prev), nth)  # noqa: F821,E501
+        theta, rsum, prev = carray(fptr(ctx.theta), nth), carray(fptr(ctx.rsum), nth), carray(fptr(ctx.prev), nth)  # noqa: F821,E501 (injected globals; one carray per line)
         lower, upper = carray(fptr(ctx.lower), nth), carray(fptr(ctx.upper), nth)  # noqa: F821 (injected)
         u_hold, s_hold = carray(fptr(ctx.u_hold), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
         refs = carray(fptr(ctx.ref), (ctx.maxrows * nst, 3, nv))  # noqa: F821 (injected)
         r = refs[row * nst + stage]
         sampled = ctx.mode == SAMPLED  # noqa: F821 (injected)
-        if (is_sample_step(ctx.step, ctx.period_steps) and stage == 0) if sampled else True:  # noqa: F821
-            law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower, upper, r)  # noqa: F821
+        if (is_sample_step(ctx.step, ctx.period_steps) and stage == 0) if sampled else True:  # noqa: F821 (injected)
+            law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower, upper, r)  # noqa: F821 (injected)
             rate = carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
             accumulate_rate(rsum, prev, rate, 1.0 if sampled else ctx.weights[stage])  # noqa: F821 (injected)
         u = u_hold
@@ -365,8 +365,8 @@ def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step'
             maxrows = ctx.maxrows
             carray(fptr(ctx.rec_t), maxrows)[row] = ctx.t  # noqa: F821 (injected)
             rx = carray(fptr(ctx.rec_x), (maxrows, 2, nv))  # noqa: F821 (injected)
-            ru, rs = carray(fptr(ctx.rec_u), (maxrows, nv)), carray(fptr(ctx.rec_s), (maxrows, nv))  # noqa: F821
-            rref, rth = carray(fptr(ctx.rec_ref), (maxrows, 3, nv)), carray(fptr(ctx.rec_theta), (maxrows, nth))  # noqa: F821,E501
+            ru, rs = carray(fptr(ctx.rec_u), (maxrows, nv)), carray(fptr(ctx.rec_s), (maxrows, nv))  # noqa: F821 (injected)
+            rref, rth = carray(fptr(ctx.rec_ref), (maxrows, 3, nv)), carray(fptr(ctx.rec_theta), (maxrows, nth))  # noqa: F821,E501 (injected globals; one carray per line)
             for j in range(nv):
                 rx[row, 0, j] = qpos[qadr[j]]
                 rx[row, 1, j] = qvel[j]
@@ -403,7 +403,7 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
     _, _, _, _, off_cdof, off_xpos, off_xmat, off_subcom, off_cinert, off_arm, off_damp, off_gravity = off
     th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
     x = carray(fptr(ctx.x), (2, nv))  # noqa: F821 (injected)
-    s, qd_r, qdd_r = carray(fptr(ctx.s), nv), carray(fptr(ctx.qd_r), nv), carray(fptr(ctx.qdd_r), nv)  # noqa: F821
+    s, qd_r, qdd_r = carray(fptr(ctx.s), nv), carray(fptr(ctx.qd_r), nv), carray(fptr(ctx.qdd_r), nv)  # noqa: F821 (injected)
     noise = carray(fptr(ctx.noise), (ctx.maxrows, 2, nv))  # noqa: F821 (injected)
     qadr = carray(iptr(ctx.qadr), nv)  # noqa: F821 (injected)
     for j in range(nv):
@@ -411,23 +411,23 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
         x[1, j] = qvel[j] + noise[row, 1, j]
     stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
     ref_terms(x, r, carray(fptr(ctx.lam), nv), s, qd_r, qdd_r)  # noqa: F821 (injected)
-    Y_std, tau_known = carray(fptr(ctx.y_std), (nv, nstd)), carray(fptr(ctx.tau_known), nv)  # noqa: F821
-    cdof, xpos = carray(fptr(_field(base, off_cdof)), (nv, 6)), carray(fptr(_field(base, off_xpos)), (nb, 3))  # noqa: F821,E501
-    xmat, subcom = carray(fptr(_field(base, off_xmat)), (nb, 9)), carray(fptr(_field(base, off_subcom)), (nb, 3))  # noqa: F821,E501
+    Y_std, tau_known = carray(fptr(ctx.y_std), (nv, nstd)), carray(fptr(ctx.tau_known), nv)  # noqa: F821 (injected)
+    cdof, xpos = carray(fptr(_field(base, off_cdof)), (nv, 6)), carray(fptr(_field(base, off_xpos)), (nb, 3))  # noqa: F821,E501 (injected globals; one carray per line)
+    xmat, subcom = carray(fptr(_field(base, off_xmat)), (nb, 9)), carray(fptr(_field(base, off_subcom)), (nb, 3))  # noqa: F821,E501 (injected globals; one carray per line)
     cinert = carray(fptr(_field(base, off_cinert)), (nb, 10))  # noqa: F821 (injected)
     gravity = carray(fptr(mbase + off_gravity), 3)  # noqa: F821 (injected)
-    arm, damp = carray(fptr(_field(mbase, off_arm)), nv), carray(fptr(_field(mbase, off_damp)), nv)  # noqa: F821
+    arm, damp = carray(fptr(_field(mbase, off_arm)), nv), carray(fptr(_field(mbase, off_damp)), nv)  # noqa: F821 (injected)
     parent, dofadr = carray(iptr(ctx.parent), nb), carray(iptr(ctx.dofadr), nb)  # noqa: F821 (injected)
     dofnum, rootid = carray(iptr(ctx.dofnum), nb), carray(iptr(ctx.rootid), nb)  # noqa: F821 (injected)
-    body_col, body_known = carray(iptr(ctx.body_col), nb), carray(iptr(ctx.body_known), nb)  # noqa: F821
+    body_col, body_known = carray(iptr(ctx.body_col), nb), carray(iptr(ctx.body_known), nb)  # noqa: F821 (injected)
     col_arm, col_damp = carray(iptr(ctx.col_arm), nv), carray(iptr(ctx.col_damp), nv)  # noqa: F821 (injected)
     scratch, need = carray(fptr(ctx.scratch), 18 * nb), carray(iptr(ctx.need), nstd)  # noqa: F821 (injected)
     if ctx.mode_law == MODE_PD_GRAVITY:
         zero = carray(fptr(ctx.zero), nv)  # noqa: F821 (injected)
-        regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, arm, damp,  # noqa: F821
+        regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, arm, damp,  # noqa: F821 (injected)
                   cdof, xpos, xmat, subcom, cinert, gravity, zero, zero, zero, Y_std, tau_known, scratch, need)
     else:
-        regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, arm, damp,  # noqa: F821
+        regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, arm, damp,  # noqa: F821 (injected)
                   cdof, xpos, xmat, subcom, cinert, gravity, x[1], qd_r, qdd_r, Y_std, tau_known, scratch, need)
     if ctx.has_base != 0:  # Y = Y_std B, B stored by columns as (pointer, row index, value)
         Y = carray(fptr(ctx.y), (nv, nth))  # noqa: F821 (injected)
@@ -448,8 +448,8 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
             e_norm += e * e
         e_norm = np.sqrt(e_norm)
     u = carray(fptr(ctx.u), nv)  # noqa: F821 (injected)
-    output(Y, tau_known, th, s, carray(fptr(ctx.kd), nv), carray(fptr(ctx.gamma), nth), ctx.adapt != 0,  # noqa: F821
-           ctx.dz_width, ctx.dz_on_s != 0, e_norm, ctx.sigma, ctx.e_mod, carray(fptr(ctx.theta0), nth),  # noqa: F821
+    output(Y, tau_known, th, s, carray(fptr(ctx.kd), nv), carray(fptr(ctx.gamma), nth), ctx.adapt != 0,  # noqa: F821 (injected)
+           ctx.dz_width, ctx.dz_on_s != 0, e_norm, ctx.sigma, ctx.e_mod, carray(fptr(ctx.theta0), nth),  # noqa: F821 (injected)
            lower, upper, u, rate)
     lo, hi = carray(fptr(ctx.lo), nv), carray(fptr(ctx.hi), nv)  # noqa: F821 (injected)
     u_hold, s_hold = carray(fptr(ctx.u_hold), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
