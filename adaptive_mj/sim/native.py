@@ -28,8 +28,7 @@ import numpy as np
 
 from adaptive_mj.laws.sliding import sliding_law_values
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_context import (addr, bind_context, mujoco_offsets, source_key, unbind_context,
-                                            unique_factory)
+from adaptive_mj.sim.native_context import ContextOwner, addr, mujoco_offsets, source_key, unique_factory
 
 _i8, _f8 = np.int64, np.float64
 CONTEXT = np.dtype([
@@ -199,7 +198,7 @@ def supported(plant, law) -> bool:
             and plant.model.nuserdata >= USERDATA_SLOTS)
 
 
-class NativeController:
+class NativeController(ContextOwner):
     """Owns the context and buffers of one native run and steps the plant chunk by chunk.
 
     control: the run's ControlTiming (adaptive_mj.sim.loop): mode, period in physics steps, delay."""
@@ -238,18 +237,7 @@ class NativeController:
         for name, buf in self.buffers.items():
             c[name] = addr(buf)
         self.context = ctx
-        bind_context(plant.data, ctx)
-        plant.native_owner = self  # the context lives as long as the plant that points at it
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc) -> None:
-        """The run is over: its MjData no longer points at the context (a later mj_step or mj_forward
-        on it under a native callback changes nothing)."""
-        unbind_context(self.plant.data)
-        if getattr(self.plant, "native_owner", None) is self:
-            self.plant.native_owner = None
+        self.bind()
 
     def chunk(self, rows: int, noise: np.ndarray | None):
         """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat) rows, each (rows, ...)."""
@@ -264,8 +252,7 @@ class NativeController:
         self.buffers["noise"][: rows * n] = 0.0 if noise is None else noise.ravel()
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
-        bind_context(plant.data, self.context)  # the newest run on this MjData owns it
-        plant.native_owner = self
+        self.bind()
         plant.step_native(rows)
         if int(c["row"]) != rows or int(c["stage"]) != 0:
             raise RuntimeError(f"native callback ran {int(c['row'])} steps (stage {int(c['stage'])}), "

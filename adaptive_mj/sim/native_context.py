@@ -133,6 +133,30 @@ def bind_context(data, context: np.ndarray) -> None:
     data.userdata.view(np.int64)[0] = context.ctypes.data
 
 
+class ContextOwner:
+    """What a native controller shares: it owns `self.context` for `self.plant`'s MjData while its
+    run goes on (a context manager: the MjData is detached when the block ends)."""
+
+    plant: object
+    context: np.ndarray
+
+    def bind(self) -> None:
+        """Point the plant's MjData at this run's context (the newest run on an MjData owns it); the
+        plant holds the owner, so the context lives as long as the MjData can reach it."""
+        bind_context(self.plant.data, self.context)
+        self.plant.native_owner = self
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """The run is over: its MjData no longer points at the context (a later mj_step or mj_forward
+        on it under a native callback changes nothing)."""
+        unbind_context(self.plant.data)
+        if getattr(self.plant, "native_owner", None) is self:
+            self.plant.native_owner = None
+
+
 def unbind_context(data) -> None:
     """Detach data from any context (userdata[0] = 0): the callback leaves it alone."""
     if data.userdata.size >= 1:

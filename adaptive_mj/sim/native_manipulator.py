@@ -39,8 +39,7 @@ import numpy as np
 
 from adaptive_mj.numba_util import address_of, jit_tree, pointer
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_context import (addr, bind_context, mujoco_offsets, source_key, unbind_context,
-                                            unique_factory)
+from adaptive_mj.sim.native_context import ContextOwner, addr, mujoco_offsets, source_key, unique_factory
 
 _i8, _f8 = np.int64, np.float64
 # The context block a run's MjData points at (userdata[0], see adaptive_mj.sim.native_context):
@@ -526,7 +525,7 @@ def _base_map_columns(B, nstd: int, nth: int) -> dict:
             "bval": np.asarray(vals or [0.0], dtype=float), "need": np.any(B != 0, axis=1).astype(np.int64)}
 
 
-class NativeManipulatorController:
+class NativeManipulatorController(ContextOwner):
     """Owns the context and buffers of one native manipulator run and steps the plant chunk by chunk
     (the interface of adaptive_mj.sim.native.NativeController)."""
 
@@ -584,18 +583,7 @@ class NativeManipulatorController:
         c["h"], c["dz_width"], c["sigma"], c["e_mod"] = plant.dt, p["dz_width"], p["sigma"], p["e_mod"]
         c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
         self.context = ctx
-        bind_context(plant.data, ctx)
-        plant.native_owner = self  # the context lives as long as the plant that points at it
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc) -> None:
-        """The run is over: its MjData no longer points at the context (a later mj_step or mj_forward
-        on it under a native callback changes nothing)."""
-        unbind_context(self.plant.data)
-        if getattr(self.plant, "native_owner", None) is self:
-            self.plant.native_owner = None
+        self.bind()
 
     def chunk(self, rows: int, noise: np.ndarray | None):
         """Step `rows` physics steps; return (t (rows,), x (rows, 2, m), u (rows, m), s (rows, m),
@@ -624,8 +612,7 @@ class NativeManipulatorController:
         b["noise"][:rows] = 0.0 if noise is None else np.asarray(noise, dtype=float).reshape(rows, 2, m)
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
-        bind_context(plant.data, self.context)  # the newest run on this MjData owns it
-        plant.native_owner = self
+        self.bind()
         plant.step_native(rows)
         done = int(c["row"])
         if done != rows or c["stage"] != 0:
