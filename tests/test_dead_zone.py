@@ -22,6 +22,18 @@ def _just_above(width: float) -> float:
     return float(np.nextafter(width, math.inf))
 
 
+def _open_at_closed_below(make, width, on, plain, *args):
+    """Call the law made by make(width, on) at exactly |signal| == width and one float below it:
+    at the width it adapts as the law without a dead-zone (plain, whose rate is all nonzero),
+    below it every rate is exactly 0. Returns both steps."""
+    assert np.all(plain.theta_hat_dot != 0)
+    at = make(width, on)(*args)
+    np.testing.assert_array_equal(at.theta_hat_dot, plain.theta_hat_dot)
+    below = make(_just_above(width), on)(*args)
+    np.testing.assert_array_equal(below.theta_hat_dot, np.zeros_like(plain.theta_hat_dot))
+    return at, below
+
+
 def test_dead_zone_open_boundary():
     for w in (0.05, 0.75, 1e-300, 5e-324, 1e300):
         assert dead_zone_open(w, w) and dead_zone_open(-w, w)
@@ -64,11 +76,7 @@ def test_sliding_law_dead_zone_on_s_boundary(x, ref):
     plain = _sliding()(0.0, x, ref, TH)
     s_abs = abs(plain.s)
     assert s_abs == 0.75 and abs(ref[0] - x[0]) != s_abs  # the test is on s, not ỹ
-    assert np.all(plain.theta_hat_dot != 0)
-    at = _sliding(s_abs)(0.0, x, ref, TH)  # |s| == width: adapting, as the plain law
-    np.testing.assert_array_equal(at.theta_hat_dot, plain.theta_hat_dot)
-    below = _sliding(_just_above(s_abs))(0.0, x, ref, TH)  # |s| one float below the width: off
-    np.testing.assert_array_equal(below.theta_hat_dot, np.zeros(3))
+    at, below = _open_at_closed_below(_sliding, s_abs, DeadZoneOn.S, plain, 0.0, x, ref, TH)
     assert at.u == below.u == plain.u  # the control is untouched
 
 
@@ -77,11 +85,7 @@ def test_sliding_law_dead_zone_on_tracking_error_boundary(x, ref):
     plain = _sliding()(0.0, x, ref, TH)
     y_abs = abs(ref[0] - x[0])  # ỹ as sliding_terms computes it
     assert y_abs == 0.125 and abs(plain.s) > y_abs
-    at = _sliding(y_abs, DeadZoneOn.TRACKING_ERROR)(0.0, x, ref, TH)
-    np.testing.assert_array_equal(at.theta_hat_dot, plain.theta_hat_dot)
-    assert np.all(at.theta_hat_dot != 0)
-    below = _sliding(_just_above(y_abs), DeadZoneOn.TRACKING_ERROR)(0.0, x, ref, TH)
-    np.testing.assert_array_equal(below.theta_hat_dot, np.zeros(3))
+    _open_at_closed_below(_sliding, y_abs, DeadZoneOn.TRACKING_ERROR, plain, 0.0, x, ref, TH)
 
 
 # ----------------------------------------------------------------- Slotine–Li
@@ -112,11 +116,7 @@ def test_slotine_li_dead_zone_on_s_norm_boundary(x, ref):
     plain = _slotine()(0.0, x, ref, th)
     s_norm = _s_norm(plain.s)
     assert s_norm == 2.5
-    assert np.all(plain.theta_hat_dot != 0)
-    at = _slotine(s_norm)(0.0, x, ref, th)
-    np.testing.assert_array_equal(at.theta_hat_dot, plain.theta_hat_dot)
-    below = _slotine(_just_above(s_norm))(0.0, x, ref, th)
-    np.testing.assert_array_equal(below.theta_hat_dot, np.zeros(4))
+    at, below = _open_at_closed_below(_slotine, s_norm, DeadZoneOn.S, plain, 0.0, x, ref, th)
     np.testing.assert_array_equal(at.u, below.u)
 
 
@@ -126,11 +126,7 @@ def test_slotine_li_dead_zone_on_tracking_error_boundary(x, ref):
     plain = _slotine()(0.0, x, ref, th)
     e_norm = float(np.linalg.norm(ref[0] - x[0]))  # ‖q̃‖ as the law computes it
     assert e_norm == 1.25 and _s_norm(plain.s) > e_norm
-    at = _slotine(e_norm, DeadZoneOn.TRACKING_ERROR)(0.0, x, ref, th)
-    np.testing.assert_array_equal(at.theta_hat_dot, plain.theta_hat_dot)
-    assert np.all(at.theta_hat_dot != 0)
-    below = _slotine(_just_above(e_norm), DeadZoneOn.TRACKING_ERROR)(0.0, x, ref, th)
-    np.testing.assert_array_equal(below.theta_hat_dot, np.zeros(4))
+    _open_at_closed_below(_slotine, e_norm, DeadZoneOn.TRACKING_ERROR, plain, 0.0, x, ref, th)
 
 
 # ----------------------------------------------------------------- first-order law

@@ -28,7 +28,8 @@ import numpy as np
 
 from adaptive_mj.laws.sliding import sliding_law_values
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_context import ContextOwner, addr, mujoco_offsets, source_key, unique_factory
+from adaptive_mj.sim.native_context import (ContextOwner, addr, context_address, context_functions, mujoco_offsets,
+                                            source_key, unique_factory)
 
 _i8, _f8 = np.int64, np.float64
 CONTEXT = np.dtype([
@@ -61,10 +62,7 @@ def _callback_factory(off, key):
         if key == 0:  # never: keeps the cache key in the closure
             return
         base = address(d)  # noqa: F821 (injected)
-        ud = carray(iptr(base + off_ud), 1)[0]  # noqa: F821 (injected)
-        if ud == 0:
-            return
-        c = carray(iptr(ud), 1)[0]  # noqa: F821 (injected)
+        c = context_address(base, off_ud)  # noqa: F821 (injected)
         if c == 0:  # an MjData no native run owns (a scratch copy): leave it alone
             return
         ctx = carray(cptr(c), 1)[0]  # noqa: F821 (injected)
@@ -72,9 +70,9 @@ def _callback_factory(off, key):
         if stage >= nst or row >= ctx.rows:  # past the step's stages (an extra mj_forward) or the chunk
             return
         n, nth = ctx.n, ctx.nth
-        qpos = carray(fptr(carray(iptr(base + off_qpos), 1)[0]), ctx.qadr + 1)  # noqa: F821 (injected)
-        qvel = carray(fptr(carray(iptr(base + off_qvel), 1)[0]), ctx.dadr + 1)  # noqa: F821 (injected)
-        ctrl = carray(fptr(carray(iptr(base + off_ctrl), 1)[0]), ctx.act + 1)  # noqa: F821 (injected)
+        qpos = carray(fptr(pointer_at(base, off_qpos)), ctx.qadr + 1)  # noqa: F821 (injected)
+        qvel = carray(fptr(pointer_at(base, off_qvel)), ctx.dadr + 1)  # noqa: F821 (injected)
+        ctrl = carray(fptr(pointer_at(base, off_ctrl)), ctx.act + 1)  # noqa: F821 (injected)
         theta, rsum, prev = carray(fptr(ctx.theta), nth), carray(fptr(ctx.rsum), nth), carray(fptr(ctx.prev), nth)  # noqa: F821,E501 (injected globals; one carray per line)
         th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
         lower, upper = carray(fptr(ctx.lower), nth), carray(fptr(ctx.upper), nth)  # noqa: F821 (injected)
@@ -166,7 +164,7 @@ def compiled(form, plugin=None):
     offsets = mujoco_offsets()
     off = (offsets["userdata"], offsets["qpos"], offsets["qvel"], offsets["ctrl"])
     key = source_key(*fns, _callback_factory, _builtin_law, _plugin_law, sliding_law_values,
-                     stage_code.stage_estimate, extra=(off, numba.__version__))
+                     stage_code.stage_estimate, context_address, extra=(off, numba.__version__))
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
     forms = {"phi_fn": jit_tree(form.phi, numba.njit, tag=tag), "f_fn": jit_tree(form.f, numba.njit, tag=tag),
              "h_fn": jit_tree(form.h, numba.njit, tag=tag)}
@@ -177,9 +175,10 @@ def compiled(form, plugin=None):
     stage_fns = {name: jit_tree(getattr(stage_code, name), numba.njit, tag=tag) for name in
                  ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
                   "delay_slot")}
+    pointers = context_functions(numba, carray, pointer(types.int64), tag)
     g = {**_callback_factory.__globals__, **stage_fns, "numba": numba, "types": types, "carray": carray,
          "law": law, "address": address_of(), "iptr": pointer(types.int64), "fptr": pointer(types.float64),
-         "cptr": pointer(numba.from_dtype(CONTEXT)), "SAMPLED": stage_code.SAMPLED}
+         "cptr": pointer(numba.from_dtype(CONTEXT)), "SAMPLED": stage_code.SAMPLED, **pointers}
     factory = unique_factory(_callback_factory, g, key)
     callback = factory(off, key)
     _compiled[mem_key] = callback

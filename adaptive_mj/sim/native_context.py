@@ -133,6 +133,29 @@ def bind_context(data, context: np.ndarray) -> None:
     data.userdata.view(np.int64)[0] = context.ctypes.data
 
 
+def pointer_at(base, offset):
+    """The pointer stored at base + offset (an mjData/mjModel pointer field), as an int64. Compiled
+    into the callbacks (carray and iptr are injected by them)."""
+    return carray(iptr(base + offset), 1)[0]  # noqa: F821 (injected)
+
+
+def context_address(base, off_userdata):
+    """The address of the context block the mjData at `base` points at (its userdata[0]), or 0
+    when it has none (no userdata, or an MjData no native run owns: leave it alone)."""
+    ud = pointer_at(base, off_userdata)
+    if ud == 0:
+        return 0
+    return pointer_at(ud, 0)
+
+
+def context_functions(numba, carray, iptr, tag: str) -> dict:
+    """{"pointer_at", "context_address"} compiled for a callback variant (tag: numba_util.jit_tree)."""
+    from adaptive_mj.numba_util import jit_tree
+
+    at = jit_tree(pointer_at, numba.njit, tag=tag, carray=carray, iptr=iptr)
+    return {"pointer_at": at, "context_address": jit_tree(context_address, numba.njit, tag=tag, pointer_at=at)}
+
+
 class ContextOwner:
     """What a native controller shares: it owns `self.context` for `self.plant`'s MjData while its
     run goes on (a context manager: the MjData is detached when the block ends)."""

@@ -39,7 +39,8 @@ import numpy as np
 
 from adaptive_mj.numba_util import address_of, jit_tree, pointer
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_context import ContextOwner, addr, mujoco_offsets, source_key, unique_factory
+from adaptive_mj.sim.native_context import (ContextOwner, addr, context_address, context_functions, mujoco_offsets,
+                                            source_key, unique_factory)
 
 _i8, _f8 = np.int64, np.float64
 # The context block a run's MjData points at (userdata[0], see adaptive_mj.sim.native_context):
@@ -322,10 +323,7 @@ def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step'
         if key == 0:  # never: keeps the cache key in the closure
             return
         base, mbase = address(d), address(m)  # noqa: F821 (injected)
-        ud = carray(iptr(base + off_ud), 1)[0]  # noqa: F821 (injected)
-        if ud == 0:
-            return
-        c = carray(iptr(ud), 1)[0]  # noqa: F821 (injected)
+        c = context_address(base, off_ud)  # noqa: F821 (injected)
         if c == 0:  # an MjData no native run owns (a scratch copy): leave it alone
             return
         ctx = carray(cptr(c), 1)[0]  # noqa: F821 (injected)
@@ -333,9 +331,9 @@ def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step'
         if stage >= nst or row >= ctx.rows:  # past the step's stages or the chunk: leave ctrl as it is
             return
         nv, nth = ctx.nv, ctx.nth
-        qpos = carray(fptr(field(base, off_qpos)), ctx.nq)  # noqa: F821 (injected)
-        qvel = carray(fptr(field(base, off_qvel)), nv)  # noqa: F821 (injected)
-        ctrl = carray(fptr(field(base, off_ctrl)), ctx.nu)  # noqa: F821 (injected)
+        qpos = carray(fptr(pointer_at(base, off_qpos)), ctx.nq)  # noqa: F821 (injected)
+        qvel = carray(fptr(pointer_at(base, off_qvel)), nv)  # noqa: F821 (injected)
+        ctrl = carray(fptr(pointer_at(base, off_ctrl)), ctx.nu)  # noqa: F821 (injected)
         qadr, act = carray(iptr(ctx.qadr), nv), carray(iptr(ctx.act), nv)  # noqa: F821 (injected)
         theta, rsum, prev = carray(fptr(ctx.theta), nth), carray(fptr(ctx.rsum), nth), carray(fptr(ctx.prev), nth)  # noqa: F821,E501 (injected globals; one carray per line)
         lower, upper = carray(fptr(ctx.lower), nth), carray(fptr(ctx.upper), nth)  # noqa: F821 (injected)
@@ -390,11 +388,6 @@ def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step'
     return callback
 
 
-def _field(base, offset):
-    """The pointer stored at base + offset (an MjData/MjModel pointer field), as an int64."""
-    return carray(iptr(base + offset), 1)[0]  # noqa: F821 (injected)
-
-
 def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower, upper, r):
     """One evaluation of the Slotine–Li law at a stage: measure x (+ noise), the stage estimate, the
     regressor on the live MjData, τ clamped into u_hold (and s into s_hold), the rate into ctx.rate."""
@@ -411,11 +404,11 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
     stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
     ref_terms(x, r, carray(fptr(ctx.lam), nv), s, qd_r, qdd_r)  # noqa: F821 (injected)
     Y_std, tau_known = carray(fptr(ctx.y_std), (nv, nstd)), carray(fptr(ctx.tau_known), nv)  # noqa: F821 (injected)
-    cdof, xpos = carray(fptr(_field(base, off_cdof)), (nv, 6)), carray(fptr(_field(base, off_xpos)), (nb, 3))  # noqa: F821,E501 (injected globals; one carray per line)
-    xmat, subcom = carray(fptr(_field(base, off_xmat)), (nb, 9)), carray(fptr(_field(base, off_subcom)), (nb, 3))  # noqa: F821,E501 (injected globals; one carray per line)
-    cinert = carray(fptr(_field(base, off_cinert)), (nb, 10))  # noqa: F821 (injected)
+    cdof, xpos = carray(fptr(pointer_at(base, off_cdof)), (nv, 6)), carray(fptr(pointer_at(base, off_xpos)), (nb, 3))  # noqa: F821,E501 (injected globals; one carray per line)
+    xmat, subcom = carray(fptr(pointer_at(base, off_xmat)), (nb, 9)), carray(fptr(pointer_at(base, off_subcom)), (nb, 3))  # noqa: F821,E501 (injected globals; one carray per line)
+    cinert = carray(fptr(pointer_at(base, off_cinert)), (nb, 10))  # noqa: F821 (injected)
     gravity = carray(fptr(mbase + off_gravity), 3)  # noqa: F821 (injected)
-    arm, damp = carray(fptr(_field(mbase, off_arm)), nv), carray(fptr(_field(mbase, off_damp)), nv)  # noqa: F821 (injected)
+    arm, damp = carray(fptr(pointer_at(mbase, off_arm)), nv), carray(fptr(pointer_at(mbase, off_damp)), nv)  # noqa: F821 (injected)
     parent, dofadr = carray(iptr(ctx.parent), nb), carray(iptr(ctx.dofadr), nb)  # noqa: F821 (injected)
     dofnum, rootid = carray(iptr(ctx.dofnum), nb), carray(iptr(ctx.rootid), nb)  # noqa: F821 (injected)
     body_col, body_known = carray(iptr(ctx.body_col), nb), carray(iptr(ctx.body_known), nb)  # noqa: F821 (injected)
@@ -475,19 +468,19 @@ def compiled():
     off = tuple(offsets[k] for k in ("userdata", "qpos", "qvel", "ctrl", "cdof", "xpos", "xmat", "subtree_com",
                                      "cinert", "model.dof_armature", "model.dof_damping", "model.gravity"))
     key = source_key(_callback_factory, _law_stage, _regressor, reference_terms, slotine_li_output,
-                     stage_code.stage_estimate, extra=(off, numba.__version__))
+                     stage_code.stage_estimate, context_address, extra=(off, numba.__version__))
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
     common = {"carray": carray, "iptr": pointer(types.int64), "fptr": pointer(types.float64), "np": np,
               "MODE_PD_GRAVITY": MODE_PD_GRAVITY}
-    field = jit_tree(_field, numba.njit, tag=tag, **common)
+    pointers = context_functions(numba, carray, common["iptr"], tag)
     stage_fns = {name: jit_tree(getattr(stage_code, name), numba.njit, tag=tag) for name in
                  ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
                   "delay_slot")}
     law_stage = jit_tree(_law_stage, numba.njit, tag=tag, regressor=jit_tree(_regressor, numba.njit, tag=tag),
                          ref_terms=jit_tree(reference_terms, numba.njit, tag=tag),
-                         output=jit_tree(slotine_li_output, numba.njit, tag=tag), _field=field, **common, **stage_fns)
+                         output=jit_tree(slotine_li_output, numba.njit, tag=tag), **pointers, **common, **stage_fns)
     g = {**_callback_factory.__globals__, **common, **stage_fns, "numba": numba, "types": types,
-         "law_stage": law_stage, "field": field, "address": address_of(), "cptr": pointer(numba.from_dtype(CONTEXT)),
+         "law_stage": law_stage, **pointers, "address": address_of(), "cptr": pointer(numba.from_dtype(CONTEXT)),
          "SAMPLED": stage_code.SAMPLED}
     factory = unique_factory(_callback_factory, g, key)
     _compiled["callback"] = factory(off, key)
