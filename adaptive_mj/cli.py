@@ -233,7 +233,7 @@ def cmd_run(args) -> int:
     scn = sc.load(_scenario_path(args.scenario), overrides=overrides, seed=args.seed)
     log = reserve_log_path(scn, out=args.output, force=args.force)
     try:
-        result = execute(scn, log_path=log)
+        result = execute(scn, log_path=log, single=True)
     except OSError as exc:  # the log could not be written (disk full, a file-size limit)
         if args.debug:
             raise

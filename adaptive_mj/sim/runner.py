@@ -139,10 +139,22 @@ def new_output_dir(requested: Path | None, name: str, *, logs_dir: Path | None =
     raise AdaptiveMJError(f"{logs_dir}: could not find a free folder name for {name}-{stamp}")
 
 
-def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None) -> RunResult:
-    """Build and run one scenario; stream it to log_path (MCAP) when given."""
+# A 1-DOF run this short takes the Python callback when it is the only run of its process
+# (`adaptive-mj run`): loading the compiled callback costs ~0.55 s of numba start-up (its type
+# registries; the compile itself is cached on disk), the Python callback ~75 µs per physics step,
+# and both give the same rows bit for bit (tests/test_control_step.py). Measured in PERFORMANCE.md.
+QUICK_START_MAX_STEPS = 5000
+
+
+def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None,
+            single: bool = False) -> RunResult:
+    """Build and run one scenario; stream it to log_path (MCAP) when given.
+
+    single: the only run of this process (the CLI's `run`): a short 1-DOF run then takes the
+    Python callback (QUICK_START_MAX_STEPS); studies leave it False and stay compiled."""
     setup = build(scn, source=source)
     plant = setup.plant
+    short = single and not getattr(plant, "joint_shape", ()) and scn.simulation.duration < QUICK_START_MAX_STEPS * plant.dt
     for note in setup.notes:  # model edits the scenario asked for: said on the terminal and kept in the log
         print(f"{scn.source}: note: {note}", file=sys.stderr)
     sink_every = max(1, round(1.0 / plant.dt))  # flush about once per simulated second
@@ -150,7 +162,7 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
                   rng=setup.rng, events=setup.events, state_bound=scn.simulation.state_bound,
                   sink_every=sink_every, control_delay=scn.simulation.control_delay,
                   control_mode=scn.control.mode, control_period=control_timing(scn, setup).period,
-                  native=False if scn.simulation.python_callback else None)
+                  native=False if scn.simulation.python_callback or short else None)
     if log_path is None:
         traj = run(plant, setup.law, setup.reference, **kwargs)
         return RunResult(traj, clean_json(make_summary(scn.name, traj)), None)
