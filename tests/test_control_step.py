@@ -179,5 +179,5 @@ def test_a_single_short_run_takes_the_python_callback_with_the_same_rows():
     long = load_scenario(SCENARIOS_DIR / "heave_tracking.toml",
                          overrides=[f"simulation.duration={QUICK_START_MAX_STEPS * 1e-3 + 0.1}"])
     assert long.simulation.timestep == 1e-3 and execute(long, single=True).trajectory.meta["native"]
-    arm = load_scenario(SCENARIOS_DIR / "arm_payload_swap.toml", overrides=["simulation.duration=0.05"])
+    arm = load_scenario(SCENARIOS_DIR / "arm_payload_swap.toml", overrides=["simulation.duration=0.05", "events=[]"])
     assert execute(arm, single=True).trajectory.meta["native"]
