@@ -169,7 +169,7 @@ def test_a_second_process_loads_the_compiled_callback_from_the_disk_cache(tmp_pa
 
 def test_a_single_short_run_takes_the_python_callback_with_the_same_rows():
     """`adaptive-mj run` on a short 1-DOF run skips the compiled callback's ~0.5 s load
-    (runner.QUICK_START_MAX_STEPS); a study's run (single=False) and any arm stay compiled."""
+    (runner.QUICK_START_MAX_STEPS); a study's run (single=False) and a manipulator stay compiled."""
     from adaptive_mj.sim.runner import QUICK_START_MAX_STEPS
 
     scn = load_scenario(SCENARIOS_DIR / "heave_tracking.toml", overrides=["simulation.duration=0.3"])
@@ -179,5 +179,5 @@ def test_a_single_short_run_takes_the_python_callback_with_the_same_rows():
     long = load_scenario(SCENARIOS_DIR / "heave_tracking.toml",
                          overrides=[f"simulation.duration={QUICK_START_MAX_STEPS * 1e-3 + 0.1}"])
     assert long.simulation.timestep == 1e-3 and execute(long, single=True).trajectory.meta["native"]
-    arm = load_scenario(SCENARIOS_DIR / "arm_payload_swap.toml", overrides=["simulation.duration=0.05", "events=[]"])
+    arm = load_scenario(SCENARIOS_DIR / "ur5e_payload_swap.toml", overrides=["simulation.duration=0.05", "events=[]"])
     assert execute(arm, single=True).trajectory.meta["native"]
