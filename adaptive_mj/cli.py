@@ -89,7 +89,8 @@ def _parser() -> argparse.ArgumentParser:
                     help="metric(s) to plot against the grid (default: rms_tracking_error_tail)")
     sw.add_argument("--breaking-point", metavar="KEY=LO:HI",
                     help="instead of a grid: bisect KEY between LO and HI for the largest value at which every "
-                         "seed passes (integers when LO and HI are); needs --tail-bound")
+                         "seed passes (integers when LO and HI are; control.period: whole physics steps, "
+                         "run under control.mode='sampled'); needs --tail-bound")
     sw.add_argument("--tail-bound", type=float, metavar="B",
                     help="with --breaking-point: a run fails when it diverges or its tail RMS error exceeds B")
     sw.add_argument("--steps", type=int, default=5, help="with --breaking-point: bisection steps (default 5)")

@@ -65,7 +65,7 @@ def test_the_study_derives_its_laws_from_the_models():
     assert box.startswith("law.projection={d=[18.5, 74.0], b=[30.0, 120.0], c=[0.500000000000000")
     assert "composite" in dict(stress.laws(plants[1], composite=True))
     names = [s.name for s in stress.stressors(plants[1], 10.0)]
-    assert names == ["noise σ_y", "disturbance", "payload ratio", "delay"]
+    assert names == ["noise σ_y", "disturbance", "payload ratio", "delay", "control period"]
     assert stress.stressors(plants[1], 10.0)[2].overrides(4.0) == ["events=[{t=5.0, kind='payload_mass', value=2.0}]"]
 
 

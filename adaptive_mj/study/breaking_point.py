@@ -8,9 +8,11 @@ exceeds a stated bound. A stress value *passes* when every seed passes. For one
   2. if the low end fails, the margin is "below the range"; if the high end passes,
      it is "at least the high end";
   3. otherwise bisects (geometrically when the range spans a decade or more and the
-     low end is > 0, linearly otherwise, to whole numbers for integer stressors) for
-     a fixed number of steps, keeping the largest passing value `margin` and the
-     smallest failing value `first_fail`; the resolution is first_fail − margin.
+     low end is > 0, linearly otherwise, to whole numbers for integer stressors and to
+     whole multiples of `step` for a stressor with a step, e.g. control.period in
+     physics steps) for a fixed number of steps, keeping the largest passing value
+     `margin` and the smallest failing value `first_fail`; the resolution is
+     first_fail − margin.
 
 Across seeds, at the margin: the mean tail error and its CVaR at 10 % (the mean of the
 worst ⌈10 %⌉ of seeds: with 5 seeds, the worst one); at first_fail: the failure rate.
@@ -32,13 +34,22 @@ import numpy as np
 from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
 
 CVAR_LEVEL = 0.10  # the worst 10 % of seeds
+TAIL_BOUND = {"heave": 0.01, "arm": 0.05}  # [m], [rad]: the stress study's failure bound on the tail RMS error
+
+
+def whole_steps(value: float, step: float) -> float:
+    """value rounded to a whole multiple of step, at least one step (e.g. a control period [s] in
+    physics steps of `step` seconds): round(value / step) · step, computed the same way every time
+    so that equal step counts give equal floats."""
+    return max(1, round(value / step)) * step
 
 
 @dataclass(frozen=True)
 class Stressor:
     """name: a label; overrides(v) -> the --set expressions that apply stress value v;
     lo, hi: the range searched; integer: round to whole numbers (e.g. delay steps);
-    unit: the value's unit for reports."""
+    unit: the value's unit for reports; step > 0: every value tried is a whole multiple of step
+    (lo and hi must be already; e.g. a control period [s] in physics steps of dt)."""
 
     name: str
     overrides: Callable[[float], list[str]]
@@ -46,12 +57,26 @@ class Stressor:
     hi: float
     integer: bool = False
     unit: str = ""
+    step: float = 0.0
 
     @classmethod
     def key(cls, key: str, lo: float, hi: float, *, integer: bool = False, unit: str = "") -> "Stressor":
         """The stressor that sets one scenario key (`sweep --breaking-point KEY=LO:HI`)."""
         fmt = (lambda v: str(int(v))) if integer else repr
         return cls(key, lambda v: [f"{key}={fmt(v)}"], lo, hi, integer, unit)
+
+    @classmethod
+    def control_period(cls, lo: float, hi: float, dt: float, *, name: str = "control.period") -> "Stressor":
+        """The sampled-data control period T [s] from lo to hi, both rounded to whole physics steps
+        of dt (as is every bisection value): each value v sets control.mode = 'sampled' and
+        control.period = v (the scenario's loader refuses a period that is not a whole multiple of
+        dt)."""
+        lo, hi = whole_steps(lo, dt), whole_steps(hi, dt)
+        return cls(name, lambda v: ["control.mode='sampled'", f"control.period={v!r}"], lo, hi, unit="s", step=dt)
+
+    def steps_between(self, lo: float, hi: float) -> int:
+        """Whole steps from lo to hi (a stressor with a step)."""
+        return round(hi / self.step) - round(lo / self.step)
 
 
 @dataclass(frozen=True)
@@ -121,6 +146,11 @@ def _tail(result: JobResult, bound: float) -> float:
     return float(tail)
 
 
+def passes(result: JobResult, bound: float) -> bool:
+    """Whether one run passes: it finished and its tail RMS error is at most `bound` (as a search judges it)."""
+    return math.isfinite(_tail(result, bound))
+
+
 def _raw_tail(result: JobResult) -> float:
     m = (result.summary or {}).get("metrics") or {}
     v = m.get("rms_tracking_error_tail", m.get("rms_tracking_error_norm_tail"))
@@ -143,19 +173,22 @@ def _mid(lo: float, hi: float, st: Stressor) -> float:
             v = lo + 1
         if v >= hi:
             v = hi - 1
+    elif st.step > 0:  # whole steps strictly between lo and hi
+        n_lo, n_hi = round(lo / st.step), round(hi / st.step)
+        v = whole_steps(min(max(round(v / st.step), n_lo + 1), n_hi - 1) * st.step, st.step)
     return v
 
 
 def _midpoints(searches: Sequence[Search], brackets: list[tuple[float, float] | None]) -> list[tuple[int, float]]:
-    """(search index, value to try next) for each search still bracketed; an integer search whose
-    bracket is down to neighbouring values is done (its bracket set to None)."""
+    """(search index, value to try next) for each search still bracketed; an integer (or stepped)
+    search whose bracket is down to neighbouring values is done (its bracket set to None)."""
     wanted = []
     for i, br in enumerate(brackets):
         if br is None:
             continue
         lo, hi = br
         st = searches[i].stressor
-        if st.integer and hi - lo <= 1:
+        if (st.integer and hi - lo <= 1) or (st.step > 0 and st.steps_between(lo, hi) <= 1):
             brackets[i] = None
             continue
         wanted.append((i, _mid(lo, hi, st)))

@@ -17,7 +17,10 @@ baselines, fixed nominal parameters (the truth) and robust sliding control (K = 
 actuator limit, Φ = 0.05).
 Stressors: noise σ (y', 10× y), a sinusoidal disturbance force (ω = 2 rad/s), an unmodelled
 thruster lag τ (heave), a payload ratio (arm), a
-control delay of whole physics steps. (arm: the payload's mass × ratio at half the run.)
+control delay of whole physics steps (arm: the payload's mass × ratio at half the run), and
+the control period T of sampled-data control: control.mode = 'sampled', control.period = n·dt,
+searched over whole physics steps n from 1 to PERIOD_MAX (or the run's duration), reported in
+seconds. Composite adaptation runs under continuous control only: n/a for the control period.
 """
 from __future__ import annotations
 
@@ -27,14 +30,16 @@ from pathlib import Path
 
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.setup import scenario as sc
-from adaptive_mj.study.breaking_point import Margin, Search, Stressor, margin_text, search_all
+from adaptive_mj.study.breaking_point import TAIL_BOUND, Margin, Search, Stressor, margin_text, search_all
 
-TAIL_BOUND = {"heave": 0.01, "arm": 0.05}  # [m], [rad]: tail RMS above this is a failure
+# TAIL_BOUND (breaking_point, shared with the bench): [m], [rad]: tail RMS above this is a failure
 NOMINAL_NOISE = {"heave": 5e-4, "arm": 5e-4}  # σ_y [m], [rad]; σ_y' = 10 σ_y [per s]
 LEAK_TIME = 5.0  # s: σ = γ_1 / LEAK_TIME; ν = γ_1 / (LEAK_TIME σ_s)
 DURATION = 20.0  # s per run (tail: the last 20 %)
-BENCH_SETTINGS = {"seeds": 5, "steps": 2, "duration": 5.0}  # the full bench's reduced study (~2.5 min on 2 cores)
+BENCH_SETTINGS = {"seeds": 5, "steps": 2, "duration": 5.0}  # the full bench's reduced study (1370 runs, ~2.2 min)
 ROBUST_K_FRACTION = 0.1  # robust sliding: K = 10 % of the actuator's limit, boundary layer Φ = 0.05
+PERIOD_MAX = 1.0  # s: the control period stressor's high end (heave: 2d/k = 0.37 s; the 1-DOF arm: 2J/k = 0.085 s)
+PERIOD = "control period"  # the control period stressor's name
 
 
 @dataclass(frozen=True)
@@ -102,6 +107,10 @@ def stressors(p: Plant, duration: float = DURATION) -> list[Stressor]:
                             1.0, 100.0, unit="×"))
     out.append(Stressor("delay", lambda v: [f"simulation.control_delay={int(v)}"], 0, 200, integer=True,
                         unit="steps"))
+    dt = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml", overrides=list(p.base)).simulation.timestep
+    if dt is None:  # the model's own timestep
+        dt = float(_setup(p)[1].plant.dt)
+    out.append(Stressor.control_period(dt, min(PERIOD_MAX, duration), dt, name=PERIOD))
     return out
 
 
@@ -111,6 +120,8 @@ def study(*, composite: bool, duration: float = DURATION) -> list[Search]:
         path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
         for law, over in laws(p, composite=composite):
             for st in stressors(p, duration):
+                if law == "composite" and st.name == PERIOD:  # composite adaptation: continuous control only
+                    continue
                 out.append(Search(path, f"{p.name}/{law}", (*p.base, *over), st, TAIL_BOUND[p.name]))
     return out
 

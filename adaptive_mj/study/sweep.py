@@ -55,6 +55,7 @@ DOCUMENTED_KEYS: dict[str, tuple[str, ...]] = {
     "noise": ("std",) + tuple(f"std.{signal}" for signal in sc.STATE_SIGNALS) + ("seed",),
     "disturbance": ("kind", "magnitude", "t0", "omega", "phase"),
     "log": ("rate_hz",),
+    "control": ("mode", "period", "hold"),
 }
 TOP_LEVEL = ("schema_version", "name", "description", "reference", "events") + tuple(DOCUMENTED_KEYS)
 _KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
@@ -508,7 +509,9 @@ def where_text(backend: Backend | None, runs: int) -> str:
 
 def main_breaking_point(args, path: Path, doc: dict, base, backend: Backend | None = None) -> int:
     """`sweep --breaking-point KEY=LO:HI --tail-bound B`: the largest value of KEY at which every seed
-    passes (no divergence, tail RMS error <= B), by bisection (adaptive_mj.study.breaking_point)."""
+    passes (no divergence, tail RMS error <= B), by bisection (adaptive_mj.study.breaking_point).
+    KEY = control.period: LO, HI and every value tried are rounded to whole physics steps of the
+    scenario's timestep, each run under control.mode = 'sampled'."""
     from adaptive_mj.sim.runner import new_output_dir
     from adaptive_mj.study.breaking_point import Search, Stressor, margin_text, search_all
 
@@ -520,20 +523,33 @@ def main_breaking_point(args, path: Path, doc: dict, base, backend: Backend | No
     if args.steps < 0:
         raise ScenarioError(f"--steps must be an integer >= 0, got {args.steps}")
     key, lo, hi, integer = parse_breaking_point(args.breaking_point, doc)
+    step = None
+    if key == "control.period":  # whole physics steps, under sampled-data control
+        step = _timestep(base)
+        stressor = Stressor.control_period(lo, hi, step)
+        if not stressor.lo < stressor.hi:
+            raise ScenarioError(f"--breaking-point {args.breaking_point!r}: LO and HI round to the same whole "
+                                f"number of physics steps ({stressor.lo:g} s, timestep {step:g} s)")
+        if (stressor.lo, stressor.hi) != (lo, hi):
+            print(f"sweep: note: control.period rounded to whole physics steps of {step:g} s: "
+                  f"[{stressor.lo:g}, {stressor.hi:g}] s", file=sys.stderr)
+        lo, hi, integer = stressor.lo, stressor.hi, False
+    else:
+        stressor = Stressor.key(key, lo, hi, integer=integer)
     for v in (lo, hi):  # both ends must make a valid scenario before anything runs
-        sc.load(path, overrides=[*args.overrides, f"{key}={int(v) if integer else v!r}"])
+        sc.load(path, overrides=[*args.overrides, *stressor.overrides(v)])
     for note in sweep_notes(base, [key], args.seeds):
         print(f"sweep: note: {note}", file=sys.stderr)
     out = new_output_dir(args.output, f"breaking-point-{base.name}")
-    search = Search(path, base.name, tuple(args.overrides), Stressor.key(key, lo, hi, integer=integer),
-                    float(args.tail_bound))
+    search = Search(path, base.name, tuple(args.overrides), stressor, float(args.tail_bound))
     print(f"breaking point of {key} in [{lo:g}, {hi:g}] for {base.name}: {args.seeds} seed(s), "
           f"{args.steps} bisection step(s) {where_text(backend, args.jobs)} -> {out}", file=sys.stderr)
     (m,) = search_all([search], seeds=args.seeds, steps=args.steps, logs=out / "logs", n_jobs=args.jobs,
                       backend=backend,
                       on_done=progress_printer(args.seeds * (2 + args.steps), label="runs"))
     stats = m.stats()
-    record = {"scenario": str(path), "key": key, "lo": lo, "hi": hi, "integer": integer, "seeds": args.seeds,
+    record = {"scenario": str(path), "key": key, "lo": lo, "hi": hi, "integer": integer, "step": step,
+              "seeds": args.seeds,
               "steps": args.steps, "tail_bound": args.tail_bound, "overrides": list(args.overrides), **stats,
               "evaluations": [{"value": e.value, "passes": e.passes, "statuses": e.statuses,
                                "tail": [x if math.isfinite(x) else None for x in e.raw]} for e in m.evaluations]}
@@ -546,6 +562,15 @@ def main_breaking_point(args, path: Path, doc: dict, base, backend: Backend | No
              if stats["failure_rate_beyond"] is not None else ""))
     print(f"output: {out}")
     return EXIT_OK
+
+
+def _timestep(base) -> float:
+    """The scenario's physics timestep [s]: simulation.timestep, or the model's own."""
+    if base.simulation.timestep is not None:
+        return float(base.simulation.timestep)
+    from adaptive_mj.setup.build import build
+
+    return float(build(base).plant.dt)
 
 
 MANIFEST = "manifest.json"  # the study's inputs, written before any run
