@@ -220,7 +220,7 @@ class TrackingTask(control.Task):
         self.log_dir = log_dir
         self.log_paths: list[Path] = []
         self.order = plant_order(plant)
-        self.joint_shape = tuple(getattr(plant, "joint_shape", ()))  # () for 1-DOF plants, (m,) for arms
+        self.joint_shape = plant.joint_shape  # () for 1-DOF plants, (m,) for arms
         self.param_names = tuple(setup.law.names)
         self.theta_hat0 = np.array(setup.theta_hat0, dtype=float)  # (n_theta,) the law's start
         self.drives_law = law is not None  # the law, not the agent, supplies the control
@@ -355,8 +355,8 @@ class _Episode:
         self.law = law
         self.reference = setup.reference
         self.order = plant_order(plant)
-        self.joint_shape = js = tuple(getattr(plant, "joint_shape", ()))
-        self.joint_names = tuple(getattr(plant, "joint_names", ()))
+        self.joint_shape = js = plant.joint_shape
+        self.joint_names = plant.joint_names
         self.dt = plant.dt
         self.control_dt = control_dt
         self.n_steps = n_steps

@@ -45,7 +45,7 @@ class Interrupted(KeyboardInterrupt):
         super().__init__(signum)
         self.signum = signum
         self.trajectory = trajectory
-        self.summary = None
+        self.summary: dict | None = None
         self.note = ""
 
     @property

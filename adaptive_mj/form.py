@@ -50,7 +50,7 @@ class ModelForm:
         """Names of theta, in order: (d_name, *p_names) or p_names."""
         return self.p_names if self.d_name is None else (self.d_name, *self.p_names)
 
-    def split(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
+    def split(self, theta: np.ndarray) -> tuple[float | np.ndarray, np.ndarray]:
         """theta (..., n_theta) -> (d, p): d is 1.0 when the form has no unknown d."""
         theta = np.asarray(theta, dtype=float)
         if self.d_name is None:
@@ -60,4 +60,4 @@ class ModelForm:
     def highest_derivative(self, x: np.ndarray, u: float, theta: np.ndarray, external: float = 0.0) -> float:
         """y^(n) from the true equation (plus an external force), for the analytic twin."""
         d, p = self.split(theta)
-        return (self.f(x) + float(self.phi(x) @ p) + self.h(x) * u + external) / d
+        return float((self.f(x) + float(self.phi(x) @ p) + self.h(x) * u + external) / d)

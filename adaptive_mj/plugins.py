@@ -6,16 +6,20 @@ import hashlib
 import inspect
 import sys
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Generic, TypeVar
+
+P = TypeVar("P")
+P_co = TypeVar("P_co", covariant=True)
 
 
 @dataclass(frozen=True)
-class Installed:
-    """An installed plugin: its entry-point name, the registered object, and where it comes from
-    (distribution, version, sha256 of the source of the module that defines it)."""
+class Installed(Generic[P_co]):
+    """An installed plugin: its entry-point name, the registered object (a laws.plugin.LawPlugin or
+    a plants.plugin.PlantPlugin), and where it comes from (distribution, version, sha256 of the
+    source of the module that defines it)."""
 
     name: str
-    plugin: object
+    plugin: P_co
     distribution: str
     version: str
     source_sha256: str
@@ -28,20 +32,23 @@ class Installed:
 
 def source_hash(fn: Callable) -> str:
     """sha256 of the source of the module that defines fn (of its name when there is no source)."""
+    module = inspect.getmodule(fn)
     try:
-        text = inspect.getsource(inspect.getmodule(fn))
+        if module is None:  # no module to read (as inspect.getsource(None) would say)
+            raise TypeError(f"{fn!r} has no module")
+        text = inspect.getsource(module)
     except (OSError, TypeError):
         text = getattr(fn, "__qualname__", repr(fn))
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def discover(group: str, expected: type, what: str, code: Callable[[object], Callable]) -> dict[str, Installed]:
+def discover(group: str, expected: type[P], what: str, code: Callable[[P], Callable]) -> dict[str, Installed[P]]:
     """Every object of type `expected` registered under the entry-point group, by name. One that
     cannot be loaded, or has another type, is skipped with a one-line note on stderr, so one bad
     package does not stop the others. code(obj): the function whose module source is hashed."""
     from importlib.metadata import entry_points
 
-    out: dict[str, Installed] = {}
+    out: dict[str, Installed[P]] = {}
     for ep in entry_points(group=group):
         try:
             obj = ep.load()

@@ -233,10 +233,12 @@ class JointSumOfSines:
         order = _check_order(type(self).__name__, order)
         tf, shape = _flat_times(t)
         out = np.zeros((order + 1, tf.size, self.m))
+        phases = self.phases
+        assert phases is not None  # __post_init__ stores zeros for None
         for i in range(self.m):
             joint = sum(
                 (_harmonic(tf, a, w, p, order, np.sin)
-                 for a, w, p in zip(self.amplitudes[i], self.omegas[i], self.phases[i], strict=True)),
+                 for a, w, p in zip(self.amplitudes[i], self.omegas[i], phases[i], strict=True)),
                 np.zeros((order + 1, tf.size)))
             joint[0] += self.center[i]
             out[:, :, i] = joint

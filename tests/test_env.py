@@ -13,6 +13,7 @@ from dm_control.rl import control
 from dm_env import specs, test_utils
 
 from adaptive_mj import env as amj_env
+from adaptive_mj.laws import Law
 from adaptive_mj.setup.build import build
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.sim.loop import run
@@ -306,7 +307,7 @@ def test_a_failing_law_leaves_no_callback_and_a_failed_log(tmp_path):
     scn = load_scenario(SCENARIOS_DIR / "heave_tracking.toml", overrides=SHORT)
     scenario_law = build(scn).law
 
-    class Failing:
+    class Failing(Law):
         order, names, lyapunov = scenario_law.order, scenario_law.names, scenario_law.lyapunov
 
         def __call__(self, t, x, ref, theta_hat):

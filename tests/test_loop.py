@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from adaptive_mj.laws import LawStep, SlidingAdaptiveLaw
+from adaptive_mj.laws import Law, LawStep, SlidingAdaptiveLaw
 from adaptive_mj.sim.loop import Event, run
 from adaptive_mj.plants import arm, heave, twin
 from adaptive_mj.plants.mujoco_plant import compile_xml_path
@@ -18,7 +18,7 @@ RK4 = mujoco.mjtIntegrator.mjINT_RK4
 EULER = mujoco.mjtIntegrator.mjINT_EULER
 
 
-class ConstantRateLaw:
+class ConstantRateLaw(Law):
     """u = 0 and theta_hat_dot = c whatever the state; records every call."""
 
     def __init__(self, names, rate, u=0.0):
@@ -36,7 +36,7 @@ class ConstantRateLaw:
         return np.zeros(len(s))
 
 
-class CountingLaw:
+class CountingLaw(Law):
     """Wraps a law and counts its calls."""
 
     def __init__(self, inner):

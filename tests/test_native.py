@@ -7,7 +7,7 @@ import pytest
 from adaptive_mj import run
 
 from adaptive_mj.sim import native
-from adaptive_mj.laws import DeadZone, DeadZoneOn, FixedNominalLaw, RobustSlidingLaw, SlidingAdaptiveLaw
+from adaptive_mj.laws import DeadZone, DeadZoneOn, FixedNominalLaw, Law, RobustSlidingLaw, SlidingAdaptiveLaw
 from adaptive_mj.sim.loop import Event
 from adaptive_mj.plants import arm, heave
 from adaptive_mj.reference import Cosine, SumOfSines
@@ -102,7 +102,7 @@ def test_native_is_chosen_only_where_supported():
     p.disturbance = lambda t: 1.0
     assert not native.supported(p, law)  # a time-varying disturbance needs the per-step Python loop
 
-    class UserLaw:  # a user's own law in plain Python has no native_params: Python path
+    class UserLaw(Law):  # a user's own law in plain Python is not native (Law's default): Python path
         order, names = 2, ("d", "b", "c")
 
         def __call__(self, t, x, ref, theta_hat):

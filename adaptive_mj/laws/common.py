@@ -14,13 +14,14 @@ class LawStep(NamedTuple):
 
     u: control before saturation [N or N*m]; theta_hat_dot: (n_theta,)
     estimate derivative [units of theta / s]; s: sliding variable
-    [units of y^(n-1)]; s_r_dot: reference derivative of s.
+    [units of y^(n-1)]; s_r_dot: reference derivative of s. On a plant of m
+    joints u, s and s_r_dot (there q̈_r) are (m,) arrays.
     """
 
-    u: float
+    u: float | np.ndarray
     theta_hat_dot: np.ndarray
-    s: float
-    s_r_dot: float
+    s: float | np.ndarray
+    s_r_dot: float | np.ndarray
 
 
 def dead_zone_open(signal: float, width: float) -> bool:

@@ -24,9 +24,9 @@ so that V = ½ d s² + ½ θ̃ᵀΓθ̃ has V' = −k s² − κ (Y_f θ̃)² �
 estimates move along every direction the filtered regressor has excited, not only
 while s is large. The filters start at the first step's values.
 
-This law keeps filter state between calls, so it runs on the Python callback path:
-loop._Controller resets it, calls step_begins(x) with the measured state at the start
-of each step and step_ends(stage states, stage controls, weights, h) at its end.
+This law keeps filter state between calls (``has_filters``, laws.protocol), so it runs on the
+Python callback path: loop.Controller resets it, calls step_begins(x) with the measured state at
+the start of each step and step_ends(stage states, stage controls, weights, h) at its end.
 """
 from __future__ import annotations
 
@@ -47,6 +47,7 @@ class CompositeSlidingLaw(SlidingAdaptiveLaw):
     """
 
     native = False  # filter state between calls: the Python callback path
+    has_filters = True  # the loop calls reset, step_begins and step_ends (laws.protocol)
 
     def __init__(self, form: ModelForm, *, lam: float, k: float, gamma, kappa: float, filter_rate: float,
                  dead_zone: DeadZone | None = None, modification: Modification | None = None):
@@ -56,8 +57,9 @@ class CompositeSlidingLaw(SlidingAdaptiveLaw):
                 raise ValueError(f"{name} must be finite and > 0, got {v}")
         self.kappa = float(kappa)
         self.filter_rate = float(filter_rate)
-        self._z = None  # [z_a, z_φ (n_p), z_τ]
-        self._pending = None  # (y^(n-1) at the step's start, φ̄, τ̄, h) of the step just done
+        self._z: np.ndarray | None = None  # [z_a, z_φ (n_p), z_τ]
+        # (y^(n-1) at the step's start, φ̄, τ̄, h) of the step just done
+        self._pending: tuple[float, np.ndarray, float, float] | None = None
 
     def reset(self) -> None:
         """Forget the filters (a new run)."""

@@ -18,9 +18,10 @@ import numpy as np
 
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws.common import NO_MODIFICATION, DeadZone, LawStep, Modification, as_gamma, modify_rate
+from adaptive_mj.laws.protocol import Box, Law
 
 
-class FirstOrderAdaptiveLaw:
+class FirstOrderAdaptiveLaw(Law):
     """form: order-1 ModelForm with d_name=None (h is honoured; the lecture has h = 1).
 
     k: gain on x̃ [u per unit of x]; gamma: scalar or (n_p,); dead_zone: None or a
@@ -43,7 +44,7 @@ class FirstOrderAdaptiveLaw:
         self._mod = self.modification.arrays(len(self.names))
 
     @property
-    def bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+    def bounds(self) -> Box | None:
         """(lower, upper) of the projection, or None (common.Modification.box)."""
         return self.modification.box(len(self.names))
 
@@ -60,7 +61,7 @@ class FirstOrderAdaptiveLaw:
         modify_rate(rate, theta_hat, abs(x_tilde), sigma, e_mod, theta0, self.gamma, lower, upper)
         return LawStep(u, rate, x_tilde, float(ref[1]))
 
-    def lyapunov(self, s, theta_hat, theta) -> np.ndarray:
+    def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
         """V = ½ x̃² + ½ sum_i gamma_i p̃_i²."""
         err = np.asarray(theta_hat, dtype=float) - np.asarray(theta, dtype=float)
         return 0.5 * np.asarray(s, dtype=float) ** 2 + 0.5 * np.sum(self.gamma * err**2, axis=-1)

@@ -28,11 +28,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
+from adaptive_mj.form import ModelForm
 from adaptive_mj.laws.common import LawStep
+from adaptive_mj.laws.protocol import Law
 from adaptive_mj.plugins import Installed, discover
 
 ENTRY_POINT_GROUP = "adaptive_mj.laws"
@@ -62,17 +64,19 @@ class LawPlugin:
     doc: str = ""
 
 
-def installed() -> dict[str, Installed]:
+def installed() -> dict[str, Installed[LawPlugin]]:
     """Every law registered under ENTRY_POINT_GROUP, by name (adaptive_mj.plugins.discover)."""
     return discover(ENTRY_POINT_GROUP, LawPlugin, "law", lambda p: p.law)
 
 
-class PluginLaw:
-    """A plugin's law on a 1-DOF plant, with the loop's law interface (``law(t, x, ref, θ̂)
-    -> LawStep``); ``native_plugin`` hands the function and its parameters to the native
-    callback (adaptive_mj.sim.native)."""
+class PluginLaw(Law):
+    """A plugin's law on a 1-DOF plant, with the loop's law interface (laws.protocol.Law);
+    ``native_params`` hands the function and its parameters to the native callback
+    (adaptive_mj.sim.native)."""
 
-    def __init__(self, installed: Installed, form, params: np.ndarray):
+    installed: Installed[LawPlugin]
+
+    def __init__(self, installed: Installed[LawPlugin], form: ModelForm, params: np.ndarray):
         self.installed = installed
         self.plugin = installed.plugin
         self.form = form
@@ -83,7 +87,7 @@ class PluginLaw:
 
     native = True  # set False to force the Python callback (simulation.python_callback)
 
-    def native_params(self) -> dict:
+    def native_params(self) -> dict[str, Any]:
         """What adaptive_mj.sim.native needs: the function and its parameters (the sliding-law
         slots are neutral: no projection, no leakage)."""
         n = len(self.names)
@@ -100,6 +104,6 @@ class PluginLaw:
             rate[:] = 0.0
         return LawStep(float(u), rate, float(s), math.nan)
 
-    def lyapunov(self, s, theta_hat, theta) -> np.ndarray:
+    def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
         """A plugin declares no Lyapunov function: NaN (the log's V column says so)."""
         return np.full(np.shape(s), np.nan)

@@ -18,12 +18,14 @@ gamma may be a scalar (the lecture) or one value per entry of theta.
 from __future__ import annotations
 
 import math
+from typing import Any, Callable
 
 import numpy as np
 
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
                                      dead_zone_open, modify_rate)
+from adaptive_mj.laws.protocol import Box, Law
 
 
 def surface_coefficients(order: int, lam: float) -> np.ndarray:
@@ -45,7 +47,7 @@ def sliding_terms(coeffs: np.ndarray, x: np.ndarray, ref: np.ndarray) -> tuple[f
     Written as scalar loops so the same code also compiles with numba
     (adaptive_mj.sim.native) for MuJoCo's native control callback.
     """
-    n = coeffs.shape[0]
+    n: int = coeffs.shape[0]
     s = 0.0
     s_r_dot = ref[n]
     for i in range(n):
@@ -111,10 +113,18 @@ def _check_gains(form: ModelForm, lam: float, k: float) -> None:
         raise ValueError(f"k must be finite and >= 0, got {k}")
 
 
-class _SlidingBase:
+# sliding_law's arguments between theta and rate: the gains (fixed after construction) and the form's
+# phi, f, h
+_SlidingArgs = tuple[np.ndarray, float, np.ndarray, bool, float, bool, float, float, float, float, np.ndarray,
+                     np.ndarray, np.ndarray, Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], float],
+                     Callable[[np.ndarray], float]]
+
+
+class _SlidingBase(Law):
     """What the three sliding laws share: the surface, and the call into `sliding_law`."""
 
     adapt = True
+    native = True  # adaptive_mj.sim.native compiles sliding_law
 
     def __init__(self, form: ModelForm, *, lam: float, k: float):
         _check_gains(form, lam, k)
@@ -125,18 +135,18 @@ class _SlidingBase:
         self.k = float(k)
         self._coeffs = surface_coefficients(form.order, self.lam)
         self.gamma = np.ones(len(self.names))
-        self.dead_zone = None
+        self.dead_zone: DeadZone | None = None
         self.K = 0.0
         self.boundary_layer = 1.0
         self.modification = NO_MODIFICATION
-        self._args = None
+        self._args: _SlidingArgs | None = None
 
     @property
-    def bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+    def bounds(self) -> Box | None:
         """(lower, upper) of the projection, or None (common.Modification.box)."""
         return self.modification.box(len(self.names))
 
-    def native_params(self) -> dict:
+    def native_params(self) -> dict[str, Any]:
         """The numbers `sliding_law` takes, for the native (numba) callback."""
         dz = self.dead_zone
         sigma, e_mod, theta0, lower, upper = self.modification.arrays(len(self.names))
@@ -172,7 +182,7 @@ class SlidingAdaptiveLaw(_SlidingBase):
         self.dead_zone = dead_zone
         self.modification = modification or NO_MODIFICATION
 
-    def lyapunov(self, s, theta_hat, theta) -> np.ndarray:
+    def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
         """V = ½ d s² + ½ sum_i gamma_i (θ̂_i - θ_i)².  s: (N,), theta*: (N, n_theta)."""
         s = np.asarray(s, dtype=float)
         err = np.asarray(theta_hat, dtype=float) - np.asarray(theta, dtype=float)
@@ -185,7 +195,7 @@ class FixedNominalLaw(_SlidingBase):
 
     adapt = False
 
-    def lyapunov(self, s, theta_hat, theta) -> np.ndarray:
+    def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
         """No adaptation, so only the tracking part: V = ½ d s²."""
         d = np.asarray(theta, dtype=float)[..., 0]
         return 0.5 * d * np.asarray(s, dtype=float) ** 2

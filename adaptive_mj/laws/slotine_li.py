@@ -27,11 +27,13 @@ from __future__ import annotations
 
 import enum
 import math
+from typing import Any
 
 import numpy as np
 
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
                                      dead_zone_open, modify_rate)
+from adaptive_mj.laws.protocol import Box, Law
 
 
 class Mode(enum.IntEnum):
@@ -86,7 +88,7 @@ def _per_joint(value, m: int, what: str) -> np.ndarray:
     return v
 
 
-class SlotineLiLaw:
+class SlotineLiLaw(Law):
     """Slotine–Li adaptive control (mode ADAPTIVE) or a fixed-parameter baseline.
 
     regressor: the plant's regressor(v, w, a) -> (Y, τ_known).
@@ -97,6 +99,7 @@ class SlotineLiLaw:
     """
 
     order = 2
+    native = True  # adaptive_mj.sim.native_manipulator compiles slotine_li_output
 
     def __init__(self, regressor, names, m: int, *, lam, kd, gamma=1.0, dead_zone: DeadZone | None = None,
                  mode: Mode = Mode.ADAPTIVE, modification: Modification | None = None):
@@ -118,11 +121,11 @@ class SlotineLiLaw:
         self._mod = self.modification.arrays(len(self.names))
 
     @property
-    def bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+    def bounds(self) -> Box | None:
         """(lower, upper) of the projection, or None (common.Modification.box)."""
         return self.modification.box(len(self.names))
 
-    def native_params(self) -> dict:
+    def native_params(self) -> dict[str, Any]:
         sigma, e_mod, theta0, lower, upper = self._mod
         return {"lam": self.lam, "kd": self.kd, "gamma": self.gamma, "adapt": self.adapt, "mode": int(self.mode),
                 "dz_width": self._dz_width, "dz_on_s": self._dz_on_s, "sigma": sigma, "e_mod": e_mod,
@@ -143,8 +146,10 @@ class SlotineLiLaw:
                           self._dz_on_s, e_norm, sigma, e_mod, theta0, lower, upper, u, rate)
         return LawStep(u, rate, s, qdd_r)
 
-    def lyapunov(self, s, theta_hat, theta, *, M) -> np.ndarray:
-        """V = ½ sᵀ M s + ½ Σ γ_i π̃_i² (baselines: ½ sᵀ M s).  s: (N, m), M: (N, m, m)."""
+    def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
+        """V = ½ sᵀ M s + ½ Σ γ_i π̃_i² (baselines: ½ sᵀ M s).  s: (N, m), M: (N, m, m) (required)."""
+        if M is None:
+            raise ValueError("the Slotine–Li V needs M, the plant's mass matrices at the rows")
         s = np.asarray(s, dtype=float)
         V = 0.5 * np.einsum("ni,nij,nj->n", s, M, s)
         if self.adapt:

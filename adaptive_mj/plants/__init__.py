@@ -1,15 +1,17 @@
 """Plants: the only code that touches MjModel/MjData (plus the analytic twin).
 
-Every plant offers the same small interface to the loop:
-  form        ModelForm: the structure the law assumes
+Every plant offers the same small interface to the loop, the protocol
+``adaptive_mj.plants.protocol.Plant`` (its module docstring lists every member):
+  order, names  the order n of the output dynamics and the names of θ
   dt          physics step [s]
   time        current simulation time [s]
   ctrl_range  (lo, hi) actuator limits in control units, or None
   observe()   (n,) true state [y, y', ...]
-  true_theta() (n_theta,) true parameters, ordered as form.names
+  true_theta() (n_theta,) true parameters, ordered as names
   controlled_by(policy)  context manager: policy(t, x) -> u runs at every
                          evaluation of the dynamics (MuJoCo's control callback)
   step()      advance one physics step
+and the 1-DOF plants their ModelForm (``form``: the structure the law assumes).
 
 Each plant kind (heave, arm, first_order in twin.py, manipulator) builds itself
 from its scenario section: its module has ``model_source(scn) -> ModelSource |
@@ -20,7 +22,10 @@ and calls those two; it has no branch per kind.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Any, Callable
+
+if TYPE_CHECKING:
+    from adaptive_mj.plants.protocol import Plant
 
 
 @dataclass(frozen=True)
@@ -40,21 +45,22 @@ class BuiltPlant:
     model for the run (servo_to_torque), shown on the terminal and logged.
     """
 
-    plant: object
+    plant: Plant
     model_xml: str | None = None
     notes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
 class Event:
-    """At time t [s] (first step with t_k >= t), call apply(plant). label: text for logs."""
+    """At time t [s] (first step with t_k >= t), call apply(plant). label: text for logs.
+    apply calls what its plant kind offers beyond the Plant protocol (set_body_mass on the arms,
+    set_fluid_density on the heave vehicle), which the scenario has checked."""
 
     t: float
     label: str
-    apply: Callable[[object], None]
+    apply: Callable[[Any], None]
 
 
-def plant_order(plant) -> int:
+def plant_order(plant: Plant) -> int:
     """n: the order of the plant's output dynamics (2 for a manipulator: x = [q; q̇])."""
-    form = getattr(plant, "form", None)
-    return form.order if form is not None else plant.order
+    return plant.order

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass
-from typing import Iterator
+from typing import Callable, Iterator
 
 import mujoco
 import numpy as np
@@ -30,6 +30,7 @@ from adaptive_mj.numba_util import with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
 from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.mujoco_plant import compile_for_scenario, control_callback, new_warnings, scale_body_mass
+from adaptive_mj.plants.protocol import Policy
 
 
 def _name(model, objtype, i: int) -> str:
@@ -319,11 +320,13 @@ class ManipulatorPlant:
 
     model: compiled, checked by check_supported. unknown: "payload", "all" or body
     names; joint_params: armature and damping unknown too; base: reduce π to a base
-    set. The loop's interface (adaptive_mj.plants) with a joint axis: the state is
-    x (2, m) = [q; q̇] [rad or m; per s], the input τ (m,) [N m or N].
+    set. The loop's interface with a joint axis (a JointPlant and a NativePlant,
+    adaptive_mj.plants.protocol): the state is x (2, m) = [q; q̇] [rad or m; per s], the
+    input τ (m,) [N m or N].
     """
 
     order = 2
+    native_owner: object | None = None  # the native controller whose context data points at
 
     def __init__(self, model: mujoco.MjModel, *, unknown="payload", joint_params: bool = False,
                  base: bool = False, where: str = "manipulator model", notes: tuple[str, ...] = ()):
@@ -338,7 +341,8 @@ class ManipulatorPlant:
         self._qadr, self._act, self._gear = plant_dofs(model)
         self.layout = param_layout(model, unknown, joints=joint_params, where=where)
         self.regressor = Regressor(model, self.data, self.layout)
-        self.base_map = self.base_projection = None
+        self.base_map: np.ndarray | None = None
+        self.base_projection: np.ndarray | None = None
         self.names = self.layout.names
         if base:
             B, P, names = base_parameters(self.regressor)
@@ -350,10 +354,10 @@ class ManipulatorPlant:
                 c0, c1 = model.actuator_ctrlrange[a] * self._gear[j]
                 lo[j], hi[j] = min(c0, c1), max(c0, c1)
         self.ctrl_range = (lo, hi) if np.isfinite(lo).any() or np.isfinite(hi).any() else None
-        self._theta = None
+        self._theta: np.ndarray | None = None
         self.force_offset = 0.0
-        self.disturbance = None
-        self.first_contact = None  # (t, text) of the first contact seen, see step()
+        self.disturbance: Callable[[float], float] | None = None
+        self.first_contact: tuple[float, str] | None = None  # (t, text) of the first contact seen, see step()
         self._warning_total0 = int(self.data.warning.number.sum())
         self._warnings0 = self.data.warning.number.copy()
         self._scratch = mujoco.MjData(model)
@@ -421,7 +425,7 @@ class ManipulatorPlant:
 
     # --- stepping ----------------------------------------------------------
     @contextlib.contextmanager
-    def controlled_by(self, policy) -> Iterator[None]:
+    def controlled_by(self, policy: Policy) -> Iterator[None]:
         """Run policy(t, x) -> τ (m,) inside MuJoCo's control callback (each RK4 stage too)."""
         act, gear, measure = self._act, self._gear, self.measure
         x = np.empty((2, self.m))
@@ -482,14 +486,14 @@ class ManipulatorPlant:
 
 
 # --- built from a scenario ------------------------------------------------------
-def model_source(scn) -> ModelSource:
+def model_source(scn) -> ModelSource | None:
     """plant.model with plant.payload attached at plant.site (as for the 1-DOF arm)."""
     from adaptive_mj.plants import arm
 
     return arm.model_source(scn)
 
 
-def from_scenario(scn, source: ModelSource) -> BuiltPlant:
+def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
     """plant.kind = "manipulator": the arm of plant.model, its unknown bodies, joint
     parameters and base set as the scenario says; with plant.servo_to_torque its
     position servos rebuilt as torque motors first (reported in the notes)."""

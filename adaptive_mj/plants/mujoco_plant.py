@@ -15,6 +15,7 @@ import mujoco
 import numpy as np
 
 from adaptive_mj.errors import ModelError, ScenarioError
+from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import ModelSource
 
 Policy = Callable[[float, np.ndarray], float]
@@ -104,13 +105,19 @@ def find_joint_and_actuator(model, *, joint: str | None, actuator: str | None,
 
 
 class MujocoPlant:
-    """A 1-DOF MuJoCo model driven through one actuator (see adaptive_mj.plants).
+    """A 1-DOF MuJoCo model driven through one actuator: a FormPlant and a NativePlant
+    (adaptive_mj.plants.protocol).
 
     The specific plants (heave, arm) give the form and the true-parameter
     function; this class owns MjData, stepping and the control callback.
     """
 
-    def __init__(self, model: mujoco.MjModel, *, joint_id: int, actuator_id: int, form,
+    joint_shape: tuple[int, ...] = ()  # 1-DOF: scalar y and u
+    joint_names: tuple[str, ...] = ()
+    first_contact: tuple[float, str] | None = None  # contacts are not tracked on a 1-DOF plant
+    native_owner: object | None = None  # the native controller whose context data points at
+
+    def __init__(self, model: mujoco.MjModel, *, joint_id: int, actuator_id: int, form: ModelForm,
                  theta_fn: Callable[[mujoco.MjModel], np.ndarray], where: str):
         self.model = model
         self.data = mujoco.MjData(model)
@@ -122,18 +129,27 @@ class MujocoPlant:
         self._act = int(actuator_id)
         self.joint_id = joint_id
         self.actuator_id = actuator_id
+        self.ctrl_range: tuple[float, float] | None = None
         if model.actuator_ctrllimited[self._act]:
             lo, hi = model.actuator_ctrlrange[self._act]
             self.ctrl_range = (float(lo), float(hi))
-        else:
-            self.ctrl_range = None
-        self._theta = None
+        self._theta: np.ndarray | None = None
         self.force_offset = 0.0  # constant external generalized force [N or N*m]
-        self.disturbance = None  # t -> external force, evaluated at each step's start
+        self.disturbance: Callable[[float], float] | None = None  # t -> external force, at each step's start
         self._warnings0 = self._warning_counts()
         self._warning_total0 = int(self._warnings0.sum())
 
     # --- state -------------------------------------------------------------
+    @property
+    def order(self) -> int:
+        """n: the order of the form (2, or 3 for the heave vehicle with thruster lag)."""
+        return self.form.order
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of θ, as the form orders them."""
+        return self.form.names
+
     @property
     def dt(self) -> float:
         """Physics step [s], read from the model (it may be edited after the plant is made)."""
@@ -281,10 +297,13 @@ def read_model_file(scn) -> ModelSource:
     return ModelSource(p.model.read_text(encoding="utf-8"), {})
 
 
-def compile_for_scenario(scn, source: ModelSource, *, edit=None) -> tuple[mujoco.MjModel, str]:
+def compile_for_scenario(scn, source: ModelSource | None, *, edit=None) -> tuple[mujoco.MjModel, str]:
     """(model, compiled MJCF text) with the scenario's simulation options applied:
     integrator, timestep (checked against the duration) and plant.viscosity.
-    edit(spec), if given, changes the MjSpec before it is compiled."""
+    edit(spec), if given, changes the MjSpec before it is compiled. source None (a model-free
+    twin's) has nothing to compile: a ModelError."""
+    if source is None:
+        raise ModelError(f"{scn.plant.model}: no model text to compile")
     model, xml = compile_spec(source.xml, source.assets, where=str(scn.plant.model), edit=edit)
     sim = scn.simulation
     model.opt.integrator = INTEGRATORS[sim.integrator]

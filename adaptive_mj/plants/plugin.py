@@ -7,10 +7,11 @@ A package registers a ``PlantPlugin`` under a name:
 
 and a scenario names it: ``plant.kind = "my_cart"`` (with ``plant.model`` to use another
 MJCF than the plugin's own, and the plugin's declared keys). The plugin's ``make(model,
-params, where)`` turns the compiled model into a plant with the interface of
-adaptive_mj.plants (a ``MujocoPlant`` subclass is the easy way: it needs the plant's
-ModelForm and a function reading the true θ from the compiled model). Every law for
-1-DOF plants, built in or a plugin, then runs on it, natively when its form compiles.
+params, where)`` turns the compiled model into a plant that satisfies the protocols
+``Plant`` and ``FormPlant`` of adaptive_mj.plants.protocol (a ``MujocoPlant`` subclass does, and
+is the easy way: it needs the plant's ModelForm and a function reading the true θ from the
+compiled model). Every law for 1-DOF plants, built in or a plugin, then runs on it, natively
+when it is a ``MujocoPlant`` and its form compiles.
 """
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 from adaptive_mj.laws.plugin import Param
+from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.plugins import Installed, discover
 
 ENTRY_POINT_GROUP = "adaptive_mj.plants"
@@ -26,11 +28,12 @@ ENTRY_POINT_GROUP = "adaptive_mj.plants"
 
 @dataclass(frozen=True)
 class PlantPlugin:
-    """model: the plugin's MJCF file; make(model, params, where) -> plant; params: its scenario
-    keys (plant.<name>); units: {"output": "m", "control": "N", <param name>: unit} for reports."""
+    """model: the plugin's MJCF file; make(model, params, where) -> plant (a 1-DOF plant with the
+    interface adaptive_mj.plants.protocol.Plant and FormPlant); params: its scenario keys
+    (plant.<name>); units: {"output": "m", "control": "N", <param name>: unit} for reports."""
 
     model: Path
-    make: Callable
+    make: Callable[..., Plant]
     params: tuple[Param, ...] = ()
     units: dict = field(default_factory=dict)
     doc: str = ""
@@ -51,6 +54,6 @@ class PlantPlugin:
         return BuiltPlant(plant, model_xml)
 
 
-def installed() -> dict[str, Installed]:
+def installed() -> dict[str, Installed[PlantPlugin]]:
     """Every plant registered under ENTRY_POINT_GROUP, by name (adaptive_mj.plugins.discover)."""
     return discover(ENTRY_POINT_GROUP, PlantPlugin, "plant", lambda p: p.make)

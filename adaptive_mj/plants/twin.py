@@ -15,12 +15,16 @@ from __future__ import annotations
 
 import contextlib
 import enum
-from typing import Iterator
+from typing import TYPE_CHECKING, Callable, Iterator
 
 import numpy as np
 
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant
+from adaptive_mj.plants.protocol import Plant, Policy
+
+if TYPE_CHECKING:
+    from adaptive_mj.plants.mujoco_plant import MujocoPlant
 
 
 class Integrator(enum.Enum):
@@ -30,7 +34,12 @@ class Integrator(enum.Enum):
 
 class TwinPlant:
     """form: the plant's structure; theta: (n_theta,) true parameters;
-    dt: step [s]; ctrl_range: (lo, hi) or None; x0: (n,) initial state."""
+    dt: step [s]; ctrl_range: (lo, hi) or None; x0: (n,) initial state.
+    A FormPlant (adaptive_mj.plants.protocol)."""
+
+    joint_shape: tuple[int, ...] = ()  # 1-DOF: scalar y and u
+    joint_names: tuple[str, ...] = ()
+    first_contact: tuple[float, str] | None = None  # no contacts in the analytic twin
 
     def __init__(self, form: ModelForm, theta, *, dt: float, integrator: Integrator = Integrator.RK4,
                  ctrl_range: tuple[float, float] | None = None, x0=None):
@@ -42,10 +51,20 @@ class TwinPlant:
         self.x = np.zeros(form.order) if x0 is None else np.array(x0, dtype=float)
         self._t = 0.0
         self._step_index = 0
-        self._policy = None
+        self._policy: Policy | None = None
         self.force_offset = 0.0  # constant external force, enters like h*u [N or N*m]
-        self.disturbance = None  # t -> external force, evaluated at each step's start
+        self.disturbance: Callable[[float], float] | None = None  # t -> external force, at each step's start
         self._force = 0.0
+
+    @property
+    def order(self) -> int:
+        """n: the order of the form."""
+        return self.form.order
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of θ, as the form orders them."""
+        return self.form.names
 
     @property
     def stages(self) -> int:
@@ -75,7 +94,7 @@ class TwinPlant:
         return None
 
     @contextlib.contextmanager
-    def controlled_by(self, policy) -> Iterator[None]:
+    def controlled_by(self, policy: Policy) -> Iterator[None]:
         self._policy = policy
         try:
             yield
@@ -83,6 +102,8 @@ class TwinPlant:
             self._policy = None
 
     def _rate(self, t: float, x: np.ndarray) -> np.ndarray:
+        if self._policy is None:
+            raise RuntimeError("TwinPlant.step outside controlled_by(policy)")
         u = self._policy(t, x)
         if self.ctrl_range is not None:
             u = min(max(u, self.ctrl_range[0]), self.ctrl_range[1])
@@ -128,7 +149,7 @@ def sin_squared_form() -> ModelForm:
     return ModelForm(order=1, p_names=("p",), phi=lambda x: np.array([np.sin(x[0]) ** 2]), d_name=None)
 
 
-def twin_of(plant, *, integrator: Integrator | None = None) -> TwinPlant:
+def twin_of(plant: MujocoPlant, *, integrator: Integrator | None = None) -> TwinPlant:
     """A twin with the MuJoCo plant's form, true theta, timestep, limits and state."""
     import mujoco  # only the bridge from a MuJoCo plant needs it
 
@@ -153,7 +174,7 @@ def from_theta(scn, form: ModelForm) -> TwinPlant:
                      ctrl_range=p.ctrl_range)
 
 
-def as_backend(scn, plant):
+def as_backend(scn, plant: MujocoPlant) -> Plant:
     """`plant` itself, or its twin when plant.backend = "twin" (with plant.ctrl_range if given)."""
     p = scn.plant
     if p.backend != "twin":

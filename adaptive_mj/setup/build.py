@@ -17,19 +17,21 @@ import numpy as np
 from adaptive_mj import reference as refs
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.laws import (CompositeSlidingLaw, DeadZone, DeadZoneOn, FirstOrderAdaptiveLaw, FixedNominalLaw,
-                              Modification, RobustSlidingLaw, SlidingAdaptiveLaw)
+                              Law, Modification, RobustSlidingLaw, SlidingAdaptiveLaw)
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.plants import ModelSource
+from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.setup.scenario import JOINT_REFERENCE_KINDS, STATE_SIGNALS, Scenario
 from adaptive_mj.plants import Event, plant_order
 
 
 @dataclass
 class Setup:
-    """Everything `loop.run` needs, built from a scenario."""
+    """Everything `loop.run` needs, built from a scenario. plant and law: the protocols of
+    adaptive_mj.plants.protocol and adaptive_mj.laws.protocol; reference(t, order) -> (order+1, ...)."""
 
-    plant: object
-    law: object
+    plant: Plant
+    law: Law
     reference: object
     theta_hat0: np.ndarray
     noise_std: np.ndarray | None
@@ -71,7 +73,7 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     reference = _reference(scn, plant)
     order = plant_order(plant)
     plant.set_state(_initial_state(scn, reference, order))
-    names = tuple(plant.names) if hasattr(plant, "names") else tuple(plant.form.names)
+    names = tuple(plant.names)
     theta_hat0 = _estimates(scn, names, plant)
     law = _law(scn, plant, _modification(scn, names, theta_hat0))
     std = None

@@ -16,12 +16,20 @@ from __future__ import annotations
 import signal
 import threading
 from contextlib import contextmanager
-from typing import Iterable
+from typing import Iterable, TypedDict
 
 from adaptive_mj.errors import Interrupted
 
+
+class _State(TypedDict):
+    signum: int | None  # the signal that asked this process to stop
+    raised: bool  # errors.Interrupted has been raised for it
+    armed: int  # depth of armed() blocks
+    deferring: int  # depth of deferred() blocks
+
+
 # This process's signal state (signal handlers are per process and run in its main thread).
-_state = {"signum": None, "raised": False, "armed": 0, "deferring": 0}
+_state: _State = {"signum": None, "raised": False, "armed": 0, "deferring": 0}
 
 
 def requested() -> int | None:
@@ -65,7 +73,7 @@ def armed():
 
 def install(signals: Iterable[int]) -> dict:
     """Route `signals` to the stop handler (main thread only); returns the previous handlers."""
-    _state.update(signum=None, raised=False)
+    _state.update({"signum": None, "raised": False})
     return {sig: signal.signal(sig, _handler) for sig in signals}
 
 
@@ -83,4 +91,4 @@ def stop_on_signals(signals: Iterable[int] = (signal.SIGINT, signal.SIGTERM)):
     finally:
         for sig, old in previous.items():
             signal.signal(sig, old if old is not None else signal.SIG_DFL)
-        _state.update(signum=None, raised=False)
+        _state.update({"signum": None, "raised": False})

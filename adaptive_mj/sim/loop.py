@@ -16,25 +16,33 @@ evaluated at every stage MuJoCo's integrator calls the callback at, with the sta
 classic Runge-Kutta tableau, and θ̂ advances once per step with the tableau's weights; under
 sampled-data control (`ControlTiming.mode`), once per control period, the output held.
 
-A law with a parameter projection (``law.bounds`` = (lower, upper)) has every stage estimate and
-every θ̂_{k+1} clipped into its box. A law with filters of its own (composite adaptation:
-``law.reset()``, ``law.step_begins(x)``, ``law.step_ends(xs, us, weights, h)``) is reset when the
-controller is made, told the measured state at each step's start, and given the stage states,
-stage controls and RK4 weights of each step once it is done (continuous control only).
+The plant and the law are the protocols adaptive_mj.plants.protocol.Plant and
+adaptive_mj.laws.protocol.Law. A law with a parameter projection (``law.bounds`` = (lower, upper))
+has every stage estimate and every θ̂_{k+1} clipped into its box. A law with filters of its own
+(``law.has_filters``, composite adaptation: ``law.reset()``, ``law.step_begins(x)``,
+``law.step_ends(xs, us, weights, h)``) is reset when the controller is made, told the measured state
+at each step's start, and given the stage states, stage controls and RK4 weights of each step once it
+is done (continuous control only).
 """
 from __future__ import annotations
 
 import math
 from contextlib import contextmanager
-from typing import Callable, NamedTuple, Protocol, Sequence
+from typing import TYPE_CHECKING, Callable, NamedTuple, Protocol, Sequence
 
 import numpy as np
 
 from adaptive_mj.errors import Interrupted
+from adaptive_mj.laws.common import LawStep
+from adaptive_mj.laws.protocol import Law
 from adaptive_mj.plants import Event, plant_order
+from adaptive_mj.plants.protocol import CtrlRange, Plant, has_joints
 from adaptive_mj.sim import stage as st
 from adaptive_mj.sim.stage import TABLEAU, ControlTiming
 from adaptive_mj.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from adaptive_mj.sim.native_context import ContextOwner
 
 __all__ = ["Event", "ControlTiming", "Controller", "ControlStep", "StepRow", "Sink", "run", "plant_order",
            "divergence", "TABLEAU", "NATIVE_CHUNK"]
@@ -46,33 +54,37 @@ class Controller:
     theta_hat: (n_theta,) the estimate at the step's start; after each step, step_u (the applied
     control), step_s and step_ref hold what the step's row records."""
 
-    def __init__(self, law, reference, theta_hat0, ctrl_range, order: int, stages: int, dt: float,
-                 joint_shape: tuple = (), timing: ControlTiming | None = None):
+    def __init__(self, law: Law, reference, theta_hat0, ctrl_range: CtrlRange | None, order: int, stages: int,
+                 dt: float, joint_shape: tuple = (), timing: ControlTiming | None = None):
         self.law, self.reference, self.order = law, reference, order
         self.timing = timing or ControlTiming(period=dt)
         self.theta_hat = np.array(theta_hat0, dtype=float)
         n_theta = self.theta_hat.shape[0]
-        self.lo, self.hi = ctrl_range if ctrl_range is not None else (-math.inf, math.inf)
+        self.lo: float | np.ndarray = -math.inf  # control limits: floats, or (m,) on a plant of m joints
+        self.hi: float | np.ndarray = math.inf
+        if ctrl_range is not None:
+            self.lo, self.hi = ctrl_range
         self.joints = bool(joint_shape)
         self.noise = np.zeros((order,) + tuple(joint_shape))
         self.inc, self.weights = TABLEAU[stages]
         self.h = dt
         self.stage, self.step_index = len(self.inc), 0
         self.prev, self.rsum, self.th = np.zeros(n_theta), np.zeros(n_theta), np.zeros(n_theta)
-        box = getattr(law, "bounds", None)
+        box = law.bounds
         self.lower, self.upper = box if box is not None else (np.full(n_theta, -np.inf), np.full(n_theta, np.inf))
-        self.held = self.step_out = self.step_ref = None
-        self.step_u = 0.0
+        self.held: tuple[float | np.ndarray, LawStep] | None = None  # the law's clamped u and its LawStep
+        self.step_out: LawStep | None = None
+        self.step_ref: np.ndarray | None = None
+        self.step_u: float | np.ndarray = 0.0
         self.ring: list = [None] * (self.timing.delay + 1)  # the last D + 1 stage-0 controls
-        self.delayed = None
+        self.delayed: float | np.ndarray = 0.0  # the control of D steps ago, set at each step's stage 0
         self._ref_t, self._ref_v = (math.nan, math.nan), (None, None)
-        self.filters = hasattr(law, "step_ends")  # a law with filters of its own (composite)
+        self.filters = law.has_filters  # a law with filters of its own (composite)
         if self.filters and self.timing.sampled:
             raise ValueError("composite adaptation runs under continuous control only")
         self.stage_xs: list = []
         self.stage_us: list = []
-        if hasattr(law, "reset"):
-            law.reset()
+        law.reset()
 
     def arm(self, noise: np.ndarray | None) -> None:
         """Mark the start of a physics step; noise: that step's measurement noise (None: none)."""
@@ -98,7 +110,9 @@ class Controller:
         sampled = self.timing.sampled
         if not sampled or (i == 0 and st.is_sample_step(self.step_index, self.timing.steps)):
             self.held = self._evaluate(t, x, i)
-        u = self.held[0]
+        held = self.held
+        assert held is not None  # the law ran at stage 0 of the first step (continuous: every stage)
+        u = held[0]
         if self.timing.delay:
             if i == 0:
                 put, get = st.delay_slot(self.step_index, self.timing.delay)
@@ -108,7 +122,7 @@ class Controller:
         if self.filters:
             self.stage_us.append(u)
         if i == 0:  # the row: the applied control, the law's (held) output, the reference at t_k
-            self.step_u, self.step_out, self.step_ref = u, self.held[1], self._ref(t)
+            self.step_u, self.step_out, self.step_ref = u, held[1], self._ref(t)
         self.stage = i + 1
         return u
 
@@ -151,8 +165,8 @@ class StepRow(NamedTuple):
     x: np.ndarray
     theta: np.ndarray
     theta_hat: np.ndarray
-    u: object
-    s: object
+    u: float | np.ndarray
+    s: float | np.ndarray
     ref: np.ndarray
     reason: str
 
@@ -201,8 +215,9 @@ class ControlStep:
         theta_hat = ctrl.theta_hat.copy()
         ctrl.arm(self.noise())
         plant.step()
-        u = ctrl.step_u
-        row = StepRow(t_k, x_k, theta, theta_hat, u, ctrl.step_out.s, ctrl.step_ref, "")
+        u, out, ref = ctrl.step_u, ctrl.step_out, ctrl.step_ref
+        assert out is not None and ref is not None  # set at the step's stage 0
+        row = StepRow(t_k, x_k, theta, theta_hat, u, out.s, ref, "")
         ctrl.finish_step()
         return row._replace(reason=divergence(plant, x_k, u, ctrl.theta_hat, self.state_bound))
 
@@ -218,7 +233,7 @@ class Sink(Protocol):
 NATIVE_CHUNK = 250  # physics steps per mj_step(nstep) call on the native path
 
 
-def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
+def run(plant: Plant, law: Law, reference, *, duration: float, theta_hat0: Sequence[float] | np.ndarray,
         noise_std: Sequence[float] | None = None, rng: np.random.Generator | None = None,
         events: Sequence[Event] = (), state_bound: float = math.inf,
         sink: Sink | None = None, sink_every: int = 1000, native: bool | None = None,
@@ -252,14 +267,14 @@ def run(plant, law, reference, *, duration: float, theta_hat0: Sequence[float],
     rows = _Rows(plant, law, int(round(duration / plant.dt)), sink, sink_every)
     queue = EventQueue(events, plant.dt)
     rows.events = queue.applied
-    noise = _NoiseSource(noise_std, rng, (order,) + tuple(getattr(plant, "joint_shape", ())))
+    noise = _NoiseSource(noise_std, rng, (order,) + plant.joint_shape)
     nc = _native_controller(plant, law, reference, theta_hat0, timing, native)
     with _interruptible(rows.stopped):
         if nc is not None:
             status, reason = _run_native(plant, nc, rows, queue, noise, state_bound)
         else:
             ctrl = Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, plant.dt,
-                              tuple(getattr(plant, "joint_shape", ())), timing)
+                              plant.joint_shape, timing)
             step = ControlStep(plant, ctrl, queue, state_bound=state_bound, noise=noise.draw, sink=sink)
             status, reason = _run_python(plant, step, rows)
     meta = {"native": nc is not None, "events": queue.applied, **timing.describe()}
@@ -299,23 +314,23 @@ def _run_native(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource, 
     return "ok", ""
 
 
-def _native_controller(plant, law, reference, theta_hat0, timing: ControlTiming, native: bool | None):
+def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: ControlTiming,
+                       native: bool | None) -> ContextOwner | None:
     """The native controller for this run, or None for the Python path (native False, or not supported;
     a law plugin numba cannot compile falls back with one line on stderr)."""
-    if getattr(plant, "joint_shape", ()):  # a manipulator: its own compiled callback (regressor inside)
-        from adaptive_mj.sim import native_manipulator as native_mod
-        make = native_mod.NativeManipulatorController
+    make: Callable[..., ContextOwner]
+    if plant.joint_shape:  # a manipulator: its own compiled callback (regressor inside)
+        from adaptive_mj.sim.native_manipulator import NativeManipulatorController as make, supported
     else:
-        from adaptive_mj.sim import native as native_mod
-        make = native_mod.NativeController
+        from adaptive_mj.sim.native import NativeController as make, supported
     if native is None:
-        native = native_mod.supported(plant, law)
+        native = supported(plant, law)
     if not native:
         return None
     try:
         return make(plant, law, reference, theta_hat0, NATIVE_CHUNK, control=timing)
     except Exception as exc:  # a user's law numba cannot compile: say why, run it in Python
-        plugin = getattr(law, "installed", None)
+        plugin = law.installed
         if plugin is None:
             raise
         import sys
@@ -346,8 +361,8 @@ class _Rows:
     True θ is piecewise constant (it changes only at events): kept as segments (first row, value)
     and expanded only where asked, so a long run holds no (n_steps, n_theta) copy of a constant."""
 
-    def __init__(self, plant, law, n: int, sink, every: int):
-        order, js, nth = plant_order(plant), tuple(getattr(plant, "joint_shape", ())), len(law.names)
+    def __init__(self, plant: Plant, law: Law, n: int, sink, every: int):
+        order, js, nth = plant_order(plant), plant.joint_shape, len(law.names)
         self.plant, self.law, self.n, self.sink, self.every, self.nth = plant, law, n, sink, every, nth
         self.t, self.x = np.empty(n), np.empty((n, order) + js)
         self.u, self.s = np.empty((n,) + js), np.empty((n,) + js)
@@ -400,8 +415,9 @@ class _Rows:
         rows = slice(self.flushed, upto)
         self.flushed = upto  # first: a write cut short by an interruption is never repeated
         theta = self.theta_rows(rows.start, rows.stop)
-        if self.x.ndim > 2:  # V = ½ sᵀ M(q) s + ...: the plant gives M at the logged q
-            M = self.plant.mass_matrices(self.x[rows, 0])
+        plant = self.plant
+        if has_joints(plant):  # V = ½ sᵀ M(q) s + ...: the plant gives M at the logged q
+            M = plant.mass_matrices(self.x[rows, 0])
             self.V[rows] = self.law.lyapunov(self.s[rows], self.theta_hat[rows], theta, M=M)
         else:
             self.V[rows] = self.law.lyapunov(self.s[rows], self.theta_hat[rows], theta)
@@ -413,13 +429,13 @@ class _Rows:
         self.flush(n)
         keep = slice(0, n)
         meta = {"dt": self.plant.dt, "order": self.x.shape[1], **meta}
-        contact = getattr(self.plant, "first_contact", None)
+        contact = self.plant.first_contact
         if contact is not None:
             meta["warnings"] = [f"t={contact[0]:.6g} s: {contact[1]} (the regressor has no contact forces)"]
         return Trajectory(t=self.t[keep], x=self.x[keep], u=self.u[keep], s=self.s[keep], ref=self.ref[keep],
                           theta_hat=self.theta_hat[keep], theta=self.theta_rows(0, n), V=self.V[keep],
                           names=tuple(self.law.names), status=status, reason=reason,
-                          joint_names=tuple(getattr(self.plant, "joint_names", ())), meta=meta)
+                          joint_names=tuple(self.plant.joint_names), meta=meta)
 
     def stopped(self, reason: str) -> Trajectory:
         """Rows 0..k-1 (and all flushed) are whole when an interruption comes."""

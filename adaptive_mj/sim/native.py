@@ -23,13 +23,42 @@ tests/test_native.py shows the Python and native paths give the same rows bit fo
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from adaptive_mj.laws.protocol import Law
 from adaptive_mj.laws.sliding import sliding_law_values
+from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import stage as stage_code
 from adaptive_mj.sim.native_context import (ContextOwner, addr, context_address, context_functions, mujoco_offsets,
                                             source_key, unique_factory)
+
+if TYPE_CHECKING:
+    from adaptive_mj.plants.mujoco_plant import MujocoPlant
+
+    # the globals compiled() injects into the callback and the laws below (numba, numba.types, carray,
+    # the pointer intrinsics, the law, the form's functions, the stage functions); declared for the
+    # type checker only
+    numba: Any
+    types: Any
+    carray: Any
+    address: Any
+    cptr: Any
+    fptr: Any
+    pointer_at: Any
+    law: Any
+    user_law: Any
+    phi_fn: Any
+    f_fn: Any
+    h_fn: Any
+    stage_estimate: Any
+    accumulate_rate: Any
+    advance_estimates: Any
+    is_sample_step: Any
+    period_ends: Any
+    delay_slot: Any
+    SAMPLED: int
 
 _i8, _f8 = np.int64, np.float64
 CONTEXT = np.dtype([
@@ -166,8 +195,8 @@ def compiled(form, plugin=None):
     key = source_key(*fns, _callback_factory, _builtin_law, _plugin_law, sliding_law_values,
                      stage_code.stage_estimate, context_address, extra=(off, numba.__version__))
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
-    forms = {"phi_fn": jit_tree(form.phi, numba.njit, tag=tag), "f_fn": jit_tree(form.f, numba.njit, tag=tag),
-             "h_fn": jit_tree(form.h, numba.njit, tag=tag)}
+    forms: dict[str, Any] = {name: jit_tree(fn, numba.njit, tag=tag)
+                             for name, fn in (("phi_fn", form.phi), ("f_fn", form.f), ("h_fn", form.h))}
     if plugin is None:
         law = jit_tree(_builtin_law, numba.njit, tag=tag, **forms)
     else:
@@ -185,14 +214,15 @@ def compiled(form, plugin=None):
     return callback
 
 
-def supported(plant, law) -> bool:
-    """Native path: a MuJoCo plant of order 2 (its state is [q, q'], which the callback reads
-    directly) compiled with a userdata slot, a sliding law (or a law plugin), no time-varying
-    disturbance (held per step in Python), no filters of the law's own (composite)."""
-    from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS
+def supported(plant: Plant, law: Law) -> bool:
+    """Native path: a 1-DOF MuJoCo plant (a MujocoPlant: the callback reads its joint and actuator
+    addresses) of order 2 (its state is [q, q'], which the callback reads directly) compiled with a
+    userdata slot, a law the callback compiles (``law.native``: a sliding law or a law plugin; not
+    the composite law, whose filters run in Python), no time-varying disturbance (held per step in
+    Python)."""
+    from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS, MujocoPlant
 
-    return (hasattr(plant, "step_native") and getattr(plant, "form", None) is not None and plant.form.order == 2
-            and hasattr(law, "native_params") and getattr(law, "native", True)
+    return (isinstance(plant, MujocoPlant) and plant.order == 2 and law.native
             and plant.stages in (1, 4) and plant.disturbance is None
             and plant.model.nuserdata >= USERDATA_SLOTS)
 
@@ -200,9 +230,17 @@ def supported(plant, law) -> bool:
 class NativeController(ContextOwner):
     """Owns the context and buffers of one native run and steps the plant chunk by chunk.
 
-    control: the run's ControlTiming (adaptive_mj.sim.loop): mode, period in physics steps, delay."""
+    plant: a MujocoPlant; law: one `supported` accepts. control: the run's ControlTiming
+    (adaptive_mj.sim.loop): mode, period in physics steps, delay."""
 
-    def __init__(self, plant, law, reference, theta_hat0, max_rows: int, *, control=None):
+    plant: MujocoPlant
+
+    def __init__(self, plant: Plant, law: Law, reference, theta_hat0, max_rows: int, *,
+                 control: stage_code.ControlTiming | None = None):
+        from adaptive_mj.plants.mujoco_plant import MujocoPlant
+
+        if not isinstance(plant, MujocoPlant):
+            raise TypeError(f"the native 1-DOF callback drives a MujocoPlant, got a {type(plant).__name__}")
         self.plant, self.law, self.reference = plant, law, reference
         control = control if control is not None else stage_code.ControlTiming(period=plant.dt)
         p = law.native_params()
@@ -238,7 +276,7 @@ class NativeController(ContextOwner):
         self.context = ctx
         self.bind()
 
-    def chunk(self, rows: int, noise: np.ndarray | None):
+    def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat) rows, each (rows, ...)."""
         plant, n, h = self.plant, self.n, self.plant.dt
         t = np.empty(rows)

@@ -27,11 +27,19 @@ import ctypes
 import hashlib
 import inspect
 import types as pytypes
-from typing import Callable, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 import numpy as np
 
 from adaptive_mj.numba_util import global_names
+
+if TYPE_CHECKING:
+    from adaptive_mj.plants.protocol import NativePlant
+
+    # injected into the compiled functions' globals by context_functions (numba's carray, a
+    # pointer intrinsic); declared here for the type checker only
+    carray: Any
+    iptr: Any
 
 _PAGE = 4096
 
@@ -158,10 +166,17 @@ def context_functions(numba, carray, iptr, tag: str) -> dict:
 
 class ContextOwner:
     """What a native controller shares: it owns `self.context` for `self.plant`'s MjData while its
-    run goes on (a context manager: the MjData is detached when the block ends)."""
+    run goes on (a context manager: the MjData is detached when the block ends), and steps the
+    plant chunk by chunk with its compiled `callback`, `theta` (n_theta,) holding the estimates."""
 
-    plant: object
+    plant: NativePlant
     context: np.ndarray
+    callback: Any  # the numba cfunc MuJoCo calls
+    theta: np.ndarray
+
+    def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
+        """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat), each (rows, ...)."""
+        raise NotImplementedError
 
     def bind(self) -> None:
         """Point the plant's MjData at this run's context (the newest run on an MjData owns it); the
@@ -176,7 +191,7 @@ class ContextOwner:
         """The run is over: its MjData no longer points at the context (a later mj_step or mj_forward
         on it under a native callback changes nothing)."""
         unbind_context(self.plant.data)
-        if getattr(self.plant, "native_owner", None) is self:
+        if self.plant.native_owner is self:
             self.plant.native_owner = None
 
 

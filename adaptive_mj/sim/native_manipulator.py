@@ -35,12 +35,42 @@ of a kinematic tree read from MjData's kinematics; the stage logic is shared (ad
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
+from adaptive_mj.laws.protocol import Law
 from adaptive_mj.numba_util import address_of, jit_tree, pointer
+from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import stage as stage_code
 from adaptive_mj.sim.native_context import (ContextOwner, addr, context_address, context_functions, mujoco_offsets,
                                             source_key, unique_factory)
+
+if TYPE_CHECKING:
+    from adaptive_mj.plants.manipulator import ManipulatorPlant
+
+    # the globals compiled() injects into the callback and _law_stage (numba, numba.types, carray, the
+    # pointer intrinsics, the stage functions, the compiled regressor and law pieces); declared for the
+    # type checker only
+    numba: Any
+    types: Any
+    carray: Any
+    address: Any
+    cptr: Any
+    fptr: Any
+    iptr: Any
+    pointer_at: Any
+    law_stage: Any
+    regressor: Any
+    ref_terms: Any
+    output: Any
+    stage_estimate: Any
+    accumulate_rate: Any
+    advance_estimates: Any
+    is_sample_step: Any
+    period_ends: Any
+    delay_slot: Any
+    SAMPLED: int
 
 _i8, _f8 = np.int64, np.float64
 # The context block a run's MjData points at (userdata[0], see adaptive_mj.sim.native_context):
@@ -473,9 +503,9 @@ def compiled():
     common = {"carray": carray, "iptr": pointer(types.int64), "fptr": pointer(types.float64), "np": np,
               "MODE_PD_GRAVITY": MODE_PD_GRAVITY}
     pointers = context_functions(numba, carray, common["iptr"], tag)
-    stage_fns = {name: jit_tree(getattr(stage_code, name), numba.njit, tag=tag) for name in
-                 ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
-                  "delay_slot")}
+    stage_fns: dict[str, Any] = {name: jit_tree(getattr(stage_code, name), numba.njit, tag=tag) for name in
+                                 ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step",
+                                  "period_ends", "delay_slot")}
     law_stage = jit_tree(_law_stage, numba.njit, tag=tag, regressor=jit_tree(_regressor, numba.njit, tag=tag),
                          ref_terms=jit_tree(reference_terms, numba.njit, tag=tag),
                          output=jit_tree(slotine_li_output, numba.njit, tag=tag), **pointers, **common, **stage_fns)
@@ -487,17 +517,17 @@ def compiled():
     return _compiled["callback"]
 
 
-def supported(plant, law) -> bool:
-    """Native path for manipulators: a ManipulatorPlant (joint axis and regressor) compiled with a
-    userdata slot, a Slotine–Li law (or baseline) using that plant's regressor, RK4 or a one-stage
-    integrator."""
+def supported(plant: Plant, law: Law) -> bool:
+    """Native path for manipulators: a ManipulatorPlant (the callback reads its joint addresses and
+    regressor arrays) compiled with a userdata slot, a Slotine–Li law (or baseline: the callback
+    compiles slotine_li_output) using that plant's regressor, RK4 or a one-stage integrator."""
+    from adaptive_mj.laws.slotine_li import SlotineLiLaw
+    from adaptive_mj.plants.manipulator import ManipulatorPlant
     from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS
 
-    if not (hasattr(plant, "joint_shape") and hasattr(plant, "regressor") and hasattr(plant, "step_native")):
+    if not (isinstance(plant, ManipulatorPlant) and isinstance(law, SlotineLiLaw) and law.native):
         return False
-    if not hasattr(law, "native_params") or "mode" not in law.native_params():
-        return False
-    return (plant.stages in (1, 4) and getattr(law, "regressor", None) is plant.regressor
+    return (plant.stages in (1, 4) and law.regressor is plant.regressor
             and len(law.names) == len(plant.names) and int(law.m) == int(plant.m)
             and plant.model.nuserdata >= USERDATA_SLOTS)
 
@@ -520,9 +550,17 @@ def _base_map_columns(B, nstd: int, nth: int) -> dict:
 
 class NativeManipulatorController(ContextOwner):
     """Owns the context and buffers of one native manipulator run and steps the plant chunk by chunk
-    (the interface of adaptive_mj.sim.native.NativeController)."""
+    (the interface of adaptive_mj.sim.native.NativeController). plant: a ManipulatorPlant; law: one
+    `supported` accepts."""
 
-    def __init__(self, plant, law, reference, theta_hat0, max_rows: int, *, control=None):
+    plant: ManipulatorPlant
+
+    def __init__(self, plant: Plant, law: Law, reference, theta_hat0, max_rows: int, *,
+                 control: stage_code.ControlTiming | None = None):
+        from adaptive_mj.plants.manipulator import ManipulatorPlant
+
+        if not isinstance(plant, ManipulatorPlant):
+            raise TypeError(f"the native manipulator callback drives a ManipulatorPlant, got a {type(plant).__name__}")
         self.plant, self.law, self.reference = plant, law, reference
         control = control if control is not None else stage_code.ControlTiming(period=plant.dt)
         self.callback = compiled()
@@ -555,7 +593,7 @@ class NativeManipulatorController(ContextOwner):
             "rec_t": np.zeros(rows), "rec_x": np.zeros((rows, 2, nv)), "rec_u": np.zeros((rows, nv)),
             "rec_s": np.zeros((rows, nv)), "rec_ref": np.zeros((rows, 3, nv)), "rec_theta": np.zeros((rows, nth)),
         }
-        B = getattr(reg, "base_map", None)
+        B = reg.base_map
         if B is not None:
             buf.update(_base_map_columns(B, nstd, nth))
         elif nstd != nth:
@@ -578,7 +616,7 @@ class NativeManipulatorController(ContextOwner):
         self.context = ctx
         self.bind()
 
-    def chunk(self, rows: int, noise: np.ndarray | None):
+    def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """Step `rows` physics steps; return (t (rows,), x (rows, 2, m), u (rows, m), s (rows, m),
         ref (rows, 3, m), theta_hat (rows, n_params)): each row the state, reference and θ̂ at
         the step's start and the clamped τ applied during it."""

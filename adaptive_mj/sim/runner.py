@@ -10,6 +10,7 @@ import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Any
 
 from adaptive_mj import __version__
 from adaptive_mj.plants import ModelSource
@@ -82,7 +83,7 @@ def control_timing(scn: Scenario, setup: Setup) -> ControlTiming:
     except ValueError:
         raise ScenarioError(f"{scn.source}: control.period must be a whole multiple of the physics timestep "
                             f"{setup.plant.dt!r} s, got {c.period!r}") from None
-    if timing.sampled and hasattr(setup.law, "step_ends"):
+    if timing.sampled and setup.law.has_filters:
         raise ScenarioError(f"{scn.source}: law.composite runs under control.mode = 'continuous' only "
                             "(its filters integrate the stage states), got control.mode = 'sampled'")
     return timing
@@ -97,12 +98,12 @@ def log_header(scn: Scenario, setup: Setup):
     return LogHeader(
         scenario_name=scn.name, scenario_text=scn.text, scenario_source=scn.source, overrides=scn.overrides,
         seed=scn.noise.seed, log_rate_hz=scn.log_rate_hz, dt=plant.dt, order=plant_order(plant),
-        joint_names=tuple(getattr(plant, "joint_names", ())), notes=tuple(setup.notes),
+        joint_names=tuple(plant.joint_names), notes=tuple(setup.notes),
         param_names=tuple(setup.law.names), model_xml=setup.model_xml,
         model_source=setup.source.xml if setup.source else None,
         model_assets=dict(setup.source.assets) if setup.source else {},
         versions=versions(), created_unix=time.time(),
-        law_plugin=setup.law.installed.describe() if hasattr(setup.law, "installed") else None,
+        law_plugin=setup.law.installed.describe() if setup.law.installed is not None else None,
         plant_plugin=_plant_plugin(scn), control_mode=timing.describe()["control_mode"],
         control_period=timing.period)
 
@@ -154,10 +155,11 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
     Python callback (QUICK_START_MAX_STEPS); studies leave it False and stay compiled."""
     setup = build(scn, source=source)
     plant = setup.plant
-    short = single and not getattr(plant, "joint_shape", ()) and scn.simulation.duration < QUICK_START_MAX_STEPS * plant.dt
+    short = single and not plant.joint_shape and scn.simulation.duration < QUICK_START_MAX_STEPS * plant.dt
     for note in setup.notes:  # model edits the scenario asked for: said on the terminal and kept in the log
         print(f"{scn.source}: note: {note}", file=sys.stderr)
     sink_every = max(1, round(1.0 / plant.dt))  # flush about once per simulated second
+    kwargs: dict[str, Any]  # run()'s keyword arguments, shared by both calls below
     kwargs = dict(duration=scn.simulation.duration, theta_hat0=setup.theta_hat0, noise_std=setup.noise_std,
                   rng=setup.rng, events=setup.events, state_bound=scn.simulation.state_bound,
                   sink_every=sink_every, control_delay=scn.simulation.control_delay,
