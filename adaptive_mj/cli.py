@@ -52,6 +52,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--python-callback", action="store_true",
                    help="run the law in the Python control callback, not the compiled one (for debugging a law; "
                         "the same as --set simulation.python_callback=true)")
+    r.add_argument("--strict", action="store_true",
+                   help="refuse a run whose loop the pre-flight check finds unstable by construction (exit 2) "
+                        "instead of warning; the same as --set success.preflight='refuse'")
 
     rp = sub.add_parser("replay", help="read a log: summary, plot, bit-identical re-simulation")
     rp.add_argument("log", type=Path)
@@ -172,11 +175,26 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
         if "rms_tracking_error_tail_per_joint" in m:
             print("  tail rms per joint [rad]: " + ", ".join(
                 f"{j} {f(v)}" for j, v in m["rms_tracking_error_tail_per_joint"].items()))
+        if m.get("saturation_fraction"):
+            per = m.get("saturation_fraction_per_joint") or {}
+            print(f"  time at the actuator limit: {100 * m['saturation_fraction']:.3g} % (worst)"
+                  + (": " + ", ".join(f"{j} {100 * v:.3g} %" for j, v in per.items() if v) if per else ""))
+        for body, e in (m.get("identification") or {}).items():
+            rel = e["inertia_error_relative"]
+            print(f"  identified {body}: mass {f(e['mass_error_percent'])} %, centre of mass "
+                  f"{f(e['com_error_mm'], 'mm')}, inertia {f(e['inertia_error'], 'kg m²')} "
+                  f"({f(None if rel is None else 100 * rel)} % of |I|)")
     final = summary["final"]
     parts = [f"{n} {f(final['theta_hat'][n], units.param(kind, n))} (true {f(final['theta'][n], units.param(kind, n))})"
              for n in final["theta_hat"]]
     if parts:
         print("  estimates: " + ", ".join(parts))
+    pre = summary.get("preflight") or {}
+    if pre.get("checked") and not pre.get("ok"):
+        print(f"  pre-flight: μh = {pre['figure']:.3g} > {pre['limit']:.3g} ({pre['scheme']})"
+              + (f" on {pre['joint']}" if pre.get("joint") else ""))
+    for w in summary.get("warnings") or ():
+        print(f"  warning: {w}")
     if note:
         print(f"  {note}")
     if log is not None:
@@ -230,7 +248,8 @@ def cmd_run(args) -> int:
     from adaptive_mj.setup import scenario as sc
     from adaptive_mj.sim.runner import execute, reserve_log_path
 
-    overrides = [*args.overrides, *(["simulation.python_callback=true"] if args.python_callback else [])]
+    overrides = [*args.overrides, *(["simulation.python_callback=true"] if args.python_callback else []),
+                 *(["success.preflight='refuse'"] if args.strict else [])]
     scn = sc.load(_scenario_path(args.scenario), overrides=overrides, seed=args.seed)
     log = reserve_log_path(scn, out=args.output, force=args.force)
     try:

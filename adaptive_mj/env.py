@@ -93,7 +93,7 @@ from dm_env import specs  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.setup import scenario as scenario_io  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.setup.build import Setup, build  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.errors import ScenarioError  # noqa: E402 (imported after MUJOCO_GL is set above)
-from adaptive_mj.sim.loop import Controller, ControlStep, EventQueue, divergence, plant_order  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.sim.loop import Controller, ControlStep, EventQueue, divergence, limits_meta, plant_order  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.report.metrics import clean_json, summary as make_summary  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
@@ -351,6 +351,7 @@ class _Episode:
                  recorder=None):
         plant = setup.plant
         self.name = scn.name
+        self.scn = scn
         self.plant = plant
         self.law = law
         self.reference = setup.reference
@@ -384,6 +385,7 @@ class _Episode:
         self.theta_hat, self.theta = np.empty((n, n_theta)), np.empty((n, n_theta))
         self.k = 0
         self.status, self.reason = "ok", ""
+        self._criteria, self._preflight, self._verdict = self._verdict_terms(scn, setup, law, drive)
         self.last_reward = 0.0
         self.recorder = recorder
         self.sink_every = max(1, round(1.0 / self.dt))  # flush about once per simulated second
@@ -429,10 +431,30 @@ class _Episode:
             self.close_log(status, f"{type(exc).__name__}: {exc}")
             raise
         self.last_reward = reward
+        if self.k >= self.n_steps and self.status == "ok":  # the episode ran to its end: its verdict
+            from adaptive_mj.sim.runner import verdict
+
+            traj, self._verdict = verdict(self.scn, self.trajectory(), self._criteria, self._preflight)
+            self.status, self.reason = traj.status, traj.reason
         if self.k >= self.n_steps or self.status != "ok":
             self.close_log(self.status, self.reason)
         elif self.k - self.flushed >= self.sink_every:
             self._flush()
+
+    def _verdict_terms(self, scn, setup: Setup, law, drive: bool):
+        """(criteria, pre-flight, None): what the episode's verdict needs, as adaptive-mj run has them
+        (the pre-flight of the law that drives the plant; none for an agent's policy)."""
+        from adaptive_mj.setup.success import criteria
+        from adaptive_mj.sim import preflight
+        from adaptive_mj.sim.runner import control_timing
+
+        crit = criteria(scn, setup.reference, self.order, tuple(setup.law.names))
+        if drive:
+            pre = preflight.check(self.plant, law, setup.reference, duration=scn.simulation.duration,
+                                  timing=control_timing(scn, setup))
+        else:
+            pre = preflight.Preflight(checked=False, note="not checked: an agent's policy drives the plant")
+        return crit, pre, None
 
     def _one_step(self) -> float:
         """One physics step, as in loop.run; returns -|y_d - y|^2 * dt at its end."""
@@ -483,7 +505,8 @@ class _Episode:
                           theta_hat=self.theta_hat[keep].copy(), theta=self.theta[keep].copy(),
                           V=self._V(keep), names=tuple(self.law.names), status=self.status,
                           reason=self.reason, joint_names=self.joint_names,
-                          meta={"dt": self.dt, "order": self.order, "events": list(self.events.applied)})
+                          meta={"dt": self.dt, "order": self.order, "events": list(self.events.applied),
+                                **limits_meta(self.plant)})
 
     def close_log(self, status: str, reason: str) -> None:
         """Write the remaining rows and the summary, and finish the log (no-op without an open log)."""
@@ -494,6 +517,8 @@ class _Episode:
         self.recorder = None
         traj = dataclasses.replace(self.trajectory(), status=status, reason=reason)
         summary = clean_json(make_summary(self.name, traj))
+        if self._verdict is not None:  # the same success and preflight records as adaptive-mj run
+            summary.update(success=self._verdict["success"], preflight=self._verdict["preflight"])
         summary.update(policy="law" if self.controller is not None else "agent",
                        control_timestep=self.control_dt)
         recorder.close(status, reason, summary)

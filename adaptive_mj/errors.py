@@ -17,6 +17,11 @@ class ModelError(AdaptiveMJError, ValueError):
     """An MJCF model is missing, fails to compile, or lacks what a plant needs."""
 
 
+class PreflightRefused(ScenarioError):
+    """The pre-flight check found the run's loop unstable by construction and the scenario (or
+    `run --strict`, or a study) asked to refuse such a run (exit code 2; a study row "refused")."""
+
+
 class LogFormatError(AdaptiveMJError, ValueError):
     """A file is not a readable adaptive-mj MCAP log."""
 

@@ -1,6 +1,7 @@
 """Formats are promises: logs written in format 1 (by adaptive-mj before multi-joint runs), format 2
-(before law plugins) and format 3 (before sampled-data control) still read and replay bit for bit; a
-multi-joint run round-trips."""
+(before law plugins), format 3 (before sampled-data control) and format 4 (before the verdict's limits
+and the embedded model's hash) still read and replay bit for bit; a multi-joint run round-trips; an
+altered embedded model is refused on read."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -8,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from adaptive_mj.errors import LogFormatError
 from adaptive_mj.log import record
 
 from adaptive_mj.setup import scenario
@@ -53,14 +55,83 @@ def test_format3_logs_read_and_verify(name, joints, capsys):
     assert "verify: bit-identical" in capsys.readouterr().out
 
 
-def test_format4_header_records_the_control_mode(tmp_path):
-    scn = scenario.load(scenario.SCENARIOS_DIR / "heave_tracking.toml",
-                        overrides=["simulation.duration=0.1", "control.period=0.005"])
+@pytest.mark.parametrize("name, joints", [("heave_drift_sampled_format4.mcap", 0),
+                                          ("ur5e_payload_swap_format4.mcap", 6)])
+def test_format4_logs_read_and_verify(name, joints, capsys):
+    """Written before format 5 (no ctrl_range, joint_limits or embedded_sha256): read without the
+    saturation metrics, no hash to check, re-simulated bit for bit (the heave one sampled at 4 ms with
+    a delay of 3 steps, the 6-joint one with a payload_mass event)."""
+    run = read_log(DATA / name)
+    assert run.header["log_format_version"] == 4 < record.LOG_FORMAT_VERSION
+    assert "embedded_sha256" not in run.header and "ctrl_range" not in run.trajectory.meta
+    assert run.status == "ok" and len(run.trajectory.joint_names) == joints
+    assert main(["replay", str(DATA / name), "--verify"]) == 0
+    assert "verify: bit-identical" in capsys.readouterr().out
+
+
+def test_format5_header_records_control_limits_and_the_embedded_hash(tmp_path):
+    scn = scenario.load(scenario.SCENARIOS_DIR / "ur5e_payload_swap.toml",
+                        overrides=["simulation.duration=0.1", "control.period=0.005", "events=[]", "log.rate_hz=1000"])
     path = tmp_path / "sampled.mcap"
-    execute(scn, log_path=path)
+    result = execute(scn, log_path=path)
     run = read_log(path)
     assert (run.header["log_format_version"], run.header["control_mode"], run.header["control_period"]) == \
-        (4, "sampled", 0.005)
+        (5, "sampled", 0.005)
+    assert run.header["ctrl_range"] == [[-150.0] * 3 + [-28.0] * 3, [150.0] * 3 + [28.0] * 3]
+    assert run.header["embedded_sha256"] == record.embedded_digest(run.model_xml, run.model_source, run.model_assets)
+    # the saturation metric of a log summarised from its rows (every step logged) equals the run's own
+    from adaptive_mj.report.metrics import saturation_fraction
+
+    frac = saturation_fraction(run.trajectory)
+    assert frac is not None and frac.shape == (6,)
+    assert result.summary["metrics"]["saturation_fraction"] == frac.max()
+
+
+def _rewrite(src: Path, dst: Path, *, attachment: str, change) -> None:
+    """Copy a log record by record with one attachment's data changed (None: removed)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as f:
+        reader = make_reader(f)
+        header = reader.get_header()
+        summary = reader.get_summary()
+        messages = list(reader.iter_messages())
+        metadata = list(reader.iter_metadata())
+        attachments = list(reader.iter_attachments())
+    with open(dst, "wb") as f:
+        w = Writer(f)
+        w.start(profile=header.profile, library=header.library)
+        schema_ids, channel_ids = {}, {}
+        for sid, schema in summary.schemas.items():
+            schema_ids[sid] = w.register_schema(schema.name, schema.encoding, schema.data)
+        for cid, ch in summary.channels.items():
+            channel_ids[cid] = w.register_channel(ch.topic, ch.message_encoding, schema_ids[ch.schema_id], ch.metadata)
+        for m in metadata:
+            w.add_metadata(m.name, dict(m.metadata))
+        for a in attachments:
+            data = change(a.data) if a.name == attachment else a.data
+            if data is not None:
+                w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, data)
+        for _schema, channel, msg in messages:
+            w.add_message(channel_ids[channel.id], msg.log_time, msg.data, msg.publish_time)
+        w.finish()
+
+
+@pytest.mark.parametrize("change", [lambda d: d.replace(b'mass="', b'mass="1', 1), lambda d: None],
+                         ids=["altered", "removed"])
+def test_an_altered_or_removed_embedded_model_is_refused_on_read(tmp_path, change, capsys):
+    scn = scenario.load(scenario.SCENARIOS_DIR / "heave_tracking.toml", overrides=["simulation.duration=0.1"])
+    good = tmp_path / "good.mcap"
+    execute(scn, log_path=good)
+    bad = tmp_path / "bad.mcap"
+    _rewrite(good, bad, attachment=record.MODEL_SOURCE_ATTACHMENT, change=change)
+    assert read_log(good).status == "ok"
+    with pytest.raises(LogFormatError, match=r"bad.mcap: the embedded model does not match the log's embedded_sha256"):
+        read_log(bad)
+    assert main(["replay", str(bad), "--verify"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "embedded_sha256" in err[0]
 
 
 def test_multi_joint_log_round_trips(tmp_path):
@@ -70,7 +141,7 @@ def test_multi_joint_log_round_trips(tmp_path):
     path = tmp_path / "arm.mcap"
     live = execute(scn, log_path=path).trajectory
     run = read_log(path)
-    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 4
+    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 5
     assert run.header["joint_names"] == list(live.joint_names) and len(live.joint_names) == 6
     tr = run.trajectory
     every = run.header["log_every"]

@@ -43,8 +43,29 @@ from mcap.records import MessageIndex
 
 from adaptive_mj.sim.interrupt import deferred
 
+# 5: ctrl_range, joint_limits and embedded_sha256 (checked on every read) in the header;
 # 4: control_mode, control_period in the header; 3: law_plugin, plant_plugin;
-LOG_FORMAT_VERSION = 4  # 2: joint_names/notes, per-joint fields (1: 1-DOF only)
+LOG_FORMAT_VERSION = 5  # 2: joint_names/notes, per-joint fields (1: 1-DOF only)
+
+def embedded_digest(model_xml: str | None, model_source: str | None, assets: dict[str, bytes]) -> str:
+    """SHA-256 (hex) of what a log embeds to re-simulate its run: the compiled model's XML, the exact
+    source compiled, and every asset by name (format 5 writes it; the reader checks it on every read)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for label, part in (("model.xml", model_xml), ("model_source.xml", model_source)):
+        h.update(label.encode() + b"\0" + (b"\1" + part.encode() if part is not None else b"\0"))
+    for name, data in sorted(assets.items()):
+        h.update(b"asset\0" + name.encode() + b"\0" + len(data).to_bytes(8, "little") + bytes(data))
+    return h.hexdigest()
+
+
+def _finite_or_null(rows):
+    """JSON cannot hold ±inf: unlimited ends become null."""
+    if rows is None:
+        return None
+    return [[v if v is not None and abs(v) != float("inf") else None for v in row] for row in rows]
+
 
 #: Statuses a run can be closed with (replay adds "truncated" for a log that was never closed).
 CLOSE_STATUSES = ("ok", "diverged", "interrupted", "failed")
@@ -143,6 +164,8 @@ class LogHeader:
     plant_plugin: dict | None = None  # a plugin plant: the same fields
     control_mode: str = "continuous"  # format 4: "continuous" (the law at every stage) or "sampled"
     control_period: float = 0.0  # format 4: [s] the law's sampling period (continuous: dt)
+    ctrl_range: list | None = None  # format 5: [lo, hi] actuator limits [control units], lists per joint
+    joint_limits: list | None = None  # format 5: (m, 2) joint ranges [rad or m], null entries unlimited
 
     @property
     def log_every(self) -> int:
@@ -405,6 +428,9 @@ class Recorder:
             "plant_plugin": json.dumps(h.plant_plugin),
             "control_mode": h.control_mode,
             "control_period": repr(float(h.control_period or h.dt)),
+            "ctrl_range": json.dumps(h.ctrl_range),
+            "joint_limits": json.dumps(_finite_or_null(h.joint_limits)),
+            "embedded_sha256": embedded_digest(h.model_xml, h.model_source, h.model_assets),
             "created_unix": repr(float(h.created_unix)),
         }
         meta.update({VERSION_KEY_PREFIX + k: v for k, v in sorted(h.versions.items())})

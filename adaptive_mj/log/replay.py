@@ -31,6 +31,7 @@ from adaptive_mj.log.record import (
     EVENT_TOPIC,
     HEADER_METADATA,
     LOG_FORMAT_VERSION,
+    embedded_digest,
     MODEL_SOURCE_ATTACHMENT,
     MODEL_XML_ATTACHMENT,
     NONFINITE_KEY,
@@ -166,17 +167,20 @@ def _read(name: str, data: bytes) -> LoggedRun:
         status=status,
         reason=reason,
         joint_names=joints,
-        meta={"dt": dt, "order": order, "events": event_list, "log_every": log_every},
+        meta={"dt": dt, "order": order, "events": event_list, "log_every": log_every,
+              **_limits_meta(header)},
     )
     assets = {k[len(ASSET_ATTACHMENT_PREFIX):]: v for k, v in scan.attachments.items()
               if k.startswith(ASSET_ATTACHMENT_PREFIX)}
+    model_xml = _text(scan.attachments.get(MODEL_XML_ATTACHMENT), name, MODEL_XML_ATTACHMENT)
+    model_source = _text(scan.attachments.get(MODEL_SOURCE_ATTACHMENT), name, MODEL_SOURCE_ATTACHMENT)
+    _check_embedded(name, header, model_xml, model_source, assets)
     return LoggedRun(
         header=header,
         scenario_text=scenario_text,
         overrides=tuple(header["overrides"]),
-        model_xml=_text(scan.attachments.get(MODEL_XML_ATTACHMENT), name, MODEL_XML_ATTACHMENT),
-        model_source=_text(scan.attachments.get(MODEL_SOURCE_ATTACHMENT), name,
-                           MODEL_SOURCE_ATTACHMENT),
+        model_xml=model_xml,
+        model_source=model_source,
         model_assets=assets,
         trajectory=trajectory,
         events=events,
@@ -186,6 +190,32 @@ def _read(name: str, data: bytes) -> LoggedRun:
         note=note,
         damaged=scan.damaged,
     )
+
+
+def _limits_meta(header: dict) -> dict:
+    """The trajectory's ctrl_range and joint_limits (format 5; null ends are unlimited), for the
+    saturation and joint-limit metrics of a log summarised from its rows."""
+    out: dict = {}
+    if header.get("ctrl_range") is not None:
+        out["ctrl_range"] = tuple(header["ctrl_range"])
+    if header.get("joint_limits") is not None:
+        out["joint_limits"] = [[-math.inf if lo is None else lo, math.inf if hi is None else hi]
+                               for lo, hi in header["joint_limits"]]
+    return out
+
+
+def _check_embedded(name: str, header: dict, model_xml, model_source, assets) -> None:
+    """Format 5: what the log embeds must hash to the header's embedded_sha256; an altered or removed
+    model is a LogFormatError, never a silent re-simulation on something else."""
+    want = header.get("embedded_sha256")
+    if want is None:
+        return
+    got = embedded_digest(model_xml, model_source, assets)
+    if got != want:
+        present = [what for what, v in (("model.xml", model_xml), ("model_source.xml", model_source)) if v is not None]
+        raise LogFormatError(f"{name}: the embedded model does not match the log's embedded_sha256 ({want[:12]}, "
+                             f"found {got[:12]} over {', '.join(present) or 'no model'} and {len(assets)} asset(s)): "
+                             "the log was altered after it was written")
 
 
 def _rows(name: str, messages: list[tuple[str, bytes]], order: int, names: tuple[str, ...],
@@ -387,6 +417,8 @@ def _decode_header(name: str, scan: _Scan) -> dict:
         "law_plugin": json.loads,  # format 3: {name, distribution, version, source_sha256} or null
         "plant_plugin": json.loads,  # format 3: the same, or null
         "control_period": float,  # format 4: [s]
+        "ctrl_range": json.loads,  # format 5: [lo, hi] or null
+        "joint_limits": json.loads,  # format 5: (m, 2) with null for unlimited ends, or null
     }
     header: dict[str, Any] = {}
     versions: dict[str, str] = {}

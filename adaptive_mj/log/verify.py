@@ -37,6 +37,12 @@ def verify(logged) -> tuple[bool, str]:
     source = None
     if logged.model_source is not None:
         source = ModelSource(logged.model_source, dict(logged.model_assets))
+    else:
+        from adaptive_mj.setup.build import model_source
+
+        if model_source(scn) is not None:  # a log from before format 2 embeds no model source
+            note += ("; note: the log embeds no model source: re-simulated against the model files on disk "
+                     "as the scenario names them now")
     rerun = execute(scn, source=source).trajectory
     logged_traj = logged.trajectory
     every = int(header.get("log_every", 1))

@@ -411,6 +411,16 @@ class ManipulatorPlant:
     def model_changed(self) -> None:
         self._theta = None
 
+    @property
+    def joint_limits(self) -> np.ndarray:
+        """(m, 2) [lo, hi] of each joint's range [rad or m]; ±inf where the joint is not limited."""
+        out = np.tile([-np.inf, np.inf], (self.m, 1))
+        for j in range(self.m):
+            jid = self.model.dof_jntid[j]
+            if self.model.jnt_limited[jid]:
+                out[j] = self.model.jnt_range[jid]
+        return out
+
     def mass_matrices(self, q: np.ndarray) -> np.ndarray:
         """(N, m, m) joint-space inertia M(q) (armature included) at rows q (N, m)."""
         d = self._scratch

@@ -46,6 +46,69 @@ def metrics(traj: Trajectory) -> dict:
     }
     if traj.joint_names:
         out.update(joint_metrics(traj))
+        ident = body_identification(traj.names, traj.theta_hat[-1], traj.theta[-1]) if len(traj) else {}
+        if ident:
+            out["identification"] = ident
+    out.update(saturation_metrics(traj))
+    return out
+
+
+_INERTIA = ("Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+
+
+def body_identification(names, estimate, truth) -> dict:
+    """For every body whose ten standard parameters ("<body>.m", ".mcx/.mcy/.mcz", ".Ixx" ... ".Izz",
+    inertia about the body's origin) are estimated: the final mass error [%], centre-of-mass error
+    |ĉ - c| with c = (m c) / m [mm], and inertia error ||Î - I||_F [kg m²], also relative to ||I||_F."""
+    index = {n: i for i, n in enumerate(names)}
+    out = {}
+    for name in names:
+        if not name.endswith(".m"):
+            continue
+        body = name[:-2]
+        keys = [f"{body}.{k}" for k in ("m", "mcx", "mcy", "mcz", *_INERTIA)]
+        if not all(k in index for k in keys):
+            continue
+        est = np.array([estimate[index[k]] for k in keys], dtype=float)
+        true = np.array([truth[index[k]] for k in keys], dtype=float)
+
+        def inertia(v):
+            xx, xy, yy, xz, yz, zz = v[4:]
+            return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+
+        com_err = (np.linalg.norm(est[1:4] / est[0] - true[1:4] / true[0]) * 1e3
+                   if est[0] != 0 and true[0] != 0 else math.nan)
+        i_err = float(np.linalg.norm(inertia(est) - inertia(true)))
+        i_norm = float(np.linalg.norm(inertia(true)))
+        out[body] = {"mass_error_percent": float(100 * (est[0] - true[0]) / true[0]) if true[0] else math.nan,
+                     "com_error_mm": float(com_err), "inertia_error": i_err,
+                     "inertia_error_relative": i_err / i_norm if i_norm else math.nan}
+    return out
+
+
+def saturation_fraction(traj: Trajectory) -> np.ndarray | None:
+    """(m,) fraction of the rows in which each actuator's applied control sits at its limit
+    (within 1e-9 relative), from traj.meta["ctrl_range"] = (lo, hi) in control units; None when
+    the run has no limits on record (logs before format 5)."""
+    rng = traj.meta.get("ctrl_range")
+    if rng is None or len(traj) == 0:
+        return None
+    lo, hi = (np.atleast_1d(np.asarray(b, dtype=float)) for b in rng)
+    u = np.asarray(traj.u, dtype=float).reshape(len(traj.t), -1)
+    tol_lo, tol_hi = 1e-9 * np.maximum(1.0, np.abs(lo)), 1e-9 * np.maximum(1.0, np.abs(hi))
+    at = (u <= lo + tol_lo) | (u >= hi - tol_hi)
+    return at.mean(axis=0)
+
+
+def saturation_metrics(traj: Trajectory) -> dict:
+    """saturation_fraction: the largest fraction of the run any actuator spent at its limit;
+    for m joints also per joint. Empty without limits on record."""
+    frac = saturation_fraction(traj)
+    if frac is None:
+        return {}
+    out: dict = {"saturation_fraction": float(frac.max())}
+    if traj.joint_names:
+        out["saturation_fraction_per_joint"] = {j: float(f) for j, f in zip(traj.joint_names, frac, strict=True)}
     return out
 
 
@@ -95,7 +158,27 @@ def summary(name: str, traj: Trajectory, *, steps: int | None = None) -> dict:
         "steps": steps,
         "metrics": metrics(traj),
         "final": last,
+        "warnings": [*traj.meta.get("warnings", ()), *joint_limit_warnings(traj)],
     }
+
+
+def joint_limit_warnings(traj: Trajectory) -> list[str]:
+    """One line per joint whose position reached its range's end (traj.meta["joint_limits"], (m, 2)
+    [lo, hi], ±inf where unlimited): when first, and by how much at most past it."""
+    limits = traj.meta.get("joint_limits")
+    if limits is None or len(traj) == 0:
+        return []
+    q = np.asarray(traj.x[:, 0], dtype=float).reshape(len(traj.t), -1)
+    names = traj.joint_names or ("the joint",)
+    out = []
+    for j, (lo, hi) in enumerate(np.asarray(limits, dtype=float).reshape(-1, 2)):
+        at = (q[:, j] <= lo) | (q[:, j] >= hi)
+        if at.any():
+            i = int(np.argmax(at))
+            past = float(max(lo - q[:, j].min(), q[:, j].max() - hi, 0.0))
+            out.append(f"{names[j]} reached its limit [{lo:.4g}, {hi:.4g}] at t={traj.t[i]:.6g} s "
+                       f"(at most {past:.3g} past it; {100 * at.mean():.3g} % of the run)")
+    return out
 
 
 def clean_json(obj):

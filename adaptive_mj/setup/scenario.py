@@ -88,6 +88,29 @@ class SimulationSpec:
 
 
 @dataclass(frozen=True)
+class SuccessSpec:
+    """[success]: the criteria of the run's verdict (docs/SCENARIOS.md, "Verdict").
+
+    tail_rms: bound on each joint's tail RMS tracking error [m or rad]; None = the default,
+    tail_fraction x the reference's half-range over the run on that joint, at least tail_floor.
+    param_error: bound on |θ̂_i - θ_i| / |θ_i| at the end, for every parameter (a number) or the
+    named ones (a table); None = not judged. saturation: the largest fraction of the run any one
+    actuator may spend at its limit. preflight: "warn" (one line, the run goes on) or "refuse"
+    (`run --strict`; studies) when the sampled loop's fastest mode is past the integrator's
+    or the hold's stability limit (adaptive_mj.sim.preflight)."""
+
+    tail_rms: float | None = None
+    tail_fraction: float = 0.05
+    tail_floor: float = 0.01
+    param_error: float | dict[str, float] | None = None
+    saturation: float = 0.2
+    preflight: str = "warn"
+
+
+PREFLIGHT_ACTIONS = ("warn", "refuse")
+
+
+@dataclass(frozen=True)
 class ControlSpec:
     """[control]: when the law runs. mode "continuous" (at every integrator stage: the lecture's
     continuous-time law) or "sampled" (once per period [s], a whole multiple of the physics timestep,
@@ -183,6 +206,7 @@ class Scenario:
     text: str
     overrides: tuple[str, ...] = field(default=())
     control: ControlSpec = ControlSpec()
+    success: SuccessSpec = SuccessSpec()
 
 
 # --------------------------------------------------------------------------
@@ -422,13 +446,14 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
                                 "remove it")
     events = _events(top.get("events", []), top, plant, sim)
     control = _control(top.table("control", {}), sim)
+    success = _success(top.table("success", {}))
     log = top.table("log", {})
     log_rate = log.number("rate_hz", 100.0, gt=0)
     log.finish()
     top.finish()
     return Scenario(name=name, description=description, plant=plant, simulation=sim, reference=reference,
                     law=law, noise=noise, disturbance=disturbance, events=events, log_rate_hz=log_rate,
-                    source=where, text=text, overrides=overrides, control=control)
+                    source=where, text=text, overrides=overrides, control=control, success=success)
 
 
 def _model_from_command_line(doc: dict, overrides, base_dir: Path | None, where: str) -> None:
@@ -616,6 +641,25 @@ def _control(t: _Table, sim: SimulationSpec) -> ControlSpec:
         raise t.fail("period", f"<= simulation.duration ({sim.duration})", period)
     t.finish()
     return ControlSpec(mode=mode, period=period, hold=hold)
+
+
+def _success(t: _Table) -> SuccessSpec:
+    d = SuccessSpec()
+    raw = t.data.get("param_error")
+    if isinstance(raw, dict):
+        param_error: float | dict[str, float] | None = t.named_numbers("param_error", gt=0)
+    else:
+        param_error = t.number("param_error", None, gt=0)
+    spec = SuccessSpec(tail_rms=t.number("tail_rms", None, gt=0, allow_inf=True),
+                       tail_fraction=t.number("tail_fraction", d.tail_fraction, gt=0),
+                       tail_floor=t.number("tail_floor", d.tail_floor, gt=0),
+                       param_error=param_error,
+                       saturation=t.number("saturation", d.saturation, ge=0),
+                       preflight=t.string("preflight", d.preflight, choices=PREFLIGHT_ACTIONS))
+    if spec.saturation > 1:
+        raise t.fail("saturation", "a fraction of the run's time in [0, 1]", spec.saturation)
+    t.finish()
+    return spec
 
 
 _REFERENCE_KEYS = {

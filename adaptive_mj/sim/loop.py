@@ -230,6 +230,19 @@ class Sink(Protocol):
     def write_event(self, t: float, label: str) -> None: ...
 
 
+def limits_meta(plant) -> dict:
+    """A trajectory's meta entries for the verdict's metrics: "ctrl_range" (lo, hi) [control units],
+    lists of one entry per actuator (saturation), and "joint_limits" (m, 2) [rad or m] when a joint is
+    limited (joints reaching their range); also used by adaptive_mj.env."""
+    out: dict = {}
+    if plant.ctrl_range is not None:
+        out["ctrl_range"] = tuple(np.atleast_1d(np.asarray(b, dtype=float)).tolist() for b in plant.ctrl_range)
+    limits = getattr(plant, "joint_limits", None)
+    if limits is not None and np.isfinite(limits).any():
+        out["joint_limits"] = np.asarray(limits, dtype=float).tolist()
+    return out
+
+
 NATIVE_CHUNK = 250  # physics steps per mj_step(nstep) call on the native path
 
 
@@ -432,6 +445,7 @@ class _Rows:
         contact = self.plant.first_contact
         if contact is not None:
             meta["warnings"] = [f"t={contact[0]:.6g} s: {contact[1]} (the regressor has no contact forces)"]
+        meta.update(limits_meta(self.plant))
         return Trajectory(t=self.t[keep], x=self.x[keep], u=self.u[keep], s=self.s[keep], ref=self.ref[keep],
                           theta_hat=self.theta_hat[keep], theta=self.theta_rows(0, n), V=self.V[keep],
                           names=tuple(self.law.names), status=status, reason=reason,

@@ -3,6 +3,7 @@ summarise. Also where log file names are chosen (never overwriting)."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import platform
 import sys
@@ -15,11 +16,13 @@ from typing import Any
 from adaptive_mj import __version__
 from adaptive_mj.plants import ModelSource
 from adaptive_mj.setup.build import Setup, build
-from adaptive_mj.errors import AdaptiveMJError, Interrupted, ScenarioError
-from adaptive_mj.sim.loop import plant_order, run
+from adaptive_mj.errors import AdaptiveMJError, Interrupted, PreflightRefused, ScenarioError
+from adaptive_mj.sim.loop import limits_meta, plant_order, run
 from adaptive_mj.sim.stage import ControlTiming
 from adaptive_mj.report.metrics import clean_json, summary as make_summary
 from adaptive_mj.setup.scenario import Scenario
+from adaptive_mj.setup.success import Criteria, criteria, judge
+from adaptive_mj.sim import preflight
 from adaptive_mj.trajectory import Trajectory
 
 # Run outputs: the repository's logs/ (ignored by git), or $ADAPTIVE_MJ_LOGS.
@@ -95,6 +98,7 @@ def log_header(scn: Scenario, setup: Setup):
 
     plant = setup.plant
     timing = control_timing(scn, setup)
+    limits = limits_meta(plant)  # the verdict's metrics of a log summarised from its rows (format 5)
     return LogHeader(
         scenario_name=scn.name, scenario_text=scn.text, scenario_source=scn.source, overrides=scn.overrides,
         seed=scn.noise.seed, log_rate_hz=scn.log_rate_hz, dt=plant.dt, order=plant_order(plant),
@@ -105,7 +109,12 @@ def log_header(scn: Scenario, setup: Setup):
         versions=versions(), created_unix=time.time(),
         law_plugin=setup.law.installed.describe() if setup.law.installed is not None else None,
         plant_plugin=_plant_plugin(scn), control_mode=timing.describe()["control_mode"],
-        control_period=timing.period)
+        control_period=timing.period, ctrl_range=_list(limits.get("ctrl_range")),
+        joint_limits=limits.get("joint_limits"))
+
+
+def _list(value) -> list | None:
+    return None if value is None else list(value)
 
 
 def _plant_plugin(scn: Scenario) -> dict | None:
@@ -149,25 +158,30 @@ QUICK_START_MAX_STEPS = 5000
 
 def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None,
             single: bool = False) -> RunResult:
-    """Build and run one scenario; stream it to log_path (MCAP) when given.
+    """Build and run one scenario; stream it to log_path (MCAP) when given. Before the first step,
+    the pre-flight check (sim.preflight; a PreflightRefused under success.preflight = "refuse");
+    after the last, the verdict against the scenario's [success] criteria (setup.success).
 
     single: the only run of this process (the CLI's `run`): a short 1-DOF run then takes the
     Python callback (QUICK_START_MAX_STEPS); studies leave it False and stay compiled."""
     setup = build(scn, source=source)
     plant = setup.plant
-    short = single and not plant.joint_shape and scn.simulation.duration < QUICK_START_MAX_STEPS * plant.dt
     for note in setup.notes:  # model edits the scenario asked for: said on the terminal and kept in the log
         print(f"{scn.source}: note: {note}", file=sys.stderr)
+    timing = control_timing(scn, setup)
+    pre = preflight_of(scn, setup, timing)
+    crit = criteria(scn, setup.reference, plant_order(plant), tuple(setup.law.names))
+    short = single and not plant.joint_shape and scn.simulation.duration < QUICK_START_MAX_STEPS * plant.dt
     sink_every = max(1, round(1.0 / plant.dt))  # flush about once per simulated second
     kwargs: dict[str, Any]  # run()'s keyword arguments, shared by both calls below
     kwargs = dict(duration=scn.simulation.duration, theta_hat0=setup.theta_hat0, noise_std=setup.noise_std,
                   rng=setup.rng, events=setup.events, state_bound=scn.simulation.state_bound,
                   sink_every=sink_every, control_delay=scn.simulation.control_delay,
-                  control_mode=scn.control.mode, control_period=control_timing(scn, setup).period,
+                  control_mode=scn.control.mode, control_period=timing.period,
                   native=False if scn.simulation.python_callback or short else None)
     if log_path is None:
-        traj = run(plant, setup.law, setup.reference, **kwargs)
-        return RunResult(traj, clean_json(make_summary(scn.name, traj)), None)
+        traj, result = verdict(scn, run(plant, setup.law, setup.reference, **kwargs), crit, pre)
+        return RunResult(traj, result, None)
 
     from adaptive_mj.log.record import Recorder
 
@@ -189,6 +203,39 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
     except BaseException as exc:
         recorder.close("failed", f"{type(exc).__name__}: {exc}", {})
         raise
-    result = clean_json(make_summary(scn.name, traj))
+    traj, result = verdict(scn, traj, crit, pre)
     recorder.close(traj.status, traj.reason, result)
     return RunResult(traj, result, log_path)
+
+
+def preflight_of(scn: Scenario, setup: Setup, timing: ControlTiming) -> preflight.Preflight:
+    """The run's pre-flight check, its lines said on stderr; a PreflightRefused when it fails and
+    success.preflight = "refuse"."""
+    pre = preflight.check(setup.plant, setup.law, setup.reference, duration=scn.simulation.duration, timing=timing)
+    for line in pre.outside:
+        print(f"{scn.source}: warning: {line}", file=sys.stderr)
+    if not pre.ok:
+        if scn.success.preflight == "refuse":
+            raise PreflightRefused(f"{scn.source}: refused (success.preflight = 'refuse'): {pre.line()}")
+        print(f"{scn.source}: warning: {pre.line()}", file=sys.stderr)
+    return pre
+
+
+def verdict(scn: Scenario, traj: Trajectory, crit: Criteria, pre: preflight.Preflight) -> tuple[Trajectory, dict]:
+    """(trajectory, summary) with the verdict: a completed run ("ok") that misses a [success] criterion
+    becomes "failed", its reason naming each criterion missed and the measured value (and the
+    pre-flight figure when the check had warned)."""
+    from adaptive_mj import units
+
+    result = clean_json(make_summary(scn.name, traj))
+    if traj.status == "ok":
+        missed = judge(result, crit, unit=units.OUTPUT.get(scn.plant.kind, ""))
+        if missed:
+            if not pre.ok:
+                missed.append(f"the pre-flight check had warned: μh = {pre.figure:.3g} > {pre.limit:.3g}"
+                              + (f" on {pre.joint}" if pre.joint else ""))
+            traj = dataclasses.replace(traj, status="failed", reason="; ".join(missed))
+            result["status"], result["reason"] = traj.status, traj.reason
+    result["success"] = clean_json(crit.describe())
+    result["preflight"] = clean_json(pre.describe())
+    return traj, result

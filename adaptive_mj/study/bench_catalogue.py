@@ -45,7 +45,8 @@ def _job(section: str, variant: str, scenario: str, logs: Path, overrides=(), ex
 
 
 def _ok(r: JobResult) -> bool:
-    return r.status == "ok" and r.trajectory is not None
+    """A run that completed (its verdict "ok" or "failed": both have every row to analyse)."""
+    return r.status in ("ok", "failed") and r.trajectory is not None
 
 
 SECTION_PLANT = {"first-order": "first_order", "phase space": "first_order", "Lyapunov": "heave",

@@ -32,6 +32,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
+from adaptive_mj.study.job import REFUSE_UNSTABLE
 
 CVAR_LEVEL = 0.10  # the worst 10 % of seeds
 TAIL_BOUND = {"heave": 0.01, "arm": 0.05}  # [m], [rad]: the stress study's failure bound on the tail RMS error
@@ -135,8 +136,12 @@ class Margin:
         return out
 
 
+#: Runs that completed: the search judges them by its own tail bound, whatever the scenario's verdict.
+COMPLETED = ("ok", "failed")
+
+
 def _tail(result: JobResult, bound: float) -> float:
-    if result.status != "ok" or result.summary is None:
+    if result.status not in COMPLETED or result.summary is None:
         return math.inf
     tail = (result.summary.get("metrics") or {}).get("rms_tracking_error_tail")
     if tail is None:
@@ -154,7 +159,7 @@ def passes(result: JobResult, bound: float) -> bool:
 def _raw_tail(result: JobResult) -> float:
     m = (result.summary or {}).get("metrics") or {}
     v = m.get("rms_tracking_error_tail", m.get("rms_tracking_error_norm_tail"))
-    return math.inf if v is None or result.status != "ok" else float(v)
+    return math.inf if v is None or result.status not in COMPLETED else float(v)
 
 
 def _file_name(text: str) -> str:
@@ -209,7 +214,7 @@ def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path
         s = searches[i]
         safe = _file_name(s.label.replace("/", "-"))
         text = str(int(value)) if s.stressor.integer else f"{value:.6g}"
-        return [Job(s.scenario, overrides=(*s.overrides, *s.stressor.overrides(value)), seed=k,
+        return [Job(s.scenario, overrides=(REFUSE_UNSTABLE, *s.overrides, *s.stressor.overrides(value)), seed=k,
                     log=logs / safe / f"{_file_name(s.stressor.name)}={text}-seed{k}.mcap",
                     tag=f"{s.label} {s.stressor.name}={text} seed {k}") for k in range(seeds)]
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from adaptive_mj.errors import AdaptiveMJError
+from adaptive_mj.errors import AdaptiveMJError, PreflightRefused
 from adaptive_mj.sim import interrupt
 from adaptive_mj.trajectory import Trajectory
 
@@ -43,7 +43,8 @@ STOP_TIMEOUT = 30.0
 @dataclass(frozen=True)
 class JobResult:
     job: Job
-    status: str  # the summary status, "error" when the run could not be set up, or "interrupted"
+    status: str  # the summary status ("ok", "failed", "diverged"), "error" when the run could not be set up,
+    # "refused" when its pre-flight check refused it (success.preflight = "refuse"), or "interrupted"
     summary: dict | None
     extras: dict = field(default_factory=dict)
     trajectory: Trajectory | None = None  # decimated to the scenario's logging rate
@@ -58,6 +59,12 @@ def decimate(traj: Trajectory, every: int) -> Trajectory:
     meta = dict(traj.meta, log_every=every)
     return replace(traj, t=traj.t[rows], x=traj.x[rows], u=traj.u[rows], s=traj.s[rows], ref=traj.ref[rows],
                    theta_hat=traj.theta_hat[rows], theta=traj.theta[rows], V=traj.V[rows], meta=meta)
+
+
+#: Study rows (sweep, stress, breaking points) refuse a run whose loop the pre-flight check finds unstable
+#: by construction (status "refused"; a failure of a search) instead of simulating it (sim.preflight).
+#: It comes first in a job's overrides, so a user's own --set success.preflight wins.
+REFUSE_UNSTABLE = "success.preflight='refuse'"
 
 
 def log_write_error(log: Path | None, exc: OSError) -> str:
@@ -95,6 +102,8 @@ def run_job(job: Job) -> JobResult:
         every = max(1, round(1.0 / (scn.log_rate_hz * traj.meta["dt"])))
         return JobResult(job, result.summary["status"], result.summary, extras,
                          decimate(traj, every) if job.keep_trajectory else None)
+    except PreflightRefused as exc:  # the loop cannot be stable: a result of the study, not a broken job
+        return JobResult(job, "refused", None, error=str(exc))
     except AdaptiveMJError as exc:
         return JobResult(job, "error", None, error=str(exc))
     except OSError as exc:  # the log could not be written (disk full, a file-size limit, a read-only folder)

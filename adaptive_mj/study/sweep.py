@@ -34,6 +34,7 @@ from adaptive_mj.setup import scenario as sc
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.report.metrics import clean_json, metrics as run_metrics
 from adaptive_mj.study.parallel import Backend, Job, JobResult, iter_results, progress_printer, session
+from adaptive_mj.study.job import REFUSE_UNSTABLE
 from adaptive_mj.trajectory import Trajectory
 
 EXIT_OK, EXIT_FAILED = 0, 1
@@ -459,7 +460,8 @@ def plan(path: Path, points: Sequence[dict[str, Any]], *, seeds: int, overrides:
     for p, point in enumerate(points):
         for seed in range(seeds):
             name = run_name(p * seeds + seed, point, seed, names=names, width=width)
-            job = Job(path, overrides=(*overrides, *_grid_overrides(point)), seed=seed, log=logs / f"{name}.mcap",
+            job = Job(path, overrides=(REFUSE_UNSTABLE, *overrides, *_grid_overrides(point)), seed=seed,
+                      log=logs / f"{name}.mcap",
                       tag=name, keep_trajectory=False)
             planned.append((point, job))
     return planned

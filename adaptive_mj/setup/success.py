@@ -1,0 +1,105 @@
+"""A run's verdict: the scenario's [success] criteria made concrete for its plant and reference
+before the run (`criteria`), and a finished run's summary judged against them (`judge`).
+
+A run that completes is "ok" only when every criterion holds; otherwise "failed", with a reason
+that names each criterion missed and the measured value. A run that diverges stays "diverged"
+(its own, earlier verdict). Defaults and their derivation: docs/SCENARIOS.md, "Verdict".
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from adaptive_mj.errors import ScenarioError
+from adaptive_mj.setup.scenario import Scenario
+
+REFERENCE_SAMPLES = 2001  # reference evaluations over [0, duration] for its half-range
+
+
+@dataclass(frozen=True)
+class Criteria:
+    """tail_rms: (m,) bound per joint on the tail RMS tracking error [m or rad] (m = 1 for a 1-DOF
+    plant); tail_rule: how it was set (said in the summary); param_error: name -> bound on the final
+    |θ̂ - θ| / |θ|; saturation: the largest fraction of the run an actuator may spend at its limit."""
+
+    tail_rms: tuple[float, ...]
+    tail_rule: str
+    param_error: dict[str, float] = field(default_factory=dict)
+    saturation: float = 1.0
+
+    def describe(self) -> dict:
+        """The criteria as JSON-ready data (the summary's "success")."""
+        return {"tail_rms": list(self.tail_rms), "tail_rule": self.tail_rule,
+                "param_error": dict(self.param_error), "saturation": self.saturation}
+
+
+def reference_half_range(reference, duration: float, order: int) -> np.ndarray:
+    """(m,) half of max - min of y_d over [0, duration] per joint (m = 1 for a 1-DOF plant)."""
+    ts = np.linspace(0.0, duration, REFERENCE_SAMPLES)
+    y = np.array([np.atleast_1d(np.asarray(reference(t, order)[0], dtype=float)) for t in ts])
+    return 0.5 * (y.max(axis=0) - y.min(axis=0))
+
+
+def criteria(scn: Scenario, reference, order: int, param_names: tuple[str, ...]) -> Criteria:
+    """The run's Criteria from scn.success; a bound on a parameter the law does not estimate is a
+    ScenarioError naming it."""
+    spec = scn.success
+    half = reference_half_range(reference, scn.simulation.duration, order)
+    if spec.tail_rms is not None:
+        tail = tuple(float(spec.tail_rms) for _ in half)
+        rule = "success.tail_rms"
+    else:
+        tail = tuple(max(spec.tail_fraction * float(h), spec.tail_floor) for h in half)
+        rule = (f"{spec.tail_fraction:g} x the reference's half-range, at least {spec.tail_floor:g} "
+                "(success.tail_fraction, success.tail_floor)")
+    if isinstance(spec.param_error, dict):
+        unknown = [n for n in spec.param_error if n not in param_names]
+        if unknown:
+            raise ScenarioError(f"{scn.source}: success.param_error.{unknown[0]}: not a parameter of the law "
+                                f"(its parameters: {', '.join(param_names)})")
+        params = dict(spec.param_error)
+    elif spec.param_error is not None:
+        params = {n: float(spec.param_error) for n in param_names}
+    else:
+        params = {}
+    return Criteria(tail_rms=tail, tail_rule=rule, param_error=params, saturation=spec.saturation)
+
+
+def _relative_error(estimate: float | None, truth: float | None) -> float:
+    if estimate is None or truth is None:
+        return math.inf
+    err = abs(estimate - truth)
+    return err / abs(truth) if truth != 0 else (0.0 if err == 0 else math.inf)
+
+
+def judge(summary: dict, c: Criteria, *, unit: str = "") -> list[str]:
+    """The criteria a finished run missed, each as "<what> <measured> > <bound> (<key>)"; empty when
+    every one holds. summary: report.metrics.summary's dict (metrics, final)."""
+    m, final, missed = summary.get("metrics") or {}, summary.get("final") or {}, []
+    unit = "" if unit == "-" else unit  # a dimensionless output
+    per_joint = m.get("rms_tracking_error_tail_per_joint")
+    tails = list(per_joint.items()) if per_joint else [("", m.get("rms_tracking_error_tail"))]
+    for (joint, value), bound in zip(tails, c.tail_rms, strict=True):
+        if value is None or not math.isfinite(value) or value > bound:
+            where = f" on {joint}" if joint else ""
+            u = f" {unit}" if unit else ""
+            missed.append(f"tail RMS tracking error{where} {_show(value)}{u} > {bound:.3g}{u} (success.tail_rms)")
+    est, true = final.get("theta_hat", {}), final.get("theta", {})
+    for name, bound in c.param_error.items():
+        rel = _relative_error(est.get(name), true.get(name))
+        if not rel <= bound:
+            missed.append(f"final error of {name} {_show(100 * rel)} % > {100 * bound:.3g} % (success.param_error)")
+    sat = m.get("saturation_fraction_per_joint") or ({"": m["saturation_fraction"]} if "saturation_fraction" in m
+                                                     else {})
+    for joint, frac in sat.items():
+        if frac is not None and frac > c.saturation:
+            where = f" on {joint}" if joint else ""
+            missed.append(f"time at the actuator limit{where} {100 * frac:.3g} % > {100 * c.saturation:.3g} % "
+                          "(success.saturation)")
+    return missed
+
+
+def _show(v: float | None) -> str:
+    return "n/a" if v is None else f"{v:.3g}"

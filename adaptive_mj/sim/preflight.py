@@ -1,0 +1,205 @@
+"""The pre-flight check: can the discrete loop of this run be stable at all?
+
+A law's velocity feedback puts a mode at rate μ [1/s] in the closed loop:
+  m joints (Slotine–Li and its baselines):  μ(q) = λ_max(M(q)⁻¹ K_D) + max_j Λ_j,
+  1-DOF sliding law of order n:             μ = h k_eff / d + (n - 1) λ   (k_eff = k + K/Φ when robust),
+  first-order law:                          μ = k,
+with M(q) the joint-space inertia (armature included) along the reference and d the plant's true
+leading coefficient, both read from the compiled model. One step of length h maps that mode to
+  RK4 at the timestep (the law at every stage):     R(-μh), stable while μh < 2.785;
+  a control held over h (sampled, Euler, or any    z = 1 - μh, stable while μh < 2;
+  one-stage integrator):
+  with a delay of D whole periods:                 z^(D+1) - z^D + μh = 0, stable while
+                                                   μh < 2 sin(π / (2(2D + 1))).
+The check evaluates the worst μ along the reference (64 samples over the run) against that limit.
+Past it, no tuning of the adaptation can help: every step overshoots, torques saturate and the
+estimates wind up. Derivation: docs/THEORY.md, "Pre-flight check".
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from adaptive_mj.laws import FirstOrderAdaptiveLaw, FixedNominalLaw, SlidingAdaptiveLaw
+from adaptive_mj.laws.slotine_li import SlotineLiLaw
+from adaptive_mj.sim.stage import ControlTiming
+
+RK4_REAL_LIMIT = 2.785293563405282  # the RK4 stability region's end on the negative real axis
+HOLD_LIMIT = 2.0  # explicit Euler / a zero-order hold: |1 - μh| < 1
+SAMPLES = 64  # points of the reference at which M(q) is evaluated
+
+
+@dataclass(frozen=True)
+class Preflight:
+    """figure = rate x step against limit; joint: the joint with the largest share K_D,j v_j² of the
+    fastest mode v ("" for a 1-DOF plant); fixes: what brings the figure under the limit;
+    outside: one line per joint whose reference leaves the joint's range."""
+
+    checked: bool
+    figure: float = 0.0
+    limit: float = math.inf
+    rate: float = 0.0  # μ [1/s]
+    step: float = 0.0  # h [s]
+    scheme: str = ""
+    joint: str = ""
+    fixes: tuple[str, ...] = ()
+    outside: tuple[str, ...] = ()
+    note: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return not self.checked or self.figure < self.limit
+
+    def line(self) -> str:
+        """The one-line warning (empty when ok)."""
+        if self.ok:
+            return ""
+        where = f"joint {self.joint}: " if self.joint else ""
+        return (f"pre-flight: {where}the loop's fastest mode μ = {self.rate:.4g} 1/s gives μh = {self.figure:.3g} "
+                f"at h = {self.step:.3g} s, past the {self.scheme} stability limit {self.limit:.3g}; the loop "
+                f"cannot be stable. Fixes: " + "; or ".join(self.fixes))
+
+    def describe(self) -> dict:
+        """JSON-ready (the summary's "preflight")."""
+        return {"checked": self.checked, "ok": self.ok, "figure": self.figure, "limit": self.limit,
+                "rate": self.rate, "step": self.step, "scheme": self.scheme, "joint": self.joint,
+                "fixes": list(self.fixes), "reference_outside_range": list(self.outside), "note": self.note}
+
+
+def step_limit(timing: ControlTiming, stages: int) -> tuple[float, float, str]:
+    """(h [s], limit on μh, scheme) for the run's control timing and integrator stages."""
+    steps = max(1, timing.steps)
+    delay_periods = math.ceil(timing.delay / steps) if timing.delay else 0
+    h = timing.period
+    if delay_periods:
+        return h, 2.0 * math.sin(math.pi / (2 * (2 * delay_periods + 1))), \
+            f"held control with a delay of {delay_periods} period(s)"
+    if timing.sampled:
+        return h, HOLD_LIMIT, "zero-order hold at the control period"
+    if stages == 4:
+        return h, RK4_REAL_LIMIT, "RK4 (the law at every stage)"
+    return h, HOLD_LIMIT, "one-stage integrator (explicit in the control)"
+
+
+def _reference_positions(reference, duration: float, order: int) -> np.ndarray:
+    ts = np.linspace(0.0, duration, SAMPLES)
+    return np.array([np.atleast_1d(np.asarray(reference(t, order)[0], dtype=float)) for t in ts])
+
+
+def _generalized(M: np.ndarray, kd: np.ndarray) -> tuple[float, np.ndarray]:
+    """(μ, v): the largest eigenvalue of M⁻¹K_D for one M (m, m) and its eigenvector (K_D v = μ M v),
+    by a Cholesky factor of M (the symmetric form L⁻¹ K_D L⁻ᵀ)."""
+    Linv = np.linalg.inv(np.linalg.cholesky(M))
+    A = Linv @ np.diag(kd) @ Linv.T
+    w, V = np.linalg.eigh(0.5 * (A + A.T))
+    return float(w[-1]), Linv.T @ V[:, -1]
+
+
+def _worst(M: np.ndarray, kd: np.ndarray) -> tuple[float, np.ndarray]:
+    """(μ, v) at the sample of M (N, m, m) where λ_max(M⁻¹K_D) is largest."""
+    return max((_generalized(Mi, kd) for Mi in M), key=lambda r: r[0])
+
+
+def _kd_within(M: np.ndarray, kd: np.ndarray, target: float) -> dict[int, float]:
+    """Joint -> lowered K_D such that max over M of λ_max(M⁻¹K_D) <= target, changing only the joints
+    above their share: with D = diag(min over the reference of 1/(M⁻¹)_jj) and ρ = max over M of
+    λ_max(M⁻¹D) (M⁻¹D has unit diagonal: 1 <= ρ <= m), K_D,j <= target D_jj / ρ on every joint gives
+    λ_max(M⁻¹K_D) <= (target/ρ) λ_max(M⁻¹D) <= target (the eigenvalue grows with K_D)."""
+    D = np.min(1.0 / np.diagonal(np.linalg.inv(M), axis1=1, axis2=2), axis=0)
+    rho = _worst(M, D)[0]
+    bound = target * D / rho
+    return {j: float(bound[j]) for j in range(len(kd)) if kd[j] > bound[j]}
+
+
+def _armature_within(M: np.ndarray, kd: np.ndarray, target: float) -> dict[int, float]:
+    """Joint -> armature to add [kg m² or kg] so that max over M of λ_max((M + diag(a))⁻¹K_D) <= target.
+    MuJoCo adds armature to M's diagonal, and 1/((M + a e_j e_jᵀ)⁻¹)_jj = 1/(M⁻¹)_jj + a exactly, so each
+    round raises every joint over its share (_kd_within's bound) by what it lacks, until the figure holds."""
+    a = np.zeros(len(kd))
+    for _ in range(50):
+        Ma = M + np.diag(a)
+        if _worst(Ma, kd)[0] <= target:
+            return {j: float(a[j]) for j in range(len(kd)) if a[j] > 0}
+        D = np.min(1.0 / np.diagonal(np.linalg.inv(Ma), axis1=1, axis2=2), axis=0)
+        rho = _worst(Ma, D)[0]
+        a += 1.001 * np.maximum(0.0, kd * rho / target - D)
+    return {}
+
+
+def _arm_check(plant, law: SlotineLiLaw, q: np.ndarray, h: float, limit: float) -> dict:
+    M = plant.mass_matrices(q)
+    mu, v = _worst(M, law.kd)
+    rate = mu + float(law.lam.max())
+    j = int(np.argmax(law.kd * v ** 2))  # the joint with the largest share of the fastest mode
+    name = plant.joint_names[j]
+    if rate * h < limit:
+        return {"rate": rate, "joint": name, "fixes": ()}
+    fixes = []
+    target = 0.9 * limit / h - float(law.lam.max())
+    if target > 0:
+        table = _kd_within(M, law.kd, target)
+        fixes.append("law.kd = {" + ", ".join(f"{plant.joint_names[i]} = {k:.3g}" for i, k in sorted(table.items()))
+                     + "} (the other joints as they are)")
+    fixes.append(f"a timestep or control.period <= {0.9 * limit / rate:.3g} s")
+    armature = _armature_within(M, law.kd, target) if target > 0 else {}
+    if armature:
+        fixes.append("more armature on " + ", ".join(f"{plant.joint_names[i]} (+{a:.3g})"
+                                                     for i, a in sorted(armature.items())) + " [kg m² or kg]")
+    return {"rate": rate, "joint": name, "fixes": tuple(fixes)}
+
+
+def _one_dof_check(plant, law, order: int, h: float, limit: float) -> dict | None:
+    if isinstance(law, FirstOrderAdaptiveLaw):
+        gain, lam_part, what = law.k, 0.0, "law.k"
+    elif isinstance(law, (SlidingAdaptiveLaw, FixedNominalLaw)):
+        gain = law.k + (law.K / law.boundary_layer if law.K > 0 else 0.0)
+        lam_part, what = (order - 1) * law.lam, "law.k" + (" (+ law.K / law.boundary_layer)" if law.K > 0 else "")
+    else:
+        return None
+    form = plant.form
+    theta = np.asarray(plant.true_theta(), dtype=float)
+    d = float(theta[0]) if form.d_name is not None else 1.0
+    x0 = np.asarray(plant.observe(), dtype=float)
+    hx = abs(float(form.h(x0)))
+    rate = hx * gain / d + lam_part
+    fixes = [f"{what} <= {0.9 * (limit / h - lam_part) * d / hx:.3g} (now {gain:.3g})"] if limit / h > lam_part else []
+    fixes.append(f"a timestep or control.period <= {0.9 * limit / rate:.3g} s")
+    return {"rate": rate, "joint": "", "fixes": tuple(fixes)}
+
+
+def check(plant, law, reference, *, duration: float, timing: ControlTiming) -> Preflight:
+    """The pre-flight of one run (before its first step). Reads the plant's inertia along the
+    reference; a law whose velocity feedback it does not know (a plugin) is not checked."""
+    order = law.order
+    h, limit, scheme = step_limit(timing, plant.stages)
+    outside = _outside_range(plant, reference, duration, order)
+    if isinstance(law, SlotineLiLaw):
+        found: dict | None = _arm_check(plant, law, _reference_positions(reference, duration, order), h, limit)
+    else:
+        found = _one_dof_check(plant, law, order, h, limit)
+    if found is None:
+        return Preflight(checked=False, outside=outside,
+                         note=f"not checked: the law {type(law).__name__} declares no velocity feedback gain")
+    return Preflight(checked=True, figure=found["rate"] * h, limit=limit, rate=found["rate"], step=h,
+                     scheme=scheme, joint=found["joint"], fixes=found["fixes"], outside=outside)
+
+
+def _outside_range(plant, reference, duration: float, order: int) -> tuple[str, ...]:
+    """One line per limited joint whose reference position leaves [lo, hi] during the run."""
+    limits = getattr(plant, "joint_limits", None)
+    if limits is None:
+        return ()
+    q = _reference_positions(reference, duration, order)
+    ts = np.linspace(0.0, duration, SAMPLES)
+    names = getattr(plant, "joint_names", ()) or ("the joint",)
+    out = []
+    for j, (lo, hi) in enumerate(np.atleast_2d(limits)):
+        below, above = q[:, j] < lo, q[:, j] > hi
+        if below.any() or above.any():
+            i = int(np.argmax(below | above))
+            by = float(max(lo - q[:, j].min(), q[:, j].max() - hi))
+            out.append(f"the reference leaves {names[j]}'s range [{lo:.4g}, {hi:.4g}] at t = {ts[i]:.3g} s "
+                       f"(by up to {by:.3g})")
+    return tuple(out)
