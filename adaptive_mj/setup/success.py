@@ -35,10 +35,21 @@ class Criteria:
                 "param_error": dict(self.param_error), "saturation": self.saturation}
 
 
+def reference_positions(reference, ts: np.ndarray, order: int) -> np.ndarray:
+    """(N, m) y_d at the times ts (N,) [s], m = 1 for a 1-DOF plant: one vectorised call of the
+    reference (the bundled kinds take an array of t), else one call per time."""
+    try:
+        y = np.asarray(reference(ts, order)[0], dtype=float)
+        if y.shape[0] == len(ts):
+            return y.reshape(len(ts), -1)
+    except (TypeError, ValueError):
+        pass
+    return np.array([np.atleast_1d(np.asarray(reference(t, order)[0], dtype=float)) for t in ts])
+
+
 def reference_half_range(reference, duration: float, order: int) -> np.ndarray:
     """(m,) half of max - min of y_d over [0, duration] per joint (m = 1 for a 1-DOF plant)."""
-    ts = np.linspace(0.0, duration, REFERENCE_SAMPLES)
-    y = np.array([np.atleast_1d(np.asarray(reference(t, order)[0], dtype=float)) for t in ts])
+    y = reference_positions(reference, np.linspace(0.0, duration, REFERENCE_SAMPLES), order)
     return 0.5 * (y.max(axis=0) - y.min(axis=0))
 
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from adaptive_mj.laws import FirstOrderAdaptiveLaw, FixedNominalLaw, SlidingAdaptiveLaw
 from adaptive_mj.laws.slotine_li import SlotineLiLaw
+from adaptive_mj.setup.success import reference_positions
 from adaptive_mj.sim.stage import ControlTiming
 
 RK4_REAL_LIMIT = 2.785293563405282  # the RK4 stability region's end on the negative real axis
@@ -84,8 +85,7 @@ def step_limit(timing: ControlTiming, stages: int) -> tuple[float, float, str]:
 
 
 def _reference_positions(reference, duration: float, order: int) -> np.ndarray:
-    ts = np.linspace(0.0, duration, SAMPLES)
-    return np.array([np.atleast_1d(np.asarray(reference(t, order)[0], dtype=float)) for t in ts])
+    return reference_positions(reference, np.linspace(0.0, duration, SAMPLES), order)
 
 
 def _generalized(M: np.ndarray, kd: np.ndarray) -> tuple[float, np.ndarray]:
