@@ -92,9 +92,9 @@ def test_control_rate_section_on_short_runs(tmp_path):
     assert (tmp_path / "figures" / "control_rate.png").stat().st_size > 10_000
 
 
-def test_the_section_is_in_both_benches():
+def test_the_section_is_in_both_benches(tmp_path):
     for quick in (True, False):
-        keys = [s.key for s in bench_catalogue.catalogue(quick=quick, logs=bench_catalogue.Path("/tmp/x"))]
+        keys = [s.key for s in bench_catalogue.catalogue(quick=quick, logs=tmp_path)]
         assert keys[-1] == "control_rate"
 
 
