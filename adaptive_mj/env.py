@@ -370,7 +370,7 @@ class _Episode:
             from adaptive_mj.sim.runner import control_timing
 
             self.controller = Controller(law, setup.reference, self.theta_hat0, plant.ctrl_range, self.order,
-                                         plant.stages, plant.dt, js, control_timing(scn, setup))
+                                         plant.stages, plant.dt, js, control_timing(scn, setup), setup.sensors)
             self.step = ControlStep(plant, self.controller, self.events, state_bound=self.state_bound,
                                     noise=self._next_noise)
             self._policy = self.controller

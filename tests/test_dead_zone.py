@@ -189,7 +189,8 @@ def test_compiled_slotine_li_output_has_the_same_boundary():
 
     def rate(width, on_s):
         u, r = np.empty(2), np.empty(4)
-        out_fn(Y, np.zeros(2), th, s, kd, gamma, True, width, on_s, 1.25, 0.0, 0.0, th, -inf4, inf4, u, r)
+        out_fn(Y, np.zeros(2), th, s, kd, gamma, True, width, on_s, 1.25, 0.0, 0.0, th, -inf4, inf4,
+               -inf4[:2], inf4[:2], False, u, r)
         return r
 
     plain = _slotine()(0.0, *ARM_CASES[0], th).theta_hat_dot

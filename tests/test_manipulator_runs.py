@@ -115,7 +115,7 @@ def test_position_servo_arm_runs_through_servo_to_torque(tmp_path, capsys):
     ("plant.unknown=['nope']", r"plant.unknown names body 'nope'"),
     ("reference.center='nokey'", r"reference.center names keyframe 'nokey'.*keyframes: \['home'\]"),
     ("law.kd={elbow=3.0}", r"law.kd must give every joint a value, missing shoulder_pan"),
-    ("noise.std.y=0.01", r"noise.std is not supported for plant.kind = 'manipulator'"),
+    ("noise.std.y=0.01", r"unknown key 'noise.std.y' \(measured signals: q, q_dot\)"),
 ])
 def test_manipulator_scenario_errors_are_one_line(override, match, capsys):
     assert main(["run", "ur5e_payload_swap", "--set", override, "--set", "simulation.duration=0.1",

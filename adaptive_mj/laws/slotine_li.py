@@ -54,10 +54,12 @@ def reference_terms(x, ref, lam, s, qd_r, qdd_r):
 
 
 def slotine_li_output(Y, tau_known, theta, s, kd, gamma, adapt, dz_width, dz_on_s, e_norm,
-                      sigma, e_mod, theta0, lower, upper, u, rate):
-    """τ = Y θ + τ_known + K_D s into u (m,); θ' = Γ⁻¹ Yᵀ s into rate (unless not adapt,
+                      sigma, e_mod, theta0, lower, upper, lo, hi, freeze, u, rate):
+    """τ = Y θ + τ_known + K_D s into u (m,) (unclamped); θ' = Γ⁻¹ Yᵀ s into rate (unless not adapt,
     or the dead-zone signal ‖s‖ (dz_on_s) or ‖q̃‖ = e_norm is below dz_width: common.dead_zone_open), then the
-    modifications (common.modify_rate with |s| = ‖s‖) when adapting."""
+    modifications (common.modify_rate with |s| = ‖s‖) when adapting. freeze (saturation-aware
+    adaptation): a joint whose τ_j lies outside its limits [lo_j, hi_j] (m,) gives no s_j to the rate
+    (θ' = Γ⁻¹ Σ_{j unsaturated} Y_jᵀ s_j)."""
     m, n = Y.shape[0], Y.shape[1]
     s_norm = 0.0
     for j in range(m):
@@ -72,6 +74,8 @@ def slotine_li_output(Y, tau_known, theta, s, kd, gamma, adapt, dz_width, dz_on_
         for i in range(n):
             acc = 0.0
             for j in range(m):
+                if freeze and (u[j] < lo[j] or u[j] > hi[j]):
+                    continue
                 acc += Y[j, i] * s[j]
             rate[i] = acc / gamma[i]
     else:
@@ -96,13 +100,16 @@ class SlotineLiLaw(Law):
     lam: Λ [1/s], kd: K_D [N m s/rad], scalar or (m,); gamma: Γ, scalar or (n_params,)
     (estimates move at 1/γ); dead_zone: None or a DeadZone on ‖s‖ (or ‖q̃‖);
     modification: σ/e-modification and projection (common.Modification), or None.
+    saturation: (lo, hi) (m,) torque limits [N m or N] for saturation-aware adaptation (a saturated
+    joint's s_j is left out of the rate, slotine_li_output's freeze), or None (the lecture's law).
     """
 
     order = 2
     native = True  # adaptive_mj.sim.native_manipulator compiles slotine_li_output
 
     def __init__(self, regressor, names, m: int, *, lam, kd, gamma=1.0, dead_zone: DeadZone | None = None,
-                 mode: Mode = Mode.ADAPTIVE, modification: Modification | None = None):
+                 mode: Mode = Mode.ADAPTIVE, modification: Modification | None = None,
+                 saturation: tuple[np.ndarray, np.ndarray] | None = None):
         self.regressor = regressor
         self.names = tuple(names)
         self.m = int(m)
@@ -119,6 +126,10 @@ class SlotineLiLaw(Law):
         self._dz_on_s = dead_zone is None or dead_zone.on is DeadZoneOn.S
         self.modification = modification or NO_MODIFICATION
         self._mod = self.modification.arrays(len(self.names))
+        self.freeze = saturation is not None
+        lo, hi = saturation if saturation is not None else (-np.inf, np.inf)
+        self.lo = np.broadcast_to(np.asarray(lo, dtype=float), (self.m,)).copy()
+        self.hi = np.broadcast_to(np.asarray(hi, dtype=float), (self.m,)).copy()
 
     @property
     def bounds(self) -> Box | None:
@@ -129,7 +140,8 @@ class SlotineLiLaw(Law):
         sigma, e_mod, theta0, lower, upper = self._mod
         return {"lam": self.lam, "kd": self.kd, "gamma": self.gamma, "adapt": self.adapt, "mode": int(self.mode),
                 "dz_width": self._dz_width, "dz_on_s": self._dz_on_s, "sigma": sigma, "e_mod": e_mod,
-                "theta0": theta0, "lower": lower, "upper": upper}
+                "theta0": theta0, "lower": lower, "upper": upper, "freeze": self.freeze,
+                "sat_lo": self.lo, "sat_hi": self.hi}
 
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
         m = self.m
@@ -143,7 +155,8 @@ class SlotineLiLaw(Law):
         e_norm = float(np.linalg.norm(ref[0] - x[0]))
         sigma, e_mod, theta0, lower, upper = self._mod
         slotine_li_output(Y, tau_known, theta_hat, s, self.kd, self.gamma, self.adapt, self._dz_width,
-                          self._dz_on_s, e_norm, sigma, e_mod, theta0, lower, upper, u, rate)
+                          self._dz_on_s, e_norm, sigma, e_mod, theta0, lower, upper, self.lo, self.hi, self.freeze,
+                          u, rate)
         return LawStep(u, rate, s, qdd_r)
 
     def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:

@@ -25,6 +25,8 @@ from typing import Callable, Iterator
 import mujoco
 import numpy as np
 
+from adaptive_mj.disturbance import JointDisturbance
+
 from adaptive_mj.errors import ModelError
 from adaptive_mj.numba_util import with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
@@ -356,7 +358,9 @@ class ManipulatorPlant:
         self.ctrl_range = (lo, hi) if np.isfinite(lo).any() or np.isfinite(hi).any() else None
         self._theta: np.ndarray | None = None
         self.force_offset = 0.0
-        self.disturbance: Callable[[float], float] | None = None
+        self.disturbance: Callable[[float], float] | None = None  # unused: an arm's are per joint
+        self.joint_disturbance: JointDisturbance | None = None  # t -> τ_d (m,), held over a step
+        self.loads: dict[str, float] = {}  # unmodelled loads: body name -> mass [kg], its weight at the CoM
         self.first_contact: tuple[float, str] | None = None  # (t, text) of the first contact seen, see step()
         self._warning_total0 = int(self.data.warning.number.sum())
         self._warnings0 = self.data.warning.number.copy()
@@ -384,6 +388,14 @@ class ManipulatorPlant:
         self.data.qpos[self._qadr] = x0[0]
         self.data.qvel[:] = x0[1]
         self.first_contact = None
+        self.apply_loads()
+
+    def apply_loads(self) -> None:
+        """Each unmodelled load's weight m g [N] on its body's centre of mass (MuJoCo's xfrc_applied,
+        world frame): a point mass the regressor does not know (its inertia left out)."""
+        self.data.xfrc_applied[:] = 0.0
+        for name, mass in self.loads.items():
+            self.data.xfrc_applied[self.body_id(name), :3] = mass * self.model.opt.gravity
 
     def measure(self, d, x: np.ndarray) -> None:
         x[0] = d.qpos[self._qadr]
@@ -457,6 +469,8 @@ class ManipulatorPlant:
         self._note_contact()
 
     def step(self) -> None:
+        if self.joint_disturbance is not None:  # held over the step (the native callback writes it per stage)
+            self.data.qfrc_applied[:] = self.joint_disturbance(self.data.time)
         mujoco.mj_step(self.model, self.data)
         self._note_contact()
 

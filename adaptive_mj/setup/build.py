@@ -20,8 +20,9 @@ from adaptive_mj.laws import (CompositeSlidingLaw, DeadZone, DeadZoneOn, FirstOr
                               Law, Modification, RobustSlidingLaw, SlidingAdaptiveLaw)
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.plants import ModelSource
-from adaptive_mj.plants.protocol import Plant
-from adaptive_mj.setup.scenario import JOINT_REFERENCE_KINDS, STATE_SIGNALS, Scenario
+from adaptive_mj.plants.protocol import Plant, has_joints
+from adaptive_mj.setup.scenario import JOINT_REFERENCE_KINDS, JOINT_SIGNALS, STATE_SIGNALS, Scenario
+from adaptive_mj.sensors import Sensors
 from adaptive_mj.plants import Event, plant_order
 
 
@@ -40,6 +41,7 @@ class Setup:
     source: ModelSource | None
     model_xml: str | None = None  # the compiled model as MJCF (the log's model.xml)
     notes: tuple[str, ...] = ()  # model edits made for the run (servo_to_torque), shown and logged
+    sensors: Sensors | None = None  # an arm's encoders and velocity estimate (None: the law sees x + noise)
 
 
 def plant_kinds(kind: str | None = None) -> dict:
@@ -77,13 +79,22 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     theta_hat0 = _estimates(scn, names, plant)
     law = _law(scn, plant, _modification(scn, names, theta_hat0))
     std = None
-    if scn.noise.std:
-        std = np.array([scn.noise.std.get(sig, 0.0) for sig in STATE_SIGNALS[:order]])
+    sensors = None
+    if has_joints(plant):
+        joints = tuple(plant.joint_names)
+        if scn.noise.std:
+            std = np.array([_per_joint(scn, f"noise.std.{sig}", scn.noise.std.get(sig, 0.0), joints)
+                            for sig in JOINT_SIGNALS])
+        sensors = _sensors(scn, plant)
+        _arm_disturbance(scn, plant)
+    else:
+        if scn.noise.std:
+            std = np.array([scn.noise.std.get(sig, 0.0) for sig in STATE_SIGNALS[:order]])
+        plant.disturbance = _disturbance(scn)
     rng = np.random.default_rng(scn.noise.seed)
-    plant.disturbance = _disturbance(scn)
     return Setup(plant=plant, law=law, reference=reference, theta_hat0=theta_hat0, noise_std=std,
                  rng=rng, events=[_event(e, scn) for e in scn.events], source=source,
-                 model_xml=built.model_xml, notes=built.notes)
+                 model_xml=built.model_xml, notes=built.notes, sensors=sensors)
 
 
 def _initial_state(scn: Scenario, reference, order: int) -> np.ndarray:
@@ -162,7 +173,17 @@ def _slotine_li(scn: Scenario, plant, modification):
     return SlotineLiLaw(plant.regressor, plant.names, plant.m, lam=lam, kd=kd,
                         gamma=_gamma(scn, plant.names) if L.gamma is not None else 1.0,
                         dead_zone=_dead_zone(scn, plant), mode=mode,
-                        modification=modification if mode is Mode.ADAPTIVE else None)
+                        modification=modification if mode is Mode.ADAPTIVE else None,
+                        saturation=_saturation(scn, plant) if L.saturation == "freeze" else None)
+
+
+def _saturation(scn: Scenario, plant):
+    """law.saturation = "freeze": the plant's torque limits (lo, hi) (m,) [N m], which must exist."""
+    if plant.ctrl_range is None:
+        raise ScenarioError(f"{scn.source}: law.saturation = 'freeze' needs torque limits (the model's actuator "
+                            "ctrlrange), but no actuator is limited")
+    return plant.ctrl_range
+
 
 
 def _plugin(scn: Scenario, plant, modification):
@@ -266,6 +287,41 @@ def _reference(scn: Scenario, plant):
     cls = {"constant": refs.Constant, "cosine": refs.Cosine, "sine": refs.Sine,
            "sum_of_sines": refs.SumOfSines, "smooth_step": refs.SmoothStep}[r.kind]
     return cls(**r.params)
+
+
+def _sensors(scn: Scenario, plant) -> Sensors | None:
+    """[sensors] of an arm as a stage.Sensors: encoder counts N -> quantum 2π/N rad (a slide joint:
+    1/N m per count, i.e. counts per metre); None when ideal."""
+    import mujoco
+
+    sn = scn.sensors
+    joints = tuple(plant.joint_names)
+    counts = np.zeros(len(joints)) if sn.encoder_counts is None else \
+        _per_joint(scn, "sensors.encoder_counts", sn.encoder_counts, joints)
+    hinge = np.array([plant.model.jnt_type[plant.model.dof_jntid[j]] == mujoco.mjtJoint.mjJNT_HINGE
+                      for j in range(len(joints))])
+    quantum = np.where(counts > 0, np.where(hinge, 2.0 * np.pi, 1.0) / np.where(counts > 0, counts, 1.0), 0.0)
+    out = Sensors(quantum=quantum, differentiated=sn.velocity == "differentiated", cutoff_hz=sn.velocity_cutoff_hz)
+    return None if out.ideal else out
+
+
+def _arm_disturbance(scn: Scenario, plant) -> None:
+    """[disturbance] on an arm: joint torques (adaptive_mj.disturbance) and unmodelled loads."""
+    from adaptive_mj.disturbance import JointDisturbance
+
+    d = scn.disturbance
+    joints = tuple(plant.joint_names)
+    if d.load:
+        for body in d.load:
+            plant.body_id(body)  # a ModelError naming the body when the model has none
+        plant.loads = dict(d.load)
+        plant.apply_loads()
+    magnitude = _per_joint(scn, "disturbance.magnitude", d.magnitude, joints)
+    if d.kind == "none" or not np.any(magnitude != 0.0):
+        return
+    rng = np.random.default_rng([scn.noise.seed, 1])  # its own stream: the measurement noise is unchanged
+    plant.joint_disturbance = JointDisturbance(d.kind, magnitude, t0=d.t0, omega=d.omega, phase=d.phase,
+                                               bandwidth_hz=d.bandwidth_hz, dt=plant.dt, rng=rng)
 
 
 def _disturbance(scn: Scenario):

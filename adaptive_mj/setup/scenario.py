@@ -31,9 +31,11 @@ LAW_KINDS = ("sliding_adaptive", "first_order_adaptive", "fixed_nominal", "robus
 MANIPULATOR_LAW_KINDS = ("slotine_li", "computed_torque", "pd_gravity")
 DEAD_ZONE_ON = ("s", "tracking_error")
 DISTURBANCE_KINDS = ("none", "constant", "step", "sine")
+ARM_DISTURBANCE_KINDS = DISTURBANCE_KINDS + ("noise",)  # per joint torques (adaptive_mj.disturbance)
 EVENT_KINDS = ("payload_mass", "payload_swap", "fluid_density_scale", "constant_force")
 DEFAULT_MODEL = {"heave": "heave_vehicle", "arm": "pendulum_arm", "manipulator": "ur5e_arm"}
 STATE_SIGNALS = ("y", "y_dot", "y_ddot")
+JOINT_SIGNALS = ("q", "q_dot")  # an arm's measured signals (noise.std)
 REGRESSORS = ("lecture", "sin_squared")
 FIRST_ORDER_PARAMS = {"lecture": ("a", "b"), "sin_squared": ("p",)}
 
@@ -162,21 +164,42 @@ class LawSpec:
     lam_joints: dict[str, float] | None = None  # manipulator laws: Λ per joint (else lam for all)
     robust: RobustSpec = RobustSpec()  # σ/e-modification, projection, composite adaptation
     plugin_params: dict[str, float] | None = None  # a law plugin's declared keys (law.kind = its name)
+    saturation: str = "ignore"  # manipulator law: "freeze" = saturation-aware adaptation
 
 
 @dataclass(frozen=True)
 class NoiseSpec:
-    std: dict[str, float]
+    """[noise]: std {signal: σ} (an arm's q and q_dot: a number for every joint, or {joint: σ});
+    seed: of the run's generator."""
+
+    std: dict[str, Any]
     seed: int
 
 
 @dataclass(frozen=True)
+class SensorSpec:
+    """[sensors] (plant.kind = "manipulator"): encoder_counts per revolution (a number, or {joint:
+    counts}; None: not quantised); velocity "measured" or "differentiated" (a filtered finite
+    difference of the measured positions); velocity_cutoff_hz: that filter's cut-off [Hz]."""
+
+    encoder_counts: float | dict[str, float] | None = None
+    velocity: str = "measured"
+    velocity_cutoff_hz: float = 50.0
+
+
+@dataclass(frozen=True)
 class DisturbanceSpec:
+    """[disturbance]: a force [N or N m] (1-DOF), or on an arm torques per joint (magnitude a number
+    or {joint: value}; kind "noise": band-limited noise of std magnitude and bandwidth_hz) and
+    unmodelled loads {body: mass [kg]}."""
+
     kind: str
-    magnitude: float
+    magnitude: float | dict[str, float]
     t0: float
     omega: float
     phase: float
+    bandwidth_hz: float = 10.0
+    load: dict[str, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -207,6 +230,7 @@ class Scenario:
     overrides: tuple[str, ...] = field(default=())
     control: ControlSpec = ControlSpec()
     success: SuccessSpec = SuccessSpec()
+    sensors: SensorSpec = SensorSpec()
 
 
 # --------------------------------------------------------------------------
@@ -435,15 +459,13 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
     sim = _simulation(top.table("simulation"), plant, order)
     reference = _reference(top.table("reference"), plant)
     law = _law(top.table("law"), plant, order)
-    noise = _noise(top.table("noise", {}), order)
-    disturbance = _disturbance(top.table("disturbance", {}))
-    if plant.kind == "manipulator":
-        if noise.std:
-            raise ScenarioError(f"{where}: noise.std is not supported for plant.kind = 'manipulator' yet "
-                                "(the regressor is evaluated at the true configuration); remove it")
-        if disturbance.kind != "none":
-            raise ScenarioError(f"{where}: disturbance is not supported for plant.kind = 'manipulator' yet; "
-                                "remove it")
+    arm = plant.kind == "manipulator"
+    noise = _noise(top.table("noise", {}), order, arm=arm)
+    disturbance = _disturbance(top.table("disturbance", {}), arm=arm)
+    sensors = _sensors(top.table("sensors", {}), arm=arm)
+    if sensors.velocity == "differentiated" and "q_dot" in noise.std:
+        raise ScenarioError(f"{where}: noise.std.q_dot is for sensors.velocity = 'measured'; a differentiated "
+                            "velocity takes its noise from the positions (noise.std.q, sensors.encoder_counts)")
     events = _events(top.get("events", []), top, plant, sim)
     control = _control(top.table("control", {}), sim)
     success = _success(top.table("success", {}))
@@ -453,7 +475,8 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
     top.finish()
     return Scenario(name=name, description=description, plant=plant, simulation=sim, reference=reference,
                     law=law, noise=noise, disturbance=disturbance, events=events, log_rate_hz=log_rate,
-                    source=where, text=text, overrides=overrides, control=control, success=success)
+                    source=where, text=text, overrides=overrides, control=control, success=success,
+                    sensors=sensors)
 
 
 def _model_from_command_line(doc: dict, overrides, base_dir: Path | None, where: str) -> None:
@@ -765,10 +788,13 @@ def _manipulator_law(t: _Table) -> LawSpec:
     if kind != "slotine_li" and nominal is None and initial is None:
         raise ScenarioError(f"{t.where}: law.nominal (or law.initial_estimates) is required for law.kind = {kind!r}")
     robust = _robust(t, kind, adaptive=kind == "slotine_li", composite=False, presets=("physical",))
+    saturation = t.string("saturation", "ignore", choices=("ignore", "freeze"))
+    if saturation != "ignore" and kind != "slotine_li":
+        raise t.fail("saturation", "'ignore' for a law without adaptation", saturation)
     t.finish()
     return LawSpec(kind=kind, order=2, lam=None if isinstance(lam, dict) else lam, k=0.0, gamma=gamma,
                    dead_zone=dead_zone, initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None,
-                   kd=kd, lam_joints=lam if isinstance(lam, dict) else None, robust=robust)
+                   kd=kd, lam_joints=lam if isinstance(lam, dict) else None, robust=robust, saturation=saturation)
 
 
 def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
@@ -888,23 +914,54 @@ def _estimate_table(t: _Table, name: str):
     return t.named_numbers(name, None)
 
 
-def _noise(t: _Table, order: int) -> NoiseSpec:
-    std = t.named_numbers("std", None) or {}
-    signals = STATE_SIGNALS[:order]
-    for key, value in std.items():
-        if key not in signals:
-            raise ScenarioError(f"{t.where}: unknown key 'noise.std.{key}' (measured signals: {', '.join(signals)})")
-        if value < 0:
-            raise t.fail(f"std.{key}", ">= 0", value)
+def _noise(t: _Table, order: int, *, arm: bool = False) -> NoiseSpec:
+    signals = JOINT_SIGNALS if arm else STATE_SIGNALS[:order]
+    raw = t.get("std", None)
+    std: dict[str, Any] = {}
+    if raw is not None:
+        sub = t.table("std")
+        for key in raw:
+            if key not in signals:
+                raise ScenarioError(f"{t.where}: unknown key 'noise.std.{key}' (measured signals: "
+                                    f"{', '.join(signals)})")
+            std[key] = _joint_values(sub, key, arrays=False) if arm else sub.number(key)
+            for j, v in (std[key].items() if isinstance(std[key], dict) else [("", std[key])]):
+                if v < 0:
+                    raise sub.fail(key + (f".{j}" if j else ""), ">= 0", v)
     seed = t.integer("seed", 0, ge=0)
     t.finish()
     return NoiseSpec(std=std, seed=seed)
 
 
-def _disturbance(t: _Table) -> DisturbanceSpec:
-    kind = t.string("kind", "none", choices=DISTURBANCE_KINDS)
-    spec = DisturbanceSpec(kind=kind, magnitude=t.number("magnitude", 0.0), t0=t.number("t0", 0.0, ge=0),
-                           omega=t.number("omega", 1.0, gt=0), phase=t.number("phase", 0.0))
+def _disturbance(t: _Table, *, arm: bool = False) -> DisturbanceSpec:
+    kinds = ARM_DISTURBANCE_KINDS if arm else DISTURBANCE_KINDS
+    kind = t.string("kind", "none", choices=kinds)
+    magnitude = _joint_values(t, "magnitude", arrays=False) if arm and "magnitude" in t.data \
+        else t.number("magnitude", 0.0)
+    bandwidth = t.number("bandwidth_hz", 10.0, gt=0) if arm else 10.0
+    load = None
+    if "load" in t.data:
+        if not arm:
+            raise t.fail("load", "absent unless plant.kind = 'manipulator'", t.data["load"])
+        load = t.named_numbers("load", gt=0)
+    spec = DisturbanceSpec(kind=kind, magnitude=magnitude, t0=t.number("t0", 0.0, ge=0),
+                           omega=t.number("omega", 1.0, gt=0), phase=t.number("phase", 0.0), bandwidth_hz=bandwidth,
+                           load=load)
+    t.finish()
+    return spec
+
+
+def _sensors(t: _Table, *, arm: bool) -> SensorSpec:
+    if t.data and not arm:
+        raise ScenarioError(f"{t.where}: [sensors] ({', '.join(repr(k) for k in t.data)}) is for plant.kind = "
+                            "'manipulator'; a 1-DOF plant's sensors are noise.std")
+    counts = _joint_values(t, "encoder_counts", arrays=False) if "encoder_counts" in t.data else None
+    for j, v in (counts.items() if isinstance(counts, dict) else [("", counts)] if counts is not None else []):
+        if not v >= 1:
+            raise t.fail("encoder_counts" + (f".{j}" if j else ""), "a count per revolution >= 1", v)
+    spec = SensorSpec(encoder_counts=counts,
+                      velocity=t.string("velocity", "measured", choices=("measured", "differentiated")),
+                      velocity_cutoff_hz=t.number("velocity_cutoff_hz", 50.0, gt=0, allow_inf=True))
     t.finish()
     return spec
 

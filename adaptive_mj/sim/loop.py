@@ -55,7 +55,8 @@ class Controller:
     control), step_s and step_ref hold what the step's row records."""
 
     def __init__(self, law: Law, reference, theta_hat0, ctrl_range: CtrlRange | None, order: int, stages: int,
-                 dt: float, joint_shape: tuple = (), timing: ControlTiming | None = None):
+                 dt: float, joint_shape: tuple = (), timing: ControlTiming | None = None,
+                 sensors: st.Sensors | None = None):
         self.law, self.reference, self.order = law, reference, order
         self.timing = timing or ControlTiming(period=dt)
         self.theta_hat = np.array(theta_hat0, dtype=float)
@@ -66,6 +67,13 @@ class Controller:
             self.lo, self.hi = ctrl_range
         self.joints = bool(joint_shape)
         self.noise = np.zeros((order,) + tuple(joint_shape))
+        # an arm's sensors (stage.sense): None = the law sees x + noise
+        self.sensors = sensors if sensors is not None and self.joints and not sensors.ideal else None
+        if self.sensors is not None:
+            m = joint_shape[0]
+            self.q_prev, self.v_est = np.zeros(m), np.zeros(m)
+            self.sense_period = self.timing.period if self.timing.sampled else dt
+            self.alpha = self.sensors.alpha(self.sense_period)
         self.inc, self.weights = TABLEAU[stages]
         self.h = dt
         self.stage, self.step_index = len(self.inc), 0
@@ -130,7 +138,13 @@ class Controller:
         """The law at stage i on the measured state: (clamped u, its LawStep)."""
         ref = self._ref(t)
         st.stage_estimate(self.theta_hat, self.prev, self.inc[i], self.h, self.lower, self.upper, self.th)
-        seen = x + self.noise
+        if self.sensors is None:
+            seen = x + self.noise
+        else:
+            seen = np.empty_like(x)
+            sn = self.sensors
+            st.sense(x[0], x[1], self.noise, sn.quantum, sn.differentiated, i == 0, self.step_index == 0,
+                     self.alpha, self.sense_period, self.q_prev, self.v_est, seen)
         if self.filters:
             if i == 0:
                 self.law.step_begins(seen)
@@ -250,7 +264,8 @@ def run(plant: Plant, law: Law, reference, *, duration: float, theta_hat0: Seque
         noise_std: Sequence[float] | None = None, rng: np.random.Generator | None = None,
         events: Sequence[Event] = (), state_bound: float = math.inf,
         sink: Sink | None = None, sink_every: int = 1000, native: bool | None = None,
-        control_delay: int = 0, control_mode: str = "continuous", control_period: float | None = None) -> Trajectory:
+        control_delay: int = 0, control_mode: str = "continuous", control_period: float | None = None,
+        sensors: st.Sensors | None = None) -> Trajectory:
     """Run plant under law tracking reference for `duration` seconds.
 
     theta_hat0: (n_theta,) initial estimates (the nominal values for baselines).
@@ -262,6 +277,7 @@ def run(plant: Plant, law: Law, reference, *, duration: float, theta_hat0: Seque
     applying it (zero before). control_mode: "continuous" (the law at every integrator stage) or
     "sampled" (once per control_period [s], a whole multiple of the timestep; default the timestep).
     native: run the law as a compiled MuJoCo callback; None = whenever the plant and law support it.
+    sensors: an arm's encoders and velocity estimate (stage.Sensors; None: the law sees x + noise).
 
     Returns a Trajectory with one row per physics step (the state at the step's start and what was
     applied during it). A run that diverges stops at that step with status "diverged" and the
@@ -281,18 +297,25 @@ def run(plant: Plant, law: Law, reference, *, duration: float, theta_hat0: Seque
     queue = EventQueue(events, plant.dt)
     rows.events = queue.applied
     noise = _NoiseSource(noise_std, rng, (order,) + plant.joint_shape)
-    nc = _native_controller(plant, law, reference, theta_hat0, timing, native)
+    if sensors is not None and sensors.ideal:
+        sensors = None
+    if sensors is not None and not plant.joint_shape:
+        raise ValueError(f"encoder quantisation and differentiated velocity are for plants with joints "
+                         f"(plant.kind = 'manipulator'), not a {type(plant).__name__}")
+    nc = _native_controller(plant, law, reference, theta_hat0, timing, native, sensors)
     with _interruptible(rows.stopped):
         if nc is not None:
             status, reason = _run_native(plant, nc, rows, queue, noise, state_bound)
         else:
             ctrl = Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, plant.dt,
-                              plant.joint_shape, timing)
+                              plant.joint_shape, timing, sensors)
             step = ControlStep(plant, ctrl, queue, state_bound=state_bound, noise=noise.draw, sink=sink)
             status, reason = _run_python(plant, step, rows)
     meta = {"native": nc is not None, "events": queue.applied, **timing.describe()}
     if control_delay:
         meta["control_delay"] = int(control_delay)  # [physics steps]
+    if sensors is not None:
+        meta["sensors"] = sensors.describe()
     return rows.result(rows.k, status, reason, meta)
 
 
@@ -328,7 +351,7 @@ def _run_native(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource, 
 
 
 def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: ControlTiming,
-                       native: bool | None) -> ContextOwner | None:
+                       native: bool | None, sensors: st.Sensors | None = None) -> ContextOwner | None:
     """The native controller for this run, or None for the Python path (native False, or not supported;
     a law plugin numba cannot compile falls back with one line on stderr)."""
     make: Callable[..., ContextOwner]
@@ -341,6 +364,8 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
     if not native:
         return None
     try:
+        if sensors is not None:
+            return make(plant, law, reference, theta_hat0, NATIVE_CHUNK, control=timing, sensors=sensors)
         return make(plant, law, reference, theta_hat0, NATIVE_CHUNK, control=timing)
     except Exception as exc:  # a user's law numba cannot compile: say why, run it in Python
         plugin = law.installed

@@ -70,6 +70,7 @@ if TYPE_CHECKING:
     is_sample_step: Any
     period_ends: Any
     delay_slot: Any
+    sense: Any
     SAMPLED: int
 
 _i8, _f8 = np.int64, np.float64
@@ -95,6 +96,10 @@ CONTEXT = np.dtype([
     ("qdd_r", _i8), ("zero", _i8), ("u", _i8), ("u_hold", _i8), ("s_hold", _i8), ("delayed", _i8),
     ("ring", _i8), ("rate", _i8), ("y_std", _i8), ("y", _i8), ("tau_known", _i8), ("ref", _i8), ("noise", _i8),
     ("scratch", _i8),
+    # sensors (stage.sense), disturbance torques and saturation-aware adaptation
+    ("diff", _i8), ("freeze", _i8), ("has_dist", _i8), ("alpha", _f8), ("sense_period", _f8),
+    ("quantum", _i8), ("q_prev", _i8), ("v_est", _i8), ("q_true", _i8), ("dist", _i8), ("sat_lo", _i8),
+    ("sat_hi", _i8),
     # records (one row per physics step)
     ("rec_t", _i8), ("rec_x", _i8), ("rec_u", _i8), ("rec_s", _i8), ("rec_ref", _i8), ("rec_theta", _i8),
 ])
@@ -346,7 +351,7 @@ def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step'
     functions it calls (regressor, ref_terms, output, the stage functions, pointer intrinsics) are
     globals that compiled() replaces by their numba versions."""
     off_ud, off_qpos, off_qvel, off_ctrl, off_cdof, off_xpos, off_xmat, off_subcom, off_cinert, \
-        off_arm, off_damp, off_gravity = off
+        off_arm, off_damp, off_gravity, off_qfrc = off
 
     @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True, cache=True)  # noqa: F821 (injected)
     def callback(m, d):  # noqa: C901 (see above)
@@ -388,6 +393,11 @@ def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step'
         gear = carray(fptr(ctx.gear), nv)  # noqa: F821 (injected)
         for j in range(nv):
             ctrl[act[j]] = u[j] / gear[j]
+        if ctx.has_dist != 0:  # the step's disturbance torques, held over its stages
+            qfrc = carray(fptr(pointer_at(base, off_qfrc)), nv)  # noqa: F821 (injected)
+            dist = carray(fptr(ctx.dist), (ctx.maxrows, nv))  # noqa: F821 (injected)
+            for j in range(nv):
+                qfrc[j] = dist[row, j]
         if stage == 0:  # the step's row: t, true x, u, s, ref, θ̂ at the step's start
             maxrows = ctx.maxrows
             carray(fptr(ctx.rec_t), maxrows)[row] = ctx.t  # noqa: F821 (injected)
@@ -422,15 +432,17 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
     """One evaluation of the Slotine–Li law at a stage: measure x (+ noise), the stage estimate, the
     regressor on the live MjData, τ clamped into u_hold (and s into s_hold), the rate into ctx.rate."""
     nv, nb, nth, nstd = ctx.nv, ctx.nbody, ctx.nth, ctx.nstd
-    _, _, _, _, off_cdof, off_xpos, off_xmat, off_subcom, off_cinert, off_arm, off_damp, off_gravity = off
+    _, _, _, _, off_cdof, off_xpos, off_xmat, off_subcom, off_cinert, off_arm, off_damp, off_gravity, _ = off
     th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
     x = carray(fptr(ctx.x), (2, nv))  # noqa: F821 (injected)
     s, qd_r, qdd_r = carray(fptr(ctx.s), nv), carray(fptr(ctx.qd_r), nv), carray(fptr(ctx.qdd_r), nv)  # noqa: F821 (injected)
     noise = carray(fptr(ctx.noise), (ctx.maxrows, 2, nv))  # noqa: F821 (injected)
-    qadr = carray(iptr(ctx.qadr), nv)  # noqa: F821 (injected)
+    qadr, q_true = carray(iptr(ctx.qadr), nv), carray(fptr(ctx.q_true), nv)  # noqa: F821 (injected)
     for j in range(nv):
-        x[0, j] = qpos[qadr[j]] + noise[row, 0, j]
-        x[1, j] = qvel[j] + noise[row, 1, j]
+        q_true[j] = qpos[qadr[j]]
+    sense(q_true, qvel, noise[row], carray(fptr(ctx.quantum), nv), ctx.diff != 0, stage == 0,  # noqa: F821 (injected)
+          ctx.step == 0, ctx.alpha, ctx.sense_period, carray(fptr(ctx.q_prev), nv),  # noqa: F821 (injected)
+          carray(fptr(ctx.v_est), nv), x)  # noqa: F821 (injected)
     stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
     ref_terms(x, r, carray(fptr(ctx.lam), nv), s, qd_r, qdd_r)  # noqa: F821 (injected)
     Y_std, tau_known = carray(fptr(ctx.y_std), (nv, nstd)), carray(fptr(ctx.tau_known), nv)  # noqa: F821 (injected)
@@ -472,7 +484,8 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
     u = carray(fptr(ctx.u), nv)  # noqa: F821 (injected)
     output(Y, tau_known, th, s, carray(fptr(ctx.kd), nv), carray(fptr(ctx.gamma), nth), ctx.adapt != 0,  # noqa: F821 (injected)
            ctx.dz_width, ctx.dz_on_s != 0, e_norm, ctx.sigma, ctx.e_mod, carray(fptr(ctx.theta0), nth),  # noqa: F821 (injected)
-           lower, upper, u, rate)
+           lower, upper, carray(fptr(ctx.sat_lo), nv), carray(fptr(ctx.sat_hi), nv), ctx.freeze != 0,  # noqa: F821
+           u, rate)
     lo, hi = carray(fptr(ctx.lo), nv), carray(fptr(ctx.hi), nv)  # noqa: F821 (injected)
     u_hold, s_hold = carray(fptr(ctx.u_hold), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
     for j in range(nv):
@@ -496,16 +509,17 @@ def compiled():
 
     offsets = mujoco_offsets()
     off = tuple(offsets[k] for k in ("userdata", "qpos", "qvel", "ctrl", "cdof", "xpos", "xmat", "subtree_com",
-                                     "cinert", "model.dof_armature", "model.dof_damping", "model.gravity"))
+                                     "cinert", "model.dof_armature", "model.dof_damping", "model.gravity",
+                                     "qfrc_applied"))
     key = source_key(_callback_factory, _law_stage, _regressor, reference_terms, slotine_li_output,
-                     stage_code.stage_estimate, context_address, extra=(off, numba.__version__))
+                     stage_code.stage_estimate, stage_code.sense, context_address, extra=(off, numba.__version__))
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
     common = {"carray": carray, "iptr": pointer(types.int64), "fptr": pointer(types.float64), "np": np,
               "MODE_PD_GRAVITY": MODE_PD_GRAVITY}
     pointers = context_functions(numba, carray, common["iptr"], tag)
     stage_fns: dict[str, Any] = {name: jit_tree(getattr(stage_code, name), numba.njit, tag=tag) for name in
                                  ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step",
-                                  "period_ends", "delay_slot")}
+                                  "period_ends", "delay_slot", "sense")}
     law_stage = jit_tree(_law_stage, numba.njit, tag=tag, regressor=jit_tree(_regressor, numba.njit, tag=tag),
                          ref_terms=jit_tree(reference_terms, numba.njit, tag=tag),
                          output=jit_tree(slotine_li_output, numba.njit, tag=tag), **pointers, **common, **stage_fns)
@@ -556,7 +570,7 @@ class NativeManipulatorController(ContextOwner):
     plant: ManipulatorPlant
 
     def __init__(self, plant: Plant, law: Law, reference, theta_hat0, max_rows: int, *,
-                 control: stage_code.ControlTiming | None = None):
+                 control: stage_code.ControlTiming | None = None, sensors: stage_code.Sensors | None = None):
         from adaptive_mj.plants.manipulator import ManipulatorPlant
 
         if not isinstance(plant, ManipulatorPlant):
@@ -592,6 +606,9 @@ class NativeManipulatorController(ContextOwner):
             "scratch": np.zeros(18 * nb), "ref": np.zeros((rows * self.nst, 3, nv)), "noise": np.zeros((rows, 2, nv)),
             "rec_t": np.zeros(rows), "rec_x": np.zeros((rows, 2, nv)), "rec_u": np.zeros((rows, nv)),
             "rec_s": np.zeros((rows, nv)), "rec_ref": np.zeros((rows, 3, nv)), "rec_theta": np.zeros((rows, nth)),
+            "quantum": f64(sensors.quantum if sensors is not None else np.zeros(nv)), "q_prev": np.zeros(nv),
+            "v_est": np.zeros(nv), "q_true": np.zeros(nv), "dist": np.zeros((rows, nv)),
+            "sat_lo": f64(p["sat_lo"]), "sat_hi": f64(p["sat_hi"]),
         }
         B = reg.base_map
         if B is not None:
@@ -613,6 +630,10 @@ class NativeManipulatorController(ContextOwner):
         c["mode"], c["period_steps"], c["delay"], c["period"] = control.mode, control.steps, d, control.period
         c["h"], c["dz_width"], c["sigma"], c["e_mod"] = plant.dt, p["dz_width"], p["sigma"], p["e_mod"]
         c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
+        c["sense_period"] = control.period if control.sampled else plant.dt
+        c["diff"] = int(sensors is not None and sensors.differentiated)
+        c["alpha"] = sensors.alpha(c["sense_period"]) if sensors is not None else 0.0
+        c["freeze"], c["has_dist"] = int(bool(p["freeze"])), int(plant.joint_disturbance is not None)
         self.context = ctx
         self.bind()
 
@@ -641,6 +662,8 @@ class NativeManipulatorController(ContextOwner):
         b = self.buffers
         b["ref"][: rows * nst] = np.moveaxis(refs, 1, 0)[which]
         b["noise"][:rows] = 0.0 if noise is None else np.asarray(noise, dtype=float).reshape(rows, 2, m)
+        if plant.joint_disturbance is not None:
+            b["dist"][:rows] = plant.joint_disturbance.rows(t)
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
         self.bind()

@@ -177,7 +177,7 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
     kwargs = dict(duration=scn.simulation.duration, theta_hat0=setup.theta_hat0, noise_std=setup.noise_std,
                   rng=setup.rng, events=setup.events, state_bound=scn.simulation.state_bound,
                   sink_every=sink_every, control_delay=scn.simulation.control_delay,
-                  control_mode=scn.control.mode, control_period=timing.period,
+                  control_mode=scn.control.mode, control_period=timing.period, sensors=setup.sensors,
                   native=False if scn.simulation.python_callback or short else None)
     if log_path is None:
         traj, result = verdict(scn, run(plant, setup.law, setup.reference, **kwargs), crit, pre)

@@ -17,12 +17,16 @@ also the exact integral of the held rate (docs/THEORY.md, "Sampled-data control"
 
 Every estimate the law sees and every estimate the step ends with is clipped into the
 projection box [lower, upper] (±inf where a parameter is free).
+
+An arm's sensors (encoders, the velocity estimate): adaptive_mj.sensors (its `sense` runs here,
+at the stages the law runs at).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 from adaptive_mj.laws.common import clip_into
+from adaptive_mj.sensors import Sensors, sense
 
 # Per stage count: increments a_i (θ̂_i = θ̂_k + h a_i k_{i-1}) and weights b_i. For the
 # classic RK4 tableau a_i are also the stage-time offsets c_i (MuJoCo evaluates stage i at
@@ -34,8 +38,8 @@ TABLEAU = {
 
 CONTINUOUS, SAMPLED = 0, 1  # control modes, as the compiled callbacks store them
 
-__all__ = ["ControlTiming", "TABLEAU", "CONTINUOUS", "SAMPLED", "clip_into", "stage_estimate", "accumulate_rate",
-           "advance_estimates", "is_sample_step", "period_ends", "delay_slot"]
+__all__ = ["ControlTiming", "Sensors", "sense", "TABLEAU", "CONTINUOUS", "SAMPLED", "clip_into", "stage_estimate",
+           "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends", "delay_slot"]
 
 
 @dataclass(frozen=True)
