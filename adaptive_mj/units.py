@@ -5,7 +5,7 @@ OUTPUT = {"heave": "m", "arm": "rad", "first_order": "-", "manipulator": "rad"} 
 CONTROL = {"heave": "N", "arm": "N m", "first_order": "-", "manipulator": "N m"}
 _BODY_PARAM_UNITS = {"m": "kg", "mcx": "kg m", "mcy": "kg m", "mcz": "kg m", "Ixx": "kg m²", "Ixy": "kg m²",
                      "Iyy": "kg m²", "Ixz": "kg m²", "Iyz": "kg m²", "Izz": "kg m²", "armature": "kg m²",
-                     "damping": "N m s/rad"}
+                     "damping": "N m s/rad", "coulomb": "N m"}
 PARAMS = {
     "heave": {"d": "kg", "b": "kg/m", "c": "kg", "tau_d": "kg s", "tau_b": "kg s/m"},
     "arm": {"J": "kg m²", "b": "N m s/rad", "g_sin": "N m", "g_cos": "N m"},

@@ -2,7 +2,8 @@
 the specialised regressor kernel gives regressor_kernel's numbers, and chunks driven as
 loop.run's native branch drives them give the rows of run(..., native=False) (here:
 bit for bit) for the adaptive law, both baselines, a base-parameter plant, saturation,
-a dead-zone and measurement noise, under RK4 and Euler."""
+a dead-zone, measurement noise, and joint friction with Coulomb columns and lagged motors,
+under RK4 and Euler."""
 from __future__ import annotations
 
 import dataclasses
@@ -17,7 +18,7 @@ from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
 from adaptive_mj.sim.loop import run
 from adaptive_mj.plants import manipulator as mp
 from adaptive_mj.plants.arm import MODELS, build_arm_xml
-from adaptive_mj.plants.mujoco_plant import with_userdata
+from adaptive_mj.plants.mujoco_plant import compile_spec, with_userdata
 from adaptive_mj.reference import JointSumOfSines, JointWaypoints
 from test_manipulator import TEST_ARM
 
@@ -38,21 +39,29 @@ def _compile(xml: str, assets=None) -> mujoco.MjModel:
     return with_userdata(mujoco.MjSpec.from_string(xml, assets=assets)).compile()
 
 
-def _ur5e_model() -> mujoco.MjModel:
-    return _compile(*UR5E_XML)
+def _ur5e_model(friction: bool = False, euler: bool = False) -> mujoco.MjModel:
+    if not friction:
+        return _compile(*UR5E_XML)
+    # joint friction and a first-order motor lag (as plant.damping/.frictionloss/.actuator_lag set them)
+    def edit(spec):
+        mp.set_joint_friction(spec, damping=0.5, frictionloss={"shoulder_lift": 2.0, "elbow": 1.0, "wrist_2": 0.2})
+        mp.set_actuator_lag(spec, {"shoulder_pan": 0.004, "wrist_3": 0.002}, exact=euler)
+
+    return compile_spec(*UR5E_XML, where="ur5e", edit=edit)[0]
 
 
 def _setup(mode=Mode.ADAPTIVE, unknown="payload", base=False, euler=False, limit=None, dead_zone=None,
-           waypoints=False, modification=None):
-    """A UR5e + tool_offset plant, its law, a joint reference and θ̂(0), built the same way each call."""
-    model = _ur5e_model()
+           waypoints=False, modification=None, friction=False):
+    """A UR5e + tool_offset plant, its law, a joint reference and θ̂(0), built the same way each call
+    (friction: joint friction, two lagged motors and the friction columns, see _ur5e_model)."""
+    model = _ur5e_model(friction, euler)
     if euler:
         model.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
     if limit is not None:  # tighter torque limits (m,), so the clamp acts
         limit = np.asarray(limit, dtype=float)[:, None]
         model.actuator_ctrlrange[:] = np.hstack([-limit, limit]) / model.actuator_gear[:, :1]
         model.actuator_ctrllimited[:] = 1
-    plant = mp.ManipulatorPlant(model, unknown=unknown, base=base)
+    plant = mp.ManipulatorPlant(model, unknown=unknown, base=base, friction_params=friction)
     home = np.array(model.key("home").qpos)
     if waypoints:
         ref = JointWaypoints(waypoints=(tuple(home), tuple(home + 0.3), tuple(home - 0.2)), durations=(0.3, 0.4),
@@ -112,6 +121,8 @@ CASES = {
     "computed_torque": dict(mode=Mode.COMPUTED_TORQUE),
     "pd_gravity": dict(mode=Mode.PD_GRAVITY),
     "base_all": dict(mode=Mode.ADAPTIVE, unknown="all", base=True),
+    "friction_lag": dict(mode=Mode.ADAPTIVE, friction=True),
+    "friction_base_all": dict(mode=Mode.ADAPTIVE, unknown="all", base=True, friction=True),
 }
 
 
@@ -203,14 +214,16 @@ def test_two_controllers_interleaved():
 def _kernel_arms():
     arm = _compile(SMALL_ARM)
     ur5e = _ur5e_model()
-    return [(arm, "all", True), (arm, "all", False), (arm, ["l3a", "tool"], False),
-            (ur5e, "all", True), (ur5e, "payload", False)]
+    return [(arm, "all", True, False), (arm, "all", False, False), (arm, ["l3a", "tool"], False, False),
+            (ur5e, "all", True, False), (ur5e, "payload", False, False),
+            (arm, "all", True, True), (_ur5e_model(friction=True), "payload", False, True)]  # Coulomb columns
 
 
-@pytest.mark.parametrize("i", range(5))
+@pytest.mark.parametrize("i", range(7))
 def test_specialised_kernel_gives_regressor_kernel_numbers(i):
-    model, unknown, joints = _kernel_arms()[i]
-    plant = mp.ManipulatorPlant(model, unknown=unknown, joint_params=joints)
+    model, unknown, joints, friction = _kernel_arms()[i]
+    plant = mp.ManipulatorPlant(model, unknown=unknown, joint_params=joints, friction_params=friction,
+                                coulomb_smoothing=0.05 if i == 5 else 0.01)
     reg, d = plant.regressor, plant.data
     fast = nm.kernel()
     scratch, need = np.zeros(18 * model.nbody), np.ones(reg.n_standard, dtype=np.int64)

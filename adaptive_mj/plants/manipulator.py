@@ -1,17 +1,27 @@
 """A manipulator: any MJCF whose moving part is a tree of hinge and slide joints, each
 driven by its own torque motor (models/ur5e_arm.xml is the bundled one).
 
-    M(q) q̈ + C(q, q̇) q̇ + g(q) + D q̇ = τ,        τ_j = gear_j ctrl_j
+    M(q) q̈ + C(q, q̇) q̇ + g(q) + D q̇ + f_c = τ,        τ_j = gear_j ctrl_j
 
 The law's parameters π are the standard 10 inertial parameters of each unknown body
 (adaptive_mj.plants.regressor_kernel.BODY_PARAM_NAMES: m, m·c, inertia about the body
-origin, in the body frame), optionally the joints' armature and damping, and
+origin, in the body frame), optionally the joints' armature and damping (joint_params),
+optionally their viscous damping and Coulomb friction (friction_params), and
 optionally reduced to a base (identifiable) set. Everything known is computed from the
 compiled model and enters as the known torque τ_known, so
 
-    Y(q, q̇, q̇_r, q̈_r) π + τ_known = M q̈_r + C(q, q̇) q̇_r + g + armature·q̈_r + D q̇
+    Y(q, q̇, q̇_r, q̈_r) π + τ_known = M q̈_r + C(q, q̇) q̇_r + g + armature·q̈_r + D q̇ (+ F_c tanh(q̇ / ε))
 
-exactly (tests/test_manipulator.py checks it against mj_inverse). The regressor is
+exactly (tests/test_manipulator.py checks it against mj_inverse).
+
+What the regressor leaves out, on purpose (plant.frictionloss, plant.actuator_lag): MuJoCo's
+joint frictionloss f_c is dry friction enforced as a (soft) constraint, bounded by the
+frictionloss F_c and opposing the motion; it is unmodelled unless the regressor has Coulomb
+columns (friction_params), and even then only approximately: the column is F_c tanh(q̇ / ε),
+which equals F_c sign(q̇) for |q̇| ≳ 3ε but cannot describe sticking (q̇ = 0 with |f_c| < F_c)
+or the constraint's own softness. A first-order actuator lag (MuJoCo's filter dynamics,
+τ_applied' = (τ_commanded - τ_applied) / T, see set_actuator_lag) makes the regressor's
+τ = gear·ctrl the commanded torque while the plant feels the lagged one. The regressor is
 evaluated on the MjData of the current evaluation of the dynamics (the control
 callback's stage), where MuJoCo's kinematics (cdof, xpos, xmat, subtree_com, cinert)
 are current.
@@ -19,8 +29,9 @@ are current.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 from dataclasses import dataclass
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 import mujoco
 import numpy as np
@@ -39,6 +50,15 @@ def _name(model, objtype, i: int) -> str:
     return mujoco.mj_id2name(model, objtype, i) or f"#{i}"
 
 
+LAG_DYNTYPES = (mujoco.mjtDyn.mjDYN_FILTER, mujoco.mjtDyn.mjDYN_FILTEREXACT)
+
+
+def _is_lag(model, a: int) -> bool:
+    """Actuator a has a first-order lag (filter or filterexact, time constant dynprm[0] > 0): the one
+    actuator dynamics the plant accepts (plant.actuator_lag; unmodelled by the regressor)."""
+    return int(model.actuator_dyntype[a]) in {int(d) for d in LAG_DYNTYPES} and bool(model.actuator_dynprm[a, 0] > 0)
+
+
 def check_supported(model: mujoco.MjModel, where: str) -> None:  # noqa: C901 (one check per unsupported feature)
     """Refuse, with one line, what the manipulator regressor does not cover."""
     for j in range(model.njnt):
@@ -53,8 +73,12 @@ def check_supported(model: mujoco.MjModel, where: str) -> None:  # noqa: C901 (o
                              f"{model.jnt_stiffness[j]:g}, which the regressor does not cover; set it to 0")
     if model.nv == 0:
         raise ModelError(f"{where}: the model has no joints; the manipulator plant needs a tree of hinge/slide joints")
-    if np.any(model.dof_frictionloss != 0):
-        raise ModelError(f"{where}: joint frictionloss is not covered by the regressor; set it to 0")
+    # dof_frictionloss is accepted: MuJoCo's dry friction (a constraint), unmodelled unless the layout has
+    # Coulomb columns (friction_params), see the module docstring
+    for j in np.nonzero(np.any(model.dof_dampingpoly != 0, axis=1))[0][:1]:
+        raise ModelError(f"{where}: joint {_name(model, mujoco.mjtObj.mjOBJ_JOINT, model.dof_jntid[j])!r} has "
+                         f"nonlinear damping (polynomial terms {model.dof_dampingpoly[j].tolist()}); the regressor "
+                         "covers linear damping only; give damping one value")
     if model.ntendon:
         raise ModelError(f"{where}: the model has {model.ntendon} tendon(s); the manipulator plant needs each "
                          "joint driven by its own motor, with no tendons")
@@ -75,7 +99,7 @@ def check_supported(model: mujoco.MjModel, where: str) -> None:  # noqa: C901 (o
                              "coupled transmission); the manipulator plant needs one motor per joint")
         if (model.actuator_gaintype[a] != mujoco.mjtGain.mjGAIN_FIXED
                 or model.actuator_biastype[a] != mujoco.mjtBias.mjBIAS_NONE
-                or model.actuator_dyntype[a] != mujoco.mjtDyn.mjDYN_NONE):
+                or not (model.actuator_dyntype[a] == mujoco.mjtDyn.mjDYN_NONE or _is_lag(model, a))):
             raise ModelError(f"{where}: actuator {aname!r} is not a torque <motor> (it has a bias, a gain "
                              "function or dynamics, e.g. a position servo); set plant.servo_to_torque = true to "
                              "rebuild servos as torque motors limited to their forcerange")
@@ -121,17 +145,76 @@ def servo_to_torque(spec) -> list[str]:
     return notes
 
 
+# --- joint friction and actuator lag, as MjSpec edits (plant.damping, .frictionloss, .actuator_lag) ---
+def _by_joint(spec, key: str, value) -> list[tuple[Any, float]]:
+    """(joint, value) pairs: a number for every joint, or a table {joint name: number} (others unchanged)."""
+    joints = list(spec.joints)
+    if not isinstance(value, dict):
+        return [(j, float(value)) for j in joints]
+    names = [j.name for j in joints]
+    unknown = [n for n in value if n not in names]
+    if unknown:
+        raise ModelError(f"{key} names joint {unknown[0]!r}, which the model does not have "
+                         f"(joints: {', '.join(names)})")
+    return [(j, float(value[j.name])) for j in joints if j.name in value]
+
+
+def set_joint_friction(spec, *, damping=None, frictionloss=None) -> None:
+    """Set joint damping [N m s/rad or N s/m] and frictionloss (dry friction [N m or N]), each a number
+    for every joint or a table {joint: value}, on the spec; None leaves the model's values."""
+    for joint, v in _by_joint(spec, "plant.damping", damping) if damping is not None else ():
+        coefs = np.array(joint.damping, dtype=float)  # [linear, polynomial terms]: the linear one
+        coefs[0] = v
+        joint.damping = coefs
+    for joint, v in _by_joint(spec, "plant.frictionloss", frictionloss) if frictionloss is not None else ():
+        joint.frictionloss = v
+
+
+def set_actuator_lag(spec, lag, *, exact: bool = True) -> None:
+    """Give each joint's motor a first-order lag of time constant T [s]: act' = (ctrl - act) / T,
+    force = gain·act, so a held ctrl gives τ(t) = τ_c (1 - e^{-t/T}). exact: MuJoCo's filterexact
+    dynamics (act advanced by the exact exponential over a step), for the one-stage integrators
+    (Euler, implicit, implicitfast); else filter, for RK4: MuJoCo 3.17's RK4 applies filterexact's
+    exponential to its stage-averaged act' and is then only first-order accurate (measured: 0.94 %
+    of τ_c at h/T = 0.05, as Euler with filter), while filter under RK4 is fourth-order (2e-8 of
+    τ_c; tests/test_joint_friction.py). lag: a number for every actuator, or a table {joint: T} for
+    the motors of those joints; T = 0 leaves a motor without dynamics."""
+    if lag is None:
+        return
+    for joint, T in _by_joint(spec, "plant.actuator_lag", lag):
+        acts = [a for a in spec.actuators if a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target == joint.name]
+        if not acts and isinstance(lag, dict):
+            raise ModelError(f"plant.actuator_lag names joint {joint.name!r}, which no actuator drives")
+        for act in acts if T > 0 else ():
+            if act.dyntype not in (mujoco.mjtDyn.mjDYN_NONE,) + LAG_DYNTYPES:
+                raise ModelError(f"plant.actuator_lag: actuator {act.name!r} already has dynamics "
+                                 f"({mujoco.mjtDyn(act.dyntype).name}); the lag needs a torque motor")
+            act.dyntype = mujoco.mjtDyn.mjDYN_FILTEREXACT if exact else mujoco.mjtDyn.mjDYN_FILTER
+            act.dynprm = np.zeros_like(act.dynprm)
+            act.dynprm[0] = T
+
+
 @dataclass(frozen=True)
 class ParamLayout:
     """Which parameters are unknown, and their names.
 
-    bodies: unknown body ids; joints: whether armature and damping are unknown;
-    names: (n_standard,) names "<body>.<param>" and "<joint>.armature"/".damping".
+    bodies: unknown body ids; joints: whether armature and damping are unknown; friction:
+    whether damping and Coulomb friction are unknown; coulomb_smoothing: ε [rad/s or m/s] of
+    the Coulomb column tanh(q̇ / ε); names: (n_standard,) names "<body>.<param>", then
+    "<joint>.armature" (joints), "<joint>.damping" (joints or friction), "<joint>.coulomb"
+    (friction), each block over every joint.
     """
 
     bodies: tuple[int, ...]
     joints: bool
     names: tuple[str, ...]
+    friction: bool = False
+    coulomb_smoothing: float = rk.DEFAULT_COULOMB_SMOOTHING
+
+    def joint_terms(self) -> tuple[str, ...]:
+        """The per-joint parameter kinds, in the order of their blocks of columns."""
+        return tuple(n for n, on in (("armature", self.joints), ("damping", self.joints or self.friction),
+                                     ("coulomb", self.friction)) if on)
 
 
 def moving_bodies(model) -> list[int]:
@@ -146,10 +229,14 @@ def moving_bodies(model) -> list[int]:
     return out
 
 
-def param_layout(model, unknown, *, joints: bool, where: str) -> ParamLayout:
+def param_layout(model, unknown, *, joints: bool, where: str, friction: bool = False,
+                 coulomb_smoothing: float = rk.DEFAULT_COULOMB_SMOOTHING) -> ParamLayout:
     """unknown: "payload" (bodies named payload/... with mass), "all" (every moving body with mass;
     a massless body, such as the frame PyMJCF attaches a payload with, has no parameters to
-    identify) or a list of body names."""
+    identify) or a list of body names. joints: armature and damping unknown; friction: damping and
+    Coulomb friction unknown (Coulomb column tanh(q̇ / coulomb_smoothing))."""
+    if not (np.isfinite(coulomb_smoothing) and coulomb_smoothing > 0):
+        raise ModelError(f"{where}: the Coulomb smoothing must be finite and > 0, got {coulomb_smoothing!r}")
     moving = moving_bodies(model)
     if unknown == "all":
         bodies = [b for b in moving if model.body_mass[b] > 0]
@@ -172,23 +259,23 @@ def param_layout(model, unknown, *, joints: bool, where: str) -> ParamLayout:
             bodies.append(b)
         bodies = sorted(set(bodies))
     names = [f"{_name(model, mujoco.mjtObj.mjOBJ_BODY, b)}.{p}" for b in bodies for p in rk.BODY_PARAM_NAMES]
-    if joints:
-        for jn in rk.JOINT_PARAM_NAMES:
-            names += [f"{_name(model, mujoco.mjtObj.mjOBJ_JOINT, model.dof_jntid[j])}.{jn}" for j in range(model.nv)]
-    return ParamLayout(tuple(bodies), bool(joints), tuple(names))
+    layout = ParamLayout(tuple(bodies), bool(joints), (), bool(friction), float(coulomb_smoothing))
+    for jn in layout.joint_terms():
+        names += [f"{_name(model, mujoco.mjtObj.mjOBJ_JOINT, model.dof_jntid[j])}.{jn}" for j in range(model.nv)]
+    return dataclasses.replace(layout, names=tuple(names))
 
 
 def standard_params(model, layout: ParamLayout) -> np.ndarray:
     """(n_standard,) true π from the compiled model: body_mass, body_ipos, body_inertia,
-    body_iquat (and dof_armature, dof_damping)."""
+    body_iquat (and dof_armature, dof_damping, dof_frictionloss as the Coulomb amplitude)."""
     out = []
     R = np.empty(9)
     for b in layout.bodies:
         mujoco.mju_quat2Mat(R, model.body_iquat[b])
         out.append(rk.body_params(float(model.body_mass[b]), model.body_ipos[b], model.body_inertia[b],
                                   R.reshape(3, 3)))
-    if layout.joints:
-        out += [np.array(model.dof_armature, dtype=float), np.array(model.dof_damping, dtype=float)]
+    fields = {"armature": model.dof_armature, "damping": model.dof_damping, "coulomb": model.dof_frictionloss}
+    out += [np.array(fields[jn], dtype=float) for jn in layout.joint_terms()]
     return np.concatenate(out) if out else np.zeros(0)
 
 
@@ -211,12 +298,11 @@ class Regressor:
             self.body_col[b] = 10 * i
             self.body_known[b] = 0
         n_body_cols = 10 * len(layout.bodies)
-        if layout.joints:
-            self.col_arm = np.arange(n_body_cols, n_body_cols + nv, dtype=np.int64)
-            self.col_damp = self.col_arm + nv
-        else:
-            self.col_arm = np.full(nv, -1, dtype=np.int64)
-            self.col_damp = np.full(nv, -1, dtype=np.int64)
+        cols = {jn: np.full(nv, -1, dtype=np.int64) for jn in ("armature", "damping", "coulomb")}
+        for i, jn in enumerate(layout.joint_terms()):
+            cols[jn] = np.arange(n_body_cols + i * nv, n_body_cols + (i + 1) * nv, dtype=np.int64)
+        self.col_arm, self.col_damp, self.col_coul = cols["armature"], cols["damping"], cols["coulomb"]
+        self.coulomb_eps = float(layout.coulomb_smoothing)
         self.n_standard = len(layout.names)
         self.base_map = base_map
         self.Y_std = np.zeros((nv, self.n_standard))
@@ -231,7 +317,7 @@ class Regressor:
         """The model arrays the kernel takes, in its order (also used by adaptive_mj.sim.native)."""
         m = self.model
         return (self.parent, self.dofadr, self.dofnum, self.rootid, self.body_col, self.body_known,
-                self.col_arm, self.col_damp, m.dof_armature, m.dof_damping)
+                self.col_arm, self.col_damp, self.col_coul, m.dof_armature, m.dof_damping, self.coulomb_eps)
 
     def __call__(self, v, w, a):
         m, d = self.model, self.data
@@ -321,8 +407,9 @@ class ManipulatorPlant:
     """A MuJoCo arm of m = nv joints under joint torques (see the module docstring).
 
     model: compiled, checked by check_supported. unknown: "payload", "all" or body
-    names; joint_params: armature and damping unknown too; base: reduce π to a base
-    set. The loop's interface with a joint axis (a JointPlant and a NativePlant,
+    names; joint_params: armature and damping unknown too; friction_params: damping and
+    Coulomb friction unknown too (Coulomb column tanh(q̇ / coulomb_smoothing), ε in rad/s
+    or m/s); base: reduce π to a base set. The loop's interface with a joint axis (a JointPlant and a NativePlant,
     adaptive_mj.plants.protocol): the state is x (2, m) = [q; q̇] [rad or m; per s], the
     input τ (m,) [N m or N].
     """
@@ -331,7 +418,8 @@ class ManipulatorPlant:
     native_owner: object | None = None  # the native controller whose context data points at
 
     def __init__(self, model: mujoco.MjModel, *, unknown="payload", joint_params: bool = False,
-                 base: bool = False, where: str = "manipulator model", notes: tuple[str, ...] = ()):
+                 base: bool = False, where: str = "manipulator model", notes: tuple[str, ...] = (),
+                 friction_params: bool = False, coulomb_smoothing: float = rk.DEFAULT_COULOMB_SMOOTHING):
         check_supported(model, where)
         self.model = model
         self.data = mujoco.MjData(model)
@@ -341,7 +429,8 @@ class ManipulatorPlant:
         self.joint_shape = (self.m,)
         self.joint_names = tuple(_name(model, mujoco.mjtObj.mjOBJ_JOINT, model.dof_jntid[j]) for j in range(self.m))
         self._qadr, self._act, self._gear = plant_dofs(model)
-        self.layout = param_layout(model, unknown, joints=joint_params, where=where)
+        self.layout = param_layout(model, unknown, joints=joint_params, where=where, friction=friction_params,
+                                   coulomb_smoothing=coulomb_smoothing)
         self.regressor = Regressor(model, self.data, self.layout)
         self.base_map: np.ndarray | None = None
         self.base_projection: np.ndarray | None = None
@@ -520,7 +609,8 @@ def model_source(scn) -> ModelSource | None:
 def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
     """plant.kind = "manipulator": the arm of plant.model, its unknown bodies, joint
     parameters and base set as the scenario says; with plant.servo_to_torque its
-    position servos rebuilt as torque motors first (reported in the notes)."""
+    position servos rebuilt as torque motors first (reported in the notes); then
+    plant.damping, .frictionloss and .actuator_lag set on the joints and motors."""
     from adaptive_mj.errors import ScenarioError
 
     p = scn.plant
@@ -532,8 +622,17 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
                 notes.extend(servo_to_torque(spec))
             except ModelError as exc:
                 raise ScenarioError(f"{scn.source}: plant.servo_to_torque: {exc}") from None
+        try:  # joint friction and actuator lag (after servo_to_torque: a lag goes on the rebuilt motor)
+            set_joint_friction(spec, damping=fr.damping, frictionloss=fr.frictionloss)
+            set_actuator_lag(spec, fr.actuator_lag, exact=scn.simulation.integrator != "rk4")
+        except ModelError as exc:  # said after compiling, as a scenario error (not as MuJoCo's)
+            bad_keys.append(f"{scn.source}: {exc}")
 
+    fr, bad_keys = p.manipulator.friction, list[str]()
     model, model_xml = compile_for_scenario(scn, source, edit=edit)
+    if bad_keys:
+        raise ScenarioError(bad_keys[0])
     plant = ManipulatorPlant(model, unknown=p.manipulator.unknown, joint_params=p.manipulator.joint_params,
-                             base=p.manipulator.base_parameters, where=str(p.model), notes=tuple(notes))
+                             base=p.manipulator.base_parameters, where=str(p.model), notes=tuple(notes),
+                             friction_params=fr.friction_params, coulomb_smoothing=fr.coulomb_smoothing)
     return BuiltPlant(plant, model_xml, tuple(notes))

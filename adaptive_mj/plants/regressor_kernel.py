@@ -29,10 +29,15 @@ of mass of the tree's root (d.subtree_com[body_rootid]); 6-vectors are [angular;
 linear]; cinert is [Ixx, Iyy, Izz, Ixy, Ixz, Iyz, m cx, m cy, m cz, m] about that point
 in world axes. Body-frame parameters π_b map to cinert linearly (cinert_of_params).
 
-Joint terms, one parameter each per dof: armature (column a_j) and viscous damping
-(column v_j, the measured velocity, so that the closed loop keeps V' = -sᵀ K_D s).
+Joint terms, one parameter each per dof: armature (column a_j), viscous damping
+(column v_j, the measured velocity, so that the closed loop keeps V' = -sᵀ K_D s) and
+Coulomb friction (column tanh(v_j / ε), the measured velocity again, smoothed with ε
+[rad/s or m/s]). A known Coulomb term is not added to tau_known: MuJoCo's frictionloss
+is a constraint force, not F tanh(v / ε), so without a Coulomb column it is unmodelled.
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -40,6 +45,14 @@ import numpy as np
 #: mass [kg], first moment m·c [kg m], inertia about the body frame's origin [kg m²].
 BODY_PARAM_NAMES = ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 JOINT_PARAM_NAMES = ("armature", "damping")
+#: Joint friction parameters (plant.friction_params): viscous damping [N m s/rad or N s/m] and
+#: Coulomb friction [N m or N], the amplitude of F tanh(q̇ / ε).
+FRICTION_PARAM_NAMES = ("damping", "coulomb")
+#: ε [rad/s or m/s] of the Coulomb column tanh(q̇ / ε) (plant.coulomb_smoothing): tanh reaches 0.995
+#: at |q̇| = 3ε = 0.03 rad/s, a few per cent of the bundled references' joint speeds (0.2-1 rad/s),
+#: so the column is F sign(q̇) wherever the joints move; a smaller ε only steepens the column's slope
+#: 1/ε near q̇ = 0, which multiplies velocity noise into the torque.
+DEFAULT_COULOMB_SMOOTHING = 0.01
 
 
 def body_params(mass, ipos, inertia, iquat_mat) -> np.ndarray:
@@ -157,7 +170,7 @@ def _body_force(inert, ca, cv, cw, out):
 
 
 def regressor(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp,  # noqa: C901 (compiled kernel)
-              arm_known, damp_known, cdof, xpos, xmat, subtree_com, cinert, gravity,
+              dof_col_coul, arm_known, damp_known, coulomb_eps, cdof, xpos, xmat, subtree_com, cinert, gravity,
               v, w, a, Y, tau_known):
     """Fill Y (nv, n_params) and tau_known (nv,) at the state MuJoCo's kinematics describe.
 
@@ -168,13 +181,16 @@ def regressor(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm,
         body is known; body_known (nbody,) 1 where the body's true cinert goes into
         tau_known;
       dof_col_arm, dof_col_damp (nv,): column of the dof's armature / damping
-        parameter, or -1 if known; arm_known, damp_known (nv,) their known values
-        [kg m² or kg; N m s/rad or N s/m].
+        parameter, or -1 if known; dof_col_coul (nv,): column of its Coulomb friction
+        parameter, or -1 (not modelled); arm_known, damp_known (nv,) the known values
+        [kg m² or kg; N m s/rad or N s/m]; coulomb_eps: ε > 0 of the Coulomb column
+        tanh(v_j / ε) [rad/s or m/s].
     Data arrays (the current stage): cdof (nv, 6), xpos (nbody, 3), xmat (nbody, 9),
       subtree_com (nbody, 3), cinert (nbody, 10); gravity (3,) [m/s²].
     Signals: v (nv,) joint velocity q̇, w (nv,) reference velocity q̇_r, a (nv,)
       reference acceleration q̈_r.
-    Output: Y π_unknown + tau_known = M a + C(q, v) w + g + armature·a + damping·v.
+    Output: Y π_unknown + tau_known = M a + C(q, v) w + g + armature·a + damping·v
+      (+ coulomb·tanh(v / ε) for the dofs with a Coulomb column).
     """
     nbody = parent.shape[0]
     nv = v.shape[0]
@@ -232,6 +248,8 @@ def regressor(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm,
             Y[j, dof_col_damp[j]] = v[j]
         else:
             tau_known[j] += damp_known[j] * v[j]
+        if dof_col_coul[j] >= 0:
+            Y[j, dof_col_coul[j]] = math.tanh(v[j] / coulomb_eps)
 
 
 def _project(parent, dofadr, dofnum, cdof, b, f, tau):

@@ -134,7 +134,7 @@ def _param_groups(names) -> list[tuple[str, list[int]]]:
     """Parameter indices grouped by kind: mass [kg], first moment [kg m], inertia [kg m²], joint terms."""
     kinds = [("mass m [kg]", ("m",)), ("first moment m·c [kg m]", ("mcx", "mcy", "mcz")),
              ("inertia [kg m²]", ("Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")),
-             ("joint armature [kg m²] / damping [N m s]", ("armature", "damping"))]
+             ("joint armature [kg m²] / damping [N m s] / Coulomb [N m]", ("armature", "damping", "coulomb"))]
     out = []
     for label, suffixes in kinds:
         idx = [i for i, n in enumerate(names) if n.rstrip("*").rsplit(".", 1)[-1] in suffixes]

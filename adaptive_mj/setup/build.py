@@ -263,7 +263,7 @@ def _modification(scn: Scenario, names: tuple[str, ...], theta_hat0: np.ndarray)
 
 #: parameter-name suffixes kept >= 0 by law.projection = "physical" (manipulators): a convex box
 #: that every physical body satisfies (necessary, not sufficient, for physical consistency)
-PHYSICAL_NONNEGATIVE = ("m", "Ixx", "Iyy", "Izz", "armature", "damping")
+PHYSICAL_NONNEGATIVE = ("m", "Ixx", "Iyy", "Izz", "armature", "damping", "coulomb")
 
 
 def _estimates(scn: Scenario, names, plant) -> np.ndarray:

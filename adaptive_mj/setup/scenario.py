@@ -76,6 +76,23 @@ class ManipulatorSpec:
     joint_params: bool
     base_parameters: bool
     servo_to_torque: bool
+    # joint friction and actuator lag (plant.damping, .frictionloss, .actuator_lag: a number for every
+    # joint or {joint = number}; None keeps the model's), and the regressor's friction columns
+    friction: "JointFrictionSpec" = field(default_factory=lambda: JointFrictionSpec())
+
+
+@dataclass(frozen=True)
+class JointFrictionSpec:
+    """plant.* keys of a manipulator's friction and actuators: damping [N m s/rad], frictionloss (MuJoCo's
+    dry friction [N m]) and actuator_lag (first-order, T [s]) set on the model, each a number for every
+    joint or {joint = number} (None: the model's own); friction_params: each joint's damping and
+    Coulomb friction unknown to the law, the Coulomb column tanh(q̇ / coulomb_smoothing) [rad/s]."""
+
+    damping: float | dict[str, float] | None = None
+    frictionloss: float | dict[str, float] | None = None
+    actuator_lag: float | dict[str, float] | None = None
+    friction_params: bool = False
+    coulomb_smoothing: float = 0.01  # = plants.regressor_kernel.DEFAULT_COULOMB_SMOOTHING
 
 
 @dataclass(frozen=True)
@@ -543,6 +560,7 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:  # noqa: C901 (one branch pe
         for key in ("unknown", "joint_params", "base_parameters", "servo_to_torque"):
             if key in t.data:
                 raise t.fail(key, "absent unless plant.kind = 'manipulator'", t.data[key])
+    manipulator = _joint_friction(t, kind, manipulator)
     theta = t.named_numbers("theta", None)
     if theta is not None and backend != "twin":
         raise t.fail("theta", "absent for backend 'mujoco' (true parameters come from the compiled model)", theta)
@@ -619,6 +637,37 @@ def _manipulator(t: _Table, payload: str | None) -> ManipulatorSpec:
     return ManipulatorSpec(unknown=unknown, joint_params=t.boolean("joint_params", False),
                            base_parameters=t.boolean("base_parameters", False),
                            servo_to_torque=t.boolean("servo_to_torque", False))
+
+
+FRICTION_KEYS = ("damping", "frictionloss", "actuator_lag", "friction_params", "coulomb_smoothing")
+
+
+def _joint_friction(t: _Table, kind: str, spec: "ManipulatorSpec | None") -> "ManipulatorSpec | None":
+    """plant.damping, .frictionloss, .actuator_lag, .friction_params, .coulomb_smoothing of a manipulator
+    into spec.friction (joint names are checked against the model in build); refused on other kinds."""
+    if spec is None:
+        for key in FRICTION_KEYS:
+            if key in t.data:
+                raise t.fail(key, "absent unless plant.kind = 'manipulator'", t.data[key])
+        return None
+    values: dict[str, Any] = {}
+    for key in ("damping", "frictionloss", "actuator_lag"):
+        if key not in t.data:
+            continue
+        v = _joint_values(t, key, arrays=False)
+        for j, x in (v.items() if isinstance(v, dict) else [("", v)]):
+            if not x >= 0:
+                raise t.fail(key + (f".{j}" if j else ""), ">= 0", x)
+        values[key] = v
+    friction_params = t.boolean("friction_params", False)
+    eps = t.number("coulomb_smoothing", 0.01, gt=0)
+    if "coulomb_smoothing" in t.data and not friction_params:
+        raise t.fail("coulomb_smoothing", "absent unless plant.friction_params = true (it shapes the Coulomb "
+                                          "column)", eps)
+    import dataclasses
+
+    return dataclasses.replace(spec, friction=JointFrictionSpec(**values, friction_params=friction_params,
+                                                                 coulomb_smoothing=eps))
 
 
 def _order(doc: dict, plant: PlantSpec, where: str) -> int:

@@ -35,6 +35,7 @@ of a kinematic tree read from MjData's kinematics; the stage logic is shared (ad
 """
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -88,6 +89,7 @@ CONTEXT = np.dtype([
     # the regressor's static arrays
     ("parent", _i8), ("dofadr", _i8), ("dofnum", _i8), ("rootid", _i8), ("body_col", _i8), ("body_known", _i8),
     ("col_arm", _i8), ("col_damp", _i8), ("need", _i8), ("bptr", _i8), ("bidx", _i8), ("bval", _i8),
+    ("col_coul", _i8), ("coulomb_eps", _f8),  # the Coulomb friction columns tanh(q̇ / ε) (plant.friction_params)
     # plant and law constants
     ("qadr", _i8), ("act", _i8), ("gear", _i8), ("lo", _i8), ("hi", _i8), ("lam", _i8), ("kd", _i8),
     ("gamma", _i8), ("theta0", _i8), ("lower", _i8), ("upper", _i8),
@@ -189,7 +191,7 @@ def _unit_column(parent, dofadr, dofnum, cdof, b, I0, I1, I2, I3, I4, I5, h0, h1
 
 
 def _regressor(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp,  # noqa: C901 (a compiled kernel)
-              arm_known, damp_known, cdof, xpos, xmat, subtree_com, cinert, gravity,
+              dof_col_coul, arm_known, damp_known, coulomb_eps, cdof, xpos, xmat, subtree_com, cinert, gravity,
               v, w, a, Y, tau_known, scratch, need):
     """regressor_kernel.regressor (same arguments and numbers) with its work arrays in scratch (18 nbody).
 
@@ -329,6 +331,8 @@ def _regressor(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm
             Y[j, dof_col_damp[j]] = v[j]
         else:
             tau_known[j] += damp_known[j] * v[j]
+        if dof_col_coul[j] >= 0:
+            Y[j, dof_col_coul[j]] = math.tanh(v[j] / coulomb_eps)
 
 
 _KERNEL = None
@@ -455,13 +459,14 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
     dofnum, rootid = carray(iptr(ctx.dofnum), nb), carray(iptr(ctx.rootid), nb)  # noqa: F821 (injected)
     body_col, body_known = carray(iptr(ctx.body_col), nb), carray(iptr(ctx.body_known), nb)  # noqa: F821 (injected)
     col_arm, col_damp = carray(iptr(ctx.col_arm), nv), carray(iptr(ctx.col_damp), nv)  # noqa: F821 (injected)
+    col_coul, eps = carray(iptr(ctx.col_coul), nv), ctx.coulomb_eps  # noqa: F821 (injected)
     scratch, need = carray(fptr(ctx.scratch), 18 * nb), carray(iptr(ctx.need), nstd)  # noqa: F821 (injected)
     if ctx.mode_law == MODE_PD_GRAVITY:
         zero = carray(fptr(ctx.zero), nv)  # noqa: F821 (injected)
-        regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, arm, damp,  # noqa: F821 (injected)
+        regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, col_coul, arm, damp, eps,  # noqa: F821,E501 (injected)
                   cdof, xpos, xmat, subcom, cinert, gravity, zero, zero, zero, Y_std, tau_known, scratch, need)
     else:
-        regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, arm, damp,  # noqa: F821 (injected)
+        regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, col_coul, arm, damp, eps,  # noqa: F821,E501 (injected)
                   cdof, xpos, xmat, subcom, cinert, gravity, x[1], qd_r, qdd_r, Y_std, tau_known, scratch, need)
     if ctx.has_base != 0:  # Y = Y_std B, B stored by columns as (pointer, row index, value)
         Y = carray(fptr(ctx.y), (nv, nth))  # noqa: F821 (injected)
@@ -593,7 +598,7 @@ class NativeManipulatorController(ContextOwner):
         buf = {  # everything the callback reaches by address: held here for the run's lifetime
             "parent": i64(reg.parent), "dofadr": i64(reg.dofadr), "dofnum": i64(reg.dofnum),
             "rootid": i64(reg.rootid), "body_col": i64(reg.body_col), "body_known": i64(reg.body_known),
-            "col_arm": i64(reg.col_arm), "col_damp": i64(reg.col_damp),
+            "col_arm": i64(reg.col_arm), "col_damp": i64(reg.col_damp), "col_coul": i64(reg.col_coul),
             "qadr": i64(plant._qadr), "act": i64(plant._act), "gear": f64(plant._gear),
             "lo": f64(np.broadcast_to(lo, (nv,))), "hi": f64(np.broadcast_to(hi, (nv,))),
             "lam": f64(p["lam"]), "kd": f64(p["kd"]), "gamma": f64(p["gamma"]),
@@ -630,6 +635,7 @@ class NativeManipulatorController(ContextOwner):
         c["mode"], c["period_steps"], c["delay"], c["period"] = control.mode, control.steps, d, control.period
         c["h"], c["dz_width"], c["sigma"], c["e_mod"] = plant.dt, p["dz_width"], p["sigma"], p["e_mod"]
         c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
+        c["coulomb_eps"] = reg.coulomb_eps
         c["sense_period"] = control.period if control.sampled else plant.dt
         c["diff"] = int(sensors is not None and sensors.differentiated)
         c["alpha"] = sensors.alpha(c["sense_period"]) if sensors is not None else 0.0
