@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Sensors", "sense"]
+__all__ = ["Sensors", "sense", "surface_noise_std"]
 
 
 @dataclass(frozen=True)
@@ -70,3 +70,23 @@ def sense(q, dq, noise, quantum, differentiated, update, first, alpha, period, q
             out[1, j] = v_est[j]
         else:
             out[1, j] = dq[j] + noise[1, j]
+
+
+def surface_noise_std(lam, sigma_q, sigma_dq, sensors: Sensors | None, period: float) -> np.ndarray:
+    """(m,) standard deviation of the noise in s_j = q̃'_j + λ_j q̃_j from white measurement noise:
+    lam, sigma_q, sigma_dq (m,) [1/s, rad, rad/s]; period T [s] of the velocity estimate.
+
+    Encoders add their rounding as uniform noise, Δ²/12 (dithered by the noise: valid while
+    σ_q ≳ Δ/2). Measured velocity: σ_s² = σ_q̇² + λ² σ_q². Differentiated: the position noise n
+    enters s as -(λ n_k + g Σ_i h_i n_(k-i)), g = (1 - α)/T and h the impulse response of
+    (1 - z⁻¹)/(1 - α z⁻¹) (h_0 = 1, h_i = α^(i-1)(α - 1)), so
+        σ_s² = σ_q² [(λ + g)² + g² (1 - α)/(1 + α)]."""
+    lam = np.asarray(lam, dtype=float)
+    var_q = np.asarray(sigma_q, dtype=float) ** 2
+    if sensors is not None:
+        var_q = var_q + np.asarray(sensors.quantum, dtype=float) ** 2 / 12.0
+    if sensors is None or not sensors.differentiated:
+        return np.sqrt(np.asarray(sigma_dq, dtype=float) ** 2 + lam**2 * var_q)
+    alpha = sensors.alpha(period)
+    g = (1.0 - alpha) / period
+    return np.sqrt(var_q * ((lam + g) ** 2 + g**2 * (1.0 - alpha) / (1.0 + alpha)))

@@ -219,3 +219,45 @@ def test_saturation_aware_adaptation_keeps_a_torque_limited_arm_tracking(tmp_pat
     assert ignore["rms_tracking_error_tail"] > 0.05 and ignore["saturation_fraction"] > 0.3
     assert out["freeze"].trajectory.status == "ok"
     assert freeze["rms_tracking_error_tail"] < 5e-3 and freeze["saturation_fraction"] < 0.2
+
+
+# --- the lecture's second half on the 6-joint arm (bench section 12) -------------------------
+def test_arm_drift_section_shows_drift_sudden_failure_and_the_fixes(tmp_path):
+    """ur5e_drift, 150 s: without a modification the estimates drift and the loop fails suddenly
+    (measured at t ≈ 98 s with seed 0); the dead-zone sized from the noise stops adaptation at rest
+    (no drift at all) and σ-modification bounds the drift; both track to ~1e-4 rad."""
+    from adaptive_mj.study import bench_catalogue
+    from adaptive_mj.study.parallel import run_jobs
+
+    section = bench_catalogue._arm_drift(False, tmp_path / "logs")
+    results = run_jobs(list(section.jobs), n_jobs=2)
+    rep = section.analyze({r.job.tag: r for r in results}, tmp_path)
+    rows = {r["run"]: r for r in rep.rows}
+    plain, dz, sigma = rows["adaptive"], rows["dead_zone_3sigma"], rows["sigma"]
+    assert plain["status"] == "failed" and plain["onset"] is not None and 30.0 < plain["onset"] < 150.0
+    assert plain["drift_per_100s"] > 0.01
+    assert dz["status"] == "ok" and dz["onset"] is None and dz["final_relative_error"] == 0.0
+    assert sigma["status"] == "ok" and sigma["onset"] is None and sigma["tail"] < 1e-3
+    assert sigma["final_relative_error"] < 0.1 * plain["final_relative_error"]
+    assert "fails suddenly" in rep.text and (tmp_path / "figures" / "arm_drift.png").stat().st_size > 10_000
+
+
+def test_the_dead_zone_width_follows_the_encoder_noise_through_the_filter():
+    """ε = k sqrt(Σ_j σ_s,j²) with σ_s,j² = σ_q² [(λ + g)² + g²(1 - α)/(1 + α)], g = (1 - α)/T; checked
+    against the noise of s measured by pushing white noise through the same sense() filter."""
+    from adaptive_mj.sensors import surface_noise_std
+
+    scn = load(SCENARIOS_DIR / "ur5e_drift.toml", overrides=["law.dead_zone={width_in_noise_std=3.0}"])
+    s = build(scn)
+    sn = s.sensors
+    sig = surface_noise_std(np.full(6, 10.0), np.full(6, 1e-4), np.zeros(6), sn, 1e-3)
+    assert s.law.dead_zone.width == pytest.approx(3.0 * math.sqrt(np.sum(sig**2)), rel=1e-12)
+    rng = np.random.default_rng(1)
+    n = rng.normal(0.0, 1e-4, size=(100_000, 1))
+    q_prev, v_est, out = np.zeros(1), np.zeros(1), np.empty((2, 1))
+    s_noise = np.empty(len(n))
+    for k in range(len(n)):
+        sense(np.zeros(1), np.zeros(1), np.array([[n[k, 0]], [0.0]]), np.zeros(1), True, True, k == 0,
+              sn.alpha(1e-3), 1e-3, q_prev, v_est, out)
+        s_noise[k] = -(out[1, 0] + 10.0 * out[0, 0])  # s = q̃' + λ q̃ with q_d = 0: the noise's part
+    assert np.std(s_noise[1000:]) == pytest.approx(sig[0], rel=0.02)

@@ -223,6 +223,8 @@ def _dead_zone(scn: Scenario, plant) -> DeadZone | None:
         return None
     if dz.width_in_noise_std is None:
         return DeadZone(dz.width, DeadZoneOn(dz.on))
+    if has_joints(plant):
+        return DeadZone(dz.width_in_noise_std * _arm_noise_scale(scn, plant, dz.on), DeadZoneOn(dz.on))
     std = np.array([scn.noise.std.get(sig, 0.0) for sig in STATE_SIGNALS[:plant_order(plant)]])
     if not np.any(std > 0):
         raise ScenarioError(f"{scn.source}: law.dead_zone.width_in_noise_std needs noise.std (the noise its "
@@ -232,6 +234,26 @@ def _dead_zone(scn: Scenario, plant) -> DeadZone | None:
     else:
         sigma = float(std[0])
     return DeadZone(dz.width_in_noise_std * sigma, DeadZoneOn(dz.on))
+
+
+def _arm_noise_scale(scn: Scenario, plant, on: str) -> float:
+    """σ of an arm's dead-zone signal: sqrt(Σ_j σ_s,j²) for ‖s‖ (sensors.surface_noise_std, with the
+    encoders and the velocity estimate), sqrt(Σ_j σ_q,j² + Δ_j²/12) for ‖q̃‖."""
+    from adaptive_mj.sensors import surface_noise_std as arm_surface_noise
+
+    joints = tuple(plant.joint_names)
+    sig_q = _per_joint(scn, "noise.std.q", scn.noise.std.get("q", 0.0), joints)
+    sig_dq = _per_joint(scn, "noise.std.q_dot", scn.noise.std.get("q_dot", 0.0), joints)
+    sensors = _sensors(scn, plant)
+    if not (np.any(sig_q > 0) or np.any(sig_dq > 0) or (sensors is not None and np.any(sensors.quantum > 0))):
+        raise ScenarioError(f"{scn.source}: law.dead_zone.width_in_noise_std needs noise.std (or encoders: "
+                            "sensors.encoder_counts), the noise its width is a multiple of; got none")
+    if on != "s":
+        quantum = sensors.quantum if sensors is not None else 0.0
+        return float(np.sqrt(np.sum(sig_q**2 + np.asarray(quantum) ** 2 / 12.0)))
+    lam = _per_joint(scn, "law.lambda", scn.law.lam_joints if scn.law.lam_joints is not None else scn.law.lam, joints)
+    period = scn.control.period if scn.control.mode == "sampled" and scn.control.period else plant.dt
+    return float(np.sqrt(np.sum(arm_surface_noise(lam, sig_q, sig_dq, sensors, period) ** 2)))
 
 
 def _modification(scn: Scenario, names: tuple[str, ...], theta_hat0: np.ndarray) -> Modification | None:
