@@ -386,3 +386,352 @@ def test_a_model_given_on_the_command_line_is_found_from_the_current_directory(t
     line = error_line(capsys)
     assert line.endswith(f"plant.model 'nope.xml' (from --set) not found in the current directory "
                          f"({tmp_path / 'nope.xml'}) nor next to the scenario ({SCENARIOS_DIR / 'nope.xml'})")
+
+
+# -- arms, studies and plugins (issue 19 §5): a generated corpus of broken multi-joint inputs -------
+# Every bad file, in every place a run reads one, is refused before anything runs: exit 2, one line
+# naming the file, no traceback, no log.
+
+MJCF_OK = ('<mujoco><worldbody><body name="body"><geom type="sphere" size=".05" mass="{mass}"/></body></worldbody>'
+           '</mujoco>')
+BAD_FILES = {  # name -> (content, what the line says after "<file>: ")
+    "malformed XML": (MJCF_OK.format(mass=0.5).replace("</mujoco>", "</mujoco2>"), r"not well-formed XML"),
+    "XML that is not MJCF": ("<html><body>a web page</body></html>", r"not an MJCF model: the root element is <html>"),
+    "binary": (bytes(range(256)) * 4, r"not a text file \(binary data"),
+    "empty": (b"", r"empty payload file \(0 bytes\)"),
+    "only whitespace": ("\n  \n", r"empty payload file \(4 bytes\)"),
+    "massless geoms": (MJCF_OK.format(mass=0), r"the payload has no mass \(its bodies weigh 0 kg in all\)"),
+    "NaN mass": (MJCF_OK.format(mass="nan"), r"<geom> mass='nan': not a finite number \(MuJoCo would replace"),
+    "infinite mass": (MJCF_OK.format(mass="inf"), r"<geom> mass='inf': not a finite number"),
+    "overflowing mass": (MJCF_OK.format(mass="1e999"), r"<geom> mass='1e999': not a finite number"),
+    "negative mass": (MJCF_OK.format(mass=-1), r"<geom> mass='-1': a mass must be >= 0 kg"),
+    "NaN position": (MJCF_OK.format(mass=0.5).replace('size=".05"', 'size=".05" pos="0 nan 0"'),
+                     r"<geom> pos='0 nan 0': not a finite number"),
+    "MJCF that does not compile": (MJCF_OK.format(mass=0.5).replace('type="sphere"', 'type="blob"'),
+                                   r"MuJoCo could not compile the payload: "),
+}
+# (place, run arguments: PATH is the bad file)
+PAYLOAD_PLACES = {
+    "manipulator plant.payload": ["ur5e_identification", "--set", "plant.payload='PATH'"],
+    "manipulator plant.payload with payload_mass": ["ur5e_identification", "--set", "plant.payload='PATH'",
+                                                    "--set", "plant.payload_mass=1.0"],
+    "manipulator payload_swap event": ["ur5e_identification", "--set",
+                                       "events=[{t=0.01, kind='payload_swap', payload='PATH'}]"],
+    "1-DOF arm plant.payload": ["arm_payload_swap", "--set", "events=[]", "--set", "plant.payload='PATH'"],
+}
+PAYLOAD_CASES = [(f, p) for f in BAD_FILES for p in PAYLOAD_PLACES]
+
+
+def _write(path: Path, content) -> Path:
+    (path.write_bytes if isinstance(content, bytes) else path.write_text)(content)
+    return path
+
+
+@pytest.mark.parametrize("bad, place", PAYLOAD_CASES, ids=[f"{f} as {p}" for f, p in PAYLOAD_CASES])
+def test_a_bad_payload_file_exits_2_with_one_line_naming_it(tmp_path, capsys, bad, place):
+    content, message = BAD_FILES[bad]
+    path = _write(tmp_path / "payload.xml", content)
+    log = tmp_path / "run.mcap"
+    args = [a.replace("PATH", str(path)) for a in PAYLOAD_PLACES[place]]
+    assert main(["run", *args, "-o", str(log), "--set", "simulation.duration=0.02"]) == 2
+    line = error_line(capsys)
+    assert re.fullmatch(re.escape(f"{path}: ") + message + ".*", line), line
+    assert not log.exists()
+
+
+SWAP_CASES = {
+    "no body named 'body'": ('<mujoco><worldbody><body name="block"><geom type="box" size=".1 .1 .1" mass="1"/>'
+                             '</body></worldbody></mujoco>',
+                             r"a payload_swap takes the inertial of the body named 'body', which this payload "
+                             r"does not have \(bodies: \['block'\]\)"),
+    "'body' of mass 0": ('<mujoco><worldbody><body name="body"><body name="inner"><geom type="sphere" size=".05" '
+                         'mass="1"/></body></body></worldbody></mujoco>',
+                         r"the body 'body' has mass 0 kg; a payload_swap needs a finite mass > 0 \(give its geoms "
+                         r"a mass\)"),
+}
+
+
+@pytest.mark.parametrize("case", SWAP_CASES)
+def test_a_swapped_in_payload_without_a_massive_body_is_refused_up_front(tmp_path, capsys, case):
+    content, message = SWAP_CASES[case]
+    path = _write(tmp_path / "swap.xml", content)
+    log = tmp_path / "run.mcap"
+    assert main(["run", "ur5e_identification", "-o", str(log), "--set", "simulation.duration=0.02", "--set",
+                 f"events=[{{t=0.01, kind='payload_swap', payload='{path}'}}]"]) == 2
+    assert re.fullmatch(re.escape(f"{path}: ") + message, error_line(capsys))
+    assert not log.exists()
+
+
+def test_a_missing_payload_names_every_place_it_was_looked_for(tmp_path, capsys, monkeypatch):
+    """A relative payload path is looked for next to the scenario, then in the current directory."""
+    monkeypatch.chdir(tmp_path)
+    scn = tmp_path / "scenarios" / "swap.toml"
+    scn.parent.mkdir()
+    scn.write_text((REPO / "scenarios" / "ur5e_payload_swap.toml").read_text().replace(
+        'payload = "sphere"', 'payload = "loads/gone.xml"'))
+    assert main(["run", str(scn), "--set", "simulation.duration=20.0"]) == 2
+    assert error_line(capsys) == (f"{scn}: the payload_swap event at t=15 s: payload 'loads/gone.xml' not found next "
+                                  f"to the scenario ({scn.parent / 'loads/gone.xml'}) nor in the current directory "
+                                  f"({tmp_path / 'loads/gone.xml'})")
+    assert main(["run", "ur5e_identification", "--set", "plant.payload=nosuch"]) == 2
+    assert error_line(capsys).endswith("plant.payload 'nosuch' is not a bundled payload (box_offset, sphere, "
+                                       "tool_offset); give one of those or a path to an MJCF file ending in .xml")
+
+
+def test_an_event_payload_resolves_next_to_the_scenario_and_the_log_verifies_from_anywhere(tmp_path, monkeypatch,
+                                                                                          capsys):
+    """payload_swap's file, relative, is found next to the scenario from any working directory; the
+    log embeds its text, so it re-simulates bit for bit from another folder, the file gone."""
+    made, elsewhere = tmp_path / "made", tmp_path / "elsewhere"
+    (made / "loads").mkdir(parents=True)
+    elsewhere.mkdir()
+    (made / "loads" / "heavy.xml").write_text(MJCF_OK.format(mass=0.9))
+    scn = made / "swap.toml"
+    scn.write_text((REPO / "scenarios" / "ur5e_payload_swap.toml").read_text().replace(
+        'payload = "sphere"', 'payload = "loads/heavy.xml"').replace("t = 15.0", "t = 0.05"))
+    monkeypatch.chdir(elsewhere)
+    log = tmp_path / "swap.mcap"
+    assert main(["run", str(scn), "-o", str(log), "--set", "simulation.duration=0.1",
+                 "--set", "success.tail_rms=inf"]) == 0  # 0.1 s: the swap is the point, not convergence
+    capsys.readouterr()
+    from adaptive_mj.log.replay import read_log
+
+    assert read_log(log).events[0]["label"] == "payload_swap payload/body = loads/heavy.xml (0.9 kg)"
+    (made / "loads" / "heavy.xml").unlink()
+    monkeypatch.chdir(tmp_path)
+    assert main(["replay", str(log), "--verify"]) == 0
+    assert "bit-identical" in capsys.readouterr().out
+
+
+# A user's arm: two hinges, each driven by a motor or a position servo.
+USER_ARM = """<mujoco model="user_arm"><option timestep="0.001" integrator="RK4"/>
+<worldbody><body name="upper" pos="0 0 0.5"><joint name="shoulder" axis="0 1 0" armature="0.05"/>
+<geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="1.2" contype="0" conaffinity="0"/>
+<body name="lower" pos="0.3 0 0"><joint name="elbow" axis="0 1 0" armature="0.05"/>
+<geom type="capsule" fromto="0 0 0 0.25 0 0" size="0.025" mass="0.6" contype="0" conaffinity="0"/>
+<site name="tip" pos="0.25 0 0"/></body></body></worldbody>
+<actuator>{actuators}</actuator></mujoco>"""
+USER_SCENARIO = """schema_version = 1
+[plant]
+kind = "manipulator"
+model = "arm.xml"
+unknown = "all"
+{plant}
+[simulation]
+duration = 0.05
+[reference]
+kind = "joint_sum_of_sines"
+amplitudes = [0.1]
+omegas = [1.0]
+[law]
+kind = "slotine_li"
+lambda = 10.0
+kd = 5.0
+gamma = 0.2
+[success]
+tail_rms = inf
+"""
+MOTORS = '<motor name="m_shoulder" joint="shoulder"/><motor name="m_elbow" joint="elbow"/>'
+SERVOS = '<position name="s_shoulder" joint="shoulder" kp="50"/><position name="s_elbow" joint="elbow" kp="30"/>'
+
+
+def _user_arm(tmp_path, actuators: str, plant: str = "") -> Path:
+    (tmp_path / "arm.xml").write_text(USER_ARM.format(actuators=actuators))
+    scn = tmp_path / "user.toml"
+    scn.write_text(USER_SCENARIO.format(plant=plant))
+    return scn
+
+
+USER_ARM_CASES = [
+    ("a motor of gear 0", MOTORS.replace('joint="elbow"', 'joint="elbow" gear="0"'), "",
+     r"{arm}: actuator\(s\) 'm_elbow' \(gear 0\) cannot drive their joint: the joint torque is gear \* ctrl, so the "
+     r"law's torque needs a finite, nonzero gear \(set gear, e\.g\. gear=\"1\"\)"),
+    ("servos without a forcerange", SERVOS, "servo_to_torque = true",
+     r"{scn}: plant\.servo_to_torque: 2 servo\(s\) have no forcerange to limit the torque motor each becomes: "
+     r"'s_shoulder' \(joint 'shoulder'\), 's_elbow' \(joint 'elbow'\); give plant\.forcerange = L .*"),
+    ("a forcerange table that misses one servo", SERVOS, "servo_to_torque = true\nforcerange = { shoulder = 20.0 }",
+     r"{scn}: plant\.servo_to_torque: 1 servo\(s\) have no forcerange .*: 's_elbow' \(joint 'elbow'\); .*"),
+    ("a forcerange table naming no servo", SERVOS, "servo_to_torque = true\nforcerange = { wrist = 20.0 }",
+     r"{scn}: plant\.forcerange names 'wrist', which is no servo's joint or actuator name \(servos: "
+     r"'s_shoulder' \(joint 'shoulder'\), 's_elbow' \(joint 'elbow'\)\)"),
+    ("forcerange without servo_to_torque", MOTORS, "forcerange = 20.0",
+     r"{scn}: plant\.forcerange must be absent unless plant\.servo_to_torque = true .*, got 20\.0"),
+    ("a forcerange <= 0", SERVOS, "servo_to_torque = true\nforcerange = { elbow = 0.0 }",
+     r"{scn}: plant\.forcerange\.elbow must be > 0, got 0\.0"),
+    ("a forcerange of the wrong type", SERVOS, "servo_to_torque = true\nforcerange = \"strong\"",
+     r"{scn}: plant\.forcerange must be a number > 0 or a table \{{joint = number > 0\}}, got 'strong'"),
+]
+
+
+@pytest.mark.parametrize("case, actuators, plant, message", USER_ARM_CASES, ids=[c[0] for c in USER_ARM_CASES])
+def test_a_users_arm_that_cannot_be_driven_exits_2_with_one_line(tmp_path, capsys, case, actuators, plant, message):
+    scn = _user_arm(tmp_path, actuators, plant)
+    log = tmp_path / "run.mcap"
+    assert main(["run", str(scn), "-o", str(log)]) == 2
+    line = error_line(capsys)
+    assert re.fullmatch(message.format(scn=re.escape(str(scn)), arm=re.escape(str(tmp_path / "arm.xml"))), line), line
+    assert not log.exists()
+
+
+@pytest.mark.parametrize("plant, limits", [
+    ("forcerange = 25.0", [25.0, 25.0]),
+    ("forcerange = { shoulder = 40.0, s_elbow = 15.0 }", [40.0, 15.0]),  # by joint or by actuator name
+])
+def test_servos_without_a_forcerange_take_the_scenarios_limit(tmp_path, capsys, plant, limits):
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.scenario import load
+
+    setup = build(load(_user_arm(tmp_path, SERVOS, "servo_to_torque = true\n" + plant)))
+    lo, hi = setup.plant.ctrl_range
+    assert list(hi) == limits and list(lo) == [-x for x in limits]
+    assert setup.notes[1] == (f"actuator 's_elbow': servo rebuilt as a torque motor, |tau| <= [-{limits[1]:g}, "
+                              f"{limits[1]:g}] N*m from plant.forcerange")
+
+
+# Model files: every bad file as plant.model of each kind of plant (the message after the file is the
+# model reader's or MuJoCo's own; the point is one line naming the file).
+MODEL_PLACES = {"heave": "heave_tracking", "manipulator": "ur5e_identification", "1-DOF arm": "arm_payload_swap"}
+MODEL_FILE_CASES = [(f, p) for f in ("malformed XML", "XML that is not MJCF", "binary", "empty", "only whitespace")
+                    for p in MODEL_PLACES]
+
+
+@pytest.mark.parametrize("bad, place", MODEL_FILE_CASES, ids=[f"{f} as the {p} model" for f, p in MODEL_FILE_CASES])
+def test_a_bad_model_file_exits_2_with_one_line_naming_it(tmp_path, capsys, bad, place):
+    path = _write(tmp_path / "model.xml", BAD_FILES[bad][0])
+    log = tmp_path / "run.mcap"
+    assert main(["run", MODEL_PLACES[place], "-o", str(log), "--set", f"plant.model='{path}'", "--set", "events=[]",
+                 "--set", "simulation.duration=0.02"]) == 2
+    assert error_line(capsys).startswith(f"{path}: ")
+    assert not log.exists()
+
+
+# Studies: every grid point, every scenario given to bench, and a resumed study's manifest are
+# checked (built: model, payload files, names, keyframes) before anything runs.
+STUDY_GRID_CASES = [
+    ("a keyframe the model does not have", ["reference.center=home,nokey"],
+     r"grid point reference\.center=nokey: .*ur5e_identification\.toml: reference\.center names keyframe 'nokey', "
+     r"which the model does not have \(keyframes: \['home'\]\)"),
+    ("a payload that does not exist", ["plant.payload=sphere,nosuch"],
+     r"grid point plant\.payload=nosuch: .*plant\.payload 'nosuch' is not a bundled payload .*"),
+    ("a body the model does not have", ["plant.unknown=['payload/body'],['nobody']"],
+     r"grid point plant\.unknown=.*nobody.*: .*plant\.unknown names body 'nobody', which the model does not have .*"),
+]
+
+
+@pytest.mark.parametrize("case, grid, message", STUDY_GRID_CASES, ids=[c[0] for c in STUDY_GRID_CASES])
+def test_a_grid_point_that_cannot_be_built_stops_the_sweep_before_any_run(tmp_path, capsys, case, grid, message):
+    out = tmp_path / "sweep"
+    args = [a for g in grid for a in ("--grid", g)]
+    assert main(["sweep", "ur5e_identification", *args, "-o", str(out), "--set", "simulation.duration=0.02"]) == 2
+    line = error_line(capsys)
+    assert re.fullmatch(message, line), line
+    assert not out.exists()
+
+
+def test_a_grid_point_with_a_bad_payload_file_stops_the_sweep_before_any_run(tmp_path, capsys):
+    good = _write(tmp_path / "good.xml", MJCF_OK.format(mass=0.5))
+    bad = _write(tmp_path / "bad.xml", MJCF_OK.format(mass="nan"))
+    out = tmp_path / "sweep"
+    assert main(["sweep", "ur5e_identification", "--grid", f"plant.payload='{good}','{bad}'", "-o", str(out),
+                 "--set", "simulation.duration=0.02"]) == 2
+    assert error_line(capsys).startswith(f"grid point plant.payload={bad}: {bad}: <geom> mass='nan'")
+    assert not out.exists()
+
+
+def test_a_breaking_point_end_that_cannot_be_built_stops_before_any_run(tmp_path, capsys):
+    out = tmp_path / "bp"
+    scn = _user_arm(tmp_path, MOTORS.replace('joint="elbow"', 'joint="elbow" gear="0"'))
+    assert main(["sweep", str(scn), "--breaking-point", "law.kd=1:10", "--tail-bound", "1", "-o", str(out)]) == 2
+    assert error_line(capsys).startswith(f"--breaking-point law.kd=1: {tmp_path / 'arm.xml'}: actuator(s) 'm_elbow'")
+    assert not out.exists()
+
+
+def test_bench_checks_your_scenarios_before_the_catalogue_runs(tmp_path, capsys, monkeypatch):
+    from adaptive_mj.study import bench_catalogue
+
+    ran = []
+    monkeypatch.setattr(bench_catalogue, "catalogue", lambda *, quick, logs: ran.append(quick) or [])
+    bad = tmp_path / "bad.toml"
+    bad.write_text((REPO / "scenarios" / "ur5e_identification.toml").read_text().replace('"home"', '"nokey"'))
+    out = tmp_path / "bench"
+    assert main(["bench", "--quick", "-o", str(out), "--scenario", str(REPO / "scenarios" / "heave_tracking.toml"),
+                 "--scenario", str(bad)]) == 2
+    assert error_line(capsys) == (f"{bad}: reference.center names keyframe 'nokey', which the model does not have "
+                                  "(keyframes: ['home'])")
+    assert not out.exists() and ran == []
+    assert main(["bench", "--quick", "-o", str(out), "--scenario", str(tmp_path / "gone.toml")]) == 2
+    assert error_line(capsys) == f"{tmp_path / 'gone.toml'}: scenario file not found"
+
+
+@pytest.mark.parametrize("manifest, got", [
+    ("[1, 2]", "a JSON array"),
+    ('"a sweep"', "a JSON string"),
+    ("null", "a JSON null"),
+    ("3", "a JSON number"),
+    ('{"grid": ["law.k=1,2"]}', "an object without format, scenario, scenario_text, seeds, overrides"),
+])
+def test_resume_on_a_manifest_of_the_wrong_shape_exits_2_with_one_line(tmp_path, capsys, manifest, got):
+    study = tmp_path / "study"
+    study.mkdir()
+    (study / "manifest.json").write_text(manifest)
+    assert main(["sweep", "heave_tracking", "--grid", "law.k=1,2", "--resume", str(study)]) == 2
+    assert error_line(capsys) == (f"sweep --resume {study}: manifest.json is not a sweep manifest (expected an object "
+                                  f"with format, scenario, scenario_text, grid, seeds, overrides; got {got}); resume "
+                                  "only a folder that sweep wrote")
+    assert sorted(p.name for p in study.iterdir()) == ["manifest.json"]
+
+
+# Plugins: a plant plugin's model file, bad in each way, as the plugin's own or as plant.model.
+CART_XML = ("<mujoco><option timestep='0.001'/><worldbody><body name='cart'><joint name='x' type='slide' "
+            "axis='1 0 0'/><geom type='box' size='.1 .05 .05' mass='2'/></body></worldbody><actuator>"
+            "<motor joint='x'/></actuator></mujoco>")
+CART_SCENARIO = """schema_version = 1
+[plant]
+kind = "cart"
+[simulation]
+duration = 0.05
+[reference]
+kind = "cosine"
+[law]
+kind = "sliding_adaptive"
+lambda = 10.0
+k = 50.0
+gamma = { d = 0.05, b = 0.05 }
+"""
+
+
+@pytest.fixture
+def cart_plugin(tmp_path, monkeypatch):
+    """A plant plugin "cart" (as an installed distribution would register it), its MJCF in tmp_path."""
+    from adaptive_mj import plugins
+    from adaptive_mj.form import ModelForm
+    from adaptive_mj.plants import plugin as plant_plugins
+    from adaptive_mj.plants.mujoco_plant import MujocoPlant, find_joint_and_actuator
+
+    def make(model, params, where):
+        import mujoco
+
+        j, a = find_joint_and_actuator(model, joint=None, actuator=None, joint_type=mujoco.mjtJoint.mjJNT_SLIDE,
+                                       where=where)
+        return MujocoPlant(model, joint_id=j, actuator_id=a,
+                           form=ModelForm(order=2, p_names=("b",), phi=lambda x: x[1:2] * -1.0),
+                           theta_fn=lambda m: [m.body_mass[1], m.dof_damping[0]], where=where)
+
+    model = _write(tmp_path / "cart.xml", CART_XML)
+    inst = plugins.Installed("cart", plant_plugins.PlantPlugin(model=model, make=make), "cart-plant", "0.1.0", "0" * 64)
+    monkeypatch.setattr(plant_plugins, "installed", lambda: {"cart": inst})
+    scn = tmp_path / "cart.toml"
+    scn.write_text(CART_SCENARIO)
+    return scn
+
+
+@pytest.mark.parametrize("bad", ["malformed XML", "XML that is not MJCF", "binary", "empty"])
+def test_a_plant_plugins_bad_model_file_exits_2_with_one_line(cart_plugin, tmp_path, capsys, bad):
+    model = _write(tmp_path / "cart.xml", BAD_FILES[bad][0])  # the plugin's own file, damaged
+    assert main(["run", str(cart_plugin), "-o", str(tmp_path / "run.mcap")]) == 2
+    assert error_line(capsys).startswith(f"{model}: ")
+    _write(tmp_path / "other.xml", BAD_FILES[bad][0])  # or the one the scenario names
+    out = tmp_path / "sweep"
+    assert main(["sweep", str(cart_plugin), "--grid", "plant.model='cart.xml','other.xml'", "-o", str(out)]) == 2
+    assert error_line(capsys).startswith(f"grid point plant.model=cart.xml: {model}: ")
+    assert not out.exists() and not (tmp_path / "run.mcap").exists()

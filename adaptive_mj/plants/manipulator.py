@@ -115,24 +115,63 @@ def check_supported(model: mujoco.MjModel, where: str) -> None:  # noqa: C901 (o
     if missing:
         raise ModelError(f"{where}: joint(s) {missing} have no actuator; the manipulator plant needs every joint "
                          "actuated (fix the unactuated joints in the MJCF, or add a <motor>)")
+    gear = model.actuator_gear[:, 0]
+    bad_gear = [f"{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)!r} (gear {gear[a]:g})" for a in range(model.nu)
+                if not (np.isfinite(gear[a]) and gear[a] != 0)]
+    if bad_gear:
+        raise ModelError(f"{where}: actuator(s) {', '.join(bad_gear)} cannot drive their joint: the joint torque is "
+                         "gear * ctrl, so the law's torque needs a finite, nonzero gear (set gear, e.g. gear=\"1\")")
 
 
-def servo_to_torque(spec) -> list[str]:
+def _is_servo(act) -> bool:
+    return not (act.biastype == mujoco.mjtBias.mjBIAS_NONE and act.gaintype == mujoco.mjtGain.mjGAIN_FIXED
+                and act.dyntype == mujoco.mjtDyn.mjDYN_NONE)
+
+
+def _model_forcerange(act) -> tuple[float, float] | None:
+    lo, hi = (float(v) for v in act.forcerange)
+    limited = act.forcelimited == mujoco.mjtLimited.mjLIMITED_TRUE or (
+        act.forcelimited == mujoco.mjtLimited.mjLIMITED_AUTO and lo < hi)
+    return (lo, hi) if limited and lo < hi else None
+
+
+def servo_to_torque(spec, forcerange: float | dict[str, float] | None = None) -> list[str]:
     """Rebuild position servos (<position>, or <general> with an affine bias) as torque motors.
 
-    Each becomes gain 1, no bias, no dynamics, its control range set to its
-    forcerange (which must be given). Returns one line per converted actuator.
+    Each becomes gain 1, no bias, no dynamics, its control range set to its force limit:
+    `forcerange` (plant.forcerange: one limit L [N m or N] for every servo, or a table
+    {joint or actuator name: L}) where it gives one, as [-L, L], else the servo's own
+    forcerange. A servo with neither is never turned into an unlimited motor: one ModelError
+    names every such actuator. Returns one line per converted actuator.
     """
-    notes = []
-    for act in spec.actuators:
-        if act.biastype == mujoco.mjtBias.mjBIAS_NONE and act.gaintype == mujoco.mjtGain.mjGAIN_FIXED \
-                and act.dyntype == mujoco.mjtDyn.mjDYN_NONE:
+    servos = [act for act in spec.actuators if _is_servo(act)]
+    table = forcerange if isinstance(forcerange, dict) else None
+    if table is not None:
+        known = {n for act in servos for n in (act.name, act.target) if n}
+        stray = [k for k in table if k not in known]
+        if stray:
+            shown = ", ".join(f"{act.name or '#' + str(i)!r} (joint {act.target!r})" for i, act in enumerate(servos))
+            raise ModelError(f"plant.forcerange names {', '.join(repr(k) for k in stray)}, which is no servo's "
+                             f"joint or actuator name (servos: {shown or 'none'})")
+    limits: list[tuple[float, float, str]] = []
+    missing = []
+    for i, act in enumerate(servos):
+        given = table.get(act.name, table.get(act.target)) if table is not None else forcerange
+        if isinstance(given, (int, float)):
+            limits.append((-float(given), float(given), " from plant.forcerange"))
             continue
-        lo, hi = act.forcerange
-        limited = act.forcelimited == mujoco.mjtLimited.mjLIMITED_TRUE or (
-            act.forcelimited == mujoco.mjtLimited.mjLIMITED_AUTO and lo < hi)
-        if not limited or not lo < hi:
-            raise ModelError(f"actuator {act.name!r}: servo_to_torque needs a forcerange to limit the torque motor")
+        own = _model_forcerange(act)
+        if own is None:
+            missing.append(f"{act.name or '#' + str(i)!r} (joint {act.target!r})")
+            limits.append((0.0, 0.0, ""))
+        else:
+            limits.append((own[0], own[1], ""))
+    if missing:
+        raise ModelError(f"plant.servo_to_torque: {len(missing)} servo(s) have no forcerange to limit the torque "
+                         f"motor each becomes: {', '.join(missing)}; give plant.forcerange = L (|tau| <= L [N m] "
+                         "on every joint) or a table {joint = L, ...}, or a forcerange in the MJCF")
+    notes = []
+    for act, (lo, hi, whence) in zip(servos, limits, strict=True):
         act.gaintype = mujoco.mjtGain.mjGAIN_FIXED
         act.gainprm = np.zeros_like(act.gainprm)
         act.gainprm[0] = 1.0
@@ -141,7 +180,11 @@ def servo_to_torque(spec) -> list[str]:
         act.dyntype = mujoco.mjtDyn.mjDYN_NONE
         act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
         act.ctrlrange = [lo, hi]
-        notes.append(f"actuator {act.name!r}: servo rebuilt as a torque motor, |tau| <= [{lo:g}, {hi:g}] N*m")
+        if whence:
+            act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            act.forcerange = [lo, hi]
+        notes.append(f"actuator {act.name!r}: servo rebuilt as a torque motor, |tau| <= [{lo:g}, {hi:g}] N*m"
+                     + whence)
     return notes
 
 
@@ -619,9 +662,9 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
     def edit(spec):
         if p.manipulator.servo_to_torque:
             try:
-                notes.extend(servo_to_torque(spec))
+                notes.extend(servo_to_torque(spec, p.manipulator.forcerange))
             except ModelError as exc:
-                raise ScenarioError(f"{scn.source}: plant.servo_to_torque: {exc}") from None
+                raise ScenarioError(f"{scn.source}: {exc}") from None
         try:  # joint friction and actuator lag (after servo_to_torque: a lag goes on the rebuilt motor)
             set_joint_friction(spec, damping=fr.damping, frictionloss=fr.frictionloss)
             set_actuator_lag(spec, fr.actuator_lag, exact=scn.simulation.integrator != "rk4")

@@ -14,7 +14,7 @@ from typing import Callable, Iterator
 import mujoco
 import numpy as np
 
-from adaptive_mj.errors import ModelError, ScenarioError
+from adaptive_mj.errors import AdaptiveMJError, ModelError, ScenarioError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import ModelSource
 
@@ -275,6 +275,8 @@ def compile_spec(xml: str, assets: dict | None = None, *, where: str, edit=None)
         if edit is not None:
             edit(spec)
         model = with_userdata(spec).compile()
+    except AdaptiveMJError:  # edit's own one-line refusal (servo_to_torque), not MuJoCo's
+        raise
     except ValueError as exc:
         raise ModelError(f"{where}: MuJoCo could not compile the model: {str(exc).strip()}") from None
     return model, spec.to_xml()
@@ -289,12 +291,30 @@ INTEGRATORS = {
 }
 
 
+def read_mjcf(path: Path, what: str = "model") -> str:
+    """An MJCF file's text; an unreadable, empty or binary file is a one-line ModelError naming it."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ModelError(f"{path}: cannot read the {what} file: {exc.strerror or exc}") from None
+    if not data.strip():
+        raise ModelError(f"{path}: empty {what} file ({len(data)} bytes), expected an MJCF model (<mujoco>...)")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        text = None
+    if text is None or "\x00" in text:
+        raise ModelError(f"{path}: not a text file (binary data, starts with {data[:8]!r}), expected an MJCF "
+                         "model (<mujoco>...)")
+    return text
+
+
 def read_model_file(scn) -> ModelSource:
     """plant.model's text, as compiled (a plant kind's model_source for a single MJCF file)."""
     p = scn.plant
     if not p.model.is_file():
         raise ModelError(f"{scn.source}: plant.model {str(p.model)!r} not found")
-    return ModelSource(p.model.read_text(encoding="utf-8"), {})
+    return ModelSource(read_mjcf(p.model), {})
 
 
 def compile_for_scenario(scn, source: ModelSource | None, *, edit=None) -> tuple[mujoco.MjModel, str]:

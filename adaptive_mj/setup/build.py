@@ -67,11 +67,13 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     """Build a run's objects. `source` replaces the model files (used by replay --verify)."""
     kind = plant_kinds(scn.plant.kind)[scn.plant.kind]
     if source is None:
+        check_payload_file(scn)  # a bad plant.payload is one line, before PyMJCF reads it
         source = kind.model_source(scn)
+    source = with_event_payloads(scn, source)  # every payload_swap file read and checked before anything runs
     built = kind.from_scenario(scn, source)
     plant = built.plant
     for e in scn.events:
-        _check_event(scn, e, plant)  # a missing body or payload fails now, not mid-run
+        _check_event(scn, e, plant, source)  # a missing body or payload fails now, not mid-run
     reference = _reference(scn, plant)
     order = plant_order(plant)
     plant.set_state(_initial_state(scn, reference, order))
@@ -93,8 +95,15 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
         plant.disturbance = _disturbance(scn)
     rng = np.random.default_rng(scn.noise.seed)
     return Setup(plant=plant, law=law, reference=reference, theta_hat0=theta_hat0, noise_std=std,
-                 rng=rng, events=[_event(e, scn) for e in scn.events], source=source,
+                 rng=rng, events=[_event(e, scn, source) for e in scn.events], source=source,
                  model_xml=built.model_xml, notes=built.notes, sensors=sensors)
+
+
+def check(scn: Scenario) -> None:
+    """Build everything a run of `scn` reads (model and payload files, the names and keyframes it
+    refers to, the law), stepping nothing: a study checks each of its runs with it before any runs.
+    Raises the one-line ScenarioError or ModelError the run itself would."""
+    build(scn)
 
 
 def _initial_state(scn: Scenario, reference, order: int) -> np.ndarray:
@@ -105,7 +114,43 @@ def _initial_state(scn: Scenario, reference, order: int) -> np.ndarray:
     return np.asarray(x0 if x0 is not None else (0.0,) * order, dtype=float)
 
 
-def _check_event(scn: Scenario, e, plant) -> None:
+def check_payload_file(scn: Scenario) -> None:
+    """plant.payload (arm, manipulator on MuJoCo): found, and a payload MJCF with mass
+    (adaptive_mj.plants.payload.check_text), else one line naming the file."""
+    from adaptive_mj.plants import payload as pl
+
+    p = scn.plant
+    if p.payload is None or not p.payload_paths or (p.backend == "twin" and p.theta is not None):
+        return
+    path = pl.locate(p.payload, p.payload_paths, where=scn.source, key="plant.payload")
+    pl.check_text(pl.read(path), path, on_disk=True)
+
+
+def with_event_payloads(scn: Scenario, source: ModelSource | None) -> ModelSource | None:
+    """`source` with the text of every payload_swap file as an asset (payload.ASSET_PREFIX + the name
+    as written), read and checked now; a source that already carries one (a log's) keeps it."""
+    from adaptive_mj.plants import payload as pl
+
+    swaps = [e for e in scn.events if e.kind == "payload_swap" and e.payload is not None]
+    if source is None or not swaps:
+        return source
+    assets = dict(source.assets)
+    for e in swaps:
+        key = pl.ASSET_PREFIX + e.payload
+        if key in assets:
+            continue
+        path = pl.locate(e.payload, e.payload_paths, where=scn.source, key=_swap_key(e))
+        text = pl.read(path)
+        pl.swap_inertial(pl.check_text(text, path, on_disk=True), path)
+        assets[key] = text.encode("utf-8")
+    return ModelSource(source.xml, assets)
+
+
+def _swap_key(e) -> str:
+    return f"the payload_swap event at t={e.t:g} s: payload"
+
+
+def _check_event(scn: Scenario, e, plant, source: ModelSource | None = None) -> None:
     if e.kind not in ("payload_mass", "payload_swap"):
         return
     if scn.plant.payload is None and e.body.startswith("payload/"):
@@ -114,7 +159,7 @@ def _check_event(scn: Scenario, e, plant) -> None:
                             "events[].body")
     plant.body_id(e.body)
     if e.kind == "payload_swap":
-        _payload_inertial(scn, e.payload)
+        _payload_inertial(scn, e, source)
 
 
 def _named(scn: Scenario, key: str, values, names: tuple[str, ...], plant=None) -> np.ndarray:
@@ -357,9 +402,9 @@ def _disturbance(scn: Scenario):
     return lambda t: d.magnitude * float(np.sin(d.omega * t + d.phase))
 
 
-def _event(e, scn: Scenario | None = None) -> Event:
+def _event(e, scn: Scenario | None = None, source: ModelSource | None = None) -> Event:
     if e.kind == "payload_swap":
-        inertial = _payload_inertial(scn, e.payload)
+        inertial = _payload_inertial(scn, e, source)
         return Event(e.t, f"payload_swap {e.body} = {e.payload} ({inertial['mass']:g} kg)",
                      lambda plant, e=e: plant.set_body_inertial(e.body, **inertial))
     if e.kind == "payload_mass":
@@ -455,20 +500,14 @@ def _per_joint_names(scn: Scenario, key: str, value: dict, joints: tuple[str, ..
                                 f"(joints: {', '.join(joints)})")
 
 
-def _payload_inertial(scn: Scenario, payload: str) -> dict:
-    """mass, ipos, iquat, inertia of the body named "body" of a payload file (compiled alone)."""
-    import mujoco
+def _payload_inertial(scn: Scenario, e, source: ModelSource | None) -> dict:
+    """mass, ipos, iquat, inertia of the body named "body" of a payload_swap's file, compiled alone:
+    the text the run's source carries (with_event_payloads; a log's), else the file found now."""
+    from adaptive_mj.plants import payload as pl
 
-    from adaptive_mj.plants.arm import PAYLOADS
-    from adaptive_mj.plants.mujoco_plant import compile_xml_path
-
-    path = Path(payload) if Path(payload).suffix == ".xml" else PAYLOADS / f"{payload}.xml"
-    if not path.is_file():
-        choices = sorted(p.stem for p in PAYLOADS.glob("*.xml"))
-        raise ScenarioError(f"{scn.source}: events: payload {payload!r} not found (bundled payloads: {choices})")
-    model = compile_xml_path(path)
-    b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "body")
-    if b < 0:
-        raise ScenarioError(f"{scn.source}: events: payload {payload!r} has no body named 'body'")
-    return {"mass": float(model.body_mass[b]), "ipos": model.body_ipos[b].copy(),
-            "iquat": model.body_iquat[b].copy(), "inertia": model.body_inertia[b].copy()}
+    data = (source.assets if source is not None else {}).get(pl.ASSET_PREFIX + e.payload)
+    if data is not None:
+        path = Path(f"{e.payload} (embedded)")
+        return pl.swap_inertial(pl.check_text(bytes(data).decode("utf-8"), path, on_disk=False), path)
+    path = pl.locate(e.payload, e.payload_paths, where=scn.source, key=_swap_key(e))
+    return pl.swap_inertial(pl.check_text(pl.read(path), path, on_disk=True), path)

@@ -61,6 +61,7 @@ class PlantSpec:
     regressor: str = "lecture"  # first_order: "lecture" (sin x - a x + b x²) or "sin_squared"
     manipulator: "ManipulatorSpec | None" = None  # kind = "manipulator" only
     plugin_params: dict[str, float] | None = None  # kind = an installed plant plugin: its declared keys
+    payload_paths: tuple[Path, ...] = ()  # where plant.payload was looked for (see EventSpec.payload_paths)
 
 
 @dataclass(frozen=True)
@@ -69,13 +70,15 @@ class ManipulatorSpec:
 
     unknown: "payload", "all" or body names; joint_params: armature and damping unknown;
     base_parameters: reduce to a base (identifiable) set; servo_to_torque: rebuild
-    position servos as torque motors limited to their forcerange.
+    position servos as torque motors limited to their forcerange; forcerange: the limit
+    [N m or N] for servos whose model gives none, one number or {joint or actuator = number}.
     """
 
     unknown: str | tuple[str, ...]
     joint_params: bool
     base_parameters: bool
     servo_to_torque: bool
+    forcerange: float | dict[str, float] | None = None
     # joint friction and actuator lag (plant.damping, .frictionloss, .actuator_lag: a number for every
     # joint or {joint = number}; None keeps the model's), and the regressor's friction columns
     friction: "JointFrictionSpec" = field(default_factory=lambda: JointFrictionSpec())
@@ -225,7 +228,10 @@ class EventSpec:
     kind: str
     value: float
     body: str
-    payload: str | None = None  # payload_swap: the payload file (name in models/payloads or path)
+    payload: str | None = None  # payload_swap: the payload file (name in models/payloads or path), as written
+    # payload_swap: where the file was looked for, in order (bundled: models/payloads; a relative path: next to
+    # the scenario, then the current directory); the first that exists is used (adaptive_mj.plants.payload)
+    payload_paths: tuple[Path, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -483,7 +489,7 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
     if sensors.velocity == "differentiated" and "q_dot" in noise.std:
         raise ScenarioError(f"{where}: noise.std.q_dot is for sensors.velocity = 'measured'; a differentiated "
                             "velocity takes its noise from the positions (noise.std.q, sensors.encoder_counts)")
-    events = _events(top.get("events", []), top, plant, sim)
+    events = _events(top.get("events", []), top, plant, sim, base_dir)
     control = _control(top.table("control", {}), sim)
     success = _success(top.table("success", {}))
     log = top.table("log", {})
@@ -543,6 +549,7 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:  # noqa: C901 (one branch pe
     payload = t.string("payload", "sphere" if kind == "arm" else None)
     if payload == "none":
         payload = None
+    payload, payload_paths = _resolve_payload(payload, base_dir)
     payload_mass = t.number("payload_mass", None, gt=0)
     site = t.string("site", "tip")
     if kind not in ("arm", "manipulator"):
@@ -557,7 +564,7 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:  # noqa: C901 (one branch pe
             raise t.fail("payload_mass", "absent when plant.payload is 'none'", payload_mass)
         manipulator = _manipulator(t, payload)
     else:
-        for key in ("unknown", "joint_params", "base_parameters", "servo_to_torque"):
+        for key in ("unknown", "joint_params", "base_parameters", "servo_to_torque", "forcerange"):
             if key in t.data:
                 raise t.fail(key, "absent unless plant.kind = 'manipulator'", t.data[key])
     manipulator = _joint_friction(t, kind, manipulator)
@@ -592,7 +599,25 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:  # noqa: C901 (one branch pe
     return PlantSpec(kind=kind, backend=backend, model=model, joint=joint, actuator=actuator, payload=payload,
                      payload_mass=payload_mass, site=site, theta=theta, g=g, density=density,
                      viscosity=viscosity, ctrl_range=ctrl, thruster_time_constant=lag, regressor=regressor,
-                     manipulator=manipulator)
+                     manipulator=manipulator, payload_paths=payload_paths)
+
+
+def _payload_paths(name: str | None, base_dir: Path) -> tuple[Path, ...]:
+    """Where a payload file is looked for (adaptive_mj.plants.payload.candidates); checked in build."""
+    from adaptive_mj.plants.payload import candidates
+
+    return () if name is None else candidates(name, base_dir)
+
+
+def _resolve_payload(name: str | None, base_dir: Path) -> tuple[str | None, tuple[Path, ...]]:
+    """plant.payload: a bundled name as it is; a path as the first place it is found (next to the
+    scenario, then the current directory), else the first place looked; and the places looked."""
+    from adaptive_mj.plants.payload import is_bundled
+
+    paths = _payload_paths(name, base_dir)
+    if name is None or is_bundled(name):
+        return name, paths
+    return str(next((p for p in paths if p.is_file()), paths[0])), paths
 
 
 
@@ -634,9 +659,28 @@ def _manipulator(t: _Table, payload: str | None) -> ManipulatorSpec:
         if unknown == "payload" and payload is None:
             raise t.fail("unknown", "'all' or an array of body names when there is no payload (plant.payload "
                                     "is 'none')", unknown)
+    servo = t.boolean("servo_to_torque", False)
     return ManipulatorSpec(unknown=unknown, joint_params=t.boolean("joint_params", False),
                            base_parameters=t.boolean("base_parameters", False),
-                           servo_to_torque=t.boolean("servo_to_torque", False))
+                           servo_to_torque=servo, forcerange=_forcerange(t, servo))
+
+
+def _forcerange(t: _Table, servo_to_torque: bool) -> float | dict[str, float] | None:
+    """plant.forcerange: |tau| limit [N m or N] for servos without a forcerange, one number for every
+    joint or a table {joint or actuator name = number} (names are checked against the model in build)."""
+    raw = t.get("forcerange", None)
+    if raw is None:
+        return None
+    if not servo_to_torque:
+        raise t.fail("forcerange", "absent unless plant.servo_to_torque = true (it limits the rebuilt servos)",
+                     raw)
+    if isinstance(raw, dict):
+        if not raw:
+            raise t.fail("forcerange", "a number > 0 or a non-empty table {joint = number > 0}", raw)
+        return t.named_numbers("forcerange", gt=0)
+    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+        raise t.fail("forcerange", "a number > 0 or a table {joint = number > 0}", raw)
+    return t.number("forcerange", gt=0)
 
 
 FRICTION_KEYS = ("damping", "frictionloss", "actuator_lag", "friction_params", "coulomb_smoothing")
@@ -1015,7 +1059,7 @@ def _sensors(t: _Table, *, arm: bool) -> SensorSpec:
     return spec
 
 
-def _events(raw, top: _Table, plant: PlantSpec, sim: SimulationSpec) -> tuple[EventSpec, ...]:
+def _events(raw, top: _Table, plant: PlantSpec, sim: SimulationSpec, base_dir: Path) -> tuple[EventSpec, ...]:
     if not isinstance(raw, list):
         raise top.fail("events", "an array of tables ([[events]])", raw)
     out = []
@@ -1040,7 +1084,8 @@ def _events(raw, top: _Table, plant: PlantSpec, sim: SimulationSpec) -> tuple[Ev
                 and body.startswith("payload/"):
             raise t.fail("kind", "an event on a payload body needs plant.payload (it is 'none')", kind)
         t.finish()
-        out.append(EventSpec(t=time, kind=kind, value=value, body=body, payload=payload))
+        out.append(EventSpec(t=time, kind=kind, value=value, body=body, payload=payload,
+                             payload_paths=_payload_paths(payload, base_dir)))
     return tuple(sorted(out, key=lambda e: e.t))
 
 

@@ -31,7 +31,7 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 
 from adaptive_mj.setup import scenario as sc
-from adaptive_mj.errors import ScenarioError
+from adaptive_mj.errors import AdaptiveMJError, ScenarioError
 from adaptive_mj.report.metrics import clean_json, metrics as run_metrics
 from adaptive_mj.study.parallel import Backend, Job, JobResult, iter_results, progress_printer, session
 from adaptive_mj.study.job import REFUSE_UNSTABLE
@@ -444,10 +444,14 @@ def _grid_overrides(point: dict[str, Any]) -> list[str]:
 
 
 def _validate_points(path: Path, overrides: Sequence[str], points: Sequence[dict[str, Any]]) -> None:
+    """Every grid point as a scenario, and built (its model, payload files, names and keyframes;
+    adaptive_mj.setup.build.check), before any point runs."""
+    from adaptive_mj.setup.build import check
+
     for point in points:
         try:
-            sc.load(path, overrides=[*overrides, *_grid_overrides(point)])
-        except ScenarioError as exc:
+            check(sc.load(path, overrides=[*overrides, *_grid_overrides(point)]))
+        except AdaptiveMJError as exc:
             where = ", ".join(f"{k}={label(v)}" for k, v in point.items())
             raise ScenarioError(f"grid point {where}: {exc}") from None
 
@@ -539,8 +543,13 @@ def main_breaking_point(args, path: Path, doc: dict, base, backend: Backend | No
         lo, hi, integer = stressor.lo, stressor.hi, False
     else:
         stressor = Stressor.key(key, lo, hi, integer=integer)
-    for v in (lo, hi):  # both ends must make a valid scenario before anything runs
-        sc.load(path, overrides=[*args.overrides, *stressor.overrides(v)])
+    from adaptive_mj.setup.build import check
+
+    for v in (lo, hi):  # both ends must make a valid scenario, built, before anything runs
+        try:
+            check(sc.load(path, overrides=[*args.overrides, *stressor.overrides(v)]))
+        except AdaptiveMJError as exc:
+            raise ScenarioError(f"--breaking-point {key}={v:g}: {exc}") from None
     for note in sweep_notes(base, [key], args.seeds):
         print(f"sweep: note: {note}", file=sys.stderr)
     out = new_output_dir(args.output, f"breaking-point-{base.name}")
@@ -590,6 +599,12 @@ def check_manifest(out: Path, manifest: dict) -> None:
         old = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         raise ScenarioError(f"sweep --resume {out}: {MANIFEST} cannot be read ({exc})") from None
+    if not isinstance(old, dict) or not all(key in old for key in manifest):
+        got = (f"an object without {', '.join(k for k in manifest if k not in old)}" if isinstance(old, dict)
+               else "a JSON " + {list: "array", str: "string", int: "number", float: "number", bool: "boolean",
+                                    type(None): "null"}.get(type(old), type(old).__name__))
+        raise ScenarioError(f"sweep --resume {out}: {MANIFEST} is not a sweep manifest (expected an object with "
+                            f"{', '.join(manifest)}; got {got}); resume only a folder that sweep wrote")
     for key in ("scenario_text", "grid", "seeds", "overrides"):
         if old.get(key) != manifest[key]:
             shown = "the scenario file's text" if key == "scenario_text" else f"{key} {old.get(key)!r}"
