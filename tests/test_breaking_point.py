@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from adaptive_mj.cli import main
+from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.scenario import SCENARIOS_DIR
 from adaptive_mj.study.breaking_point import Evaluation, Margin, Search, Stressor, margin_text, search_all
 from adaptive_mj.study import stress
@@ -108,3 +109,31 @@ def test_sweep_breaking_point_errors_are_one_line(args, match, capsys, tmp_path)
     assert main(["sweep", "heave_tracking", "-o", str(tmp_path / "x"), *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and re.search(match, err[0]), err
+
+
+def test_the_stress_study_covers_the_six_joint_arm(tmp_path):
+    """The 6-joint arm's laws are derived from its scenario and model (leak toward the true θ, the
+    dead-zone from the nominal noise), its stressors are the real-robot conditions, and a search on
+    it finds a noise margin between its ends."""
+    from adaptive_mj.setup.build import build
+
+    arm6 = [p for p in stress.plants(2.0) if p.name == "ur5e"][0]
+    laws = dict(stress.laws(arm6, composite=False))
+    assert list(laws) == ["adaptive", "dead_zone", "sigma", "e_modification", "projection", "saturation_freeze",
+                          "computed_torque", "pd_gravity"]
+    scn = sc.load(sc.SCENARIOS_DIR / "ur5e_identification.toml", overrides=list(arm6.base))
+    s = build(scn)
+    assert laws["sigma"][0] == f"law.sigma={float(s.law.gamma[0]) / stress.LEAK_TIME!r}"
+    assert f"'payload/body.m'={float(s.plant.true_theta()[0])!r}" in laws["sigma"][1]
+    names = [st.name for st in stress.stressors(arm6, 2.0)]
+    assert names == ["noise σ_y", "encoder Δ", "velocity filter τ", "disturbance", "lag τ", "payload ratio", "delay",
+                     "control period"]
+    enc = stress.stressors(arm6, 2.0)[1]
+    assert enc.overrides(2 * math.pi / 4096) == ["sensors={encoder_counts=4096.0}"]
+    bench = stress.study(composite=False, duration=2.0, arm_laws=stress.BENCH_SETTINGS["arm_laws"])
+    assert {s.label for s in bench if s.label.startswith("ur5e/")} == {
+        f"ur5e/{law}" for law in stress.BENCH_SETTINGS["arm_laws"]}
+    noise = [x for x in stress.study(composite=False, duration=2.0)
+             if x.label == "ur5e/adaptive" and x.stressor.name == "noise σ_y"]
+    (m,) = search_all(noise, seeds=1, steps=2, logs=tmp_path / "logs", n_jobs=2)
+    assert m.margin is not None and m.first_fail is not None and 1e-5 <= m.margin < m.first_fail <= 0.1

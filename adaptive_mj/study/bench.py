@@ -38,12 +38,6 @@ def main_bench(args) -> int:
     from adaptive_mj.sim.runner import new_output_dir
 
     backend = Backend.from_args(args)  # a bad option fails before any folder is made
-    if getattr(args, "scenario", None):  # so does a scenario of yours that cannot run: checked and built now,
-        from adaptive_mj.setup.build import check  # not after the catalogue has run
-        from adaptive_mj.setup.scenario import load
-
-        for path in args.scenario:
-            check(load(path))
     out = new_output_dir(args.output, "bench-quick" if args.quick else "bench")
     sections = catalogue(quick=args.quick, logs=out / "logs")
     if getattr(args, "scenario", None):
@@ -72,7 +66,7 @@ def _bench(args, out, sections, jobs, backend) -> int:
         margins, text, _ = run_study(out / "stress", n_jobs=max(1, args.jobs), composite=False, backend=backend,
                                      **BENCH_SETTINGS)
         n_runs += sum(len(e.tails) for m in margins for e in m.evaluations)
-        parts.append("## 12. Breaking points: law × stressor margins\n\n**The lecture:** the modifications make "
+        parts.append("## 13. Breaking points: law × stressor margins\n\n**The lecture:** the modifications make "
                      "adaptation robust to noise, disturbances and unmodelled dynamics; here is how far each law "
                      f"goes before it fails.\n\n{text}\n\n(Logs in `stress/logs/`. `adaptive-mj stress` runs the "
                      "study at full size: 20 s runs, 4 bisection steps, optionally composite adaptation.)\n")

@@ -7,6 +7,8 @@ compared on robustness, not on their first transient, under a nominal sensor noi
 that seeds differ):
   heave: heave_tracking (y_d = cos t), σ_y = 0.5 mm, σ_y' = 5 mm/s;
   arm:   arm_payload_swap without its swap (a sum of sines), σ_y = 0.5 mrad, σ_y' = 5 mrad/s.
+  ur5e:  ur5e_identification (the 6-joint arm on its exciting sum of sines), σ_q = 0.1 mrad,
+         σ_q' = 1 mrad/s on every joint.
 Failure: divergence, or tail RMS ỹ above the plant's bound (TAIL_BOUND).
 
 Laws: the lecture's adaptive law with no modification; the dead-zone (ε = 3σ_s at the
@@ -15,6 +17,12 @@ parameter, toward the true θ); projection onto [θ/2, 2θ] for the positive par
 composite adaptation (Python callback path: slow, so only with `--composite`); and the two
 baselines, fixed nominal parameters (the truth) and robust sliding control (K = 10 % of the
 actuator limit, Φ = 0.05).
+On the 6-joint arm the laws are Slotine–Li with the dead-zone (width_in_noise_std = 3), σ- and
+e-modification (the same leak rule), the physical projection and saturation-aware adaptation, and
+the computed-torque and PD + gravity baselines with the true parameters; its stressors are noise,
+encoder resolution Δ (counts = 2π/Δ), a differentiated velocity's filter time constant
+τ = 1/(2π f_c), a sinusoidal torque on every joint, actuator lag, payload ratio, delay and the
+control period.
 Stressors: noise σ (y', 10× y), a sinusoidal disturbance force (ω = 2 rad/s), an unmodelled
 thruster lag τ (heave), a payload ratio (arm), a
 control delay of whole physics steps (arm: the payload's mass × ratio at half the run), and
@@ -24,19 +32,24 @@ seconds. Composite adaptation runs under continuous control only: n/a for the co
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.breaking_point import TAIL_BOUND, Margin, Search, Stressor, margin_text, search_all
 
 # TAIL_BOUND (breaking_point, shared with the bench): [m], [rad]: tail RMS above this is a failure
-NOMINAL_NOISE = {"heave": 5e-4, "arm": 5e-4}  # σ_y [m], [rad]; σ_y' = 10 σ_y [per s]
+NOMINAL_NOISE = {"heave": 5e-4, "arm": 5e-4, "ur5e": 1e-4}  # σ_y [m], [rad]; σ_y' = 10 σ_y [per s]
 LEAK_TIME = 5.0  # s: σ = γ_1 / LEAK_TIME; ν = γ_1 / (LEAK_TIME σ_s)
 DURATION = 20.0  # s per run (tail: the last 20 %)
-BENCH_SETTINGS = {"seeds": 5, "steps": 2, "duration": 5.0}  # the full bench's reduced study (1370 runs, ~2.2 min)
+# the full bench's reduced study: 5 s runs, and on the 6-joint arm four laws (the full study: eight)
+BENCH_SETTINGS = {"seeds": 5, "steps": 2, "duration": 5.0, "arm_laws": ("adaptive", "dead_zone", "sigma",
+                                                                         "computed_torque")}
 ROBUST_K_FRACTION = 0.1  # robust sliding: K = 10 % of the actuator's limit, boundary layer Φ = 0.05
 PERIOD_MAX = 1.0  # s: the control period stressor's high end (heave: 2d/k = 0.37 s; the 1-DOF arm: 2J/k = 0.085 s)
 PERIOD = "control period"  # the control period stressor's name
@@ -53,10 +66,13 @@ def plants(duration: float = DURATION) -> list[Plant]:
     def noise(p):
         return f"noise.std={{y={NOMINAL_NOISE[p]!r}, y_dot={10 * NOMINAL_NOISE[p]!r}}}"
 
+    sig = NOMINAL_NOISE["ur5e"]
     return [Plant("heave", "heave_tracking", (f"simulation.duration={duration}", "simulation.initial_state='reference'",
                                               "law.initial_estimates='model'", noise("heave"))),
             Plant("arm", "arm_payload_swap", (f"simulation.duration={duration}", "events=[]",
-                                              "law.initial_estimates='model'", noise("arm")))]
+                                              "law.initial_estimates='model'", noise("arm"))),
+            Plant("ur5e", "ur5e_identification", (f"simulation.duration={duration}", "law.initial_estimates='model'",
+                                                  f"noise.std={{q={sig!r}, q_dot={10 * sig!r}}}"))]
 
 
 def _setup(p: Plant):
@@ -68,6 +84,8 @@ def _setup(p: Plant):
 
 def laws(p: Plant, *, composite: bool) -> list[tuple[str, list[str]]]:
     """(law name, overrides) for plant p; every number derived from the scenario and its model."""
+    if p.name == "ur5e":
+        return _arm_laws(p)
     scn, s = _setup(p)
     names, theta = s.law.names, s.plant.true_theta()
     gamma1 = float(s.law.gamma[0])
@@ -91,7 +109,58 @@ def laws(p: Plant, *, composite: bool) -> list[tuple[str, list[str]]]:
     return out
 
 
+def _arm_laws(p: Plant) -> list[tuple[str, list[str]]]:
+    """The 6-joint arm: Slotine–Li with each modification (the dead-zone sized from the nominal noise,
+    σ- and e-modification with the leak toward the true θ, the physical projection, saturation-aware
+    adaptation), and its two baselines with the true parameters (computed torque, PD + gravity)."""
+    scn, s = _setup(p)
+    gamma1 = float(s.law.gamma[0])
+    sig_q = NOMINAL_NOISE[p.name]
+    lam = float(scn.law.lam)
+    sig_s = float(np.sqrt(6 * ((10 * sig_q) ** 2 + lam**2 * sig_q**2)))  # noise in ‖s‖ (6 joints)
+    pairs = zip(s.law.names, s.plant.true_theta(), strict=True)
+    theta0 = "{" + ", ".join(f"'{n}'={float(v)!r}" for n, v in pairs) + "}"
+    return [("adaptive", []),
+            ("dead_zone", ["law.dead_zone={width_in_noise_std=3.0}"]),
+            ("sigma", [f"law.sigma={gamma1 / LEAK_TIME!r}", f"law.theta0={theta0}"]),
+            ("e_modification", [f"law.e_modification={gamma1 / (LEAK_TIME * sig_s)!r}", f"law.theta0={theta0}"]),
+            ("projection", ["law.projection='physical'"]),
+            ("saturation_freeze", ["law.saturation='freeze'"]),
+            ("computed_torque", ["law.kind='computed_torque'", "law.nominal='model'"]),
+            ("pd_gravity", ["law.kind='pd_gravity'", "law.nominal='model'"])]
+
+
+def _arm_stressors(p: Plant, duration: float) -> list[Stressor]:
+    """The 6-joint arm's conditions: noise, encoder resolution, a differentiated velocity's filter
+    time constant, a sinusoidal torque on every joint, actuator lag, payload ratio, delay, and the
+    control period (added by `stressors`)."""
+    sig = NOMINAL_NOISE[p.name]
+    m0 = float(_setup(p)[1].plant.true_theta()[0])  # the payload's mass [kg], from the compiled model
+    t_swap = 0.5 * duration
+    return [Stressor("noise σ_y", lambda v: [f"noise.std={{q={v!r}, q_dot={10 * v!r}}}"], 1e-5, 0.1, unit="rad"),
+            Stressor("encoder Δ", lambda v: [f"sensors={{encoder_counts={2 * math.pi / v!r}}}"], 1e-5, 0.5,
+                     unit="rad"),
+            Stressor("velocity filter τ",
+                     lambda v: [f"noise.std={{q={sig!r}}}",
+                                f"sensors={{velocity='differentiated', velocity_cutoff_hz={1 / (2 * math.pi * v)!r}}}"],
+                     1e-4, 0.5, unit="s"),
+            Stressor("disturbance", lambda v: [f"disturbance={{kind='sine', magnitude={v!r}, omega=2.0}}"], 0.1, 1000.0,
+                     unit="N m"),
+            # from one physics step: a lag much shorter than the step is stiff for an explicit integrator (RK4:
+            # h/τ < 2.785), a failure of the numerics, not of the loop
+            Stressor("lag τ", lambda v: [f"plant.actuator_lag={v!r}"], 1e-3, 1.0, unit="s"),
+            Stressor("payload ratio",
+                     lambda v: [f"events=[{{t={t_swap!r}, kind='payload_mass', value={v * m0!r}}}]"], 1.0, 100.0,
+                     unit="×")]
+
+
 def stressors(p: Plant, duration: float = DURATION) -> list[Stressor]:
+    if p.name == "ur5e":
+        out = _arm_stressors(p, duration)
+        out.append(Stressor("delay", lambda v: [f"simulation.control_delay={int(v)}"], 0, 200, integer=True,
+                            unit="steps"))
+        out.append(Stressor.control_period(0.001, min(PERIOD_MAX, duration), 0.001, name=PERIOD))
+        return out
     unit_y = "m" if p.name == "heave" else "rad"
     unit_u = "N" if p.name == "heave" else "N m"
     out = [Stressor("noise σ_y", lambda v: [f"noise.std={{y={v!r}, y_dot={10 * v!r}}}"], 1e-4, 0.1, unit=unit_y),
@@ -114,11 +183,14 @@ def stressors(p: Plant, duration: float = DURATION) -> list[Stressor]:
     return out
 
 
-def study(*, composite: bool, duration: float = DURATION) -> list[Search]:
+def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, ...] | None = None) -> list[Search]:
+    """Every plant × law × stressor search; arm_laws: the 6-joint arm's laws to include (None: all)."""
     out = []
     for p in plants(duration):
         path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
         for law, over in laws(p, composite=composite):
+            if p.name == "ur5e" and arm_laws is not None and law not in arm_laws:
+                continue
             for st in stressors(p, duration):
                 if law == "composite" and st.name == PERIOD:  # composite adaptation: continuous control only
                     continue
@@ -156,14 +228,15 @@ def table(margins: list[Margin], *, seeds: int) -> str:
 
 
 def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int,
-              duration: float = DURATION, backend=None) -> tuple[list[Margin], str, float]:
+              duration: float = DURATION, backend=None,
+              arm_laws: tuple[str, ...] | None = None) -> tuple[list[Margin], str, float]:
     """Run the study (on `backend`: a parallel.Backend, default n_jobs local processes); returns the
     margins, the report text and the wall time [s]."""
     import sys
 
     from adaptive_mj.study.parallel import progress_printer
 
-    searches = study(composite=composite, duration=duration)
+    searches = study(composite=composite, duration=duration, arm_laws=arm_laws)
     t0 = time.perf_counter()
     at_most = len(searches) * seeds * (2 + steps)  # bisection stops early where a bracket closes
 
@@ -176,8 +249,9 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
     runs = sum(len(e.tails) for m in margins for e in m.evaluations)
     text = (f"{len(searches)} breaking-point searches (plant × law × stressor), {seeds} seeds per value, "
             f"the two ends and {steps} bisection steps: {runs} runs of {duration:g} s in {wall:.0f} s. "
-            f"A run fails when it diverges or its tail RMS ỹ exceeds {TAIL_BOUND['heave']:g} m (heave) or "
-            f"{TAIL_BOUND['arm']:g} rad (arm); a value passes when every seed passes. Each cell: the margin (the "
+            f"A run fails when it diverges or its tail RMS ỹ exceeds {TAIL_BOUND['heave']:g} m (heave), "
+            f"{TAIL_BOUND['arm']:g} rad (arm) or {TAIL_BOUND['ur5e']:g} rad (the 6-joint arm, RMS over its joints); "
+            "a value passes when every seed passes. Each cell: the margin (the "
             "largest value that passed) and, in brackets, the smallest that failed: their gap is the resolution; "
             "then, over the seeds at the margin, the mean / CVaR at 10 % (the worst seed of "
             f"{seeds}) of the tail error, and the failure rate at the failing value. n/a: the stressor does not "
