@@ -38,6 +38,12 @@ def main_bench(args) -> int:
     from adaptive_mj.sim.runner import new_output_dir
 
     backend = Backend.from_args(args)  # a bad option fails before any folder is made
+    if getattr(args, "scenario", None):  # so does a scenario of yours that cannot run: checked and built now,
+        from adaptive_mj.setup.build import check  # not after the catalogue has run
+        from adaptive_mj.setup.scenario import load
+
+        for path in args.scenario:
+            check(load(path))
     out = new_output_dir(args.output, "bench-quick" if args.quick else "bench")
     sections = catalogue(quick=args.quick, logs=out / "logs")
     if getattr(args, "scenario", None):
