@@ -18,7 +18,7 @@ from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
 from adaptive_mj.sim.loop import run
 from adaptive_mj.plants import manipulator as mp
 from adaptive_mj.plants.arm import MODELS, build_arm_xml
-from adaptive_mj.plants.mujoco_plant import compile_spec, with_userdata
+from adaptive_mj.plants.mujoco_plant import compile_spec, spec_from_text, with_userdata
 from adaptive_mj.reference import JointSumOfSines, JointWaypoints
 from test_manipulator import TEST_ARM
 
@@ -36,7 +36,7 @@ UR5E_XML = build_arm_xml(arm=UR5E, payload="tool_offset", site="tip")  # (xml, a
 
 def _compile(xml: str, assets=None) -> mujoco.MjModel:
     """As the plants compile a model: with the userdata slot the native callback's context needs."""
-    return with_userdata(mujoco.MjSpec.from_string(xml, assets=assets)).compile()
+    return with_userdata(spec_from_text(xml, assets)).compile()
 
 
 def _ur5e_model(friction: bool = False, euler: bool = False) -> mujoco.MjModel:

@@ -19,7 +19,6 @@ h = actuator gear. The payload's mass and inertia are the unknowns.
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import mujoco
@@ -28,8 +27,9 @@ import numpy as np
 from adaptive_mj.errors import ModelError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant, ModelSource
+from adaptive_mj.plants.attach import compose
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path, with_userdata,
-                                             find_joint_and_actuator, scale_body_mass)
+                                             find_joint_and_actuator, scale_body_mass, spec_from_text)
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 MODEL_PATH = MODELS / "pendulum_arm.xml"
@@ -85,50 +85,30 @@ def arm_form(gear: float = 1.0) -> ModelForm:
 
 def build_arm_xml(*, arm: str | Path = MODEL_PATH, payload: str | Path | None = "sphere",
                   payload_mass: float | None = None, site: str = "tip") -> tuple[str, dict]:
-    """Attach a payload MJCF at `site` with dm_control's PyMJCF; return (xml, assets).
+    """Attach a payload MJCF at `site`; return (xml, assets), the text MuJoCo compiles (and a log
+    embeds) and the files it reads (adaptive_mj.plants.attach: MuJoCo's own attach, no PyMJCF).
 
     payload: a name in models/payloads/ (without .xml), a path, or None.
     payload_mass: total payload mass [kg]; the payload's geom masses are scaled
     to it (inertia scales with them). The payload's names get the prefix "payload/".
     """
-    os.environ.setdefault("MUJOCO_GL", "egl")  # dm_control probes a GL backend on import
-    from dm_control import mjcf
-
     arm = Path(arm)
     if not arm.is_file():
         raise ModelError(f"{arm}: model file not found")
-    try:
-        root = mjcf.from_path(str(arm))
-    except Exception as exc:  # PyMJCF raises several types for bad XML
-        raise ModelError(f"{arm}: could not parse the MJCF: {exc}") from None
+    ppath = None
     if payload is not None:
         ppath = Path(payload) if Path(payload).suffix == ".xml" else PAYLOADS / f"{payload}.xml"
         if not ppath.is_file():
             choices = sorted(p.stem for p in PAYLOADS.glob("*.xml"))
             raise ModelError(f"{ppath}: payload file not found (bundled payloads: {choices})")
-        load = mjcf.from_path(str(ppath))
-        load.model = "payload"
-        if payload_mass is not None:
-            geoms = load.find_all("geom")
-            if not geoms or any(g.mass is None for g in geoms):
-                raise ModelError(f"{ppath}: every payload geom needs a mass attribute to scale it")
-            total = sum(float(g.mass) for g in geoms)
-            for g in geoms:
-                g.mass = float(g.mass) * payload_mass / total
-        tip = root.find("site", site)
-        if tip is None:
-            sites = [x.name for x in root.find_all("site") if x.name]
-            raise ModelError(f"{arm}: no site named {site!r} to attach the payload to (the model has sites "
-                             f"{sites}; set plant.site, or plant.payload = \"none\")")
-        tip.attach(load)
-    return root.to_xml_string(), root.get_assets()
+    return compose(arm, ppath, payload_mass=payload_mass, site=site)
 
 
 def compile_arm(**kwargs) -> mujoco.MjModel:
     """build_arm_xml(...) compiled to an MjModel."""
     xml, assets = build_arm_xml(**kwargs)
     try:
-        return with_userdata(mujoco.MjSpec.from_string(xml, assets=assets)).compile()
+        return with_userdata(spec_from_text(xml, assets)).compile()
     except ValueError as exc:
         raise ModelError(f"{kwargs.get('arm', MODEL_PATH)}: MuJoCo could not compile the model: "
                          f"{str(exc).strip()}") from None
@@ -175,7 +155,7 @@ def load_bare(path: str | Path, **kwargs) -> ArmPlant:
 
 # --- built from a scenario ------------------------------------------------------
 def model_source(scn) -> ModelSource | None:
-    """plant.model with plant.payload attached at plant.site by PyMJCF (also the
+    """plant.model with plant.payload attached at plant.site (build_arm_xml; also the
     manipulator's); None for a twin given plant.theta (no model)."""
     p = scn.plant
     if p.backend == "twin" and p.theta is not None:

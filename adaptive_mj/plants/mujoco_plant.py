@@ -264,6 +264,13 @@ def scale_body_mass(model: mujoco.MjModel, body: int, mass: float) -> None:
     mujoco.mj_setConst(model, mujoco.MjData(model))
 
 
+def spec_from_text(xml: str, assets: dict | None = None) -> mujoco.MjSpec:
+    """MjSpec of MJCF text and its assets. MjSpec.from_string reads files that <model file=...> and
+    <include file=...> name from `include`, meshes and textures from `assets`: both get the dict
+    (an attached payload is an asset, adaptive_mj.plants.attach)."""
+    return mujoco.MjSpec.from_string(xml, include=assets or None, assets=assets or None)
+
+
 def compile_spec(xml: str, assets: dict | None = None, *, where: str, edit=None) -> tuple[mujoco.MjModel, str]:
     """Compile MJCF text through MjSpec, optionally editing the spec first.
 
@@ -271,7 +278,7 @@ def compile_spec(xml: str, assets: dict | None = None, *, where: str, edit=None)
     MuJoCo's own message is passed on in a ModelError naming `where`.
     """
     try:
-        spec = mujoco.MjSpec.from_string(xml, assets=assets or None)
+        spec = spec_from_text(xml, assets)
         if edit is not None:
             edit(spec)
         model = with_userdata(spec).compile()

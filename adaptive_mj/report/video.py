@@ -39,6 +39,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco  # noqa: E402 (after MUJOCO_GL is set, see above)
 
 from adaptive_mj.log.replay import LoggedRun, read_log  # noqa: E402 (after MUJOCO_GL too, should it import mujoco)
+from adaptive_mj.plants.mujoco_plant import spec_from_text  # noqa: E402 (after MUJOCO_GL too: it imports mujoco)
 
 #: Frames per second [1/s] when none is given (frames of simulation time, played in real time).
 DEFAULT_FPS = 30.0
@@ -135,7 +136,7 @@ def _model(logged: LoggedRun, where: str) -> mujoco.MjModel:
                              f"{logged.header.get('scenario_name', '?')!r} ran without one), "
                              f"so there is nothing to render; --video needs a run of a MuJoCo plant")
     try:
-        spec = mujoco.MjSpec.from_string(xml, assets=assets or None)
+        spec = spec_from_text(xml, assets)
         if not any(tex.type == mujoco.mjtTexture.mjTEXTURE_SKYBOX for tex in spec.textures):
             # A backdrop instead of black; it only changes how the model looks.
             spec.add_texture(name="adaptive_mj_video_sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
