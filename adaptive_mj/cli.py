@@ -350,6 +350,20 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # so the interpreter's final flush does not fail again
         return EXIT_OK
+    finally:
+        if argv is None:  # the command itself (adaptive-mj, python -m adaptive_mj): the process ends now
+            _before_exit()
+
+
+def _before_exit() -> None:
+    """The interpreter's last garbage collections walk every object numba and LLVM made, 0.3 s of
+    a short run's 0.7 s; frozen, they go with the process's memory instead. Only objects in
+    reference cycles are concerned: everything else is freed as before, and what must happen at
+    exit is done explicitly or by atexit and weakref.finalize, which still run (every log is closed
+    by the run itself, with its status)."""
+    import gc
+
+    gc.freeze()
 
 
 def _dispatch(args) -> int:

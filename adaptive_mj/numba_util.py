@@ -2,8 +2,50 @@
 they are called)."""
 from __future__ import annotations
 
+import sys
 import types as pytypes
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable
+
+_registries_loaded = False
+
+
+def load_registries() -> None:
+    """Load numba's CPU target registries (the lowering of every numpy function numba knows) now,
+    once per process, without the BLAS probe that comes with them.
+
+    numba loads the registries before it compiles a function or loads one from its disk cache.
+    One of them, numba.np.arraymath, asks at import whether BLAS is there (_check_blas) by importing
+    scipy.linalg.cython_blas, and so all of scipy.linalg: 0.2 s of every run's start, while the
+    answer depends only on scipy.linalg being installed. Here it is answered from that, without
+    the import; numba's own ensure_blas is back in place before anything is lowered or run, so a
+    function that does use BLAS imports it (and checks it) as before. The machine code is the same
+    either way: nothing is compiled differently, the cache is not keyed on it."""
+    global _registries_loaded
+    if _registries_loaded:
+        return
+    _registries_loaded = True
+    if "numba.np.arraymath" in sys.modules:  # numba has loaded them already
+        return
+    import importlib.util
+
+    from numba.core.registry import cpu_target
+    from numba.np import linalg as numba_linalg
+
+    linalg: Any = numba_linalg  # Any: its ensure_blas is replaced for the load
+    real = linalg.ensure_blas
+
+    def blas_installed() -> None:
+        if importlib.util.find_spec("scipy.linalg") is None:
+            raise ImportError("scipy 0.16+ is required for linear algebra")
+
+    linalg.ensure_blas = blas_installed
+    try:
+        cpu_target.target_context.refresh()
+    finally:
+        linalg.ensure_blas = real
+        arraymath: Any = sys.modules.get("numba.np.arraymath")
+        if arraymath is not None and getattr(arraymath, "ensure_blas", None) is blas_installed:
+            arraymath.ensure_blas = real
 
 
 def with_globals(fn, **replace):
@@ -22,6 +64,7 @@ def jit_tree(fn: Callable, njit: Callable, *, tag: str = "", seen: dict | None =
     two variants of the same functions (other globals: another plant's phi) compiled in two
     processes and loaded from the disk cache into a third would define one symbol twice, and the
     JIT would link one variant's calls to the other's code. A tag per variant keeps them apart."""
+    load_registries()
     seen = {} if seen is None else seen
     if id(fn) in seen:
         return seen[id(fn)]
