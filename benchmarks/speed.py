@@ -9,6 +9,10 @@ with 1 and 2 jobs; log size per simulated second; peak memory of a 600 s run.
   d  closed loop with MCAP logging of every physics step
   e  the example law plugin (pip install examples/emod_law): compiled, and through the Python callback
   f  closed loop under sampled-data control at 250 Hz (control.period = 4 ms), native path
+  g  6-joint arm only: c with real-robot conditions on (REAL_CONDITIONS: encoder noise and 2^17 counts,
+     differentiated velocity, band-limited joint torque noise, saturation-aware adaptation, joint
+     frictionloss with Coulomb and damping columns in the regressor); against a (the model without
+     friction) and against a_friction, bare stepping of the same model with its frictionloss
   start-up: wall time of `adaptive-mj run <scenario> --set simulation.duration=0.01` in a fresh
      process: the first call with an empty numba cache (it compiles the callback) and the second
      (it loads it from the cache), heave vehicle and 6-joint arm
@@ -44,8 +48,14 @@ def _scenario(name: str, steps: int, extra=()):
                    overrides=[f"simulation.duration={steps * 0.001!r}", "events=[]", *extra])
 
 
-def bare(name: str, steps: int) -> float:
-    setup = build(_scenario(name, steps))
+# the 6-joint arm as a real robot sees it (row g)
+REAL_CONDITIONS = ("noise.std={q=1e-4}", "sensors={encoder_counts=131072, velocity='differentiated'}",
+                   "disturbance={kind='noise', magnitude=0.5}", "law.saturation='freeze'", "plant.frictionloss=0.5",
+                   "plant.friction_params=true")
+
+
+def bare(name: str, steps: int, extra=()) -> float:
+    setup = build(_scenario(name, steps, extra))
     m, d = setup.plant.model, setup.plant.data
     t0 = time.perf_counter()
     mujoco.mj_step(m, d, nstep=steps)
@@ -101,20 +111,21 @@ def plugin_loop(plant: str, steps: int, native: bool) -> float:
     return (time.perf_counter() - t0) / steps * 1e6
 
 
-def logged(name: str, steps: int, rate_hz: float | None) -> tuple[float, int]:
+def logged(name: str, steps: int, rate_hz: float | None, extra=()) -> tuple[float, int]:
     """Closed loop with the MCAP recorder as the sink; times run() + close() like `loop` times
     run(), so set-up (model compile, log header) is outside both. Returns (µs/step, bytes)."""
     from adaptive_mj.log.record import Recorder
     from adaptive_mj.sim.runner import log_header
 
-    scn = _scenario(name, steps, [f"log.rate_hz={rate_hz!r}"] if rate_hz else [])
+    scn = _scenario(name, steps, [*([f"log.rate_hz={rate_hz!r}"] if rate_hz else []), *extra])
     setup = build(scn)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "run.mcap"
         recorder = Recorder(path, log_header(scn, setup))
         t0 = time.perf_counter()
         traj = run(setup.plant, setup.law, setup.reference, duration=scn.simulation.duration,
-                   theta_hat0=setup.theta_hat0, sink=recorder, sink_every=max(1, round(1.0 / setup.plant.dt)))
+                   theta_hat0=setup.theta_hat0, sink=recorder, sink_every=max(1, round(1.0 / setup.plant.dt)),
+                   noise_std=setup.noise_std, rng=setup.rng, sensors=setup.sensors)
         recorder.close(traj.status, traj.reason, {})
         el = time.perf_counter() - t0
         return el / steps * 1e6, path.stat().st_size
@@ -193,6 +204,10 @@ def main() -> None:
             sizes.append(size / (args.steps * 0.001))
             rows["d_logged_every_step"].append(logged(name, args.steps, 1000.0)[0])
             rows["f_sampled_250Hz"].append(loop(name, args.steps, True, period=0.004))
+            if plant == "ur5e":
+                rows.setdefault("a_friction", []).append(bare(name, args.steps, ("plant.frictionloss=0.5",)))
+                rows.setdefault("g_real_conditions_logged_100Hz", []).append(
+                    logged(name, args.steps, None, REAL_CONDITIONS)[0])
         if plant in PLUGIN_LAW and plugin_installed():
             plugin_loop(plant, 500, True)  # compile once, outside the timing
             rows["e_plugin_native"], rows["e_plugin_python"] = [], []
@@ -208,6 +223,9 @@ def main() -> None:
                        "c/a": stats["c_logged_100Hz"]["median"] / a,
                        "d/a": stats["d_logged_every_step"]["median"] / a,
                        "f/a": stats["f_sampled_250Hz"]["median"] / a,
+                       **({"g/a": stats["g_real_conditions_logged_100Hz"]["median"] / a,
+                           "g/a_friction": stats["g_real_conditions_logged_100Hz"]["median"]
+                           / stats["a_friction"]["median"]} if "a_friction" in stats else {}),
                        **({"e_native/a": stats["e_plugin_native"]["median"] / a,
                            "e_python/a": stats["e_plugin_python"]["median"] / a}
                           if "e_plugin_native" in stats else {})},
