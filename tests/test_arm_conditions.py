@@ -198,27 +198,33 @@ def test_sensors_on_a_one_dof_plant_are_refused():
         load(SCENARIOS_DIR / "heave_tracking.toml", overrides=["sensors={velocity='differentiated'}"])
 
 
-def test_saturation_aware_adaptation_keeps_a_torque_limited_arm_tracking(tmp_path):
-    """The UR5e with its wrists limited to ±4 N m and the rest to ±60 N m, 10 s of the identification
-    trajectory: the lecture's law integrates the part of s the saturation causes and loses tracking
-    (measured: 0.13 rad tail RMS, wrist_1 at its limit 47 % of the time, 'failed'); freezing the
-    saturated joints' adaptation tracks (1.7e-3 rad, 10 %, 'ok')."""
-    from adaptive_mj.plants.arm import MODELS
+def test_saturation_aware_adaptation_keeps_a_torque_limited_arm_tracking():
+    """The UR5e with its wrists limited to ±4 N m and the rest to ±60 N m (plant.torque_limit), 10 s of
+    the identification trajectory: the lecture's law integrates the part of s the saturation causes and
+    loses tracking (measured: 0.13 rad tail RMS, wrist_1 at its limit 47 % of the time, 'failed');
+    freezing the saturated joints' adaptation tracks (1.7e-3 rad, 10 %, 'ok')."""
     from adaptive_mj.sim.runner import execute
 
-    text = (MODELS / "ur5e_arm.xml").read_text()
-    limited = tmp_path / "ur5e_limited.xml"
-    limited.write_text(text.replace('ctrlrange="-28 28"', 'ctrlrange="-4 4"')
-                       .replace('ctrlrange="-150 150"', 'ctrlrange="-60 60"'))
+    limit = "plant.torque_limit={shoulder_pan=60, shoulder_lift=60, elbow=60, wrist_1=4, wrist_2=4, wrist_3=4}"
     out = {}
     for rule in ("ignore", "freeze"):
-        scn = _scenario(f"plant.model='{limited.as_posix()}'", f"law.saturation='{rule}'", duration=10.0)
-        out[rule] = execute(scn)
+        out[rule] = execute(_scenario(limit, f"law.saturation='{rule}'", duration=10.0))
+    s = build(_scenario(limit))
+    np.testing.assert_array_equal(s.plant.ctrl_range[1], [60, 60, 60, 4, 4, 4])
     ignore, freeze = (out[k].summary["metrics"] for k in ("ignore", "freeze"))
     assert out["ignore"].trajectory.status == "failed" and "success.tail_rms" in out["ignore"].trajectory.reason
     assert ignore["rms_tracking_error_tail"] > 0.05 and ignore["saturation_fraction"] > 0.3
     assert out["freeze"].trajectory.status == "ok"
     assert freeze["rms_tracking_error_tail"] < 5e-3 and freeze["saturation_fraction"] < 0.2
+
+
+@pytest.mark.parametrize("override, match", [
+    ("plant.torque_limit=0", r"plant\.torque_limit must be > 0"),
+    ("plant.torque_limit={wrist_9=4.0}", r"plant\.torque_limit names joint 'wrist_9'"),
+])
+def test_torque_limit_errors_name_the_key(override, match):
+    with pytest.raises(ScenarioError, match=match):
+        build(_scenario(override))
 
 
 # --- the lecture's second half on the 6-joint arm (bench section 12) -------------------------
@@ -261,3 +267,22 @@ def test_the_dead_zone_width_follows_the_encoder_noise_through_the_filter():
               sn.alpha(1e-3), 1e-3, q_prev, v_est, out)
         s_noise[k] = -(out[1, 0] + 10.0 * out[0, 0])  # s = q̃' + λ q̃ with q_d = 0: the noise's part
     assert np.std(s_noise[1000:]) == pytest.approx(sig[0], rel=0.02)
+
+
+def test_arm_conditions_section_reports_each_condition_with_its_verdict(tmp_path):
+    """Bench section 13: every condition runs to a verdict; the ideal arm identifies the payload mass
+    within 1 %, 12-bit encoders cost identification accuracy, the torque-limited arm fails and the
+    saturation-aware law keeps it tracking."""
+    from adaptive_mj.study import bench_catalogue
+    from adaptive_mj.study.parallel import run_jobs
+
+    section = bench_catalogue._arm_conditions(False, tmp_path / "logs")
+    results = run_jobs(list(section.jobs), n_jobs=2)
+    rep = section.analyze({r.job.tag: r for r in results}, tmp_path)
+    rows = {r["run"]: r for r in rep.rows}
+    assert set(rows) == {v for v, _, _ in bench_catalogue.ARM_CONDITIONS}
+    assert all(r["status"] in ("ok", "failed") for r in rows.values())
+    assert rows["ideal"]["status"] == "ok" and abs(rows["ideal"]["mass_error_percent"]) < 1.0
+    assert abs(rows["encoder_4096"]["mass_error_percent"]) > abs(rows["ideal"]["mass_error_percent"])
+    assert rows["torque_limits"]["status"] == "failed" and rows["torque_limits_freeze"]["status"] == "ok"
+    assert "| torque_limits_freeze |" in rep.text

@@ -126,8 +126,11 @@ def test_the_stress_study_covers_the_six_joint_arm(tmp_path):
     assert laws["sigma"][0] == f"law.sigma={float(s.law.gamma[0]) / stress.LEAK_TIME!r}"
     assert f"'payload/body.m'={float(s.plant.true_theta()[0])!r}" in laws["sigma"][1]
     names = [st.name for st in stress.stressors(arm6, 2.0)]
-    assert names == ["noise σ_y", "encoder Δ", "velocity filter τ", "disturbance", "lag τ", "payload ratio", "delay",
-                     "control period"]
+    assert names == ["noise σ_y", "encoder Δ", "velocity filter τ", "disturbance", "lag τ", "torque limit ÷",
+                     "payload ratio", "delay", "control period"]
+    cut = stress.stressors(arm6, 2.0)[5].overrides(10.0)
+    assert cut == ["plant.torque_limit={shoulder_pan=15.0, shoulder_lift=15.0, elbow=15.0, wrist_1=2.8, wrist_2=2.8, "
+                   "wrist_3=2.8}"]
     enc = stress.stressors(arm6, 2.0)[1]
     assert enc.overrides(2 * math.pi / 4096) == ["sensors={encoder_counts=4096.0}"]
     bench = stress.study(composite=False, duration=2.0, arm_laws=stress.BENCH_SETTINGS["arm_laws"])

@@ -237,6 +237,24 @@ def set_actuator_lag(spec, lag, *, exact: bool = True) -> None:
             act.dynprm[0] = T
 
 
+def set_torque_limit(spec, limit) -> None:
+    """Limit each joint's motor to |τ| <= L [N m or N] (plant.torque_limit: a number for every joint or
+    a table {joint: L}): ctrlrange = [-L, L] / |gear|, ctrllimited. The law's torques are clamped to it
+    (and law.saturation = "freeze" reads it)."""
+    if limit is None:
+        return
+    for joint, L in _by_joint(spec, "plant.torque_limit", limit):
+        acts = [a for a in spec.actuators if a.trntype == mujoco.mjtTrn.mjTRN_JOINT and a.target == joint.name]
+        if not acts:
+            raise ModelError(f"plant.torque_limit names joint {joint.name!r}, which no actuator drives")
+        for act in acts:
+            g = abs(float(act.gear[0]))
+            if not g > 0:
+                raise ModelError(f"plant.torque_limit: actuator {act.name!r} has gear {act.gear[0]:g}")
+            act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            act.ctrlrange = [-L / g, L / g]
+
+
 @dataclass(frozen=True)
 class ParamLayout:
     """Which parameters are unknown, and their names.
@@ -668,6 +686,7 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
         try:  # joint friction and actuator lag (after servo_to_torque: a lag goes on the rebuilt motor)
             set_joint_friction(spec, damping=fr.damping, frictionloss=fr.frictionloss)
             set_actuator_lag(spec, fr.actuator_lag, exact=scn.simulation.integrator != "rk4")
+            set_torque_limit(spec, fr.torque_limit)
         except ModelError as exc:  # said after compiling, as a scenario error (not as MuJoCo's)
             bad_keys.append(f"{scn.source}: {exc}")
 

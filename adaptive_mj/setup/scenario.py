@@ -94,6 +94,7 @@ class JointFrictionSpec:
     damping: float | dict[str, float] | None = None
     frictionloss: float | dict[str, float] | None = None
     actuator_lag: float | dict[str, float] | None = None
+    torque_limit: float | dict[str, float] | None = None  # |τ| <= L [N m] on each joint's motor
     friction_params: bool = False
     coulomb_smoothing: float = 0.01  # = plants.regressor_kernel.DEFAULT_COULOMB_SMOOTHING
 
@@ -683,7 +684,7 @@ def _forcerange(t: _Table, servo_to_torque: bool) -> float | dict[str, float] | 
     return t.number("forcerange", gt=0)
 
 
-FRICTION_KEYS = ("damping", "frictionloss", "actuator_lag", "friction_params", "coulomb_smoothing")
+FRICTION_KEYS = ("damping", "frictionloss", "actuator_lag", "torque_limit", "friction_params", "coulomb_smoothing")
 
 
 def _joint_friction(t: _Table, kind: str, spec: "ManipulatorSpec | None") -> "ManipulatorSpec | None":
@@ -703,6 +704,12 @@ def _joint_friction(t: _Table, kind: str, spec: "ManipulatorSpec | None") -> "Ma
             if not x >= 0:
                 raise t.fail(key + (f".{j}" if j else ""), ">= 0", x)
         values[key] = v
+    if "torque_limit" in t.data:
+        v = _joint_values(t, "torque_limit", arrays=False)
+        for j, x in (v.items() if isinstance(v, dict) else [("", v)]):
+            if not x > 0:
+                raise t.fail("torque_limit" + (f".{j}" if j else ""), "> 0 [N m]", x)
+        values["torque_limit"] = v
     friction_params = t.boolean("friction_params", False)
     eps = t.number("coulomb_smoothing", 0.01, gt=0)
     if "coulomb_smoothing" in t.data and not friction_params:

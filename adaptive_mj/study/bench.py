@@ -72,7 +72,7 @@ def _bench(args, out, sections, jobs, backend) -> int:
         margins, text, _ = run_study(out / "stress", n_jobs=max(1, args.jobs), composite=False, backend=backend,
                                      **BENCH_SETTINGS)
         n_runs += sum(len(e.tails) for m in margins for e in m.evaluations)
-        parts.append("## 13. Breaking points: law × stressor margins\n\n**The lecture:** the modifications make "
+        parts.append("## 14. Breaking points: law × stressor margins\n\n**The lecture:** the modifications make "
                      "adaptation robust to noise, disturbances and unmodelled dynamics; here is how far each law "
                      f"goes before it fails.\n\n{text}\n\n(Logs in `stress/logs/`. `adaptive-mj stress` runs the "
                      "study at full size: 20 s runs, 4 bisection steps, optionally composite adaptation.)\n")

@@ -21,8 +21,8 @@ On the 6-joint arm the laws are Slotine–Li with the dead-zone (width_in_noise_
 e-modification (the same leak rule), the physical projection and saturation-aware adaptation, and
 the computed-torque and PD + gravity baselines with the true parameters; its stressors are noise,
 encoder resolution Δ (counts = 2π/Δ), a differentiated velocity's filter time constant
-τ = 1/(2π f_c), a sinusoidal torque on every joint, actuator lag, payload ratio, delay and the
-control period.
+τ = 1/(2π f_c), a sinusoidal torque on every joint, actuator lag, the motors' torque limits divided
+by a factor (plant.torque_limit), payload ratio, delay and the control period.
 Stressors: noise σ (y', 10× y), a sinusoidal disturbance force (ω = 2 rad/s), an unmodelled
 thruster lag τ (heave), a payload ratio (arm), a
 control delay of whole physics steps (arm: the payload's mass × ratio at half the run), and
@@ -132,11 +132,17 @@ def _arm_laws(p: Plant) -> list[tuple[str, list[str]]]:
 
 def _arm_stressors(p: Plant, duration: float) -> list[Stressor]:
     """The 6-joint arm's conditions: noise, encoder resolution, a differentiated velocity's filter
-    time constant, a sinusoidal torque on every joint, actuator lag, payload ratio, delay, and the
-    control period (added by `stressors`)."""
+    time constant, a sinusoidal torque on every joint, actuator lag, the motors' torque limits divided by
+    a factor, payload ratio, delay, and the control period (added by `stressors`)."""
     sig = NOMINAL_NOISE[p.name]
-    m0 = float(_setup(p)[1].plant.true_theta()[0])  # the payload's mass [kg], from the compiled model
+    plant = _setup(p)[1].plant
+    m0 = float(plant.true_theta()[0])  # the payload's mass [kg], from the compiled model
+    limits = dict(zip(plant.joint_names, np.asarray(plant.ctrl_range[1], dtype=float).tolist(), strict=True))
     t_swap = 0.5 * duration
+
+    def torque_limit(v: float) -> list[str]:  # the model's limits divided by v
+        return ["plant.torque_limit={" + ", ".join(f"{j}={L / v!r}" for j, L in limits.items()) + "}"]
+
     return [Stressor("noise σ_y", lambda v: [f"noise.std={{q={v!r}, q_dot={10 * v!r}}}"], 1e-5, 0.1, unit="rad"),
             Stressor("encoder Δ", lambda v: [f"sensors={{encoder_counts={2 * math.pi / v!r}}}"], 1e-5, 0.5,
                      unit="rad"),
@@ -149,6 +155,7 @@ def _arm_stressors(p: Plant, duration: float) -> list[Stressor]:
             # from one physics step: a lag much shorter than the step is stiff for an explicit integrator (RK4:
             # h/τ < 2.785), a failure of the numerics, not of the loop
             Stressor("lag τ", lambda v: [f"plant.actuator_lag={v!r}"], 1e-3, 1.0, unit="s"),
+            Stressor("torque limit ÷", torque_limit, 1.0, 100.0, unit="÷"),
             Stressor("payload ratio",
                      lambda v: [f"events=[{{t={t_swap!r}, kind='payload_mass', value={v * m0!r}}}]"], 1.0, 100.0,
                      unit="×")]
