@@ -145,6 +145,10 @@ def load(scenario, *, law=None, log: str | os.PathLike | None = None, seed: int 
     if scn.simulation.control_delay and law is None:
         raise ScenarioError(f"{scn.source}: simulation.control_delay delays the scenario's law; with an agent as "
                             "the policy, delay its actions yourself (or load with law='scenario')")
+    if setup.sensors is not None and law is None:
+        raise ScenarioError(f"{scn.source}: [sensors] (encoders, a differentiated velocity) shape what the "
+                            "scenario's law measures; an agent's observation is the state + noise.std only: remove "
+                            "[sensors], or load with law='scenario'")
     task = TrackingTask(scn, setup, law=law, privileged=privileged, n_sub_steps=n_sub_steps,
                         log_dir=None if log is None else Path(log))
     # The task ends episodes itself (an exact step count; dm_control's time_limit

@@ -286,3 +286,16 @@ def test_arm_conditions_section_reports_each_condition_with_its_verdict(tmp_path
     assert abs(rows["encoder_4096"]["mass_error_percent"]) > abs(rows["ideal"]["mass_error_percent"])
     assert rows["torque_limits"]["status"] == "failed" and rows["torque_limits_freeze"]["status"] == "ok"
     assert "| torque_limits_freeze |" in rep.text
+
+
+def test_env_refuses_sensors_with_an_agent_and_runs_them_with_the_scenario_law():
+    from adaptive_mj import env as amj_env
+
+    with pytest.raises(ScenarioError, match=r"\[sensors\]"):
+        amj_env.load("ur5e_drift", overrides=["simulation.duration=0.02"])
+    e = amj_env.load("ur5e_drift", law="scenario", overrides=["simulation.duration=0.02"])
+    e.reset()
+    ts = None
+    while ts is None or not ts.last():
+        ts = e.step(None)
+    assert np.isfinite(ts.reward)
