@@ -99,11 +99,20 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
                  model_xml=built.model_xml, notes=built.notes, sensors=sensors)
 
 
-def check(scn: Scenario) -> None:
+def check(scn: Scenario, sources: dict | None = None) -> None:
     """Build everything a run of `scn` reads (model and payload files, the names and keyframes it
     refers to, the law), stepping nothing: a study checks each of its runs with it before any runs.
-    Raises the one-line ScenarioError or ModelError the run itself would."""
-    build(scn)
+    Raises the one-line ScenarioError or ModelError the run itself would. sources: a cache of
+    model sources by [plant] section (a model_source depends on nothing else), so grid points
+    that share a plant read and compose its files once."""
+    if sources is None:
+        build(scn)
+        return
+    key = repr(scn.plant)
+    if key not in sources:
+        check_payload_file(scn)
+        sources[key] = plant_kinds(scn.plant.kind)[scn.plant.kind].model_source(scn)
+    build(scn, source=sources[key])
 
 
 def _initial_state(scn: Scenario, reference, order: int) -> np.ndarray:

@@ -448,9 +448,10 @@ def _validate_points(path: Path, overrides: Sequence[str], points: Sequence[dict
     adaptive_mj.setup.build.check), before any point runs."""
     from adaptive_mj.setup.build import check
 
+    sources: dict = {}  # points that share a [plant] section compose its model once
     for point in points:
         try:
-            check(sc.load(path, overrides=[*overrides, *_grid_overrides(point)]))
+            check(sc.load(path, overrides=[*overrides, *_grid_overrides(point)]), sources)
         except AdaptiveMJError as exc:
             where = ", ".join(f"{k}={label(v)}" for k, v in point.items())
             raise ScenarioError(f"grid point {where}: {exc}") from None
