@@ -605,6 +605,22 @@ def test_a_bad_model_file_exits_2_with_one_line_naming_it(tmp_path, capsys, bad,
     assert not log.exists()
 
 
+@pytest.mark.parametrize("scenario, model", [("heave_tracking", "heave_vehicle"), ("arm_payload_swap", "pendulum_arm")])
+def test_a_motor_of_gear_0_is_refused_on_a_1dof_plant(tmp_path, capsys, scenario, model):
+    """The law divides by the gear (u = τ / gear): a gear of 0 is one line, not a ZeroDivisionError."""
+    path = tmp_path / "model.xml"
+    text = (REPO / "models" / f"{model}.xml").read_text()
+    assert text.count('gear="1"') == 1
+    path.write_text(text.replace('gear="1"', 'gear="0"'))
+    log = tmp_path / "run.mcap"
+    assert main(["run", scenario, "-o", str(log), "--set", f"plant.model='{path}'", "--set", "events=[]",
+                 "--set", "simulation.duration=0.02"]) == 2
+    line = error_line(capsys)
+    assert re.fullmatch(re.escape(f"{path}: actuator ") + r"'\w+' has gear 0; the force on the joint is gear \* ctrl, "
+                        r"so the law needs a finite, nonzero gear \(set gear, e\.g\. gear=\"1\"\)", line), line
+    assert not log.exists()
+
+
 # Studies: every grid point, every scenario given to bench, and a resumed study's manifest are
 # checked (built: model, payload files, names, keyframes) before anything runs.
 STUDY_GRID_CASES = [
@@ -723,6 +739,12 @@ def cart_plugin(tmp_path, monkeypatch):
     scn = tmp_path / "cart.toml"
     scn.write_text(CART_SCENARIO)
     return scn
+
+
+def test_a_plant_plugins_motor_of_gear_0_exits_2_with_one_line(cart_plugin, tmp_path, capsys):
+    model = _write(tmp_path / "cart.xml", CART_XML.replace("<motor joint='x'/>", "<motor joint='x' gear='0'/>"))
+    assert main(["run", str(cart_plugin), "-o", str(tmp_path / "run.mcap")]) == 2
+    assert error_line(capsys).startswith(f"{model}: actuator '#0' has gear 0; ")
 
 
 @pytest.mark.parametrize("bad", ["malformed XML", "XML that is not MJCF", "binary", "empty"])

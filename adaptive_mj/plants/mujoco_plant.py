@@ -98,6 +98,10 @@ def find_joint_and_actuator(model, *, joint: str | None, actuator: str | None,
             or model.actuator_biastype[a] != mujoco.mjtBias.mjBIAS_NONE
             or int(model.actuator_dyntype[a]) not in dyn_ok):
         raise ModelError(f"{where}: actuator {aname!r} must be a <motor> (fixed gain, no bias, no dynamics)")
+    gear = float(model.actuator_gear[a, 0])
+    if not (np.isfinite(gear) and gear != 0):
+        raise ModelError(f"{where}: actuator {aname or f'#{a}'!r} has gear {gear:g}; the force on the joint is "
+                         "gear * ctrl, so the law needs a finite, nonzero gear (set gear, e.g. gear=\"1\")")
     if model.jnt_stiffness[j] != 0 or model.dof_frictionloss[model.jnt_dofadr[j]] != 0:
         raise ModelError(f"{where}: joint {jname!r} has stiffness or frictionloss, "
                          "which the regressor does not cover; set them to 0")
