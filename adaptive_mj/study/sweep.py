@@ -47,7 +47,7 @@ LOG_SPAN = 100.0  # a plotted quantity spanning more than this ratio (2 decades)
 DOCUMENTED_KEYS: dict[str, tuple[str, ...]] = {
     "plant": ("kind", "backend", "model", "joint", "actuator", "payload", "payload_mass", "site", "theta",
               "g", "density", "viscosity", "ctrl_range", "thruster_time_constant", "regressor",
-              "unknown", "joint_params", "base_parameters", "servo_to_torque",
+              "unknown", "joint_params", "base_parameters", "servo_to_torque", "forcerange",
               "damping", "frictionloss", "actuator_lag", "friction_params", "coulomb_smoothing"),
     "simulation": ("integrator", "timestep", "duration", "initial_state", "state_bound", "control_delay",
                    "python_callback"),
