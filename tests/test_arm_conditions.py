@@ -299,3 +299,52 @@ def test_env_refuses_sensors_with_an_agent_and_runs_them_with_the_scenario_law()
     while ts is None or not ts.last():
         ts = e.step(None)
     assert np.isfinite(ts.reward)
+
+
+# --- saturation-aware adaptation on the 1-DOF sliding law ---------------------------------------
+def test_sliding_freeze_stops_adaptation_only_outside_the_limits():
+    from adaptive_mj.laws.sliding import sliding_law_values
+
+    x, ref, th = np.array([0.1, -0.2]), np.array([0.3, 0.1, -0.5]), np.array([50.0, 5.0, 1.0])
+    coeffs, gamma, inf3 = np.array([4.0, 1.0]), np.array([1.0, 2.0, 3.0]), np.full(3, math.inf)
+
+    def call(lo, hi, freeze):
+        rate = np.empty(3)
+        u, s, _ = sliding_law_values(x, ref, th, coeffs, 10.0, gamma, True, 0.0, True, 0.0, 1.0, 0.0, 0.0, th, -inf3,
+                                     inf3, lo, hi, freeze, np.array([-x[1], -1.0]), 0.0, 1.0, rate)
+        return u, rate
+
+    u, free = call(-math.inf, math.inf, False)
+    assert np.any(free != 0.0)
+    np.testing.assert_array_equal(call(u - 1.0, u + 1.0, True)[1], free)  # inside: the lecture's rate
+    np.testing.assert_array_equal(call(u - 2.0, u - 1.0, True)[1], np.zeros(3))  # above hi: frozen
+    np.testing.assert_array_equal(call(u + 1.0, u + 2.0, True)[1], np.zeros(3))  # below lo: frozen
+    np.testing.assert_array_equal(call(u - 2.0, u - 1.0, False)[1], free)  # without freeze the limit is ignored
+
+
+def test_heave_freeze_native_equals_python_and_differs_from_ignore():
+    """The heave vehicle driven into its ±200 N thrust limit (d̂(0) = 2000 kg, a 3 m cosine): the compiled
+    and the Python callbacks give the same rows with law.saturation = 'freeze', and freezing changes
+    the estimates."""
+    rows = {}
+    for rule in ("ignore", "freeze"):
+        scn = load(SCENARIOS_DIR / "heave_tracking.toml", overrides=[
+            "simulation.duration=3.0", f"law.saturation='{rule}'", "law.initial_estimates={d=2000.0, b=0.0, c=0.0}",
+            "reference.amplitude=3.0"])
+        for native in (False, True):
+            s = build(scn)
+            rows[rule, native] = run(s.plant, s.law, s.reference, duration=scn.simulation.duration,
+                                     theta_hat0=s.theta_hat0, native=native)
+    lo, hi = build(scn).plant.ctrl_range
+    tr = rows["freeze", True]
+    assert tr.meta["native"] and np.mean((tr.u <= lo) | (tr.u >= hi)) > 0.5
+    for field in ("x", "u", "s", "theta_hat"):
+        np.testing.assert_array_equal(getattr(rows["freeze", False], field), getattr(tr, field), err_msg=field)
+    assert not np.array_equal(rows["ignore", True].theta_hat, tr.theta_hat)
+
+
+def test_one_dof_saturation_key_is_for_the_adaptive_sliding_law():
+    with pytest.raises(ScenarioError, match=r"law\.saturation must be 'ignore' except for law\.kind = "
+                                            r"'sliding_adaptive'"):
+        load(SCENARIOS_DIR / "heave_tracking.toml",
+             overrides=["law.saturation='freeze'", "law.kind='fixed_nominal'", "law.nominal='model'"])

@@ -169,7 +169,7 @@ def test_compiled_sliding_law_has_the_same_boundary():
     def rate(width, on_s):
         out = np.empty(3)
         law(x, ref, TH, coeffs, 200.0, GAMMA, True, width, on_s, 0.0, 1.0, 0.0, 0.0, TH, -inf3, inf3,
-            phi_fn, f_fn, h_fn, out)
+            -math.inf, math.inf, False, phi_fn, f_fn, h_fn, out)
         return out
 
     plain = _sliding()(0.0, x, ref, TH).theta_hat_dot

@@ -59,7 +59,7 @@ def sliding_terms(coeffs: np.ndarray, x: np.ndarray, ref: np.ndarray) -> tuple[f
 
 
 def sliding_law(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, boundary_layer,
-                sigma, e_mod, theta0, lower, upper, phi_fn, f_fn, h_fn, rate):
+                sigma, e_mod, theta0, lower, upper, lo, hi, freeze, phi_fn, f_fn, h_fn, rate):
     """One evaluation of the sliding laws (adaptive, fixed nominal, robust), as plain array code.
 
     x (n,), ref (n+1,), theta (n_theta,) = [d̂, p̂...], coeffs (n,) surface coefficients,
@@ -67,8 +67,9 @@ def sliding_law(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, bo
     baselines), dead-zone: adaptation off while |s| (dz_on_s) or |ỹ| < dz_width (common.dead_zone_open),
     K, boundary_layer: robust term K sat(s/Phi) (K = 0: none); sigma, e_mod, theta0
     (n_theta,), lower, upper (n_theta,): the robust modifications (common.modify_rate:
-    leakage toward theta0, projection onto the box). Writes θ̂' into rate (n_theta,)
-    and returns (u, s, ṡ_r):
+    leakage toward theta0, projection onto the box); freeze: saturation-aware adaptation, no
+    adaptation while u lies outside the actuator's [lo, hi] (the 1-DOF case of Slotine–Li's
+    per-joint rule). Writes θ̂' into rate (n_theta,) and returns (u, s, ṡ_r):
 
         u = h^-1 (d̂ ṡ_r - f - phi p̂ + k s [+ K sat(s/Phi)])
         d̂' = ṡ_r s / gamma_d,   p̂' = -phi^T s / gamma_p   [- (σ + ν|s|)(θ̂ - θ₀)/γ, projected]
@@ -76,11 +77,11 @@ def sliding_law(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, bo
     The Python laws below call it; adaptive_mj.sim.native compiles this same function.
     """
     return sliding_law_values(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, boundary_layer,
-                              sigma, e_mod, theta0, lower, upper, phi_fn(x), f_fn(x), h_fn(x), rate)
+                              sigma, e_mod, theta0, lower, upper, lo, hi, freeze, phi_fn(x), f_fn(x), h_fn(x), rate)
 
 
 def sliding_law_values(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, boundary_layer,
-                       sigma, e_mod, theta0, lower, upper, phi, f, h, rate):
+                       sigma, e_mod, theta0, lower, upper, lo, hi, freeze, phi, f, h, rate):
     """sliding_law with the regressor's values at x: phi (n_p,), f, h (floats), not its functions
     (the compiled callback evaluates the plant's functions itself and calls this)."""
     s, s_r_dot, y_tilde = sliding_terms(coeffs, x, ref)
@@ -92,7 +93,7 @@ def sliding_law_values(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s
         acc += K * min(1.0, max(-1.0, z))
     u = acc / h
     signal = s if dz_on_s else y_tilde
-    if adapt and dead_zone_open(signal, dz_width):
+    if adapt and dead_zone_open(signal, dz_width) and not (freeze and (u < lo or u > hi)):
         rate[0] = s_r_dot * s / gamma[0]
         for j in range(phi.shape[0]):
             rate[j + 1] = -phi[j] * s / gamma[j + 1]
@@ -116,8 +117,8 @@ def _check_gains(form: ModelForm, lam: float, k: float) -> None:
 # sliding_law's arguments between theta and rate: the gains (fixed after construction) and the form's
 # phi, f, h
 _SlidingArgs = tuple[np.ndarray, float, np.ndarray, bool, float, bool, float, float, float, float, np.ndarray,
-                     np.ndarray, np.ndarray, Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], float],
-                     Callable[[np.ndarray], float]]
+                     np.ndarray, np.ndarray, float, float, bool, Callable[[np.ndarray], np.ndarray],
+                     Callable[[np.ndarray], float], Callable[[np.ndarray], float]]
 
 
 class _SlidingBase(Law):
@@ -139,6 +140,7 @@ class _SlidingBase(Law):
         self.K = 0.0
         self.boundary_layer = 1.0
         self.modification = NO_MODIFICATION
+        self.saturation: tuple[float, float] | None = None  # (lo, hi) [control units]: saturation-aware adaptation
         self._args: _SlidingArgs | None = None
 
     @property
@@ -153,14 +155,16 @@ class _SlidingBase(Law):
         return {"coeffs": self._coeffs, "k": self.k, "gamma": self.gamma, "adapt": self.adapt,
                 "dz_width": 0.0 if dz is None else dz.width, "dz_on_s": dz is None or dz.on is DeadZoneOn.S,
                 "K": self.K, "boundary_layer": self.boundary_layer, "sigma": sigma, "e_mod": e_mod,
-                "theta0": theta0, "lower": lower, "upper": upper}
+                "theta0": theta0, "lower": lower, "upper": upper, "freeze": self.saturation is not None,
+                "sat_lo": -math.inf if self.saturation is None else float(self.saturation[0]),
+                "sat_hi": math.inf if self.saturation is None else float(self.saturation[1])}
 
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
         if self._args is None:  # the gains, once (they are fixed after construction)
             p = self.native_params()
             self._args = (p["coeffs"], p["k"], p["gamma"], p["adapt"], p["dz_width"], p["dz_on_s"], p["K"],
                           p["boundary_layer"], p["sigma"], p["e_mod"], p["theta0"], p["lower"], p["upper"],
-                          self.form.phi, self.form.f, self.form.h)
+                          p["sat_lo"], p["sat_hi"], p["freeze"], self.form.phi, self.form.f, self.form.h)
         rate = np.empty(len(self.names))
         u, s, s_r_dot = sliding_law(x, ref, theta_hat, *self._args, rate)
         return LawStep(u, rate, s, s_r_dot)
@@ -172,15 +176,18 @@ class SlidingAdaptiveLaw(_SlidingBase):
     lam: lambda [1/s] of the surface; k: gain on s [u per unit of s];
     gamma: scalar or (n_theta,) adaptation "stiffness" (estimates move at 1/gamma);
     dead_zone: None, or a DeadZone (default test |s| < eps, the lecture's formula);
-    modification: σ/e-modification and projection (common.Modification), or None.
+    modification: σ/e-modification and projection (common.Modification), or None;
+    saturation: the actuator's (lo, hi) for saturation-aware adaptation (no adaptation while the law's
+    u is outside it), or None (the lecture's law).
     """
 
     def __init__(self, form: ModelForm, *, lam: float, k: float, gamma, dead_zone: DeadZone | None = None,
-                 modification: Modification | None = None):
+                 modification: Modification | None = None, saturation: tuple[float, float] | None = None):
         super().__init__(form, lam=lam, k=k)
         self.gamma = as_gamma(gamma, len(self.names))
         self.dead_zone = dead_zone
         self.modification = modification or NO_MODIFICATION
+        self.saturation = None if saturation is None else (float(saturation[0]), float(saturation[1]))
 
     def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
         """V = ½ d s² + ½ sum_i gamma_i (θ̂_i - θ_i)².  s: (N,), theta*: (N, n_theta)."""

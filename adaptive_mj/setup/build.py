@@ -203,7 +203,8 @@ def _sliding_adaptive(scn: Scenario, plant, modification):
                                    kappa=L.robust.composite_gain, filter_rate=L.robust.composite_filter,
                                    dead_zone=_dead_zone(scn, plant), modification=modification)
     return SlidingAdaptiveLaw(form, lam=L.lam, k=L.k, gamma=_gamma(scn, form.names),
-                              dead_zone=_dead_zone(scn, plant), modification=modification)
+                              dead_zone=_dead_zone(scn, plant), modification=modification,
+                              saturation=_saturation(scn, plant) if L.saturation == "freeze" else None)
 
 
 def _fixed_nominal(scn: Scenario, plant, modification):
@@ -232,12 +233,12 @@ def _slotine_li(scn: Scenario, plant, modification):
 
 
 def _saturation(scn: Scenario, plant):
-    """law.saturation = "freeze": the plant's torque limits (lo, hi) (m,) [N m], which must exist."""
+    """law.saturation = "freeze": the plant's limits (lo, hi): (m,) [N m] on an arm, floats [N or N m] on a 1-DOF
+    plant; they must exist."""
     if plant.ctrl_range is None:
         raise ScenarioError(f"{scn.source}: law.saturation = 'freeze' needs torque limits (the model's actuator "
                             "ctrlrange), but no actuator is limited")
     return plant.ctrl_range
-
 
 
 def _plugin(scn: Scenario, plant, modification):

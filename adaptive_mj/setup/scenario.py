@@ -932,9 +932,14 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
         raise ScenarioError(f"{t.where}: law.K and law.boundary_layer are required for law.kind = 'robust_sliding'")
     robust = _robust(t, kind, adaptive=kind in ("sliding_adaptive", "first_order_adaptive"),
                      composite=kind == "sliding_adaptive", presets=())
+    saturation = t.string("saturation", "ignore", choices=("ignore", "freeze"))
+    if saturation != "ignore" and (kind != "sliding_adaptive" or robust.composite_gain is not None):
+        raise t.fail("saturation", "'ignore' except for law.kind = 'sliding_adaptive' (without law.composite)",
+                     saturation)
     t.finish()
     return LawSpec(kind=kind, order=law_order, lam=lam, k=k, gamma=gamma, dead_zone=dead_zone,
-                   initial_estimates=initial, nominal=nominal, K=K, boundary_layer=phi, robust=robust)
+                   initial_estimates=initial, nominal=nominal, K=K, boundary_layer=phi, robust=robust,
+                   saturation=saturation)
 
 
 def _plugin_law(t: _Table, kind: str, inst, plant: PlantSpec, order: int) -> LawSpec:

@@ -71,7 +71,7 @@ CONTEXT = np.dtype([
     ("inc", _f8, 4), ("weights", _f8, 4),
     # the law's numbers (sliding_law's scalars)
     ("k", _f8), ("adapt", _i8), ("dz_width", _f8), ("dz_on_s", _i8), ("K", _f8), ("boundary_layer", _f8),
-    ("sigma", _f8), ("e_mod", _f8),
+    ("sigma", _f8), ("e_mod", _f8), ("freeze", _i8), ("sat_lo", _f8), ("sat_hi", _f8),
     # buffers (addresses)
     ("ref", _i8), ("noise", _i8), ("rec", _i8), ("theta", _i8), ("rsum", _i8), ("prev", _i8), ("th", _i8),
     ("rate", _i8), ("coeffs", _i8), ("gamma", _i8), ("theta0", _i8), ("lower", _i8), ("upper", _i8),
@@ -161,8 +161,8 @@ def _builtin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rat
     """laws.sliding.sliding_law with its scalars read from the context (the plant's functions are
 called here, as globals, so no function is passed as a value: numba could not cache that)."""
     u, s, _ = sliding_law_values(x, r, th, coeffs, ctx.k, gamma, ctx.adapt != 0, ctx.dz_width, ctx.dz_on_s != 0,
-                                 ctx.K, ctx.boundary_layer, ctx.sigma, ctx.e_mod, theta0, lower, upper,
-                                 phi_fn(x), f_fn(x), h_fn(x), rate)  # noqa: F821 (injected)
+                                 ctx.K, ctx.boundary_layer, ctx.sigma, ctx.e_mod, theta0, lower, upper, ctx.sat_lo,
+                                 ctx.sat_hi, ctx.freeze != 0, phi_fn(x), f_fn(x), h_fn(x), rate)  # noqa: F821
     return u, s
 
 
@@ -271,6 +271,8 @@ class NativeController(ContextOwner):
         c["k"], c["adapt"], c["dz_width"], c["dz_on_s"] = p["k"], int(bool(p["adapt"])), p["dz_width"], \
             int(bool(p["dz_on_s"]))
         c["K"], c["boundary_layer"], c["sigma"], c["e_mod"] = p["K"], p["boundary_layer"], p["sigma"], p["e_mod"]
+        c["freeze"] = int(bool(p.get("freeze", False)))  # saturation-aware adaptation (sliding_law's freeze)
+        c["sat_lo"], c["sat_hi"] = p.get("sat_lo", -np.inf), p.get("sat_hi", np.inf)
         for name, buf in self.buffers.items():
             c[name] = addr(buf)
         self.context = ctx

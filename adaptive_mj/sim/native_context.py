@@ -92,17 +92,19 @@ def block_offsets(base: int, arrays: dict[str, int], block: list[str]) -> dict[s
     """{name: byte offset} of the pointer fields in `block` (consecutive 8-byte pointers, in order)
     given the addresses `arrays` {name: address} some of them hold. The block's start is the one
     offset at which every given pointer sits at its place in the order: a zero-size array shares
-    its address with its neighbour, so matching single values is ambiguous, the pattern is not."""
+    its address with its neighbour, so matching single values is ambiguous, the pattern is not;
+    of several places that hold the whole pattern the first is the struct's (see below)."""
     cands = struct_offsets(base, arrays)
     index = {n: i for i, n in enumerate(block)}
     starts: set[int] | None = None
     for name, offs in cands.items():
         here = {off - 8 * index[name] for off in offs}
         starts = here if starts is None else starts & here
-    if not starts or len(starts) != 1:
-        raise RuntimeError(f"could not place MuJoCo's array pointers {sorted(arrays)} unambiguously "
-                           f"(block starts {sorted(starts or ())})")
-    start = starts.pop()
+    if not starts:
+        raise RuntimeError(f"could not place MuJoCo's array pointers {sorted(arrays)} in the struct at {base:#x}")
+    # The live struct's own block is the first match: memory after the struct can hold a stale copy of
+    # the same pointers (a freed struct whose arrays' buffer malloc handed to this one), never before it.
+    start = min(starts)
     return {n: start + 8 * index[n] for n in block}
 
 

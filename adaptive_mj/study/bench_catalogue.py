@@ -1110,7 +1110,7 @@ def _arm_drift(quick: bool, logs: Path) -> Section:
         fig, ax = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True, constrained_layout=True)
         lines = ["| law | drift of ‖θ̃‖/‖θ‖ over the first 60 s [per 100 s] | failure onset (max_j abs(q̃_j) > "
                  f"{_g(bound)} rad) | final m̂ (true {_g(float(setup.plant.true_theta()[0]))} kg) | "
-                 "final ‖θ̃‖/‖θ‖ | tail RMS max_j q̃ [rad] | verdict |", "|---|---|---|---|---|---|---|"]
+                 "final ‖θ̃‖/‖θ‖ | tail RMS q̃ (over the joints) [rad] | verdict |", "|---|---|---|---|---|---|---|"]
         rows, onsets, quiet = [], {}, None
         for job, (v, _) in zip(jobs, ARM_DRIFT_VARIANTS, strict=True):
             r = res[job.tag]
@@ -1154,7 +1154,8 @@ def _arm_drift(quick: bool, logs: Path) -> Section:
             sudden = "Without a modification the estimates drift; no failure occurred within the run. "
         text = (f"`{name}`: the UR5e holds `home` (no excitation), the payload's 10 estimates start at the truth, the "
                 f"encoders have σ_q = {sigma_q:g} rad of noise and the law gets q̇ differentiated from them through a "
-                f"{scn.sensors.velocity_cutoff_hz:g} Hz low-pass (docs/THEORY.md, \"Sensors\"). " + sudden +
+                f"{scn.sensors.velocity_cutoff_hz:g} Hz low-pass (docs/THEORY.md, \"Sensors, disturbances and "
+                "saturation on the arms\"). " + sudden +
                 f"The dead-zone on ‖s‖ has width ε = 3 σ_s = {_g(width)} rad/s, σ_s from the encoder noise through the "
                 "velocity filter (adaptive_mj.sensors.surface_noise_std); σ-modification pulls θ̂ to the truth with "
                 "σ = 0.02; `physical` projects the payload's mass and inertia to physically possible values. "
