@@ -21,6 +21,8 @@ ALL_ON = ["noise.std={q=1e-4}",
           "sensors={encoder_counts=65536, velocity='differentiated', velocity_cutoff_hz=50.0}",
           "disturbance={kind='noise', magnitude=0.5, bandwidth_hz=5.0, load={'payload/body'=0.2}}",
           "law.saturation='freeze'"]
+PLANT_ON = ["plant.frictionloss=0.3", "plant.friction_params=true", "plant.actuator_lag=0.004",
+            "plant.torque_limit={shoulder_pan=60, shoulder_lift=60, elbow=60, wrist_1=4, wrist_2=4, wrist_3=4}"]
 
 
 def _scenario(*overrides, duration=0.3):
@@ -150,10 +152,11 @@ def test_freeze_changes_only_a_run_that_saturates():
 @pytest.mark.parametrize("extra", [[], ["control.mode='sampled'", "control.period=0.002"],
                                    ["simulation.control_delay=2"]], ids=["continuous", "sampled", "delay"])
 def test_native_reproduces_python_with_every_condition_on(extra):
-    scn = _scenario(*ALL_ON, *extra)
+    scn = _scenario(*ALL_ON, *PLANT_ON, *extra)
     py, _ = _run(scn, False)
-    nat, _ = _run(scn, True)
+    nat, s = _run(scn, True)
     assert nat.meta["native"] and not py.meta["native"]
+    assert np.any(np.abs(nat.u) >= s.plant.ctrl_range[1]) and s.plant.model.nu == s.plant.model.na  # limits, lags
     for field in ("t", "x", "u", "s", "ref", "theta_hat"):
         np.testing.assert_array_equal(getattr(py, field), getattr(nat, field), err_msg=field)
     assert py.meta["sensors"]["velocity"] == "differentiated"
