@@ -618,6 +618,12 @@ class ManipulatorPlant:
         mujoco.mj_step(self.model, self.data, nstep=nstep)
         self._note_contact()
 
+    def native_prestep(self) -> None:
+        pass
+
+    def native_poststep(self) -> None:
+        self._note_contact()
+
     def step(self) -> None:
         if self.joint_disturbance is not None:  # held over the step (the native callback writes it per stage)
             self.data.qfrc_applied[:] = self.joint_disturbance(self.data.time)

@@ -226,8 +226,14 @@ class MujocoPlant:
 
     def step_native(self, nstep: int) -> None:
         """nstep physics steps in one mj_step call, the constant external force held throughout."""
-        self.data.qfrc_applied[self._dadr] = self.force_offset
+        self.native_prestep()
         mujoco.mj_step(self.model, self.data, nstep=nstep)
+
+    def native_prestep(self) -> None:
+        self.data.qfrc_applied[self._dadr] = self.force_offset
+
+    def native_poststep(self) -> None:
+        pass
 
     def step(self) -> None:
         """One mj_step; the external force (offset + disturbance(t)) is held over the step."""

@@ -135,6 +135,14 @@ class NativePlant(Plant, Protocol):
 
     def step_native(self, nstep: int) -> None: ...
 
+    def native_prestep(self) -> None:
+        """What step_native does to data before mj_step (a batch driver steps the state elsewhere)."""
+        ...
+
+    def native_poststep(self) -> None:
+        """What step_native does after mj_step."""
+        ...
+
 
 def has_joints(plant: Plant) -> TypeGuard[JointPlant]:
     """Whether the plant has a joint axis (joint_shape (m,)): it is then a JointPlant."""

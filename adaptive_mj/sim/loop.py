@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable, NamedTuple, Protocol, Sequence
 
 import numpy as np
@@ -44,7 +45,8 @@ from adaptive_mj.trajectory import Trajectory
 if TYPE_CHECKING:
     from adaptive_mj.sim.native_context import ContextOwner
 
-__all__ = ["Event", "ControlTiming", "Controller", "ControlStep", "StepRow", "Sink", "run", "plant_order",
+__all__ = ["Event", "ControlTiming", "Controller", "ControlStep", "StepRow", "Sink", "run", "prepare", "PreparedRun",
+           "native_steps", "plant_order",
            "divergence", "TABLEAU", "NATIVE_CHUNK"]
 
 
@@ -284,6 +286,52 @@ def run(plant: Plant, law: Law, reference, *, duration: float, theta_hat0: Seque
     reason. A KeyboardInterrupt (SIGINT, or SIGTERM through the CLI) first hands the sink every
     whole row, then comes out as errors.Interrupted carrying them (status "interrupted").
     """
+    r = prepare(plant, law, reference, duration=duration, theta_hat0=theta_hat0, noise_std=noise_std, rng=rng,
+                events=events, state_bound=state_bound, sink=sink, sink_every=sink_every, native=native,
+                control_delay=control_delay, control_mode=control_mode, control_period=control_period,
+                sensors=sensors)
+    with _interruptible(r.rows.stopped):
+        if r.nc is not None:
+            status, reason = _run_native(plant, r.nc, r.rows, r.queue, r.noise, state_bound)
+        else:
+            ctrl = Controller(law, reference, r.theta_hat0, plant.ctrl_range, r.order, plant.stages, plant.dt,
+                              plant.joint_shape, r.timing, r.sensors)
+            step = ControlStep(plant, ctrl, r.queue, state_bound=state_bound, noise=r.noise.draw, sink=sink)
+            status, reason = _run_python(plant, step, r.rows)
+    return r.result(status, reason)
+
+
+@dataclass
+class PreparedRun:
+    """One run set up for a driver (loop.run's, or adaptive_mj.sim.batch's): its rows, events, noise,
+    control timing and native controller (None: the Python path)."""
+
+    plant: Plant
+    rows: _Rows
+    queue: EventQueue
+    noise: _NoiseSource
+    timing: ControlTiming
+    nc: ContextOwner | None
+    theta_hat0: np.ndarray
+    order: int
+    state_bound: float
+    sensors: st.Sensors | None = None
+
+    def result(self, status: str, reason: str) -> Trajectory:
+        meta = {"native": self.nc is not None, "events": self.queue.applied, **self.timing.describe()}
+        if self.timing.delay:
+            meta["control_delay"] = int(self.timing.delay)  # [physics steps]
+        if self.sensors is not None:
+            meta["sensors"] = self.sensors.describe()
+        return self.rows.result(self.rows.k, status, reason, meta)
+
+
+def prepare(plant: Plant, law: Law, reference, *, duration: float, theta_hat0, noise_std=None, rng=None,
+            events: Sequence[Event] = (), state_bound: float = math.inf, sink: Sink | None = None,
+            sink_every: int = 1000, native: bool | None = None, control_delay: int = 0,
+            control_mode: str = "continuous", control_period: float | None = None,
+            sensors: st.Sensors | None = None) -> PreparedRun:
+    """Check run()'s arguments and set one run up (see run)."""
     order = plant_order(plant)
     if order != law.order:
         raise ValueError(f"law of order {law.order} on a plant of order {order}")
@@ -303,20 +351,7 @@ def run(plant: Plant, law: Law, reference, *, duration: float, theta_hat0: Seque
         raise ValueError(f"encoder quantisation and differentiated velocity are for plants with joints "
                          f"(plant.kind = 'manipulator'), not a {type(plant).__name__}")
     nc = _native_controller(plant, law, reference, theta_hat0, timing, native, sensors)
-    with _interruptible(rows.stopped):
-        if nc is not None:
-            status, reason = _run_native(plant, nc, rows, queue, noise, state_bound)
-        else:
-            ctrl = Controller(law, reference, theta_hat0, plant.ctrl_range, order, plant.stages, plant.dt,
-                              plant.joint_shape, timing, sensors)
-            step = ControlStep(plant, ctrl, queue, state_bound=state_bound, noise=noise.draw, sink=sink)
-            status, reason = _run_python(plant, step, rows)
-    meta = {"native": nc is not None, "events": queue.applied, **timing.describe()}
-    if control_delay:
-        meta["control_delay"] = int(control_delay)  # [physics steps]
-    if sensors is not None:
-        meta["sensors"] = sensors.describe()
-    return rows.result(rows.k, status, reason, meta)
+    return PreparedRun(plant, rows, queue, noise, timing, nc, theta_hat0, order, state_bound, sensors)
 
 
 def _run_python(plant, step: ControlStep, rows: _Rows) -> tuple[str, str]:
@@ -334,19 +369,36 @@ def _run_python(plant, step: ControlStep, rows: _Rows) -> tuple[str, str]:
 def _run_native(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
     """Drive the native callback chunk by chunk: (status, reason)."""
     with plant.controlled_natively(nc.callback), nc:
-        while rows.k < rows.n:
-            k, t_k = rows.k, plant.time
-            queue.due(t_k, plant, rows.sink)
-            n = min(NATIVE_CHUNK, rows.n - k, rows.every - k % rows.every)
-            to_event = queue.steps_to_next(t_k)
-            if to_event is not None:  # stop at the step where the next event applies
-                n = min(n, to_event)
-            theta_now = plant.true_theta()
-            block = nc.chunk(n, noise.draw_block(n))
-            bad, reason = first_divergence(plant, block[1], block[2], block[5], nc.theta, state_bound)
-            rows.put_block(block, theta_now, n if bad is None else bad)
-            if bad is not None:
-                return "diverged", reason
+        steps = native_steps(plant, nc, rows, queue, noise, state_bound)
+        try:
+            n = next(steps)
+            while True:
+                plant.step_native(n)
+                n = steps.send(None)
+        except StopIteration as done:
+            return done.value
+
+
+def native_steps(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
+    """A native run as a generator: each chunk's events and callback buffers are prepared, then it
+    yields the chunk's step count n and waits for the plant to have stepped n physics steps (one
+    mj_step(nstep=n) here, or a row of a mujoco.batch.Batch in adaptive_mj.sim.batch); it returns
+    (status, reason). The callback must be installed and the run's context bound by the driver."""
+    while rows.k < rows.n:
+        k, t_k = rows.k, plant.time
+        queue.due(t_k, plant, rows.sink)
+        n = min(NATIVE_CHUNK, rows.n - k, rows.every - k % rows.every)
+        to_event = queue.steps_to_next(t_k)
+        if to_event is not None:  # stop at the step where the next event applies
+            n = min(n, to_event)
+        theta_now = plant.true_theta()
+        nc.prepare(n, noise.draw_block(n))
+        yield n
+        block = nc.finish(n)
+        bad, reason = first_divergence(plant, block[1], block[2], block[5], nc.theta, state_bound)
+        rows.put_block(block, theta_now, n if bad is None else bad)
+        if bad is not None:
+            return "diverged", reason
     return "ok", ""
 
 

@@ -280,6 +280,12 @@ class NativeController(ContextOwner):
 
     def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat) rows, each (rows, ...)."""
+        self.prepare(rows, noise)
+        self.plant.step_native(rows)
+        return self.finish(rows)
+
+    def prepare(self, rows: int, noise: np.ndarray | None) -> None:
+        """Set the buffers and the context up for the next `rows` physics steps (then the plant steps)."""
         plant, n, h = self.plant, self.n, self.plant.dt
         t = np.empty(rows)
         t[0] = plant.time
@@ -292,7 +298,10 @@ class NativeController(ContextOwner):
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
         self.bind()
-        plant.step_native(rows)
+
+    def finish(self, rows: int) -> tuple[np.ndarray, ...]:
+        """The rows the callback recorded over the `rows` steps just taken: (t, x, u, s, ref, theta_hat)."""
+        c, n = self.context[0], self.n
         if int(c["row"]) != rows or int(c["stage"]) != 0:
             raise RuntimeError(f"native callback ran {int(c['row'])} steps (stage {int(c['stage'])}), "
                                f"expected {rows}")

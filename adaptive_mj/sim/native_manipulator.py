@@ -647,6 +647,12 @@ class NativeManipulatorController(ContextOwner):
         """Step `rows` physics steps; return (t (rows,), x (rows, 2, m), u (rows, m), s (rows, m),
         ref (rows, 3, m), theta_hat (rows, n_params)): each row the state, reference and θ̂ at
         the step's start and the clamped τ applied during it."""
+        self.prepare(rows, noise)
+        self.plant.step_native(rows)
+        return self.finish(rows)
+
+    def prepare(self, rows: int, noise: np.ndarray | None) -> None:
+        """Set the buffers and the context up for the next `rows` physics steps (then the plant steps)."""
         if not 0 < rows <= self.max_rows:
             raise ValueError(f"rows must be in 1..{self.max_rows}, got {rows}")
         plant, m, nst, h = self.plant, self.m, self.nst, self.plant.dt
@@ -673,7 +679,10 @@ class NativeManipulatorController(ContextOwner):
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
         self.bind()
-        plant.step_native(rows)
+
+    def finish(self, rows: int) -> tuple[np.ndarray, ...]:
+        """The rows the callback recorded over the `rows` steps just taken (see chunk)."""
+        c, b = self.context[0], self.buffers
         done = int(c["row"])
         if done != rows or c["stage"] != 0:
             raise RuntimeError(f"native callback ran {done} steps (stage {int(c['stage'])}), expected {rows}")

@@ -1,0 +1,125 @@
+"""Many native runs in one process on `mujoco.batch.Batch` (issue 20, first part): the runs' physics
+stepped together on a thread pool, each run otherwise exactly as `loop.run` drives it.
+
+Each run is set up by `loop.prepare` (its rows, events, noise, native controller and context) and
+driven by `loop.native_steps`, the same generator `loop.run`'s native path drives: before each
+chunk the run's events are applied and its callback buffers filled, then it asks for n physics
+steps. Here the runs that ask for the same n are stepped together: each run's MjData state
+(mjSTATE_INTEGRATION: time, qpos, qvel, act, warm start, ctrl, applied forces and `userdata`, whose
+first slot points the compiled callback at the run's own context) is copied into its row of the
+batch, `Batch.step(ids, nstep=n)` steps those rows on the batch's threads with the run's own
+MjModel (`set_models`: events that change a model, such as a payload's mass, apply to its run
+only), and the rows are copied back. MuJoCo documents `Batch` as bit-identical to stepping one
+MjData per simulation, so every run gives the rows `loop.run` gives (tests/test_batch.py).
+
+What differs from loop.run: MuJoCo's warnings (`plant.instability()`) are not seen, because the
+batch steps its own MjData; a non-finite state is still caught by the divergence check, and a
+simulation the batch reports failed ends its run as "diverged" with MuJoCo's message. All runs of one
+batch share one control callback (the same compiled law and plant form) and one model layout.
+"""
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import Any, Sequence
+
+import mujoco
+import mujoco.batch
+import numpy as np
+
+from adaptive_mj.sim.loop import PreparedRun, native_steps, prepare
+from adaptive_mj.sim.native_context import ContextOwner
+from adaptive_mj.trajectory import Trajectory
+
+__all__ = ["run_batch"]
+
+_STATE = mujoco.mjtState.mjSTATE_INTEGRATION
+
+
+def run_batch(runs: Sequence[dict[str, Any]], *, nthread: int = 0) -> list[Trajectory]:
+    """Run each of `runs` (the keyword arguments of loop.run: plant, law, reference, duration,
+    theta_hat0, ...; each on its own plant) with its physics stepped in one mujoco.batch.Batch of
+    nthread threads (0: all CPUs). Returns their trajectories, in order. Every run must take the
+    native path with the same compiled callback."""
+    if not runs:
+        return []
+    prepared = [prepare(**{**r, "native": True}) for r in runs]
+    ncs = []
+    for i, p in enumerate(prepared):
+        if p.nc is None:
+            raise ValueError(f"run {i}: its plant and law have no native callback; a batch steps native runs only")
+        ncs.append(p.nc)
+        if p.nc.callback is not ncs[0].callback:
+            raise ValueError(f"run {i}: a different compiled callback from run 0; batch runs of one law and plant form")
+    return _drive(prepared, ncs, nthread)
+
+
+def _drive(prepared: list[PreparedRun], ncs: list[ContextOwner], nthread: int) -> list[Trajectory]:
+    from adaptive_mj.plants.mujoco_plant import control_callback
+
+    plants = [nc.plant for nc in ncs]
+    batch = mujoco.batch.Batch(plants[0].model, nsim=len(prepared), nthread=nthread)
+    batch.set_models([pl.model for pl in plants])
+    state = np.empty(mujoco.mj_stateSize(plants[0].model, _STATE))
+    results: dict[int, tuple[str, str]] = {}
+    steps = {}
+    with control_callback(ncs[0].callback.ctypes), _all_bound(ncs):
+        asks: dict[int, int] = {}
+        for i, p in enumerate(prepared):
+            steps[i] = native_steps(p.plant, p.nc, p.rows, p.queue, p.noise, p.state_bound)
+            _advance(steps, i, None, asks, results)
+        while asks:
+            groups: dict[int, list[int]] = defaultdict(list)
+            for i, n in asks.items():
+                groups[n].append(i)
+            for n, ids in sorted(groups.items()):
+                for i in ids:
+                    pl = plants[i]
+                    pl.native_prestep()
+                    mujoco.mj_getState(pl.model, pl.data, state, _STATE)
+                    batch.state[i] = state
+                failed = _step(batch, ids, n)
+                for i in ids:
+                    pl = plants[i]
+                    mujoco.mj_setState(pl.model, pl.data, batch.state[i], _STATE)
+                    pl.native_poststep()
+                    if i in failed:
+                        results[i] = ("diverged", failed[i])
+                        asks.pop(i)
+                        continue
+                    _advance(steps, i, None, asks, results)
+    return [p.result(*results[i]) for i, p in enumerate(prepared)]
+
+
+def _advance(steps, i: int, value, asks: dict[int, int], results: dict[int, tuple[str, str]]) -> None:
+    """Resume run i's generator: its next step count into asks, or its (status, reason) into results."""
+    try:
+        asks[i] = steps[i].send(value) if i in asks else next(steps[i])
+    except StopIteration as done:
+        asks.pop(i, None)
+        results[i] = done.value
+
+
+def _step(batch, ids: list[int], n: int) -> dict[int, str]:
+    """Step the rows `ids` n physics steps; {row: MuJoCo's message} for the simulations that failed."""
+    try:
+        batch.step(ids=np.asarray(ids), nstep=n)
+    except mujoco.batch.SimulationError:
+        return {i: f"MuJoCo: {batch.error(i)}" for i in ids if batch.error(i)}
+    return {}
+
+
+class _all_bound:
+    """Every run's context bound to its MjData while the batch runs (and unbound after, as loop.run's
+    `with nc:` does)."""
+
+    def __init__(self, ncs: list[ContextOwner]):
+        self.ncs = ncs
+
+    def __enter__(self):
+        for nc in self.ncs:
+            nc.__enter__()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for nc in self.ncs:
+            nc.__exit__(*exc)
