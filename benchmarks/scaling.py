@@ -12,6 +12,11 @@
   study     a --study-runs study of 2 s runs through `adaptive-mj sweep` (local, 2 jobs):
             wall time, runs/s, and the driver's peak RSS (VmHWM, polled) for it and for a
             study 10× smaller (bounded memory: the two should be close)
+  batch     issue 20: simulation-steps per second of many runs in one mujoco.batch.Batch
+            (adaptive_mj.sim.batch.run_batch, unlogged, 2 threads) against the bare-stepping
+            limit (a Batch of the same model with no law, 2 threads), for the heave vehicle
+            (nsim --batch-sims), the 1-DOF arm and the 6-joint arm (nsim 100), and a single
+            process stepping the same runs one after another; the scenario builds apart
 
 Every figure is the median of --reps repetitions with [min, max] where repeated.
 Usage: python benchmarks/scaling.py [--reps 3] [--runs 8] [--only local,ray,...] [--study-runs 10000] [--json]
@@ -243,6 +248,60 @@ def study(n: int, jobs: int = 2, backend: str = "local") -> dict:
             "logs_mb": size / 2**20}
 
 
+def _batch_spec(name: str, overrides: list[str]) -> dict:
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
+
+    scn = load(SCENARIOS_DIR / f"{name}.toml", overrides=overrides)
+    st = build(scn)
+    return dict(plant=st.plant, law=st.law, reference=st.reference, duration=scn.simulation.duration,
+                theta_hat0=st.theta_hat0, noise_std=st.noise_std, rng=st.rng, events=st.events,
+                state_bound=scn.simulation.state_bound, sensors=st.sensors)
+
+
+def batch_figures(nsim_heave: int, seconds: float = 2.0) -> dict:
+    """µs per simulation-step: bare Batch (no law), run_batch (the law, unlogged) and one process
+    running the same runs one by one (20 of them, scaled), per plant."""
+    import mujoco
+    import mujoco.batch
+
+    from adaptive_mj.sim.batch import run_batch
+    from adaptive_mj.sim.loop import run
+
+    cases = {"heave": ("heave_drift", nsim_heave, lambda i: [f"law.k={150 + 100 * (i % 2)}"]),
+             "arm": ("arm_payload_swap", 100, lambda i: ["events=[]"]),
+             "ur5e": ("ur5e_identification", 100, lambda i: [f"law.kd={45.0 + i % 10}"])}
+    out = {}
+    for label, (name, nsim, vary) in cases.items():
+        steps = int(round(seconds / 0.001))
+
+        def specs(n, name=name, vary=vary):
+            return [_batch_spec(name, [f"simulation.duration={seconds!r}", f"noise.seed={i}", *vary(i)])
+                    for i in range(n)]
+
+        t0 = time.perf_counter()
+        runs = specs(nsim)
+        build_s = time.perf_counter() - t0
+        model = runs[0]["plant"].model
+        bare = mujoco.batch.Batch(model, nsim=nsim, nthread=2)
+        t0 = time.perf_counter()
+        bare.step(nstep=steps)
+        bare_us = (time.perf_counter() - t0) / (nsim * steps) * 1e6
+        run_batch(specs(2), nthread=2)  # load the compiled callback outside the timing
+        t0 = time.perf_counter()
+        run_batch(runs, nthread=2)
+        batch_us = (time.perf_counter() - t0) / (nsim * steps) * 1e6
+        one = specs(min(20, nsim))
+        t0 = time.perf_counter()
+        for r in one:
+            run(**r)
+        single_us = (time.perf_counter() - t0) / (len(one) * steps) * 1e6
+        out[label] = {"nsim": nsim, "seconds": seconds, "bare_batch_us": bare_us, "run_batch_us": batch_us,
+                      "ratio_to_limit": bare_us / batch_us, "one_process_us": single_us,
+                      "build_ms_per_run": 1e3 * build_s / nsim}
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--reps", type=int, default=3)
@@ -250,7 +309,8 @@ def main() -> None:
     ap.add_argument("--tasks", type=int, default=2000, help="no-op Ray tasks per overhead measurement")
     ap.add_argument("--study-runs", type=int, default=10000)
     ap.add_argument("--study-backend", default="local", choices=("local", "ray"))
-    ap.add_argument("--only", default="ceiling,local,ray,study")
+    ap.add_argument("--batch-sims", type=int, default=1000, help="heave runs in the batch figure (default 1000)")
+    ap.add_argument("--only", default="ceiling,local,ray,study,batch")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     parts = set(args.only.split(","))
@@ -264,6 +324,8 @@ def main() -> None:
     if "study" in parts:
         res["study_small"] = study(max(100, args.study_runs // 10), backend=args.study_backend)
         res["study"] = study(args.study_runs, backend=args.study_backend)
+    if "batch" in parts:
+        res["batch"] = batch_figures(args.batch_sims)
     if args.json:
         print(json.dumps(res, indent=1))
         return
@@ -294,6 +356,11 @@ def main() -> None:
             print(f"study ({s['backend']} backend): {s['runs']} runs of 2 s ({s['rows']} rows): {s['wall_s']:.0f} s, "
                   f"{s['runs_per_s']:.1f} runs/s, driver peak RSS {s['driver_peak_rss_mb']:.0f} MB, "
                   f"logs {s['logs_mb']:.0f} MB")
+    for label, b in res.get("batch", {}).items():
+        print(f"batch {label}: nsim {b['nsim']}, {b['seconds']:g} s runs: bare Batch {b['bare_batch_us']:.2f} "
+              "µs/sim-step, "
+              f"run_batch {b['run_batch_us']:.2f} µs/sim-step ({b['ratio_to_limit']:.2f}x the limit), one process "
+              f"{b['one_process_us']:.2f} µs/sim-step; building a run {b['build_ms_per_run']:.1f} ms")
 
 
 if __name__ == "__main__":

@@ -35,14 +35,17 @@ __all__ = ["run_batch"]
 _STATE = mujoco.mjtState.mjSTATE_INTEGRATION
 
 
-def run_batch(runs: Sequence[dict[str, Any]], *, nthread: int = 0) -> list[Trajectory]:
+BATCH_CHUNK = 1000  # physics steps per Batch.step call (the runs' Python work is per chunk; 1 s at 1 ms)
+
+
+def run_batch(runs: Sequence[dict[str, Any]], *, nthread: int = 0, chunk: int = BATCH_CHUNK) -> list[Trajectory]:
     """Run each of `runs` (the keyword arguments of loop.run: plant, law, reference, duration,
     theta_hat0, ...; each on its own plant) with its physics stepped in one mujoco.batch.Batch of
-    nthread threads (0: all CPUs). Returns their trajectories, in order. Every run must take the
-    native path with the same compiled callback."""
+    nthread threads (0: all CPUs), at most `chunk` physics steps per Batch.step call. Returns their
+    trajectories, in order. Every run must take the native path with the same compiled callback."""
     if not runs:
         return []
-    prepared = [prepare(**{**r, "native": True}) for r in runs]
+    prepared = [prepare(**{**r, "native": True, "chunk": chunk}) for r in runs]
     ncs = []
     for i, p in enumerate(prepared):
         if p.nc is None:

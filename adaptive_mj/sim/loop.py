@@ -330,8 +330,9 @@ def prepare(plant: Plant, law: Law, reference, *, duration: float, theta_hat0, n
             events: Sequence[Event] = (), state_bound: float = math.inf, sink: Sink | None = None,
             sink_every: int = 1000, native: bool | None = None, control_delay: int = 0,
             control_mode: str = "continuous", control_period: float | None = None,
-            sensors: st.Sensors | None = None) -> PreparedRun:
-    """Check run()'s arguments and set one run up (see run)."""
+            sensors: st.Sensors | None = None, chunk: int = NATIVE_CHUNK) -> PreparedRun:
+    """Check run()'s arguments and set one run up (see run); chunk: the most physics steps a native
+    chunk takes (its buffers' rows)."""
     order = plant_order(plant)
     if order != law.order:
         raise ValueError(f"law of order {law.order} on a plant of order {order}")
@@ -350,7 +351,7 @@ def prepare(plant: Plant, law: Law, reference, *, duration: float, theta_hat0, n
     if sensors is not None and not plant.joint_shape:
         raise ValueError(f"encoder quantisation and differentiated velocity are for plants with joints "
                          f"(plant.kind = 'manipulator'), not a {type(plant).__name__}")
-    nc = _native_controller(plant, law, reference, theta_hat0, timing, native, sensors)
+    nc = _native_controller(plant, law, reference, theta_hat0, timing, native, sensors, chunk)
     return PreparedRun(plant, rows, queue, noise, timing, nc, theta_hat0, order, state_bound, sensors)
 
 
@@ -387,7 +388,7 @@ def native_steps(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource,
     while rows.k < rows.n:
         k, t_k = rows.k, plant.time
         queue.due(t_k, plant, rows.sink)
-        n = min(NATIVE_CHUNK, rows.n - k, rows.every - k % rows.every)
+        n = min(nc.max_rows, rows.n - k, rows.every - k % rows.every)
         to_event = queue.steps_to_next(t_k)
         if to_event is not None:  # stop at the step where the next event applies
             n = min(n, to_event)
@@ -403,7 +404,8 @@ def native_steps(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource,
 
 
 def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: ControlTiming,
-                       native: bool | None, sensors: st.Sensors | None = None) -> ContextOwner | None:
+                       native: bool | None, sensors: st.Sensors | None = None,
+                       chunk: int = NATIVE_CHUNK) -> ContextOwner | None:
     """The native controller for this run, or None for the Python path (native False, or not supported;
     a law plugin numba cannot compile falls back with one line on stderr)."""
     make: Callable[..., ContextOwner]
@@ -417,8 +419,8 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
         return None
     try:
         if sensors is not None:
-            return make(plant, law, reference, theta_hat0, NATIVE_CHUNK, control=timing, sensors=sensors)
-        return make(plant, law, reference, theta_hat0, NATIVE_CHUNK, control=timing)
+            return make(plant, law, reference, theta_hat0, chunk, control=timing, sensors=sensors)
+        return make(plant, law, reference, theta_hat0, chunk, control=timing)
     except Exception as exc:  # a user's law numba cannot compile: say why, run it in Python
         plugin = law.installed
         if plugin is None:

@@ -242,6 +242,7 @@ class NativeController(ContextOwner):
         if not isinstance(plant, MujocoPlant):
             raise TypeError(f"the native 1-DOF callback drives a MujocoPlant, got a {type(plant).__name__}")
         self.plant, self.law, self.reference = plant, law, reference
+        self.max_rows = int(max_rows)
         control = control if control is not None else stage_code.ControlTiming(period=plant.dt)
         p = law.native_params()
         self.callback = compiled(plant.form, plugin=p.get("plugin_law"))

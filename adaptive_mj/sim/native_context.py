@@ -175,9 +175,18 @@ class ContextOwner:
     context: np.ndarray
     callback: Any  # the numba cfunc MuJoCo calls
     theta: np.ndarray
+    max_rows: int  # the most physics steps one chunk takes (its buffers' rows)
 
     def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat), each (rows, ...)."""
+        raise NotImplementedError
+
+    def prepare(self, rows: int, noise: np.ndarray | None) -> None:
+        """chunk()'s first half: the buffers and the context set up for the next `rows` steps."""
+        raise NotImplementedError
+
+    def finish(self, rows: int) -> tuple[np.ndarray, ...]:
+        """chunk()'s second half, after the plant stepped: the rows the callback recorded."""
         raise NotImplementedError
 
     def bind(self) -> None:
