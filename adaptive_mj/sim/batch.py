@@ -26,7 +26,7 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
-from adaptive_mj.sim.loop import PreparedRun, native_steps, prepare
+from adaptive_mj.sim.loop import PreparedRun, drive, native_steps, prepare
 from adaptive_mj.sim.native_context import ContextOwner
 from adaptive_mj.trajectory import Trajectory
 
@@ -42,18 +42,23 @@ def run_batch(runs: Sequence[dict[str, Any]], *, nthread: int = 0, chunk: int = 
     """Run each of `runs` (the keyword arguments of loop.run: plant, law, reference, duration,
     theta_hat0, ...; each on its own plant) with its physics stepped in one mujoco.batch.Batch of
     nthread threads (0: all CPUs), at most `chunk` physics steps per Batch.step call. Returns their
-    trajectories, in order. Every run must take the native path with the same compiled callback."""
-    if not runs:
-        return []
-    prepared = [prepare(**{**r, "native": True, "chunk": chunk}) for r in runs]
-    ncs = []
+    trajectories, in order. Runs with the same compiled callback and model layout are stepped in one
+    batch each; a run without a compiled callback (native False, or a law numba cannot compile) runs
+    alone on the Python path, as loop.run runs it."""
+    prepared = [prepare(**{**r, "chunk": chunk}) for r in runs]
+    out: list[Trajectory | None] = [None] * len(prepared)
+    groups: dict[tuple, list[int]] = defaultdict(list)
     for i, p in enumerate(prepared):
         if p.nc is None:
-            raise ValueError(f"run {i}: its plant and law have no native callback; a batch steps native runs only")
-        ncs.append(p.nc)
-        if p.nc.callback is not ncs[0].callback:
-            raise ValueError(f"run {i}: a different compiled callback from run 0; batch runs of one law and plant form")
-    return _drive(prepared, ncs, nthread)
+            out[i] = drive(p, runs[i]["law"], runs[i]["reference"])
+        else:
+            groups[(id(p.nc.callback), mujoco.mj_stateSize(p.nc.plant.model, _STATE))].append(i)
+    for ids in groups.values():
+        ncs = [prepared[i].nc for i in ids]
+        for i, tr in zip(ids, _drive([prepared[i] for i in ids], [nc for nc in ncs if nc is not None], nthread),
+                         strict=True):
+            out[i] = tr
+    return [tr for tr in out if tr is not None]
 
 
 def _drive(prepared: list[PreparedRun], ncs: list[ContextOwner], nthread: int) -> list[Trajectory]:

@@ -290,13 +290,20 @@ def run(plant: Plant, law: Law, reference, *, duration: float, theta_hat0: Seque
                 events=events, state_bound=state_bound, sink=sink, sink_every=sink_every, native=native,
                 control_delay=control_delay, control_mode=control_mode, control_period=control_period,
                 sensors=sensors)
+    return drive(r, law, reference)
+
+
+def drive(r: PreparedRun, law: Law, reference) -> Trajectory:
+    """Run a prepared run to its end on its own: the native callback chunk by chunk, or the Python path."""
+    plant = r.plant
     with _interruptible(r.rows.stopped):
         if r.nc is not None:
-            status, reason = _run_native(plant, r.nc, r.rows, r.queue, r.noise, state_bound)
+            status, reason = _run_native(plant, r.nc, r.rows, r.queue, r.noise, r.state_bound)
         else:
             ctrl = Controller(law, reference, r.theta_hat0, plant.ctrl_range, r.order, plant.stages, plant.dt,
                               plant.joint_shape, r.timing, r.sensors)
-            step = ControlStep(plant, ctrl, r.queue, state_bound=state_bound, noise=r.noise.draw, sink=sink)
+            step = ControlStep(plant, ctrl, r.queue, state_bound=r.state_bound, noise=r.noise.draw,
+                               sink=r.rows.sink)
             status, reason = _run_python(plant, step, r.rows)
     return r.result(status, reason)
 

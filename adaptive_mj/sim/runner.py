@@ -11,7 +11,7 @@ import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 from adaptive_mj import __version__
 from adaptive_mj.plants import ModelSource
@@ -164,6 +164,70 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
 
     single: the only run of this process (the CLI's `run`): a short 1-DOF run then takes the
     Python callback (QUICK_START_MAX_STEPS); studies leave it False and stay compiled."""
+    st = start(scn, log_path=log_path, source=source, single=single)
+    try:
+        traj = run(st.setup.plant, st.setup.law, st.setup.reference, sink=st.recorder, **st.kwargs)
+    except BaseException as exc:
+        st.abandon(exc)
+        raise
+    return st.finish(traj)
+
+
+def execute_batch(scenarios: Sequence[tuple[Scenario, Path | None]], *, nthread: int = 0) -> list[RunResult]:
+    """execute() for each (scenario, log path) with their physics stepped together in one
+    mujoco.batch.Batch (adaptive_mj.sim.batch): the same rows, logs and verdicts as execute gives each
+    alone. Runs that cannot take the compiled callback, or that need another callback than the first,
+    run one by one. An exception (a stop signal) closes every log as loop.run's would."""
+    from adaptive_mj.sim.batch import run_batch
+
+    starts = [start(scn, log_path=log) for scn, log in scenarios]
+    try:
+        trajs = run_batch([dict(plant=st.setup.plant, law=st.setup.law, reference=st.setup.reference,
+                                sink=st.recorder, **st.kwargs) for st in starts], nthread=nthread)
+    except BaseException as exc:
+        for st in starts:
+            st.abandon(exc)
+        raise
+    return [st.finish(traj) for st, traj in zip(starts, trajs, strict=True)]
+
+
+@dataclass
+class Started:
+    """One run built, checked and its log opened (runner.start), waiting for its trajectory."""
+
+    scn: Scenario
+    setup: Setup
+    crit: Criteria
+    pre: preflight.Preflight
+    kwargs: dict[str, Any]  # loop.run's keyword arguments (sink apart)
+    recorder: Any | None  # the MCAP Recorder, or None without a log
+    log_path: Path | None
+
+    def finish(self, traj: Trajectory) -> RunResult:
+        """The verdict, and the log closed with it."""
+        traj, result = verdict(self.scn, traj, self.crit, self.pre)
+        if self.recorder is not None:
+            self.recorder.close(traj.status, traj.reason, result)
+        return RunResult(traj, result, self.log_path)
+
+    def abandon(self, exc: BaseException) -> None:
+        """The run did not end: its log closed as "interrupted" (with the rows it had, a stop signal)
+        or "failed" (anything else)."""
+        if self.recorder is None:
+            return
+        if isinstance(exc, KeyboardInterrupt):  # loop.run has handed the recorder every whole row
+            partial = getattr(exc, "trajectory", None)
+            summary = {} if partial is None else clean_json(make_summary(self.scn.name, partial))
+            self.recorder.close("interrupted", summary.get("reason") or str(exc) or "interrupted", summary)
+            if isinstance(exc, Interrupted):
+                exc.summary = summary or None
+        else:
+            self.recorder.close("failed", f"{type(exc).__name__}: {exc}", {})
+
+
+def start(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None,
+          single: bool = False) -> Started:
+    """Build `scn`, say its notes, check it before flight and open its log (see execute)."""
     setup = build(scn, source=source)
     plant = setup.plant
     for note in setup.notes:  # model edits the scenario asked for: said on the terminal and kept in the log
@@ -173,39 +237,22 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
     crit = criteria(scn, setup.reference, plant_order(plant), tuple(setup.law.names))
     short = single and not plant.joint_shape and scn.simulation.duration < QUICK_START_MAX_STEPS * plant.dt
     sink_every = max(1, round(1.0 / plant.dt))  # flush about once per simulated second
-    kwargs: dict[str, Any]  # run()'s keyword arguments, shared by both calls below
-    kwargs = dict(duration=scn.simulation.duration, theta_hat0=setup.theta_hat0, noise_std=setup.noise_std,
-                  rng=setup.rng, events=setup.events, state_bound=scn.simulation.state_bound,
-                  sink_every=sink_every, control_delay=scn.simulation.control_delay,
-                  control_mode=scn.control.mode, control_period=timing.period, sensors=setup.sensors,
-                  native=False if scn.simulation.python_callback or short else None)
-    if log_path is None:
-        traj, result = verdict(scn, run(plant, setup.law, setup.reference, **kwargs), crit, pre)
-        return RunResult(traj, result, None)
+    kwargs: dict[str, Any] = dict(
+        duration=scn.simulation.duration, theta_hat0=setup.theta_hat0, noise_std=setup.noise_std, rng=setup.rng,
+        events=setup.events, state_bound=scn.simulation.state_bound, sink_every=sink_every,
+        control_delay=scn.simulation.control_delay, control_mode=scn.control.mode, control_period=timing.period,
+        sensors=setup.sensors, native=False if scn.simulation.python_callback or short else None)
+    recorder = None
+    if log_path is not None:
+        from adaptive_mj.log.record import Recorder
 
-    from adaptive_mj.log.record import Recorder
-
-    try:
-        recorder = Recorder(log_path, log_header(scn, setup))
-    except BaseException:
-        with contextlib.suppress(OSError):
-            Path(log_path).unlink()  # a half-written header must not pass for a log
-        raise
-    try:
-        traj = run(plant, setup.law, setup.reference, sink=recorder, **kwargs)
-    except KeyboardInterrupt as exc:  # loop.run has handed the recorder every whole row
-        partial = getattr(exc, "trajectory", None)
-        summary = {} if partial is None else clean_json(make_summary(scn.name, partial))
-        recorder.close("interrupted", summary.get("reason") or str(exc) or "interrupted", summary)
-        if isinstance(exc, Interrupted):
-            exc.summary = summary or None
-        raise
-    except BaseException as exc:
-        recorder.close("failed", f"{type(exc).__name__}: {exc}", {})
-        raise
-    traj, result = verdict(scn, traj, crit, pre)
-    recorder.close(traj.status, traj.reason, result)
-    return RunResult(traj, result, log_path)
+        try:
+            recorder = Recorder(log_path, log_header(scn, setup))
+        except BaseException:
+            with contextlib.suppress(OSError):
+                Path(log_path).unlink()  # a half-written header must not pass for a log
+            raise
+    return Started(scn, setup, crit, pre, kwargs, recorder, log_path)
 
 
 def preflight_of(scn: Scenario, setup: Setup, timing: ControlTiming) -> preflight.Preflight:
