@@ -127,6 +127,10 @@ def _backend_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ray-logs", choices=("bytes", "shared"), default="bytes",
                    help="with --backend ray: bytes (each log is sent back to this machine; default) or shared "
                         "(each node writes its logs itself: the output folder must be on shared storage)")
+    p.add_argument("--engine", choices=("process", "batch"), default="process",
+                   help="with --backend local: process (one run at a time per worker process; default) or batch "
+                        "(the runs' physics stepped together in mujoco.batch, --jobs threads, in this process: the "
+                        "same rows, logs and verdicts)")
     p.add_argument("--retries", type=int, default=3,
                    help="times a run is submitted again when its worker process (or Ray node) dies (default 3; "
                         "local --jobs 1 runs in this process, where there is no worker to lose)")

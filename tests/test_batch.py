@@ -93,3 +93,24 @@ def test_execute_batch_gives_execute_s_summaries_and_logs(tmp_path):
             np.testing.assert_array_equal(getattr(la.trajectory, f), getattr(lb.trajectory, f), err_msg=f)
         assert la.trajectory.status == lb.trajectory.status and la.trajectory.meta["events"] == \
             lb.trajectory.meta["events"]
+
+
+def test_sweep_engine_batch_writes_the_same_table(tmp_path):
+    """`sweep --engine batch` (the runs' physics in one Batch, this process) gives the table the
+    process engine gives, and a log per run that replays."""
+    from adaptive_mj.cli import main
+
+    args = ["sweep", "heave_drift", "--grid", "law.k=150:250:2", "--seeds", "2", "--set", "simulation.duration=1",
+            "--jobs", "2"]
+    assert main([*args, "-o", str(tmp_path / "p")]) == 0
+    assert main([*args, "-o", str(tmp_path / "b"), "--engine", "batch"]) == 0
+    assert (tmp_path / "p" / "sweep.csv").read_text() == (tmp_path / "b" / "sweep.csv").read_text()
+    logs = sorted((tmp_path / "b" / "logs").glob("*.mcap"))
+    assert len(logs) == 4 and main(["replay", str(logs[0]), "--verify"]) == 0
+
+
+def test_engine_batch_is_refused_with_ray(capsys):
+    from adaptive_mj.cli import main
+
+    assert main(["sweep", "heave_drift", "--engine", "batch", "--backend", "ray", "--grid", "law.k=150,250"]) == 2
+    assert "--engine batch" in capsys.readouterr().err

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Sequence
 
 from adaptive_mj.errors import AdaptiveMJError, PreflightRefused
 from adaptive_mj.sim import interrupt
@@ -110,6 +111,61 @@ def run_job(job: Job) -> JobResult:
         return JobResult(job, "error", None, error=log_write_error(job.log, exc))
 
 
+def run_jobs_batched(jobs: Sequence[Job], *, nthread: int = 0) -> list[JobResult]:
+    """run_job for each of `jobs`, their physics stepped together in one mujoco.batch.Batch of nthread
+    threads (runner.execute_batch's pieces): the same logs, summaries and verdicts. A job that cannot be
+    set up is an "error" (or "refused") result and the others go on. A stop signal closes every log of
+    the group as "interrupted" and comes out as the KeyboardInterrupt."""
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.sim.batch import run_batch
+    from adaptive_mj.sim.runner import start
+
+    out: list[JobResult | None] = [None] * len(jobs)
+    started = {}
+    for i, job in enumerate(jobs):
+        try:
+            for name in job.extras:
+                if name not in EXTRAS:
+                    raise AdaptiveMJError(f"unknown analysis {name!r}; expected one of {', '.join(EXTRAS)}")
+            scn = sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed)
+            if job.log is not None:
+                job.log.parent.mkdir(parents=True, exist_ok=True)
+                if job.log.exists():
+                    raise AdaptiveMJError(f"{job.log}: file exists")
+            started[i] = start(scn, log_path=job.log)
+        except PreflightRefused as exc:
+            out[i] = JobResult(job, "refused", None, error=str(exc))
+        except AdaptiveMJError as exc:
+            out[i] = JobResult(job, "error", None, error=str(exc))
+        except OSError as exc:
+            out[i] = JobResult(job, "error", None, error=log_write_error(job.log, exc))
+    ids = list(started)
+    try:
+        trajs = run_batch([dict(plant=st.setup.plant, law=st.setup.law, reference=st.setup.reference,
+                                sink=st.recorder, **st.kwargs) for st in started.values()], nthread=nthread)
+    except BaseException as exc:
+        for st in started.values():
+            st.abandon(exc)
+        raise
+    for i, traj in zip(ids, trajs, strict=True):
+        out[i] = _job_result(jobs[i], started[i], traj)
+    return [r for r in out if r is not None]
+
+
+def _job_result(job: Job, st, traj: Trajectory) -> JobResult:
+    """A started run's verdict, log closed, analyses and decimated rows, as run_job returns them."""
+    from adaptive_mj.study import analysis
+
+    try:
+        result = st.finish(traj)
+    except OSError as exc:
+        return JobResult(job, "error", None, error=log_write_error(job.log, exc))
+    extras = {name: getattr(analysis, name)(result.trajectory, st.setup) for name in job.extras}
+    every = max(1, round(1.0 / (st.scn.log_rate_hz * result.trajectory.meta["dt"])))
+    return JobResult(job, result.summary["status"], result.summary, extras,
+                     decimate(result.trajectory, every) if job.keep_trajectory else None)
+
+
 def run_in_worker(job: Job) -> JobResult:
     """run_job in a worker process or a Ray task: a stop signal interrupts the run (its log closed as "interrupted");
     once one came, jobs still queued are not started."""
@@ -140,6 +196,7 @@ class Backend:
     address: str | None = None
     logs: str = "bytes"
     retries: int = 3
+    engine: str = "process"  # local only: "process" (one run per worker) or "batch" (mujoco.batch, this process)
 
     @classmethod
     def from_args(cls, args) -> "Backend":
@@ -156,9 +213,12 @@ class Backend:
                     raise ScenarioError(f"{opt} is for --backend ray (this command runs on --backend {kind})")
         if retries < 0:
             raise ScenarioError(f"--retries must be an integer >= 0, got {retries}")
+        engine = getattr(args, "engine", "process")
+        if engine == "batch" and kind == "ray":
+            raise ScenarioError("--engine batch runs in this process on mujoco.batch; it is for --backend local")
         if kind == "ray":
             ray_module()  # not installed: one line now, before any folder is made
-        return cls(kind=kind, jobs=max(1, args.jobs), address=address, logs=logs, retries=retries)
+        return cls(kind=kind, jobs=max(1, args.jobs), address=address, logs=logs, retries=retries, engine=engine)
 
 
 def ray_module():

@@ -32,7 +32,8 @@ from typing import Callable, Iterator, Sequence
 from adaptive_mj.sim import interrupt
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
 # Job, JobResult and Backend are imported from here by the study's commands, tests and benchmarks
-from adaptive_mj.study.job import STOP_TIMEOUT, Backend, Job, JobResult, interrupted_note, run_in_worker, run_job
+from adaptive_mj.study.job import (STOP_TIMEOUT, Backend, Job, JobResult, interrupted_note, run_in_worker, run_job,
+                                   run_jobs_batched)
 
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
@@ -96,6 +97,8 @@ def iter_results(jobs: Sequence[Job], backend: Backend | None = None, *,
         from adaptive_mj.study import ray_backend
 
         yield from ray_backend.iter_results(jobs, backend, on_retry=on_retry)
+    elif backend.engine == "batch":
+        yield from _iter_batched(jobs, backend.jobs)
     elif backend.jobs <= 1:
         for i, job in enumerate(jobs):
             try:
@@ -107,6 +110,24 @@ def iter_results(jobs: Sequence[Job], backend: Backend | None = None, *,
             yield i, result
     else:
         yield from _iter_local_pool(jobs, backend.jobs, retries=backend.retries, on_retry=on_retry)
+
+
+#: Runs per mujoco.batch.Batch under --engine batch: the driver holds this many runs' buffers at once.
+BATCH_RUNS = 256
+
+
+def _iter_batched(jobs: Sequence[Job], nthread: int) -> Iterator[tuple[int, JobResult]]:
+    """--engine batch: the jobs in groups of BATCH_RUNS, each group's physics in one Batch of nthread threads
+    in this process (job.run_jobs_batched)."""
+    for g in range(0, len(jobs), BATCH_RUNS):
+        group = jobs[g:g + BATCH_RUNS]
+        try:
+            results = run_jobs_batched(group, nthread=nthread)
+        except KeyboardInterrupt as exc:
+            if isinstance(exc, Interrupted):
+                exc.note = interrupted_note(g, len(jobs))
+            raise
+        yield from ((g + k, r) for k, r in enumerate(results))
 
 
 def run_jobs(jobs: Sequence[Job], *, n_jobs: int = 1, on_done: Callable[[JobResult], None] | None = None,
