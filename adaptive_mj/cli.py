@@ -97,6 +97,9 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("--tail-bound", type=float, metavar="B",
                     help="with --breaking-point: a run fails when it diverges or its tail RMS error exceeds B")
     sw.add_argument("--steps", type=int, default=5, help="with --breaking-point: bisection steps (default 5)")
+    sw.add_argument("--logs", choices=("all", "summary"), default="all",
+                    help="all: an MCAP log per run (default); summary: the table rows only, no logs (very large "
+                         "studies; no --resume)")
     _backend_arguments(sw)
     st = sub.add_parser("stress", help="breaking points: every law x stressor x plant, margins by bisection "
                                        "over seeded runs; report.md and margins.csv")

@@ -114,3 +114,27 @@ def test_engine_batch_is_refused_with_ray(capsys):
 
     assert main(["sweep", "heave_drift", "--engine", "batch", "--backend", "ray", "--grid", "law.k=150,250"]) == 2
     assert "--engine batch" in capsys.readouterr().err
+
+
+def test_sweep_logs_summary_writes_the_table_without_logs(tmp_path):
+    from adaptive_mj.cli import main
+
+    args = ["sweep", "heave_drift", "--grid", "law.k=150,250", "--set", "simulation.duration=1", "--jobs", "2"]
+    assert main([*args, "-o", str(tmp_path / "all")]) == 0
+    assert main([*args, "-o", str(tmp_path / "sum"), "--logs", "summary", "--engine", "batch"]) == 0
+    assert not (tmp_path / "sum" / "logs").exists() or not any((tmp_path / "sum" / "logs").iterdir())
+    import csv
+
+    full = list(csv.DictReader((tmp_path / "all" / "sweep.csv").open()))
+    short = list(csv.DictReader((tmp_path / "sum" / "sweep.csv").open()))
+    assert [{k: v for k, v in r.items() if k != "log"} for r in full] == \
+        [{k: v for k, v in r.items() if k != "log"} for r in short]
+    assert all(r["log"] == "" for r in short) and all(r["log"] for r in full)
+
+
+def test_sweep_logs_summary_refuses_resume(capsys, tmp_path):
+    from adaptive_mj.cli import main
+
+    assert main(["sweep", "heave_drift", "--grid", "law.k=150,250", "--logs", "summary", "--resume",
+                 str(tmp_path)]) == 2
+    assert "--logs summary" in capsys.readouterr().err

@@ -458,8 +458,9 @@ def _validate_points(path: Path, overrides: Sequence[str], points: Sequence[dict
 
 
 def plan(path: Path, points: Sequence[dict[str, Any]], *, seeds: int, overrides: Sequence[str],
-         logs: Path) -> list[tuple[dict[str, Any], Job]]:
-    """(grid point, Job) for every point × seed 0..seeds-1, seeds fastest; each job logs to logs/<name>.mcap."""
+         logs: Path | None) -> list[tuple[dict[str, Any], Job]]:
+    """(grid point, Job) for every point × seed 0..seeds-1, seeds fastest; each job logs to logs/<name>.mcap
+    (logs None: no log, the summary row only)."""
     names = short_names(list(points[0]))
     width = max(4, len(str(len(points) * seeds - 1)))
     planned = []
@@ -467,7 +468,7 @@ def plan(path: Path, points: Sequence[dict[str, Any]], *, seeds: int, overrides:
         for seed in range(seeds):
             name = run_name(p * seeds + seed, point, seed, names=names, width=width)
             job = Job(path, overrides=(REFUSE_UNSTABLE, *overrides, *_grid_overrides(point)), seed=seed,
-                      log=logs / f"{name}.mcap",
+                      log=None if logs is None else logs / f"{name}.mcap",
                       tag=name, keep_trajectory=False)
             planned.append((point, job))
     return planned
@@ -703,6 +704,10 @@ def main_sweep(args) -> int:
     if getattr(args, "resume", None) is not None and args.output is not None:
         raise ScenarioError(f"sweep --resume {args.resume} writes into that folder; -o {args.output} cannot be "
                             "combined with it")
+    if getattr(args, "logs", "all") == "summary" and (getattr(args, "resume", None) is not None
+                                                       or getattr(args, "breaking_point", None)):
+        raise ScenarioError("--logs summary writes no logs, and --resume and --breaking-point read the runs' logs "
+                            "back; leave out --logs summary")
     if getattr(args, "breaking_point", None):
         with session(backend):  # several batches, one Ray session
             return main_breaking_point(args, path, doc, base, backend)
@@ -730,7 +735,8 @@ def _sweep(args, path: Path, doc: dict, base, backend: Backend) -> int:
         out = new_output_dir(args.output, f"sweep-{base.name}")
         (out / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")  # first: a study
         # killed at any point can be resumed
-    planned = plan(path, points, seeds=args.seeds, overrides=args.overrides, logs=out / "logs")
+    planned = plan(path, points, seeds=args.seeds, overrides=args.overrides,
+                   logs=None if getattr(args, "logs", "all") == "summary" else out / "logs")
     total = len(planned)
     stream_path = out / ROWS_STREAM
     finished: set[int] = set()
