@@ -76,22 +76,30 @@ def log_write_error(log: Path | None, exc: OSError) -> str:
     return f"{log}: the log could not be written ({what}){left}"
 
 
+def _job_scenario(job: Job):
+    """A job's scenario, loaded with its overrides and seed, after checking its analyses and that its log
+    can be made (its folder, and no file there yet); an AdaptiveMJError (or OSError) otherwise."""
+    from adaptive_mj.setup import scenario as sc
+
+    for name in job.extras:
+        if name not in EXTRAS:
+            raise AdaptiveMJError(f"unknown analysis {name!r}; expected one of {', '.join(EXTRAS)}")
+    scn = sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed)
+    if job.log is not None:
+        job.log.parent.mkdir(parents=True, exist_ok=True)
+        if job.log.exists():
+            raise AdaptiveMJError(f"{job.log}: file exists")
+    return scn
+
+
 def run_job(job: Job) -> JobResult:
     """Load, run and log one job (in a worker or in-process)."""
     from adaptive_mj.study import analysis
-    from adaptive_mj.setup import scenario as sc
     from adaptive_mj.setup.build import build
     from adaptive_mj.sim.runner import execute
 
     try:
-        for name in job.extras:
-            if name not in EXTRAS:
-                raise AdaptiveMJError(f"unknown analysis {name!r}; expected one of {', '.join(EXTRAS)}")
-        scn = sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed)
-        if job.log is not None:
-            job.log.parent.mkdir(parents=True, exist_ok=True)
-            if job.log.exists():
-                raise AdaptiveMJError(f"{job.log}: file exists")
+        scn = _job_scenario(job)
         result = execute(scn, log_path=job.log)
         traj = result.trajectory
         setup = None
@@ -116,7 +124,6 @@ def run_jobs_batched(jobs: Sequence[Job], *, nthread: int = 0) -> list[JobResult
     threads (runner.execute_batch's pieces): the same logs, summaries and verdicts. A job that cannot be
     set up is an "error" (or "refused") result and the others go on. A stop signal closes every log of
     the group as "interrupted" and comes out as the KeyboardInterrupt."""
-    from adaptive_mj.setup import scenario as sc
     from adaptive_mj.sim.batch import run_batch
     from adaptive_mj.sim.runner import start
 
@@ -124,15 +131,7 @@ def run_jobs_batched(jobs: Sequence[Job], *, nthread: int = 0) -> list[JobResult
     started = {}
     for i, job in enumerate(jobs):
         try:
-            for name in job.extras:
-                if name not in EXTRAS:
-                    raise AdaptiveMJError(f"unknown analysis {name!r}; expected one of {', '.join(EXTRAS)}")
-            scn = sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed)
-            if job.log is not None:
-                job.log.parent.mkdir(parents=True, exist_ok=True)
-                if job.log.exists():
-                    raise AdaptiveMJError(f"{job.log}: file exists")
-            started[i] = start(scn, log_path=job.log)
+            started[i] = start(_job_scenario(job), log_path=job.log)
         except PreflightRefused as exc:
             out[i] = JobResult(job, "refused", None, error=str(exc))
         except AdaptiveMJError as exc:
