@@ -43,7 +43,9 @@ class Interrupted(KeyboardInterrupt):
 
     signum: the signal (2 = SIGINT); trajectory: the rows simulated before it (set by
     loop.run); summary: that run's summary (set by runner.execute once the log is closed);
-    note: what was left behind, for the one-line message (set by the command).
+    note: what was left behind, for the one-line message (set by the command); trajectories: for a
+    batch of runs (sim.batch.run_batch), each run's rows or ended trajectory (None: not started);
+    finished: how many of a batch's runs had ended before it (their logs closed with their verdicts).
     """
 
     def __init__(self, signum: int = 2, trajectory=None):
@@ -52,6 +54,8 @@ class Interrupted(KeyboardInterrupt):
         self.trajectory = trajectory
         self.summary: dict | None = None
         self.note = ""
+        self.trajectories: list | None = None
+        self.finished = 0
 
     @property
     def signal_name(self) -> str:

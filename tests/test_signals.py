@@ -298,3 +298,33 @@ def test_crash_mid_run_leaves_a_failed_log_that_replay_reports(tmp_path, capsys,
     assert main(["replay", str(log)]) == 1
     out = capsys.readouterr().out
     assert out.startswith("lecture_first_order: failed (RuntimeError: sensor driver crashed), 1.000 s simulated")
+
+
+def test_sigint_during_a_batched_sweep_closes_every_log_of_the_batch_as_interrupted(tmp_path):
+    """--engine batch: the runs of a group are stepped together in the driver's mujoco.batch.Batch; Ctrl-C
+    mid-batch closes every one of their logs as "interrupted" (each readable through its index, with the
+    rows simulated before the signal), exit 130, one line, and the runs of later groups never start."""
+    out_dir = tmp_path / "sweep"
+    proc = start("sweep", "heave_drift", "--grid", "law.k=100,200,300", "--engine", "batch", "--jobs", "2",
+                 "-o", out_dir, "--set", LONG)
+    logs = out_dir / "logs"
+    wait_for(lambda: len([p for p in logs.glob("*.mcap") if p.stat().st_size > 50_000]) == 3, proc,
+             what="the batch's three logs to grow")
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err
+    last = err.strip().splitlines()[-1]
+    assert last == ("adaptive-mj: interrupted by SIGINT; 0 of 3 runs had finished; "
+                    "the run(s) in progress closed their logs as 'interrupted'")
+    written = sorted(logs.glob("*.mcap"))
+    assert len(written) == 3
+    durations = []
+    for path in written:
+        summary = closed_status(path)
+        assert summary["status"] == "interrupted" and summary["duration"] > 1.0
+        run = read_log(path)
+        assert run.status == "interrupted"
+        assert run.trajectory.t[-1] > 1.0  # the rows simulated before the signal are in the log
+        durations.append(summary["duration"])
+    assert max(durations) - min(durations) <= 1.0 + 1e-9  # stepped together: at most one chunk (1 s) apart

@@ -26,6 +26,7 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
+from adaptive_mj.errors import Interrupted
 from adaptive_mj.sim.loop import PreparedRun, drive, native_steps, prepare
 from adaptive_mj.sim.native_context import ContextOwner
 from adaptive_mj.trajectory import Trajectory
@@ -45,30 +46,48 @@ def run_batch(runs: Sequence[dict[str, Any]], *, nthread: int = 0, chunk: int = 
     trajectories, in order. Runs with the same compiled callback and model layout are stepped in one
     batch each; a run without a compiled callback (native False, or a law numba cannot compile) runs
     alone on the Python path, as loop.run runs it."""
-    prepared = [prepare(**{**r, "chunk": chunk}) for r in runs]
-    out: list[Trajectory | None] = [None] * len(prepared)
-    groups: dict[tuple, list[int]] = defaultdict(list)
-    for i, p in enumerate(prepared):
-        if p.nc is None:
-            out[i] = drive(p, runs[i]["law"], runs[i]["reference"])
-        else:
-            groups[(id(p.nc.callback), mujoco.mj_stateSize(p.nc.plant.model, _STATE))].append(i)
-    for ids in groups.values():
-        ncs = [prepared[i].nc for i in ids]
-        for i, tr in zip(ids, _drive([prepared[i] for i in ids], [nc for nc in ncs if nc is not None], nthread),
-                         strict=True):
-            out[i] = tr
+    prepared: list[PreparedRun] = []
+    out: list[Trajectory | None] = [None] * len(runs)
+    try:
+        for r in runs:
+            prepared.append(prepare(**{**r, "chunk": chunk}))
+        groups: dict[tuple, list[int]] = defaultdict(list)
+        for i, p in enumerate(prepared):
+            if p.nc is None:
+                out[i] = drive(p, runs[i]["law"], runs[i]["reference"])
+            else:
+                groups[(id(p.nc.callback), mujoco.mj_stateSize(p.nc.plant.model, _STATE))].append(i)
+        for ids in groups.values():
+            ncs = [prepared[i].nc for i in ids]
+            _drive([prepared[i] for i in ids], [nc for nc in ncs if nc is not None], nthread, out, ids)
+    except KeyboardInterrupt as exc:
+        raise _interrupted(exc, prepared, out) from (None if isinstance(exc, Interrupted) else exc)
     return [tr for tr in out if tr is not None]
 
 
-def _drive(prepared: list[PreparedRun], ncs: list[ContextOwner], nthread: int) -> list[Trajectory]:
+def _interrupted(exc: KeyboardInterrupt, prepared: list[PreparedRun], out: list[Trajectory | None]) -> Interrupted:
+    """A stop signal mid-batch, as errors.Interrupted carrying `trajectories`: for each run, its trajectory
+    if it had ended, else its rows so far (status "interrupted", every whole row handed to its sink, as
+    loop.run hands them), and None for a run not yet prepared."""
+    interrupted = exc if isinstance(exc, Interrupted) else Interrupted()
+    trajectories: list[Trajectory | None] = [
+        tr if tr is not None or i >= len(prepared) else prepared[i].rows.stopped(str(interrupted))
+        for i, tr in enumerate(out)]
+    interrupted.trajectories = trajectories
+    return interrupted
+
+
+def _drive(prepared: list[PreparedRun], ncs: list[ContextOwner], nthread: int, out: list[Trajectory | None],
+           ids: list[int]) -> None:
+    """Step the runs `prepared` (of one callback and state size) in one Batch; each run's trajectory goes
+    to out[ids[i]] as it ends."""
     from adaptive_mj.plants.mujoco_plant import control_callback
 
     plants = [nc.plant for nc in ncs]
     batch = mujoco.batch.Batch(plants[0].model, nsim=len(prepared), nthread=nthread)
     batch.set_models([pl.model for pl in plants])
     state = np.empty(mujoco.mj_stateSize(plants[0].model, _STATE))
-    results: dict[int, tuple[str, str]] = {}
+    results = _Ended(prepared, out, ids)
     steps = {}
     with control_callback(ncs[0].callback.ctypes), _all_bound(ncs):
         asks: dict[int, int] = {}
@@ -95,7 +114,19 @@ def _drive(prepared: list[PreparedRun], ncs: list[ContextOwner], nthread: int) -
                         asks.pop(i)
                         continue
                     _advance(steps, i, None, asks, results)
-    return [p.result(*results[i]) for i, p in enumerate(prepared)]
+
+
+class _Ended(dict):
+    """run -> (status, reason) as runs end; each ended run's trajectory is put in `out` at once, so a
+    stop signal later in the batch finds it (run_batch's _interrupted)."""
+
+    def __init__(self, prepared: list[PreparedRun], out: list[Trajectory | None], ids: list[int]):
+        super().__init__()
+        self.prepared, self.out, self.ids = prepared, out, ids
+
+    def __setitem__(self, i: int, ended: tuple[str, str]) -> None:
+        super().__setitem__(i, ended)
+        self.out[self.ids[i]] = self.prepared[i].result(*ended)
 
 
 def _advance(steps, i: int, value, asks: dict[int, int], results: dict[int, tuple[str, str]]) -> None:

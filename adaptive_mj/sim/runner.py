@@ -185,10 +185,24 @@ def execute_batch(scenarios: Sequence[tuple[Scenario, Path | None]], *, nthread:
         trajs = run_batch([dict(plant=st.setup.plant, law=st.setup.law, reference=st.setup.reference,
                                 sink=st.recorder, **st.kwargs) for st in starts], nthread=nthread)
     except BaseException as exc:
-        for st in starts:
-            st.abandon(exc)
+        settle_batch(starts, exc)
         raise
     return [st.finish(traj) for st, traj in zip(starts, trajs, strict=True)]
+
+
+def settle_batch(starts: Sequence[Started], exc: BaseException) -> list[RunResult | None]:
+    """Close the logs of a batch that `exc` stopped (run_batch): a run that had ended gets its verdict
+    (its RunResult), one cut short by a stop signal is closed as "interrupted" with its rows so far, and
+    any other exception closes every log as "failed" (None for those)."""
+    partial = getattr(exc, "trajectories", None) or [None] * len(starts)
+    out: list[RunResult | None] = []
+    for st, traj in zip(starts, partial, strict=True):
+        if traj is not None and traj.status != "interrupted":
+            out.append(st.finish(traj))
+        else:
+            st.abandon(exc, traj)
+            out.append(None)
+    return out
 
 
 @dataclass
@@ -210,13 +224,14 @@ class Started:
             self.recorder.close(traj.status, traj.reason, result)
         return RunResult(traj, result, self.log_path)
 
-    def abandon(self, exc: BaseException) -> None:
+    def abandon(self, exc: BaseException, partial: Trajectory | None = None) -> None:
         """The run did not end: its log closed as "interrupted" (with the rows it had, a stop signal)
-        or "failed" (anything else)."""
+        or "failed" (anything else). partial: the run's rows so far (default: the exception's
+        `trajectory`, as loop.run's Interrupted carries it)."""
         if self.recorder is None:
             return
         if isinstance(exc, KeyboardInterrupt):  # loop.run has handed the recorder every whole row
-            partial = getattr(exc, "trajectory", None)
+            partial = partial if partial is not None else getattr(exc, "trajectory", None)
             summary = {} if partial is None else clean_json(make_summary(self.scn.name, partial))
             self.recorder.close("interrupted", summary.get("reason") or str(exc) or "interrupted", summary)
             if isinstance(exc, Interrupted):

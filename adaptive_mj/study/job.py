@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
 
-from adaptive_mj.errors import AdaptiveMJError, PreflightRefused
+from adaptive_mj.errors import AdaptiveMJError, Interrupted, PreflightRefused
 from adaptive_mj.sim import interrupt
 from adaptive_mj.trajectory import Trajectory
 
@@ -125,7 +125,7 @@ def run_jobs_batched(jobs: Sequence[Job], *, nthread: int = 0) -> list[JobResult
     set up is an "error" (or "refused") result and the others go on. A stop signal closes every log of
     the group as "interrupted" and comes out as the KeyboardInterrupt."""
     from adaptive_mj.sim.batch import run_batch
-    from adaptive_mj.sim.runner import start
+    from adaptive_mj.sim.runner import settle_batch, start
 
     out: list[JobResult | None] = [None] * len(jobs)
     started = {}
@@ -143,8 +143,9 @@ def run_jobs_batched(jobs: Sequence[Job], *, nthread: int = 0) -> list[JobResult
         trajs = run_batch([dict(plant=st.setup.plant, law=st.setup.law, reference=st.setup.reference,
                                 sink=st.recorder, **st.kwargs) for st in started.values()], nthread=nthread)
     except BaseException as exc:
-        for st in started.values():
-            st.abandon(exc)
+        ended = settle_batch(list(started.values()), exc)
+        if isinstance(exc, Interrupted):  # the runs that had ended before the signal count as finished
+            exc.finished = sum(r is not None for r in ended)
         raise
     for i, traj in zip(ids, trajs, strict=True):
         out[i] = _job_result(jobs[i], started[i], traj)

@@ -125,7 +125,7 @@ def _iter_batched(jobs: Sequence[Job], nthread: int) -> Iterator[tuple[int, JobR
             results = run_jobs_batched(group, nthread=nthread)
         except KeyboardInterrupt as exc:
             if isinstance(exc, Interrupted):
-                exc.note = interrupted_note(g, len(jobs))
+                exc.note = interrupted_note(g + getattr(exc, "finished", 0), len(jobs))
             raise
         yield from ((g + k, r) for k, r in enumerate(results))
 
