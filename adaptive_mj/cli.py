@@ -131,9 +131,9 @@ def _backend_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --backend ray: bytes (each log is sent back to this machine; default) or shared "
                         "(each node writes its logs itself: the output folder must be on shared storage)")
     p.add_argument("--engine", choices=("process", "batch"), default="process",
-                   help="with --backend local: process (one run at a time per worker process; default) or batch "
-                        "(the runs' physics stepped together in mujoco.batch, --jobs threads, in this process: the "
-                        "same rows, logs and verdicts)")
+                   help="process (one run at a time per worker process or Ray task; default) or batch (runs' "
+                        "physics stepped together in mujoco.batch: with --backend local in this process on --jobs "
+                        "threads, with --backend ray up to 32 runs per task; the same rows, logs and verdicts)")
     p.add_argument("--retries", type=int, default=3,
                    help="times a run is submitted again when its worker process (or Ray node) dies (default 3; "
                         "local --jobs 1 runs in this process, where there is no worker to lose)")

@@ -119,13 +119,6 @@ def test_sweep_engine_batch_writes_the_same_table(tmp_path):
     assert len(logs) == 4 and main(["replay", str(logs[0]), "--verify"]) == 0
 
 
-def test_engine_batch_is_refused_with_ray(capsys):
-    from adaptive_mj.cli import main
-
-    assert main(["sweep", "heave_drift", "--engine", "batch", "--backend", "ray", "--grid", "law.k=150,250"]) == 2
-    assert "--engine batch" in capsys.readouterr().err
-
-
 def test_sweep_logs_summary_writes_the_table_without_logs(tmp_path):
     from adaptive_mj.cli import main
 

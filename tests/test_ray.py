@@ -109,14 +109,17 @@ def local_short(tmp_path_factory):
     return out
 
 
-@pytest.mark.parametrize("logs", ["bytes", "shared"])
-def test_ray_sweep_gives_the_local_table_and_logs(cluster, local_short, tmp_path, logs):
-    """On a 2-node cluster, both log transports: sweep.csv byte-identical to the local backend's,
-    every log's messages the same bytes, and the rows of sweep.json the same."""
+@pytest.mark.parametrize("logs, engine", [("bytes", "process"), ("shared", "process"), ("bytes", "batch"),
+                                          ("shared", "batch")])
+def test_ray_sweep_gives_the_local_table_and_logs(cluster, local_short, tmp_path, logs, engine):
+    """On a 2-node cluster, both log transports, one run per task or (--engine batch) two runs per task in
+    one mujoco.batch.Batch: sweep.csv byte-identical to the local backend's, every log's messages the same
+    bytes, and the rows of sweep.json the same."""
     import json
 
     out = tmp_path / "ray"
-    r = cli("sweep", *SHORT, "--backend", "ray", "--address", cluster, "--ray-logs", logs, "-o", str(out))
+    r = cli("sweep", *SHORT, "--backend", "ray", "--address", cluster, "--ray-logs", logs, "--engine", engine,
+            "-o", str(out))
     assert r.returncode == 0, r.stderr
     assert f"on Ray ({cluster}, logs as {logs})" in r.stderr
     assert (out / "sweep.csv").read_bytes() == (local_short / "sweep.csv").read_bytes()
@@ -169,14 +172,18 @@ def test_a_run_whose_worker_keeps_dying_is_recorded_after_the_retry_limit(cluste
     assert read_log(out / "logs" / name).status == "truncated" and not (out / "logs" / (name + ".partial")).exists()
 
 
-@pytest.mark.parametrize("signum, logs", [(signal.SIGINT, "bytes"), (signal.SIGTERM, "shared")])
-def test_interrupting_a_ray_sweep_closes_the_logs_and_leaves_no_task(cluster, tmp_path, signum, logs):
+@pytest.mark.parametrize("signum, logs, engine", [(signal.SIGINT, "bytes", "process"),
+                                                  (signal.SIGTERM, "shared", "process"),
+                                                  (signal.SIGINT, "bytes", "batch")])
+def test_interrupting_a_ray_sweep_closes_the_logs_and_leaves_no_task(cluster, tmp_path, signum, logs, engine):
     """SIGINT or SIGTERM to the driver: every running task stops, its log closed as "interrupted"
     (bytes: sent back and written by the driver), exit 128 + signal, and no task process is left
-    running. (Ray's driver installs its own SIGTERM handler: the CLI's clean stop must win.)"""
+    running. (Ray's driver installs its own SIGTERM handler: the CLI's clean stop must win.) With
+    --engine batch the 5 runs go as tasks of 2, 2 and 1: the two running tasks close 4 logs."""
     out = tmp_path / "ray"
-    driver = start("sweep", "heave_tracking", "--grid", "law.k=150,250,350", "--set", "simulation.duration=3000",
-                   "--backend", "ray", "--address", cluster, "--ray-logs", logs, "-o", str(out))
+    grid = "law.k=150,250,350" if engine == "process" else "law.k=150,250,350,450,550"
+    driver = start("sweep", "heave_tracking", "--grid", grid, "--set", "simulation.duration=3000",
+                   "--backend", "ray", "--address", cluster, "--ray-logs", logs, "--engine", engine, "-o", str(out))
     deadline = time.monotonic() + 120  # until both running tasks have logged rows (in their scratch folders)
     while sum(any(".mcap" in f and _size(f) > 50_000 for f in files)
               for files in task_processes().values()) < 2:
@@ -185,9 +192,10 @@ def test_interrupting_a_ray_sweep_closes_the_logs_and_leaves_no_task(cluster, tm
     driver.send_signal(signum)
     stdout, stderr = driver.communicate(timeout=120)
     assert driver.returncode == 128 + signum, stderr
-    assert f"interrupted by {signal.Signals(signum).name}; 0 of 3 runs had finished" in stderr
+    total, ran = (3, 2) if engine == "process" else (5, 4)
+    assert f"interrupted by {signal.Signals(signum).name}; 0 of {total} runs had finished" in stderr
     logs = sorted((out / "logs").glob("*.mcap"))
-    assert len(logs) == 2 and not list((out / "logs").glob("*.partial"))  # the two that ran; the third never started
+    assert len(logs) == ran and not list((out / "logs").glob("*.partial"))  # those that ran; the last never started
     for log in logs:
         logged = read_log(log)
         assert logged.status == "interrupted" and len(logged.trajectory.t) > 10

@@ -196,7 +196,8 @@ class Backend:
     address: str | None = None
     logs: str = "bytes"
     retries: int = 3
-    engine: str = "process"  # local only: "process" (one run per worker) or "batch" (mujoco.batch, this process)
+    engine: str = "process"  # "process": one run per worker process or Ray task; "batch": runs stepped together
+    # in a mujoco.batch.Batch (local: in this process, --jobs threads; ray: up to RUNS_PER_TASK runs per task)
 
     @classmethod
     def from_args(cls, args) -> "Backend":
@@ -214,8 +215,6 @@ class Backend:
         if retries < 0:
             raise ScenarioError(f"--retries must be an integer >= 0, got {retries}")
         engine = getattr(args, "engine", "process")
-        if engine == "batch" and kind == "ray":
-            raise ScenarioError("--engine batch runs in this process on mujoco.batch; it is for --backend local")
         if kind == "ray":
             ray_module()  # not installed: one line now, before any folder is made
         return cls(kind=kind, jobs=max(1, args.jobs), address=address, logs=logs, retries=retries, engine=engine)

@@ -1,4 +1,5 @@
-"""The Ray backend of bench and sweep: each Job is one Ray task (`--backend ray`).
+"""The Ray backend of bench and sweep: each Job is one Ray task (`--backend ray`), or with
+`--engine batch` each task carries up to RUNS_PER_TASK jobs stepped in one mujoco.batch.Batch.
 
     driver ── submit (at most WINDOW_PER_CPU × cluster CPUs in flight) ──► task: run_job on a node
            ◄── (JobResult, log bytes | None) ──  as each finishes: the log written, the result yielded
@@ -43,7 +44,7 @@ from typing import Callable, Iterator, Sequence
 
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
 from adaptive_mj.study.job import (STOP_TIMEOUT, Backend, Job, JobResult, interrupted_note, log_write_error, ray_module,
-                                   run_in_worker)
+                                   run_in_worker, run_jobs_batched)
 
 #: Tasks in flight per CPU of the cluster: enough to keep every worker busy while results come
 #: back, few enough that the driver holds a bounded number of results and arguments.
@@ -65,6 +66,47 @@ def _scratch(job: Job) -> Path:
     return Path(tempfile.gettempdir()) / "adaptive-mj-ray" / digest
 
 
+def _task_log(job: Job, logs: str) -> tuple[Path | None, JobResult | None]:
+    """Where a task writes job's log (its node's scratch folder with "bytes", NAME.partial with "shared"),
+    or the error result that stops it first (its scenario missing on this node, its log already there)."""
+    if not job.scenario.is_file():
+        import socket
+
+        why = (f"{job.scenario}: no such file on the Ray node {socket.gethostname()} (every node must see the "
+               "scenarios and models at the same paths)")
+        return None, JobResult(job, "error", None, error=why)
+    if job.log is None:
+        return None, None
+    if logs == "bytes":
+        scratch = _scratch(job)
+        shutil.rmtree(scratch, ignore_errors=True)
+        scratch.mkdir(parents=True)
+        return scratch / job.log.name, None
+    if job.log.exists():
+        return None, JobResult(job, "error", None, error=f"{job.log}: file exists")
+    where = partial_path(job.log)
+    where.unlink(missing_ok=True)  # left by an attempt whose worker died
+    return where, None
+
+
+def _task_collect(job: Job, logs: str, where: Path | None, result: JobResult) -> tuple[JobResult, bytes | None]:
+    """A task's result with the caller's job and log path, and the log's bytes with logs="bytes" (the
+    scratch folder removed); with "shared" the log renamed from NAME.partial."""
+    data = None
+    if where is not None and where.is_file():
+        if logs == "bytes":
+            data = where.read_bytes()
+        else:
+            os.replace(where, job.log)
+    error = result.error.replace(str(where), str(job.log)) if where is not None else result.error
+    return replace(result, job=job, error=error), data
+
+
+def _task_cleanup(job: Job, logs: str, where: Path | None) -> None:
+    if where is not None and logs == "bytes":
+        shutil.rmtree(where.parent, ignore_errors=True)
+
+
 def run_task(job: Job, logs: str) -> tuple[JobResult, bytes | None]:
     """One job on a Ray worker: (its result with the caller's job, the log's bytes with logs="bytes").
 
@@ -72,37 +114,49 @@ def run_task(job: Job, logs: str) -> tuple[JobResult, bytes | None]:
     from adaptive_mj.sim import interrupt
 
     os.environ.setdefault("MUJOCO_GL", "egl")
-    if not job.scenario.is_file():
-        import socket
-
-        why = (f"{job.scenario}: no such file on the Ray node {socket.gethostname()} (every node must see the "
-               "scenarios and models at the same paths)")
-        return JobResult(job, "error", None, error=why), None
-    data = None
-    where = None
-    if job.log is not None and logs == "bytes":
-        scratch = _scratch(job)
-        shutil.rmtree(scratch, ignore_errors=True)
-        scratch.mkdir(parents=True)
-        where = scratch / job.log.name
-    elif job.log is not None:
-        if job.log.exists():
-            return JobResult(job, "error", None, error=f"{job.log}: file exists"), None
-        where = partial_path(job.log)
-        where.unlink(missing_ok=True)  # left by an attempt whose worker died
+    where, refused = _task_log(job, logs)
+    if refused is not None:
+        return refused, None
     try:
         with interrupt.stop_on_signals((signal.SIGINT, signal.SIGTERM)):
             result = run_in_worker(replace(job, log=where))
-        if where is not None and where.is_file():
-            if logs == "bytes":
-                data = where.read_bytes()
-            else:
-                os.replace(where, job.log)
+        return _task_collect(job, logs, where, result)
     finally:
-        if job.log is not None and logs == "bytes":
-            shutil.rmtree(where.parent, ignore_errors=True)
-    error = result.error.replace(str(where), str(job.log)) if where is not None else result.error
-    return replace(result, job=job, error=error), data
+        _task_cleanup(job, logs, where)
+
+
+def run_task_batch(jobs: Sequence[Job], logs: str) -> list[tuple[JobResult, bytes | None]]:
+    """Several jobs on one Ray worker (`--engine batch`): their physics stepped together in one
+    mujoco.batch.Batch of one thread (job.run_jobs_batched), each with run_task's result and log. A stop
+    signal closes every log of the batch as "interrupted" (a run that had ended keeps its verdict) and
+    every result not yet made is "interrupted"."""
+    from adaptive_mj.sim import interrupt
+
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    out: list[tuple[JobResult, bytes | None] | None] = [None] * len(jobs)
+    places: dict[int, Path | None] = {}
+    for k, job in enumerate(jobs):
+        where, refused = _task_log(job, logs)
+        if refused is not None:
+            out[k] = (refused, None)
+        else:
+            places[k] = where
+    ks = list(places)
+    try:
+        if interrupt.requested() is not None:
+            raise Interrupted(interrupt.requested())
+        try:
+            with interrupt.stop_on_signals((signal.SIGINT, signal.SIGTERM)):
+                results = run_jobs_batched([replace(jobs[k], log=places[k]) for k in ks], nthread=1)
+        except KeyboardInterrupt as exc:
+            why = str(exc) or "interrupted"
+            results = [JobResult(jobs[k], "interrupted", None, error=why) for k in ks]
+        for k, result in zip(ks, results, strict=True):
+            out[k] = _task_collect(jobs[k], logs, places[k], result)
+    finally:
+        for k in ks:
+            _task_cleanup(jobs[k], logs, places[k])
+    return [o for o in out if o is not None]
 
 
 # --------------------------------------------------------------------------
@@ -201,62 +255,72 @@ def _system_failure(ray, exc: BaseException) -> bool:
     return isinstance(exc, ray.exceptions.RayError) and not isinstance(exc, ray.exceptions.RayTaskError)
 
 
+#: Runs per Ray task under --engine batch: one Batch per task, so per-task costs (scheduling, the
+#: worker's numba start-up, the result's trip back) are shared by this many runs.
+RUNS_PER_TASK = 32
+
+
+def _units(n: int, backend: Backend, cpus: int) -> list[list[int]]:
+    """The job indices each task carries: one per task, or with --engine batch up to RUNS_PER_TASK, fewer
+    when the study is small (about two tasks per CPU of the cluster's `cpus`)."""
+    if backend.engine != "batch":
+        return [[i] for i in range(n)]
+    size = max(1, min(RUNS_PER_TASK, -(-n // (2 * cpus))))
+    return [list(range(a, min(n, a + size))) for a in range(0, n, size)]
+
+
 def iter_results(jobs: Sequence[Job], backend: Backend, *,
                  on_retry: Callable[[Job, str], None] | None = None) -> Iterator[tuple[int, JobResult]]:
-    """(index, result) for each job as it finishes on Ray, exactly once per job (see the module docstring)."""
+    """(index, result) for each job as it finishes on Ray, exactly once per job (see the module docstring).
+    With backend.engine "batch" each task carries several jobs (run_task_batch)."""
     from adaptive_mj.sim import interrupt
 
     ray = ray_module()
     started = _connect(ray, backend)
-    remote = ray.remote(run_task).options(num_cpus=1, max_retries=0, name="adaptive-mj-run")
+    one = ray.remote(run_task).options(num_cpus=1, max_retries=0, name="adaptive-mj-run")
+    many = ray.remote(run_task_batch).options(num_cpus=1, max_retries=0, name="adaptive-mj-run")
     cpus = max(1, int(ray.cluster_resources().get("CPU", backend.jobs)))
     window = WINDOW_PER_CPU * cpus
-    pending: dict = {}  # ObjectRef -> job index
-    attempts = [0] * len(jobs)
+    units = _units(len(jobs), backend, cpus)
+    pending: dict = {}  # ObjectRef -> unit index
+    attempts = [0] * len(units)
     nxt = finished = 0
 
-    def submit(i: int) -> None:
-        pending[remote.remote(jobs[i], backend.logs)] = i
+    def submit(u: int) -> None:
+        ids = units[u]
+        pending[many.remote([jobs[i] for i in ids], backend.logs) if backend.engine == "batch"
+                else one.remote(jobs[ids[0]], backend.logs)] = u
 
     try:
-        while pending or nxt < len(jobs):
-            while nxt < len(jobs) and len(pending) < window:
-                if jobs[nxt].log is not None and jobs[nxt].log.exists():
-                    yield nxt, JobResult(jobs[nxt], "error", None, error=f"{jobs[nxt].log}: file exists")
-                    finished += 1
-                else:
+        while pending or nxt < len(units):
+            while nxt < len(units) and len(pending) < window:
+                units[nxt], exist = _drop_existing(units[nxt], jobs)
+                finished += len(exist)
+                yield from exist
+                if units[nxt]:
                     submit(nxt)
                 nxt += 1
             if not pending:
                 continue
             ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)  # a timeout: signals get through
             for ref in ready:
-                i = pending.pop(ref)
-                try:
-                    result, data = ray.get(ref)
-                except Exception as exc:  # noqa: BLE001 (a Ray error: sorted below)
-                    why = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"
-                    if _system_failure(ray, exc) and _retry(jobs[i], i, attempts, backend, on_retry, why):
-                        submit(i)
-                        continue
-                    tried = f" (tried {attempts[i] + 1} times)" if attempts[i] else ""
-                    result, data = JobResult(jobs[i], "error", None, error=f"the Ray task failed{tried}: {why}"
-                                             + _keep_leftovers(jobs[i], backend)), None
-                if result.status == "interrupted" and interrupt.requested() is not None:  # Ctrl-C reached it too
-                    _write_returned_log(jobs[i], result, data)
-                    raise Interrupted(interrupt.requested())
-                if result.status == "interrupted" and _retry(jobs[i], i, attempts, backend, on_retry,
-                                                             f"its node stopped it: {result.error}"):
-                    submit(i)  # stopped from outside: a node shutting down, preempted
+                u = pending.pop(ref)
+                ids = units[u]
+                pairs = _task_results(ray, ref, ids, jobs, u, attempts, backend, on_retry)
+                if pairs is None:
+                    submit(u)
                     continue
-                result = _write_returned_log(jobs[i], result, data)
-                finished += 1
-                yield i, result
+                if _stopped_again(pairs, jobs, u, attempts, backend, on_retry):
+                    submit(u)  # stopped from outside: a node shutting down, preempted
+                    continue
+                for i, (res, data) in pairs:
+                    finished += 1
+                    yield i, _write_returned_log(jobs[i], res, data)
     except GeneratorExit:  # the caller stopped reading (its own error): stop the tasks, keep what they wrote
-        _stop(ray, pending, jobs, backend)
+        _stop(ray, pending, units, jobs, backend)
         raise
     except KeyboardInterrupt as exc:
-        _stop(ray, pending, jobs, backend)
+        _stop(ray, pending, units, jobs, backend)
         # Ray's wait may re-raise the CLI's Interrupted as a plain KeyboardInterrupt: the signal is on record
         stop = exc if isinstance(exc, Interrupted) else Interrupted(interrupt.requested() or signal.SIGINT)
         stop.note = interrupted_note(finished, len(jobs))
@@ -268,16 +332,62 @@ def iter_results(jobs: Sequence[Job], backend: Backend, *,
             ray.shutdown()
 
 
-def _retry(job: Job, i: int, attempts: list[int], backend: Backend, on_retry: Callable[[Job, str], None] | None,
-           why: str) -> bool:
-    """Whether job i (jobs[i] is `job`) has an attempt left; if so it is charged one, what its last
-    attempt left is removed and on_retry is told why, for the caller to submit it again."""
-    if attempts[i] >= backend.retries:
+def _drop_existing(ids: list[int], jobs: Sequence[Job]) -> tuple[list[int], list[tuple[int, JobResult]]]:
+    """(the jobs of a task still to run, an error result for each whose log is already there)."""
+    exist = [i for i in ids if jobs[i].log is not None and jobs[i].log.exists()]
+    return ([i for i in ids if i not in exist],
+            [(i, JobResult(jobs[i], "error", None, error=f"{jobs[i].log}: file exists")) for i in exist])
+
+
+_Returned = tuple[JobResult, bytes | None]
+
+
+def _task_results(ray, ref, ids: list[int], jobs: Sequence[Job], u: int, attempts: list[int], backend: Backend,
+                  on_retry: Callable[[Job, str], None] | None) -> list[tuple[int, _Returned]] | None:
+    """What finished task u (carrying jobs[i] for i in ids) sent back: (job index, (result, log bytes)) for
+    each of its jobs; a Ray error (its worker or node died) gives None when the task has an attempt left
+    (the caller submits it again), an error result for each job when not or when the run itself raised."""
+    try:
+        got = ray.get(ref)
+        return list(zip(ids, got if backend.engine == "batch" else [got], strict=True))
+    except Exception as exc:  # noqa: BLE001 (a Ray error: sorted below)
+        why = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"
+        if _system_failure(ray, exc) and _retry(ids, jobs, u, attempts, backend, on_retry, why):
+            return None
+        tried = f" (tried {attempts[u] + 1} times)" if attempts[u] else ""
+        return [(i, (JobResult(jobs[i], "error", None, error=f"the Ray task failed{tried}: {why}"
+                               + _keep_leftovers(jobs[i], backend)), None)) for i in ids]
+
+
+def _stopped_again(pairs: list[tuple[int, _Returned]], jobs: Sequence[Job], u: int, attempts: list[int],
+                   backend: Backend, on_retry: Callable[[Job, str], None] | None) -> bool:
+    """Task u came back with a run "interrupted": after a stop signal here (Ctrl-C reached the task too)
+    its logs are written and errors.Interrupted raised; otherwise (its node stopped it) True when it has
+    an attempt left, to be submitted again. False when no run of it was interrupted."""
+    from adaptive_mj.sim import interrupt
+
+    stopped = [res for _, (res, _) in pairs if res.status == "interrupted"]
+    if not stopped:
         return False
-    attempts[i] += 1
-    _remove_leftovers(job, backend)
-    if on_retry:
-        on_retry(job, f"attempt {attempts[i] + 1} of {backend.retries + 1} ({why})")
+    if interrupt.requested() is not None:
+        for i, (res, data) in pairs:
+            _write_returned_log(jobs[i], res, data)
+        raise Interrupted(interrupt.requested())
+    return _retry([i for i, _ in pairs], jobs, u, attempts, backend, on_retry,
+                  f"its node stopped it: {stopped[0].error}")
+
+
+def _retry(ids: list[int], jobs: Sequence[Job], u: int, attempts: list[int], backend: Backend,
+           on_retry: Callable[[Job, str], None] | None, why: str) -> bool:
+    """Whether task u (carrying jobs[i] for i in ids) has an attempt left; if so it is charged one, what its
+    last attempt left is removed and on_retry is told why for each job, for the caller to submit it again."""
+    if attempts[u] >= backend.retries:
+        return False
+    attempts[u] += 1
+    for i in ids:
+        _remove_leftovers(jobs[i], backend)
+        if on_retry:
+            on_retry(jobs[i], f"attempt {attempts[u] + 1} of {backend.retries + 1} ({why})")
     return True
 
 
@@ -303,8 +413,9 @@ def _keep_leftovers(job: Job, backend: Backend) -> str:
     return f"; what its last attempt wrote reads as truncated ({job.log})"
 
 
-def _stop(ray, pending: dict, jobs: Sequence[Job], backend: Backend, *, timeout: float = STOP_TIMEOUT) -> None:
-    """Cancel every outstanding task (a running one closes its log as "interrupted"), write the
+def _stop(ray, pending: dict, units: list[list[int]], jobs: Sequence[Job], backend: Backend, *,
+          timeout: float = STOP_TIMEOUT) -> None:
+    """Cancel every outstanding task (a running one closes its logs as "interrupted"), write the
     logs that come back, and force-cancel what has not ended after `timeout` s."""
     for ref in pending:
         ray.cancel(ref)
@@ -313,13 +424,14 @@ def _stop(ray, pending: dict, jobs: Sequence[Job], backend: Backend, *, timeout:
     while left and time.monotonic() < deadline:
         ready, _ = ray.wait(list(left), num_returns=len(left), timeout=max(0.0, deadline - time.monotonic()))
         for ref in ready:
-            i = left.pop(ref)
+            ids = units[left.pop(ref)]
             try:
-                _, data = ray.get(ref)
+                got = ray.get(ref)
             except Exception:  # noqa: BLE001 (cancelled before it started)
                 continue
-            if data is not None:
-                _write_log(jobs[i], data)
+            for i, (_, data) in zip(ids, got if backend.engine == "batch" else [got], strict=True):
+                if data is not None:
+                    _write_log(jobs[i], data)
         if not ready:
             break
     for ref in left:
