@@ -12,11 +12,12 @@
   study     a --study-runs study of 2 s runs through `adaptive-mj sweep` (local, 2 jobs):
             wall time, runs/s, and the driver's peak RSS (VmHWM, polled) for it and for a
             study 10× smaller (bounded memory: the two should be close)
-  batch     issue 20: simulation-steps per second of many runs in one mujoco.batch.Batch
-            (adaptive_mj.sim.batch.run_batch, unlogged, 2 threads) against the bare-stepping
-            limit (a Batch of the same model with no law, 2 threads), for the heave vehicle
-            (nsim --batch-sims), the 1-DOF arm and the 6-joint arm (nsim 100), and a single
-            process stepping the same runs one after another; the scenario builds apart
+  batch     issue 20: simulation-steps per second for the heave vehicle, the 1-DOF arm and the
+            6-joint arm at nsim --batch-sims (100, 1000, 10^4): the bare-stepping limit (a Batch
+            of the model with no law, 2 threads); run_batch (built runs, unlogged); the batched
+            engine end to end (building, stepping, verdicts; without logs and with MCAP logs at
+            100 Hz); the process pool on the same logged study (nsim --pool-sims); the driver's
+            memory per prepared run, and the bytes of a Batch state row, an MjData, an MjModel
 
 Every figure is the median of --reps repetitions with [min, max] where repeated.
 Usage: python benchmarks/scaling.py [--reps 3] [--runs 8] [--only local,ray,...] [--study-runs 10000] [--json]
@@ -219,15 +220,16 @@ def _peak_rss_kb(pid: int, stop: threading.Event, out: list) -> None:
         stop.wait(0.2)
 
 
-def study(n: int, jobs: int = 2, backend: str = "local") -> dict:
-    """`adaptive-mj sweep` over n 2-s runs of heave_drift (noise: the seeds differ); driver peak RSS."""
+def study(n: int, jobs: int = 2, backend: str = "local", engine: str = "process", logs: str = "all") -> dict:
+    """`adaptive-mj sweep` over n 2-s runs of heave_drift (noise: the seeds differ); driver peak RSS.
+    engine: --engine (process or batch); logs: --logs (all, or summary: the table only)."""
     points = 100 if n >= 1000 else 10
     seeds = n // points
     folder = Path(tempfile.mkdtemp(prefix="scaling-study-"))
     try:
         cmd = [sys.executable, "-m", "adaptive_mj", "sweep", "heave_drift", "--grid", f"law.k=100:300:{points}",
                "--seeds", str(seeds), "--set", "simulation.duration=2.0", "--jobs", str(jobs),
-               "-o", str(folder / "out"), "--backend", backend]
+               "-o", str(folder / "out"), "--backend", backend, "--engine", engine, "--logs", logs]
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                                 env=dict(os.environ, MUJOCO_GL="egl"))
@@ -240,10 +242,10 @@ def study(n: int, jobs: int = 2, backend: str = "local") -> dict:
         wall = time.perf_counter() - t0
         assert proc.returncode == 0, err[-2000:]
         lines = (folder / "out" / "sweep.csv").read_text().count("\n") - 1
-        size = sum(p.stat().st_size for p in (folder / "out" / "logs").glob("*.mcap"))
+        size = sum(p.stat().st_size for p in (folder / "out" / "logs").glob("*.mcap")) if logs == "all" else 0
     finally:
         shutil.rmtree(folder, ignore_errors=True)
-    return {"backend": backend, "runs": points * seeds, "rows": lines, "wall_s": wall,
+    return {"backend": backend, "engine": engine, "logs": logs, "runs": points * seeds, "rows": lines, "wall_s": wall,
             "runs_per_s": points * seeds / wall, "driver_peak_rss_mb": max(rss) / 1024 if rss else None,
             "logs_mb": size / 2**20}
 
@@ -259,46 +261,107 @@ def _batch_spec(name: str, overrides: list[str]) -> dict:
                 state_bound=scn.simulation.state_bound, sensors=st.sensors)
 
 
-def batch_figures(nsim_heave: int, seconds: float = 2.0) -> dict:
-    """µs per simulation-step: bare Batch (no law), run_batch (the law, unlogged) and one process
-    running the same runs one by one (20 of them, scaled), per plant."""
+def _rss_kb() -> int:
+    for line in open("/proc/self/status"):
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    return 0
+
+
+#: plant -> (scenario, simulated seconds per run, the --set that varies a run i). The 6-joint runs are
+#: shorter: 10^4 of them at 2 s would take minutes of stepping alone.
+BATCH_CASES = {
+    "heave": ("heave_drift", 1.0, lambda i: [f"law.k={150 + 100 * (i % 2)}"]),
+    "arm": ("arm_payload_swap", 1.0, lambda i: ["events=[]", f"plant.payload_mass={0.5 + 0.1 * (i % 10)!r}"]),
+    "ur5e": ("ur5e_identification", 0.2, lambda i: [f"law.kd={45.0 + i % 10}"]),
+}
+
+
+def _batch_jobs(name: str, seconds: float, vary, n: int, folder: Path | None):
+    from adaptive_mj.study.job import Job
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR
+
+    return [Job(SCENARIOS_DIR / f"{name}.toml", overrides=(f"simulation.duration={seconds!r}", "log.rate_hz=100",
+                                                           *vary(i)),
+                seed=i, log=None if folder is None else folder / f"{i:05d}.mcap", keep_trajectory=False)
+            for i in range(n)]
+
+
+def batch_figures(sizes: list[int], pool_nsim: int, threads: int = 2) -> dict:
+    """Issue 20's figures, per plant and nsim: the bare-stepping limit (a Batch of nsim simulations of the
+    model with no law, `threads` threads) in simulation-steps per second; run_batch (the law, built runs,
+    unlogged); the batched engine end to end (sweep's path, parallel.iter_results with engine "batch":
+    building, stepping, verdicts) without logs and with MCAP logs at 100 Hz; the process pool on the same
+    logged study (pool_nsim runs); and the memory a prepared run holds in the driver (VmRSS growth per run
+    while nsim runs are held, divided by nsim)."""
+    import gc
+
     import mujoco
     import mujoco.batch
 
     from adaptive_mj.sim.batch import run_batch
-    from adaptive_mj.sim.loop import run
+    from adaptive_mj.study.job import Backend
+    from adaptive_mj.study.parallel import iter_results
 
-    cases = {"heave": ("heave_drift", nsim_heave, lambda i: [f"law.k={150 + 100 * (i % 2)}"]),
-             "arm": ("arm_payload_swap", 100, lambda i: ["events=[]"]),
-             "ur5e": ("ur5e_identification", 100, lambda i: [f"law.kd={45.0 + i % 10}"])}
-    out = {}
-    for label, (name, nsim, vary) in cases.items():
+    out: dict = {}
+    for label, (name, seconds, vary) in BATCH_CASES.items():
         steps = int(round(seconds / 0.001))
-
-        def specs(n, name=name, vary=vary):
-            return [_batch_spec(name, [f"simulation.duration={seconds!r}", f"noise.seed={i}", *vary(i)])
-                    for i in range(n)]
-
-        t0 = time.perf_counter()
-        runs = specs(nsim)
-        build_s = time.perf_counter() - t0
-        model = runs[0]["plant"].model
-        bare = mujoco.batch.Batch(model, nsim=nsim, nthread=2)
-        t0 = time.perf_counter()
-        bare.step(nstep=steps)
-        bare_us = (time.perf_counter() - t0) / (nsim * steps) * 1e6
-        run_batch(specs(2), nthread=2)  # load the compiled callback outside the timing
-        t0 = time.perf_counter()
-        run_batch(runs, nthread=2)
-        batch_us = (time.perf_counter() - t0) / (nsim * steps) * 1e6
-        one = specs(min(20, nsim))
-        t0 = time.perf_counter()
-        for r in one:
-            run(**r)
-        single_us = (time.perf_counter() - t0) / (len(one) * steps) * 1e6
-        out[label] = {"nsim": nsim, "seconds": seconds, "bare_batch_us": bare_us, "run_batch_us": batch_us,
-                      "ratio_to_limit": bare_us / batch_us, "one_process_us": single_us,
-                      "build_ms_per_run": 1e3 * build_s / nsim}
+        warm = [_batch_spec(name, [f"simulation.duration={seconds!r}", *vary(i)]) for i in range(2)]
+        run_batch(warm, nthread=threads)  # load the compiled callback outside the timings
+        model = warm[0]["plant"].model
+        rows = []
+        for nsim in sizes:
+            bare = mujoco.batch.Batch(model, nsim=nsim, nthread=threads)
+            t0 = time.perf_counter()
+            bare.step(nstep=steps)
+            bare_s = time.perf_counter() - t0
+            del bare
+            gc.collect()
+            rss0 = _rss_kb()
+            t0 = time.perf_counter()
+            runs = [_batch_spec(name, [f"simulation.duration={seconds!r}", f"noise.seed={i}", *vary(i)])
+                    for i in range(nsim)]
+            build_s = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            run_batch(runs, nthread=threads)
+            step_s = time.perf_counter() - t0
+            held_kb = (_rss_kb() - rss0) / nsim
+            del runs
+            gc.collect()
+            row = {"nsim": nsim, "seconds": seconds, "sim_steps": nsim * steps,
+                   "bare_steps_per_s": nsim * steps / bare_s,
+                   "run_batch_steps_per_s": nsim * steps / step_s, "build_ms_per_run": 1e3 * build_s / nsim,
+                   "driver_kb_per_run_held": held_kb}
+            for logged in (False, True):
+                folder = Path(tempfile.mkdtemp(prefix="scaling-batch-")) if logged else None
+                try:
+                    jobs = _batch_jobs(name, seconds, vary, nsim, folder)
+                    t0 = time.perf_counter()
+                    res = [r for _, r in iter_results(jobs, Backend(jobs=threads, engine="batch"))]
+                    wall = time.perf_counter() - t0
+                finally:
+                    if folder is not None:
+                        shutil.rmtree(folder, ignore_errors=True)
+                assert all(r.status == "ok" for r in res), {r.status for r in res}
+                row["engine_logged_steps_per_s" if logged else "engine_steps_per_s"] = nsim * steps / wall
+            if nsim == pool_nsim:
+                folder = Path(tempfile.mkdtemp(prefix="scaling-pool-"))
+                try:
+                    jobs = _batch_jobs(name, seconds, vary, nsim, folder)
+                    t0 = time.perf_counter()
+                    res = [r for _, r in iter_results(jobs, Backend(jobs=threads))]
+                    row["pool_logged_steps_per_s"] = nsim * steps / (time.perf_counter() - t0)
+                finally:
+                    shutil.rmtree(folder, ignore_errors=True)
+            for key in ("run_batch", "engine", "engine_logged", "pool_logged"):
+                if f"{key}_steps_per_s" in row:
+                    row[f"{key}_to_limit"] = row[f"{key}_steps_per_s"] / row["bare_steps_per_s"]
+            rows.append(row)
+            print(f"  batch {label} nsim {nsim}: " + ", ".join(
+                f"{k} {v:.3g}" for k, v in row.items() if k not in ("nsim",)), file=sys.stderr, flush=True)
+        state_bytes = 8 * mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_INTEGRATION)
+        out[label] = {"rows": rows, "state_bytes": state_bytes, "mjdata_bytes": mujoco.MjData(model).nbuffer,
+                      "mjmodel_bytes": model.nbuffer}
     return out
 
 
@@ -309,7 +372,10 @@ def main() -> None:
     ap.add_argument("--tasks", type=int, default=2000, help="no-op Ray tasks per overhead measurement")
     ap.add_argument("--study-runs", type=int, default=10000)
     ap.add_argument("--study-backend", default="local", choices=("local", "ray"))
-    ap.add_argument("--batch-sims", type=int, default=1000, help="heave runs in the batch figure (default 1000)")
+    ap.add_argument("--study-engine", default="process", choices=("process", "batch"))
+    ap.add_argument("--study-logs", default="all", choices=("all", "summary"))
+    ap.add_argument("--batch-sims", default="100,1000,10000", help="nsim in the batch figures (default 100,1000,10000)")
+    ap.add_argument("--pool-sims", type=int, default=1000, help="nsim at which the process pool runs the same study")
     ap.add_argument("--only", default="ceiling,local,ray,study,batch")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
@@ -322,10 +388,11 @@ def main() -> None:
     if "ray" in parts:
         res["ray"] = ray_figures(args.reps, args.runs, args.tasks)
     if "study" in parts:
-        res["study_small"] = study(max(100, args.study_runs // 10), backend=args.study_backend)
-        res["study"] = study(args.study_runs, backend=args.study_backend)
+        kw = dict(backend=args.study_backend, engine=args.study_engine, logs=args.study_logs)
+        res["study_small"] = study(max(100, args.study_runs // 10), **kw)
+        res["study"] = study(args.study_runs, **kw)
     if "batch" in parts:
-        res["batch"] = batch_figures(args.batch_sims)
+        res["batch"] = batch_figures([int(n) for n in args.batch_sims.split(",")], args.pool_sims)
     if args.json:
         print(json.dumps(res, indent=1))
         return
@@ -353,14 +420,26 @@ def main() -> None:
     for key in ("study_small", "study"):
         if key in res:
             s = res[key]
-            print(f"study ({s['backend']} backend): {s['runs']} runs of 2 s ({s['rows']} rows): {s['wall_s']:.0f} s, "
+            print(f"study ({s['backend']} backend, engine {s['engine']}, logs {s['logs']}): {s['runs']} runs of 2 s "
+                  f"({s['rows']} rows): {s['wall_s']:.0f} s, "
                   f"{s['runs_per_s']:.1f} runs/s, driver peak RSS {s['driver_peak_rss_mb']:.0f} MB, "
                   f"logs {s['logs_mb']:.0f} MB")
-    for label, b in res.get("batch", {}).items():
-        print(f"batch {label}: nsim {b['nsim']}, {b['seconds']:g} s runs: bare Batch {b['bare_batch_us']:.2f} "
-              "µs/sim-step, "
-              f"run_batch {b['run_batch_us']:.2f} µs/sim-step ({b['ratio_to_limit']:.2f}x the limit), one process "
-              f"{b['one_process_us']:.2f} µs/sim-step; building a run {b['build_ms_per_run']:.1f} ms")
+    print_batch(res.get("batch", {}))
+
+
+def print_batch(figures: dict) -> None:
+    for label, b in figures.items():
+        print(f"batch {label} ({b['rows'][0]['seconds']:g} s runs; state row {b['state_bytes']} B, MjData "
+              f"{b['mjdata_bytes']} B, MjModel {b['mjmodel_bytes']} B): sim-steps/s, and x the bare limit")
+        for r in b["rows"]:
+            cells = [f"nsim {r['nsim']:>6}", f"bare {r['bare_steps_per_s']:.3g}",
+                     f"run_batch {r['run_batch_steps_per_s']:.3g} ({r['run_batch_to_limit']:.2f}x)",
+                     f"engine {r['engine_steps_per_s']:.3g} ({r['engine_to_limit']:.2f}x)",
+                     f"engine+logs {r['engine_logged_steps_per_s']:.3g} ({r['engine_logged_to_limit']:.2f}x)"]
+            if "pool_logged_steps_per_s" in r:
+                cells.append(f"process pool+logs {r['pool_logged_steps_per_s']:.3g} ({r['pool_logged_to_limit']:.2f}x)")
+            cells.append(f"build {r['build_ms_per_run']:.2f} ms/run, held {r['driver_kb_per_run_held']:.0f} kB/run")
+            print("  " + "; ".join(cells))
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import os
 import platform
 import sys
@@ -36,13 +37,20 @@ class RunResult:
     log_path: Path | None
 
 
-def versions() -> dict[str, str]:
+@functools.cache
+def _versions() -> tuple[tuple[str, str], ...]:
     import mcap
     import mujoco
     from importlib.metadata import version
 
-    return {"adaptive_mj": __version__, "mujoco": mujoco.__version__, "dm_control": version("dm-control"),
-            "mcap": getattr(mcap, "__version__", version("mcap")), "python": platform.python_version()}
+    return tuple({"adaptive_mj": __version__, "mujoco": mujoco.__version__, "dm_control": version("dm-control"),
+                  "mcap": getattr(mcap, "__version__", version("mcap")), "python": platform.python_version()}.items())
+
+
+def versions() -> dict[str, str]:
+    """The versions a log records (read once per process: importlib.metadata scans the installed
+    distributions, ~0.4 ms a call, which a study of 10^4 runs would pay 2·10^4 times)."""
+    return dict(_versions())
 
 
 def reserve_log_path(scn: Scenario, *, out: Path | None = None, directory: Path | None = None,
