@@ -209,6 +209,52 @@ def ray_figures(reps: int, runs: int, tasks: int) -> dict:
             "overhead_per_run_ms": med([60e3 / a - 60e3 / b for a, b in zip(thr, loc, strict=True)])}
 
 
+def ray_nodes(runs: int, seconds: float = 2.0) -> dict:
+    """Issue 20 §3: runs per hour of batched Ray tasks (--engine batch, logs as bytes and shared) on a
+    local Ray cluster of 1 and then 2 nodes (one CPU each, ray.cluster_utils.Cluster, as tests/test_ray.py),
+    `runs` logged heave_drift runs of `seconds` s, and the driver's CPU per run: the driver writes every
+    log that comes back as bytes, so 3600 / (driver CPU s per run) runs per hour is where adding nodes
+    stops helping with logs as bytes; with shared logs the driver only takes the summaries."""
+    from ray.cluster_utils import Cluster
+
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR
+    from adaptive_mj.study.job import Backend, Job
+    from adaptive_mj.study.parallel import iter_results
+
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    c = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False,
+                                                       "object_store_memory": 200 * 2**20})
+    out: dict = {"runs": runs, "seconds": seconds, "nodes": {}}
+    try:
+        for nodes in (1, 2):
+            if nodes == 2:
+                c.add_node(num_cpus=1, object_store_memory=200 * 2**20)
+            c.wait_for_nodes()
+            row = {}
+            for logs in ("bytes", "shared"):
+                backend = Backend(kind="ray", jobs=nodes, address=c.address, logs=logs, engine="batch")
+                with tempfile.TemporaryDirectory() as tmp:
+                    warm = [Job(SCENARIOS_DIR / "heave_drift.toml", ("simulation.duration=0.1",), seed=i,
+                                log=Path(tmp) / f"w{i}.mcap") for i in range(4 * nodes)]
+                    list(iter_results(warm, backend))  # the workers up and their callbacks loaded
+                    jobs = [Job(SCENARIOS_DIR / "heave_drift.toml", (f"simulation.duration={seconds!r}",
+                                                                     f"law.k={150 + i % 100}"), seed=i,
+                                log=Path(tmp) / f"r{i:05d}.mcap", keep_trajectory=False) for i in range(runs)]
+                    c0, t0 = time.process_time(), time.perf_counter()
+                    statuses = [r.status for _, r in iter_results(jobs, backend)]
+                    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+                    mb = sum(p.stat().st_size for p in Path(tmp).glob("r*.mcap")) / 2**20
+                assert statuses == ["ok"] * runs, set(statuses)
+                row[logs] = {"wall_s": wall, "runs_per_hour": 3600 * runs / wall, "driver_cpu_ms_per_run":
+                             1e3 * cpu / runs, "log_mb_per_s": mb / wall,
+                             "driver_bound_runs_per_hour": 3600 * runs / cpu if cpu > 0 else None}
+                print(f"  ray {nodes} node(s), logs {logs}: {row[logs]}", file=sys.stderr, flush=True)
+            out["nodes"][nodes] = row
+    finally:
+        c.shutdown()
+    return out
+
+
 def _peak_rss_kb(pid: int, stop: threading.Event, out: list) -> None:
     while not stop.is_set():
         try:
@@ -376,7 +422,8 @@ def main() -> None:
     ap.add_argument("--study-logs", default="all", choices=("all", "summary"))
     ap.add_argument("--batch-sims", default="100,1000,10000", help="nsim in the batch figures (default 100,1000,10000)")
     ap.add_argument("--pool-sims", type=int, default=1000, help="nsim at which the process pool runs the same study")
-    ap.add_argument("--only", default="ceiling,local,ray,study,batch")
+    ap.add_argument("--ray-node-runs", type=int, default=400, help="runs per measurement in the ray_nodes figure")
+    ap.add_argument("--only", default="ceiling,local,ray,study,batch,ray_nodes")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     parts = set(args.only.split(","))
@@ -391,6 +438,8 @@ def main() -> None:
         kw = dict(backend=args.study_backend, engine=args.study_engine, logs=args.study_logs)
         res["study_small"] = study(max(100, args.study_runs // 10), **kw)
         res["study"] = study(args.study_runs, **kw)
+    if "ray_nodes" in parts:
+        res["ray_nodes"] = ray_nodes(args.ray_node_runs)
     if "batch" in parts:
         res["batch"] = batch_figures([int(n) for n in args.batch_sims.split(",")], args.pool_sims)
     if args.json:
@@ -425,6 +474,16 @@ def main() -> None:
                   f"{s['runs_per_s']:.1f} runs/s, driver peak RSS {s['driver_peak_rss_mb']:.0f} MB, "
                   f"logs {s['logs_mb']:.0f} MB")
     print_batch(res.get("batch", {}))
+    print_ray_nodes(res.get("ray_nodes"))
+
+
+def print_ray_nodes(fig: dict | None) -> None:
+    for nodes, row in (fig or {}).get("nodes", {}).items():
+        for logs, r in row.items():
+            print(f"ray_nodes: {nodes} node(s), --engine batch, logs {logs}: {r['runs_per_hour']:.0f} runs/h "
+                  f"({fig['runs']} runs of {fig['seconds']:g} s in {r['wall_s']:.1f} s), "
+                  f"driver {r['driver_cpu_ms_per_run']:.1f} ms CPU/run -> at most "
+                  f"{r['driver_bound_runs_per_hour']:.0f} runs/h by the driver, logs {r['log_mb_per_s']:.2f} MB/s")
 
 
 def print_batch(figures: dict) -> None:
