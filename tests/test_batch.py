@@ -168,3 +168,23 @@ def test_resume_with_the_batch_engine_finishes_a_killed_study_with_the_same_tabl
     assert (study / "sweep.csv").read_text() == (full / "sweep.csv").read_text()
     for a, b in zip(sorted((full / "logs").glob("*.mcap")), sorted((study / "logs").glob("*.mcap")), strict=True):
         assert _messages(a) == _messages(b)
+
+
+def test_payload_grids_on_both_arms_give_the_process_engine_s_table_and_log_messages(tmp_path):
+    """A payload grid (each run's own compiled model: the payload's file or its mass) on the 1-DOF arm
+    and on the 6-joint arm, with noise and a mid-run swap: `sweep --engine batch` gives the table and
+    every log message the process engine gives."""
+    cases = [["arm_payload_swap", "--grid", "plant.payload_mass=0.25,1.0,2.0", "--seeds", "2",
+              "--set", "simulation.duration=1.5", "--set", "events=[{t=0.75, kind='payload_mass', value=1.5}]"],
+             ["ur5e_payload_swap", "--grid", "plant.payload=tool_offset,box_offset,sphere",
+              "--set", "simulation.duration=0.4", "--set", "events=[{t=0.2, kind='payload_swap', payload='sphere'}]",
+              "--set", "noise.std={q=1e-4}"]]
+    for k, args in enumerate(cases):
+        p, b = tmp_path / f"p{k}", tmp_path / f"b{k}"
+        assert main(["sweep", *args, "--jobs", "2", "-o", str(p)]) == 0
+        assert main(["sweep", *args, "--jobs", "2", "--engine", "batch", "-o", str(b)]) == 0
+        assert (p / "sweep.csv").read_text() == (b / "sweep.csv").read_text()
+        logs = sorted((p / "logs").glob("*.mcap"))
+        assert len(logs) == (6 if k == 0 else 3)
+        for log in logs:
+            assert _messages(log) == _messages(b / "logs" / log.name), log.name

@@ -19,6 +19,7 @@ batch share one control callback (the same compiled law and plant form) and one 
 """
 from __future__ import annotations
 
+import functools
 from collections import defaultdict
 from typing import Any, Sequence
 
@@ -56,13 +57,30 @@ def run_batch(runs: Sequence[dict[str, Any]], *, nthread: int = 0, chunk: int = 
             if p.nc is None:
                 out[i] = drive(p, runs[i]["law"], runs[i]["reference"])
             else:
-                groups[(id(p.nc.callback), mujoco.mj_stateSize(p.nc.plant.model, _STATE))].append(i)
+                groups[(id(p.nc.callback), layout(p.nc.plant.model))].append(i)
         for ids in groups.values():
             ncs = [prepared[i].nc for i in ids]
             _drive([prepared[i] for i in ids], [nc for nc in ncs if nc is not None], nthread, out, ids)
     except KeyboardInterrupt as exc:
         raise _interrupted(exc, prepared, out) from (None if isinstance(exc, Interrupted) else exc)
     return [tr for tr in out if tr is not None]
+
+
+def layout(model: mujoco.MjModel) -> tuple[int, ...]:
+    """The model's sizes (nq, nv, nbody, ngeom, narena, ...: MjModel's integer size fields): models of one
+    Batch must give MjData the same layout (mjb_setModels refuses others), so arms whose payloads differ
+    in geoms or bodies are batched apart."""
+    return tuple(getattr(model, name) for name in _size_fields(model))
+
+
+@functools.cache
+def _size_fields_of(names: tuple[str, ...]) -> tuple[str, ...]:
+    probe = mujoco.MjModel.from_xml_string("<mujoco/>")
+    return tuple(n for n in names if isinstance(getattr(probe, n), int))
+
+
+def _size_fields(model: mujoco.MjModel) -> tuple[str, ...]:
+    return _size_fields_of(tuple(sorted(n for n in dir(model) if n.startswith("n") and not n.startswith("name"))))
 
 
 def _interrupted(exc: KeyboardInterrupt, prepared: list[PreparedRun], out: list[Trajectory | None]) -> Interrupted:
