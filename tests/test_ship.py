@@ -115,7 +115,7 @@ def test_fitted_nomoto_reproduces_the_hulls_step_response(plant, steps):
     to 3 % of the largest yaw rate (RMS over all runs, every physics step) and each run's heading after
     40 s to 4 % of the heading turned. Tolerance: the hull is a sway-yaw system of second order (Nomoto's
     T1, T2, T3) whose yaw damping is not exactly cubic, which a first-order cubic model cannot match; the
-    measured figures are 1.6 % and 2 %."""
+    measured figures are 1.6 % and 1.9 %."""
     t, delta, r = steps
     f = plant.nomoto()
     model_r = nomoto.simulate(np.array([f.K, f.T, f.alpha, f.delta_b]), delta, plant.dt)
@@ -192,8 +192,9 @@ def loading_runs():
 def test_autopilot_heading_error_after_the_loading_change(loading_runs):
     """After the hull's mass and inertia grow by 60 % (T by 44 %) mid-voyage, through three 60-deg course
     changes the adaptive autopilot holds |psi~| under 0.25 deg (RMS under 0.05 deg): a quarter of the
-    +-1 deg a course-keeping autopilot is asked for. The same law with its estimates frozen at the light
-    loading's fit does measurably worse (its RMS at least 2x the adaptive one's)."""
+    +-1 deg a course-keeping autopilot is asked for; measured 0.083 deg and 0.017 deg. The same law with
+    its estimates frozen at the light loading's fit does measurably worse (measured RMS 0.051 deg, bound:
+    at least 2x the adaptive one's)."""
     err = {}
     for name, res in loading_runs.items():
         tr = res.trajectory
@@ -225,3 +226,22 @@ def test_a_model_without_the_ship_joints_is_refused(tmp_path):
     scn = sc.load(sc.SCENARIOS_DIR / "ship_course_changes.toml", overrides=[f"plant.model='{bad}'"])
     with pytest.raises(ModelError, match="needs a hinge joint named 'yaw'"):
         build(scn)
+
+
+def test_bench_section_reports_fits_errors_and_figures(tmp_path):
+    """The bench's ship section on runs cut to 66 s (every event has happened): the fitted K, T at each
+    condition with their ratios, each scenario's table and figure, a log per run."""
+    from adaptive_mj.study import bench_catalogue as bc
+    from adaptive_mj.study.parallel import run_jobs
+
+    section = bc._ship(False, tmp_path / "logs", duration=66.0)
+    assert len(section.jobs) == sum(len(v) for _, _, v in bc.SHIP_SCENARIOS) == 11
+    results = run_jobs(list(section.jobs), n_jobs=2)
+    rep = section.analyze({r.job.tag: r for r in results}, tmp_path)
+    assert "| loaded (mass, inertia x1.6) | 0.864 |" in rep.text and "(1.44x)" in rep.text
+    assert "| thrust x0.25 | 0.432 |" in rep.text and "(0.51x)" in rep.text and "(2.22x)" in rep.text
+    for name, _, _ in bc.SHIP_SCENARIOS:
+        assert f"figures/{name}.png" in rep.text
+        assert (tmp_path / "figures" / f"{name}.png").stat().st_size > 20_000
+    assert len(rep.rows) == 11 and all(r["y_unit"] == "rad" for r in rep.rows)
+    assert len(list((tmp_path / "logs").glob("ship-*.mcap"))) == 11
