@@ -10,7 +10,7 @@ y_d = cos t it sets ddy_d = cos t; the correct value, used here, is -cos t.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -353,10 +353,12 @@ class Waypoints:
     waypoints: tuple[float, ...]
     durations: tuple[float, ...]
     t0: float = 0.0
+    joint: JointWaypoints | None = field(init=False, repr=False, compare=False, default=None)
 
     def __post_init__(self):
-        object.__setattr__(self, "_joint", JointWaypoints(waypoints=tuple((float(w),) for w in self.waypoints),
-                                                          durations=tuple(self.durations), t0=self.t0))
+        object.__setattr__(self, "joint", JointWaypoints(waypoints=tuple((float(w),) for w in self.waypoints),
+                                                         durations=tuple(self.durations), t0=self.t0))
 
     def __call__(self, t, order: int) -> np.ndarray:
-        return self._joint(t, order)[..., 0]  # type: ignore[attr-defined]  (set in __post_init__)
+        assert self.joint is not None  # set in __post_init__
+        return self.joint(t, order)[..., 0]

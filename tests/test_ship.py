@@ -245,3 +245,17 @@ def test_bench_section_reports_fits_errors_and_figures(tmp_path):
         assert (tmp_path / "figures" / f"{name}.png").stat().st_size > 20_000
     assert len(rep.rows) == 11 and all(r["y_unit"] == "rad" for r in rep.rows)
     assert len(list((tmp_path / "logs").glob("ship-*.mcap"))) == 11
+
+
+def test_waypoints_reference_is_one_joint_of_joint_waypoints():
+    """reference.kind = "waypoints": set-points joined by C⁴ smooth steps, exactly JointWaypoints of one joint."""
+    from adaptive_mj.reference import JointWaypoints, Waypoints
+
+    w = Waypoints((0.0, 0.5, 0.5, -0.2), (10.0, 5.0, 8.0), 2.0)
+    j = JointWaypoints(((0.0,), (0.5,), (0.5,), (-0.2,)), (10.0, 5.0, 8.0), 2.0)
+    t = np.linspace(0.0, 30.0, 301)
+    np.testing.assert_array_equal(w(t, 3), j(t, 3)[..., 0])
+    assert w(14.0, 2).tolist() == [0.5, 0.0, 0.0] and w(30.0, 0)[0] == -0.2
+    scn = sc.load(sc.SCENARIOS_DIR / "ship_course_changes.toml")
+    ref = build(scn).reference
+    assert ref(200.0, 2)[0] == 0.0 and ref(25.0, 0)[0] == pytest.approx(math.radians(10.0), abs=1e-6)
