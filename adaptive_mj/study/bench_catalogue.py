@@ -1322,10 +1322,12 @@ def _ship_fits(res) -> str:
 
     model = mujoco.MjModel.from_xml_path(str(ship.MODEL_PATH))
     prop = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, ship.PROPELLER)
+    F0 = float(model.actuator_biasprm[prop, 0])  # [N] the design thrust
+    L = 2.0 * float(model.geom_size[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, ship.HULL), 0])  # [m]
     u0 = ship.cruise_speed(model)
     lines = ["| condition | U [m/s] | K [1/s] | T [s] | α [s²] | δ_b [deg] | K' = KL/U | T' = TU/L |",
              "|---|---|---|---|---|---|---|---|"]
-    conditions = [("light ship, 40 N thrust", "ship_loading", 0, 1.0)]
+    conditions = [(f"light ship, {F0:g} N thrust", "ship_loading", 0, 1.0)]
     conditions += [("loaded (mass, inertia x1.6)", "ship_loading", -1, 1.0),
                    ("thrust x0.25", "ship_speed_change", -1, 0.25), ("wind moment 2 N m", "ship_wind_waves", -1, 1.0)]
     K0 = T0 = None
@@ -1335,17 +1337,28 @@ def _ship_fits(res) -> str:
             lines.append(f"| {label} | (run {r.status if r else 'missing'}) |||||||")
             continue
         K, T, al, b = _ship_theta(r.trajectory, row)
-        model.actuator_biasprm[prop, 0] = 40.0 * thrust
+        model.actuator_biasprm[prop, 0] = F0 * thrust
         U = ship.cruise_speed(model) if thrust != 1.0 else u0
         K0, T0 = (K, T) if K0 is None else (K0, T0)
         lines.append(f"| {label} | {U:.3f} | {K:.4f} ({K / K0:.2f}x) | {T:.3f} ({T / T0:.2f}x) | {al:.3g} | "
-                     f"{math.degrees(b):.2f} | {K * 3.0 / U:.2f} | {T * U / 3.0:.2f} |")
+                     f"{math.degrees(b):.2f} | {K * L / U:.2f} | {T * U / L:.2f} |")
     return ("**The plant** (`models/ship.xml`): a 3 m model-scale hull in MuJoCo's ellipsoid fluid, rudder ±35° at "
             "15°/s, constant-thrust propeller; output the heading ψ [rad], input the commanded rudder angle δ [rad]. "
             "**The truth** is not typed: at each condition the plant fits T ψ̈ + ψ̇ + α ψ̇³ = K (δ + δ_b) to the "
             "hull's own responses to rudder steps of ±5, 10, 20 and 35° (adaptive_mj/plants/ship.py); a run logs "
             "θ = [T/K, 1/K, α/K, δ_b] of that fit, refitted at each event. The fitted parameters at each condition "
-            "(the first row is the reference for the ratios; L = 3 m):\n\n" + "\n".join(lines))
+            f"(the first row is the reference for the ratios; L = {L:g} m):\n\n" + "\n".join(lines))
+
+
+def _ship_hard_over() -> tuple[float, float]:
+    """The steering gear's ctrlrange [deg] in the bundled model."""
+    import mujoco
+
+    from adaptive_mj.plants import ship
+
+    model = mujoco.MjModel.from_xml_path(str(ship.MODEL_PATH))
+    lo, hi = model.actuator_ctrlrange[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, ship.STEERING_GEAR)]
+    return math.degrees(lo), math.degrees(hi)
 
 
 def _ship_errors(tr, window) -> tuple[float, float, float]:
@@ -1391,11 +1404,16 @@ def _ship_scenario(res, name: str, change: str, variants, out: Path) -> tuple[st
             for i, c in ((0, "C0"), (1, "C1")):
                 ax[3].plot(tr.t, tr.theta_hat[:, i], c, lw=1.2, label=f"{tr.names[i]} estimate")
                 ax[3].plot(tr.t, tr.theta[:, i], c, ls="--", lw=1, label=f"{tr.names[i]} fitted")
+            bias = ax[3].twinx()
+            bias.plot(tr.t, deg(tr.theta_hat[:, 3]), "C2", lw=1.2, label="rudder_bias estimate")
+            bias.plot(tr.t, deg(tr.theta[:, 3]), "C2", ls="--", lw=1, label="rudder_bias fitted")
+            bias.set_ylabel("δ_b [deg]", color="C2")
+            bias.legend(fontsize=7, loc="lower right")
     ax[0].set_ylabel("course [deg]")
     ax[1].set_ylabel("ψ̃ = ψ_d − ψ [deg]")
     ax[1].set_yscale("symlog", linthresh=0.1)
     ax[2].set_ylabel("rudder δ [deg]")
-    for lim in (-35.0, 35.0):
+    for lim in _ship_hard_over():
         ax[2].axhline(lim, color="grey", ls=":", lw=1)
     ax[3].set_ylabel("T/K [s²], 1/K [s]")
     ax[3].set_xlabel("time t [s]")
