@@ -259,3 +259,15 @@ def test_waypoints_reference_is_one_joint_of_joint_waypoints():
     scn = sc.load(sc.SCENARIOS_DIR / "ship_course_changes.toml")
     ref = build(scn).reference
     assert ref(200.0, 2)[0] == 0.0 and ref(25.0, 0)[0] == pytest.approx(math.radians(10.0), abs=1e-6)
+
+
+def test_a_ship_that_cannot_be_fitted_is_refused():
+    """A timestep the steering gear cannot be integrated at gives no Nomoto ship: one ModelError naming the
+    model, before any run; so does water too thin to balance the thrust."""
+    scn = sc.load(sc.SCENARIOS_DIR / "ship_course_changes.toml", overrides=["simulation.timestep=0.1"])
+    with pytest.raises(ModelError, match=r"ship\.xml: the hull's rudder-step responses are not those of a "
+                                         r"steerable ship .*this model's is 0\.1 s\)$"):
+        build(scn)
+    scn = sc.load(sc.SCENARIOS_DIR / "ship_course_changes.toml", overrides=["plant.density=1e-6"])
+    with pytest.raises(ModelError, match=r"ship\.xml: no speed balances the propeller's thrust"):
+        build(scn)

@@ -99,15 +99,21 @@ def fit(delta: np.ndarray, r: np.ndarray, h: float, *, r0: np.ndarray | None = N
     Starts from the equation-error solution (r' by finite differences, linear in the
     parameters), then minimises the output error sum (r_model - r)² over every sample."""
     delta, r = np.asarray(delta, dtype=float), np.asarray(r, dtype=float)
-    x0 = _equation_error(delta, r, h)
+    try:
+        with np.errstate(all="ignore"):
+            x0 = _equation_error(delta, r, h)
+    except np.linalg.LinAlgError:  # degenerate data: a fit that the caller's checks refuse
+        nan = float("nan")
+        return NomotoFit(K=nan, T=nan, alpha=nan, delta_b=nan, rms=nan, peak=float(np.max(np.abs(r))))
 
     def residual(P):
         return (simulate(P, delta, h, r0) - r[None]).reshape(P.shape[1], -1).T
 
     from mujoco import minimize
 
-    x, _ = minimize.least_squares(x0, residual, verbose=0, max_iter=60)
-    res = residual(x.reshape(4, 1))[:, 0]
+    with np.errstate(all="ignore"):  # a diverging trial point is the minimiser's to reject, not a warning
+        x, _ = minimize.least_squares(x0, residual, verbose=0, max_iter=60)
+        res = residual(x.reshape(4, 1))[:, 0]
     return NomotoFit(K=float(x[0]), T=float(x[1]), alpha=float(x[2]), delta_b=float(x[3]),
                      rms=float(np.sqrt(np.mean(res**2))), peak=float(np.max(np.abs(r))))
 

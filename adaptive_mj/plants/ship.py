@@ -43,7 +43,7 @@ def _id(model, objtype, name: str, kind: str, where: str) -> int:
     return i
 
 
-def cruise_speed(model: mujoco.MjModel) -> float:
+def cruise_speed(model: mujoco.MjModel, where: str = "ship model") -> float:
     """U [m/s]: the straight-line speed at which the fluid's resistance balances the propeller's thrust
     (bisection on the hull's surge force, rudder amidships, no yaw)."""
     data = mujoco.MjData(model)
@@ -62,7 +62,8 @@ def cruise_speed(model: mujoco.MjModel) -> float:
     while net(hi) > 0:
         lo, hi = hi, 2.0 * hi
         if hi > 1e3:
-            raise ModelError("ship: no speed balances the propeller's thrust below 1000 m/s")
+            raise ModelError(f"{where}: no speed balances the propeller's thrust below 1000 m/s (is there water: "
+                             f"option density {model.opt.density:g} kg/m³?)")
     for _ in range(60):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if net(mid) > 0 else (lo, mid)
@@ -70,16 +71,16 @@ def cruise_speed(model: mujoco.MjModel) -> float:
 
 
 def step_responses(model: mujoco.MjModel, *, angles=STEP_ANGLES, duration: float = STEP_DURATION,
-                   yaw_moment: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   yaw_moment: float = 0.0, where: str = "ship model") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The hull's responses to rudder steps, one per angle, each from a straight course at the cruise
     speed with the rudder amidships, the steering gear commanded to the angle at t = 0 and the constant
     yaw moment [N m] applied throughout. Returns (t (N,) [s], delta (R, N) the rudder stock's angle
     [rad], r (R, N) the yaw rate [rad/s]), every physics step (N = duration / timestep + 1)."""
     from mujoco import rollout
 
-    ids = _ids(model, "ship model")
+    ids = _ids(model, where)
     data = mujoco.MjData(model)
-    data.qvel[ids["surge"]] = cruise_speed(model)
+    data.qvel[ids["surge"]] = cruise_speed(model, where)
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     x0 = np.empty(mujoco.mj_stateSize(model, spec))
     mujoco.mj_getState(model, data, x0, spec)
@@ -96,18 +97,31 @@ def step_responses(model: mujoco.MjModel, *, angles=STEP_ANGLES, duration: float
     return np.arange(nstep + 1) * model.opt.timestep, delta, r
 
 
-def identify(model: mujoco.MjModel, *, yaw_moment: float = 0.0) -> NomotoFit:
+FIT_TOLERANCE = 0.1  # the largest yaw-rate residual RMS, as a fraction of the peak yaw rate, taken as a fit
+
+
+def identify(model: mujoco.MjModel, *, yaw_moment: float = 0.0, where: str = "ship model") -> NomotoFit:
     """K, T, alpha, delta_b of the compiled model at its cruise speed, fitted to its own rudder steps
-    (step_responses, sampled every FIT_SAMPLE s). Remembered per model and moment in this process."""
-    return _identified(model, yaw_moment)[0]
+    (step_responses, sampled every FIT_SAMPLE s). Remembered per model and moment in this process.
+    A ModelError naming `where` when the responses are no Nomoto model's (a ship that does not move or
+    turn, a rudder servo the timestep cannot integrate): residual over FIT_TOLERANCE of the peak."""
+    return _identified(model, yaw_moment, where)[0]
 
 
-def _identified(model: mujoco.MjModel, yaw_moment: float) -> tuple[NomotoFit, float]:
+def _identified(model: mujoco.MjModel, yaw_moment: float, where: str) -> tuple[NomotoFit, float]:
     key = _fingerprint(model, yaw_moment)
     if key not in _FITS:
-        _, delta, r = step_responses(model, yaw_moment=yaw_moment)
+        _, delta, r = step_responses(model, yaw_moment=yaw_moment, where=where)
         every = max(1, int(round(FIT_SAMPLE / model.opt.timestep)))
-        _FITS[key] = (fit(delta[:, ::every], r[:, ::every], every * model.opt.timestep), cruise_speed(model))
+        f = fit(delta[:, ::every], r[:, ::every], every * model.opt.timestep) if np.all(np.isfinite(r)) else None
+        if f is None or not (f.K > 0 and f.T > 0 and f.peak > 1e-6 and f.rms <= FIT_TOLERANCE * f.peak):
+            what = "non-finite yaw rates" if f is None else (
+                f"K = {f.K:.3g} 1/s, T = {f.T:.3g} s, residual {f.rms:.3g} rad/s for a peak yaw rate of "
+                f"{f.peak:.3g} rad/s")
+            raise ModelError(f"{where}: the hull's rudder-step responses are not those of a steerable ship ({what}); "
+                             "the hull must move and its rudder turn it, at a timestep that integrates the steering "
+                             f"gear (0.01 s does; this model's is {model.opt.timestep:g} s)")
+        _FITS[key] = (f, cruise_speed(model, where))
     return _FITS[key]
 
 
@@ -146,17 +160,17 @@ class ShipPlant(MujocoPlant):
                              f"{model.opt.density}")
         self.ids = ids
         super().__init__(model, joint_id=ids["yaw_joint"], actuator_id=ids["gear"], form=nomoto_form(),
-                         theta_fn=lambda m: identify(m).theta, where=where)
+                         theta_fn=lambda m: identify(m, where=where).theta, where=where)
         self._theta_moment = 0.0
 
     # --- the truth, refitted when the model or the constant moment changes -----------
     def nomoto(self) -> NomotoFit:
         """The current fit (K, T, alpha, delta_b) for this model and constant yaw moment."""
-        return _identified(self.model, self.force_offset)[0]
+        return _identified(self.model, self.force_offset, self.where)[0]
 
     def speed(self) -> float:
         """Cruise speed [m/s] of the model as it is now."""
-        return _identified(self.model, self.force_offset)[1]
+        return _identified(self.model, self.force_offset, self.where)[1]
 
     def true_theta(self) -> np.ndarray:
         """[T/K, 1/K, alpha/K, delta_b] of the current fit (refitted after a model change or a new moment)."""
@@ -205,7 +219,10 @@ def model_source(scn) -> ModelSource | None:
 
 
 def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
-    """plant.kind = "ship": the ship of plant.model (MuJoCo only: its truth is a fit to the model)."""
+    """plant.kind = "ship": the ship of plant.model (MuJoCo only: its truth is a fit to the model), in water of
+    plant.density when given."""
     model, model_xml = compile_for_scenario(scn, source)
+    if scn.plant.density is not None:
+        model.opt.density = scn.plant.density
     return BuiltPlant(ShipPlant(model, where=str(scn.plant.model)), model_xml)
 
