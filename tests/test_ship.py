@@ -271,3 +271,17 @@ def test_a_ship_that_cannot_be_fitted_is_refused():
     scn = sc.load(sc.SCENARIOS_DIR / "ship_course_changes.toml", overrides=["plant.density=1e-6"])
     with pytest.raises(ModelError, match=r"ship\.xml: no speed balances the propeller's thrust"):
         build(scn)
+
+
+def test_identification_does_not_depend_on_the_timestep():
+    """The fitted K, T, alpha of the hull at a 10 ms step and at a 1e-9 s step (identified at FIT_MIN_TIMESTEP:
+    a build must not spend hours on the truth) agree to 1e-6."""
+    import copy
+
+    model = mujoco.MjModel.from_xml_path(str(ship.MODEL_PATH))
+    fine = copy.copy(model)
+    fine.opt.timestep = 1e-9
+    a, b = ship.identify(model), ship.identify(fine)
+    np.testing.assert_allclose([b.K, b.T, b.alpha], [a.K, a.T, a.alpha], rtol=1e-6)
+    scn = sc.load(sc.SCENARIOS_DIR / "ship_loading.toml", overrides=["simulation.timestep=1e-9"])
+    assert build(scn).theta_hat0[1] == pytest.approx(1.0 / a.K, rel=1e-6)
