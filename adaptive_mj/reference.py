@@ -10,7 +10,7 @@ y_d = cos t it sets ddy_d = cos t; the correct value, used here, is -cos t.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -342,3 +342,23 @@ class JointWaypoints:
             rate = S(x) / d[j] ** k
             out[k] = np.where(inside[:, None], span * rate[:, None], 0.0)
         return out.reshape((order + 1,) + shape + (wp.shape[1],))
+
+
+@dataclass(frozen=True)
+class Waypoints:
+    """A 1-DOF output through set-points, each move a C^4 smooth step (JointWaypoints of one joint):
+    rests at waypoints[0] until t0 [s], moves to waypoints[j+1] during durations[j] [s], rests at the
+    last. A repeated value holds it (e.g. a ship's course changes: [0, 0.17, 0.17, -0.17] rad)."""
+
+    waypoints: tuple[float, ...]
+    durations: tuple[float, ...]
+    t0: float = 0.0
+    joint: JointWaypoints | None = field(init=False, repr=False, compare=False, default=None)
+
+    def __post_init__(self):
+        object.__setattr__(self, "joint", JointWaypoints(waypoints=tuple((float(w),) for w in self.waypoints),
+                                                         durations=tuple(self.durations), t0=self.t0))
+
+    def __call__(self, t, order: int) -> np.ndarray:
+        assert self.joint is not None  # set in __post_init__
+        return self.joint(t, order)[..., 0]

@@ -1,8 +1,9 @@
 """SI units of each plant kind's output, control and parameters (for labels and summaries)."""
 from __future__ import annotations
 
-OUTPUT = {"heave": "m", "arm": "rad", "first_order": "-", "manipulator": "rad"}  # manipulator: rad (hinges) or m
-CONTROL = {"heave": "N", "arm": "N m", "first_order": "-", "manipulator": "N m"}
+# manipulator: rad (hinges) or m; ship: the heading, and the control is the commanded rudder angle
+OUTPUT = {"heave": "m", "arm": "rad", "first_order": "-", "manipulator": "rad", "ship": "rad"}
+CONTROL = {"heave": "N", "arm": "N m", "first_order": "-", "manipulator": "N m", "ship": "rad"}
 _BODY_PARAM_UNITS = {"m": "kg", "mcx": "kg m", "mcy": "kg m", "mcz": "kg m", "Ixx": "kg m²", "Ixy": "kg m²",
                      "Iyy": "kg m²", "Ixz": "kg m²", "Iyz": "kg m²", "Izz": "kg m²", "armature": "kg m²",
                      "damping": "N m s/rad", "coulomb": "N m"}
@@ -10,6 +11,7 @@ PARAMS = {
     "heave": {"d": "kg", "b": "kg/m", "c": "kg", "tau_d": "kg s", "tau_b": "kg s/m"},
     "arm": {"J": "kg m²", "b": "N m s/rad", "g_sin": "N m", "g_cos": "N m"},
     "first_order": {"a": "-", "b": "-", "p": "-"},
+    "ship": {"T_over_K": "s²", "one_over_K": "s", "alpha_over_K": "s³", "rudder_bias": "rad"},
 }
 
 

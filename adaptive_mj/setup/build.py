@@ -48,9 +48,9 @@ def plant_kinds(kind: str | None = None) -> dict:
     """plant.kind -> what builds it (``model_source(scn)``, ``from_scenario(scn, source)``): the
     bundled kinds' modules, and installed plant plugins (adaptive_mj.plants.plugin) when `kind` is
     not a bundled one."""
-    from adaptive_mj.plants import arm, heave, manipulator, twin
+    from adaptive_mj.plants import arm, heave, manipulator, ship, twin
 
-    kinds = {"heave": heave, "arm": arm, "first_order": twin, "manipulator": manipulator}
+    kinds = {"heave": heave, "arm": arm, "first_order": twin, "manipulator": manipulator, "ship": ship}
     if kind is not None and kind not in kinds:
         from adaptive_mj.plants.plugin import installed
 
@@ -362,7 +362,7 @@ def _reference(scn: Scenario, plant):
     if r.kind in JOINT_REFERENCE_KINDS:
         return _joint_reference(scn, plant.model, plant.joint_names)
     cls = {"constant": refs.Constant, "cosine": refs.Cosine, "sine": refs.Sine,
-           "sum_of_sines": refs.SumOfSines, "smooth_step": refs.SmoothStep}[r.kind]
+           "sum_of_sines": refs.SumOfSines, "smooth_step": refs.SmoothStep, "waypoints": refs.Waypoints}[r.kind]
     return cls(**r.params)
 
 
@@ -420,6 +420,11 @@ def _event(e, scn: Scenario | None = None, source: ModelSource | None = None) ->
     if e.kind == "payload_mass":
         return Event(e.t, f"payload_mass {e.body} = {e.value} kg",
                      lambda plant, e=e: plant.set_body_mass(e.body, e.value))
+    if e.kind == "loading":
+        return Event(e.t, f"loading: hull mass and inertia x {e.value}",
+                     lambda plant, e=e: plant.set_loading(e.value))
+    if e.kind == "thrust_scale":
+        return Event(e.t, f"propeller thrust x {e.value}", lambda plant, e=e: plant.set_thrust_scale(e.value))
     if e.kind == "fluid_density_scale":
         return Event(e.t, f"fluid density x {e.value}",
                      lambda plant, e=e: plant.set_fluid_density(plant.model.opt.density * e.value))

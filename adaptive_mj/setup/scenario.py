@@ -22,18 +22,18 @@ REPO = Path(__file__).resolve().parents[2]
 MODELS_DIR = REPO / "models"
 SCENARIOS_DIR = REPO / "scenarios"
 
-PLANT_KINDS = ("heave", "arm", "first_order", "manipulator")
+PLANT_KINDS = ("heave", "arm", "first_order", "manipulator", "ship")
 BACKENDS = ("mujoco", "twin")
 INTEGRATORS = ("rk4", "euler", "implicitfast", "implicit")
-REFERENCE_KINDS = ("constant", "cosine", "sine", "sum_of_sines", "smooth_step")
+REFERENCE_KINDS = ("constant", "cosine", "sine", "sum_of_sines", "smooth_step", "waypoints")
 JOINT_REFERENCE_KINDS = ("joint_sum_of_sines", "joint_waypoints")
 LAW_KINDS = ("sliding_adaptive", "first_order_adaptive", "fixed_nominal", "robust_sliding")
 MANIPULATOR_LAW_KINDS = ("slotine_li", "computed_torque", "pd_gravity")
 DEAD_ZONE_ON = ("s", "tracking_error")
 DISTURBANCE_KINDS = ("none", "constant", "step", "sine")
 ARM_DISTURBANCE_KINDS = DISTURBANCE_KINDS + ("noise",)  # per joint torques (adaptive_mj.disturbance)
-EVENT_KINDS = ("payload_mass", "payload_swap", "fluid_density_scale", "constant_force")
-DEFAULT_MODEL = {"heave": "heave_vehicle", "arm": "pendulum_arm", "manipulator": "ur5e_arm"}
+EVENT_KINDS = ("payload_mass", "payload_swap", "fluid_density_scale", "constant_force", "loading", "thrust_scale")
+DEFAULT_MODEL = {"heave": "heave_vehicle", "arm": "pendulum_arm", "manipulator": "ur5e_arm", "ship": "ship"}
 STATE_SIGNALS = ("y", "y_dot", "y_ddot")
 JOINT_SIGNALS = ("q", "q_dot")  # an arm's measured signals (noise.std)
 REGRESSORS = ("lecture", "sin_squared")
@@ -541,6 +541,9 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:  # noqa: C901 (one branch pe
     backend = t.string("backend", "mujoco", choices=BACKENDS)
     if kind == "first_order" and backend != "twin":
         raise t.fail("backend", "'twin' for plant.kind = 'first_order' (it is not a mechanical system)", backend)
+    if kind == "ship" and backend != "mujoco":
+        raise t.fail("backend", "'mujoco' for plant.kind = 'ship' (its true Nomoto parameters are fitted to the "
+                                "MuJoCo model)", backend)
     model_name = t.string("model", DEFAULT_MODEL.get(kind))
     model = None if model_name is None else _resolve_model(model_name, base_dir)
     if kind == "first_order" and "model" in t.data:
@@ -844,6 +847,8 @@ def _reference(t: _Table, plant: PlantSpec) -> ReferenceSpec:
         kind = t.string("kind", choices=JOINT_REFERENCE_KINDS)
         return _joint_reference(t, kind)
     kind = t.string("kind", choices=REFERENCE_KINDS)
+    if kind == "waypoints":
+        return _waypoints(t)
     params: dict[str, Any] = {}
     for key, default in _REFERENCE_KEYS[kind].items():
         if key in ("amplitudes", "omegas", "phases"):
@@ -858,6 +863,19 @@ def _reference(t: _Table, plant: PlantSpec) -> ReferenceSpec:
             raise t.fail("omegas", f"as many entries as reference.amplitudes ({n})", list(params["omegas"]))
     t.finish()
     return ReferenceSpec(kind=kind, params=params)
+
+
+def _waypoints(t: _Table) -> ReferenceSpec:
+    """reference.kind = "waypoints" (1-DOF): set-points joined by C⁴ smooth steps (reference.Waypoints)."""
+    points = t.numbers("waypoints")
+    if len(points) < 2:
+        raise t.fail("waypoints", "an array of at least 2 set-points", list(points))
+    durations = t.numbers("durations")
+    if len(durations) != len(points) - 1 or any(d <= 0 for d in durations):
+        raise t.fail("durations", f"{len(points) - 1} move times > 0 [s] (one per move)", list(durations))
+    params = {"waypoints": points, "durations": durations, "t0": t.number("t0", 0.0, ge=0)}
+    t.finish()
+    return ReferenceSpec(kind="waypoints", params=params)
 
 
 def _gamma(t: _Table):
@@ -1088,7 +1106,8 @@ def _events(raw, top: _Table, plant: PlantSpec, sim: SimulationSpec, base_dir: P
         payload = t.string("payload") if kind == "payload_swap" else None
         needs = {"payload_mass": (("arm", "manipulator"), "mujoco"), "fluid_density_scale": (("heave",), "mujoco"),
                  "payload_swap": (("manipulator",), "mujoco"),
-                 "constant_force": (("heave", "arm", "first_order"), plant.backend)}.get(kind)
+                 "constant_force": (("heave", "arm", "first_order", "ship"), plant.backend),
+                 "loading": (("ship",), "mujoco"), "thrust_scale": (("ship",), "mujoco")}.get(kind)
         if needs and (plant.kind not in needs[0] or plant.backend != needs[1]):
             kinds = " or ".join(repr(k) for k in needs[0])
             raise t.fail("kind", f"used only with plant.kind = {kinds} on backend {needs[1]!r}", kind)

@@ -63,7 +63,7 @@ TOP_LEVEL = ("schema_version", "name", "description", "reference", "events") + t
 _KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
 
 # plant.kind -> (output y, control u) units; first_order has neither.
-PLANT_UNITS = {"heave": ("m", "N"), "arm": ("rad", "N·m")}
+PLANT_UNITS = {"heave": ("m", "N"), "arm": ("rad", "N·m"), "ship": ("rad", "rad")}
 _OUTPUT_METRICS = ("rms_tracking_error", "rms_tracking_error_tail", "max_abs_tracking_error_tail")
 _CONTROL_METRICS = ("control_rms", "control_total_variation")
 _KEY_UNITS = {"plant.payload_mass": "kg", "plant.density": "kg/m³", "plant.viscosity": "Pa·s",
