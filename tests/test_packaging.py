@@ -9,13 +9,13 @@ import re
 import shutil
 import subprocess
 import sys
-import sysconfig
 import tomllib
 import zipfile
 from importlib.metadata import version
 from pathlib import Path
 
 import pytest
+from clean_env import make_venv, pip_install
 from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 
@@ -109,16 +109,10 @@ def test_the_wheel_holds_every_bundled_file_and_the_license(wheel):
 @pytest.fixture(scope="module")
 def installed(wheel, tmp_path_factory) -> Path:
     """A fresh virtual environment with the wheel installed (not editable, nothing from the checkout).
-    Third-party dependencies are shared read-only from the test environment through a .pth file, so
-    nothing is downloaded; that environment's own adaptive-mj (an editable install) is not on the path."""
+    Third-party dependencies are shared read-only from the test environment (tests/clean_env.py: not its
+    own adaptive-mj, an editable install, nor any plugin), so nothing is downloaded."""
     root = tmp_path_factory.mktemp("wheel_env")
-    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(root)], check=True, timeout=300)
-    python = root / "bin" / "python"
-    purelib = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                                  check=True, capture_output=True, text=True).stdout.strip())
-    (purelib / "_shared_dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
-    subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps", "--no-index",
-                    str(wheel)], check=True, timeout=300, capture_output=True)
+    pip_install(make_venv(root), str(wheel))
     return root
 
 
