@@ -286,7 +286,7 @@ PLAIN_PROGRESS_EVERY = 5.0  # s between progress lines when stderr is not a term
 
 class Progress:
     """Progress on stderr: runs done (and how many of them failed: any status but ok), runs
-    retried, and the rate. On a terminal a tqdm bar redrawn in place after each run (the counts and
+    retried, and the rate. On a terminal a tqdm bar redrawn in place as runs finish (the counts and
     the last run in its postfix); otherwise (a file, a pipe, CI) a plain line at most every
     PLAIN_PROGRESS_EVERY seconds and one at the end, so redirected output holds no carriage returns.
     Call it with each JobResult; `retried(job, why)` counts a run submitted again (the Ray backend,
@@ -318,8 +318,8 @@ class Progress:
         now = self.clock()
         last = f"last: {result.job.tag or result.job.scenario.stem} ({result.status})"
         if self._bar is not None:
-            self._bar.set_postfix_str(f"{self._extra().lstrip(', ')}{'; ' if self._extra() else ''}{last}",
-                                      refresh=False)
+            extra = self._extra().lstrip(", ")  # "failed 1, retried 2" or ""
+            self._bar.set_postfix_str(f"{extra}; {last}" if extra else last, refresh=False)
             self._bar.update(1)
             if self.n >= self.total:
                 self._bar.close()
