@@ -7,11 +7,11 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from clean_env import make_venv, pip_install, shared_site_packages
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "emod_law"
@@ -108,26 +108,30 @@ def env(tmp_path_factory):
     """A clean virtual environment: adaptive-mj installed (editable, from this checkout), the example
     plugin built from its own folder and installed by pip, plus a plant plugin and a law numba
     cannot compile. Third-party dependencies (mujoco, numba, ...) are shared read-only from the
-    test environment through a .pth file, so nothing is downloaded."""
+    test environment, without its adaptive-mj or any plugin installed there (tests/clean_env.py),
+    so nothing is downloaded and the plugins seen are exactly these."""
     root = tmp_path_factory.mktemp("clean_env")
-    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(root)], check=True, timeout=300)
-    python = root / "bin" / "python"
-    purelib = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                                  check=True, capture_output=True, text=True).stdout.strip())
-    import sysconfig
-
-    (purelib / "_shared_dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    python = make_venv(root)
     probe = subprocess.run([str(python), "-c", "import adaptive_mj"], capture_output=True, text=True, cwd=root)
     assert probe.returncode != 0  # clean: adaptive-mj is not there until pip installs it
     broken = _package(tmp_path_factory.mktemp("broken_plugin"), "broken_law", BROKEN, "broken-law", "0.0.1",
                       "adaptive_mj.laws", "broken = \"broken_law:LAW\"")
     cart = _package(tmp_path_factory.mktemp("cart_plant"), "cart_plant", CART, "cart-plant", "0.2.0",
                     "adaptive_mj.plants", "cart = \"cart_plant:PLANT\"")
-    subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q", "--no-deps",
-                    "--no-build-isolation", "-e", str(REPO), str(EXAMPLE), str(broken), str(cart)],
-                   check=True, timeout=600)
+    pip_install(python, "--no-build-isolation", "-e", str(REPO), str(EXAMPLE), str(broken), str(cart))
+    purelib = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                                  check=True, capture_output=True, text=True).stdout.strip())
     (purelib / "cart.xml").write_text(CART_XML)  # beside the module, as a package would ship it
     return {"python": python, "purelib": purelib}
+
+
+@pytest.fixture(scope="module")
+def bare(tmp_path_factory) -> Path:
+    """A clean virtual environment with adaptive-mj and no plugin at all, whatever the interpreter
+    running the tests has installed (a user who followed docs/ADDING_A_LAW.md has emod there)."""
+    python = make_venv(tmp_path_factory.mktemp("bare_env"))
+    pip_install(python, "--no-build-isolation", "-e", str(REPO))
+    return python
 
 
 @pytest.fixture(scope="module")
@@ -159,7 +163,7 @@ def test_list_laws_shows_where_each_comes_from(site):
     assert "sliding_adaptive" in r.stdout and "built in" in r.stdout
 
 
-def test_run_then_replay_verify_is_bit_identical_and_the_log_names_the_plugin(site, tmp_path):
+def test_run_then_replay_verify_is_bit_identical_and_the_log_names_the_plugin(site, bare, tmp_path):
     log = tmp_path / "emod.mcap"
     r = cli(site, "run", str(SCENARIO), "-o", str(log), "--set", "simulation.duration=2", "--json")
     assert r.returncode == 0, r.stderr
@@ -175,7 +179,7 @@ def test_run_then_replay_verify_is_bit_identical_and_the_log_names_the_plugin(si
     # without the plugin installed, verify says so instead of failing on the scenario
     env = dict(os.environ, MUJOCO_GL="egl")
     env.pop("PYTHONPATH", None)
-    r = subprocess.run([sys.executable, "-m", "adaptive_mj", "replay", str(log), "--verify"], capture_output=True,
+    r = subprocess.run([str(bare), "-m", "adaptive_mj", "replay", str(log), "--verify"], capture_output=True,
                        text=True, env=env, cwd=REPO, timeout=600)
     assert "the log's law plugin 'emod' (adaptive-mj-emod-law 0.1.0) is not installed" in r.stdout + r.stderr
 
@@ -304,3 +308,27 @@ def test_native_path_runs_a_plant_plugin(on_path, tmp_path):
     traj = execute(load(scn_path, overrides=["simulation.duration=0.5"])).trajectory
     assert traj.meta["native"] is True and traj.status == "ok"
     assert build(load(scn_path)).plant.true_theta().tolist() == [2.0, 4.0]
+
+
+def test_a_clean_environment_sees_no_plugin_of_the_test_environment(tmp_path):
+    """shared_site_packages hides adaptive-mj and every distribution registering a plugin (here a fake
+    site-packages holding a law plugin, an editable plant plugin and an ordinary dependency) and keeps the rest."""
+    site = tmp_path / "site"
+    for dist, files, entry_points in [
+            ("some_dep-1.0", ["some_dep/__init__.py"], ""),
+            ("my_law-0.1", ["my_law.py"], "[adaptive_mj.laws]\nmine = my_law:LAW\n"),
+            ("my_plant-0.1", ["__editable__.my_plant-0.1.pth", "__editable___my_plant_finder.py"],
+             "[adaptive_mj.plants]\nmine = my_plant:PLANT\n"),
+            ("adaptive_mj-9.0", ["adaptive_mj/__init__.py"], "")]:
+        info = site / f"{dist}.dist-info"
+        info.mkdir(parents=True)
+        name, version = dist.split("-")
+        (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: {version}\n")
+        (info / "entry_points.txt").write_text(entry_points)
+        (info / "RECORD").write_text("".join(f"{f},,\n" for f in [*files, f"{info.name}/RECORD"]))
+        for f in files:
+            (site / f).parent.mkdir(parents=True, exist_ok=True)
+            (site / f).write_text("")
+    shared = shared_site_packages(tmp_path / "shared", sources=[str(site)])
+    assert sorted(p.name for p in shared.iterdir()) == ["some_dep", "some_dep-1.0.dist-info"]
+    assert all(p.is_symlink() for p in shared.iterdir())

@@ -676,30 +676,48 @@ def test_a_signal_during_write_rows_is_raised_after_the_whole_block(tmp_path):
     assert_rows_equal(run.trajectory, rows, slice(0, 2000, LOG_EVERY))
 
 
-def test_batched_message_writing_gives_the_same_bytes_as_mcap_add_message(tmp_path):
-    """record._add_messages (the fast path) writes exactly what Writer.add_message would."""
+def test_batched_message_writing_gives_the_same_bytes_as_mcap_add_message(tmp_path, monkeypatch):
+    """The fast chunk writer (adaptive_mj/log/fast_mcap.py, for the mcap it was written for) and mcap's
+    public Writer.add_message (any other mcap) write the same file, byte for byte, hence the same messages."""
     import adaptive_mj.log.record as record_mod
+    from adaptive_mj.log import fast_mcap
 
     rows = synthetic(2500)
     header = make_header()
-    fast = tmp_path / "fast.mcap"
-    rec = Recorder(fast, header)
-    write_block(rec, rows, 0, 1300)
-    write_block(rec, rows, 1300, 2500)
-    rec.close("ok", "", {"x": 1})
-
-    def reference(writer, batch):
-        for channel_id, ns, data in batch:
-            writer.add_message(channel_id, ns, data, ns)
-
-    original = record_mod._add_messages
-    record_mod._add_messages = reference
-    try:
-        slow = tmp_path / "slow.mcap"
-        rec = Recorder(slow, header)
+    paths = {}
+    for name, writer in (("fast", fast_mcap.add_messages_fast), ("public", fast_mcap.add_messages_public)):
+        monkeypatch.setattr(record_mod, "_add_messages", writer)
+        paths[name] = tmp_path / f"{name}.mcap"
+        rec = Recorder(paths[name], header)
         write_block(rec, rows, 0, 1300)
+        rec.write_event(0.5, "payload_swap", mass=2.0)  # Writer.add_message between two batches
         write_block(rec, rows, 1300, 2500)
         rec.close("ok", "", {"x": 1})
-    finally:
-        record_mod._add_messages = original
-    assert fast.read_bytes() == slow.read_bytes()
+    messages = {}
+    for name, path in paths.items():
+        assert_rows_equal(read_log(path).trajectory, rows, slice(0, 2500, LOG_EVERY))
+        with open(path, "rb") as f:
+            messages[name] = [(ch.topic, m.log_time, m.publish_time, m.sequence, m.data)
+                              for _, ch, m in make_reader(f).iter_messages()]
+    assert len(messages["fast"]) == 6 * 250 + 2 and messages["fast"] == messages["public"]
+    assert paths["fast"].read_bytes() == paths["public"].read_bytes()
+
+
+def test_the_fast_writer_is_taken_only_on_the_mcap_it_was_written_for():
+    from importlib.metadata import version
+
+    from adaptive_mj.log import fast_mcap, record
+
+    assert fast_mcap.writer_for(fast_mcap.WRITTEN_FOR) is fast_mcap.add_messages_fast
+    for other in ("1.5.0", "1.6.1", "1.7.0", "2.0.0"):
+        assert fast_mcap.writer_for(other) is fast_mcap.add_messages_public
+    assert record._add_messages is fast_mcap.writer_for(version("mcap"))
+    assert record._add_messages is fast_mcap.add_messages_fast  # constraints.txt pins the mcap it was written for
+
+
+def test_only_the_fast_writer_touches_mcap_internals():
+    from pathlib import Path
+
+    package = Path(record.__file__).resolve().parents[1]
+    hits = [p.relative_to(package).as_posix() for p in package.rglob("*.py") if "_Writer__" in p.read_text()]
+    assert hits == ["log/fast_mcap.py"]

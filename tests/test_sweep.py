@@ -319,10 +319,16 @@ def test_progress_is_plain_lines_when_not_a_terminal():
     lines = pipe.getvalue().splitlines()
     assert "\r" not in pipe.getvalue() and len(lines) == 2
     assert lines[0].startswith("3/5 runs done, 34.0/min after 5 s") and lines[1].startswith("5/5 runs")
-    term = Terminal()
+    term = Terminal()  # on a terminal: a tqdm bar redrawn in place, closed with a newline after the last run
     update = progress_printer(2, stream=term)
     update(JobResult(job, "ok", None))
-    assert term.getvalue().startswith("\r[")
+    update.retried(job, "its worker died")
+    update(JobResult(job, "diverged", None))
+    out = term.getvalue()
+    assert out.startswith("\rruns:") and out.endswith("\n") and out.count("\n") == 2
+    assert "\rretrying run: its worker died\n" in out  # a line of its own, above the bar
+    final = out.rstrip("\n").rsplit("\r", 1)[1]
+    assert "100%" in final and "2/2" in final and "failed 1, retried 1; last: run (diverged)" in final
 
 
 def test_sweep_notes_what_the_grid_will_not_do():

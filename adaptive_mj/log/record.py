@@ -31,16 +31,14 @@ import functools
 import json
 import math
 import os
-import struct
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
-from mcap.opcode import Opcode
-from mcap.records import MessageIndex
-
+# the batch writer: fast on the mcap it was written for, mcap's public Writer API on any other
+from adaptive_mj.log.fast_mcap import add_messages as _add_messages
 from adaptive_mj.sim.interrupt import deferred
 
 # 5: ctrl_range, joint_limits and embedded_sha256 (checked on every read) in the header;
@@ -581,61 +579,3 @@ class Recorder:
             # The original exception matters more; the file keeps its flushed prefix.
             self._file.close()
 
-
-class _PackedMessageIndex(MessageIndex):
-    """mcap's MessageIndex, serialised with one struct.pack instead of two calls per entry
-    (same bytes: channel u16, byte length u32, then (log_time u64, offset u64) pairs)."""
-
-    def write(self, stream) -> None:
-        stream.start_record(Opcode.MESSAGE_INDEX)
-        stream.write2(self.channel_id)
-        stream.write4(len(self.records) * 16)
-        flat = [v for pair in self.records for v in pair]
-        stream.write(struct.pack(f"<{len(flat)}Q", *flat))
-        stream.finish_record()
-
-
-_MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log_time, publish_time
-_OPCODE_MESSAGE = 0x05
-
-
-def _add_messages(writer: Writer, batch: list[tuple[int, int, bytes]]) -> None:
-    """Writer.add_message for many (channel_id, time_ns, data) at once (publish_time = log_time).
-
-    mcap 1.6.0's add_message costs ~3 µs per message in pure Python (a dataclass, a dozen
-    small writes and struct calls). This writes the same Message records into the open
-    chunk with one pack per message and updates the same chunk index and statistics, then
-    lets the writer finish the chunk if it is full. It relies on the pinned mcap 1.6.0's
-    Writer internals; tests/test_record.py and the independent @mcap/core reader check the
-    files, and on any other writer it falls back to add_message.
-    """
-    if not batch:
-        return
-    stats = getattr(writer, "_Writer__statistics", None)
-    chunk = getattr(writer, "_Writer__chunk_builder", None)
-    finalize = getattr(writer, "_Writer__maybe_finalize_chunk", None)
-    if stats is None or chunk is None or finalize is None:
-        for channel_id, ns, data in batch:
-            writer.add_message(channel_id, ns, data, ns)
-        return
-    buf = chunk.record_writer._buffer
-    pack = _MESSAGE_HEAD.pack
-    indices = chunk.message_indices
-    counts = stats.channel_message_counts
-    lo = min(ns for _, ns, _ in batch)
-    hi = max(ns for _, ns, _ in batch)
-    for channel_id, ns, data in batch:
-        index = indices.get(channel_id)
-        if index is None:
-            index = indices[channel_id] = _PackedMessageIndex(channel_id=channel_id, records=[])
-        index.records.append((ns, buf.tell()))
-        buf.write(pack(_OPCODE_MESSAGE, 22 + len(data), channel_id, 0, ns, ns))
-        buf.write(data)
-        counts[channel_id] += 1
-    chunk.message_start_time = lo if chunk.num_messages == 0 else min(chunk.message_start_time, lo)
-    chunk.message_end_time = max(chunk.message_end_time, hi)
-    chunk.num_messages += len(batch)
-    stats.message_start_time = lo if stats.message_count == 0 else min(stats.message_start_time, lo)
-    stats.message_end_time = max(stats.message_end_time, hi)
-    stats.message_count += len(batch)
-    finalize()

@@ -24,6 +24,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from adaptive_mj.data import MODELS, PAYLOADS
 from adaptive_mj.errors import ModelError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant, ModelSource
@@ -31,9 +32,7 @@ from adaptive_mj.plants.attach import compose
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path, with_userdata,
                                              find_joint_and_actuator, scale_body_mass, spec_from_text)
 
-MODELS = Path(__file__).resolve().parents[2] / "models"
 MODEL_PATH = MODELS / "pendulum_arm.xml"
-PAYLOADS = MODELS / "payloads"
 THETA_NAMES = ("J", "b", "g_sin", "g_cos")
 
 

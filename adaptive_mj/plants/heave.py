@@ -34,13 +34,14 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from adaptive_mj.data import MODELS
 from adaptive_mj.errors import ModelError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path,
                                              find_joint_and_actuator, read_model_file)
 
-MODEL_PATH = Path(__file__).resolve().parents[2] / "models" / "heave_vehicle.xml"
+MODEL_PATH = MODELS / "heave_vehicle.xml"
 THETA_NAMES = ("d", "b", "c")
 THETA_NAMES_LAG = ("tau_d", "tau_b", "d", "b", "c")
 

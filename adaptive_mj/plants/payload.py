@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
+from adaptive_mj.data import PAYLOADS
 from adaptive_mj.errors import ModelError
 
-PAYLOADS = Path(__file__).resolve().parents[2] / "models" / "payloads"
 SWAP_BODY = "body"  # the body of a payload file whose inertial a payload_swap takes
 
 #: key prefix of a payload_swap file's text in a run's ModelSource.assets (and so in its log): a log

@@ -15,12 +15,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from adaptive_mj.data import MODELS as MODELS_DIR, SCENARIOS as SCENARIOS_DIR
 from adaptive_mj.errors import ScenarioError
 
 SCHEMA_VERSION = 1
-REPO = Path(__file__).resolve().parents[2]
-MODELS_DIR = REPO / "models"
-SCENARIOS_DIR = REPO / "scenarios"
 
 PLANT_KINDS = ("heave", "arm", "first_order", "manipulator", "ship")
 BACKENDS = ("mujoco", "twin")

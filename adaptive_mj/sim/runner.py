@@ -26,8 +26,14 @@ from adaptive_mj.setup.success import Criteria, criteria, judge
 from adaptive_mj.sim import preflight
 from adaptive_mj.trajectory import Trajectory
 
-# Run outputs: the repository's logs/ (ignored by git), or $ADAPTIVE_MJ_LOGS.
-LOGS_DIR = Path(os.environ.get("ADAPTIVE_MJ_LOGS") or Path(__file__).resolve().parents[2] / "logs")
+# Run outputs: logs/ under the current directory (in the repository, its logs/, ignored by git), or
+# $ADAPTIVE_MJ_LOGS; read when a run needs it (default_logs_dir()). A Path set here replaces both.
+LOGS_DIR: Path | None = None
+
+
+def default_logs_dir() -> Path:
+    """The folder new logs and study folders go to by default (absolute: LOGS_DIR, $ADAPTIVE_MJ_LOGS or ./logs)."""
+    return Path(LOGS_DIR or os.environ.get("ADAPTIVE_MJ_LOGS") or "logs").absolute()
 
 
 @dataclass(frozen=True)
@@ -71,7 +77,7 @@ def reserve_log_path(scn: Scenario, *, out: Path | None = None, directory: Path 
         if not out.exists():
             out.write_bytes(b"")
         return out
-    directory = Path(directory) if directory is not None else LOGS_DIR
+    directory = Path(directory) if directory is not None else default_logs_dir()
     directory.mkdir(parents=True, exist_ok=True)
     stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
     stem = f"{scn.name}-{stamp}-seed{scn.noise.seed}"
@@ -137,14 +143,14 @@ def _plant_plugin(scn: Scenario) -> dict | None:
 
 def new_output_dir(requested: Path | None, name: str, *, logs_dir: Path | None = None) -> Path:
     """A folder for a bench or sweep: `requested` if new or empty (created), else a new
-    <logs_dir>/<name>-<UTC time>[-i] that no earlier run used (logs_dir: LOGS_DIR)."""
+    <logs_dir>/<name>-<UTC time>[-i] that no earlier run used (logs_dir: default_logs_dir())."""
     if requested is not None:
         out = Path(requested)
         if out.exists() and (not out.is_dir() or any(out.iterdir())):
             raise AdaptiveMJError(f"{out}: exists and is not an empty folder; choose a new -o DIR")
         out.mkdir(parents=True, exist_ok=True)
         return out
-    logs_dir = Path(logs_dir) if logs_dir is not None else LOGS_DIR
+    logs_dir = Path(logs_dir) if logs_dir is not None else default_logs_dir()
     logs_dir.mkdir(parents=True, exist_ok=True)
     stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
     for i in range(10_000):

@@ -286,10 +286,11 @@ PLAIN_PROGRESS_EVERY = 5.0  # s between progress lines when stderr is not a term
 
 class Progress:
     """Progress on stderr: runs done (and how many of them failed: any status but ok), runs
-    retried, and the rate. On a terminal a bar redrawn in place after each run; otherwise (a
-    file, a pipe, CI) a plain line at most every PLAIN_PROGRESS_EVERY seconds and one at the end,
-    so redirected output holds no carriage returns. Call it with each JobResult; `retried(job, why)`
-    counts a run submitted again (the Ray backend, when a worker died)."""
+    retried, and the rate. On a terminal a tqdm bar redrawn in place as runs finish (the counts and
+    the last run in its postfix); otherwise (a file, a pipe, CI) a plain line at most every
+    PLAIN_PROGRESS_EVERY seconds and one at the end, so redirected output holds no carriage returns.
+    Call it with each JobResult; `retried(job, why)` counts a run submitted again (the Ray backend,
+    when a worker died)."""
 
     def __init__(self, total: int, *, label: str = "runs", stream=None, clock: Callable[[], float] | None = None):
         self.total, self.label = total, label
@@ -298,30 +299,43 @@ class Progress:
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
         self.n = self.failed = self.n_retried = 0
         self.t0 = self.last = self.clock()
+        self._bar = None
+        if self.tty:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, desc=label, unit="run", file=self.stream, dynamic_ncols=True, leave=True)
 
     def _counts(self, now: float) -> str:
         rate = 60.0 * self.n / (now - self.t0) if now > self.t0 else 0.0
-        extra = "".join(f", {k} {v}" for k, v in (("failed", self.failed), ("retried", self.n_retried)) if v)
-        return f"{self.n}/{self.total} {self.label} done{extra}, {rate:.1f}/min"
+        return f"{self.n}/{self.total} {self.label} done{self._extra()}, {rate:.1f}/min"
+
+    def _extra(self) -> str:
+        return "".join(f", {k} {v}" for k, v in (("failed", self.failed), ("retried", self.n_retried)) if v)
 
     def __call__(self, result: JobResult) -> None:
         self.n += 1
         self.failed += result.status != "ok"
         now = self.clock()
         last = f"last: {result.job.tag or result.job.scenario.stem} ({result.status})"
-        if self.tty:
-            bar = "#" * min(30, int(30 * self.n / max(1, self.total)))
-            self.stream.write(f"\r[{bar:<30s}] {self._counts(now)}  {last}".ljust(110)[:110])
-            if self.n == self.total:
-                self.stream.write("\n")
-        elif self.n == self.total or now - self.last >= PLAIN_PROGRESS_EVERY:
+        if self._bar is not None:
+            extra = self._extra().lstrip(", ")  # "failed 1, retried 2" or ""
+            self._bar.set_postfix_str(f"{extra}; {last}" if extra else last, refresh=False)
+            self._bar.update(1)
+            if self.n >= self.total:
+                self._bar.close()
+            return
+        if self.n == self.total or now - self.last >= PLAIN_PROGRESS_EVERY:
             self.last = now
             self.stream.write(f"{self._counts(now)} after {now - self.t0:.0f} s; {last}\n")
         self.stream.flush()
 
     def retried(self, job: Job, why: str) -> None:
         self.n_retried += 1
-        self.stream.write(("\n" if self.tty else "") + f"retrying {job.tag or job.scenario.stem}: {why}\n")
+        line = f"retrying {job.tag or job.scenario.stem}: {why}"
+        if self._bar is not None:
+            self._bar.write(line, file=self.stream)  # above the bar, which is redrawn below it
+            return
+        self.stream.write(line + "\n")
         self.stream.flush()
 
 
