@@ -140,23 +140,9 @@ def _backend_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _scenario_path(arg: str) -> Path:
-    from adaptive_mj.setup.scenario import SCENARIOS_DIR
+    from adaptive_mj.study.api import scenario_path
 
-    path = Path(arg)
-    if not path.exists() and "/" not in arg:
-        bundled = SCENARIOS_DIR / (arg if arg.endswith(".toml") else f"{arg}.toml")
-        if bundled.exists():
-            return bundled
-        if arg.endswith(".toml"):  # a file name: the loader says it is not found
-            return path
-        import difflib
-
-        names = sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
-        close = difflib.get_close_matches(Path(arg).stem, names, n=1, cutoff=0.6)
-        hint = f"did you mean {close[0]!r}? " if close else ""
-        raise ScenarioError(f"{arg}: no such scenario file, nor a bundled scenario ({hint}`adaptive-mj list` shows "
-                            "the bundled ones)")
-    return path
+    return scenario_path(arg)
 
 
 def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, note: str = "",
@@ -346,6 +332,40 @@ def _time_range(text: str | None) -> tuple[float, float] | None:
     return t0, t1
 
 
+def _study(args):
+    """`bench`, `sweep` and `stress`: the parsed options handed to adaptive_mj.study.api, which checks them."""
+    from adaptive_mj.study import api
+
+    where = dict(backend=args.backend, jobs=args.jobs, address=args.address, ray_logs=args.ray_logs,
+                 retries=args.retries, engine=args.engine)
+    if args.command == "bench":
+        return api.bench(quick=args.quick, scenarios=[_scenario_path(p) for p in args.scenario], out=args.output,
+                         **where)
+    if args.command == "stress":
+        return api.stress(seeds=args.seeds, steps=args.steps, duration=args.duration, composite=args.composite,
+                          out=args.output, **where)
+    if args.breaking_point:  # sweep --breaking-point: one key bisected instead of a grid
+        if args.grid:
+            raise ScenarioError("--breaking-point and --grid cannot be combined (one stressor at a time)")
+        if args.logs == "summary" or args.resume is not None:
+            raise ScenarioError("--logs summary writes no logs, and --resume and --breaking-point read the runs' logs "
+                                "back; leave out --logs summary" if args.logs == "summary" else
+                                "--resume is for a grid sweep; --breaking-point starts a new search")
+        return api.breaking_point(_scenario_path(args.scenario), key=args.breaking_point, tail_bound=args.tail_bound,
+                                  seeds=args.seeds, steps=args.steps, overrides=args.overrides, out=args.output,
+                                  **where)
+    return api.sweep(_scenario_path(args.scenario), grid=args.grid, seeds=args.seeds, overrides=args.overrides,
+                     metrics=args.metric, out=args.output, resume=args.resume, logs=args.logs, **where)
+
+
+def _print_study(study) -> int:
+    """A study's result on stdout, its notes (metrics no run has, runs not ok) on stderr; the exit code."""
+    print(study.text)
+    for note in study.notes:
+        print(note, file=sys.stderr)
+    return study.exit_code
+
+
 def main(argv: list[str] | None = None) -> int:
     from adaptive_mj.sim.interrupt import stop_on_signals
 
@@ -375,29 +395,8 @@ def _before_exit() -> None:
 
 def _dispatch(args) -> int:
     try:
-        if args.command == "bench":
-            from adaptive_mj.setup import scenario as sc
-            from adaptive_mj.study.bench import main_bench
-
-            args.scenario = [_scenario_path(p) for p in args.scenario]
-            for p in args.scenario:  # a bad one fails now, with one line, before anything runs
-                sc.load(p)
-
-            return main_bench(args)
-        if args.command == "sweep":
-            from adaptive_mj.study.sweep import main_sweep
-
-            args.scenario = _scenario_path(args.scenario)
-            return main_sweep(args)
-        if args.command == "stress":
-            from adaptive_mj.study.stress import main_stress
-
-            for name, lowest in (("seeds", 1), ("steps", 0), ("jobs", 1)):
-                if getattr(args, name) < lowest:
-                    raise ScenarioError(f"--{name} must be an integer >= {lowest}, got {getattr(args, name)}")
-            if not args.duration > 0:
-                raise ScenarioError(f"--duration must be > 0 [s], got {args.duration}")
-            return main_stress(args)
+        if args.command in ("bench", "sweep", "stress"):
+            return _print_study(_study(args))
         return {"list": cmd_list, "run": cmd_run, "replay": cmd_replay}[args.command](args)
     except AdaptiveMJError as exc:
         if args.debug:

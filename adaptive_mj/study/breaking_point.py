@@ -23,6 +23,8 @@ the study takes (2 + steps) batches whatever its size. Every run's MCAP log is k
 """
 from __future__ import annotations
 
+from adaptive_mj.study import callable_module
+
 import math
 import re
 from dataclasses import dataclass, field
@@ -272,3 +274,6 @@ def margin_text(m: Margin) -> str:
     if m.first_fail is None:
         return f"≥ {st.hi:g}{unit}"
     return f"{m.margin:.3g}{unit} (next {m.first_fail:.3g})"
+
+
+callable_module(__name__)  # adaptive_mj.study.breaking_point(...) calls adaptive_mj.study.api.breaking_point(...)

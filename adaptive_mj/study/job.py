@@ -199,25 +199,41 @@ class Backend:
 
     @classmethod
     def from_args(cls, args) -> "Backend":
-        """The Backend a command line asks for (--jobs, --backend, --address, --ray-logs, --retries;
-        absent ones at their defaults); a Ray option without --backend ray is refused with one line."""
+        """The Backend a command line asks for (--jobs, --backend, --address, --ray-logs, --retries,
+        --engine; absent ones at their defaults), checked by `checked`."""
+        return cls.checked(getattr(args, "backend", "local"), jobs=args.jobs, address=getattr(args, "address", None),
+                           logs=getattr(args, "ray_logs", "bytes"), retries=getattr(args, "retries", 3),
+                           engine=getattr(args, "engine", "process"))
+
+    @classmethod
+    def checked(cls, kind: str = "local", *, jobs: int | None = None, address: str | None = None,
+                logs: str = "bytes", retries: int = 3, engine: str = "process") -> "Backend":
+        """The one place a backend's options are checked (the command line's and the Python API's,
+        adaptive_mj.study.api): a Ray option without kind "ray" is refused with one line, as are a
+        bad count or choice; jobs None: every core."""
+        import os
+
         from adaptive_mj.errors import ScenarioError
 
-        kind = getattr(args, "backend", "local")
-        address, logs, retries = (getattr(args, "address", None), getattr(args, "ray_logs", "bytes"),
-                                  getattr(args, "retries", 3))
+        for opt, value, choices in (("--backend", kind, ("local", "ray")), ("--ray-logs", logs, ("bytes", "shared")),
+                                    ("--engine", engine, ("process", "batch"))):
+            if value not in choices:
+                raise ScenarioError(f"{opt} must be one of {', '.join(choices)}, got {value!r}")
         if kind != "ray":
             for opt, value, default in (("--address", address, None), ("--ray-logs", logs, "bytes")):
                 if value != default:
                     raise ScenarioError(f"{opt} is for --backend ray (this command runs on --backend {kind})")
-        if retries < 0:
+        if jobs is None:
+            jobs = os.cpu_count() or 1
+        if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+            raise ScenarioError(f"--jobs must be an integer >= 1, got {jobs}")
+        if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
             raise ScenarioError(f"--retries must be an integer >= 0, got {retries}")
-        engine = getattr(args, "engine", "process")
         if engine == "batch" and kind == "ray":
             raise ScenarioError("--engine batch runs in this process on mujoco.batch; it is for --backend local")
         if kind == "ray":
             ray_module()  # not installed: one line now, before any folder is made
-        return cls(kind=kind, jobs=max(1, args.jobs), address=address, logs=logs, retries=retries, engine=engine)
+        return cls(kind=kind, jobs=jobs, address=address, logs=logs, retries=retries, engine=engine)
 
 
 def ray_module():

@@ -32,6 +32,8 @@ seconds. Composite adaptation runs under continuous control only: n/a for the co
 """
 from __future__ import annotations
 
+from adaptive_mj.study import callable_module
+
 import math
 import time
 from dataclasses import dataclass
@@ -42,6 +44,7 @@ import numpy as np
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.breaking_point import TAIL_BOUND, Margin, Search, Stressor, margin_text, search_all
+from adaptive_mj.study.result import Study
 
 # TAIL_BOUND (breaking_point, shared with the bench): [m], [rad]: tail RMS above this is a failure
 NOMINAL_NOISE = {"heave": 5e-4, "arm": 5e-4, "ur5e": 1e-4}  # σ_y [m], [rad]; σ_y' = 10 σ_y [per s]
@@ -267,18 +270,20 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
     return margins, text, wall
 
 
-def main_stress(args) -> int:
+def run_stress(*, seeds: int, steps: int, duration: float, composite: bool, out: Path | None, backend) -> Study:
+    """The study with options adaptive_mj.study.api.stress has checked: report.md, report.html and
+    margins.csv in `out` (default a new logs/stress-...)."""
+    from adaptive_mj.report.html import write_html
     from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.study.parallel import session
 
-    from adaptive_mj.study.parallel import Backend, session
-
-    backend = Backend.from_args(args)  # a bad option fails before any folder is made
-    out = new_output_dir(args.output, "stress")
+    out = new_output_dir(out, "stress")
     with session(backend):
-        margins, text, wall = run_study(out, seeds=args.seeds, steps=args.steps, composite=args.composite,
-                                        n_jobs=max(1, args.jobs), duration=args.duration, backend=backend)
+        margins, text, wall = run_study(out, seeds=seeds, steps=steps, composite=composite,
+                                        n_jobs=backend.jobs, duration=duration, backend=backend)
     report = "# adaptive-mj breaking points\n\n" + text + "\n"
     (out / "report.md").write_text(report, encoding="utf-8")
+    html = write_html(out / "report.md")  # report.html: the same text, for a browser
     rows = []
     for m in margins:
         st = m.stats()
@@ -290,6 +295,9 @@ def main_stress(args) -> int:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    print(text)
-    print(f"\nreport: {out / 'report.md'}  ({wall:.0f} s)")
-    return 0
+    return Study("stress", out, 0, out / "report.md", html,
+                 text + f"\n\nreport: {out / 'report.md'}  ({wall:.0f} s)\nhtml: {html}",
+                 info={"seconds": wall}, load_rows=lambda: rows)
+
+
+callable_module(__name__)  # adaptive_mj.study.stress(...) calls adaptive_mj.study.api.stress(...)
