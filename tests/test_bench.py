@@ -44,6 +44,9 @@ def test_quick_bench_on_a_reduced_catalogue(tmp_path, small_catalogue, capsys):
     for fig in ("first_order", "phase_portrait", "payload_swap"):
         assert (out / "figures" / f"{fig}.png").stat().st_size > 10_000
         assert f"figures/{fig}.png" in report
+    html = (out / "report.html").read_text()  # the same report for a browser: every figure embedded
+    assert html.count('src="data:image/png;base64,') == 3 and "not found" not in html
+    assert "<td>first-order</td>" in html and "diverged run: diverged" in html
     summary = json.loads((out / "summary.json").read_text())
     assert summary["diverge/lecture_heave"]["status"] == "diverged"
     # cut to 1 s, the lecture's first-order run has not converged: its verdict says so, the section still reports it

@@ -30,3 +30,15 @@ class CallableModule(types.ModuleType):
 def callable_module(name: str) -> None:
     """Make the module `name` (one of sweep, breaking_point, stress, bench) callable (CallableModule)."""
     sys.modules[name].__class__ = CallableModule
+
+
+COMMANDS = ("sweep", "breaking_point", "stress", "bench")
+
+
+def __getattr__(name: str):
+    """adaptive_mj.study.sweep (and the other commands) before anything imported that module; Study, Table."""
+    if name in COMMANDS:
+        return importlib.import_module(f"adaptive_mj.study.{name}")
+    if name in ("Study", "Table"):
+        return getattr(importlib.import_module("adaptive_mj.study.result"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

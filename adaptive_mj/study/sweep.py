@@ -517,7 +517,8 @@ def where_text(backend: Backend | None, runs: int) -> str:
     if backend is not None and backend.kind == "ray":
         return f"on Ray ({backend.address or 'started here'}, logs as {backend.logs})"
     jobs = backend.jobs if backend is not None else 1
-    return f"in {min(jobs, max(1, runs))} processes"
+    n = min(jobs, max(1, runs))
+    return f"in {n} process{'es' if n > 1 else ''}"
 
 
 def run_breaking_point(path: Path, *, point: str, tail_bound: float, seeds: int, steps: int,
@@ -831,7 +832,7 @@ def run_sweep(path: Path, *, grid: Sequence[str], seeds: int, overrides: Sequenc
 
     return Study("sweep", out, EXIT_OK if not not_ok else EXIT_FAILED, out / "report.md", html, text, tuple(notes),
                  info={"keys": keys, "metrics": metrics, "counts": counts, "inputs": inputs},
-                 load_rows=load_rows, columns=tuple(present) + ("log",), plotter=plotter)
+                 load_rows=load_rows, columns=tuple(present), plotter=plotter)
 
 
 def sweep_report(inputs: dict[str, Any], table: Sequence[dict[str, Any]], keys: Sequence[str],
