@@ -119,4 +119,4 @@ def test_the_command_modules_stay_modules_and_are_callable():
     assert callable(sweep) and sweep.parse_grid("law.k=1,2", {})[1] == [1, 2]
     assert study.Study is api.Study and study.Table is api.Table
     with pytest.raises(AttributeError, match="has no attribute 'nope'"):
-        study.nope
+        _ = study.nope
