@@ -16,6 +16,10 @@ import importlib
 import sys
 import types
 
+from adaptive_mj.study.result import Study, Table
+
+__all__ = ["Study", "Table", "bench", "breaking_point", "stress", "sweep"]
+
 
 class CallableModule(types.ModuleType):
     """A study command's module that can be called like its API function (adaptive_mj.study.api)."""
@@ -36,9 +40,7 @@ COMMANDS = ("sweep", "breaking_point", "stress", "bench")
 
 
 def __getattr__(name: str):
-    """adaptive_mj.study.sweep (and the other commands) before anything imported that module; Study, Table."""
+    """adaptive_mj.study.sweep (and the other commands) before anything imported that module."""
     if name in COMMANDS:
         return importlib.import_module(f"adaptive_mj.study.{name}")
-    if name in ("Study", "Table"):
-        return getattr(importlib.import_module("adaptive_mj.study.result"), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
