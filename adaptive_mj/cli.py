@@ -67,6 +67,9 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("--video-fps", type=float, metavar="FPS", help="video frames per second (default 30, real time)")
     rp.add_argument("--video-size", metavar="WxH", help="video frame size in pixels (default 800x400)")
     rp.add_argument("--video-range", metavar="T0:T1", help="only simulation times T0..T1 [s], e.g. 18:26")
+    rp.add_argument("--video-groups", metavar="G1,G2,...",
+                    help="the model's geom groups to draw (default: MuJoCo's 0, 1, 2 and the groups of any body whose "
+                         "geoms are all outside them, e.g. a menagerie arm's collision geoms in group 3)")
     b = sub.add_parser("bench", help="run the benchmark catalogue: report.md, figures, logs, summary.json")
     b.add_argument("--quick", action="store_true",
                    help="shorter runs and fewer variants, no breaking-point study (under a minute on 2 cores)")
@@ -294,10 +297,10 @@ def cmd_replay(args) -> int:
 
         plot_run(logged.trajectory, args.plot, title=f"{summary['scenario']} (replay)", kind=kind)
     if args.video:
-        from adaptive_mj.report.video import render_log
+        from adaptive_mj.report.video import parse_groups, render_log
 
         video = render_log(args.log, args.video, fps=args.video_fps, size=args.video_size,
-                           t_range=_time_range(args.video_range))
+                           t_range=_time_range(args.video_range), groups=parse_groups(args.video_groups))
         print(f"video: {video.path} ({video.frames} frames at {video.fps:g} fps, "
               f"{video.size[0]}x{video.size[1]}; rendered at {video.render_rate:.1f} frames/s)",
               file=sys.stderr if args.json else sys.stdout)
@@ -366,10 +369,40 @@ def _print_study(study) -> int:
     return study.exit_code
 
 
+#: MUJOCO_GL -> (the library mujoco's backend loads, the Debian package that ships it)
+GL_LIBRARIES = {"osmesa": ("OSMesa", "libosmesa6"), "egl": ("EGL", "libegl1")}
+
+
+def gl_library_missing(backend: str | None, *, load=None) -> str | None:
+    """One line when MUJOCO_GL names a backend whose library cannot be loaded (mujoco would fail on import
+    with a traceback from PyOpenGL), else None. load(name) opens a shared library (ctypes, by default)."""
+    wanted = GL_LIBRARIES.get((backend or "").strip().lower())
+    if wanted is None:
+        return None
+    import ctypes
+    import ctypes.util
+
+    name, package = wanted
+    if load is None:
+        def load(lib):
+            return ctypes.CDLL(ctypes.util.find_library(lib) or f"lib{lib}.so", mode=ctypes.RTLD_GLOBAL)
+    try:
+        load(name)
+    except OSError:
+        other = "MUJOCO_GL=egl" if name != "EGL" else "MUJOCO_GL=osmesa (Debian package libosmesa6)"
+        return (f"MUJOCO_GL={backend} needs the {name} library (lib{name}.so), which is not installed: install the "
+                f"Debian package {package} (apt-get install {package}), or use {other}")
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     from adaptive_mj.sim.interrupt import stop_on_signals
 
     args = _parser().parse_args(argv)
+    missing = gl_library_missing(os.environ.get("MUJOCO_GL"))
+    if missing:  # before anything imports mujoco, which would end in PyOpenGL's traceback
+        print(f"adaptive-mj: error: {missing}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     try:
         with stop_on_signals():  # SIGINT, SIGTERM: errors.Interrupted, handled in _dispatch
             return _dispatch(args)

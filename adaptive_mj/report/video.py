@@ -24,7 +24,7 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -216,6 +216,43 @@ def _free_camera(model: mujoco.MjModel, q_values: np.ndarray, aspect: float) -> 
     return camera
 
 
+def visible_groups(model: mujoco.MjModel, groups: Sequence[int] | None = None) -> np.ndarray:
+    """(6,) uint8 mjvOption.geomgroup for the video: `groups` if given, else MuJoCo's default groups (0, 1, 2)
+    and the groups of every body whose geoms all lie outside them (menagerie arms keep their collision
+    geoms in group 3 and have no visual ones: MuJoCo's default would show only the payload)."""
+    shown = np.zeros(mujoco.mjNGROUP, dtype=np.uint8)
+    if groups is not None:
+        for g in groups:
+            if not 0 <= int(g) < mujoco.mjNGROUP:
+                raise AdaptiveMJError(f"video geom group {g}: expected 0..{mujoco.mjNGROUP - 1}")
+            shown[int(g)] = 1
+        return shown
+    shown[:] = mujoco.MjvOption().geomgroup
+    by_body: dict[int, set[int]] = {}
+    for body, group in zip(model.geom_bodyid, model.geom_group, strict=True):
+        by_body.setdefault(int(body), set()).add(int(group))
+    for body, body_groups in by_body.items():
+        if body and not any(shown[g] for g in body_groups if 0 <= g < mujoco.mjNGROUP):
+            for g in body_groups:
+                if 0 <= g < mujoco.mjNGROUP:
+                    shown[g] = 1
+    return shown
+
+
+def parse_groups(text: str | None) -> list[int] | None:
+    """--video-groups "0,3" -> [0, 3] (None: chosen from the model, visible_groups)."""
+    if text is None:
+        return None
+    try:
+        groups = [int(g) for g in text.split(",") if g.strip()]
+    except ValueError:
+        groups = []
+    if not groups or not all(0 <= g < mujoco.mjNGROUP for g in groups):
+        raise AdaptiveMJError(f"--video-groups {text!r}: expected geom groups 0..{mujoco.mjNGROUP - 1} separated by "
+                              "commas, e.g. 0,3")
+    return groups
+
+
 @contextlib.contextmanager
 def _headless_gl() -> Iterator[None]:
     """Inside the block, mujoco.Renderer gets an OpenGL context of the MUJOCO_GL backend.
@@ -382,7 +419,8 @@ def _logged(log: str | os.PathLike | LoggedRun) -> tuple[LoggedRun, str]:
 
 def iter_frames(log: str | os.PathLike | LoggedRun, *, fps: float = DEFAULT_FPS,
                 size: tuple[int, int] | str | None = None,
-                t_range: tuple[float, float] | None = None) -> Iterator[np.ndarray]:
+                t_range: tuple[float, float] | None = None,
+                groups: Sequence[int] | None = None) -> Iterator[np.ndarray]:
     """Yield the video's frames, (height, width, 3) uint8 RGB, one per 1/fps of simulation time.
 
     log: a log path or a LoggedRun. size: (width, height) or "WxH"; the MuJoCo
@@ -390,13 +428,14 @@ def iter_frames(log: str | os.PathLike | LoggedRun, *, fps: float = DEFAULT_FPS,
     t_range: (t0, t1) [s] of simulation time to show (default: the whole run).
     Raises LogFormatError (when iteration starts) for a log without a MuJoCo
     model or without rows. Closing the iterator closes the renderer.
+    groups: the geom groups drawn (default: visible_groups of the model).
     """
     logged, where = _logged(log)
-    return _frames(logged, where, fps=fps, size=parse_size(size), t_range=t_range)
+    return _frames(logged, where, fps=fps, size=parse_size(size), t_range=t_range, groups=groups)
 
 
 def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
-            t_range: tuple[float, float] | None) -> Iterator[np.ndarray]:
+            t_range: tuple[float, float] | None, groups: Sequence[int] | None = None) -> Iterator[np.ndarray]:
     width, height = size
     model = _model(logged, where)
     traj = logged.trajectory
@@ -428,6 +467,7 @@ def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
     else:
         qadr, dadr = int(model.jnt_qposadr[0]), int(model.jnt_dofadr[0])
     option, perturb = mujoco.MjvOption(), mujoco.MjvPerturb()
+    option.geomgroup[:] = visible_groups(model, groups)
     label = _Label("green: reference pose q_d" if traj.joint_names else "green: reference y_d", height=height)
     renderer = _renderer(model, scene_w, height)
     try:
@@ -438,7 +478,7 @@ def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
             mujoco.mj_forward(model, data)
             ghost.qpos[qadr] = traj.ref[i, 0]
             mujoco.mj_kinematics(model, ghost)
-            renderer.update_scene(data, camera=camera)
+            renderer.update_scene(data, camera=camera, scene_option=option)
             scene = renderer.scene
             first = scene.ngeom
             mujoco.mjv_addGeoms(model, ghost, option, perturb, mujoco.mjtCatBit.mjCAT_DYNAMIC, scene)
@@ -505,7 +545,7 @@ class _Gif:
 
 def render_log(log: str | os.PathLike | LoggedRun, out: str | os.PathLike, *,
                fps: float | None = None, size: tuple[int, int] | str | None = None,
-               t_range: tuple[float, float] | None = None) -> Video:
+               t_range: tuple[float, float] | None = None, groups: Sequence[int] | None = None) -> Video:
     """Render a logged run to out (.mp4 or .gif); see iter_frames for the arguments.
 
     fps: frames per second of simulation time, played in real time (default
@@ -521,7 +561,7 @@ def render_log(log: str | os.PathLike | LoggedRun, out: str | os.PathLike, *,
     fps = DEFAULT_FPS if fps is None else float(fps)
     width, height = parse_size(size)
     logged, where = _logged(log)
-    frames = _frames(logged, where, fps=fps, size=(width, height), t_range=t_range)
+    frames = _frames(logged, where, fps=fps, size=(width, height), t_range=t_range, groups=groups)
     t = logged.trajectory.t
     span = (float(t[0]), float(t[-1])) if len(t) else (0.0, 0.0)
     if len(t) and t_range is not None:

@@ -498,7 +498,10 @@ def sweep_notes(base, keys: Sequence[str], seeds: int) -> list[str]:
     """What a sweep's grid will not do that its user may expect: seeds that change nothing (no
     noise anywhere in the grid), and a payload mass that an event overrides mid-run."""
     notes = []
-    noisy = any(v > 0 for v in (base.noise.std or {}).values()) or any(k.startswith("noise.std") for k in keys)
+    disturbance = getattr(base, "disturbance", None)
+    noisy = (any(v > 0 for v in (base.noise.std or {}).values()) or any(k.startswith("noise.std") for k in keys)
+             or getattr(disturbance, "kind", None) == "noise"  # band-limited noise drawn from the seed
+             or any(k.startswith("disturbance") for k in keys))
     if seeds > 1 and not noisy:
         notes.append(f"--seeds {seeds} on a scenario without noise (noise.std is empty): the seed changes nothing, "
                      f"so the {seeds} runs of each point are identical; set noise.std (--set or --grid) or use "

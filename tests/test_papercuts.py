@@ -1,0 +1,89 @@
+"""Papercuts from a new user's trial (issue 22, item 9): each fixed where a user met it."""
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from adaptive_mj.cli import gl_library_missing, main
+from adaptive_mj.errors import AdaptiveMJError
+
+REPO = Path(__file__).resolve().parents[1]
+
+# a user's arm as menagerie writes them: the links' geoms in group 3 (collision), the payload in group 0
+ARM_IN_GROUP_3 = """<mujoco><worldbody><geom type="plane" size="1 1 .1"/>
+<body name="link"><joint type="hinge"/><geom type="capsule" size=".05" fromto="0 0 0 .5 0 0" group="3"/>
+<geom type="box" size=".02 .02 .02" group="3"/>
+<body name="payload" pos=".5 0 0"><geom type="sphere" size=".1"/></body></body></worldbody></mujoco>"""
+
+
+# ------------------------------------------------------------------ video: geom groups
+def test_video_draws_the_groups_that_hold_a_bodys_geoms():
+    from adaptive_mj.report.video import parse_groups, visible_groups
+
+    model = mujoco.MjModel.from_xml_string(ARM_IN_GROUP_3)
+    assert visible_groups(model).tolist() == [1, 1, 1, 1, 0, 0]  # MuJoCo's default 0-2, and the arm's 3
+    both = mujoco.MjModel.from_xml_string(ARM_IN_GROUP_3.replace('size=".02 .02 .02" group="3"',
+                                                                 'size=".02 .02 .02" group="2"'))
+    assert visible_groups(both).tolist() == [1, 1, 1, 0, 0, 0]  # a visual geom in group 2: collision stays hidden
+    assert visible_groups(model, [0, 4]).tolist() == [1, 0, 0, 0, 1, 0]
+    assert parse_groups("0,3") == [0, 3] and parse_groups(None) is None
+    with pytest.raises(AdaptiveMJError, match=r"--video-groups '0,9': expected geom groups 0\.\.5"):
+        parse_groups("0,9")
+
+
+def test_video_groups_reach_the_renderer(tmp_path):
+    from adaptive_mj.report.video import iter_frames, scene_width
+
+    log = tmp_path / "arm.mcap"
+    assert main(["run", "arm_payload_swap", "-o", str(log), "--set", "simulation.duration=0.2",
+                 "--set", "events=[]", "--set", "success.tail_rms=inf"]) == 0
+    size = (256, 128)
+    default = next(iter(iter_frames(log, fps=10, size=size)))[:, :scene_width(size)].astype(float)
+    nothing = next(iter(iter_frames(log, fps=10, size=size, groups=[5])))[:, :scene_width(size)].astype(float)
+    assert np.abs(default - nothing).mean() > 1.0  # group 5 holds no geom: the arm and its ghost are gone
+    assert main(["replay", str(log), "--video", str(tmp_path / "v.gif"), "--video-groups", "x"]) == 2
+
+
+# ------------------------------------------------------------------ MUJOCO_GL without its library
+def test_a_gl_backend_without_its_library_is_one_line():
+    def missing(name):
+        raise OSError(f"lib{name}.so: cannot open shared object file")
+
+    assert gl_library_missing("osmesa", load=missing) == (
+        "MUJOCO_GL=osmesa needs the OSMesa library (libOSMesa.so), which is not installed: install the Debian "
+        "package libosmesa6 (apt-get install libosmesa6), or use MUJOCO_GL=egl")
+    assert "Debian package libegl1" in gl_library_missing("egl", load=missing)
+    assert gl_library_missing("osmesa", load=lambda name: None) is None
+    assert gl_library_missing("glfw", load=missing) is None and gl_library_missing(None, load=missing) is None
+
+
+def _osmesa_loads() -> bool:
+    return gl_library_missing("osmesa") is None
+
+
+@pytest.mark.skipif(_osmesa_loads(), reason="this machine has libOSMesa: the failure cannot be seen here")
+def test_mujoco_gl_osmesa_without_osmesa_exits_2_with_one_line(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "adaptive_mj", "run", "heave_tracking", "-o", str(tmp_path / "h.mcap")],
+                       capture_output=True, text=True, env=dict(os.environ, MUJOCO_GL="osmesa", PYTHONPATH=str(REPO)),
+                       timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip().splitlines() == [r.stderr.strip()] and "apt-get install libosmesa6" in r.stderr
+    assert not (tmp_path / "h.mcap").exists()
+
+
+# ------------------------------------------------------------------ sweep: seeds, units
+def test_seeds_note_counts_a_noise_disturbance_as_randomness():
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
+    from adaptive_mj.study.sweep import sweep_notes
+
+    arm6 = load(SCENARIOS_DIR / "ur5e_identification.toml")
+    assert re.match(r"--seeds 3 on a scenario without noise .*the 3 runs of each point are identical",
+                    sweep_notes(arm6, ["law.kd"], 3)[0])
+    noisy = load(SCENARIOS_DIR / "ur5e_identification.toml",
+                 overrides=["disturbance={kind='noise', magnitude=0.5}"])
+    assert sweep_notes(noisy, ["law.kd"], 3) == []  # band-limited torque noise is drawn from the seed
