@@ -87,3 +87,33 @@ def test_seeds_note_counts_a_noise_disturbance_as_randomness():
     noisy = load(SCENARIOS_DIR / "ur5e_identification.toml",
                  overrides=["disturbance={kind='noise', magnitude=0.5}"])
     assert sweep_notes(noisy, ["law.kd"], 3) == []  # band-limited torque noise is drawn from the seed
+
+
+def test_sweep_axes_carry_units_and_parameter_errors_come_relative_too():
+    from adaptive_mj.study.sweep import flat_metrics, metric_label
+
+    assert metric_label("rms_tracking_error_tail", "manipulator") == "rms_tracking_error_tail [rad]"
+    assert metric_label("control_rms", "arm") == "control_rms [N m]"
+    assert metric_label("param_error_final.b", "heave") == "param_error_final.b [kg/m]"
+    assert metric_label("param_error_final.payload/body.m", "manipulator") == "param_error_final.payload/body.m [kg]"
+    assert metric_label("param_error_relative_final.J", "arm") == "param_error_relative_final.J [-] (p̂/p − 1)"
+    summary = {"metrics": {"rms_tracking_error": 0.1, "param_error_final": {"d": -3.7, "c": 0.5}},
+               "final": {"theta": {"d": 37.0, "c": 0.0}, "theta_hat": {"d": 33.3, "c": 0.5}}}
+    row = flat_metrics(summary)
+    assert row["param_error_final.d"] == -3.7 and row["param_error_relative_final.d"] == pytest.approx(-0.1)
+    assert row["param_error_relative_final.c"] is None  # no relative error of a parameter whose truth is 0
+
+
+def test_a_sweep_plots_a_relative_parameter_error(tmp_path):
+    out = tmp_path / "s"
+    assert main(["sweep", "heave_tracking", "--grid", "law.k=100,200", "--set", "simulation.duration=1",
+                 "--set", "success.tail_rms=inf", "--metric", "param_error_relative_final.d", "-o", str(out),
+                 "--jobs", "1"]) == 0
+    import csv
+
+    with open(out / "sweep.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:  # d̂/d − 1 from the same row's absolute error and the model's d (37 kg, README)
+        assert float(r["param_error_relative_final.d"]) == pytest.approx(float(r["param_error_final.d"]) / 37.0,
+                                                                         rel=0.01)
+    assert "mean param_error_relative_final.d [-] (p̂/p − 1)" in (out / "report.md").read_text()

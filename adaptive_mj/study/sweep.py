@@ -66,9 +66,9 @@ DOCUMENTED_KEYS: dict[str, tuple[str, ...]] = {
 TOP_LEVEL = ("schema_version", "name", "description", "reference", "events") + tuple(DOCUMENTED_KEYS)
 _KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
 
-# plant.kind -> (output y, control u) units; first_order has neither.
-PLANT_UNITS = {"heave": ("m", "N"), "arm": ("rad", "N·m")}
 _OUTPUT_METRICS = ("rms_tracking_error", "rms_tracking_error_tail", "max_abs_tracking_error_tail")
+#: a sweep row's column: each estimate's final error over its true value, p̂/p − 1 [-] (None when p = 0)
+RELATIVE = "param_error_relative_final"
 _CONTROL_METRICS = ("control_rms", "control_total_variation")
 _KEY_UNITS = {"plant.payload_mass": "kg", "plant.density": "kg/m³", "plant.viscosity": "Pa·s",
               "plant.thruster_time_constant": "s", "simulation.duration": "s", "simulation.timestep": "s",
@@ -250,13 +250,21 @@ def scalar_metric_names() -> list[str]:
 
 
 def flat_metrics(summary: dict | None) -> dict[str, Any]:
-    """A summary's metrics with tables flattened: param_error_final.J, ..."""
+    """A summary's metrics with tables flattened: param_error_final.J, ...; and each parameter's error
+    relative to its true value, param_error_relative_final.J = (p̂ − p)/|p| (None where p = 0)."""
     out: dict[str, Any] = {}
     for name, value in (summary or {}).get("metrics", {}).items():
         if isinstance(value, dict):
             out.update({f"{name}.{k}": v for k, v in value.items()})
         else:
             out[name] = value
+    true = ((summary or {}).get("final") or {}).get("theta") or {}
+    for name, err in ((summary or {}).get("metrics", {}).get("param_error_final") or {}).items():
+        if name not in true:  # a summary without the final values (none in the tests' stand-ins)
+            continue
+        p = true[name]
+        ok = isinstance(err, (int, float)) and isinstance(p, (int, float)) and p != 0
+        out[f"{RELATIVE}.{name}"] = err / abs(p) if ok else None
     return out
 
 
@@ -304,13 +312,28 @@ def point_stats(table: Sequence[dict[str, Any]], keys: Sequence[str], metric: st
 
 def metric_label(metric: str, plant_kind: str) -> str:
     """The metric name with its unit where known (tracking errors in the plant's output unit)."""
-    y_unit, u_unit = PLANT_UNITS.get(plant_kind, ("", ""))
-    unit = y_unit if metric in _OUTPUT_METRICS else u_unit if metric in _CONTROL_METRICS else ""
+    from adaptive_mj import units
+
+    if metric.startswith(f"{RELATIVE}."):
+        return f"{metric} [-] (p̂/p − 1)"
+    if metric.startswith("param_error_final."):
+        unit = units.param(plant_kind, metric.split(".", 1)[1])
+    elif metric in _OUTPUT_METRICS:
+        unit = units.OUTPUT.get(plant_kind, "")
+    elif metric in _CONTROL_METRICS:
+        unit = units.CONTROL.get(plant_kind, "")
+    else:
+        unit = {"saturation_fraction": "-"}.get(metric, "")
+    if unit == "-" and metric != "saturation_fraction":  # the first-order example: dimensionless
+        unit = ""
     return f"{metric} [{unit}]" if unit else metric
 
 
 def key_label(key: str, plant_kind: str) -> str:
-    y_unit = PLANT_UNITS.get(plant_kind, ("", ""))[0]
+    from adaptive_mj import units
+
+    y_unit = units.OUTPUT.get(plant_kind, "")
+    y_unit = "" if y_unit == "-" else y_unit
     unit = _KEY_UNITS.get(key) or {"noise.std.y": y_unit, "noise.std.y_dot": y_unit and f"{y_unit}/s"}.get(key, "")
     return f"{key} [{unit}]" if unit else key
 
@@ -437,9 +460,9 @@ def _metrics(requested: Sequence[str]) -> list[str]:
     names = [n.strip() for item in requested for n in item.split(",") if n.strip()] or [DEFAULT_METRIC]
     known = scalar_metric_names()
     for name in names:
-        if name not in known and not name.startswith("param_error_final."):
+        if name not in known and not name.startswith(("param_error_final.", f"{RELATIVE}.")):
             raise ScenarioError(f"--metric {name!r}: expected one of {', '.join(known)} "
-                                "or param_error_final.<parameter>")
+                                f"or param_error_final.<parameter> or {RELATIVE}.<parameter>")
     return list(dict.fromkeys(names))
 
 
