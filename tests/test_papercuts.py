@@ -117,3 +117,17 @@ def test_a_sweep_plots_a_relative_parameter_error(tmp_path):
         assert float(r["param_error_relative_final.d"]) == pytest.approx(float(r["param_error_final.d"]) / 37.0,
                                                                          rel=0.01)
     assert "mean param_error_relative_final.d [-] (p̂/p − 1)" in (out / "report.md").read_text()
+
+
+# ------------------------------------------------------------------ bench figures and tables
+def test_a_recovery_that_was_not_needed_is_not_zero_seconds():
+    from adaptive_mj.study import analysis
+    from adaptive_mj.study.bench_catalogue import _recovery
+
+    thr = analysis.SWAP_THRESHOLD
+    assert _recovery(None, 0.07) == "never"
+    assert _recovery(0.0, 0.5 * thr) == f"not needed (peak < {thr} rad)"
+    assert _recovery(5.694, 0.0198) == "5.69 s"
+    t = np.linspace(0.0, 2.0, 201)
+    quiet = np.full_like(t, 0.5 * thr)  # never above the threshold after the event at t = 1 s
+    assert analysis.settle_time(t, quiet < thr, 1.0) == 0.0 and _recovery(0.0, float(quiet.max())).startswith("not")
