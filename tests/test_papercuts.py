@@ -1,4 +1,5 @@
 """Papercuts from a new user's trial (issue 22, item 9): each fixed where a user met it."""
+import itertools
 import os
 import re
 import subprocess
@@ -131,3 +132,40 @@ def test_a_recovery_that_was_not_needed_is_not_zero_seconds():
     t = np.linspace(0.0, 2.0, 201)
     quiet = np.full_like(t, 0.5 * thr)  # never above the threshold after the event at t = 1 s
     assert analysis.settle_time(t, quiet < thr, 1.0) == 0.0 and _recovery(0.0, float(quiet.max())).startswith("not")
+
+
+# ------------------------------------------------------------------ video panel on a 6-joint arm
+def test_the_video_panel_shows_every_estimate_of_a_six_joint_arm_without_overlapping_labels(tmp_path):
+    from adaptive_mj.report import video
+
+    log = tmp_path / "ur5e.mcap"
+    assert main(["run", "ur5e_identification", "-o", str(log), "--set", "simulation.duration=0.2",
+                 "--set", "success.tail_rms=inf"]) in (0, 1)
+    panels = []
+    real = video._Panel.__init__
+
+    def spy(self, traj, rows, **kw):
+        real(self, traj, rows, **kw)
+        panels.append((self, traj))
+
+    video._Panel.__init__ = spy
+    try:
+        next(iter(video.iter_frames(log, fps=10, size=(800, 400))))
+    finally:
+        video._Panel.__init__ = real
+    (panel, traj), = panels
+    assert len(traj.names) == 10  # the payload's m, m·c (3), inertia (6)
+    axes = panel._fig.axes
+    assert [a.get_ylabel() for a in axes] == ["|q̃| [rad]", "mass [kg]", "m·c [kg m]", "inertia [kg m²]"]
+    assert len(panel._lines) == 1 + 2 * 10  # the error, and each estimate with its true value
+    renderer = panel._canvas.get_renderer()
+    boxes = [a.yaxis.label.get_window_extent(renderer) for a in axes]
+    for a, label in zip(axes, boxes, strict=True):
+        assert label.x0 >= 0  # not cut off at the panel's left edge
+        lo, hi = sorted(a.get_ylim())
+        ticks = [t.get_window_extent(renderer) for t in a.get_yticklabels()
+                 if t.get_text() and lo <= t.get_position()[1] <= hi]  # the ticks drawn (inside the limits)
+        assert ticks
+        assert all(label.x1 <= t.x0 + 0.5 for t in ticks)  # left of the tick labels, not over them
+    for upper, lower in itertools.pairwise(boxes):
+        assert lower.y1 <= upper.y0 + 0.5 or lower.x1 <= upper.x0  # stacked labels do not overlap

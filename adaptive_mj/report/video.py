@@ -295,6 +295,25 @@ def _renderer(model: mujoco.MjModel, width: int, height: int) -> mujoco.Renderer
 
 # -- the panel ----------------------------------------------------------------------------------
 
+#: An arm's parameters by unit: what the panel's axis of that unit is called.
+_QUANTITY = {"kg": "mass", "kg m": "m·c", "kg m²": "inertia", "N m s/rad": "damping", "N m": "Coulomb"}
+
+
+def panel_groups(names: tuple[str, ...], plant_kind: str | None) -> list[tuple[str, list[int]]]:
+    """The panel's estimate axes: (y label, indices into names). A 1-DOF plant: one axis per parameter,
+    "J [kg m²]". An arm (plant_kind "manipulator"): one axis per quantity, all its parameters in it (a
+    payload's 10: "mass [kg]", "m·c [kg m]", "inertia [kg m²]"), so every estimate is shown."""
+    from adaptive_mj import units
+
+    if plant_kind != "manipulator":
+        return [(f"{n} [{units.param(plant_kind, n)}]" if units.param(plant_kind, n) else n, [i])
+                for i, n in enumerate(names)]
+    by_unit: dict[str, list[int]] = {}
+    for i, n in enumerate(names):
+        by_unit.setdefault(units.param(plant_kind, n), []).append(i)
+    return [(f"{_QUANTITY.get(u, 'other')} [{u}]" if u else "other", members) for u, members in by_unit.items()]
+
+
 class _Panel:
     """ỹ and each estimate against its true value, drawn up to the current row.
 
@@ -310,10 +329,12 @@ class _Panel:
         self._fig = fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
         self._canvas = FigureCanvasAgg(fig)
         names = traj.names
+        groups = panel_groups(names, plant_kind)
         font = 7.0 * float(np.clip(min(width, height) / 400.0, 0.7, 1.6))   # [pt]
         px = font * dpi / 72.0                                                # one line [pixels]
-        axes = fig.subplots(1 + len(names), 1, sharex=True, squeeze=False)[:, 0]
-        fig.subplots_adjust(left=min(0.4, 6.5 * px / width), right=1 - 1.2 * px / width,
+        axes = fig.subplots(1 + len(groups), 1, sharex=True, squeeze=False)[:, 0]
+        # room on the left for the tick labels and a y label (7.5 lines), so they never overlap
+        fig.subplots_adjust(left=min(0.45, 7.5 * px / width), right=1 - 1.2 * px / width,
                             top=1 - 3.4 * px / height, bottom=3.0 * px / height, hspace=0.4)
         fig.text(0.5, 1 - 0.4 * px / height, title, ha="center", va="top", fontsize=font + 1,
                  weight="bold")
@@ -328,11 +349,12 @@ class _Panel:
         self._t = traj.t[keep]
         error = np.linalg.norm(traj.joint_errors, axis=1) if traj.joint_names else traj.y_tilde
         series = [(axes[0], error[keep], dict(color=PANEL_COLORS["error"], lw=1.0))]
-        for i in range(len(names)):
-            series.append((axes[1 + i], traj.theta[keep, i],
-                           dict(color=PANEL_COLORS["true"], lw=0.9, ls="--")))
-            series.append((axes[1 + i], traj.theta_hat[keep, i],
-                           dict(color=PANEL_COLORS["estimate"], lw=1.1)))
+        for g, (_, members) in enumerate(groups):
+            for j, i in enumerate(members):  # one colour per parameter of a group; one group: the fixed pair
+                est = PANEL_COLORS["estimate"] if len(members) == 1 else f"C{j % 10}"
+                true = PANEL_COLORS["true"] if len(members) == 1 else est
+                series.append((axes[1 + g], traj.theta[keep, i], dict(color=true, lw=0.9, ls="--")))
+                series.append((axes[1 + g], traj.theta_hat[keep, i], dict(color=est, lw=1.1)))
         self._lines = []
         for ax, y, style in series:
             (line,) = ax.plot([], [], animated=True, **style)
@@ -352,12 +374,10 @@ class _Panel:
             ax.tick_params(labelsize=font - 1, length=2, pad=1)
             ax.yaxis.get_offset_text().set_fontsize(font - 1)
             ax.grid(alpha=0.3, lw=0.5)
-        axes[0].set_ylabel(f"|q̃| [{unit}]" if traj.joint_names else f"ỹ [{unit}]", fontsize=font)
-        from adaptive_mj import units
-
-        for i, name in enumerate(names):
-            u = units.param(plant_kind, name)
-            axes[1 + i].set_ylabel(f"{name} [{u}]" if u else name, fontsize=font)
+        axes[0].set_ylabel(f"|q̃| [{unit}]" if traj.joint_names else f"ỹ [{unit}]", fontsize=font, labelpad=1)
+        for g, (label, _) in enumerate(groups):
+            axes[1 + g].set_ylabel(label, fontsize=font, labelpad=1)
+        fig.align_ylabels(axes)
         if names:
             axes[1].plot([], [], color=PANEL_COLORS["estimate"], lw=1.1, label="estimate")
             axes[1].plot([], [], color=PANEL_COLORS["true"], lw=0.9, ls="--", label="true")
@@ -445,13 +465,7 @@ def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
     scene_w = scene_width((width, height))
     unit = "rad" if model.jnt_type[0] == mujoco.mjtJoint.mjJNT_HINGE else "m"
     title = str(logged.header.get("scenario_name", where))
-    if traj.joint_names and len(traj.names) > 4:  # the panel shows the first 4 (a payload: m, m·c)
-        import dataclasses
-
-        panel_traj = dataclasses.replace(traj, names=traj.names[:4], theta=traj.theta[:, :4],
-                                         theta_hat=traj.theta_hat[:, :4])
-    else:
-        panel_traj = traj
+    panel_traj = traj  # every estimate: an arm's in one axis per quantity (panel_groups)
     from adaptive_mj import units
 
     kind = units.plant_kind_of(logged.scenario_text or "") or (
