@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from adaptive_mj.report.metrics import tail_mask
 from adaptive_mj.trajectory import Trajectory
 
 RELATIVE_PARAM_TOLERANCE = 0.10  # "converged": every |θ̂_i − θ_i| <= 10 % of |θ_i| (or of max|θ|)
@@ -293,7 +294,7 @@ def sudden_failure(traj: Trajectory, setup) -> dict:
             "ratio_max": float(np.max(ratio)), "ratio_final": float(ratio[-1]), "critical_ratio": crit,
             "t_critical": float(t[np.argmax(ratio > crit)]) if np.any(ratio > crit) else None,
             "rms_before": float(np.sqrt(np.mean(e[t < (t_sat if t_sat is not None else t[-1] + 1)] ** 2))),
-            "rms_tail": float(np.sqrt(np.mean(e[t >= t[-1] - 0.1 * (t[-1] - t[0])] ** 2)))}
+            "rms_tail": float(np.sqrt(np.mean(e[tail_mask(traj)] ** 2)))}  # the tail of every metric
 
 
 CHATTER_CUTOFF_HZ = 5.0  # Hz: u above this counts as chattering (the references are below 1 Hz)

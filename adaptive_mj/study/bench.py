@@ -11,6 +11,7 @@ import json
 import time
 
 from adaptive_mj.report.html import write_html
+from adaptive_mj.report.metrics import TAIL_FRACTION
 from adaptive_mj.study.parallel import Backend, progress_printer, run_jobs, session
 from adaptive_mj.study.result import Study, Table
 
@@ -99,9 +100,15 @@ def _bench(quick: bool, out, sections, jobs, backend) -> Study:
     header = (f"# adaptive-mj benchmark report{' (quick)' if quick else ''}\n\n"
               f"{n_runs} runs ({sum(r.status == 'ok' for r in results)} of the {len(results)} catalogue runs ok) "
               f"on MuJoCo physics and "
-              f"the analytic twin, {_where(backend)}: runs took {run_seconds:.1f} s, "
-              f"the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
-              f"every run's MCAP log is in `logs/` (replay with `adaptive-mj replay logs/<run>.mcap --verify`).\n\n"
+              f"the analytic twin, {_where(backend)}: the {len(results)} catalogue runs took {run_seconds:.1f} s"
+              + ("" if quick else f", the breaking-point study {elapsed - run_seconds:.1f} s")
+              + f", the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
+              f"every catalogue run's MCAP log is in `logs/`"
+              + ("" if quick else ", the breaking-point study's in `stress/logs/`")
+              + " (replay with `adaptive-mj replay logs/<run>.mcap --verify`).\n\n"
+              f"**Tail**, wherever a table or figure says it: the last {100 * TAIL_FRACTION:g} % of a run "
+              "(docs/METRICS.md). On an arm of m joints a tail RMS error is the RMS over the joints and the tail's "
+              "rows, i.e. the RMS of ‖q̃‖ divided by √m.\n\n"
               + ("**Quick mode:** runs are shorter (15–60 s instead of 20–200 s), so estimates that need "
                  "time to converge (first-order example, payload swap, drift) have not; run `adaptive-mj bench` "
                  "for the full catalogue.\n\n" if quick else "")

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from adaptive_mj.laws.sliding import surface_noise_std
+from adaptive_mj.report.metrics import TAIL_FRACTION
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.breaking_point import TAIL_BOUND, Margin, Search, Stressor, margin_text, search_all
 from adaptive_mj.study.result import Study
@@ -49,7 +50,7 @@ from adaptive_mj.study.result import Study
 # TAIL_BOUND (breaking_point, shared with the bench): [m], [rad]: tail RMS above this is a failure
 NOMINAL_NOISE = {"heave": 5e-4, "arm": 5e-4, "ur5e": 1e-4}  # σ_y [m], [rad]; σ_y' = 10 σ_y [per s]
 LEAK_TIME = 5.0  # s: σ = γ_1 / LEAK_TIME; ν = γ_1 / (LEAK_TIME σ_s)
-DURATION = 20.0  # s per run (tail: the last 20 %)
+DURATION = 20.0  # s per run (its tail: report.metrics.TAIL_FRACTION, the last 25 %)
 # the full bench's reduced study: 5 s runs, and on the 6-joint arm four laws (the full study: eight)
 BENCH_SETTINGS = {"seeds": 5, "steps": 2, "duration": 5.0, "arm_laws": ("adaptive", "dead_zone", "sigma",
                                                                          "computed_torque")}
@@ -261,7 +262,9 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
     text = (f"{len(searches)} breaking-point searches (plant × law × stressor), {seeds} seeds per value, "
             f"the two ends and {steps} bisection steps: {runs} runs of {duration:g} s in {wall:.0f} s. "
             f"A run fails when it diverges or its tail RMS ỹ exceeds {TAIL_BOUND['heave']:g} m (heave), "
-            f"{TAIL_BOUND['arm']:g} rad (arm) or {TAIL_BOUND['ur5e']:g} rad (the 6-joint arm, RMS over its joints); "
+            f"{TAIL_BOUND['arm']:g} rad (arm) or {TAIL_BOUND['ur5e']:g} rad (the 6-joint arm: the RMS over its joints "
+            "and the tail's rows, ‖q̃‖'s RMS / √6); the tail is the last "
+            f"{100 * TAIL_FRACTION:g} % of a run; "
             "a value passes when every seed passes. Each cell: the margin (the "
             "largest value that passed) and, in brackets, the smallest that failed: their gap is the resolution; "
             "then, over the seeds at the margin, the mean / CVaR at 10 % (the worst seed of "
