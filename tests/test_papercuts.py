@@ -1,5 +1,4 @@
 """Papercuts from a new user's trial (issue 22, item 9): each fixed where a user met it."""
-import itertools
 import os
 import re
 import subprocess
@@ -155,17 +154,44 @@ def test_the_video_panel_shows_every_estimate_of_a_six_joint_arm_without_overlap
         video._Panel.__init__ = real
     (panel, traj), = panels
     assert len(traj.names) == 10  # the payload's m, m·c (3), inertia (6)
-    axes = panel._fig.axes
-    assert [a.get_ylabel() for a in axes] == ["|q̃| [rad]", "mass [kg]", "m·c [kg m]", "inertia [kg m²]"]
+    assert [t.get_text() for t in panel._labels] == ["|q̃| [rad]", "mass [kg]", "m·c [kg m]", "inertia [kg m²]"]
     assert len(panel._lines) == 1 + 2 * 10  # the error, and each estimate with its true value
+    assert_labels_inside_their_axes(panel)
+
+
+def assert_labels_inside_their_axes(panel):
+    """Each axis's name lies inside that axis (so names cannot run into each other) and tick labels are not
+    cut off at the panel's left edge."""
     renderer = panel._canvas.get_renderer()
-    boxes = [a.yaxis.label.get_window_extent(renderer) for a in axes]
-    for a, label in zip(axes, boxes, strict=True):
-        assert label.x0 >= 0  # not cut off at the panel's left edge
-        lo, hi = sorted(a.get_ylim())
-        ticks = [t.get_window_extent(renderer) for t in a.get_yticklabels()
+    for ax, text in zip(panel._fig.axes, panel._labels, strict=True):
+        box, frame = text.get_window_extent(renderer), ax.get_window_extent(renderer)
+        assert frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1 + 0.5
+        lo, hi = sorted(ax.get_ylim())
+        ticks = [t.get_window_extent(renderer) for t in ax.get_yticklabels()
                  if t.get_text() and lo <= t.get_position()[1] <= hi]  # the ticks drawn (inside the limits)
-        assert ticks
-        assert all(label.x1 <= t.x0 + 0.5 for t in ticks)  # left of the tick labels, not over them
-    for upper, lower in itertools.pairwise(boxes):
-        assert lower.y1 <= upper.y0 + 0.5 or lower.x1 <= upper.x0  # stacked labels do not overlap
+        assert ticks and min(t.x0 for t in ticks) >= 0
+
+
+def test_the_small_gif_panel_of_the_one_joint_arm_keeps_its_names_apart(tmp_path):
+    """The bench's payload-swap GIF is 480 x 240 with five axes: the names used to overlap."""
+    from adaptive_mj.report import video
+
+    log = tmp_path / "arm.mcap"
+    assert main(["run", "arm_payload_swap", "-o", str(log), "--set", "simulation.duration=0.2",
+                 "--set", "events=[]", "--set", "success.tail_rms=inf"]) == 0
+    panels = []
+    real = video._Panel.__init__
+
+    def spy(self, traj, rows, **kw):
+        real(self, traj, rows, **kw)
+        panels.append(self)
+
+    video._Panel.__init__ = spy
+    try:
+        next(iter(video.iter_frames(log, fps=15, size=(480, 240))))
+    finally:
+        video._Panel.__init__ = real
+    (panel,) = panels
+    assert [t.get_text() for t in panel._labels] == ["ỹ [rad]", "J [kg m²]", "b [N m s/rad]", "g_sin [N m]",
+                                                     "g_cos [N m]"]
+    assert_labels_inside_their_axes(panel)

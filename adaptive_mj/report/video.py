@@ -49,10 +49,10 @@ DEFAULT_SIZE = (800, 400)
 FORMATS = (".mp4", ".gif")
 
 _MAX_SIDE = 4096            # [pixels]
-_GHOST_RGBA = (0.1, 0.85, 0.3, 0.45)    # the reference pose: translucent green
+_GHOST_RGBA = (0.1, 0.85, 0.3, 0.3)     # the reference pose: translucent green (the body shows through it)
 #: Panel line colours (RGB in 0..1): tracking error, estimate, true value.
 PANEL_COLORS = {"error": (0.84, 0.15, 0.16), "estimate": (0.12, 0.47, 0.71), "true": (0.0, 0.0, 0.0)}
-_GHOST_SCALE = 1.12         # grown: a translucent green shell that stays visible around the body when tracking is exact
+_GHOST_SCALE = 1.08         # grown: a translucent green shell that stays visible around the body when tracking is exact
 _SHADOW_SIZE = 1024         # [texels]
 _SKY_RGB = ([0.62, 0.74, 0.86], [0.16, 0.2, 0.28])   # backdrop gradient, top and bottom
 _EVENT_SHOWN_S = 3.0        # how long an event's label stays in the panel [s]
@@ -333,8 +333,8 @@ class _Panel:
         font = 7.0 * float(np.clip(min(width, height) / 400.0, 0.7, 1.6))   # [pt]
         px = font * dpi / 72.0                                                # one line [pixels]
         axes = fig.subplots(1 + len(groups), 1, sharex=True, squeeze=False)[:, 0]
-        # room on the left for the tick labels and a y label (7.5 lines), so they never overlap
-        fig.subplots_adjust(left=min(0.45, 7.5 * px / width), right=1 - 1.2 * px / width,
+        # room on the left for the tick labels (the axes' names are inside them)
+        fig.subplots_adjust(left=min(0.4, 5.0 * px / width), right=1 - 1.2 * px / width,
                             top=1 - 3.4 * px / height, bottom=3.0 * px / height, hspace=0.4)
         fig.text(0.5, 1 - 0.4 * px / height, title, ha="center", va="top", fontsize=font + 1,
                  weight="bold")
@@ -374,10 +374,11 @@ class _Panel:
             ax.tick_params(labelsize=font - 1, length=2, pad=1)
             ax.yaxis.get_offset_text().set_fontsize(font - 1)
             ax.grid(alpha=0.3, lw=0.5)
-        axes[0].set_ylabel(f"|q̃| [{unit}]" if traj.joint_names else f"ỹ [{unit}]", fontsize=font, labelpad=1)
+        # each axis names its quantity inside its top-left corner, horizontally: a rotated y label longer than a
+        # short axis runs into its neighbours' (5 axes in a 240-pixel GIF)
+        self._labels = [self._label(axes[0], f"|q̃| [{unit}]" if traj.joint_names else f"ỹ [{unit}]", font)]
         for g, (label, _) in enumerate(groups):
-            axes[1 + g].set_ylabel(label, fontsize=font, labelpad=1)
-        fig.align_ylabels(axes)
+            self._labels.append(self._label(axes[1 + g], label, font))
         if names:
             axes[1].plot([], [], color=PANEL_COLORS["estimate"], lw=1.1, label="estimate")
             axes[1].plot([], [], color=PANEL_COLORS["true"], lw=0.9, ls="--", label="true")
@@ -391,6 +392,11 @@ class _Panel:
                 ax.axvline(te, color="0.5", lw=0.8, ls=":")
         self._canvas.draw()
         self._background = self._canvas.copy_from_bbox(fig.bbox)
+
+    @staticmethod
+    def _label(ax, text: str, font: float):
+        return ax.text(0.006, 0.96, text, transform=ax.transAxes, ha="left", va="top", fontsize=font - 0.5,
+                       bbox=dict(facecolor="white", edgecolor="none", alpha=0.75, pad=0.6), zorder=5)
 
     def image(self, t_now: float) -> np.ndarray:
         """(height, width, 3) uint8: the panel with the data up to t_now [s]."""
