@@ -120,3 +120,34 @@ def test_the_command_modules_stay_modules_and_are_callable():
     assert study.Study is api.Study and study.Table is api.Table
     with pytest.raises(AttributeError, match="has no attribute 'nope'"):
         _ = study.nope
+
+
+def test_stress_from_python_on_a_reduced_study(tmp_path, monkeypatch):
+    """The stress study cut to two searches on the heave vehicle: its Study has a row per margin (as
+    margins.csv), report.md and report.html with the same table, and plot() draws the margins' grid."""
+    from adaptive_mj.study import stress as stress_module
+
+    full = stress_module.study
+
+    def two(**kw):
+        return [s for s in full(**kw) if s.label == "heave/adaptive" and s.stressor.name in ("noise σ_y", "delay")]
+
+    monkeypatch.setattr(stress_module, "study", two)
+    s = study.stress(seeds=1, steps=1, duration=1.0, out=tmp_path / "stress", jobs=2)
+    assert s.kind == "stress" and s.ok and [r["stressor"] for r in s.rows] == ["noise σ_y", "delay"]
+    with open(s.out / "margins.csv", newline="") as f:
+        assert [r["stressor"] for r in csv.DictReader(f)] == s.table["stressor"]
+    assert all(r["lo"] < r["hi"] and 0.0 <= stress_module.margin_position(r) <= 1.0 for r in s.rows)
+    html = s.html.read_text()
+    assert "<td>heave/adaptive</td>" in html and "breaking-point searches" in html
+    png = s.plot(tmp_path / "margins.png")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+
+
+def test_margin_position_is_on_the_bisections_scale():
+    from adaptive_mj.study.stress import margin_position
+
+    row = {"lo": 1e-4, "hi": 0.1, "margin": 1e-2, "first_fail": 2e-2}
+    assert margin_position(row) == pytest.approx(2 / 3)  # geometric: 3 decades, 2 of them passed
+    assert margin_position({**row, "lo": 0, "hi": 200, "margin": 50, "first_fail": 60}) == 0.25
+    assert margin_position({**row, "margin": None}) == 0.0 and margin_position({**row, "first_fail": None}) == 1.0

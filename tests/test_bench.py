@@ -63,3 +63,15 @@ def test_quick_bench_on_a_reduced_catalogue(tmp_path, small_catalogue, capsys):
 def test_bench_refuses_a_non_empty_output_dir(tmp_path):
     (tmp_path / "keep.txt").write_text("x")
     assert main(["bench", "--quick", "-o", str(tmp_path)]) == 2
+
+
+def test_bench_from_python_returns_its_main_table(tmp_path, small_catalogue):
+    from adaptive_mj import study
+
+    s = study.bench(quick=True, out=tmp_path / "b", jobs=2)
+    assert s.kind == "bench" and s.ok and s.html == tmp_path / "b" / "report.html"
+    assert ("Divergence" not in s.table["section"]) and ("diverge", "x") in zip(s.table["section"], s.table["run"],
+                                                                               strict=True)
+    assert {r["status"] for r in s.rows} >= {"ok", "diverged"}
+    png = s.plot()
+    assert png == tmp_path / "b" / "figures" / "tails.png" and png.stat().st_size > 10_000

@@ -5,11 +5,11 @@ DIR/logs/. A run that diverges is reported as diverged; the rest go on.
 """
 from __future__ import annotations
 
-from adaptive_mj.study import callable_module
-
 import json
 import time
+from pathlib import Path
 
+from adaptive_mj.study import callable_module
 from adaptive_mj.report.html import write_html
 from adaptive_mj.report.metrics import TAIL_FRACTION
 from adaptive_mj.study.parallel import Backend, progress_printer, run_jobs, session
@@ -123,7 +123,45 @@ def _bench(quick: bool, out, sections, jobs, backend) -> Study:
     text = (main_table(rows) + f"\n\nreport: {out / 'report.md'}  ({n_runs} runs, {elapsed:.1f} s)\n"
             f"html: {out / 'report.html'}")
     return Study("bench", out, 0 if not failed else 1, out / "report.md", out / "report.html", text,
-                 info={"runs": n_runs, "seconds": elapsed}, load_rows=lambda: rows)
+                 info={"runs": n_runs, "seconds": elapsed}, load_rows=lambda: rows,
+                 plotter=lambda path=None: plot_tails(rows, path or out / "figures" / "tails.png"))
+
+
+def plot_tails(rows: list[dict], path) -> Path:
+    """Every catalogue run's tail RMS tracking error, one panel per output unit (m, rad, dimensionless),
+    one bar per run grouped by section, hatched where the run was not ok."""
+    import math
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    by_unit: dict[str, list[dict]] = {}
+    for r in rows:
+        if isinstance(r.get("tail"), (int, float)) and math.isfinite(r["tail"]) and r["tail"] > 0:
+            by_unit.setdefault(r.get("y_unit") or "-", []).append(r)
+    fig, axes = plt.subplots(len(by_unit), 1, figsize=(11, 3.2 * len(by_unit) + 0.8), constrained_layout=True,
+                             squeeze=False)
+    for ax, (unit, group) in zip(axes[:, 0], by_unit.items(), strict=True):
+        sections = list(dict.fromkeys(r["section"] for r in group))
+        colors = [f"C{sections.index(r['section']) % 10}" for r in group]
+        bars = ax.bar(range(len(group)), [r["tail"] for r in group], color=colors)
+        for bar, r in zip(bars, group, strict=True):
+            if r["status"] != "ok":
+                bar.set_hatch("//")
+                bar.set_edgecolor("k")
+        ax.set_yscale("log")
+        ax.set_xticks(range(len(group)), [f"{r['section']}: {r['run']}" for r in group], rotation=60, ha="right",
+                      fontsize=7)
+        ax.set_ylabel(f"tail RMS error [{unit}]" if unit != "-" else "tail RMS error [-]")
+        ax.grid(alpha=0.3, axis="y")
+    axes[0, 0].set_title("every catalogue run's tail RMS tracking error (hatched: not ok)", fontsize=10)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
 
 
 def _where(backend: Backend) -> str:

@@ -23,8 +23,6 @@ the study takes (2 + steps) batches whatever its size. Every run's MCAP log is k
 """
 from __future__ import annotations
 
-from adaptive_mj.study import callable_module
-
 import math
 import re
 from dataclasses import dataclass, field
@@ -33,6 +31,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from adaptive_mj.study import callable_module
 from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
 from adaptive_mj.study.job import REFUSE_UNSTABLE
 

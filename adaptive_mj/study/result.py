@@ -100,8 +100,10 @@ class Study:
         return Table.of(self.rows, self.columns)
 
     def plot(self, path: Path | str | None = None, **options: Any) -> Path:
-        """Draw the study (a sweep: its metrics against the grid, options `metrics=[...]`; a breaking point:
-        the tail error of each seed at each value tried) to `path` (default: a PNG in `out`); returns the path."""
+        """Draw the study to `path` (default: a PNG in `out`) and return the path: a sweep, its metrics against
+        the grid (option `metrics=[...]`); a breaking point, each seed's tail error at each value tried; the
+        stress study, every margin's place in its range (plant/law × stressor); the bench, every run's tail
+        error, one panel per unit."""
         if self.plotter is None:
-            raise NotImplementedError(f"a {self.kind} study draws its figures into its report ({self.report})")
+            raise ValueError(f"this {self.kind} study has nothing to draw")
         return self.plotter(None if path is None else Path(path), **options)

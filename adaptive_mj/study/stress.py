@@ -32,8 +32,6 @@ seconds. Composite adaptation runs under continuous control only: n/a for the co
 """
 from __future__ import annotations
 
-from adaptive_mj.study import callable_module
-
 import math
 import time
 from dataclasses import dataclass
@@ -41,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from adaptive_mj.study import callable_module
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.report.metrics import TAIL_FRACTION
 from adaptive_mj.setup import scenario as sc
@@ -291,7 +290,7 @@ def run_stress(*, seeds: int, steps: int, duration: float, composite: bool, out:
     for m in margins:
         st = m.stats()
         rows.append({"plant_law": m.search.label, "stressor": m.search.stressor.name, "unit": m.search.stressor.unit,
-                     **st})
+                     "lo": m.search.stressor.lo, "hi": m.search.stressor.hi, **st})
     import csv
 
     with (out / "margins.csv").open("w", newline="", encoding="utf-8") as f:
@@ -300,7 +299,52 @@ def run_stress(*, seeds: int, steps: int, duration: float, composite: bool, out:
         w.writerows(rows)
     return Study("stress", out, 0, out / "report.md", html,
                  text + f"\n\nreport: {out / 'report.md'}  ({wall:.0f} s)\nhtml: {html}",
-                 info={"seconds": wall}, load_rows=lambda: rows)
+                 info={"seconds": wall}, load_rows=lambda: rows,
+                 plotter=lambda path=None: plot_margins(rows, path or out / "margins.png"))
+
+
+def margin_position(row: dict) -> float:
+    """Where a margin lies in its stressor's range: 0 = the low end already fails, 1 = the high end still
+    passes; in between on the bisection's own scale (geometric over a decade or more from > 0, else linear)."""
+    lo, hi, margin = row["lo"], row["hi"], row["margin"]
+    if margin is None:
+        return 0.0
+    if row["first_fail"] is None:
+        return 1.0
+    if lo > 0 and hi / lo >= 10:
+        return float(math.log(margin / lo) / math.log(hi / lo))
+    return float((margin - lo) / (hi - lo))
+
+
+def plot_margins(rows: list[dict], path: Path) -> Path:
+    """A plant/law × stressor grid: each cell coloured by where its margin lies in the stressor's range
+    (margin_position) and labelled with the margin in the stressor's unit; n/a cells left white."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    laws = list(dict.fromkeys(r["plant_law"] for r in rows))
+    stressors = list(dict.fromkeys(r["stressor"] for r in rows))
+    grid = np.full((len(laws), len(stressors)), np.nan)
+    fig, ax = plt.subplots(figsize=(1.3 * len(stressors) + 2.5, 0.42 * len(laws) + 1.6), constrained_layout=True)
+    for r in rows:
+        i, j = laws.index(r["plant_law"]), stressors.index(r["stressor"])
+        grid[i, j] = margin_position(r)
+        text = "< lo" if r["margin"] is None else f"{r['margin']:.3g}" + ("+" if r["first_fail"] is None else "")
+        ax.text(j, i, text, ha="center", va="center", fontsize=7)
+    image = ax.imshow(grid, cmap="RdYlGn", vmin=0.0, vmax=1.0, aspect="auto")
+    units = {name: " or ".join(dict.fromkeys(r["unit"] for r in rows if r["stressor"] == name and r["unit"]))
+             for name in stressors}  # a stressor's unit per plant: noise σ_y in m (heave) or rad (arms)
+    ax.set_xticks(range(len(stressors)), [f"{n} [{units[n]}]" if units[n] else n for n in stressors],
+                  rotation=30, ha="right", fontsize=8)
+    ax.set_yticks(range(len(laws)), laws, fontsize=8)
+    fig.colorbar(image, ax=ax, label="margin's place in the range searched [-] (0: fails at its low end, "
+                                     "1: passes at its high end)", shrink=0.8)
+    ax.set_title("breaking points: the largest value that passed (+: the high end passed)", fontsize=10)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return Path(path)
 
 
 callable_module(__name__)  # adaptive_mj.study.stress(...) calls adaptive_mj.study.api.stress(...)

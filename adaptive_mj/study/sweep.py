@@ -15,8 +15,6 @@ diverges or fails is recorded and the others go on (exit 1).
 """
 from __future__ import annotations
 
-from adaptive_mj.study import callable_module
-
 import csv
 import difflib
 import itertools
@@ -32,6 +30,7 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
+from adaptive_mj.study import callable_module
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.errors import AdaptiveMJError, ScenarioError
 from adaptive_mj.report.html import write_html
