@@ -1,4 +1,5 @@
 """Papercuts from a new user's trial (issue 22, item 9): each fixed where a user met it."""
+import dataclasses
 import os
 import re
 import subprocess
@@ -195,3 +196,22 @@ def test_the_small_gif_panel_of_the_one_joint_arm_keeps_its_names_apart(tmp_path
     assert [t.get_text() for t in panel._labels] == ["ỹ [rad]", "J [kg m²]", "b [N m s/rad]", "g_sin [N m]",
                                                      "g_cos [N m]"]
     assert_labels_inside_their_axes(panel)
+
+
+def test_the_chattering_panel_shows_where_u_chatters():
+    """Section 4's bottom panel: the 0.5 s where u's high-frequency part moves most, not the run's last 0.5 s."""
+    from adaptive_mj.study import analysis
+    from adaptive_mj.trajectory import Trajectory
+
+    dt = 1e-3
+    t = np.arange(0.0, 3.0, dt)
+    u = np.cos(t)
+    burst = (t >= 1.2) & (t < 1.7)
+    u[burst] += 0.5 * np.sign(np.sin(2 * np.pi * 200 * t[burst]))  # a 200 Hz switching stretch
+    n = len(t)
+    traj = Trajectory(t=t, x=np.zeros((n, 2)), u=u, s=np.zeros(n), ref=np.zeros((n, 3)), theta_hat=np.zeros((n, 0)),
+                      theta=np.zeros((n, 0)), V=np.zeros(n), names=(), meta={"dt": dt})
+    ch = analysis.chattering(traj)
+    assert len(ch["window_t"]) == 500 and 1.15 <= ch["window_t"][0] <= 1.25
+    quiet = analysis.chattering(dataclasses.replace(traj, u=np.cos(t)))
+    assert quiet["window_t"][-1] == t[-1]  # nothing chatters: the last 0.5 s, as before

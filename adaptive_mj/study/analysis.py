@@ -298,6 +298,7 @@ def sudden_failure(traj: Trajectory, setup) -> dict:
 
 
 CHATTER_CUTOFF_HZ = 5.0  # Hz: u above this counts as chattering (the references are below 1 Hz)
+CHATTER_WINDOW = 0.5  # s: the stretch of u shown at every physics step, where it chatters most
 
 
 def lowpass_zero_phase(u: np.ndarray, dt: float, cutoff_hz: float) -> np.ndarray:
@@ -326,7 +327,13 @@ def chattering(traj: Trajectory, setup=None) -> dict:
     slow = lowpass_zero_phase(u, dt, CHATTER_CUTOFF_HZ)
     fast = u - slow
     T = max(dt, float(traj.t[-1] - traj.t[0]))
-    tv_fast = float(np.sum(np.abs(np.diff(fast))))
+    steps = np.abs(np.diff(fast))
+    tv_fast = float(np.sum(steps))
+    # the CHATTER_WINDOW s where the high-frequency part moves most (the last ones when u never chatters)
+    n = min(len(u), max(2, round(CHATTER_WINDOW / dt)))
+    activity = np.convolve(steps, np.ones(n - 1), mode="valid") if n >= 2 else np.zeros(1)
+    start = int(len(activity) - 1 - np.argmax(activity[::-1]))  # the latest of equally active windows
+    window = slice(start, start + n)
     return {"cutoff_hz": CHATTER_CUTOFF_HZ, "tv_high_frequency": tv_fast, "tv_high_frequency_per_s": tv_fast / T,
             "tv_total": float(np.sum(np.abs(np.diff(u)))), "tv_low_frequency": float(np.sum(np.abs(np.diff(slow)))),
-            "window_t": traj.t[-500:].tolist(), "window_u": u[-500:].tolist()}
+            "window_t": traj.t[window].tolist(), "window_u": u[window].tolist()}
