@@ -215,3 +215,15 @@ def test_the_chattering_panel_shows_where_u_chatters():
     assert len(ch["window_t"]) == 500 and 1.15 <= ch["window_t"][0] <= 1.25
     quiet = analysis.chattering(dataclasses.replace(traj, u=np.cos(t)))
     assert quiet["window_t"][-1] == t[-1]  # nothing chatters: the last 0.5 s, as before
+
+
+def test_a_studys_decimated_rows_end_on_the_runs_final_row():
+    """The bench reads "final" values from a run's rows at the logging rate: those rows end on the full-rate
+    run's last row, so they are the summary's final values (docs/METRICS.md), not those up to 9 ms before."""
+    from adaptive_mj.study.job import Job, run_job
+
+    result = run_job(Job(REPO / "scenarios" / "heave_tracking.toml", ("simulation.duration=0.555",)))
+    traj, final = result.trajectory, result.summary["final"]
+    assert traj.meta["log_every"] == 10 and len(traj.t) == 57  # rows 0, 10, ..., 550, and 554
+    assert traj.t[-1] == pytest.approx(0.554) and np.all(np.diff(traj.t) > 0)
+    assert [float(v) for v in traj.theta_hat[-1]] == [final["theta_hat"][n] for n in traj.names]

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
 
+import numpy as np
+
 from adaptive_mj.errors import AdaptiveMJError, PreflightRefused
 from adaptive_mj.sim import interrupt
 from adaptive_mj.trajectory import Trajectory
@@ -53,10 +55,13 @@ class JobResult:
 
 
 def decimate(traj: Trajectory, every: int) -> Trajectory:
-    """Every `every`-th row of a trajectory (the logging rate)."""
+    """Every `every`-th row of a trajectory (the logging rate), and its last row: a report's "final"
+    values read from the decimated rows are then the full-rate run's own (docs/METRICS.md)."""
     if every <= 1:
         return traj
-    rows = slice(None, None, every)
+    rows = np.arange(0, len(traj.t), every)
+    if len(traj.t) and rows[-1] != len(traj.t) - 1:
+        rows = np.append(rows, len(traj.t) - 1)
     meta = dict(traj.meta, log_every=every)
     return replace(traj, t=traj.t[rows], x=traj.x[rows], u=traj.u[rows], s=traj.s[rows], ref=traj.ref[rows],
                    theta_hat=traj.theta_hat[rows], theta=traj.theta[rows], V=traj.V[rows], meta=meta)
