@@ -67,6 +67,9 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("--video-fps", type=float, metavar="FPS", help="video frames per second (default 30, real time)")
     rp.add_argument("--video-size", metavar="WxH", help="video frame size in pixels (default 800x400)")
     rp.add_argument("--video-range", metavar="T0:T1", help="only simulation times T0..T1 [s], e.g. 18:26")
+    rp.add_argument("--video-groups", metavar="G1,G2,...",
+                    help="the model's geom groups to draw (default: MuJoCo's 0, 1, 2 and the groups of any body whose "
+                         "geoms are all outside them, e.g. a menagerie arm's collision geoms in group 3)")
     b = sub.add_parser("bench", help="run the benchmark catalogue: report.md, figures, logs, summary.json")
     b.add_argument("--quick", action="store_true",
                    help="shorter runs and fewer variants, no breaking-point study (under a minute on 2 cores)")
@@ -140,23 +143,9 @@ def _backend_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _scenario_path(arg: str) -> Path:
-    from adaptive_mj.setup.scenario import SCENARIOS_DIR
+    from adaptive_mj.study.api import scenario_path
 
-    path = Path(arg)
-    if not path.exists() and "/" not in arg:
-        bundled = SCENARIOS_DIR / (arg if arg.endswith(".toml") else f"{arg}.toml")
-        if bundled.exists():
-            return bundled
-        if arg.endswith(".toml"):  # a file name: the loader says it is not found
-            return path
-        import difflib
-
-        names = sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
-        close = difflib.get_close_matches(Path(arg).stem, names, n=1, cutoff=0.6)
-        hint = f"did you mean {close[0]!r}? " if close else ""
-        raise ScenarioError(f"{arg}: no such scenario file, nor a bundled scenario ({hint}`adaptive-mj list` shows "
-                            "the bundled ones)")
-    return path
+    return scenario_path(arg)
 
 
 def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, note: str = "",
@@ -308,10 +297,10 @@ def cmd_replay(args) -> int:
 
         plot_run(logged.trajectory, args.plot, title=f"{summary['scenario']} (replay)", kind=kind)
     if args.video:
-        from adaptive_mj.report.video import render_log
+        from adaptive_mj.report.video import parse_groups, render_log
 
         video = render_log(args.log, args.video, fps=args.video_fps, size=args.video_size,
-                           t_range=_time_range(args.video_range))
+                           t_range=_time_range(args.video_range), groups=parse_groups(args.video_groups))
         print(f"video: {video.path} ({video.frames} frames at {video.fps:g} fps, "
               f"{video.size[0]}x{video.size[1]}; rendered at {video.render_rate:.1f} frames/s)",
               file=sys.stderr if args.json else sys.stdout)
@@ -346,10 +335,74 @@ def _time_range(text: str | None) -> tuple[float, float] | None:
     return t0, t1
 
 
+def _study(args):
+    """`bench`, `sweep` and `stress`: the parsed options handed to adaptive_mj.study.api, which checks them."""
+    from adaptive_mj.study import api
+
+    where = dict(backend=args.backend, jobs=args.jobs, address=args.address, ray_logs=args.ray_logs,
+                 retries=args.retries, engine=args.engine)
+    if args.command == "bench":
+        return api.bench(quick=args.quick, scenarios=[_scenario_path(p) for p in args.scenario], out=args.output,
+                         **where)
+    if args.command == "stress":
+        return api.stress(seeds=args.seeds, steps=args.steps, duration=args.duration, composite=args.composite,
+                          out=args.output, **where)
+    if args.breaking_point:  # sweep --breaking-point: one key bisected instead of a grid
+        if args.grid:
+            raise ScenarioError("--breaking-point and --grid cannot be combined (one stressor at a time)")
+        if args.logs == "summary" or args.resume is not None:
+            raise ScenarioError("--logs summary writes no logs, and --resume and --breaking-point read the runs' logs "
+                                "back; leave out --logs summary" if args.logs == "summary" else
+                                "--resume is for a grid sweep; --breaking-point starts a new search")
+        return api.breaking_point(_scenario_path(args.scenario), key=args.breaking_point, tail_bound=args.tail_bound,
+                                  seeds=args.seeds, steps=args.steps, overrides=args.overrides, out=args.output,
+                                  **where)
+    return api.sweep(_scenario_path(args.scenario), grid=args.grid, seeds=args.seeds, overrides=args.overrides,
+                     metrics=args.metric, out=args.output, resume=args.resume, logs=args.logs, **where)
+
+
+def _print_study(study) -> int:
+    """A study's result on stdout, its notes (metrics no run has, runs not ok) on stderr; the exit code."""
+    print(study.text)
+    for note in study.notes:
+        print(note, file=sys.stderr)
+    return study.exit_code
+
+
+#: MUJOCO_GL -> (the library mujoco's backend loads, the Debian package that ships it)
+GL_LIBRARIES = {"osmesa": ("OSMesa", "libosmesa6"), "egl": ("EGL", "libegl1")}
+
+
+def gl_library_missing(backend: str | None, *, load=None) -> str | None:
+    """One line when MUJOCO_GL names a backend whose library cannot be loaded (mujoco would fail on import
+    with a traceback from PyOpenGL), else None. load(name) opens a shared library (ctypes, by default)."""
+    wanted = GL_LIBRARIES.get((backend or "").strip().lower())
+    if wanted is None:
+        return None
+    import ctypes
+    import ctypes.util
+
+    name, package = wanted
+    if load is None:
+        def load(lib):
+            return ctypes.CDLL(ctypes.util.find_library(lib) or f"lib{lib}.so", mode=ctypes.RTLD_GLOBAL)
+    try:
+        load(name)
+    except OSError:
+        other = "MUJOCO_GL=egl" if name != "EGL" else "MUJOCO_GL=osmesa (Debian package libosmesa6)"
+        return (f"MUJOCO_GL={backend} needs the {name} library (lib{name}.so), which is not installed: install the "
+                f"Debian package {package} (apt-get install {package}), or use {other}")
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     from adaptive_mj.sim.interrupt import stop_on_signals
 
     args = _parser().parse_args(argv)
+    missing = gl_library_missing(os.environ.get("MUJOCO_GL"))
+    if missing:  # before anything imports mujoco, which would end in PyOpenGL's traceback
+        print(f"adaptive-mj: error: {missing}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     try:
         with stop_on_signals():  # SIGINT, SIGTERM: errors.Interrupted, handled in _dispatch
             return _dispatch(args)
@@ -375,29 +428,8 @@ def _before_exit() -> None:
 
 def _dispatch(args) -> int:
     try:
-        if args.command == "bench":
-            from adaptive_mj.setup import scenario as sc
-            from adaptive_mj.study.bench import main_bench
-
-            args.scenario = [_scenario_path(p) for p in args.scenario]
-            for p in args.scenario:  # a bad one fails now, with one line, before anything runs
-                sc.load(p)
-
-            return main_bench(args)
-        if args.command == "sweep":
-            from adaptive_mj.study.sweep import main_sweep
-
-            args.scenario = _scenario_path(args.scenario)
-            return main_sweep(args)
-        if args.command == "stress":
-            from adaptive_mj.study.stress import main_stress
-
-            for name, lowest in (("seeds", 1), ("steps", 0), ("jobs", 1)):
-                if getattr(args, name) < lowest:
-                    raise ScenarioError(f"--{name} must be an integer >= {lowest}, got {getattr(args, name)}")
-            if not args.duration > 0:
-                raise ScenarioError(f"--duration must be > 0 [s], got {args.duration}")
-            return main_stress(args)
+        if args.command in ("bench", "sweep", "stress"):
+            return _print_study(_study(args))
         return {"list": cmd_list, "run": cmd_run, "replay": cmd_replay}[args.command](args)
     except AdaptiveMJError as exc:
         if args.debug:

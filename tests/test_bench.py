@@ -44,6 +44,9 @@ def test_quick_bench_on_a_reduced_catalogue(tmp_path, small_catalogue, capsys):
     for fig in ("first_order", "phase_portrait", "payload_swap"):
         assert (out / "figures" / f"{fig}.png").stat().st_size > 10_000
         assert f"figures/{fig}.png" in report
+    html = (out / "report.html").read_text()  # the same report for a browser: every figure embedded
+    assert html.count('src="data:image/png;base64,') == 3 and "not found" not in html
+    assert "<td>first-order</td>" in html and "diverged run: diverged" in html
     summary = json.loads((out / "summary.json").read_text())
     assert summary["diverge/lecture_heave"]["status"] == "diverged"
     # cut to 1 s, the lecture's first-order run has not converged: its verdict says so, the section still reports it
@@ -60,3 +63,15 @@ def test_quick_bench_on_a_reduced_catalogue(tmp_path, small_catalogue, capsys):
 def test_bench_refuses_a_non_empty_output_dir(tmp_path):
     (tmp_path / "keep.txt").write_text("x")
     assert main(["bench", "--quick", "-o", str(tmp_path)]) == 2
+
+
+def test_bench_from_python_returns_its_main_table(tmp_path, small_catalogue):
+    from adaptive_mj import study
+
+    s = study.bench(quick=True, out=tmp_path / "b", jobs=2)
+    assert s.kind == "bench" and s.ok and s.html == tmp_path / "b" / "report.html"
+    assert ("Divergence" not in s.table["section"]) and ("diverge", "x") in zip(s.table["section"], s.table["run"],
+                                                                               strict=True)
+    assert {r["status"] for r in s.rows} >= {"ok", "diverged"}
+    png = s.plot()
+    assert png == tmp_path / "b" / "figures" / "tails.png" and png.stat().st_size > 10_000

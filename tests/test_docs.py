@@ -87,6 +87,23 @@ def test_readme_python_examples_run(tmp_path):
     assert len(codes) >= 2
     for code in codes:
         r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
-                           env=env(), timeout=300)
+                           env=dict(env(), ADAPTIVE_MJ_LOGS=str(tmp_path / "logs")), timeout=300)
         assert r.returncode == 0, (code, r.stderr[-2000:])
     assert "adaptive law: return -0.001" in r.stdout
+
+
+def test_readme_study_example_prints_its_rows_and_writes_its_report(tmp_path):
+    """The README's study example: a 2 x 2 sweep from Python prints a row per run and the paths of its plot
+    and report.html, which exist."""
+    text = (REPO / "README.md").read_text()
+    (code,) = [c for c in re.findall(r"^```python\n(.*?)^```", text, re.S | re.M) if "study.sweep(" in c]
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                       env=dict(env(), ADAPTIVE_MJ_LOGS=str(tmp_path / "logs")), timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    lines = r.stdout.splitlines()
+    assert [line.split()[:3] for line in lines[:4]] == [["100", "0", "ok"], ["100", "1", "ok"], ["400", "0", "ok"],
+                                                        ["400", "1", "ok"]]
+    assert lines[4].startswith("tail errors: [")
+    png, html = lines[5].split()
+    assert Path(png).stat().st_size > 10_000 and Path(html).name == "report.html" and Path(html).is_file()
+    assert Path(html).parent.parent == tmp_path / "logs"

@@ -24,7 +24,7 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -49,10 +49,10 @@ DEFAULT_SIZE = (800, 400)
 FORMATS = (".mp4", ".gif")
 
 _MAX_SIDE = 4096            # [pixels]
-_GHOST_RGBA = (0.1, 0.85, 0.3, 0.45)    # the reference pose: translucent green
+_GHOST_RGBA = (0.1, 0.85, 0.3, 0.3)     # the reference pose: translucent green (the body shows through it)
 #: Panel line colours (RGB in 0..1): tracking error, estimate, true value.
 PANEL_COLORS = {"error": (0.84, 0.15, 0.16), "estimate": (0.12, 0.47, 0.71), "true": (0.0, 0.0, 0.0)}
-_GHOST_SCALE = 1.12         # grown: a translucent green shell that stays visible around the body when tracking is exact
+_GHOST_SCALE = 1.08         # grown: a translucent green shell that stays visible around the body when tracking is exact
 _SHADOW_SIZE = 1024         # [texels]
 _SKY_RGB = ([0.62, 0.74, 0.86], [0.16, 0.2, 0.28])   # backdrop gradient, top and bottom
 _EVENT_SHOWN_S = 3.0        # how long an event's label stays in the panel [s]
@@ -216,6 +216,43 @@ def _free_camera(model: mujoco.MjModel, q_values: np.ndarray, aspect: float) -> 
     return camera
 
 
+def visible_groups(model: mujoco.MjModel, groups: Sequence[int] | None = None) -> np.ndarray:
+    """(6,) uint8 mjvOption.geomgroup for the video: `groups` if given, else MuJoCo's default groups (0, 1, 2)
+    and the groups of every body whose geoms all lie outside them (menagerie arms keep their collision
+    geoms in group 3 and have no visual ones: MuJoCo's default would show only the payload)."""
+    shown = np.zeros(mujoco.mjNGROUP, dtype=np.uint8)
+    if groups is not None:
+        for g in groups:
+            if not 0 <= int(g) < mujoco.mjNGROUP:
+                raise AdaptiveMJError(f"video geom group {g}: expected 0..{mujoco.mjNGROUP - 1}")
+            shown[int(g)] = 1
+        return shown
+    shown[:] = mujoco.MjvOption().geomgroup
+    by_body: dict[int, set[int]] = {}
+    for body, group in zip(model.geom_bodyid, model.geom_group, strict=True):
+        by_body.setdefault(int(body), set()).add(int(group))
+    for body, body_groups in by_body.items():
+        if body and not any(shown[g] for g in body_groups if 0 <= g < mujoco.mjNGROUP):
+            for g in body_groups:
+                if 0 <= g < mujoco.mjNGROUP:
+                    shown[g] = 1
+    return shown
+
+
+def parse_groups(text: str | None) -> list[int] | None:
+    """--video-groups "0,3" -> [0, 3] (None: chosen from the model, visible_groups)."""
+    if text is None:
+        return None
+    try:
+        groups = [int(g) for g in text.split(",") if g.strip()]
+    except ValueError:
+        groups = []
+    if not groups or not all(0 <= g < mujoco.mjNGROUP for g in groups):
+        raise AdaptiveMJError(f"--video-groups {text!r}: expected geom groups 0..{mujoco.mjNGROUP - 1} separated by "
+                              "commas, e.g. 0,3")
+    return groups
+
+
 @contextlib.contextmanager
 def _headless_gl() -> Iterator[None]:
     """Inside the block, mujoco.Renderer gets an OpenGL context of the MUJOCO_GL backend.
@@ -258,6 +295,25 @@ def _renderer(model: mujoco.MjModel, width: int, height: int) -> mujoco.Renderer
 
 # -- the panel ----------------------------------------------------------------------------------
 
+#: An arm's parameters by unit: what the panel's axis of that unit is called.
+_QUANTITY = {"kg": "mass", "kg m": "m·c", "kg m²": "inertia", "N m s/rad": "damping", "N m": "Coulomb"}
+
+
+def panel_groups(names: tuple[str, ...], plant_kind: str | None) -> list[tuple[str, list[int]]]:
+    """The panel's estimate axes: (y label, indices into names). A 1-DOF plant: one axis per parameter,
+    "J [kg m²]". An arm (plant_kind "manipulator"): one axis per quantity, all its parameters in it (a
+    payload's 10: "mass [kg]", "m·c [kg m]", "inertia [kg m²]"), so every estimate is shown."""
+    from adaptive_mj import units
+
+    if plant_kind != "manipulator":
+        return [(f"{n} [{units.param(plant_kind, n)}]" if units.param(plant_kind, n) else n, [i])
+                for i, n in enumerate(names)]
+    by_unit: dict[str, list[int]] = {}
+    for i, n in enumerate(names):
+        by_unit.setdefault(units.param(plant_kind, n), []).append(i)
+    return [(f"{_QUANTITY.get(u, 'other')} [{u}]" if u else "other", members) for u, members in by_unit.items()]
+
+
 class _Panel:
     """ỹ and each estimate against its true value, drawn up to the current row.
 
@@ -273,10 +329,12 @@ class _Panel:
         self._fig = fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
         self._canvas = FigureCanvasAgg(fig)
         names = traj.names
+        groups = panel_groups(names, plant_kind)
         font = 7.0 * float(np.clip(min(width, height) / 400.0, 0.7, 1.6))   # [pt]
         px = font * dpi / 72.0                                                # one line [pixels]
-        axes = fig.subplots(1 + len(names), 1, sharex=True, squeeze=False)[:, 0]
-        fig.subplots_adjust(left=min(0.4, 6.5 * px / width), right=1 - 1.2 * px / width,
+        axes = fig.subplots(1 + len(groups), 1, sharex=True, squeeze=False)[:, 0]
+        # room on the left for the tick labels (the axes' names are inside them)
+        fig.subplots_adjust(left=min(0.4, 5.0 * px / width), right=1 - 1.2 * px / width,
                             top=1 - 3.4 * px / height, bottom=3.0 * px / height, hspace=0.4)
         fig.text(0.5, 1 - 0.4 * px / height, title, ha="center", va="top", fontsize=font + 1,
                  weight="bold")
@@ -291,11 +349,12 @@ class _Panel:
         self._t = traj.t[keep]
         error = np.linalg.norm(traj.joint_errors, axis=1) if traj.joint_names else traj.y_tilde
         series = [(axes[0], error[keep], dict(color=PANEL_COLORS["error"], lw=1.0))]
-        for i in range(len(names)):
-            series.append((axes[1 + i], traj.theta[keep, i],
-                           dict(color=PANEL_COLORS["true"], lw=0.9, ls="--")))
-            series.append((axes[1 + i], traj.theta_hat[keep, i],
-                           dict(color=PANEL_COLORS["estimate"], lw=1.1)))
+        for g, (_, members) in enumerate(groups):
+            for j, i in enumerate(members):  # one colour per parameter of a group; one group: the fixed pair
+                est = PANEL_COLORS["estimate"] if len(members) == 1 else f"C{j % 10}"
+                true = PANEL_COLORS["true"] if len(members) == 1 else est
+                series.append((axes[1 + g], traj.theta[keep, i], dict(color=true, lw=0.9, ls="--")))
+                series.append((axes[1 + g], traj.theta_hat[keep, i], dict(color=est, lw=1.1)))
         self._lines = []
         for ax, y, style in series:
             (line,) = ax.plot([], [], animated=True, **style)
@@ -315,12 +374,11 @@ class _Panel:
             ax.tick_params(labelsize=font - 1, length=2, pad=1)
             ax.yaxis.get_offset_text().set_fontsize(font - 1)
             ax.grid(alpha=0.3, lw=0.5)
-        axes[0].set_ylabel(f"|q̃| [{unit}]" if traj.joint_names else f"ỹ [{unit}]", fontsize=font)
-        from adaptive_mj import units
-
-        for i, name in enumerate(names):
-            u = units.param(plant_kind, name)
-            axes[1 + i].set_ylabel(f"{name} [{u}]" if u else name, fontsize=font)
+        # each axis names its quantity inside its top-left corner, horizontally: a rotated y label longer than a
+        # short axis runs into its neighbours' (5 axes in a 240-pixel GIF)
+        self._labels = [self._label(axes[0], f"|q̃| [{unit}]" if traj.joint_names else f"ỹ [{unit}]", font)]
+        for g, (label, _) in enumerate(groups):
+            self._labels.append(self._label(axes[1 + g], label, font))
         if names:
             axes[1].plot([], [], color=PANEL_COLORS["estimate"], lw=1.1, label="estimate")
             axes[1].plot([], [], color=PANEL_COLORS["true"], lw=0.9, ls="--", label="true")
@@ -334,6 +392,11 @@ class _Panel:
                 ax.axvline(te, color="0.5", lw=0.8, ls=":")
         self._canvas.draw()
         self._background = self._canvas.copy_from_bbox(fig.bbox)
+
+    @staticmethod
+    def _label(ax, text: str, font: float):
+        return ax.text(0.006, 0.96, text, transform=ax.transAxes, ha="left", va="top", fontsize=font - 0.5,
+                       bbox=dict(facecolor="white", edgecolor="none", alpha=0.75, pad=0.6), zorder=5)
 
     def image(self, t_now: float) -> np.ndarray:
         """(height, width, 3) uint8: the panel with the data up to t_now [s]."""
@@ -382,7 +445,8 @@ def _logged(log: str | os.PathLike | LoggedRun) -> tuple[LoggedRun, str]:
 
 def iter_frames(log: str | os.PathLike | LoggedRun, *, fps: float = DEFAULT_FPS,
                 size: tuple[int, int] | str | None = None,
-                t_range: tuple[float, float] | None = None) -> Iterator[np.ndarray]:
+                t_range: tuple[float, float] | None = None,
+                groups: Sequence[int] | None = None) -> Iterator[np.ndarray]:
     """Yield the video's frames, (height, width, 3) uint8 RGB, one per 1/fps of simulation time.
 
     log: a log path or a LoggedRun. size: (width, height) or "WxH"; the MuJoCo
@@ -390,13 +454,14 @@ def iter_frames(log: str | os.PathLike | LoggedRun, *, fps: float = DEFAULT_FPS,
     t_range: (t0, t1) [s] of simulation time to show (default: the whole run).
     Raises LogFormatError (when iteration starts) for a log without a MuJoCo
     model or without rows. Closing the iterator closes the renderer.
+    groups: the geom groups drawn (default: visible_groups of the model).
     """
     logged, where = _logged(log)
-    return _frames(logged, where, fps=fps, size=parse_size(size), t_range=t_range)
+    return _frames(logged, where, fps=fps, size=parse_size(size), t_range=t_range, groups=groups)
 
 
 def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
-            t_range: tuple[float, float] | None) -> Iterator[np.ndarray]:
+            t_range: tuple[float, float] | None, groups: Sequence[int] | None = None) -> Iterator[np.ndarray]:
     width, height = size
     model = _model(logged, where)
     traj = logged.trajectory
@@ -406,13 +471,7 @@ def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
     scene_w = scene_width((width, height))
     unit = "rad" if model.jnt_type[0] == mujoco.mjtJoint.mjJNT_HINGE else "m"
     title = str(logged.header.get("scenario_name", where))
-    if traj.joint_names and len(traj.names) > 4:  # the panel shows the first 4 (a payload: m, m·c)
-        import dataclasses
-
-        panel_traj = dataclasses.replace(traj, names=traj.names[:4], theta=traj.theta[:, :4],
-                                         theta_hat=traj.theta_hat[:, :4])
-    else:
-        panel_traj = traj
+    panel_traj = traj  # every estimate: an arm's in one axis per quantity (panel_groups)
     from adaptive_mj import units
 
     kind = units.plant_kind_of(logged.scenario_text or "") or (
@@ -428,6 +487,7 @@ def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
     else:
         qadr, dadr = int(model.jnt_qposadr[0]), int(model.jnt_dofadr[0])
     option, perturb = mujoco.MjvOption(), mujoco.MjvPerturb()
+    option.geomgroup[:] = visible_groups(model, groups)
     label = _Label("green: reference pose q_d" if traj.joint_names else "green: reference y_d", height=height)
     renderer = _renderer(model, scene_w, height)
     try:
@@ -438,7 +498,7 @@ def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
             mujoco.mj_forward(model, data)
             ghost.qpos[qadr] = traj.ref[i, 0]
             mujoco.mj_kinematics(model, ghost)
-            renderer.update_scene(data, camera=camera)
+            renderer.update_scene(data, camera=camera, scene_option=option)
             scene = renderer.scene
             first = scene.ngeom
             mujoco.mjv_addGeoms(model, ghost, option, perturb, mujoco.mjtCatBit.mjCAT_DYNAMIC, scene)
@@ -505,7 +565,7 @@ class _Gif:
 
 def render_log(log: str | os.PathLike | LoggedRun, out: str | os.PathLike, *,
                fps: float | None = None, size: tuple[int, int] | str | None = None,
-               t_range: tuple[float, float] | None = None) -> Video:
+               t_range: tuple[float, float] | None = None, groups: Sequence[int] | None = None) -> Video:
     """Render a logged run to out (.mp4 or .gif); see iter_frames for the arguments.
 
     fps: frames per second of simulation time, played in real time (default
@@ -521,7 +581,7 @@ def render_log(log: str | os.PathLike | LoggedRun, out: str | os.PathLike, *,
     fps = DEFAULT_FPS if fps is None else float(fps)
     width, height = parse_size(size)
     logged, where = _logged(log)
-    frames = _frames(logged, where, fps=fps, size=(width, height), t_range=t_range)
+    frames = _frames(logged, where, fps=fps, size=(width, height), t_range=t_range, groups=groups)
     t = logged.trajectory.t
     span = (float(t[0]), float(t[-1])) if len(t) else (0.0, 0.0)
     if len(t) and t_range is not None:

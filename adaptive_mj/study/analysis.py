@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from adaptive_mj.report.metrics import tail_mask
 from adaptive_mj.trajectory import Trajectory
 
 RELATIVE_PARAM_TOLERANCE = 0.10  # "converged": every |θ̂_i − θ_i| <= 10 % of |θ_i| (or of max|θ|)
@@ -293,10 +294,11 @@ def sudden_failure(traj: Trajectory, setup) -> dict:
             "ratio_max": float(np.max(ratio)), "ratio_final": float(ratio[-1]), "critical_ratio": crit,
             "t_critical": float(t[np.argmax(ratio > crit)]) if np.any(ratio > crit) else None,
             "rms_before": float(np.sqrt(np.mean(e[t < (t_sat if t_sat is not None else t[-1] + 1)] ** 2))),
-            "rms_tail": float(np.sqrt(np.mean(e[t >= t[-1] - 0.1 * (t[-1] - t[0])] ** 2)))}
+            "rms_tail": float(np.sqrt(np.mean(e[tail_mask(traj)] ** 2)))}  # the tail of every metric
 
 
 CHATTER_CUTOFF_HZ = 5.0  # Hz: u above this counts as chattering (the references are below 1 Hz)
+CHATTER_WINDOW = 0.5  # s: the stretch of u shown at every physics step, where it chatters most
 
 
 def lowpass_zero_phase(u: np.ndarray, dt: float, cutoff_hz: float) -> np.ndarray:
@@ -325,7 +327,13 @@ def chattering(traj: Trajectory, setup=None) -> dict:
     slow = lowpass_zero_phase(u, dt, CHATTER_CUTOFF_HZ)
     fast = u - slow
     T = max(dt, float(traj.t[-1] - traj.t[0]))
-    tv_fast = float(np.sum(np.abs(np.diff(fast))))
+    steps = np.abs(np.diff(fast))
+    tv_fast = float(np.sum(steps))
+    # the CHATTER_WINDOW s where the high-frequency part moves most (the last ones when u never chatters)
+    n = min(len(u), max(2, round(CHATTER_WINDOW / dt)))
+    activity = np.convolve(steps, np.ones(n - 1), mode="valid") if n >= 2 else np.zeros(1)
+    start = int(len(activity) - 1 - np.argmax(activity[::-1]))  # the latest of equally active windows
+    window = slice(start, start + n)
     return {"cutoff_hz": CHATTER_CUTOFF_HZ, "tv_high_frequency": tv_fast, "tv_high_frequency_per_s": tv_fast / T,
             "tv_total": float(np.sum(np.abs(np.diff(u)))), "tv_low_frequency": float(np.sum(np.abs(np.diff(slow)))),
-            "window_t": traj.t[-500:].tolist(), "window_u": u[-500:].tolist()}
+            "window_t": traj.t[window].tolist(), "window_u": u[window].tolist()}

@@ -7,8 +7,13 @@ from __future__ import annotations
 
 import json
 import time
+from pathlib import Path
 
+from adaptive_mj.study import callable_module
+from adaptive_mj.report.html import write_html
+from adaptive_mj.report.metrics import TAIL_FRACTION
 from adaptive_mj.study.parallel import Backend, progress_printer, run_jobs, session
+from adaptive_mj.study.result import Study, Table
 
 
 def _fmt(v, spec=".3g") -> str:
@@ -32,30 +37,44 @@ def main_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def main_bench(args) -> int:
+def main_table_markdown(rows: list[dict]) -> str:
+    """The main table for report.md (and so a sortable table in report.html): the terminal table's columns,
+    each number with its unit."""
+    def with_unit(v, unit: str) -> str:
+        return _fmt(v) + (f" {unit}" if v is not None and unit and unit != "-" else "")
+
+    return Table.of([{"section": r["section"], "run": r["run"], "status": r["status"],
+                      "rms err tail": with_unit(r.get("tail"), r.get("y_unit", "")),
+                      "u rms": with_unit(r.get("u_rms"), r.get("u_unit", "")),
+                      "u TV": with_unit(r.get("u_tv"), r.get("u_unit", "")), "key result": r.get("key", "")}
+                     for r in rows]).to_markdown()
+
+
+def run_bench(*, quick: bool, scenarios: list, out, backend: Backend) -> Study:
+    """The bench with options adaptive_mj.study.api.bench has checked: the catalogue (quick: shorter runs,
+    no breaking-point study) and a section for the user's scenario files, written to `out`."""
     from adaptive_mj.study.bench_catalogue import catalogue
 
     from adaptive_mj.sim.runner import new_output_dir
 
-    backend = Backend.from_args(args)  # a bad option fails before any folder is made
-    if getattr(args, "scenario", None):  # so does a scenario of yours that cannot run: checked and built now,
-        from adaptive_mj.setup.build import check  # not after the catalogue has run
+    if scenarios:  # a scenario of yours that cannot run fails now: checked and built, not after the catalogue
+        from adaptive_mj.setup.build import check
         from adaptive_mj.setup.scenario import load
 
-        for path in args.scenario:
+        for path in scenarios:
             check(load(path))
-    out = new_output_dir(args.output, "bench-quick" if args.quick else "bench")
-    sections = catalogue(quick=args.quick, logs=out / "logs")
-    if getattr(args, "scenario", None):
+    out = new_output_dir(out, "bench-quick" if quick else "bench")
+    sections = catalogue(quick=quick, logs=out / "logs")
+    if scenarios:
         from adaptive_mj.study.bench_catalogue import user_section
 
-        sections.append(user_section(list(args.scenario), out / "logs"))
+        sections.append(user_section(list(scenarios), out / "logs"))
     jobs = [job for s in sections for job in s.jobs]
     with session(backend):
-        return _bench(args, out, sections, jobs, backend)
+        return _bench(quick, out, sections, jobs, backend)
 
 
-def _bench(args, out, sections, jobs, backend) -> int:
+def _bench(quick: bool, out, sections, jobs, backend) -> Study:
     t0 = time.perf_counter()
     results = run_jobs(jobs, backend=backend, on_done=progress_printer(len(jobs)))
     run_seconds = time.perf_counter() - t0
@@ -66,10 +85,10 @@ def _bench(args, out, sections, jobs, backend) -> int:
         parts.append(f"## {section.title}\n\n**The lecture:** {section.claim}\n\n{rep.text}\n")
         rows.extend(rep.rows)
     n_runs = len(results)
-    if not args.quick:  # the breaking-point study: its own batches (bisection), a reduced `adaptive-mj stress`
+    if not quick:  # the breaking-point study: its own batches (bisection), a reduced `adaptive-mj stress`
         from adaptive_mj.study.stress import BENCH_SETTINGS, run_study
 
-        margins, text, _ = run_study(out / "stress", n_jobs=max(1, args.jobs), composite=False, backend=backend,
+        margins, text, _ = run_study(out / "stress", n_jobs=backend.jobs, composite=False, backend=backend,
                                      **BENCH_SETTINGS)
         n_runs += sum(len(e.tails) for m in margins for e in m.evaluations)
         parts.append("## 14. Breaking points: law × stressor margins\n\n**The lecture:** the modifications make "
@@ -78,25 +97,71 @@ def _bench(args, out, sections, jobs, backend) -> int:
                      "study at full size: 20 s runs, 4 bisection steps, optionally composite adaptation.)\n")
     elapsed = time.perf_counter() - t0
     failed = [r for r in results if r.status == "error"]  # diverged runs are results, not failures
-    header = (f"# adaptive-mj benchmark report{' (quick)' if args.quick else ''}\n\n"
+    header = (f"# adaptive-mj benchmark report{' (quick)' if quick else ''}\n\n"
               f"{n_runs} runs ({sum(r.status == 'ok' for r in results)} of the {len(results)} catalogue runs ok) "
               f"on MuJoCo physics and "
-              f"the analytic twin, {_where(backend)}: runs took {run_seconds:.1f} s, "
-              f"the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
-              f"every run's MCAP log is in `logs/` (replay with `adaptive-mj replay logs/<run>.mcap --verify`).\n\n"
+              f"the analytic twin, {_where(backend)}: the {len(results)} catalogue runs took {run_seconds:.1f} s"
+              + ("" if quick else f", the breaking-point study {elapsed - run_seconds:.1f} s")
+              + f", the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
+              f"every catalogue run's MCAP log is in `logs/`"
+              + ("" if quick else ", the breaking-point study's in `stress/logs/`")
+              + " (replay with `adaptive-mj replay logs/<run>.mcap --verify`).\n\n"
+              f"**Tail**, wherever a table or figure says it: the last {100 * TAIL_FRACTION:g} % of a run "
+              "(docs/METRICS.md). On an arm of m joints a tail RMS error is the RMS over the joints and the tail's "
+              "rows, i.e. the RMS of ‖q̃‖ divided by √m.\n\n"
               + ("**Quick mode:** runs are shorter (15–60 s instead of 20–200 s), so estimates that need "
                  "time to converge (first-order example, payload swap, drift) have not; run `adaptive-mj bench` "
-                 "for the full catalogue.\n\n" if args.quick else "")
-              + "```\n" + main_table(rows) + "\n```\n\n")
+                 "for the full catalogue.\n\n" if quick else "")
+              + main_table_markdown(rows) + "\n\n")
     (out / "report.md").write_text(header + "\n".join(parts), encoding="utf-8")
+    write_html(out / "report.md")  # report.html: the same text, figures embedded, for a browser
     summary = {r.job.tag: {"scenario": str(r.job.scenario.name), "overrides": list(r.job.overrides),
                            "log": str(r.job.log.relative_to(out)) if r.job.log else None,
                            "status": r.status, "error": r.error, "summary": r.summary, "extras": r.extras}
                for r in results}
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=_json_default), encoding="utf-8")
-    print(main_table(rows))
-    print(f"\nreport: {out / 'report.md'}  ({n_runs} runs, {elapsed:.1f} s)")
-    return 0 if not failed else 1
+    text = (main_table(rows) + f"\n\nreport: {out / 'report.md'}  ({n_runs} runs, {elapsed:.1f} s)\n"
+            f"html: {out / 'report.html'}")
+    return Study("bench", out, 0 if not failed else 1, out / "report.md", out / "report.html", text,
+                 info={"runs": n_runs, "seconds": elapsed}, load_rows=lambda: rows,
+                 plotter=lambda path=None: plot_tails(rows, path or out / "figures" / "tails.png"))
+
+
+def plot_tails(rows: list[dict], path) -> Path:
+    """Every catalogue run's tail RMS tracking error, one panel per output unit (m, rad, dimensionless),
+    one bar per run grouped by section, hatched where the run was not ok."""
+    import math
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    by_unit: dict[str, list[dict]] = {}
+    for r in rows:
+        if isinstance(r.get("tail"), (int, float)) and math.isfinite(r["tail"]) and r["tail"] > 0:
+            by_unit.setdefault(r.get("y_unit") or "-", []).append(r)
+    fig, axes = plt.subplots(len(by_unit), 1, figsize=(11, 3.2 * len(by_unit) + 0.8), constrained_layout=True,
+                             squeeze=False)
+    for ax, (unit, group) in zip(axes[:, 0], by_unit.items(), strict=True):
+        sections = list(dict.fromkeys(r["section"] for r in group))
+        colors = [f"C{sections.index(r['section']) % 10}" for r in group]
+        bars = ax.bar(range(len(group)), [r["tail"] for r in group], color=colors)
+        for bar, r in zip(bars, group, strict=True):
+            if r["status"] != "ok":
+                bar.set_hatch("//")
+                bar.set_edgecolor("k")
+        ax.set_yscale("log")
+        ax.set_xticks(range(len(group)), [f"{r['section']}: {r['run']}" for r in group], rotation=60, ha="right",
+                      fontsize=7)
+        ax.set_ylabel(f"tail RMS error [{unit}]" if unit != "-" else "tail RMS error [-]")
+        ax.grid(alpha=0.3, axis="y")
+    axes[0, 0].set_title("every catalogue run's tail RMS tracking error (hatched: not ok)", fontsize=10)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
 
 
 def _where(backend: Backend) -> str:
@@ -113,3 +178,6 @@ def _json_default(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
     return str(o)
+
+
+callable_module(__name__)  # adaptive_mj.study.bench(...) calls adaptive_mj.study.api.bench(...)

@@ -85,6 +85,16 @@ def _g(v, spec=".3g") -> str:
     return "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, spec)
 
 
+def _recovery(recovery: float | None, peak: float | None) -> str:
+    """A recovery time [s] as the tables say it: "never" when the error never settles below the threshold,
+    "not needed" when it never went above it after the swap (settle time 0), else seconds."""
+    if recovery is None:
+        return "never"
+    if recovery == 0.0 and peak is not None and peak < analysis.SWAP_THRESHOLD:
+        return f"not needed (peak < {analysis.SWAP_THRESHOLD} rad)"
+    return f"{recovery:.2f} s"
+
+
 def _final_table(r: JobResult, plant: str) -> str:
     if r.summary is None:
         return f"(no result: {r.error})"
@@ -325,7 +335,8 @@ def _second_order(quick: bool, logs: Path) -> Section:
             ax[0].semilogy(tr.t, np.abs(tr.y_tilde) + 1e-9, lw=1, label=v)
             win = (tr.t >= tr.t[-1] - 3.0)
             ax[1].plot(tr.t[win], tr.u[win], lw=1, label=v)
-            ax[2].plot(ch["window_t"], ch["window_u"], lw=0.8, label=v)
+            wt = np.asarray(ch["window_t"])  # each run's own window: where its u chatters most
+            ax[2].plot(wt - wt[0], ch["window_u"], lw=0.8, label=f"{v} (from t = {wt[0]:.2f} s)")
         ax[0].set_ylabel("|ỹ| [m]")
         ax[0].set_xlabel("time t [s]")
         ax[0].legend(fontsize=8)
@@ -334,8 +345,8 @@ def _second_order(quick: bool, logs: Path) -> Section:
         ax[1].set_xlabel("time t [s]")
         ax[1].legend(fontsize=8)
         ax[1].grid(alpha=0.3)
-        ax[2].set_ylabel("thrust u [N]\n(last 0.5 s, every\n1 ms physics step)")
-        ax[2].set_xlabel("time t [s]")
+        ax[2].set_ylabel(f"thrust u [N]\n({analysis.CHATTER_WINDOW:g} s of most\nchattering, every\n1 ms step)")
+        ax[2].set_xlabel("time in the window [s]")
         ax[2].legend(fontsize=8)
         ax[2].grid(alpha=0.3)
         fig.suptitle("MuJoCo heave vehicle, y_d = cos t: adaptive vs fixed nominal vs robust sliding")
@@ -359,7 +370,8 @@ def _second_order(quick: bool, logs: Path) -> Section:
                 f"lowpass(u), a zero-phase first-order low-pass at {analysis.CHATTER_CUTOFF_HZ:g} Hz (the reference "
                 "is at 0.16 Hz); the total variation Σ|Δu| is also shown, with its low-frequency part, because it "
                 "is dominated by the feed-forward that every controller shares. The middle panel is drawn from the "
-                "100 Hz log and aliases any chattering; the bottom panel is u at every physics step.\n\n"
+                "100 Hz log and aliases any chattering; the bottom panel is u at every physics step over the "
+                f"{analysis.CHATTER_WINDOW:g} s where each run's high-frequency part moves most.\n\n"
                 + "\n".join(lines) + "\n\n" + img + lec_text + _status_note(res))
         return SectionReport(text, rows)
 
@@ -380,10 +392,11 @@ def _lecture_twin_note(r: JobResult, out: Path) -> str:
     dissipated = float(np.sum(k * tr.s[i1:-1] ** 2 * dt[i1:]))
     err1, err_end = tr.theta_hat[i1] - tr.theta[i1], tr.theta_hat[-1] - tr.theta[-1]
     fig, ax = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True, constrained_layout=True)
-    for i, name in enumerate(tr.names):
-        ax[0].plot(tr.t, tr.theta_hat[:, i], color=f"C{i}", lw=1.2, label=f"$\\hat{{{name}}}$")
-        ax[0].axhline(tr.theta[0, i], color=f"C{i}", ls=":", lw=1)
-    ax[0].set_ylabel("estimates (dotted: true)")
+    for i, name in enumerate(tr.names):  # each estimate over its true value: d, b, c have three units
+        ax[0].plot(tr.t, tr.theta_hat[:, i] / tr.theta[0, i], color=f"C{i}", lw=1.2,
+                   label=f"$\\hat{{{name}}}/{name}$ ({name} = {tr.theta[0, i]:g} {_unit(name, 'heave')})")
+    ax[0].axhline(1.0, color="k", ls=":", lw=1)
+    ax[0].set_ylabel("estimate / true value [-]")
     ax[0].legend(fontsize=8)
     ax[1].semilogy(tr.t, tr.V, lw=1.2, label="V")
     ax[1].semilogy(tr.t, np.maximum(k * tr.s ** 2, 1e-12), lw=0.8, label="k s² = −V'")
@@ -531,7 +544,7 @@ def _swap(quick: bool, logs: Path) -> Section:
 
     def analyze(res, out):
         fig, ax = plt.subplots(3, 1, figsize=(9, 8), sharex=True, constrained_layout=True)
-        lines = ["| controller | peak \\|ỹ\\| after swap [rad] (at swap + [s]) | recovery time [s] | estimates "
+        lines = ["| controller | peak \\|ỹ\\| after swap [rad] (at swap + [s]) | recovery time | estimates "
                  "re-converged after [s] | tail RMS ỹ [rad] | min Ĵ [kg m²] (time Ĵ < 0 [s]) | min b̂, ĝ_sin, ĝ_cos |",
                  "|---|---|---|---|---|---|---|"]
         rows = []
@@ -543,15 +556,14 @@ def _swap(quick: bool, logs: Path) -> Section:
                 lines.append(f"| {v} | {r.status} ||||")
                 continue
             tr, sw, m = r.trajectory, r.extras["swap_response"], r.summary["metrics"]
-            rec = "never" if sw["recovery_time"] is None else f"{sw['recovery_time']:.2f}"
+            rec = _recovery(sw["recovery_time"], sw["peak_error_after"])
             conv = "never" if sw["reconvergence_time"] is None else f"{sw['reconvergence_time']:.2f}"
             mins = sw["estimate_min"]
             lines.append(f"| {v} | {sw['peak_error_after']:.4f} ({sw['peak_time_after']:.2f}) | {rec} | {conv} | "
                          f"{_g(m['rms_tracking_error_tail'])} | {mins['J']:.3f} "
                          f"({sw['leading_negative_seconds']:.2f}) | "
                          f"{mins['b']:.3g}, {mins['g_sin']:.3g}, {mins['g_cos']:.3g} |")
-            rows.append(_row("payload swap", v, r, f"peak {sw['peak_error_after']:.3g} rad, recovery {rec}"
-                             + (" s" if rec != "never" else "")))
+            rows.append(_row("payload swap", v, r, f"peak {sw['peak_error_after']:.3g} rad, recovery {rec}"))
             ax[0].plot(tr.t, tr.y_tilde, style, lw=1, label=v)
             for i, name in ((0, "J"), (2, "g_sin")):
                 a = ax[1] if name == "J" else ax[2]
@@ -657,7 +669,8 @@ def _pe(quick: bool, logs: Path) -> Section:
         fig.suptitle("persistent excitation: parameter convergence on the MuJoCo heave vehicle")
         img = _save(fig, out, "excitation")
         text = (f"`heave_tracking` (estimates from zero, starting on the reference) with {len(jobs)} references: "
-                "a sum of three sines, the same shape at smaller amplitude (`sum_of_sines_small`: less excitation "
+                "a sum of three sines, a smaller one with nearby frequencies (`sum_of_sines_small`: amplitudes "
+                "2/3 as large, ω = 0.5, 1.3, 2.9 rad/s against 0.6, 1.3, 2.7; less excitation "
                 "of the drag term, whose regressor y'|y'| grows with amplitude squared), a single cosine, and a "
                 "setpoint. "
                 "Excitation index: λ_min of C = D^-½ M D^-½, M = (1/T)∫ψψᵀdt over the run with the desired "
@@ -724,7 +737,7 @@ def _manipulator(quick: bool, logs: Path) -> Section:
     def analyze(res, out):
         rows, lines = [], ["| controller | tail RMS q̃ per joint [mrad] (" + ", ".join(
             j for j in ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3")) +
-            ") | peak max_j \\|q̃_j\\| after swap [rad] | recovery [s] |", "|---|---|---|---|"]
+            ") | peak max_j \\|q̃_j\\| after swap [rad] | recovery |", "|---|---|---|---|"]
         fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True, constrained_layout=True)
         for job, style in zip(jobs[:3], ["-", "--", ":"], strict=True):
             r, v = res[job.tag], job.tag.split("/")[1]
@@ -734,7 +747,7 @@ def _manipulator(quick: bool, logs: Path) -> Section:
                 continue
             mr = r.extras["manipulator_response"]
             tails = ", ".join(f"{1e3 * x:.3g}" for x in mr["tail_rms_per_joint"])
-            rec = "never" if mr.get("recovery_time") is None else f"{mr['recovery_time']:.2f}"
+            rec = _recovery(mr.get("recovery_time"), mr.get("peak_error_after"))
             lines.append(f"| {v} | {tails} | {mr.get('peak_error_after', math.nan):.4f} | {rec} |")
             rows.append(_row("manipulator", v, r, f"worst joint tail {1e3 * max(mr['tail_rms_per_joint']):.3g} mrad"))
             tr = r.trajectory
@@ -743,7 +756,8 @@ def _manipulator(quick: bool, logs: Path) -> Section:
                 i = list(tr.names).index("payload/body.m")
                 ax[1].plot(tr.t, tr.theta[:, i], "k--", lw=1, label="true payload mass")
                 ax[1].plot(tr.t, tr.theta_hat[:, i], lw=1.2, label="estimate (Slotine–Li)")
-        ax[0].axhline(analysis.SWAP_THRESHOLD, color="g", lw=0.8, ls="--")
+        ax[0].axhline(analysis.SWAP_THRESHOLD, color="0.35", lw=0.9, ls="-.",  # not a controller's colour
+                      label=f"recovery threshold {analysis.SWAP_THRESHOLD} rad")
         ax[0].set_ylabel("max_j |q̃_j| [rad]")
         ax[0].legend(fontsize=8)
         ax[1].set_ylabel("payload mass [kg]")
@@ -771,14 +785,16 @@ def _manipulator(quick: bool, logs: Path) -> Section:
         if _ok(r):
             p = r.extras["manipulator_response"]["payload"]
             f = p["final"]
-            fig, ax = plt.subplots(1, 1, figsize=(9, 3.5), constrained_layout=True)
-            ax.semilogy(p["t"], p["mass_rel_error"], label="mass, relative")
-            ax.semilogy(p["t"], p["com_error"], label="centre of mass [m]")
-            ax.semilogy(p["t"], p["inertia_error"], label="inertia, max entry [kg m²]")
-            ax.set_xlabel("time t [s]")
-            ax.set_ylabel("identification error")
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=8)
+            fig, axes = plt.subplots(3, 1, figsize=(9, 6), sharex=True, constrained_layout=True)
+            # three quantities, three units: one axis each
+            for a, y, label, color in ((axes[0], 100 * np.asarray(p["mass_rel_error"]), "mass error [%]", "C0"),
+                                       (axes[1], 1e3 * np.asarray(p["com_error"]), "centre of mass error [mm]", "C1"),
+                                       (axes[2], p["inertia_error"], "inertia error,\nmax entry [kg m²]", "C2")):
+                a.semilogy(p["t"], y, color=color)
+                a.set_ylabel(label, fontsize=9)
+                a.grid(alpha=0.3)
+            axes[-1].set_xlabel("time t [s]")
+            fig.suptitle(f"{ident_scn.name}: the payload's identification error", fontsize=10)
             img2 = _save(fig, out, "manipulator_identification")
             rows.append(_row("manipulator", "identification", r,
                              f"mass err {100 * f['mass_rel_error']:.3g} %, c err {1e3 * f['com_error']:.3g} mm"))

@@ -31,6 +31,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from adaptive_mj.study import callable_module
 from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
 from adaptive_mj.study.job import REFUSE_UNSTABLE
 
@@ -272,3 +273,6 @@ def margin_text(m: Margin) -> str:
     if m.first_fail is None:
         return f"≥ {st.hi:g}{unit}"
     return f"{m.margin:.3g}{unit} (next {m.first_fail:.3g})"
+
+
+callable_module(__name__)  # adaptive_mj.study.breaking_point(...) calls adaptive_mj.study.api.breaking_point(...)

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
 
+import numpy as np
+
 from adaptive_mj.errors import AdaptiveMJError, Interrupted, PreflightRefused
 from adaptive_mj.sim import interrupt
 from adaptive_mj.trajectory import Trajectory
@@ -53,10 +55,13 @@ class JobResult:
 
 
 def decimate(traj: Trajectory, every: int) -> Trajectory:
-    """Every `every`-th row of a trajectory (the logging rate)."""
+    """Every `every`-th row of a trajectory (the logging rate), and its last row: a report's "final"
+    values read from the decimated rows are then the full-rate run's own (docs/METRICS.md)."""
     if every <= 1:
         return traj
-    rows = slice(None, None, every)
+    rows = np.arange(0, len(traj.t), every)
+    if len(traj.t) and rows[-1] != len(traj.t) - 1:
+        rows = np.append(rows, len(traj.t) - 1)
     meta = dict(traj.meta, log_every=every)
     return replace(traj, t=traj.t[rows], x=traj.x[rows], u=traj.u[rows], s=traj.s[rows], ref=traj.ref[rows],
                    theta_hat=traj.theta_hat[rows], theta=traj.theta[rows], V=traj.V[rows], meta=meta)
@@ -201,23 +206,39 @@ class Backend:
 
     @classmethod
     def from_args(cls, args) -> "Backend":
-        """The Backend a command line asks for (--jobs, --backend, --address, --ray-logs, --retries;
-        absent ones at their defaults); a Ray option without --backend ray is refused with one line."""
+        """The Backend a command line asks for (--jobs, --backend, --address, --ray-logs, --retries,
+        --engine; absent ones at their defaults), checked by `checked`."""
+        return cls.checked(getattr(args, "backend", "local"), jobs=args.jobs, address=getattr(args, "address", None),
+                           logs=getattr(args, "ray_logs", "bytes"), retries=getattr(args, "retries", 3),
+                           engine=getattr(args, "engine", "process"))
+
+    @classmethod
+    def checked(cls, kind: str = "local", *, jobs: int | None = None, address: str | None = None,
+                logs: str = "bytes", retries: int = 3, engine: str = "process") -> "Backend":
+        """The one place a backend's options are checked (the command line's and the Python API's,
+        adaptive_mj.study.api): a Ray option without kind "ray" is refused with one line, as are a
+        bad count or choice; jobs None: every core."""
+        import os
+
         from adaptive_mj.errors import ScenarioError
 
-        kind = getattr(args, "backend", "local")
-        address, logs, retries = (getattr(args, "address", None), getattr(args, "ray_logs", "bytes"),
-                                  getattr(args, "retries", 3))
+        for opt, value, choices in (("--backend", kind, ("local", "ray")), ("--ray-logs", logs, ("bytes", "shared")),
+                                    ("--engine", engine, ("process", "batch"))):
+            if value not in choices:
+                raise ScenarioError(f"{opt} must be one of {', '.join(choices)}, got {value!r}")
         if kind != "ray":
             for opt, value, default in (("--address", address, None), ("--ray-logs", logs, "bytes")):
                 if value != default:
                     raise ScenarioError(f"{opt} is for --backend ray (this command runs on --backend {kind})")
-        if retries < 0:
+        if jobs is None:
+            jobs = os.cpu_count() or 1
+        if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+            raise ScenarioError(f"--jobs must be an integer >= 1, got {jobs}")
+        if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
             raise ScenarioError(f"--retries must be an integer >= 0, got {retries}")
-        engine = getattr(args, "engine", "process")
         if kind == "ray":
             ray_module()  # not installed: one line now, before any folder is made
-        return cls(kind=kind, jobs=max(1, args.jobs), address=address, logs=logs, retries=retries, engine=engine)
+        return cls(kind=kind, jobs=jobs, address=address, logs=logs, retries=retries, engine=engine)
 
 
 def ray_module():

@@ -39,14 +39,17 @@ from pathlib import Path
 
 import numpy as np
 
+from adaptive_mj.study import callable_module
 from adaptive_mj.laws.sliding import surface_noise_std
+from adaptive_mj.report.metrics import TAIL_FRACTION
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.breaking_point import TAIL_BOUND, Margin, Search, Stressor, margin_text, search_all
+from adaptive_mj.study.result import Study
 
 # TAIL_BOUND (breaking_point, shared with the bench): [m], [rad]: tail RMS above this is a failure
 NOMINAL_NOISE = {"heave": 5e-4, "arm": 5e-4, "ur5e": 1e-4}  # σ_y [m], [rad]; σ_y' = 10 σ_y [per s]
 LEAK_TIME = 5.0  # s: σ = γ_1 / LEAK_TIME; ν = γ_1 / (LEAK_TIME σ_s)
-DURATION = 20.0  # s per run (tail: the last 20 %)
+DURATION = 20.0  # s per run (its tail: report.metrics.TAIL_FRACTION, the last 25 %)
 # the full bench's reduced study: 5 s runs, and on the 6-joint arm four laws (the full study: eight)
 BENCH_SETTINGS = {"seeds": 5, "steps": 2, "duration": 5.0, "arm_laws": ("adaptive", "dead_zone", "sigma",
                                                                          "computed_torque")}
@@ -258,7 +261,9 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
     text = (f"{len(searches)} breaking-point searches (plant × law × stressor), {seeds} seeds per value, "
             f"the two ends and {steps} bisection steps: {runs} runs of {duration:g} s in {wall:.0f} s. "
             f"A run fails when it diverges or its tail RMS ỹ exceeds {TAIL_BOUND['heave']:g} m (heave), "
-            f"{TAIL_BOUND['arm']:g} rad (arm) or {TAIL_BOUND['ur5e']:g} rad (the 6-joint arm, RMS over its joints); "
+            f"{TAIL_BOUND['arm']:g} rad (arm) or {TAIL_BOUND['ur5e']:g} rad (the 6-joint arm: the RMS over its joints "
+            "and the tail's rows, ‖q̃‖'s RMS / √6); the tail is the last "
+            f"{100 * TAIL_FRACTION:g} % of a run; "
             "a value passes when every seed passes. Each cell: the margin (the "
             "largest value that passed) and, in brackets, the smallest that failed: their gap is the resolution; "
             "then, over the seeds at the margin, the mean / CVaR at 10 % (the worst seed of "
@@ -267,29 +272,79 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
     return margins, text, wall
 
 
-def main_stress(args) -> int:
+def run_stress(*, seeds: int, steps: int, duration: float, composite: bool, out: Path | None, backend) -> Study:
+    """The study with options adaptive_mj.study.api.stress has checked: report.md, report.html and
+    margins.csv in `out` (default a new logs/stress-...)."""
+    from adaptive_mj.report.html import write_html
     from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.study.parallel import session
 
-    from adaptive_mj.study.parallel import Backend, session
-
-    backend = Backend.from_args(args)  # a bad option fails before any folder is made
-    out = new_output_dir(args.output, "stress")
+    out = new_output_dir(out, "stress")
     with session(backend):
-        margins, text, wall = run_study(out, seeds=args.seeds, steps=args.steps, composite=args.composite,
-                                        n_jobs=max(1, args.jobs), duration=args.duration, backend=backend)
+        margins, text, wall = run_study(out, seeds=seeds, steps=steps, composite=composite,
+                                        n_jobs=backend.jobs, duration=duration, backend=backend)
     report = "# adaptive-mj breaking points\n\n" + text + "\n"
     (out / "report.md").write_text(report, encoding="utf-8")
+    html = write_html(out / "report.md")  # report.html: the same text, for a browser
     rows = []
     for m in margins:
         st = m.stats()
         rows.append({"plant_law": m.search.label, "stressor": m.search.stressor.name, "unit": m.search.stressor.unit,
-                     **st})
+                     "lo": m.search.stressor.lo, "hi": m.search.stressor.hi, **st})
     import csv
 
     with (out / "margins.csv").open("w", newline="", encoding="utf-8") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    print(text)
-    print(f"\nreport: {out / 'report.md'}  ({wall:.0f} s)")
-    return 0
+    return Study("stress", out, 0, out / "report.md", html,
+                 text + f"\n\nreport: {out / 'report.md'}  ({wall:.0f} s)\nhtml: {html}",
+                 info={"seconds": wall}, load_rows=lambda: rows,
+                 plotter=lambda path=None: plot_margins(rows, path or out / "margins.png"))
+
+
+def margin_position(row: dict) -> float:
+    """Where a margin lies in its stressor's range: 0 = the low end already fails, 1 = the high end still
+    passes; in between on the bisection's own scale (geometric over a decade or more from > 0, else linear)."""
+    lo, hi, margin = row["lo"], row["hi"], row["margin"]
+    if margin is None:
+        return 0.0
+    if row["first_fail"] is None:
+        return 1.0
+    if lo > 0 and hi / lo >= 10:
+        return float(math.log(margin / lo) / math.log(hi / lo))
+    return float((margin - lo) / (hi - lo))
+
+
+def plot_margins(rows: list[dict], path: Path) -> Path:
+    """A plant/law × stressor grid: each cell coloured by where its margin lies in the stressor's range
+    (margin_position) and labelled with the margin in the stressor's unit; n/a cells left white."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    laws = list(dict.fromkeys(r["plant_law"] for r in rows))
+    stressors = list(dict.fromkeys(r["stressor"] for r in rows))
+    grid = np.full((len(laws), len(stressors)), np.nan)
+    fig, ax = plt.subplots(figsize=(1.3 * len(stressors) + 2.5, 0.42 * len(laws) + 1.6), constrained_layout=True)
+    for r in rows:
+        i, j = laws.index(r["plant_law"]), stressors.index(r["stressor"])
+        grid[i, j] = margin_position(r)
+        text = "< lo" if r["margin"] is None else f"{r['margin']:.3g}" + ("+" if r["first_fail"] is None else "")
+        ax.text(j, i, text, ha="center", va="center", fontsize=7)
+    image = ax.imshow(grid, cmap="RdYlGn", vmin=0.0, vmax=1.0, aspect="auto")
+    units = {name: " or ".join(dict.fromkeys(r["unit"] for r in rows if r["stressor"] == name and r["unit"]))
+             for name in stressors}  # a stressor's unit per plant: noise σ_y in m (heave) or rad (arms)
+    ax.set_xticks(range(len(stressors)), [f"{n} [{units[n]}]" if units[n] else n for n in stressors],
+                  rotation=30, ha="right", fontsize=8)
+    ax.set_yticks(range(len(laws)), laws, fontsize=8)
+    fig.colorbar(image, ax=ax, label="margin's place in the range searched [-] (0: fails at its low end, "
+                                     "1: passes at its high end)", shrink=0.8)
+    ax.set_title("breaking points: the largest value that passed (+: the high end passed)", fontsize=10)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return Path(path)
+
+
+callable_module(__name__)  # adaptive_mj.study.stress(...) calls adaptive_mj.study.api.stress(...)

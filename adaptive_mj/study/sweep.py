@@ -30,11 +30,14 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
+from adaptive_mj.study import callable_module
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.errors import AdaptiveMJError, ScenarioError
-from adaptive_mj.report.metrics import clean_json, metrics as run_metrics
+from adaptive_mj.report.html import write_html
+from adaptive_mj.report.metrics import TAIL_FRACTION, clean_json, metrics as run_metrics
 from adaptive_mj.study.parallel import Backend, Job, JobResult, iter_results, progress_printer, session
 from adaptive_mj.study.job import REFUSE_UNSTABLE
+from adaptive_mj.study.result import Study, Table
 from adaptive_mj.trajectory import Trajectory
 
 EXIT_OK, EXIT_FAILED = 0, 1
@@ -62,9 +65,9 @@ DOCUMENTED_KEYS: dict[str, tuple[str, ...]] = {
 TOP_LEVEL = ("schema_version", "name", "description", "reference", "events") + tuple(DOCUMENTED_KEYS)
 _KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
 
-# plant.kind -> (output y, control u) units; first_order has neither.
-PLANT_UNITS = {"heave": ("m", "N"), "arm": ("rad", "N·m"), "ship": ("rad", "rad")}
 _OUTPUT_METRICS = ("rms_tracking_error", "rms_tracking_error_tail", "max_abs_tracking_error_tail")
+#: a sweep row's column: each estimate's final error over its true value, p̂/p − 1 [-] (None when p = 0)
+RELATIVE = "param_error_relative_final"
 _CONTROL_METRICS = ("control_rms", "control_total_variation")
 _KEY_UNITS = {"plant.payload_mass": "kg", "plant.density": "kg/m³", "plant.viscosity": "Pa·s",
               "plant.thruster_time_constant": "s", "simulation.duration": "s", "simulation.timestep": "s",
@@ -246,13 +249,21 @@ def scalar_metric_names() -> list[str]:
 
 
 def flat_metrics(summary: dict | None) -> dict[str, Any]:
-    """A summary's metrics with tables flattened: param_error_final.J, ..."""
+    """A summary's metrics with tables flattened: param_error_final.J, ...; and each parameter's error
+    relative to its true value, param_error_relative_final.J = (p̂ − p)/|p| (None where p = 0)."""
     out: dict[str, Any] = {}
     for name, value in (summary or {}).get("metrics", {}).items():
         if isinstance(value, dict):
             out.update({f"{name}.{k}": v for k, v in value.items()})
         else:
             out[name] = value
+    true = ((summary or {}).get("final") or {}).get("theta") or {}
+    for name, err in ((summary or {}).get("metrics", {}).get("param_error_final") or {}).items():
+        if name not in true:  # a summary without the final values (none in the tests' stand-ins)
+            continue
+        p = true[name]
+        ok = isinstance(err, (int, float)) and isinstance(p, (int, float)) and p != 0
+        out[f"{RELATIVE}.{name}"] = err / abs(p) if ok else None
     return out
 
 
@@ -300,13 +311,28 @@ def point_stats(table: Sequence[dict[str, Any]], keys: Sequence[str], metric: st
 
 def metric_label(metric: str, plant_kind: str) -> str:
     """The metric name with its unit where known (tracking errors in the plant's output unit)."""
-    y_unit, u_unit = PLANT_UNITS.get(plant_kind, ("", ""))
-    unit = y_unit if metric in _OUTPUT_METRICS else u_unit if metric in _CONTROL_METRICS else ""
+    from adaptive_mj import units
+
+    if metric.startswith(f"{RELATIVE}."):
+        return f"{metric} [-] (p̂/p − 1)"
+    if metric.startswith("param_error_final."):
+        unit = units.param(plant_kind, metric.split(".", 1)[1])
+    elif metric in _OUTPUT_METRICS:
+        unit = units.OUTPUT.get(plant_kind, "")
+    elif metric in _CONTROL_METRICS:
+        unit = units.CONTROL.get(plant_kind, "")
+    else:
+        unit = {"saturation_fraction": "-"}.get(metric, "")
+    if unit == "-" and metric != "saturation_fraction":  # the first-order example: dimensionless
+        unit = ""
     return f"{metric} [{unit}]" if unit else metric
 
 
 def key_label(key: str, plant_kind: str) -> str:
-    y_unit = PLANT_UNITS.get(plant_kind, ("", ""))[0]
+    from adaptive_mj import units
+
+    y_unit = units.OUTPUT.get(plant_kind, "")
+    y_unit = "" if y_unit == "-" else y_unit
     unit = _KEY_UNITS.get(key) or {"noise.std.y": y_unit, "noise.std.y_dot": y_unit and f"{y_unit}/s"}.get(key, "")
     return f"{key} [{unit}]" if unit else key
 
@@ -433,9 +459,9 @@ def _metrics(requested: Sequence[str]) -> list[str]:
     names = [n.strip() for item in requested for n in item.split(",") if n.strip()] or [DEFAULT_METRIC]
     known = scalar_metric_names()
     for name in names:
-        if name not in known and not name.startswith("param_error_final."):
+        if name not in known and not name.startswith(("param_error_final.", f"{RELATIVE}.")):
             raise ScenarioError(f"--metric {name!r}: expected one of {', '.join(known)} "
-                                "or param_error_final.<parameter>")
+                                f"or param_error_final.<parameter> or {RELATIVE}.<parameter>")
     return list(dict.fromkeys(names))
 
 
@@ -494,7 +520,10 @@ def sweep_notes(base, keys: Sequence[str], seeds: int) -> list[str]:
     """What a sweep's grid will not do that its user may expect: seeds that change nothing (no
     noise anywhere in the grid), and a payload mass that an event overrides mid-run."""
     notes = []
-    noisy = any(v > 0 for v in (base.noise.std or {}).values()) or any(k.startswith("noise.std") for k in keys)
+    disturbance = getattr(base, "disturbance", None)
+    noisy = (any(v > 0 for v in (base.noise.std or {}).values()) or any(k.startswith("noise.std") for k in keys)
+             or getattr(disturbance, "kind", None) == "noise"  # band-limited noise drawn from the seed
+             or any(k.startswith("disturbance") for k in keys))
     if seeds > 1 and not noisy:
         notes.append(f"--seeds {seeds} on a scenario without noise (noise.std is empty): the seed changes nothing, "
                      f"so the {seeds} runs of each point are identical; set noise.std (--set or --grid) or use "
@@ -513,31 +542,28 @@ def where_text(backend: Backend | None, runs: int) -> str:
     if backend is not None and backend.kind == "ray":
         return f"on Ray ({backend.address or 'started here'}, logs as {backend.logs})"
     jobs = backend.jobs if backend is not None else 1
-    return f"in {min(jobs, max(1, runs))} processes"
+    n = min(jobs, max(1, runs))
+    return f"in {n} process{'es' if n > 1 else ''}"
 
 
-def main_breaking_point(args, path: Path, doc: dict, base, backend: Backend | None = None) -> int:
-    """`sweep --breaking-point KEY=LO:HI --tail-bound B`: the largest value of KEY at which every seed
-    passes (no divergence, tail RMS error <= B), by bisection (adaptive_mj.study.breaking_point).
+def run_breaking_point(path: Path, *, point: str, tail_bound: float, seeds: int, steps: int,
+                       overrides: Sequence[str], out: Path | None, backend: Backend) -> Study:
+    """`sweep --breaking-point KEY=LO:HI --tail-bound B` (adaptive_mj.study.api.breaking_point, which checks
+    the options): the largest value of KEY at which every seed passes (no divergence, tail RMS error <= B),
+    by bisection (adaptive_mj.study.breaking_point).
     KEY = control.period: LO, HI and every value tried are rounded to whole physics steps of the
     scenario's timestep, each run under control.mode = 'sampled'."""
     from adaptive_mj.sim.runner import new_output_dir
     from adaptive_mj.study.breaking_point import Search, Stressor, margin_text, search_all
 
-    if args.grid:
-        raise ScenarioError("--breaking-point and --grid cannot be combined (one stressor at a time)")
-    if args.tail_bound is None or not args.tail_bound > 0:
-        raise ScenarioError(f"--breaking-point needs --tail-bound B > 0 (the tail RMS tracking error above which "
-                            f"a run fails, in the scenario's output unit), got {args.tail_bound}")
-    if args.steps < 0:
-        raise ScenarioError(f"--steps must be an integer >= 0, got {args.steps}")
-    key, lo, hi, integer = parse_breaking_point(args.breaking_point, doc)
+    doc, base = _document(path, overrides)
+    key, lo, hi, integer = parse_breaking_point(point, doc)
     step = None
     if key == "control.period":  # whole physics steps, under sampled-data control
         step = _timestep(base)
         stressor = Stressor.control_period(lo, hi, step)
         if not stressor.lo < stressor.hi:
-            raise ScenarioError(f"--breaking-point {args.breaking_point!r}: LO and HI round to the same whole "
+            raise ScenarioError(f"--breaking-point {point!r}: LO and HI round to the same whole "
                                 f"number of physics steps ({stressor.lo:g} s, timestep {step:g} s)")
         if (stressor.lo, stressor.hi) != (lo, hi):
             print(f"sweep: note: control.period rounded to whole physics steps of {step:g} s: "
@@ -549,33 +575,92 @@ def main_breaking_point(args, path: Path, doc: dict, base, backend: Backend | No
 
     for v in (lo, hi):  # both ends must make a valid scenario, built, before anything runs
         try:
-            check(sc.load(path, overrides=[*args.overrides, *stressor.overrides(v)]))
+            check(sc.load(path, overrides=[*overrides, *stressor.overrides(v)]))
         except AdaptiveMJError as exc:
             raise ScenarioError(f"--breaking-point {key}={v:g}: {exc}") from None
-    for note in sweep_notes(base, [key], args.seeds):
+    for note in sweep_notes(base, [key], seeds):
         print(f"sweep: note: {note}", file=sys.stderr)
-    out = new_output_dir(args.output, f"breaking-point-{base.name}")
-    search = Search(path, base.name, tuple(args.overrides), stressor, float(args.tail_bound))
-    print(f"breaking point of {key} in [{lo:g}, {hi:g}] for {base.name}: {args.seeds} seed(s), "
-          f"{args.steps} bisection step(s) {where_text(backend, args.jobs)} -> {out}", file=sys.stderr)
-    (m,) = search_all([search], seeds=args.seeds, steps=args.steps, logs=out / "logs", n_jobs=args.jobs,
-                      backend=backend,
-                      on_done=progress_printer(args.seeds * (2 + args.steps), label="runs"))
+    out = new_output_dir(out, f"breaking-point-{base.name}")
+    search = Search(path, base.name, tuple(overrides), stressor, float(tail_bound))
+    print(f"breaking point of {key} in [{lo:g}, {hi:g}] for {base.name}: {seeds} seed(s), "
+          f"{steps} bisection step(s) {where_text(backend, backend.jobs)} -> {out}", file=sys.stderr)
+    with session(backend):  # several batches, one Ray session
+        (m,) = search_all([search], seeds=seeds, steps=steps, logs=out / "logs", n_jobs=backend.jobs,
+                          backend=backend, on_done=progress_printer(seeds * (2 + steps), label="runs"))
     stats = m.stats()
     record = {"scenario": str(path), "key": key, "lo": lo, "hi": hi, "integer": integer, "step": step,
-              "seeds": args.seeds,
-              "steps": args.steps, "tail_bound": args.tail_bound, "overrides": list(args.overrides), **stats,
+              "seeds": seeds,
+              "steps": steps, "tail_bound": tail_bound, "overrides": list(overrides), **stats,
               "evaluations": [{"value": e.value, "passes": e.passes, "statuses": e.statuses,
                                "tail": [x if math.isfinite(x) else None for x in e.raw]} for e in m.evaluations]}
     (out / "breaking_point.json").write_text(json.dumps(clean_json(record), indent=1), encoding="utf-8")
-    print(f"\n{key}: margin {margin_text(m)}"
-          + (f", resolution {m.resolution:.3g}" if m.resolution is not None else "")
-          + (f"; at the margin over {args.seeds} seed(s): tail error mean {stats['tail_mean']:.3g}, CVaR10% "
-             f"{stats['tail_cvar10']:.3g}" if stats["tail_mean"] is not None else "")
-          + (f"; failure rate at {m.first_fail:g}: {100 * stats['failure_rate_beyond']:.0f} %"
-             if stats["failure_rate_beyond"] is not None else ""))
-    print(f"output: {out}")
-    return EXIT_OK
+    text = (f"{key}: margin {margin_text(m)}"
+            + (f", resolution {m.resolution:.3g}" if m.resolution is not None else "")
+            + (f"; at the margin over {seeds} seed(s): tail error mean {stats['tail_mean']:.3g}, CVaR10% "
+               f"{stats['tail_cvar10']:.3g}" if stats["tail_mean"] is not None else "")
+            + (f"; failure rate at {m.first_fail:g}: {100 * stats['failure_rate_beyond']:.0f} %"
+               if stats["failure_rate_beyond"] is not None else ""))
+    evaluations = [{"value": e["value"], "passes": e["passes"], "statuses": ", ".join(e["statuses"]),
+                    "tail_max": max((x for x in e["tail"] if x is not None), default=None)}
+                   for e in clean_json(record)["evaluations"]]
+    evaluations.sort(key=lambda e: e["value"])
+    unit = metric_label(DEFAULT_METRIC, base.plant.kind)[len(DEFAULT_METRIC):].strip(" []")
+    plot_path = out / "breaking_point.png"
+    plot_breaking_point(record, plot_path, unit=unit, title=base.name)
+    md = (f"# Breaking point of {key} for {base.name}\n\n"
+          f"Bisection of `{key}` in [{lo:g}, {hi:g}] on `{path.name}` ({seeds} seed(s), {steps} bisection step(s)"
+          + (f", overrides {', '.join(f'`{o}`' for o in overrides)}" if overrides else "")
+          + f"): a run fails when it diverges or its tail RMS tracking error (over the last "
+          f"{100 * TAIL_FRACTION:g} % of the run) exceeds {tail_bound:g}{' ' + unit if unit else ''}; a value "
+          f"passes when every seed passes.\n\n**{text}.**\n\n"
+          + Table.of(evaluations).to_markdown()
+          + "\n\n![breaking point](breaking_point.png)\n\nEvery value's runs are in `breaking_point.json`, their "
+          "logs in `logs/`.\n")
+    (out / "report.md").write_text(md, encoding="utf-8")
+    html = write_html(out / "report.md")
+    return Study("breaking_point", out, EXIT_OK, out / "report.md", html, f"\n{text}\noutput: {out}",
+                 info=clean_json({k: v for k, v in record.items() if k != "evaluations"}),
+                 load_rows=lambda: evaluations,
+                 plotter=lambda path=None: plot_breaking_point(record, path or plot_path, unit=unit, title=base.name))
+
+
+def plot_breaking_point(record: dict, path: Path, *, unit: str = "", title: str = "") -> Path:
+    """Each seed's tail RMS error at each value tried (a cross where the run diverged, failed or could not
+    run), the bound as a labelled line, the margin and the first failing value as vertical lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
+    bound = record["tail_bound"]
+    ys = []
+    for e in record["evaluations"]:
+        for x, status in zip(e["tail"], e["statuses"], strict=True):
+            if x is not None and status == "ok":
+                ax.plot(e["value"], x, "o", color="C0", ms=4)
+                ys.append(x)
+            else:
+                ax.plot(e["value"], bound, "x", color="C3", ms=8, mew=2)
+    ax.axhline(bound, color="C3", ls="--", lw=1, label=f"bound {bound:g}{' ' + unit if unit else ''}")
+    if record.get("margin") is not None:
+        ax.axvline(record["margin"], color="C2", lw=1, label=f"margin {record['margin']:g}")
+    if record.get("first_fail") is not None:
+        ax.axvline(record["first_fail"], color="C1", lw=1, ls=":", label=f"first failing {record['first_fail']:g}")
+    ax.plot([], [], "x", color="C3", ms=8, mew=2, label="run not ok (drawn at the bound)")
+    values = [e["value"] for e in record["evaluations"]]
+    if _spans_decades(values):
+        ax.set_xscale("log")
+    if _spans_decades(ys + [bound]):
+        ax.set_yscale("log")
+    ax.set_xlabel(record["key"])
+    ax.set_ylabel(f"tail RMS tracking error{f' [{unit}]' if unit else ''}")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(f"{title}: breaking point of {record['key']}" if title else record["key"], fontsize=10)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return Path(path)
 
 
 def _timestep(base) -> float:
@@ -692,51 +777,30 @@ def write_tables(stream_path: Path, n: int, inputs: dict[str, Any], out: Path, *
     return short, fieldnames
 
 
-def main_sweep(args) -> int:
-    """Run the sweep the CLI parsed (see the module docstring); returns the exit code."""
-    if args.seeds < 1:
-        raise ScenarioError(f"--seeds must be an integer >= 1, got {args.seeds}")
-    if args.jobs < 1:
-        raise ScenarioError(f"--jobs must be an integer >= 1, got {args.jobs}")
-    path = Path(args.scenario)
-    doc, base = _document(path, args.overrides)
-    backend = Backend.from_args(args)
-    if getattr(args, "resume", None) is not None and args.output is not None:
-        raise ScenarioError(f"sweep --resume {args.resume} writes into that folder; -o {args.output} cannot be "
-                            "combined with it")
-    if getattr(args, "logs", "all") == "summary" and (getattr(args, "resume", None) is not None
-                                                       or getattr(args, "breaking_point", None)):
-        raise ScenarioError("--logs summary writes no logs, and --resume and --breaking-point read the runs' logs "
-                            "back; leave out --logs summary")
-    if getattr(args, "breaking_point", None):
-        with session(backend):  # several batches, one Ray session
-            return main_breaking_point(args, path, doc, base, backend)
-    return _sweep(args, path, doc, base, backend)  # Ray (if asked for) starts only when a run is left to do
-
-
-def _sweep(args, path: Path, doc: dict, base, backend: Backend) -> int:
+def run_sweep(path: Path, *, grid: Sequence[str], seeds: int, overrides: Sequence[str], metrics: Sequence[str],
+              out: Path | None, resume: Path | None, logs: str, backend: Backend) -> Study:
+    """The sweep (see the module docstring) with options that adaptive_mj.study.api.sweep has checked."""
     from adaptive_mj.sim.runner import new_output_dir
 
-    axes = _axes(args.grid, doc)
+    doc, base = _document(path, overrides)
+    axes = _axes(grid, doc)
     keys = [key for key, _ in axes]
-    metrics = _metrics(args.metric)
+    metrics = _metrics(metrics)
     points = grid_points(axes)
-    _validate_points(path, args.overrides, points)
+    _validate_points(path, overrides, points)
 
-    for note in sweep_notes(base, keys, args.seeds):
+    for note in sweep_notes(base, keys, seeds):
         print(f"sweep: note: {note}", file=sys.stderr)
-    manifest = {"format": MANIFEST_FORMAT, "scenario": str(path), "scenario_text": base.text, "grid": list(args.grid),
-                "seeds": args.seeds, "overrides": list(args.overrides)}
-    resume = getattr(args, "resume", None)
+    manifest = {"format": MANIFEST_FORMAT, "scenario": str(path), "scenario_text": base.text, "grid": list(grid),
+                "seeds": seeds, "overrides": list(overrides)}
     if resume is not None:
         out = Path(resume)
         check_manifest(out, manifest)
     else:
-        out = new_output_dir(args.output, f"sweep-{base.name}")
+        out = new_output_dir(out, f"sweep-{base.name}")
         (out / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")  # first: a study
         # killed at any point can be resumed
-    planned = plan(path, points, seeds=args.seeds, overrides=args.overrides,
-                   logs=None if getattr(args, "logs", "all") == "summary" else out / "logs")
+    planned = plan(path, points, seeds=seeds, overrides=overrides, logs=None if logs == "summary" else out / "logs")
     total = len(planned)
     stream_path = out / ROWS_STREAM
     finished: set[int] = set()
@@ -749,7 +813,7 @@ def _sweep(args, path: Path, doc: dict, base, backend: Backend) -> int:
         if backend.kind == "local":
             backend = replace(backend, jobs=min(backend.jobs, max(1, len(todo))))
         where = where_text(backend, len(todo))
-        print(f"sweep: {len(points)} grid point(s) x {args.seeds} seed(s) = {total} runs of {base.name} "
+        print(f"sweep: {len(points)} grid point(s) x {seeds} seed(s) = {total} runs of {base.name} "
               + (f"({len(finished)} already finished, {len(todo)} to run) " if resume is not None else "")
               + f"{where} -> {out}", file=sys.stderr)
         progress = progress_printer(len(todo), label="runs")
@@ -762,22 +826,66 @@ def _sweep(args, path: Path, doc: dict, base, backend: Backend) -> int:
 
     inputs = {"scenario": str(path), "scenario_name": base.name,
               "grid": [{"expr": expr, "key": key, "values": values}
-                       for expr, (key, values) in zip(args.grid, axes, strict=True)],
-              "overrides": list(args.overrides), "seeds": args.seeds, "metrics": metrics,
+                       for expr, (key, values) in zip(grid, axes, strict=True)],
+              "overrides": list(overrides), "seeds": seeds, "metrics": metrics,
               "backend": backend.kind, "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
     table, present = write_tables(stream_path, total, inputs, out, keep=[*keys, "seed", *metrics])
     plot_sweep(table, keys, metrics, out / "sweep.png", plant_kind=base.plant.kind, title=base.name)
 
-    print(summary_table(table, keys, metrics))
+    notes = []
     for name in metrics:
         if name not in present:
             have = [c for c in present if c.startswith("param_error_final.")]
-            print(f"--metric {name!r}: no run has this metric (have: {', '.join(sorted(have)) or 'none'})",
-                  file=sys.stderr)
+            notes.append(f"--metric {name!r}: no run has this metric (have: {', '.join(sorted(have)) or 'none'})")
     not_ok = [r for r in table if r["status"] != "ok"]
-    for row in not_ok[:5]:
-        print(f"  {row['run']}: {row['status']}: {row['reason']}", file=sys.stderr)
+    notes += [f"  {row['run']}: {row['status']}: {row['reason']}" for row in not_ok[:5]]
     if len(not_ok) > 5:
-        print(f"  ... and {len(not_ok) - 5} more (see sweep.csv)", file=sys.stderr)
-    print(f"{total - len(not_ok)}/{total} runs ok; output: {out}")
-    return EXIT_OK if not not_ok else EXIT_FAILED
+        notes.append(f"  ... and {len(not_ok) - 5} more (see sweep.csv)")
+    counts = {status: sum(r["status"] == status for r in table) for status in dict.fromkeys(r["status"] for r in table)}
+    (out / "report.md").write_text(sweep_report(inputs, table, keys, metrics, plant_kind=base.plant.kind, where=where,
+                                                logs=logs), encoding="utf-8")
+    html = write_html(out / "report.md")
+    text = (summary_table(table, keys, metrics) + f"\nreport: {html}\n"
+            + f"{total - len(not_ok)}/{total} runs ok; output: {out}")
+
+    def load_rows() -> list[dict[str, Any]]:
+        return json.loads((out / "sweep.json").read_text(encoding="utf-8"))["rows"]
+
+    def plotter(path: Path | None = None, *, metrics: Sequence[str] = tuple(metrics)) -> Path:
+        return plot_sweep(table, keys, _metrics(metrics), path or out / "sweep.png", plant_kind=base.plant.kind,
+                          title=base.name)
+
+    return Study("sweep", out, EXIT_OK if not not_ok else EXIT_FAILED, out / "report.md", html, text, tuple(notes),
+                 info={"keys": keys, "metrics": metrics, "counts": counts, "inputs": inputs},
+                 load_rows=load_rows, columns=tuple(present), plotter=plotter)
+
+
+def sweep_report(inputs: dict[str, Any], table: Sequence[dict[str, Any]], keys: Sequence[str],
+                 metrics: Sequence[str], *, plant_kind: str, where: str, logs: str) -> str:
+    """report.md of a sweep: what ran, each grid point's metrics (mean over the ok seeds), the figure, the
+    runs that were not ok."""
+    total = len(table)
+    n_ok = sum(r["status"] == "ok" for r in table)
+    grid = "; ".join(f"`{g['key']}` = " + ", ".join(label(v) for v in g["values"]) for g in inputs["grid"])
+    stats = {m: point_stats(table, keys, m) for m in metrics}
+    points = [{**{key_label(k, plant_kind): label(st.point[k]) for k in keys},
+               **{f"mean {metric_label(m, plant_kind)}": stats[m][i].mean for m in metrics},
+               "ok/total": f"{st.n_ok}/{st.n}"} for i, st in enumerate(stats[metrics[0]])]
+    not_ok = [r for r in table if r["status"] != "ok"]
+    text = (f"# Sweep of {inputs['scenario_name']}\n\n"
+            f"{total} runs of `{Path(inputs['scenario']).name}` {where}, created {inputs['created_utc']}: the grid "
+            f"{grid} × {inputs['seeds']} seed(s) (0..{inputs['seeds'] - 1})"
+            + (f", with {', '.join(f'`{o}`' for o in inputs['overrides'])}" if inputs["overrides"] else "")
+            + f". {n_ok} of {total} runs ok. Each metric is the mean over the seeds whose run is ok"
+            f" (tail: the last {100 * TAIL_FRACTION:g} % of the run).\n\n"
+            + Table.of(points).to_markdown() + "\n\n![sweep](sweep.png)\n\n")
+    if not_ok:
+        text += "Runs that were not ok:\n\n" + "\n".join(
+            f"- `{r['run']}`: {r['status']}" + (f" ({r['reason']})" if r["reason"] else "") for r in not_ok[:50])
+        text += (f"\n- ... and {len(not_ok) - 50} more (see `sweep.csv`)" if len(not_ok) > 50 else "") + "\n\n"
+    text += ("Every run's row (all metrics) is in `sweep.csv` and `sweep.json`"
+             + (", its MCAP log in `logs/`." if logs != "summary" else " (no logs: `--logs summary`).") + "\n")
+    return text
+
+
+callable_module(__name__)  # adaptive_mj.study.sweep(...) calls adaptive_mj.study.api.sweep(...)

@@ -1,0 +1,194 @@
+"""The studies from Python: sweep, breaking_point, stress and bench, each returning a Study
+(adaptive_mj.study.result): its rows as a list of dicts, a pandas-free table, the output folder,
+report.md / report.html, and .plot().
+
+    from adaptive_mj import study
+
+    s = study.sweep("heave_tracking", grid={"law.k": [100, 200]}, seeds=2, out="logs/k")
+    s.table["rms_tracking_error_tail"]; s.rows[0]["status"]; s.plot(); s.out / "report.html"
+
+`adaptive-mj sweep | stress | bench` parse their command line and call these (adaptive_mj.cli), so
+this module is the one place their options are checked (and Backend.checked, for where the runs
+go): bad input raises adaptive_mj.errors.ScenarioError naming the option as the command line spells
+it, before any folder is made or any run starts. A run that diverges or fails is a row of the
+result (Study.exit_code 1), not an exception.
+
+Every argument after the scenario is keyword-only. `backend`: "local" (worker processes on this
+machine, `jobs` of them, default every core; engine "batch": mujoco.batch in this process) or "ray"
+(`address`, `ray_logs`, `retries`: see README "Studies that outgrow one machine").
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from adaptive_mj.errors import ScenarioError
+from adaptive_mj.study.job import Backend
+from adaptive_mj.study.result import Study, Table
+
+__all__ = ["Study", "Table", "bench", "breaking_point", "stress", "sweep"]
+
+GridSpec = Mapping[str, Any] | Sequence[str]
+
+
+def count(option: str, value: Any, lowest: int) -> int:
+    """An integer option >= lowest, or one line naming it."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < lowest:
+        raise ScenarioError(f"{option} must be an integer >= {lowest}, got {value}")
+    return value
+
+
+def positive(option: str, value: Any, unit: str = "") -> float:
+    """A finite number > 0, or one line naming it (and its unit)."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0
+    if not ok:
+        raise ScenarioError(f"{option} must be > 0{f' [{unit}]' if unit else ''}, got {value}")
+    return float(value)
+
+
+def where(backend: str | Backend = "local", *, jobs: int | None = None, address: str | None = None,
+          ray_logs: str = "bytes", retries: int = 3, engine: str = "process") -> Backend:
+    """The Backend the options ask for (a Backend given as `backend` is used as it is)."""
+    if isinstance(backend, Backend):
+        return backend
+    return Backend.checked(backend, jobs=jobs, address=address, logs=ray_logs, retries=retries, engine=engine)
+
+
+def scenario_path(scenario: str | Path) -> Path:
+    """A scenario file, or the name of a bundled one (heave_tracking, heave_tracking.toml); a name that is
+    neither raises one line with the closest bundled name."""
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR
+
+    arg = str(scenario)
+    path = Path(arg)
+    if not path.exists() and "/" not in arg:
+        bundled = SCENARIOS_DIR / (arg if arg.endswith(".toml") else f"{arg}.toml")
+        if bundled.exists():
+            return bundled
+        if arg.endswith(".toml"):  # a file name: the loader says it is not found
+            return path
+        import difflib
+
+        names = sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
+        close = difflib.get_close_matches(Path(arg).stem, names, n=1, cutoff=0.6)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        raise ScenarioError(f"{arg}: no such scenario file, nor a bundled scenario ({hint}`adaptive-mj list` shows "
+                            "the bundled ones)")
+    return path
+
+
+def grid_expressions(grid: GridSpec) -> list[str]:
+    """--grid expressions from {key: [values]} (TOML values), {key: "LO:HI:N"} or ["KEY=LO:HI:N", ...]."""
+    from adaptive_mj.study.sweep import to_toml
+
+    if isinstance(grid, str):
+        return [grid]
+    if isinstance(grid, Mapping):
+        out = []
+        for key, values in grid.items():
+            if isinstance(values, str):
+                out.append(f"{key}={values}")
+            elif isinstance(values, Sequence) and not isinstance(values, (bytes, bytearray)):
+                out.append(f"{key}=" + ",".join(to_toml(v) for v in values))
+            else:
+                raise ScenarioError(f"grid[{key!r}]: expected a list of values or 'LO:HI:N', got {values!r}")
+        return out
+    return [str(expr) for expr in grid]
+
+
+def _strings(option: str, value: Any) -> list[str]:
+    if isinstance(value, str):
+        return [value]
+    if not isinstance(value, Sequence) or not all(isinstance(v, str) for v in value):
+        raise ScenarioError(f"{option}: expected KEY=VALUE strings, got {value!r}")
+    return list(value)
+
+
+def sweep(scenario: str | Path, *, grid: GridSpec, seeds: int = 1, overrides: Sequence[str] = (),
+          metrics: Sequence[str] = (), out: str | Path | None = None, resume: str | Path | None = None,
+          logs: str = "all", backend: str | Backend = "local", jobs: int | None = None,
+          address: str | None = None, ray_logs: str = "bytes", retries: int = 3,
+          engine: str = "process") -> Study:
+    """Run `scenario` over a grid of keys × seeds 0..seeds-1 (`adaptive-mj sweep`).
+
+    grid: {key: [values]} or {key: "LO:HI:N"} or ["KEY=LO:HI:N", "KEY=V1,V2"] (a key dotted, law.k, or
+    bare, payload_mass); overrides: --set expressions; metrics: the columns summarised and plotted
+    (default rms_tracking_error_tail); out: a new or empty folder (default a new logs/sweep-...);
+    resume: finish the study in that folder (the same arguments); logs: "all" (an MCAP log per run) or
+    "summary" (the rows only). Returns the Study: one row per run (its grid values, seed, status,
+    reason, every metric, log)."""
+    from adaptive_mj.study.sweep import run_sweep
+
+    seeds = count("--seeds", seeds, 1)
+    if logs not in ("all", "summary"):
+        raise ScenarioError(f"--logs must be 'all' or 'summary', got {logs!r}")
+    backend_ = where(backend, jobs=jobs, address=address, ray_logs=ray_logs, retries=retries, engine=engine)
+    if resume is not None and out is not None:
+        raise ScenarioError(f"sweep --resume {resume} writes into that folder; -o {out} cannot be combined with it")
+    if logs == "summary" and resume is not None:
+        raise ScenarioError("--logs summary writes no logs, and --resume and --breaking-point read the runs' logs "
+                            "back; leave out --logs summary")
+    return run_sweep(scenario_path(scenario), grid=grid_expressions(grid), seeds=seeds,
+                     overrides=_strings("--set", overrides), metrics=_strings("--metric", metrics),
+                     out=None if out is None else Path(out), resume=None if resume is None else Path(resume),
+                     logs=logs, backend=backend_)
+
+
+def breaking_point(scenario: str | Path, *, key: str, lo: float | None = None, hi: float | None = None,
+                   tail_bound: float, seeds: int = 1, steps: int = 5, overrides: Sequence[str] = (),
+                   out: str | Path | None = None, backend: str | Backend = "local", jobs: int | None = None,
+                   address: str | None = None, ray_logs: str = "bytes", retries: int = 3,
+                   engine: str = "process") -> Study:
+    """Bisect one scenario key for the largest value at which every seed passes (no divergence, tail RMS
+    tracking error <= tail_bound, in the scenario's output unit) (`adaptive-mj sweep --breaking-point`).
+
+    key: "KEY=LO:HI", or KEY with lo and hi (integers when both are ints: whole numbers are tried);
+    control.period is searched in whole physics steps under sampled-data control. Returns the Study:
+    one row per value tried (value, passes, statuses, tail_max); info holds the margin, first_fail,
+    resolution and the tail statistics at the margin."""
+    from adaptive_mj.study.sweep import run_breaking_point
+
+    if lo is not None or hi is not None:
+        if lo is None or hi is None or "=" in key:
+            raise ScenarioError(f"--breaking-point: give key='KEY=LO:HI', or key='KEY' with both lo and hi "
+                                f"(got key={key!r}, lo={lo!r}, hi={hi!r})")
+        key = f"{key}={lo!r}:{hi!r}"
+    if tail_bound is None or not isinstance(tail_bound, (int, float)) or not tail_bound > 0:
+        raise ScenarioError(f"--breaking-point needs --tail-bound B > 0 (the tail RMS tracking error above which "
+                            f"a run fails, in the scenario's output unit), got {tail_bound}")
+    seeds = count("--seeds", seeds, 1)
+    steps = count("--steps", steps, 0)
+    backend_ = where(backend, jobs=jobs, address=address, ray_logs=ray_logs, retries=retries, engine=engine)
+    return run_breaking_point(scenario_path(scenario), point=key, tail_bound=float(tail_bound), seeds=seeds,
+                              steps=steps, overrides=_strings("--set", overrides),
+                              out=None if out is None else Path(out), backend=backend_)
+
+
+def stress(*, seeds: int = 5, steps: int = 4, duration: float = 20.0, composite: bool = False,
+           out: str | Path | None = None, backend: str | Backend = "local", jobs: int | None = None,
+           address: str | None = None, ray_logs: str = "bytes", retries: int = 3,
+           engine: str = "process") -> Study:
+    """The breaking-point study, every plant × law × stressor (`adaptive-mj stress`): `seeds` per value,
+    `steps` bisection steps, runs of `duration` s; composite: also composite adaptation. Returns the Study:
+    one row per plant/law × stressor (margin, first_fail, resolution, tail statistics), as margins.csv."""
+    from adaptive_mj.study.stress import run_stress
+
+    seeds, steps = count("--seeds", seeds, 1), count("--steps", steps, 0)
+    duration = positive("--duration", duration, "s")
+    backend_ = where(backend, jobs=jobs, address=address, ray_logs=ray_logs, retries=retries, engine=engine)
+    return run_stress(seeds=seeds, steps=steps, duration=duration, composite=bool(composite),
+                      out=None if out is None else Path(out), backend=backend_)
+
+
+def bench(*, quick: bool = False, scenarios: Sequence[str | Path] = (), out: str | Path | None = None,
+          backend: str | Backend = "local", jobs: int | None = None, address: str | None = None,
+          ray_logs: str = "bytes", retries: int = 3, engine: str = "process") -> Study:
+    """The benchmark catalogue (`adaptive-mj bench`): quick: shorter runs, no breaking-point study;
+    scenarios: your own scenario files (or bundled names), each in a section of its own. Returns the
+    Study: one row per run of the report's main table (section, run, status, tail, u_rms, u_tv, key)."""
+    from adaptive_mj.study.bench import run_bench
+
+    backend_ = where(backend, jobs=jobs, address=address, ray_logs=ray_logs, retries=retries, engine=engine)
+    paths = [scenario_path(p) for p in ([scenarios] if isinstance(scenarios, (str, Path)) else scenarios)]
+    return run_bench(quick=bool(quick), scenarios=paths, out=None if out is None else Path(out), backend=backend_)
