@@ -27,6 +27,7 @@ def _law(**kw):
 
 
 def test_lyapunov_rule_is_its_equation():
+    """sign(b) = -1: θ̂' = -sign(b) γ ω e = γ ω e."""
     rng = np.random.default_rng(1)
     law = _law()
     for _ in range(20):
@@ -35,7 +36,7 @@ def test_lyapunov_rule_is_its_equation():
         r = (ref[1] + 3.0 * ref[0]) / 3.0  # r from the reference model y_m' = -3 y_m + 3 r
         omega, e = np.array([x[0], r]), x[0] - ref[0]
         assert out.u == pytest.approx(th @ omega, rel=1e-14)
-        np.testing.assert_allclose(out.theta_hat_dot, -(-1.0) * np.array([0.7, 1.3]) * omega * e, rtol=1e-14)
+        np.testing.assert_allclose(out.theta_hat_dot, np.array([0.7, 1.3]) * omega * e, rtol=1e-14)
         assert out.s == pytest.approx(-e, rel=1e-14)
 
 
