@@ -77,7 +77,8 @@ SCENARIO_CASES = [
     ("event after the end", GOOD, ["--set", "events=[{t=3.0, kind='constant_force', value=1.0}]"],
      r"events\[0\]\.t must be <= simulation\.duration \(2\.0\), got 3\.0"),
     ("unknown reference kind", GOOD, ["--set", "reference.kind=square"],
-     r"reference\.kind must be one of 'constant', 'cosine', 'sine', 'sum_of_sines', 'smooth_step', 'reference_model', got 'square'"),
+     r"reference\.kind must be one of 'constant', 'cosine', 'sine', 'sum_of_sines', 'smooth_step', "
+     r"'reference_model', got 'square'"),
     ("unknown law kind", GOOD, ["--set", "law.kind=mpc"],
      r"law\.kind must be one of 'sliding_adaptive', .*, got 'mpc'"),
     ("schema version", GOOD.replace("schema_version = 1", "schema_version = 7"), [],
