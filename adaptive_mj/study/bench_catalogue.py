@@ -1284,6 +1284,7 @@ ROHRS_VARIANTS = [
     ("e_mod", "e-modification ν = 0.5", ["law.e_modification=0.5"]),
     ("projection", "projection k_y ∈ [−5, 0], k_r ∈ [0, 5]", ["law.projection={k_y=[-5, 0], k_r=[0, 5]}"]),
     ("dead_zone", "dead-zone |e| < 0.5", ["law.dead_zone={width=0.5}"]),
+    ("dead_zone_0.3", "dead-zone |e| < 0.3", ["law.dead_zone={width=0.3}"]),
     ("mit", "the MIT rule", ["law.rule=mit"]),
 ]
 
@@ -1349,7 +1350,7 @@ def _mrac_breaks(quick: bool, logs: Path) -> Section:
             tail = (r.summary or {}).get("metrics", {}).get("rms_tracking_error_tail")
             r_lines.append(f"| {label} | {r.status} | {tr.t[-1]:.2f} | {_g(onset) if onset is not None else '—'} | "
                            f"{_g(tr.theta_hat[-1, 0])} | {_g(tail)} |")
-            if key in ("published", "constant_r", "e_mod"):
+            if key in ("published", "constant_r", "no_unmodelled", "e_mod"):
                 ax[0].plot(tr.t, tr.theta_hat[:, 0], lw=1.1, label=label)
                 ax[1].plot(tr.t, np.clip(tr.x[:, 0] - tr.ref[:, 0], -5, 5), lw=0.8, label=label)
         ax[0].axhline(limit, color="k", ls="--", lw=1, label=f"frozen-gain limit {limit:.2f}")
