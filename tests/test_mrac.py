@@ -226,3 +226,37 @@ def test_wing_rock_tracks_roll_through_the_flight_condition_change(name):
     err = traj.ref[:, 0] - traj.x[:, 0]
     assert float(np.sqrt(np.mean(err[traj.t >= 40.0] ** 2))) < 0.02
     assert np.all(np.abs(traj.u) <= 1.75)
+
+
+def test_state_space_keys_give_the_same_plant_as_the_transfer_function():
+    """Rohrs' plant written as A, B, C (its canonical form) runs the same as num/den x unmodelled."""
+    A, B, C = canonical(np.polymul([2.0], [229.0]), np.polymul([1.0, 1.0], [1.0, 30.0, 229.0]))
+    text = (sc.SCENARIOS_DIR / "rohrs_counterexample.toml").read_text()
+    text = text.replace("unmodelled_num = [229.0]\nunmodelled_den = [1.0, 30.0, 229.0]\n",
+                        f"A = {A.tolist()}\nB = {B.tolist()}\nC = {C.tolist()}\n")
+    short = ["simulation.duration=2.0"]
+    a = execute(sc.loads(text, overrides=short)).trajectory
+    b = _run("rohrs_counterexample", *short).trajectory
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.theta_hat, b.theta_hat)
+    with pytest.raises(ScenarioError, match="plant.C must be given with plant.A, plant.B and plant.C together"):
+        sc.loads(text.replace("C = ", "#C = "))
+    with pytest.raises(ScenarioError, match=r"plant.B must be an array of 3 numbers"):
+        sc.loads(text.replace(f"B = {B.tolist()}", "B = [0.0, 1.0]"))
+
+
+def test_first_order_law_is_mrac_with_known_b():
+    """docs/THEORY.md: the lecture's first-order law is MRAC with ω = φ(x), k_φ = −p̂, e = x − x_m, x_m = x_d
+    (the model x_m' = −k x_m + r with r = x_d' + k x_d), rate Γ = 1/γ, plus the known part r − k x − f(x)."""
+    from adaptive_mj.laws import FirstOrderAdaptiveLaw
+    from adaptive_mj.plants.twin import lecture_first_order_form
+
+    form, k, gamma = lecture_first_order_form(), 2.0, 0.5
+    law = FirstOrderAdaptiveLaw(form, k=k, gamma=gamma)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        x, ref, p_hat = rng.normal(size=1), rng.normal(size=2), rng.normal(size=2)
+        out = law(0.0, x, ref, p_hat)
+        r, e, omega, k_phi = ref[1] + k * ref[0], x[0] - ref[0], form.phi(x), -p_hat
+        assert out.u == pytest.approx(r - k * x[0] - form.f(x) + k_phi @ omega, rel=1e-12, abs=1e-12)
+        np.testing.assert_allclose(-out.theta_hat_dot, -(1.0 / gamma) * omega * e, rtol=1e-12, atol=1e-15)

@@ -5,7 +5,9 @@ optional input delay, stepped without MuJoCo (the analytic twin's sibling, plant
 
 Written in a scenario as the modelled part num/den (a first-order factor b/(s - a): what MRAC
 assumes) times an optional unmodelled factor (plant.unmodelled_num/den, DC gain 1 in Rohrs'
-example), realised in controllable canonical form. The law sees y only (order 1: x_law = [y]).
+example), realised in controllable canonical form; or as the whole plant's matrices plant.A, B, C
+(num/den then only name the modelled part the law is designed for). The law sees y only (order 1:
+x_law = [y]).
 
 Integration: classic RK4 at the scenario's timestep h. The policy is evaluated at the four
 stages t, t+h/2, t+h/2, t+h (so a law's estimates integrate exactly as on the twin). Without a
@@ -164,7 +166,8 @@ def model_source(scn) -> None:
 
 
 def from_scenario(scn, source) -> BuiltPlant:
-    """plant.kind = "linear": num/den (times unmodelled_num/den), input_delay [s], ctrl_range; the
+    """plant.kind = "linear": num/den (times unmodelled_num/den, or the whole plant as A, B, C), input_delay
+    [s], ctrl_range; the
     true parameters are MRAC's ideal gains for the modelled part and the law's reference model."""
     from adaptive_mj.laws.mrac import gain_names, ideal_gains
 
@@ -173,8 +176,13 @@ def from_scenario(scn, source) -> BuiltPlant:
     dt = sim.timestep if sim.timestep is not None else 0.001
     try:
         a, b = first_order_part(lin.num, lin.den)
-        num, den = np.polymul(lin.num, lin.unmodelled_num), np.polymul(lin.den, lin.unmodelled_den)
-        A, B, C = canonical(num, den)
+        if lin.A is not None:
+            A, B, C = np.array(lin.A, dtype=float), np.array(lin.B, dtype=float), np.array(lin.C, dtype=float)
+            if not np.any(C):
+                raise ValueError("plant.C must not be all zeros")
+        else:
+            num, den = np.polymul(lin.num, lin.unmodelled_num), np.polymul(lin.den, lin.unmodelled_den)
+            A, B, C = canonical(num, den)
     except ValueError as exc:
         raise ScenarioError(f"{scn.source}: plant: {exc}") from None
     steps = lin.input_delay / dt

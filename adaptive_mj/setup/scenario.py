@@ -77,6 +77,11 @@ class LinearSpec:
     unmodelled_num: tuple[float, ...] = (1.0,)
     unmodelled_den: tuple[float, ...] = (1.0,)
     input_delay: float = 0.0
+    # the whole plant as x' = A x + B u, y = C x instead of the product num/den · unmodelled (A (n, n) as
+    # rows, B and C (n,)); num/den still name the modelled part the law is designed for
+    A: tuple[tuple[float, ...], ...] | None = None
+    B: tuple[float, ...] | None = None
+    C: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -661,7 +666,7 @@ def _analytic_plant(t: _Table, kind: str) -> PlantSpec:
         linear = LinearSpec(num=t.numbers("num"), den=t.numbers("den"),
                             unmodelled_num=t.numbers("unmodelled_num", (1.0,)),
                             unmodelled_den=t.numbers("unmodelled_den", (1.0,)),
-                            input_delay=t.number("input_delay", 0.0, ge=0))
+                            input_delay=t.number("input_delay", 0.0, ge=0), **_state_space(t))
         for key in ("den", "unmodelled_den"):
             if not any(getattr(linear, key)):
                 raise t.fail(key, "a polynomial with a non-zero coefficient", list(getattr(linear, key)))
@@ -673,6 +678,26 @@ def _analytic_plant(t: _Table, kind: str) -> PlantSpec:
     return PlantSpec(kind=kind, backend=backend, model=None, joint=None, actuator=None, payload=None,
                      payload_mass=None, site="tip", theta=None, g=9.81, density=None, viscosity=None,
                      ctrl_range=ctrl, linear=linear, wing_rock=wing_rock)
+
+
+def _state_space(t: _Table) -> dict:
+    """plant.A, plant.B, plant.C (kind "linear"): all three or none; A square, B and C of its size; not
+    with unmodelled_num/den (the matrices are the whole plant)."""
+    given = [k for k in ("A", "B", "C") if k in t.data]
+    if not given:
+        return {}
+    if len(given) != 3:
+        missing = next(k for k in ("A", "B", "C") if k not in t.data)
+        raise t.fail(missing, "given with plant.A, plant.B and plant.C together", None)
+    for key in ("unmodelled_num", "unmodelled_den"):
+        if key in t.data:
+            raise t.fail(key, "absent when plant.A, B and C give the whole plant", t.data[key])
+    rows = t.get("A")
+    if not isinstance(rows, list) or not rows or any(not isinstance(r, list) or len(r) != len(rows) for r in rows):
+        raise t.fail("A", "a square array of arrays (rows)", rows)
+    sub = _Table({f"A[{i}]": r for i, r in enumerate(rows)}, t.prefix, t.where)
+    A = tuple(sub.numbers(f"A[{i}]", length=len(rows)) for i in range(len(rows)))
+    return {"A": A, "B": t.numbers("B", length=len(rows)), "C": t.numbers("C", length=len(rows))}
 
 
 def _payload_paths(name: str | None, base_dir: Path) -> tuple[Path, ...]:
