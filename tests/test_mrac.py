@@ -260,3 +260,8 @@ def test_first_order_law_is_mrac_with_known_b():
         r, e, omega, k_phi = ref[1] + k * ref[0], x[0] - ref[0], form.phi(x), -p_hat
         assert out.u == pytest.approx(r - k * x[0] - form.f(x) + k_phi @ omega, rel=1e-12, abs=1e-12)
         np.testing.assert_allclose(-out.theta_hat_dot, -(1.0 / gamma) * omega * e, rtol=1e-12, atol=1e-15)
+
+
+def test_mit_rule_is_refused_under_sampled_control():
+    with pytest.raises(ScenarioError, match=r"law.rule = 'mit' runs under control.mode = 'continuous' only"):
+        _run("rohrs_counterexample", "law.rule=mit", "control.period=0.01")

@@ -88,6 +88,7 @@ class LinearPlant:
         self._policy: Policy | None = None
         self._ring = np.zeros(self.delay_steps + 1)  # the stage-0 controls of the last D + 1 steps
         self._k = 0
+        self._force = 0.0  # the input disturbance held over the current step
 
     @property
     def form(self):
@@ -155,8 +156,6 @@ class LinearPlant:
         self.x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         self._t = t + h
         self._k += 1
-
-    _force = 0.0
 
 
 # --- built from a scenario ------------------------------------------------------
