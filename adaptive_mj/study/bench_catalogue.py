@@ -1422,4 +1422,5 @@ def _wing_rock(quick: bool, logs: Path) -> Section:
 
     return Section("wing_rock", "16. Aircraft: wing rock",
                    "The sliding adaptive law and MRAC hold a roll reference on the wing-rock dynamics within the "
-                   "aileron limit, and re-adapt when the flight condition changes.", jobs, analyze)
+                   "aileron limit, and re-adapt (slowly: docs/THEORY.md, \"Wing rock\") when the flight condition "
+                   "changes.", jobs, analyze)
