@@ -139,6 +139,60 @@ class SmoothStep:
         return out
 
 
+@dataclass(frozen=True)
+class ModelResponse:
+    """y_m: the response of MRAC's reference model y_m^(n) + α_{n-1} y_m^(n-1) + ... + α_0 y_m = β r,
+    started at rest (y_m and its n-1 derivatives 0 at t = 0), to the command
+    r(t) = offset + sum_i amplitudes[i]*sin(omegas[i]*t + phases[i]); exact, closed form.
+
+    alpha: (n,) [α_0, ..., α_{n-1}], the polynomial's roots distinct and in the left half-plane;
+    beta: gain. y_m = steady state (β r through G(s) = β / (s^n + ...), each sine by G(jω)) plus the
+    free response Σ c_j e^{λ_j t} that brings it to rest at t = 0; derivative k of each term is
+    exact ((jω)^k, λ_j^k), so every order asked for is exact."""
+
+    alpha: tuple[float, ...]
+    beta: float
+    offset: float = 0.0
+    amplitudes: tuple[float, ...] = ()
+    omegas: tuple[float, ...] = ()
+    phases: tuple[float, ...] = ()
+
+    def __post_init__(self):
+        if not (len(self.amplitudes) == len(self.omegas) == len(self.phases)):
+            raise ValueError("ModelResponse: amplitudes, omegas and phases must have the same length")
+        lam = self.poles()
+        if np.any(lam.real >= 0) or len(np.unique(np.round(lam, 12))) != len(lam):
+            raise ValueError(f"ModelResponse: the reference model's poles must be distinct and stable, got {lam}")
+
+    def poles(self) -> np.ndarray:
+        """λ (n,): roots of s^n + α_{n-1} s^{n-1} + ... + α_0."""
+        return np.roots(np.concatenate([[1.0], np.asarray(self.alpha, dtype=float)[::-1]]))
+
+    def _gain(self, s):
+        """G(s) = β / (s^n + α_{n-1} s^{n-1} + ... + α_0)."""
+        return self.beta / np.polyval(np.concatenate([[1.0], np.asarray(self.alpha, dtype=float)[::-1]]), s)
+
+    def _steady(self, t, k: int):
+        """k-th derivative of the steady-state response at t."""
+        out = np.zeros(np.shape(t)) + (self.beta * self.offset / self.alpha[0] if k == 0 else 0.0)
+        for a, w, p in zip(self.amplitudes, self.omegas, self.phases, strict=True):
+            out = out + a * np.imag((1j * w) ** k * self._gain(1j * w) * np.exp(1j * (w * np.asarray(t) + p)))
+        return out
+
+    def __call__(self, t, order: int) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        n = len(self.alpha)
+        lam = self.poles()
+        # free response Σ c_j e^{λ_j t}: Σ c_j λ_j^k = -steady^(k)(0), k < n
+        vander = np.array([lam**k for k in range(n)])
+        c = np.linalg.solve(vander, -np.array([self._steady(0.0, k) for k in range(n)], dtype=complex))
+        out = np.empty((order + 1,) + t.shape)
+        for k in range(order + 1):
+            free = sum(cj * lj**k * np.exp(lj * t) for cj, lj in zip(c, lam, strict=True))
+            out[k] = self._steady(t, k) + np.real(free)
+        return out
+
+
 # --------------------------------------------------------------------------
 # Joint-space references for an arm of m joints.
 #

@@ -4,6 +4,8 @@ from __future__ import annotations
 # manipulator: rad (hinges) or m; ship: the heading, and the control is the commanded rudder angle
 OUTPUT = {"heave": "m", "arm": "rad", "first_order": "-", "manipulator": "rad", "ship": "rad"}
 CONTROL = {"heave": "N", "arm": "N m", "first_order": "-", "manipulator": "N m", "ship": "rad"}
+OUTPUT.update({"linear": "-", "wing_rock": "rad"})  # the analytic plants (issue 21): y of a transfer function; roll
+CONTROL.update({"linear": "-", "wing_rock": "-"})  # u of a transfer function; the aileron input (|u| <= 1.75)
 _BODY_PARAM_UNITS = {"m": "kg", "mcx": "kg m", "mcy": "kg m", "mcz": "kg m", "Ixx": "kg m²", "Ixy": "kg m²",
                      "Iyy": "kg m²", "Ixz": "kg m²", "Iyz": "kg m²", "Izz": "kg m²", "armature": "kg m²",
                      "damping": "N m s/rad", "coulomb": "N m"}

@@ -78,9 +78,9 @@ SCENARIO_CASES = [
      r"events\[0\]\.t must be <= simulation\.duration \(2\.0\), got 3\.0"),
     ("unknown reference kind", GOOD, ["--set", "reference.kind=square"],
      r"reference\.kind must be one of 'constant', 'cosine', 'sine', 'sum_of_sines', 'smooth_step', 'waypoints', "
-     r"got 'square'"),
-    ("unknown law kind", GOOD, ["--set", "law.kind=mrac"],
-     r"law\.kind must be one of 'sliding_adaptive', .*, got 'mrac'"),
+     r"'reference_model', got 'square'"),
+    ("unknown law kind", GOOD, ["--set", "law.kind=mpc"],
+     r"law\.kind must be one of 'sliding_adaptive', .*, got 'mpc'"),
     ("schema version", GOOD.replace("schema_version = 1", "schema_version = 7"), [],
      r"schema_version must be 1 \(this adaptive-mj reads version 1\), got 7"),
     ("name with a path", GOOD, ["--set", 'name="../../outside"'],

@@ -95,7 +95,7 @@ def test_control_rate_section_on_short_runs(tmp_path):
 def test_the_section_is_in_both_benches(tmp_path):
     for quick in (True, False):
         keys = [s.key for s in bench_catalogue.catalogue(quick=quick, logs=tmp_path)]
-        i = keys.index("control_rate")  # sections added later (the ship's) come after these three
+        i = keys.index("control_rate")  # then the arm's sections; issue 21's (ship, mrac, wing_rock) come after
         assert keys[i:i + 3] == ["control_rate", "arm_drift", "arm_conditions"]
 
 

@@ -77,7 +77,7 @@ def test_toml_syntax_error_names_line(tmp_path):
     (("initial_state = [1.0, 0.0]", "initial_state = [1.0]"),
      r"simulation\.initial_state must be an array of 2 numbers"),
     (('kind = "cosine"', 'kind = "square"'), r"reference\.kind must be one of 'constant', .*got 'square'"),
-    (('kind = "sliding_adaptive"', 'kind = "mrac"'), r"law\.kind must be one of .*got 'mrac'"),
+    (('kind = "sliding_adaptive"', 'kind = "mpc"'), r"law\.kind must be one of .*got 'mpc'"),
     (("schema_version = 1", "schema_version = 7"), r"schema_version must be 1 .*got 7"),
     (("schema_version = 1", ""), r"schema_version is required but missing"),
     (('backend = "mujoco"', 'backend = "mujoco"\npayload_mass = 1.0'),

@@ -48,9 +48,10 @@ def plant_kinds(kind: str | None = None) -> dict:
     """plant.kind -> what builds it (``model_source(scn)``, ``from_scenario(scn, source)``): the
     bundled kinds' modules, and installed plant plugins (adaptive_mj.plants.plugin) when `kind` is
     not a bundled one."""
-    from adaptive_mj.plants import arm, heave, manipulator, ship, twin
+    from adaptive_mj.plants import arm, heave, linear, manipulator, ship, twin, wing_rock
 
-    kinds = {"heave": heave, "arm": arm, "first_order": twin, "manipulator": manipulator, "ship": ship}
+    kinds = {"heave": heave, "arm": arm, "first_order": twin, "manipulator": manipulator, "ship": ship,
+             "linear": linear, "wing_rock": wing_rock}
     if kind is not None and kind not in kinds:
         from adaptive_mj.plants.plugin import installed
 
@@ -252,8 +253,25 @@ def _plugin(scn: Scenario, plant, modification):
     return PluginLaw(inst, plant.form, np.array(params, dtype=float))
 
 
+def _mrac(scn: Scenario, plant, modification):
+    """law.kind = "mrac" (laws.mrac) on a linear plant (sign and size of b from its modelled part) or
+    the wing rock (b = L_δ, the nonlinear terms of its regressor as matched terms)."""
+    from adaptive_mj.laws.mrac import MracLaw, Rule
+    from adaptive_mj.plants import linear, wing_rock
+
+    M, psi, psi_names = scn.law.mrac, None, ()
+    if scn.plant.kind == "linear":
+        b = linear.nominal_b(scn)
+    else:
+        b, psi, psi_names = scn.plant.wing_rock.l_delta, wing_rock.nonlinear_terms, wing_rock.NONLINEAR
+    return MracLaw(order=scn.law.order, alpha=M.alpha, beta=M.beta, gamma=_gamma(scn, tuple(plant.names)),
+                   sign_b=1.0 if b > 0 else -1.0, rule=Rule(M.rule), psi=psi, psi_names=psi_names, b_abs=abs(b),
+                   dead_zone=_dead_zone(scn, plant), modification=modification)
+
+
 #: law.kind -> builder(scn, plant) (the scenario has checked that the kind fits the plant kind)
 LAW_KINDS = {
+    "mrac": _mrac,
     "first_order_adaptive": _first_order_adaptive,
     "sliding_adaptive": _sliding_adaptive,
     "fixed_nominal": _fixed_nominal,
@@ -361,6 +379,12 @@ def _reference(scn: Scenario, plant):
     r = scn.reference
     if r.kind in JOINT_REFERENCE_KINDS:
         return _joint_reference(scn, plant.model, plant.joint_names)
+    if r.kind == "reference_model":
+        M = scn.law.mrac
+        try:
+            return refs.ModelResponse(alpha=M.alpha, beta=M.beta, **r.params)
+        except ValueError as exc:
+            raise ScenarioError(f"{scn.source}: reference: {exc}") from None
     cls = {"constant": refs.Constant, "cosine": refs.Cosine, "sine": refs.Sine,
            "sum_of_sines": refs.SumOfSines, "smooth_step": refs.SmoothStep, "waypoints": refs.Waypoints}[r.kind]
     return cls(**r.params)
@@ -428,6 +452,14 @@ def _event(e, scn: Scenario | None = None, source: ModelSource | None = None) ->
     if e.kind == "fluid_density_scale":
         return Event(e.t, f"fluid density x {e.value}",
                      lambda plant, e=e: plant.set_fluid_density(plant.model.opt.density * e.value))
+
+    if e.kind == "flight_condition":
+        from adaptive_mj.plants.wing_rock import form_theta
+
+        l_delta = e.l_delta if e.l_delta is not None else scn.plant.wing_rock.l_delta
+        theta = form_theta(e.W, l_delta)
+        return Event(e.t, f"flight condition W = {list(e.W)}, L_delta = {l_delta:g}",
+                     lambda plant, theta=theta: plant.set_true_theta(theta))
 
     def add_force(plant, e=e):
         plant.force_offset += e.value

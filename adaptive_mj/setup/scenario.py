@@ -20,17 +20,19 @@ from adaptive_mj.errors import ScenarioError
 
 SCHEMA_VERSION = 1
 
-PLANT_KINDS = ("heave", "arm", "first_order", "manipulator", "ship")
+ANALYTIC_PLANT_KINDS = ("linear", "wing_rock")  # analytic plants (adaptive_mj.plants.linear, .wing_rock)
+PLANT_KINDS = ("heave", "arm", "first_order", "manipulator", "ship") + ANALYTIC_PLANT_KINDS
 BACKENDS = ("mujoco", "twin")
 INTEGRATORS = ("rk4", "euler", "implicitfast", "implicit")
-REFERENCE_KINDS = ("constant", "cosine", "sine", "sum_of_sines", "smooth_step", "waypoints")
+REFERENCE_KINDS = ("constant", "cosine", "sine", "sum_of_sines", "smooth_step", "waypoints", "reference_model")
 JOINT_REFERENCE_KINDS = ("joint_sum_of_sines", "joint_waypoints")
-LAW_KINDS = ("sliding_adaptive", "first_order_adaptive", "fixed_nominal", "robust_sliding")
+LAW_KINDS = ("sliding_adaptive", "first_order_adaptive", "fixed_nominal", "robust_sliding", "mrac")
 MANIPULATOR_LAW_KINDS = ("slotine_li", "computed_torque", "pd_gravity")
 DEAD_ZONE_ON = ("s", "tracking_error")
 DISTURBANCE_KINDS = ("none", "constant", "step", "sine")
 ARM_DISTURBANCE_KINDS = DISTURBANCE_KINDS + ("noise",)  # per joint torques (adaptive_mj.disturbance)
-EVENT_KINDS = ("payload_mass", "payload_swap", "fluid_density_scale", "constant_force", "loading", "thrust_scale")
+EVENT_KINDS = ("payload_mass", "payload_swap", "fluid_density_scale", "constant_force", "loading", "thrust_scale",
+               "flight_condition")
 DEFAULT_MODEL = {"heave": "heave_vehicle", "arm": "pendulum_arm", "manipulator": "ur5e_arm", "ship": "ship"}
 STATE_SIGNALS = ("y", "y_dot", "y_ddot")
 JOINT_SIGNALS = ("q", "q_dot")  # an arm's measured signals (noise.std)
@@ -60,6 +62,34 @@ class PlantSpec:
     manipulator: "ManipulatorSpec | None" = None  # kind = "manipulator" only
     plugin_params: dict[str, float] | None = None  # kind = an installed plant plugin: its declared keys
     payload_paths: tuple[Path, ...] = ()  # where plant.payload was looked for (see EventSpec.payload_paths)
+    linear: "LinearSpec | None" = None  # kind = "linear" only
+    wing_rock: "WingRockSpec | None" = None  # kind = "wing_rock" only
+
+
+@dataclass(frozen=True)
+class LinearSpec:
+    """plant.* keys of kind "linear": the modelled part num/den (b/(s - a), highest power first), the
+    unmodelled factor unmodelled_num/unmodelled_den (default 1/1), input_delay τ [s] (whole timesteps)."""
+
+    num: tuple[float, ...]
+    den: tuple[float, ...]
+    unmodelled_num: tuple[float, ...] = (1.0,)
+    unmodelled_den: tuple[float, ...] = (1.0,)
+    input_delay: float = 0.0
+    # the whole plant as x' = A x + B u, y = C x instead of the product num/den · unmodelled (A (n, n) as
+    # rows, B and C (n,)); num/den still name the modelled part the law is designed for
+    A: tuple[tuple[float, ...], ...] | None = None
+    B: tuple[float, ...] | None = None
+    C: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
+class WingRockSpec:
+    """plant.* keys of kind "wing_rock": W (5,) the roll-moment coefficients of [x1, x2, |x1|x2, |x2|x2,
+    x1³] (default Elzebda's 25° set) and l_delta L_δ, the control effectiveness (default 1)."""
+
+    W: tuple[float, ...]
+    l_delta: float
 
 
 @dataclass(frozen=True)
@@ -184,6 +214,18 @@ class LawSpec:
     robust: RobustSpec = RobustSpec()  # σ/e-modification, projection, composite adaptation
     plugin_params: dict[str, float] | None = None  # a law plugin's declared keys (law.kind = its name)
     saturation: str = "ignore"  # manipulator law: "freeze" = saturation-aware adaptation
+    mrac: "MracSpec | None" = None  # law.kind = "mrac" only
+
+
+@dataclass(frozen=True)
+class MracSpec:
+    """law.* keys of kind "mrac": the reference model y_m^(n) + α_{n-1}y_m^(n-1) + ... + α_0 y_m = β r
+    (alpha = law.model [α_0, ...], beta = law.model_gain, default α_0: unit DC gain) and the rule
+    ("lyapunov" or "mit")."""
+
+    alpha: tuple[float, ...]
+    beta: float
+    rule: str = "lyapunov"
 
 
 @dataclass(frozen=True)
@@ -231,6 +273,8 @@ class EventSpec:
     # payload_swap: where the file was looked for, in order (bundled: models/payloads; a relative path: next to
     # the scenario, then the current directory); the first that exists is used (adaptive_mj.plants.payload)
     payload_paths: tuple[Path, ...] = ()
+    W: tuple[float, ...] | None = None  # flight_condition: the wing-rock coefficients from t on
+    l_delta: float | None = None  # flight_condition: L_δ from t on
 
 
 @dataclass(frozen=True)
@@ -481,6 +525,9 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
     sim = _simulation(top.table("simulation"), plant, order)
     reference = _reference(top.table("reference"), plant)
     law = _law(top.table("law"), plant, order)
+    if reference.kind == "reference_model" and law.kind != "mrac":
+        raise ScenarioError(f"{where}: reference.kind = 'reference_model' needs law.kind = 'mrac' (its model is "
+                            f"law.model), got law.kind = {law.kind!r}")
     arm = plant.kind == "manipulator"
     noise = _noise(top.table("noise", {}), order, arm=arm)
     disturbance = _disturbance(top.table("disturbance", {}), arm=arm)
@@ -528,6 +575,8 @@ def _resolve_model(name: str, base_dir: Path) -> Path:
 
 def _plant(t: _Table, base_dir: Path) -> PlantSpec:  # noqa: C901 (one branch per plant kind; split in issue 19)
     raw_kind = t.data.get("kind")
+    if raw_kind in ANALYTIC_PLANT_KINDS:
+        return _analytic_plant(t, raw_kind)
     plugins = {}
     if isinstance(raw_kind, str) and raw_kind not in PLANT_KINDS:
         from adaptive_mj.plants.plugin import installed
@@ -602,6 +651,55 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:  # noqa: C901 (one branch pe
                      payload_mass=payload_mass, site=site, theta=theta, g=g, density=density,
                      viscosity=viscosity, ctrl_range=ctrl, thruster_time_constant=lag, regressor=regressor,
                      manipulator=manipulator, payload_paths=payload_paths)
+
+
+WING_ROCK_W = (-18.59521e-3, 15.162375e-3, -62.45153e-3, 9.54708e-3, 21.45291e-3)  # Elzebda et al., 25°
+
+
+def _analytic_plant(t: _Table, kind: str) -> PlantSpec:
+    """plant.kind = "linear" or "wing_rock": analytic plants on the twin backend (no model)."""
+    t.string("kind")
+    backend = t.string("backend", "twin", choices=("twin",))
+    ctrl = t.numbers("ctrl_range", None, length=2)
+    if ctrl is not None and not ctrl[0] < ctrl[1]:
+        raise t.fail("ctrl_range", "[lo, hi] with lo < hi", list(ctrl))
+    linear = wing_rock = None
+    if kind == "linear":
+        linear = LinearSpec(num=t.numbers("num"), den=t.numbers("den"),
+                            unmodelled_num=t.numbers("unmodelled_num", (1.0,)),
+                            unmodelled_den=t.numbers("unmodelled_den", (1.0,)),
+                            input_delay=t.number("input_delay", 0.0, ge=0), **_state_space(t))
+        for key in ("den", "unmodelled_den"):
+            if not any(getattr(linear, key)):
+                raise t.fail(key, "a polynomial with a non-zero coefficient", list(getattr(linear, key)))
+    else:
+        wing_rock = WingRockSpec(W=t.numbers("W", WING_ROCK_W, length=5), l_delta=t.number("l_delta", 1.0))
+        if wing_rock.l_delta == 0:
+            raise t.fail("l_delta", "non-zero", 0.0)
+    t.finish()
+    return PlantSpec(kind=kind, backend=backend, model=None, joint=None, actuator=None, payload=None,
+                     payload_mass=None, site="tip", theta=None, g=9.81, density=None, viscosity=None,
+                     ctrl_range=ctrl, linear=linear, wing_rock=wing_rock)
+
+
+def _state_space(t: _Table) -> dict:
+    """plant.A, plant.B, plant.C (kind "linear"): all three or none; A square, B and C of its size; not
+    with unmodelled_num/den (the matrices are the whole plant)."""
+    given = [k for k in ("A", "B", "C") if k in t.data]
+    if not given:
+        return {}
+    if len(given) != 3:
+        missing = next(k for k in ("A", "B", "C") if k not in t.data)
+        raise t.fail(missing, "given with plant.A, plant.B and plant.C together", None)
+    for key in ("unmodelled_num", "unmodelled_den"):
+        if key in t.data:
+            raise t.fail(key, "absent when plant.A, B and C give the whole plant", t.data[key])
+    rows = t.get("A")
+    if not isinstance(rows, list) or not rows or any(not isinstance(r, list) or len(r) != len(rows) for r in rows):
+        raise t.fail("A", "a square array of arrays (rows)", rows)
+    sub = _Table({f"A[{i}]": r for i, r in enumerate(rows)}, t.prefix, t.where)
+    A = tuple(sub.numbers(f"A[{i}]", length=len(rows)) for i in range(len(rows)))
+    return {"A": A, "B": t.numbers("B", length=len(rows)), "C": t.numbers("C", length=len(rows))}
 
 
 def _payload_paths(name: str | None, base_dir: Path) -> tuple[Path, ...]:
@@ -724,7 +822,7 @@ def _joint_friction(t: _Table, kind: str, spec: "ManipulatorSpec | None") -> "Ma
 
 def _order(doc: dict, plant: PlantSpec, where: str) -> int:
     """n: 1 for first_order; 2, or 3 for a heave vehicle with a thruster lag and law.order = 3."""
-    if plant.kind == "first_order":
+    if plant.kind in ("first_order", "linear"):
         return 1
     law = doc.get("law")
     order = law.get("order", 2) if isinstance(law, dict) else 2
@@ -847,6 +945,8 @@ def _reference(t: _Table, plant: PlantSpec) -> ReferenceSpec:
     kind = t.string("kind", choices=REFERENCE_KINDS)
     if kind == "waypoints":
         return _waypoints(t)
+    if kind == "reference_model":
+        return _model_reference(t)
     params: dict[str, Any] = {}
     for key, default in _REFERENCE_KEYS[kind].items():
         if key in ("amplitudes", "omegas", "phases"):
@@ -874,6 +974,20 @@ def _waypoints(t: _Table) -> ReferenceSpec:
     params = {"waypoints": points, "durations": durations, "t0": t.number("t0", 0.0, ge=0)}
     t.finish()
     return ReferenceSpec(kind="waypoints", params=params)
+
+
+def _model_reference(t: _Table) -> ReferenceSpec:
+    """reference.kind = "reference_model": the command r = offset + Σ amplitudes_i sin(omegas_i t + phases_i)
+    through MRAC's reference model (law.model, law.model_gain), from rest."""
+    amplitudes = t.numbers("amplitudes", ())
+    n = len(amplitudes)
+    omegas = t.numbers("omegas", (), length=n)
+    phases = t.numbers("phases", (0.0,) * n, length=n)
+    if any(w <= 0 for w in omegas):
+        raise t.fail("omegas", "frequencies > 0 [rad/s]", list(omegas))
+    params = {"offset": t.number("offset", 0.0), "amplitudes": amplitudes, "omegas": omegas, "phases": phases}
+    t.finish()
+    return ReferenceSpec(kind="reference_model", params=params)
 
 
 def _gamma(t: _Table):
@@ -918,6 +1032,11 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
         return _manipulator_law(t)
     default_kind = "first_order_adaptive" if plant.kind == "first_order" else "sliding_adaptive"
     raw_kind = t.data.get("kind")
+    if raw_kind == "mrac" or plant.kind == "linear":
+        return _mrac_law(t, plant, order)
+    if plant.kind == "wing_rock" and raw_kind not in ("sliding_adaptive", "fixed_nominal", "robust_sliding", None):
+        raise t.fail("kind", "'mrac', 'sliding_adaptive', 'fixed_nominal' or 'robust_sliding' for plant.kind = "
+                             "'wing_rock'", raw_kind)
     plugins = {}
     if isinstance(raw_kind, str) and raw_kind not in LAW_KINDS:
         from adaptive_mj.laws.plugin import installed
@@ -974,6 +1093,38 @@ def _plugin_law(t: _Table, kind: str, inst, plant: PlantSpec, order: int) -> Law
 
 
 ROBUST_KEYS = ("sigma", "e_modification", "theta0", "projection", "composite")
+
+
+def _mrac_law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
+    """law.kind = "mrac" (adaptive_mj.laws.mrac), on plant.kind = "linear" (which takes no other law)
+    or "wing_rock": law.model, law.model_gain, law.rule, law.gamma (rates), law.initial_estimates and
+    the modifications (law.sigma, law.e_modification, law.theta0, law.projection, law.dead_zone)."""
+    kind = t.string("kind", "mrac", choices=("mrac",))
+    if plant.kind not in ("linear", "wing_rock"):
+        raise t.fail("kind", "a law of plant.kind = 'linear' or 'wing_rock' (law.kind = 'mrac' needs an analytic "
+                             f"plant), not of plant.kind = {plant.kind!r}", kind)
+    law_order = t.integer("order", order, ge=1)
+    if law_order != order:
+        raise t.fail("order", f"{order} for plant.kind = {plant.kind!r}", law_order)
+    alpha = t.numbers("model", length=order)
+    if any(a <= 0 for a in alpha):
+        raise t.fail("model", f"{order} coefficient(s) > 0 (a stable reference model)", list(alpha))
+    beta = t.number("model_gain", alpha[0])
+    if beta == 0:
+        raise t.fail("model_gain", "non-zero", beta)
+    rule = t.string("rule", "lyapunov", choices=("lyapunov", "mit"))
+    if rule == "mit" and order != 1:
+        raise t.fail("rule", "'lyapunov' for a law of order 2 (the MIT rule is written for order 1)", rule)
+    gamma = _gamma(t)
+    if gamma is None:
+        raise ScenarioError(f"{t.where}: law.gamma is required for law.kind = 'mrac'")
+    dead_zone = _dead_zone(t)
+    initial = _estimate_table(t, "initial_estimates")
+    robust = _robust(t, kind, adaptive=True, composite=False, presets=())
+    t.finish()
+    return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=gamma, dead_zone=dead_zone,
+                   initial_estimates=initial, nominal=None, K=None, boundary_layer=None, robust=robust,
+                   mrac=MracSpec(alpha=alpha, beta=beta, rule=rule))
 
 
 def _robust(t: _Table, kind: str, *, adaptive: bool, composite: bool, presets: tuple[str, ...]) -> RobustSpec:
@@ -1099,13 +1250,19 @@ def _events(raw, top: _Table, plant: PlantSpec, sim: SimulationSpec, base_dir: P
         if time > sim.duration:
             raise t.fail("t", f"<= simulation.duration ({sim.duration})", time)
         kind = t.string("kind", choices=EVENT_KINDS)
-        value = 0.0 if kind == "payload_swap" else t.number("value", gt=0 if kind != "constant_force" else None)
+        value = 0.0 if kind in ("payload_swap", "flight_condition") else \
+            t.number("value", gt=0 if kind != "constant_force" else None)
+        W = t.numbers("W", length=5) if kind == "flight_condition" else None
+        l_delta = t.number("l_delta", None) if kind == "flight_condition" else None
+        if l_delta == 0:
+            raise t.fail("l_delta", "non-zero", l_delta)
         body = t.string("body", "payload/body")
         payload = t.string("payload") if kind == "payload_swap" else None
         needs = {"payload_mass": (("arm", "manipulator"), "mujoco"), "fluid_density_scale": (("heave",), "mujoco"),
                  "payload_swap": (("manipulator",), "mujoco"),
-                 "constant_force": (("heave", "arm", "first_order", "ship"), plant.backend),
-                 "loading": (("ship",), "mujoco"), "thrust_scale": (("ship",), "mujoco")}.get(kind)
+                 "constant_force": (("heave", "arm", "first_order", "ship", "linear", "wing_rock"), plant.backend),
+                 "loading": (("ship",), "mujoco"), "thrust_scale": (("ship",), "mujoco"),
+                 "flight_condition": (("wing_rock",), "twin")}.get(kind)
         if needs and (plant.kind not in needs[0] or plant.backend != needs[1]):
             kinds = " or ".join(repr(k) for k in needs[0])
             raise t.fail("kind", f"used only with plant.kind = {kinds} on backend {needs[1]!r}", kind)
@@ -1114,7 +1271,7 @@ def _events(raw, top: _Table, plant: PlantSpec, sim: SimulationSpec, base_dir: P
             raise t.fail("kind", "an event on a payload body needs plant.payload (it is 'none')", kind)
         t.finish()
         out.append(EventSpec(t=time, kind=kind, value=value, body=body, payload=payload,
-                             payload_paths=_payload_paths(payload, base_dir)))
+                             payload_paths=_payload_paths(payload, base_dir), W=W, l_delta=l_delta))
     return tuple(sorted(out, key=lambda e: e.t))
 
 

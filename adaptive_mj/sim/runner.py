@@ -101,7 +101,8 @@ def control_timing(scn: Scenario, setup: Setup) -> ControlTiming:
         raise ScenarioError(f"{scn.source}: control.period must be a whole multiple of the physics timestep "
                             f"{setup.plant.dt!r} s, got {c.period!r}") from None
     if timing.sampled and setup.law.has_filters:
-        raise ScenarioError(f"{scn.source}: law.composite runs under control.mode = 'continuous' only "
+        key = "law.rule = 'mit'" if scn.law.kind == "mrac" else "law.composite"  # MRAC's MIT rule filters too
+        raise ScenarioError(f"{scn.source}: {key} runs under control.mode = 'continuous' only "
                             "(its filters integrate the stage states), got control.mode = 'sampled'")
     return timing
 

@@ -74,6 +74,12 @@ def run_bench(*, quick: bool, scenarios: list, out, backend: Backend) -> Study:
         return _bench(quick, out, sections, jobs, backend)
 
 
+def _number(title: str) -> float:
+    """A section's number ("15. Ship steering ..." -> 15); inf for one without (the user's scenarios)."""
+    head = title.split(".", 1)[0]
+    return float(head) if head.isdigit() else float("inf")
+
+
 def _bench(quick: bool, out, sections, jobs, backend) -> Study:
     t0 = time.perf_counter()
     results = run_jobs(jobs, backend=backend, on_done=progress_printer(len(jobs)))
@@ -91,8 +97,9 @@ def _bench(quick: bool, out, sections, jobs, backend) -> Study:
         margins, text, _ = run_study(out / "stress", n_jobs=backend.jobs, composite=False, backend=backend,
                                      **BENCH_SETTINGS)
         n_runs += sum(len(e.tails) for m in margins for e in m.evaluations)
-        parts.append("## 14. Breaking points: law × stressor margins\n\n**The lecture:** the modifications make "
-                     "adaptation robust to noise, disturbances and unmodelled dynamics; here is how far each law "
+        before = sum(1 for section in sections if _number(section.title) < 14)  # in order: before 15, 16, ...
+        parts.insert(before, "## 14. Breaking points: law × stressor margins\n\n**The lecture:** the modifications "
+                     "make adaptation robust to noise, disturbances and unmodelled dynamics; here is how far each law "
                      f"goes before it fails.\n\n{text}\n\n(Logs in `stress/logs/`. `adaptive-mj stress` runs the "
                      "study at full size: 20 s runs, 4 bisection steps, optionally composite adaptation.)\n")
     elapsed = time.perf_counter() - t0

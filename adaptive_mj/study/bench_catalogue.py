@@ -52,6 +52,7 @@ def _ok(r: JobResult) -> bool:
 SECTION_PLANT = {"first-order": "first_order", "phase space": "first_order", "Lyapunov": "heave",
                  "2nd order": "heave", "n-th order": "heave", "drift": "heave", "payload swap": "arm",
                  "excitation": "heave", "manipulator": "manipulator", "failure": "heave", "ship": "ship"}
+SECTION_PLANT.update({"MRAC delay": "linear", "Rohrs": "linear", "wing rock": "wing_rock"})
 
 
 def _row(section: str, variant: str, r: JobResult, key: str = "") -> dict:
@@ -1285,7 +1286,7 @@ def catalogue(*, quick: bool, logs: Path) -> list[Section]:
     return [_first_order(quick, logs), _phase(quick, logs), _lyapunov(quick, logs), _second_order(quick, logs),
             _nth(quick, logs), _drift(quick, logs), _swap(quick, logs), _pe(quick, logs), _manipulator(quick, logs),
             _failure(quick, logs), _control_rate(quick, logs), _arm_drift(quick, logs), _arm_conditions(quick, logs),
-            _ship(quick, logs)]
+            _ship(quick, logs), _mrac_breaks(quick, logs), _wing_rock(quick, logs)]
 
 
 # ---------------------------------------------------------------- 15. ship steering
@@ -1444,3 +1445,157 @@ def _ship_scenario(res, name: str, change: str, variants, out: Path) -> tuple[st
     return (f"**`{name}`** — change{when}: {change}. Heading error ψ̃ before and after the change (the whole run when "
             "there is none); the final estimates (frozen: those it held) against the fit at the run's last condition "
             "(K = 1/(1/K), T = (T/K)/(1/K)):\n\n" + "\n".join(lines) + "\n\n" + img), rows
+
+
+
+# ---------------------------------------------------------------- 16. MRAC break points (issue 21)
+NGUYEN_PUBLISHED = (2.0, 2.9)  # Nguyen, Model-Reference Adaptive Control, §8.3: γ = 2 stable, γ = 2.9 unstable
+ROHRS_CONSTANT_R = ("reference.amplitudes=[]", "reference.omegas=[]", "reference.offset=2.0")
+ROHRS_VARIANTS = [
+    ("published", "r = 0.3 + 1.85 sin 16.1t", []),
+    ("constant_r", "r = 2", list(ROHRS_CONSTANT_R)),
+    ("no_unmodelled", "the same r, plant 2/(s+1) only", ["plant.unmodelled_num=[1.0]", "plant.unmodelled_den=[1.0]"]),
+    ("sigma", "σ-modification σ = 0.1", ["law.sigma=0.1"]),
+    ("e_mod", "e-modification ν = 0.5", ["law.e_modification=0.5"]),
+    ("projection", "projection k_y ∈ [−5, 0], k_r ∈ [0, 5]", ["law.projection={k_y=[-5, 0], k_r=[0, 5]}"]),
+    ("dead_zone", "dead-zone |e| < 0.5", ["law.dead_zone={width=0.5}"]),
+    ("dead_zone_0.3", "dead-zone |e| < 0.3", ["law.dead_zone={width=0.3}"]),
+    ("mit", "the MIT rule", ["law.rule=mit"]),
+]
+
+
+def _nguyen_gammas(quick: bool) -> list[float]:
+    """γ from 2 to 2.9: every 0.05 (quick: every 0.3)."""
+    step = 0.3 if quick else 0.05
+    return [round(2.0 + i * step, 3) for i in range(int(round(0.9 / step)) + 1)]
+
+
+def _mrac_breaks(quick: bool, logs: Path) -> Section:
+    from adaptive_mj.study.mrac_breaks import frozen_gain_limit, phase_lag_deg, rohrs_onset
+
+    gammas = _nguyen_gammas(quick)
+    jobs = [_job("mrac", f"nguyen_gamma_{g:g}", "mrac_time_delay", logs, [f"law.gamma={g}"]) for g in gammas]
+    jobs.append(_job("mrac", "nguyen_projection", "mrac_time_delay", logs,
+                     ["law.gamma=2.9", "law.projection={k_y=[-2, 0], k_r=[0, 4]}"]))
+    variants = ROHRS_VARIANTS[:3] if quick else ROHRS_VARIANTS  # quick: the published pair and the mechanism
+    jobs += [_job("mrac", f"rohrs_{key}", "rohrs_counterexample", logs, ov) for key, _, ov in variants]
+    rohrs = sc.load(SCN / "rohrs_counterexample.toml")
+    lin = rohrs.plant.linear
+    assert lin is not None
+    num, den = np.polymul(lin.num, lin.unmodelled_num), np.polymul(lin.den, lin.unmodelled_den)
+    limit = frozen_gain_limit(num, den)
+    lag = phase_lag_deg(lin.unmodelled_num, lin.unmodelled_den, 16.1)
+
+    def analyze(res, out):
+        rows, lines = [], ["| γ | verdict | diverged at [s] | tail RMS e |", "|---|---|---|---|"]
+        ok_g, bad_g = [], []
+        for g in gammas:
+            r = res[f"mrac/nguyen_gamma_{g:g}"]
+            div = r.trajectory is not None and r.trajectory.status == "diverged"
+            (bad_g if div or r.trajectory is None else ok_g).append(g)
+            t_end = f"{r.trajectory.t[-1]:.2f}" if div and r.trajectory is not None else "—"
+            tail = (r.summary or {}).get("metrics", {}).get("rms_tracking_error_tail")
+            lines.append(f"| {g:g} | {r.status} | {t_end} | {_g(tail)} |")
+            rows.append(_row("MRAC delay", f"gamma {g:g}", r))
+        stable = [g for g in ok_g if not any(b < g for b in bad_g)]
+        first_bad = min(bad_g) if bad_g else None
+        crit = (f"largest bounded γ {max(stable):g}, smallest diverging γ {first_bad:g}"
+                if stable and first_bad is not None else "no bracket inside [2, 2.9]")
+        pr = res["mrac/nguyen_projection"]
+        rows.append(_row("MRAC delay", "gamma 2.9 + projection", pr))
+        text = (f"**Nguyen's delay threshold** (`scenarios/mrac_time_delay.toml`: ẋ = −x + u(t − 0.5 s), "
+                f"x_m' = −2x_m + 2r, r = sin t, 60 s runs, RK4 at 5 ms, the delay an exact 100-step line). "
+                f"Published: γ = {NGUYEN_PUBLISHED[0]:g} stable, γ = {NGUYEN_PUBLISHED[1]:g} unstable. Measured over "
+                f"this grid: {crit}; `adaptive-mj sweep mrac_time_delay --breaking-point law.gamma=2:2.9 "
+                f"--tail-bound 0.3 --steps 6` bisects it finer. γ = 2.9 with projection k_y ∈ [−2, 0]: "
+                f"{pr.status}.\n\n" + "\n".join(lines))
+        r_lines = ["| run | verdict | end [s] | onset [s] | final k̂_y | tail RMS e |", "|---|---|---|---|---|---|"]
+        fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True, constrained_layout=True)
+        onset_pub = None
+        for key, label, _ in variants:
+            r = res[f"mrac/rohrs_{key}"]
+            rows.append(_row("Rohrs", key, r))
+            tr = r.trajectory
+            if tr is None:
+                r_lines.append(f"| {label} | {r.status} | | | | |")
+                continue
+            onset = rohrs_onset(tr, limit)
+            if key == "published":
+                onset_pub = onset
+            tail = (r.summary or {}).get("metrics", {}).get("rms_tracking_error_tail")
+            r_lines.append(f"| {label} | {r.status} | {tr.t[-1]:.2f} | {_g(onset) if onset is not None else '—'} | "
+                           f"{_g(tr.theta_hat[-1, 0])} | {_g(tail)} |")
+            if key in ("published", "constant_r", "no_unmodelled", "e_mod"):
+                ax[0].plot(tr.t, tr.theta_hat[:, 0], lw=1.1, label=label)
+                ax[1].plot(tr.t, np.clip(tr.x[:, 0] - tr.ref[:, 0], -5, 5), lw=0.8, label=label)
+        ax[0].axhline(limit, color="k", ls="--", lw=1, label=f"frozen-gain limit {limit:.2f}")
+        if onset_pub is not None:
+            ax[0].axvline(onset_pub, color="r", ls=":", lw=1)
+        ax[0].set_ylabel("$\\hat k_y$")
+        ax[0].set_ylim(max(limit * 1.5, -40), 1)
+        ax[0].legend(fontsize=8)
+        ax[1].set_ylabel("e = y − y_m (clipped ±5)")
+        ax[1].set_xlabel("time t [s]")
+        for a in ax:
+            a.grid(alpha=0.3)
+        fig.suptitle("Rohrs' counterexample: k_y drifts past the frozen-gain limit")
+        img = _save(fig, out, "rohrs")
+        text += ("\n\n**Rohrs' counterexample** (`scenarios/rohrs_counterexample.toml`: 2/(s+1) · "
+                 "229/(s² + 30s + 229), x_m from 3/(s+3), k_y(0) = −0.65, k_r(0) = 1.14, γ = 1, 30 s, "
+                 "|y| > 100 counts as diverged). "
+                 f"Mechanism: at 16.1 rad/s the unmodelled factor lags by {abs(lag):.1f}°, so the gradient e·y "
+                 "has a non-zero mean that drives k̂_y down; with the gains frozen, the loop with the unmodelled "
+                 f"dynamics is stable only for k_y > {limit:.3f} (the roots of den − k·num; Routh gives "
+                 "(1 − 31·259/229)/2). The **onset** is the first time k̂_y crosses that limit: "
+                 f"{_g(onset_pub) if onset_pub is not None else 'never'} s for the published r. The same r on the "
+                 "plant without its unmodelled factor (the row below) shows whether the drift needs it.\n\n"
+                 + "\n".join(r_lines) + "\n\n" + img)
+        return SectionReport(text + _status_note(res), rows)
+
+    return Section("mrac", "16. MRAC: Nguyen's delay threshold and Rohrs' counterexample",
+                   "Direct MRAC (Lyapunov rule) is stable with the plant it was designed for; an input delay "
+                   "puts a ceiling on γ (published between 2 and 2.9), and unmodelled dynamics excited by a "
+                   "high-frequency command make the gains drift until the loop is unstable (Rohrs).",
+                   tuple(jobs), analyze)
+
+
+def _wing_rock(quick: bool, logs: Path) -> Section:
+    jobs = (_job("wing_rock", "sliding", "wing_rock", logs, []),  # the same 60 s runs under --quick
+            _job("wing_rock", "mrac", "wing_rock_mrac", logs, []))
+
+    def analyze(res, out):
+        lines = ["| law | verdict | RMS error before 30 s [rad] | RMS error 40–60 s [rad] | peak error after the "
+                 "change [rad] | time at ±1.75 |", "|---|---|---|---|---|---|"]
+        rows = []
+        fig, ax = plt.subplots(1, 1, figsize=(9, 3.5), constrained_layout=True)
+        for key in ("sliding", "mrac"):
+            r = res[f"wing_rock/{key}"]
+            rows.append(_row("wing rock", key, r))
+            tr = r.trajectory
+            if tr is None:
+                lines.append(f"| {key} | {r.status} | | | | |")
+                continue
+            err = tr.ref[:, 0] - tr.x[:, 0]
+            pre, post = (tr.t > 10) & (tr.t < 30), tr.t >= 40
+            after = tr.t >= 30
+            sat = float(np.mean(np.abs(tr.u) >= 1.75 - 1e-12))
+            lines.append(f"| {key} | {r.status} | {_g(np.sqrt(np.mean(err[pre] ** 2)))} | "
+                         f"{_g(np.sqrt(np.mean(err[post] ** 2)))} | {_g(np.max(np.abs(err[after])))} | {sat:.1%} |")
+            ax.plot(tr.t, err, lw=0.8, label=key)
+        ax.axvline(30.0, color="k", ls=":", lw=1)
+        ax.set_xlabel("time t [s]")
+        ax.set_ylabel("roll error [rad]")
+        ax.legend()
+        ax.grid(alpha=0.3)
+        img = _save(fig, out, "wing_rock")
+        text = ("Wing rock (`scenarios/wing_rock.toml`, `wing_rock_mrac.toml`): ẋ₂ = Wᵀ[x₁, x₂, |x₁|x₂, |x₂|x₂, x₁³] "
+                "+ L_δ u with Elzebda's 25° coefficients, |u| ≤ 1.75, a roll reference of 0.3 and 0.15 rad at 0.5 "
+                "and 1.3 rad/s. At t = 30 s W is tripled and L_δ halved: a stated change, not a published second "
+                "set (none was found). RMS error measured from 10 s to 30 s and from 40 s to 60 s.\n\n"
+                + "\n".join(lines) + "\n\n" + img)
+        return SectionReport(text + _status_note(res), rows)
+
+    return Section("wing_rock", "17. Aircraft: wing rock",
+                   "The sliding adaptive law and MRAC hold a roll reference on the wing-rock dynamics within the "
+                   "aileron limit, and re-adapt (slowly: docs/THEORY.md, \"Wing rock\") when the flight condition "
+                   "changes.", jobs, analyze)

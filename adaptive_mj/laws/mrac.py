@@ -1,0 +1,174 @@
+"""Direct model-reference adaptive control (MRAC) of a plant of relative degree one in its
+control input, with the Lyapunov rule and, for contrast, the MIT rule (docs/THEORY.md, "MRAC").
+
+The plant, in the law's coordinates (x = [y, y', ..., y^(n-1)], n = 1 or 2):
+
+    y^(n) = aᵀx + wᵀψ(x) + b u          a (n,), w and b unknown, sign(b) known;
+                                         ψ: the matched nonlinear terms, or none
+
+the reference model, a stable polynomial s^n + α_{n-1} s^{n-1} + ... + α_0 and a gain β:
+
+    y_m^(n) = -αᵀx_m + β r               x_m = [y_m, ..., y_m^(n-1)]
+
+The reference supplies x_m and y_m^(n) (ref = [y_m, ..., y_m^(n)], reference.kind =
+"reference_model" filters a command r through this model in closed form); the law recovers
+r = (y_m^(n) + αᵀx_m) / β. The control and the gains (θ̂ = [k_x (n), k_r, k_ψ (len ψ)]):
+
+    u = θ̂ᵀω,   ω = [x; r; ψ(x)]
+    e = x - x_m,  s = eᵀP b_n  (n = 1: s = e; n = 2: AᵀP + PA = -I, A the model's companion matrix)
+    Lyapunov rule:  θ̂' = -γ sign(b) ω s
+    MIT rule:       θ̂' = -γ sign(b) ω_f e₁,  ω_f = α_0/(p + α_0) ω (n = 1): the sensitivity
+                    ∂e/∂θ̂ approximated by the filtered regressor (a filter state of the law)
+
+The ideal gains θ* = [-(α + a)/b, β/b, -w/b] make the closed loop the reference model, and
+e' = A e + b_n b θ̃ᵀω (θ̃ = θ̂ - θ*). With V = eᵀPe·c + |b| θ̃ᵀΓ⁻¹θ̃ (n = 1: V = ½e² + |b|/(2γ)θ̃²)
+the Lyapunov rule gives V' = -α_0 e² ≤ 0 (n = 1); the MIT rule has no such V.
+
+The gains γ here are adaptation *rates* (the textbooks' Γ), unlike the lecture laws' stiffnesses
+(1/γ): Nguyen's γ = 2 and 2.9 and Rohrs' γ = 1 are written as published. The modifications
+(laws.common.Modification) are applied with Γ: θ̂' -= (σ + ν|s|) Γ (θ̂ - θ₀), projection the same.
+
+Plain array code; no mujoco. The analytic plants it runs on are stepped in Python
+(adaptive_mj.plants.linear, adaptive_mj.plants.wing_rock), so it has no compiled callback.
+"""
+from __future__ import annotations
+
+import enum
+import math
+from typing import Callable
+
+import numpy as np
+
+from adaptive_mj.laws.common import NO_MODIFICATION, DeadZone, LawStep, Modification, as_gamma, modify_rate
+from adaptive_mj.laws.protocol import Box, Law
+
+
+class Rule(enum.Enum):
+    LYAPUNOV = "lyapunov"
+    MIT = "mit"
+
+
+def gain_names(order: int, psi_names: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """θ names: ("k_y", "k_r") for n = 1; ("k_x1", "k_x2", "k_r", "k_<ψ name>"...) for n = 2."""
+    state = ("k_y",) if order == 1 else tuple(f"k_x{i + 1}" for i in range(order))
+    return state + ("k_r",) + tuple(f"k_{p}" for p in psi_names)
+
+
+def ideal_gains(a, b: float, w, alpha, beta: float) -> np.ndarray:
+    """θ* = [-(α + a)/b, β/b, -w/b]: the gains that make the plant y^(n) = aᵀx + wᵀψ + b u the
+    reference model. a, alpha (n,); w (len ψ,); b, beta scalars."""
+    a, alpha, w = (np.asarray(v, dtype=float).reshape(-1) for v in (a, alpha, w))
+    return np.concatenate([-(alpha + a) / b, [beta / b], -w / b])
+
+
+def lyapunov_matrix(alpha) -> np.ndarray:
+    """P (n, n) with AᵀP + PA = -I for the companion matrix A of s^n + α_{n-1}s^{n-1} + ... + α_0
+    (solved through the Kronecker form: plain numpy)."""
+    alpha = np.asarray(alpha, dtype=float)
+    n = alpha.shape[0]
+    A = np.zeros((n, n))
+    A[:-1, 1:] = np.eye(n - 1)
+    A[-1, :] = -alpha
+    eye = np.eye(n)
+    K = np.kron(eye, A.T) + np.kron(A.T, eye)
+    P = np.linalg.solve(K, -eye.reshape(-1)).reshape(n, n)
+    return 0.5 * (P + P.T)
+
+
+class MracLaw(Law):
+    """Direct MRAC (see the module docstring).
+
+    order: n (1 or 2); alpha: (n,) the reference model's polynomial [α_0, ..., α_{n-1}] [1/s^k];
+    beta: its gain on r; gamma: (n_theta,) or scalar adaptation rates; sign_b: ±1; rule: Rule;
+    psi: x -> (n_psi,) matched nonlinear terms and psi_names; b_abs: |b| of the plant (only for V,
+    like every law's V uses the true θ); dead_zone on |s|; modification: σ/e-mod and projection.
+    """
+
+    def __init__(self, *, order: int, alpha, beta: float, gamma, sign_b: float = 1.0, rule: Rule = Rule.LYAPUNOV,
+                 psi: Callable[[np.ndarray], np.ndarray] | None = None, psi_names: tuple[str, ...] = (),
+                 b_abs: float = math.nan, dead_zone: DeadZone | None = None,
+                 modification: Modification | None = None):
+        if order not in (1, 2):
+            raise ValueError(f"MRAC is written for order 1 or 2, got {order}")
+        self.alpha = np.asarray(alpha, dtype=float).reshape(-1)
+        if self.alpha.shape != (order,) or not np.all(np.isfinite(self.alpha)) or np.any(self.alpha <= 0):
+            raise ValueError(f"the reference model needs {order} coefficients > 0 (a stable polynomial), "
+                             f"got {self.alpha.tolist()}")
+        if not (math.isfinite(beta) and beta != 0):
+            raise ValueError(f"the reference model's gain must be finite and non-zero, got {beta}")
+        if sign_b not in (1.0, -1.0):
+            raise ValueError(f"sign_b must be 1 or -1, got {sign_b}")
+        self.order = order
+        self.names = gain_names(order, tuple(psi_names))
+        self.beta, self.sign_b, self.rule = float(beta), float(sign_b), Rule(rule)
+        if self.rule is Rule.MIT and order != 1:
+            raise ValueError("the MIT rule is written for order 1 (its sensitivity filter is α_0/(p + α_0))")
+        self.psi = psi
+        self.gamma = as_gamma(gamma, len(self.names))
+        self.b_abs = float(b_abs)
+        self.dead_zone = dead_zone
+        self.modification = modification or NO_MODIFICATION
+        self._mod = self.modification.arrays(len(self.names))
+        self.pb = np.array([1.0]) if order == 1 else lyapunov_matrix(self.alpha)[:, -1]  # P b_n
+        self.has_filters = self.rule is Rule.MIT
+        self.omega_f = np.zeros(len(self.names))  # MIT: the filtered regressor, at the step's start
+        self._stage_omegas: list[np.ndarray] = []
+
+    @property
+    def bounds(self) -> Box | None:
+        return self.modification.box(len(self.names))
+
+    def regressor(self, x, ref) -> tuple[np.ndarray, float]:
+        """(ω, r): ω = [x; r; ψ(x)] (n_theta,), r recovered from the reference model."""
+        n = self.order
+        r = float((ref[n] + self.alpha @ ref[:n]) / self.beta)
+        parts = [np.asarray(x[:n], dtype=float), np.array([r])]
+        if self.psi is not None:
+            parts.append(np.asarray(self.psi(x), dtype=float))
+        return np.concatenate(parts), r
+
+    def __call__(self, t, x, ref, theta_hat) -> LawStep:
+        n = self.order
+        omega, r = self.regressor(x, ref)
+        u = float(theta_hat @ omega)
+        e = np.asarray(x[:n], dtype=float) - np.asarray(ref[:n], dtype=float)
+        s = float(e @ self.pb)
+        if self.rule is Rule.MIT:
+            self._stage_omegas.append(omega)
+            signal, direction = float(e[0]), self.omega_f
+        else:
+            signal, direction = s, omega
+        if self.dead_zone is None or self.dead_zone.adapting(s, float(e[0])):
+            rate = -self.sign_b * self.gamma * direction * signal
+        else:
+            rate = np.zeros(len(self.names))
+        sigma, e_mod, theta0, lower, upper = self._mod
+        # the modifications divide by a stiffness: Γ is a rate here, so 1/Γ is passed
+        modify_rate(rate, theta_hat, abs(s), sigma, e_mod, theta0, 1.0 / self.gamma, lower, upper)
+        return LawStep(u, rate, -s, float(ref[n]))
+
+    # --- the MIT rule's sensitivity filter (loop: law.has_filters) -----------------------------
+    def reset(self) -> None:
+        self.omega_f = np.zeros(len(self.names))
+        self._stage_omegas = []
+
+    def step_begins(self, x) -> None:
+        self._stage_omegas = []
+
+    def step_ends(self, xs, us, weights, h: float) -> None:
+        """ω_f' = α_0 (ω - ω_f) over the step, ω held at the integrator-weighted mean of its stages:
+        ω_f ← e^{-α_0 h} ω_f + (1 - e^{-α_0 h}) Σ b_i ω_i (exact for that held input)."""
+        if not self._stage_omegas:
+            return
+        mean = sum(w * o for w, o in zip(weights, self._stage_omegas, strict=True))
+        decay = math.exp(-self.alpha[0] * h)
+        self.omega_f = decay * self.omega_f + (1.0 - decay) * mean
+
+    def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
+        """n = 1, Lyapunov rule: V = ½ e² + |b|/2 Σ θ̃_i²/γ_i (s logged as -e). Otherwise NaN: the
+        MIT rule has no Lyapunov function, and for n = 2 V needs the whole e, not s."""
+        err = np.asarray(theta_hat, dtype=float) - np.asarray(theta, dtype=float)
+        s = np.asarray(s, dtype=float)
+        if self.order != 1 or self.rule is not Rule.LYAPUNOV:
+            return np.full(s.shape[:1] if s.ndim else (), math.nan)
+        return 0.5 * s**2 + 0.5 * self.b_abs * np.sum(err**2 / self.gamma, axis=-1)

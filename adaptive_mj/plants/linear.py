@@ -1,0 +1,199 @@
+"""plant.kind = "linear": an analytic linear plant, a transfer function (or A, B, C) with an
+optional input delay, stepped without MuJoCo (the analytic twin's sibling, plants.twin).
+
+    x' = A x + B u(t - τ),   y = C x
+
+Written in a scenario as the modelled part num/den (a first-order factor b/(s - a): what MRAC
+assumes) times an optional unmodelled factor (plant.unmodelled_num/den, DC gain 1 in Rohrs'
+example), realised in controllable canonical form; or as the whole plant's matrices plant.A, B, C
+(num/den then only name the modelled part the law is designed for). The law sees y only (order 1:
+x_law = [y]).
+
+Integration: classic RK4 at the scenario's timestep h. The policy is evaluated at the four
+stages t, t+h/2, t+h/2, t+h (so a law's estimates integrate exactly as on the twin). Without a
+delay each stage's control drives that stage; with plant.input_delay = τ = D h (D whole steps)
+the plant is driven over step k by the control computed at stage 0 of step k - D, held over the
+step (zero before t = τ): an exact delay line of D steps on a zero-order-held input.
+
+The analytic plants are stepped in Python: the compiled MuJoCo callback (adaptive_mj.sim.native)
+does not apply to them.
+"""
+from __future__ import annotations
+
+import contextlib
+from typing import Callable, Iterator
+
+import numpy as np
+
+from adaptive_mj.errors import ScenarioError
+from adaptive_mj.plants import BuiltPlant
+from adaptive_mj.plants.protocol import Policy
+
+
+def canonical(num, den) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A (n, n), B (n,), C (n,)) of the strictly proper num/den (highest power first), in
+    controllable canonical form."""
+    num = np.trim_zeros(np.asarray(num, dtype=float), "f")
+    den = np.trim_zeros(np.asarray(den, dtype=float), "f")
+    n = den.shape[0] - 1
+    if n < 1 or num.shape[0] > n:
+        raise ValueError(f"the transfer function must be strictly proper (deg num < deg den), "
+                         f"got num {num.tolist()} and den {den.tolist()}")
+    A = np.zeros((n, n))
+    A[:-1, 1:] = np.eye(n - 1)
+    A[-1, :] = -den[1:][::-1] / den[0]
+    B = np.zeros(n)
+    B[-1] = 1.0 / den[0]
+    C = np.zeros(n)
+    C[:num.shape[0]] = num[::-1]
+    return A, B, C
+
+
+def first_order_part(num, den) -> tuple[float, float]:
+    """(a, b) of the modelled part b/(s - a): num one coefficient, den two."""
+    num, den = np.trim_zeros(np.asarray(num, dtype=float), "f"), np.trim_zeros(np.asarray(den, dtype=float), "f")
+    if num.shape != (1,) or den.shape != (2,):
+        raise ValueError(f"the modelled part must be first order, b/(s - a), got num {num.tolist()} "
+                         f"and den {den.tolist()}")
+    return float(-den[1] / den[0]), float(num[0] / den[0])
+
+
+class LinearPlant:
+    """x' = A x + B u(t - D dt), y = C x (see the module docstring). A FormPlant-like 1-DOF plant
+    whose law-facing state is [y] (order 1) and whose "true parameters" are given by the caller in
+    the law's coordinates (names, theta: MRAC's ideal gains for the modelled part).
+
+    A (n, n), B (n,), C (n,); dt: step [s]; delay_steps: D >= 0; ctrl_range: (lo, hi) or None."""
+
+    joint_shape: tuple[int, ...] = ()
+    joint_names: tuple[str, ...] = ()
+    first_contact: tuple[float, str] | None = None
+    order = 1
+    stages = 4
+
+    def __init__(self, A, B, C, *, dt: float, names: tuple[str, ...], theta, delay_steps: int = 0,
+                 ctrl_range: tuple[float, float] | None = None):
+        self.A, self.B, self.C = (np.array(v, dtype=float) for v in (A, B, C))
+        self.dt = float(dt)
+        self.names = tuple(names)
+        self._theta = np.array(theta, dtype=float)
+        if delay_steps < 0:
+            raise ValueError(f"delay_steps must be >= 0, got {delay_steps}")
+        self.delay_steps = int(delay_steps)
+        self.ctrl_range = ctrl_range
+        self.force_offset = 0.0  # a constant input disturbance, added to u
+        self.disturbance: Callable[[float], float] | None = None
+        self.x = np.zeros(self.A.shape[0])
+        self._t = 0.0
+        self._policy: Policy | None = None
+        self._ring = np.zeros(self.delay_steps + 1)  # the stage-0 controls of the last D + 1 steps
+        self._k = 0
+        self._force = 0.0  # the input disturbance held over the current step
+
+    @property
+    def form(self):
+        raise AttributeError("a linear plant has no ModelForm: law.kind = 'mrac' is its law")
+
+    @property
+    def time(self) -> float:
+        return self._t
+
+    def set_state(self, x0) -> None:
+        """x0: [y0]; the internal state is the least-norm x with C x = y0."""
+        y0 = float(np.asarray(x0, dtype=float).reshape(-1)[0])
+        self.x = y0 * self.C / float(self.C @ self.C)
+        self._t, self._k = 0.0, 0
+        self._ring[:] = 0.0
+
+    def observe(self) -> np.ndarray:
+        return np.array([self.C @ self.x])
+
+    def true_theta(self) -> np.ndarray:
+        return self._theta
+
+    def instability(self) -> str | None:
+        return None
+
+    @contextlib.contextmanager
+    def controlled_by(self, policy: Policy) -> Iterator[None]:
+        self._policy = policy
+        try:
+            yield
+        finally:
+            self._policy = None
+
+    def _control(self, t: float, x: np.ndarray) -> float:
+        if self._policy is None:
+            raise RuntimeError("LinearPlant.step outside controlled_by(policy)")
+        u = float(self._policy(t, np.array([self.C @ x])))
+        if self.ctrl_range is not None:
+            u = min(max(u, self.ctrl_range[0]), self.ctrl_range[1])
+        return u
+
+    def _rate(self, x: np.ndarray, u: float) -> np.ndarray:
+        return self.A @ x + self.B * (u + self._force)
+
+    def step(self) -> None:
+        h, t, x = self.dt, self._t, self.x
+        self._force = self.force_offset + (self.disturbance(t) if self.disturbance is not None else 0.0)
+        u0 = self._control(t, x)
+        if self.delay_steps == 0:
+            k1 = self._rate(x, u0)
+            k2 = self._rate(x + h / 2 * k1, self._control(t + h / 2, x + h / 2 * k1))
+            k3 = self._rate(x + h / 2 * k2, self._control(t + h / 2, x + h / 2 * k2))
+            k4 = self._rate(x + h * k3, self._control(t + h, x + h * k3))
+        else:
+            D = self.delay_steps
+            self._ring[self._k % (D + 1)] = u0
+            held = self._ring[(self._k - D) % (D + 1)] if self._k >= D else 0.0
+            k1 = self._rate(x, held)
+            self._control(t + h / 2, x + h / 2 * k1)  # the law's stages (its estimates integrate by RK4)
+            k2 = self._rate(x + h / 2 * k1, held)
+            self._control(t + h / 2, x + h / 2 * k2)
+            k3 = self._rate(x + h / 2 * k2, held)
+            self._control(t + h, x + h * k3)
+            k4 = self._rate(x + h * k3, held)
+        self.x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        self._t = t + h
+        self._k += 1
+
+
+# --- built from a scenario ------------------------------------------------------
+def model_source(scn) -> None:
+    """plant.kind = "linear" has no model."""
+    return None
+
+
+def from_scenario(scn, source) -> BuiltPlant:
+    """plant.kind = "linear": num/den (times unmodelled_num/den, or the whole plant as A, B, C), input_delay
+    [s], ctrl_range; the
+    true parameters are MRAC's ideal gains for the modelled part and the law's reference model."""
+    from adaptive_mj.laws.mrac import gain_names, ideal_gains
+
+    p, sim, L = scn.plant, scn.simulation, scn.law
+    lin = p.linear
+    dt = sim.timestep if sim.timestep is not None else 0.001
+    try:
+        a, b = first_order_part(lin.num, lin.den)
+        if lin.A is not None:
+            A, B, C = np.array(lin.A, dtype=float), np.array(lin.B, dtype=float), np.array(lin.C, dtype=float)
+            if not np.any(C):
+                raise ValueError("plant.C must not be all zeros")
+        else:
+            num, den = np.polymul(lin.num, lin.unmodelled_num), np.polymul(lin.den, lin.unmodelled_den)
+            A, B, C = canonical(num, den)
+    except ValueError as exc:
+        raise ScenarioError(f"{scn.source}: plant: {exc}") from None
+    steps = lin.input_delay / dt
+    D = int(round(steps))
+    if abs(steps - D) > 1e-9 * max(1.0, steps):
+        raise ScenarioError(f"{scn.source}: plant.input_delay must be a whole number of timesteps "
+                            f"({dt:g} s), got {lin.input_delay:g} s")
+    theta = ideal_gains([a], b, [], L.mrac.alpha, L.mrac.beta)
+    return BuiltPlant(LinearPlant(A, B, C, dt=dt, names=gain_names(1), theta=theta, delay_steps=D,
+                                  ctrl_range=p.ctrl_range))
+
+
+def nominal_b(scn) -> float:
+    """b of the modelled part b/(s - a) (its sign is MRAC's known sign; |b| enters V)."""
+    return first_order_part(scn.plant.linear.num, scn.plant.linear.den)[1]

@@ -1,0 +1,95 @@
+"""plant.kind = "wing_rock": the roll dynamics of a slender delta wing in wing rock, an analytic
+nonlinear plant stepped like the twin (plants.twin.TwinPlant: RK4 at the scenario's timestep, the
+policy at each stage).
+
+    x1' = x2,   x2' = Wᵀ[x1, x2, |x1| x2, |x2| x2, x1³] + L_δ u,    |u| <= 1.75
+
+x1 the roll angle [rad], x2 the roll rate [rad/s], u the aileron input. W: Elzebda, Nayfeh and
+Mook's coefficients at 25° angle of attack (J. Aircraft 26(8), 1989), the set MRAC papers use
+(Cho et al., IEEE TAC 2018, quote them ×1000). L_δ = 1 as in those papers.
+
+For the lecture's laws it is the ModelForm d x1'' = φ(x)ᵀp + u with d = 1/L_δ and p = W/L_δ
+(θ = [d, p], names d, w_x1, w_x2, w_ax1x2, w_ax2x2, w_x1cube). For MRAC (law.kind = "mrac",
+order 2) the true parameters are its ideal gains for the law's reference model, with the linear
+terms of W in k_x and the three nonlinear ones as matched terms ψ.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from adaptive_mj.form import ModelForm
+from adaptive_mj.plants import BuiltPlant
+from adaptive_mj.plants.twin import TwinPlant, scenario_integrator
+
+#: Elzebda, Nayfeh and Mook (1989), 25° angle of attack: [x1, x2, |x1| x2, |x2| x2, x1³]
+W_ELZEBDA_25 = 1e-3 * np.array([-18.59521, 15.162375, -62.45153, 9.54708, 21.45291])
+L_DELTA = 1.0  # control effectiveness [1/s² per unit input], as in the MRAC papers
+INPUT_LIMIT = 1.75  # |u| <= 1.75
+TERMS = ("x1", "x2", "ax1x2", "ax2x2", "x1cube")  # the regressor's terms, in W's order
+NONLINEAR = TERMS[2:]  # MRAC's matched terms ψ (the linear ones are in k_x)
+
+
+def regressor(x: np.ndarray) -> np.ndarray:
+    """φ(x) (5,) = [x1, x2, |x1| x2, |x2| x2, x1³]."""
+    x1, x2 = float(x[0]), float(x[1])
+    return np.array([x1, x2, abs(x1) * x2, abs(x2) * x2, x1 * x1 * x1])
+
+
+def nonlinear_terms(x: np.ndarray) -> np.ndarray:
+    """ψ(x) (3,) = [|x1| x2, |x2| x2, x1³]: MRAC's matched terms."""
+    x1, x2 = float(x[0]), float(x[1])
+    return np.array([abs(x1) * x2, abs(x2) * x2, x1 * x1 * x1])
+
+
+def form() -> ModelForm:
+    """d x1'' = φ(x)ᵀp + u, d = 1/L_δ, p = W/L_δ."""
+    return ModelForm(order=2, p_names=tuple(f"w_{t}" for t in TERMS), phi=regressor, d_name="d")
+
+
+def form_theta(W, l_delta: float) -> np.ndarray:
+    """θ = [1/L_δ, W/L_δ] (6,) of `form()`."""
+    return np.concatenate([[1.0 / l_delta], np.asarray(W, dtype=float) / l_delta])
+
+
+class MracWingRock(TwinPlant):
+    """The wing-rock twin whose true parameters are MRAC's ideal gains (law coordinates): the
+    reference model's alpha (2,) and beta; a flight-condition event (set_true_theta with form θ)
+    moves them."""
+
+    def __init__(self, theta, *, alpha, beta: float, dt: float, integrator, ctrl_range):
+        super().__init__(form(), theta, dt=dt, integrator=integrator, ctrl_range=ctrl_range)
+        self.alpha, self.beta = np.asarray(alpha, dtype=float), float(beta)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        from adaptive_mj.laws.mrac import gain_names
+
+        return gain_names(2, NONLINEAR)
+
+    def true_theta(self) -> np.ndarray:
+        from adaptive_mj.laws.mrac import ideal_gains
+
+        d, p = self.form.split(self._theta)  # p = W/L_δ, d = 1/L_δ
+        b = 1.0 / float(d)
+        W = np.asarray(p) * b
+        return ideal_gains(W[:2], b, W[2:], self.alpha, self.beta)
+
+
+def model_source(scn) -> None:
+    """plant.kind = "wing_rock" has no model."""
+    return None
+
+
+def from_scenario(scn, source) -> BuiltPlant:
+    """plant.kind = "wing_rock": W (plant.W, default Elzebda's 25° set), L_δ (plant.l_delta), the
+    input limit (plant.ctrl_range, default ±1.75); RK4 at simulation.timestep (default 1 ms)."""
+    p, sim, L = scn.plant, scn.simulation, scn.law
+    wr = p.wing_rock
+    dt = sim.timestep if sim.timestep is not None else 0.001
+    ctrl = p.ctrl_range if p.ctrl_range is not None else (-INPUT_LIMIT, INPUT_LIMIT)
+    theta = form_theta(wr.W, wr.l_delta)
+    integrator = scenario_integrator(scn)
+    if L.kind == "mrac":
+        return BuiltPlant(MracWingRock(theta, alpha=L.mrac.alpha, beta=L.mrac.beta, dt=dt, integrator=integrator,
+                                       ctrl_range=ctrl))
+    return BuiltPlant(TwinPlant(form(), theta, dt=dt, integrator=integrator, ctrl_range=ctrl))
