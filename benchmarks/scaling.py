@@ -333,7 +333,12 @@ def _batch_jobs(name: str, seconds: float, vary, n: int, folder: Path | None):
             for i in range(n)]
 
 
-def batch_figures(sizes: list[int], pool_nsim: int, threads: int = 2) -> dict:
+#: runs per run_batch call in the batch figures (each prepared run holds its MjData, MjModel and row buffers:
+#: 0.4-1 MB; 10^4 at once held 8 GB and left the process too big to fork the process pool afterwards)
+RUN_BATCH_GROUP = 1000
+
+
+def batch_figures(sizes: list[int], pool_nsim: int, threads: int = 2, plants: tuple[str, ...] = ()) -> dict:
     """Issue 20's figures, per plant and nsim: the bare-stepping limit (a Batch of nsim simulations of the
     model with no law, `threads` threads) in simulation-steps per second; run_batch (the law, built runs,
     unlogged); the batched engine end to end (sweep's path, parallel.iter_results with engine "batch":
@@ -351,29 +356,44 @@ def batch_figures(sizes: list[int], pool_nsim: int, threads: int = 2) -> dict:
 
     out: dict = {}
     for label, (name, seconds, vary) in BATCH_CASES.items():
+        if plants and label not in plants:
+            continue
         steps = int(round(seconds / 0.001))
         warm = [_batch_spec(name, [f"simulation.duration={seconds!r}", *vary(i)]) for i in range(2)]
         run_batch(warm, nthread=threads)  # load the compiled callback outside the timings
         model = warm[0]["plant"].model
         rows = []
         for nsim in sizes:
+            pool_s = None
+            if nsim == pool_nsim:  # first: forking the pool from a process that has held 10^3 runs can fail (ENOMEM)
+                folder = Path(tempfile.mkdtemp(prefix="scaling-pool-"))
+                try:
+                    jobs = _batch_jobs(name, seconds, vary, nsim, folder)
+                    t0 = time.perf_counter()
+                    res = [r for _, r in iter_results(jobs, Backend(jobs=threads))]
+                    pool_s = time.perf_counter() - t0
+                finally:
+                    shutil.rmtree(folder, ignore_errors=True)
             bare = mujoco.batch.Batch(model, nsim=nsim, nthread=threads)
             t0 = time.perf_counter()
             bare.step(nstep=steps)
             bare_s = time.perf_counter() - t0
             del bare
             gc.collect()
-            rss0 = _rss_kb()
-            t0 = time.perf_counter()
-            runs = [_batch_spec(name, [f"simulation.duration={seconds!r}", f"noise.seed={i}", *vary(i)])
-                    for i in range(nsim)]
-            build_s = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            run_batch(runs, nthread=threads)
-            step_s = time.perf_counter() - t0
-            held_kb = (_rss_kb() - rss0) / nsim
-            del runs
-            gc.collect()
+            build_s = step_s = 0.0
+            held_kb = None
+            for g in range(0, nsim, RUN_BATCH_GROUP):  # groups, as the engine holds them (memory: ~1 MB a run)
+                rss0 = _rss_kb()
+                t0 = time.perf_counter()
+                runs = [_batch_spec(name, [f"simulation.duration={seconds!r}", f"noise.seed={i}", *vary(i)])
+                        for i in range(g, min(nsim, g + RUN_BATCH_GROUP))]
+                build_s += time.perf_counter() - t0
+                t0 = time.perf_counter()
+                run_batch(runs, nthread=threads)
+                step_s += time.perf_counter() - t0
+                held_kb = held_kb if held_kb is not None else (_rss_kb() - rss0) / len(runs)
+                del runs
+                gc.collect()
             row = {"nsim": nsim, "seconds": seconds, "sim_steps": nsim * steps,
                    "bare_steps_per_s": nsim * steps / bare_s,
                    "run_batch_steps_per_s": nsim * steps / step_s, "build_ms_per_run": 1e3 * build_s / nsim,
@@ -390,15 +410,8 @@ def batch_figures(sizes: list[int], pool_nsim: int, threads: int = 2) -> dict:
                         shutil.rmtree(folder, ignore_errors=True)
                 assert all(r.status == "ok" for r in res), {r.status for r in res}
                 row["engine_logged_steps_per_s" if logged else "engine_steps_per_s"] = nsim * steps / wall
-            if nsim == pool_nsim:
-                folder = Path(tempfile.mkdtemp(prefix="scaling-pool-"))
-                try:
-                    jobs = _batch_jobs(name, seconds, vary, nsim, folder)
-                    t0 = time.perf_counter()
-                    res = [r for _, r in iter_results(jobs, Backend(jobs=threads))]
-                    row["pool_logged_steps_per_s"] = nsim * steps / (time.perf_counter() - t0)
-                finally:
-                    shutil.rmtree(folder, ignore_errors=True)
+            if pool_s is not None:
+                row["pool_logged_steps_per_s"] = nsim * steps / pool_s
             for key in ("run_batch", "engine", "engine_logged", "pool_logged"):
                 if f"{key}_steps_per_s" in row:
                     row[f"{key}_to_limit"] = row[f"{key}_steps_per_s"] / row["bare_steps_per_s"]
@@ -422,6 +435,7 @@ def main() -> None:
     ap.add_argument("--study-logs", default="all", choices=("all", "summary"))
     ap.add_argument("--batch-sims", default="100,1000,10000", help="nsim in the batch figures (default 100,1000,10000)")
     ap.add_argument("--pool-sims", type=int, default=1000, help="nsim at which the process pool runs the same study")
+    ap.add_argument("--batch-plants", default="", help="comma-separated subset of heave,arm,ur5e (default: all)")
     ap.add_argument("--ray-node-runs", type=int, default=400, help="runs per measurement in the ray_nodes figure")
     ap.add_argument("--only", default="ceiling,local,ray,study,batch,ray_nodes")
     ap.add_argument("--json", action="store_true")
@@ -441,7 +455,8 @@ def main() -> None:
     if "ray_nodes" in parts:
         res["ray_nodes"] = ray_nodes(args.ray_node_runs)
     if "batch" in parts:
-        res["batch"] = batch_figures([int(n) for n in args.batch_sims.split(",")], args.pool_sims)
+        res["batch"] = batch_figures([int(n) for n in args.batch_sims.split(",")], args.pool_sims,
+                                     plants=tuple(p for p in args.batch_plants.split(",") if p))
     if args.json:
         print(json.dumps(res, indent=1))
         return
