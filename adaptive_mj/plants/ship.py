@@ -21,13 +21,14 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from adaptive_mj.data import MODELS
 from adaptive_mj.errors import ModelError
 from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path, control_callback,
                                              read_model_file, scale_body_mass)
 from adaptive_mj.plants.nomoto import NomotoFit, fit, nomoto_form
 
-MODEL_PATH = Path(__file__).resolve().parents[2] / "models" / "ship.xml"
+MODEL_PATH = MODELS / "ship.xml"
 HEADING_JOINT, RUDDER_JOINT, SURGE_JOINT, SWAY_JOINT = "yaw", "rudder", "x", "y"
 STEERING_GEAR, PROPELLER, HULL = "steering_gear", "propeller", "hull"
 STEP_ANGLES = np.radians([5.0, 10.0, 20.0, 35.0, -5.0, -10.0, -20.0, -35.0])  # rudder steps of the fit [rad]
