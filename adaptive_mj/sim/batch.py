@@ -19,7 +19,6 @@ batch share one control callback (the same compiled law and plant form) and one 
 """
 from __future__ import annotations
 
-import functools
 from collections import defaultdict
 from typing import Any, Sequence
 
@@ -66,21 +65,12 @@ def run_batch(runs: Sequence[dict[str, Any]], *, nthread: int = 0, chunk: int = 
     return [tr for tr in out if tr is not None]
 
 
-def layout(model: mujoco.MjModel) -> tuple[int, ...]:
-    """The model's sizes (nq, nv, nbody, ngeom, narena, ...: MjModel's integer size fields): models of one
-    Batch must give MjData the same layout (mjb_setModels refuses others), so arms whose payloads differ
-    in geoms or bodies are batched apart."""
-    return tuple(getattr(model, name) for name in _size_fields(model))
-
-
-@functools.cache
-def _size_fields_of(names: tuple[str, ...]) -> tuple[str, ...]:
-    probe = mujoco.MjModel.from_xml_string("<mujoco/>")
-    return tuple(n for n in names if isinstance(getattr(probe, n), int))
-
-
-def _size_fields(model: mujoco.MjModel) -> tuple[str, ...]:
-    return _size_fields_of(tuple(sorted(n for n in dir(model) if n.startswith("n") and not n.startswith("name"))))
+def layout(model: mujoco.MjModel) -> tuple[tuple[str, int], ...]:
+    """The model's sizes (nq, nv, nbody, ngeom, narena, ...: MjModel's integer attributes named n*):
+    models of one Batch must give MjData the same layout (mjb_setModels refuses others), so arms whose
+    payloads differ in geoms or bodies are batched apart."""
+    return tuple((name, value) for name in sorted(dir(model)) if name.startswith("n") and not name.startswith("name")
+                 for value in (getattr(model, name),) if isinstance(value, int))
 
 
 def _interrupted(exc: KeyboardInterrupt, prepared: list[PreparedRun], out: list[Trajectory | None]) -> Interrupted:
@@ -97,7 +87,7 @@ def _interrupted(exc: KeyboardInterrupt, prepared: list[PreparedRun], out: list[
 
 def _drive(prepared: list[PreparedRun], ncs: list[ContextOwner], nthread: int, out: list[Trajectory | None],
            ids: list[int]) -> None:
-    """Step the runs `prepared` (of one callback and state size) in one Batch; each run's trajectory goes
+    """Step the runs `prepared` (of one callback and model layout) in one Batch; each run's trajectory goes
     to out[ids[i]] as it ends."""
     from adaptive_mj.plants.mujoco_plant import control_callback
 
