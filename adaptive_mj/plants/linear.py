@@ -20,14 +20,14 @@ does not apply to them.
 """
 from __future__ import annotations
 
-import contextlib
-from typing import Callable, Iterator
+from typing import Callable
 
 import numpy as np
 
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.plants import BuiltPlant
 from adaptive_mj.plants.protocol import Policy
+from adaptive_mj.plants.twin import PythonStepped
 
 
 def canonical(num, den) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -58,7 +58,7 @@ def first_order_part(num, den) -> tuple[float, float]:
     return float(-den[1] / den[0]), float(num[0] / den[0])
 
 
-class LinearPlant:
+class LinearPlant(PythonStepped):
     """x' = A x + B u(t - D dt), y = C x (see the module docstring). A FormPlant-like 1-DOF plant
     whose law-facing state is [y] (order 1) and whose "true parameters" are given by the caller in
     the law's coordinates (names, theta: MRAC's ideal gains for the modelled part).
@@ -110,17 +110,6 @@ class LinearPlant:
 
     def true_theta(self) -> np.ndarray:
         return self._theta
-
-    def instability(self) -> str | None:
-        return None
-
-    @contextlib.contextmanager
-    def controlled_by(self, policy: Policy) -> Iterator[None]:
-        self._policy = policy
-        try:
-            yield
-        finally:
-            self._policy = None
 
     def _control(self, t: float, x: np.ndarray) -> float:
         if self._policy is None:

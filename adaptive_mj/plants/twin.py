@@ -32,7 +32,25 @@ class Integrator(enum.Enum):
     EULER = "euler"
 
 
-class TwinPlant:
+class PythonStepped:
+    """What the plants stepped in Python (the twin, the linear plant) share: no MuJoCo warnings, and a
+    control policy (t, x) -> u installed for the length of a run (protocol.Plant.controlled_by)."""
+
+    _policy: Policy | None = None
+
+    def instability(self) -> str | None:
+        return None
+
+    @contextlib.contextmanager
+    def controlled_by(self, policy: Policy) -> Iterator[None]:
+        self._policy = policy
+        try:
+            yield
+        finally:
+            self._policy = None
+
+
+class TwinPlant(PythonStepped):
     """form: the plant's structure; theta: (n_theta,) true parameters;
     dt: step [s]; ctrl_range: (lo, hi) or None; x0: (n,) initial state.
     A FormPlant (adaptive_mj.plants.protocol)."""
@@ -89,17 +107,6 @@ class TwinPlant:
     def set_true_theta(self, theta) -> None:
         """Change the true parameters (an event on the twin)."""
         self._theta = np.array(theta, dtype=float)
-
-    def instability(self) -> str | None:
-        return None
-
-    @contextlib.contextmanager
-    def controlled_by(self, policy: Policy) -> Iterator[None]:
-        self._policy = policy
-        try:
-            yield
-        finally:
-            self._policy = None
 
     def _rate(self, t: float, x: np.ndarray) -> np.ndarray:
         if self._policy is None:
