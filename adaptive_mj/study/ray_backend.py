@@ -143,9 +143,9 @@ def run_task_batch(jobs: Sequence[Job], logs: str) -> list[tuple[JobResult, byte
             places[k] = where
     ks = list(places)
     try:
-        if interrupt.requested() is not None:
-            raise Interrupted(interrupt.requested())
         try:
+            if interrupt.requested() is not None:  # stopped before it started: no run begins (run_in_worker's rule)
+                raise Interrupted(interrupt.requested())
             with interrupt.stop_on_signals((signal.SIGINT, signal.SIGTERM)):
                 results = run_jobs_batched([replace(jobs[k], log=places[k]) for k in ks], nthread=1)
         except KeyboardInterrupt as exc:
