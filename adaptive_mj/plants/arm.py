@@ -30,7 +30,7 @@ from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.attach import compose
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path, with_userdata,
-                                             find_joint_and_actuator, scale_body_mass, spec_from_text)
+                                             find_joint_and_actuator, scale_body_mass, scratch_data, spec_from_text)
 
 MODEL_PATH = MODELS / "pendulum_arm.xml"
 THETA_NAMES = ("J", "b", "g_sin", "g_cos")
@@ -51,7 +51,7 @@ def _moved_bodies(model, joint_id: int) -> list[int]:
 
 def true_theta(model: mujoco.MjModel, joint_id: int = 0) -> np.ndarray:
     """(4,) true [J, b, g_sin, g_cos] from masses, inertias and kinematics at q = 0."""
-    data = mujoco.MjData(model)
+    data = scratch_data(model)
     data.qpos[:] = 0.0
     mujoco.mj_kinematics(model, data)
     a = data.xaxis[joint_id].copy()

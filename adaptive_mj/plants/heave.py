@@ -39,7 +39,7 @@ from adaptive_mj.errors import ModelError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path,
-                                             find_joint_and_actuator, read_model_file)
+                                             find_joint_and_actuator, read_model_file, scratch_data)
 
 MODEL_PATH = MODELS / "heave_vehicle.xml"
 THETA_NAMES = ("d", "b", "c")
@@ -49,7 +49,7 @@ THETA_NAMES_LAG = ("tau_d", "tau_b", "d", "b", "c")
 def _vehicle(model, joint_id: int) -> tuple[int, np.ndarray, np.ndarray]:
     """(body id, joint axis in the body's principal-inertia frame (3,), equivalent box sides (3,) [m])."""
     body = int(model.jnt_bodyid[joint_id])
-    scratch = mujoco.MjData(model)
+    scratch = scratch_data(model)
     scratch.qpos[:] = 0
     mujoco.mj_kinematics(model, scratch)
     axis_local = scratch.ximat[body].reshape(3, 3).T @ scratch.xaxis[joint_id]
@@ -61,7 +61,7 @@ def _vehicle(model, joint_id: int) -> tuple[int, np.ndarray, np.ndarray]:
 
 def gravity_along_axis(model, joint_id: int) -> float:
     """g [m/s²] as it enters c*g: minus gravity projected on the (upward) joint axis."""
-    scratch = mujoco.MjData(model)
+    scratch = scratch_data(model)
     mujoco.mj_kinematics(model, scratch)
     return float(-model.opt.gravity @ scratch.xaxis[joint_id])
 
@@ -212,7 +212,7 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
                 act.dyntype = mujoco.mjtDyn.mjDYN_FILTER
                 act.dynprm[0] = lag
 
-    model, model_xml = compile_for_scenario(scn, source, edit=thruster_lag)
+    model, model_xml = compile_for_scenario(scn, source, edit=thruster_lag, edit_key=("thruster_lag", lag))
     plant = HeavePlant(model, joint=p.joint, actuator=p.actuator, where=str(p.model), order=scn.law.order or 2)
     if p.density is not None:
         plant.set_fluid_density(p.density)

@@ -42,7 +42,8 @@ from adaptive_mj.errors import ModelError
 from adaptive_mj.numba_util import with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
 from adaptive_mj.plants import BuiltPlant, ModelSource
-from adaptive_mj.plants.mujoco_plant import compile_for_scenario, control_callback, new_warnings, scale_body_mass
+from adaptive_mj.plants.mujoco_plant import (compile_for_scenario, control_callback, new_warnings, scale_body_mass,
+                                             scratch_data)
 from adaptive_mj.plants.protocol import Policy
 
 
@@ -661,7 +662,7 @@ class ManipulatorPlant:
         self.model.body_ipos[b] = ipos
         self.model.body_iquat[b] = iquat
         self.model.body_inertia[b] = inertia
-        mujoco.mj_setConst(self.model, mujoco.MjData(self.model))
+        mujoco.mj_setConst(self.model, scratch_data(self.model))
         self.model_changed()
 
 

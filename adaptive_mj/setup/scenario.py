@@ -8,6 +8,8 @@ The full key reference is docs/SCENARIOS.md.
 """
 from __future__ import annotations
 
+import copy
+import functools
 import math
 import re
 import tomllib
@@ -458,7 +460,7 @@ def loads(text: str, *, where: str = "<string>", base_dir: Path | None = None, d
           overrides: list[str] | tuple[str, ...] = (), seed: int | None = None) -> Scenario:
     """Validate scenario TOML text (see `load`)."""
     try:
-        doc = tomllib.loads(text)
+        doc = copy.deepcopy(_parsed(text))
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{where}: TOML syntax error: {exc}") from None
     for expr in overrides:
@@ -478,10 +480,17 @@ _KEY_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
 _NAME_RE = re.compile(r"[^./\\\x00-\x1f\x7f][^/\\\x00-\x1f\x7f]{0,99}")
 
 
+@functools.lru_cache(maxsize=64)
+def _parsed(text: str) -> dict:
+    """TOML text parsed, kept for the next run of a study (the same file and --set values, thousands of
+    times): callers take a deep copy, since overrides edit the document."""
+    return tomllib.loads(text)
+
+
 def parse_value(raw: str, *, what: str) -> Any:
     """A TOML value (number, bool, string, array, inline table); a bare word is a string."""
     try:
-        return tomllib.loads(f"v = {raw}")["v"]
+        return copy.deepcopy(_parsed(f"v = {raw}")["v"])
     except tomllib.TOMLDecodeError:
         if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_./-]*", raw):
             return raw

@@ -27,6 +27,7 @@ import mujoco.batch
 import numpy as np
 
 from adaptive_mj.errors import Interrupted
+from adaptive_mj.plants.mujoco_plant import layout
 from adaptive_mj.sim.loop import PreparedRun, drive, native_steps, prepare
 from adaptive_mj.sim.native_context import ContextOwner
 from adaptive_mj.trajectory import Trajectory
@@ -63,14 +64,6 @@ def run_batch(runs: Sequence[dict[str, Any]], *, nthread: int = 0, chunk: int = 
     except KeyboardInterrupt as exc:
         raise _interrupted(exc, prepared, out) from (None if isinstance(exc, Interrupted) else exc)
     return [tr for tr in out if tr is not None]
-
-
-def layout(model: mujoco.MjModel) -> tuple[tuple[str, int], ...]:
-    """The model's sizes (nq, nv, nbody, ngeom, narena, ...: MjModel's integer attributes named n*):
-    models of one Batch must give MjData the same layout (mjb_setModels refuses others), so arms whose
-    payloads differ in geoms or bodies are batched apart."""
-    return tuple((name, value) for name in sorted(dir(model)) if name.startswith("n") and not name.startswith("name")
-                 for value in (getattr(model, name),) if isinstance(value, int))
 
 
 def _interrupted(exc: KeyboardInterrupt, prepared: list[PreparedRun], out: list[Trajectory | None]) -> Interrupted:

@@ -288,10 +288,7 @@ class NativeController(ContextOwner):
     def prepare(self, rows: int, noise: np.ndarray | None) -> None:
         """Set the buffers and the context up for the next `rows` physics steps (then the plant steps)."""
         plant, n, h = self.plant, self.n, self.plant.dt
-        t = np.empty(rows)
-        t[0] = plant.time
-        for i in range(1, rows):  # MuJoCo's own time accumulation, bit for bit
-            t[i] = t[i - 1] + h
+        t = stage_code.step_times(plant.time, h, rows)
         stage_t = t[:, None] + h * self.stage_offsets[None, :]
         refs = self.reference(stage_t.ravel(), n)  # (n+1, rows*nst)
         self.buffers["ref"][: refs.size] = refs.T.ravel()

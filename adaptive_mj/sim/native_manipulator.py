@@ -656,10 +656,7 @@ class NativeManipulatorController(ContextOwner):
         if not 0 < rows <= self.max_rows:
             raise ValueError(f"rows must be in 1..{self.max_rows}, got {rows}")
         plant, m, nst, h = self.plant, self.m, self.nst, self.plant.dt
-        t = np.empty(rows)
-        t[0] = plant.time
-        for i in range(1, rows):  # MuJoCo's own time accumulation, bit for bit
-            t[i] = t[i - 1] + h
+        t = stage_code.step_times(plant.time, h, rows)
         stage_t = (t[:, None] + h * self.stage_offsets[None, :]).ravel()
         # Each distinct stage time once (RK4: stages 2 and 3 share t + h/2, and stage 4's t + h is
         # the next step's t, the same number): half the reference evaluations.

@@ -25,6 +25,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from adaptive_mj.laws.common import clip_into
 from adaptive_mj.sensors import Sensors, sense
 
@@ -116,3 +118,12 @@ def delay_slot(step: int, delay: int) -> tuple[int, int]:
     delay + 1 controls; the second is -1 while step < delay (nothing sent yet: zero applied)."""
     size = delay + 1
     return step % size, ((step - delay) % size if step >= delay else -1)
+
+
+def step_times(t0: float, h: float, rows: int) -> np.ndarray:
+    """(rows,) the times [s] at the start of `rows` physics steps of h [s] from t0, as MuJoCo accumulates
+    them (t += h at each step), bit for bit: numpy's cumulative sum adds left to right, one term at a
+    time (no pairwise summation, unlike np.sum), so it is the same sequence of roundings."""
+    terms = np.full(rows, h)
+    terms[0] = t0
+    return np.cumsum(terms)
