@@ -721,3 +721,23 @@ def test_only_the_fast_writer_touches_mcap_internals():
     package = Path(record.__file__).resolve().parents[1]
     hits = [p.relative_to(package).as_posix() for p in package.rglob("*.py") if "_Writer__" in p.read_text()]
     assert hits == ["log/fast_mcap.py"]
+
+
+@pytest.mark.parametrize("order, n_theta", [(2, 3), (3, 2)])
+def test_a_block_of_finite_rows_formatted_at_once_gives_the_bytes_of_one_message_at_a_time(tmp_path, order, n_theta):
+    """Recorder._write_finite_block (one %-operation for a whole block of finite rows) against the
+    per-message path it stands in for (taken when flush_every_rows is set, or a row has a non-finite
+    value): the same file, byte for byte, also with a non-finite row in the other block."""
+    rows = synthetic(2500, order=order, n_theta=n_theta)
+    rows["x"][1710, 0] = np.nan  # the second block goes the per-message way in both files
+    header = make_header(order=order, names=NAMES[:n_theta])
+    paths = {}
+    for name, flush_every in (("block", None), ("per_message", 10**9)):
+        paths[name] = tmp_path / f"{name}.mcap"
+        rec = Recorder(paths[name], header, flush_every_rows=flush_every)
+        write_block(rec, rows, 0, 1300)
+        write_block(rec, rows, 1300, 2500)
+        rec.close("ok", "", {})
+        assert rec.rows_written == 250
+    assert paths["block"].read_bytes() == paths["per_message"].read_bytes()
+    np.testing.assert_array_equal(read_log(paths["block"]).trajectory.x[:130], rows["x"][0:1300:LOG_EVERY])

@@ -63,14 +63,19 @@ def add_messages_fast(writer: Writer, batch: Batch) -> None:
     counts = stats.channel_message_counts
     lo = min(ns for _, ns, _ in batch)
     hi = max(ns for _, ns, _ in batch)
+    offset = buf.tell()
+    parts = []
     for channel_id, ns, data in batch:
         index = indices.get(channel_id)
         if index is None:
             index = indices[channel_id] = _PackedMessageIndex(channel_id=channel_id, records=[])
-        index.records.append((ns, buf.tell()))
-        buf.write(pack(_OPCODE_MESSAGE, 22 + len(data), channel_id, 0, ns, ns))
-        buf.write(data)
+        index.records.append((ns, offset))
+        head = pack(_OPCODE_MESSAGE, 22 + len(data), channel_id, 0, ns, ns)
+        offset += len(head) + len(data)
+        parts.append(head)
+        parts.append(data)
         counts[channel_id] += 1
+    buf.write(b"".join(parts))  # one write: the offsets above are where each record lands
     chunk.message_start_time = lo if chunk.num_messages == 0 else min(chunk.message_start_time, lo)
     chunk.message_end_time = max(chunk.message_end_time, hi)
     chunk.num_messages += len(batch)

@@ -408,6 +408,7 @@ class Recorder:
         fields = row_fields(self.order, self.names, self.joint_names)
         self._row_fields = [(self._channels[topic], fields[topic]) for topic in ROW_TOPICS]
         self._templates = [_template(fields) for _, fields in self._row_fields]
+        self._row_template: str | None = None  # the templates joined (_write_finite_block)
 
         meta = {
             "log_format_version": str(LOG_FORMAT_VERSION),
@@ -492,6 +493,9 @@ class Recorder:
 
     def _write_block(self, tk: np.ndarray, blocks: list[np.ndarray]) -> None:
         log_ns = np.rint(tk * _NS_PER_S).astype(np.int64).tolist()
+        if self._flush_every is None and all(np.isfinite(b).all() for b in blocks):
+            self._write_finite_block(tk, log_ns, blocks)
+            return
         t_list = tk.tolist()
         rows = [b.tolist() for b in blocks]
         finite = [np.isfinite(b).all(axis=1).tolist() for b in blocks]
@@ -513,6 +517,23 @@ class Recorder:
                 self._writer.flush()
         _add_messages(self._writer, batch)
         self._t_last = max(self._t_last, t_list[-1])
+
+    def _write_finite_block(self, tk: np.ndarray, log_ns: list[int], blocks: list[np.ndarray]) -> None:
+        """_write_block's payloads for rows of finite numbers, formatted in one %-operation for the whole
+        block: every row's messages are the row templates joined by NUL bytes (which no template or float
+        repr contains), repeated per row, then split apart. The same bytes as one template per message,
+        at a fifth of the cost (the per-message Python work was most of a logged run's logging time)."""
+        m, topics = len(tk), len(blocks)
+        values = np.hstack([np.column_stack([tk, b]) for b in blocks]).ravel().tolist()
+        if self._row_template is None:
+            self._row_template = "\0".join(self._templates)
+        text = "\0".join([self._row_template] * m) % tuple(values)
+        payloads = text.encode().split(b"\0")
+        channels = [channel_id for channel_id, _ in self._row_fields] * m
+        times = [ns for ns in log_ns for _ in range(topics)]
+        _add_messages(self._writer, list(zip(channels, times, payloads, strict=True)))
+        self._rows += m
+        self._t_last = max(self._t_last, float(tk[-1]))
 
     @_whole
     def write_event(self, t: float, label: str, **detail) -> None:
