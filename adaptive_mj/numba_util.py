@@ -54,7 +54,8 @@ def with_globals(fn, **replace):
                                 fn.__closure__)
 
 
-def jit_tree(fn: Callable, njit: Callable, *, tag: str = "", seen: dict | None = None, **replace) -> Callable:
+def jit_tree(fn: Callable, njit: Callable, *, tag: str = "", seen: dict | None = None, inner: Callable | None = None,
+             **replace) -> Callable:
     """fn compiled by njit, with every plain Python function it calls through its module globals
     compiled the same way (recursively), and globals in `replace` replaced. So a law written as
     plain array code, and the functions it calls, compile without a hand-kept list.
@@ -63,7 +64,10 @@ def jit_tree(fn: Callable, njit: Callable, *, tag: str = "", seen: dict | None =
     machine-code symbols after its qualified name and a counter that restarts in every process, so
     two variants of the same functions (other globals: another plant's phi) compiled in two
     processes and loaded from the disk cache into a third would define one symbol twice, and the
-    JIT would link one variant's calls to the other's code. A tag per variant keeps them apart."""
+    JIT would link one variant's calls to the other's code. A tag per variant keeps them apart.
+
+    inner: the njit for the functions fn calls (recursively), when not njit itself (e.g. inlined into fn
+    while fn is compiled apart: adaptive_mj.sim.native_context.inlined)."""
     load_registries()
     seen = {} if seen is None else seen
     if id(fn) in seen:
@@ -76,7 +80,7 @@ def jit_tree(fn: Callable, njit: Callable, *, tag: str = "", seen: dict | None =
             continue
         value = g.get(name)
         if isinstance(value, pytypes.FunctionType) and not _is_jitted(value):
-            g[name] = jit_tree(value, njit, tag=tag, seen=seen)
+            g[name] = jit_tree(value, inner or njit, tag=tag, seen=seen, inner=inner)
     code = fn.__code__
     if tag:
         code = code.replace(co_name=code.co_name + tag, co_qualname=code.co_qualname + tag)

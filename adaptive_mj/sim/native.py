@@ -31,8 +31,8 @@ from adaptive_mj.laws.protocol import Law
 from adaptive_mj.laws.sliding import sliding_law_values
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_context import (ContextOwner, addr, context_address, context_functions, mujoco_offsets,
-                                            source_key, unique_factory)
+from adaptive_mj.sim.native_context import (ContextOwner, addr, context_address, context_functions, inlined,
+                                            mujoco_offsets, source_key, unique_factory)
 
 if TYPE_CHECKING:
     from adaptive_mj.plants.mujoco_plant import MujocoPlant
@@ -195,13 +195,14 @@ def compiled(form, plugin=None):
     key = source_key(*fns, _callback_factory, _builtin_law, _plugin_law, sliding_law_values,
                      stage_code.stage_estimate, context_address, extra=(off, numba.__version__))
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
-    forms: dict[str, Any] = {name: jit_tree(fn, numba.njit, tag=tag)
+    inline = inlined(numba)
+    forms: dict[str, Any] = {name: jit_tree(fn, inline, tag=tag)
                              for name, fn in (("phi_fn", form.phi), ("f_fn", form.f), ("h_fn", form.h))}
     if plugin is None:
-        law = jit_tree(_builtin_law, numba.njit, tag=tag, **forms)
+        law = jit_tree(_builtin_law, inline, tag=tag, **forms)
     else:
-        law = jit_tree(_plugin_law, numba.njit, tag=tag, user_law=jit_tree(plugin, numba.njit, tag=tag), **forms)
-    stage_fns = {name: jit_tree(getattr(stage_code, name), numba.njit, tag=tag) for name in
+        law = jit_tree(_plugin_law, inline, tag=tag, user_law=jit_tree(plugin, inline, tag=tag), **forms)
+    stage_fns = {name: jit_tree(getattr(stage_code, name), inline, tag=tag) for name in
                  ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
                   "delay_slot")}
     pointers = context_functions(numba, carray, pointer(types.int64), tag)

@@ -44,8 +44,8 @@ from adaptive_mj.laws.protocol import Law
 from adaptive_mj.numba_util import address_of, jit_tree, pointer
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_context import (ContextOwner, addr, context_address, context_functions, mujoco_offsets,
-                                            source_key, unique_factory)
+from adaptive_mj.sim.native_context import (ContextOwner, addr, context_address, context_functions, inlined,
+                                            mujoco_offsets, source_key, unique_factory)
 
 if TYPE_CHECKING:
     from adaptive_mj.plants.manipulator import ManipulatorPlant
@@ -522,12 +522,14 @@ def compiled():
     common = {"carray": carray, "iptr": pointer(types.int64), "fptr": pointer(types.float64), "np": np,
               "MODE_PD_GRAVITY": MODE_PD_GRAVITY}
     pointers = context_functions(numba, carray, common["iptr"], tag)
-    stage_fns: dict[str, Any] = {name: jit_tree(getattr(stage_code, name), numba.njit, tag=tag) for name in
+    inline = inlined(numba)
+    stage_fns: dict[str, Any] = {name: jit_tree(getattr(stage_code, name), inline, tag=tag) for name in
                                  ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step",
                                   "period_ends", "delay_slot", "sense")}
-    law_stage = jit_tree(_law_stage, numba.njit, tag=tag, regressor=jit_tree(_regressor, numba.njit, tag=tag),
-                         ref_terms=jit_tree(reference_terms, numba.njit, tag=tag),
-                         output=jit_tree(slotine_li_output, numba.njit, tag=tag), **pointers, **common, **stage_fns)
+    law_stage = jit_tree(_law_stage, numba.njit, tag=tag,
+                         regressor=jit_tree(_regressor, numba.njit, tag=tag, inner=inline),
+                         ref_terms=jit_tree(reference_terms, inline, tag=tag),
+                         output=jit_tree(slotine_li_output, inline, tag=tag), **pointers, **common, **stage_fns)
     g = {**_callback_factory.__globals__, **common, **stage_fns, "numba": numba, "types": types,
          "law_stage": law_stage, **pointers, "address": address_of(), "cptr": pointer(numba.from_dtype(CONTEXT)),
          "SAMPLED": stage_code.SAMPLED}
