@@ -133,7 +133,15 @@ def check_payload_file(scn: Scenario) -> None:
     if p.payload is None or not p.payload_paths or (p.backend == "twin" and p.theta is not None):
         return
     path = pl.locate(p.payload, p.payload_paths, where=scn.source, key="plant.payload")
-    pl.check_text(pl.read(path), path, on_disk=True)
+    text = pl.read(path)
+    if (str(path), text) in _payloads_checked:  # a study's runs share a payload: compiled once per process
+        return
+    pl.check_text(text, path, on_disk=True)
+    _payloads_checked.add((str(path), text))
+
+
+#: (path, text) of the payload files check_payload_file has passed in this process (it compiles each, ~1 ms)
+_payloads_checked: set[tuple[str, str]] = set()
 
 
 def with_event_payloads(scn: Scenario, source: ModelSource | None) -> ModelSource | None:
