@@ -16,8 +16,14 @@
             6-joint arm at nsim --batch-sims (100, 1000, 10^4): the bare-stepping limit (a Batch
             of the model with no law, 2 threads); run_batch (built runs, unlogged); the batched
             engine end to end (building, stepping, verdicts; without logs and with MCAP logs at
-            100 Hz); the process pool on the same logged study (nsim --pool-sims); the driver's
+            100 Hz); the process pool on the same study, without and with logs (nsim --pool-sims); the driver's
             memory per prepared run, and the bytes of a Batch state row, an MjData, an MjModel
+  per_run   what one run of a study costs in one process, against bare stepping of its model
+            (mj_step, the same steps): building the run, and the whole run (run_job: build, step,
+            verdict) without a log and with its MCAP log at 100 Hz, for the heave vehicle and the
+            1-DOF arm at 1 s and 2 s and the 6-joint arm at 0.2 s and 2 s (--per-run-runs runs,
+            median of --reps); the ratio bare / run is the most a study of such runs can reach
+            against the bare-stepping limit on any number of cores, whatever the engine
 
 Every figure is the median of --reps repetitions with [min, max] where repeated.
 Usage: python benchmarks/scaling.py [--reps 3] [--runs 8] [--only local,ray,...] [--study-runs 10000] [--json]
@@ -314,6 +320,74 @@ def _rss_kb() -> int:
     return 0
 
 
+#: plant -> (run lengths [s] measured) for per_run
+PER_RUN_SECONDS = {"heave": (1.0, 2.0), "arm": (1.0, 2.0), "ur5e": (0.2, 2.0)}
+
+
+def per_run(reps: int, runs: int) -> dict:
+    """One run's cost in this process (see the module's doc): ms per run, median [min, max] of reps, each
+    over `runs` runs; the runs vary as in the batch figures (BATCH_CASES), every run its own seed."""
+    import mujoco
+
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
+    from adaptive_mj.sim.runner import start
+    from adaptive_mj.study.job import run_job
+
+    out: dict = {}
+    for label, lengths in PER_RUN_SECONDS.items():
+        name, _, vary = BATCH_CASES[label]
+        for seconds in lengths:
+            scn = load(SCENARIOS_DIR / f"{name}.toml", overrides=[f"simulation.duration={seconds!r}", *vary(0)])
+            model = build(scn).plant.model
+            data = mujoco.MjData(model)
+            steps = int(round(seconds / model.opt.timestep))
+            for job in _batch_jobs(name, seconds, vary, 2, None):  # the compiled callback loaded, caches warm
+                run_job(job)
+            times: dict[str, list[float]] = {"bare": [], "start": [], "unlogged": [], "logged": []}
+            for _rep in range(reps):
+                t0 = time.perf_counter()
+                for _ in range(runs):
+                    mujoco.mj_resetData(model, data)
+                    mujoco.mj_step(model, data, nstep=steps)
+                times["bare"].append((time.perf_counter() - t0) / runs)
+                scns = [load(SCENARIOS_DIR / f"{name}.toml", overrides=[f"simulation.duration={seconds!r}", *vary(i)],
+                             seed=i) for i in range(runs)]
+                t0 = time.perf_counter()
+                for one in scns:
+                    start(one)
+                times["start"].append((time.perf_counter() - t0) / runs)
+                for logged in (False, True):
+                    folder = Path(tempfile.mkdtemp(prefix="scaling-per-run-")) if logged else None
+                    try:
+                        jobs = _batch_jobs(name, seconds, vary, runs, folder)
+                        t0 = time.perf_counter()
+                        results = [run_job(job) for job in jobs]
+                        times["logged" if logged else "unlogged"].append((time.perf_counter() - t0) / runs)
+                    finally:
+                        if folder is not None:
+                            shutil.rmtree(folder, ignore_errors=True)
+                    assert all(r.status == "ok" for r in results), {r.status for r in results}
+            row = {k: med([1e3 * v for v in vs]) for k, vs in times.items()}
+            row["steps"] = steps
+            row["unlogged_to_bare"] = row["bare"]["median"] / row["unlogged"]["median"]
+            row["logged_to_bare"] = row["bare"]["median"] / row["logged"]["median"]
+            out[f"{label} {seconds:g} s"] = row
+            print(f"  per_run {label} {seconds:g} s: " + ", ".join(
+                f"{k} {v['median']:.2f} ms" if isinstance(v, dict) else f"{k} {v:.3g}" for k, v in row.items()),
+                file=sys.stderr, flush=True)
+    return out
+
+
+def print_per_run(fig: dict | None) -> None:
+    for case, r in (fig or {}).items():
+        def f(m):
+            return f"{m['median']:.2f} [{m['min']:.2f}, {m['max']:.2f}]"
+        print(f"per_run {case} ({r['steps']} steps): bare stepping {f(r['bare'])} ms; start (build) {f(r['start'])} "
+              f"ms; run unlogged {f(r['unlogged'])} ms ({r['unlogged_to_bare']:.2f}x bare); run logged "
+              f"{f(r['logged'])} ms ({r['logged_to_bare']:.2f}x bare)")
+
+
 #: plant -> (scenario, simulated seconds per run, the --set that varies a run i). The 6-joint runs are
 #: shorter: 10^4 of them at 2 s would take minutes of stepping alone.
 BATCH_CASES = {
@@ -338,12 +412,14 @@ def _batch_jobs(name: str, seconds: float, vary, n: int, folder: Path | None):
 RUN_BATCH_GROUP = 1000
 
 
-def batch_figures(sizes: list[int], pool_nsim: int, threads: int = 2, plants: tuple[str, ...] = ()) -> dict:
+def batch_figures(sizes: list[int], pool_nsim: int, threads: int = 2, plants: tuple[str, ...] = (),
+                  durations: dict[str, float] | None = None) -> dict:
     """Issue 20's figures, per plant and nsim: the bare-stepping limit (a Batch of nsim simulations of the
     model with no law, `threads` threads) in simulation-steps per second; run_batch (the law, built runs,
     unlogged); the batched engine end to end (sweep's path, parallel.iter_results with engine "batch":
     building, stepping, verdicts) without logs and with MCAP logs at 100 Hz; the process pool on the same
-    logged study (pool_nsim runs); and the memory a prepared run holds in the driver (VmRSS growth per run
+    study (pool_nsim runs, without and with logs); durations: simulated seconds per run by plant, in place of
+    BATCH_CASES's; and the memory a prepared run holds in the driver (VmRSS growth per run
     while nsim runs are held, divided by nsim)."""
     import gc
 
@@ -358,22 +434,25 @@ def batch_figures(sizes: list[int], pool_nsim: int, threads: int = 2, plants: tu
     for label, (name, seconds, vary) in BATCH_CASES.items():
         if plants and label not in plants:
             continue
+        seconds = (durations or {}).get(label, seconds)
         steps = int(round(seconds / 0.001))
         warm = [_batch_spec(name, [f"simulation.duration={seconds!r}", *vary(i)]) for i in range(2)]
         run_batch(warm, nthread=threads)  # load the compiled callback outside the timings
         model = warm[0]["plant"].model
         rows = []
         for nsim in sizes:
-            pool_s = None
+            pool_s: dict[bool, float] = {}
             if nsim == pool_nsim:  # first: forking the pool from a process that has held 10^3 runs can fail (ENOMEM)
-                folder = Path(tempfile.mkdtemp(prefix="scaling-pool-"))
-                try:
-                    jobs = _batch_jobs(name, seconds, vary, nsim, folder)
-                    t0 = time.perf_counter()
-                    res = [r for _, r in iter_results(jobs, Backend(jobs=threads))]
-                    pool_s = time.perf_counter() - t0
-                finally:
-                    shutil.rmtree(folder, ignore_errors=True)
+                for logged in (False, True):
+                    folder = Path(tempfile.mkdtemp(prefix="scaling-pool-")) if logged else None
+                    try:
+                        jobs = _batch_jobs(name, seconds, vary, nsim, folder)
+                        t0 = time.perf_counter()
+                        res = [r for _, r in iter_results(jobs, Backend(jobs=threads))]
+                        pool_s[logged] = time.perf_counter() - t0
+                    finally:
+                        if folder is not None:
+                            shutil.rmtree(folder, ignore_errors=True)
             bare = mujoco.batch.Batch(model, nsim=nsim, nthread=threads)
             t0 = time.perf_counter()
             bare.step(nstep=steps)
@@ -410,9 +489,9 @@ def batch_figures(sizes: list[int], pool_nsim: int, threads: int = 2, plants: tu
                         shutil.rmtree(folder, ignore_errors=True)
                 assert all(r.status == "ok" for r in res), {r.status for r in res}
                 row["engine_logged_steps_per_s" if logged else "engine_steps_per_s"] = nsim * steps / wall
-            if pool_s is not None:
-                row["pool_logged_steps_per_s"] = nsim * steps / pool_s
-            for key in ("run_batch", "engine", "engine_logged", "pool_logged"):
+            for logged, wall in pool_s.items():
+                row["pool_logged_steps_per_s" if logged else "pool_steps_per_s"] = nsim * steps / wall
+            for key in ("run_batch", "engine", "engine_logged", "pool", "pool_logged"):
                 if f"{key}_steps_per_s" in row:
                     row[f"{key}_to_limit"] = row[f"{key}_steps_per_s"] / row["bare_steps_per_s"]
             rows.append(row)
@@ -436,8 +515,11 @@ def main() -> None:
     ap.add_argument("--batch-sims", default="100,1000,10000", help="nsim in the batch figures (default 100,1000,10000)")
     ap.add_argument("--pool-sims", type=int, default=1000, help="nsim at which the process pool runs the same study")
     ap.add_argument("--batch-plants", default="", help="comma-separated subset of heave,arm,ur5e (default: all)")
+    ap.add_argument("--batch-seconds", default="", help="simulated seconds per run by plant, e.g. heave=2,arm=2 "
+                    "(default: heave 1, arm 1, ur5e 0.2)")
     ap.add_argument("--ray-node-runs", type=int, default=400, help="runs per measurement in the ray_nodes figure")
-    ap.add_argument("--only", default="ceiling,local,ray,study,batch,ray_nodes")
+    ap.add_argument("--per-run-runs", type=int, default=20, help="runs per repetition in the per_run figures")
+    ap.add_argument("--only", default="ceiling,local,ray,study,batch,ray_nodes,per_run")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     parts = set(args.only.split(","))
@@ -454,9 +536,12 @@ def main() -> None:
         res["study"] = study(args.study_runs, **kw)
     if "ray_nodes" in parts:
         res["ray_nodes"] = ray_nodes(args.ray_node_runs)
+    if "per_run" in parts:
+        res["per_run"] = per_run(args.reps, args.per_run_runs)
     if "batch" in parts:
+        durations = {k: float(v) for k, v in (kv.split("=") for kv in args.batch_seconds.split(",") if kv)}
         res["batch"] = batch_figures([int(n) for n in args.batch_sims.split(",")], args.pool_sims,
-                                     plants=tuple(p for p in args.batch_plants.split(",") if p))
+                                     plants=tuple(p for p in args.batch_plants.split(",") if p), durations=durations)
     if args.json:
         print(json.dumps(res, indent=1))
         return
@@ -490,6 +575,7 @@ def main() -> None:
                   f"logs {s['logs_mb']:.0f} MB")
     print_batch(res.get("batch", {}))
     print_ray_nodes(res.get("ray_nodes"))
+    print_per_run(res.get("per_run"))
 
 
 def print_ray_nodes(fig: dict | None) -> None:
@@ -510,6 +596,8 @@ def print_batch(figures: dict) -> None:
                      f"run_batch {r['run_batch_steps_per_s']:.3g} ({r['run_batch_to_limit']:.2f}x)",
                      f"engine {r['engine_steps_per_s']:.3g} ({r['engine_to_limit']:.2f}x)",
                      f"engine+logs {r['engine_logged_steps_per_s']:.3g} ({r['engine_logged_to_limit']:.2f}x)"]
+            if "pool_steps_per_s" in r:
+                cells.append(f"process pool {r['pool_steps_per_s']:.3g} ({r['pool_to_limit']:.2f}x)")
             if "pool_logged_steps_per_s" in r:
                 cells.append(f"process pool+logs {r['pool_logged_steps_per_s']:.3g} ({r['pool_logged_to_limit']:.2f}x)")
             cells.append(f"build {r['build_ms_per_run']:.2f} ms/run, held {r['driver_kb_per_run_held']:.0f} kB/run")

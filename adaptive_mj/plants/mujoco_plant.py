@@ -276,8 +276,10 @@ def scale_body_mass(model: mujoco.MjModel, body: int, mass: float) -> None:
     mujoco.mj_setConst(model, scratch_data(model))
 
 
-#: the most models scratch_data keeps an MjData for (and compile_spec keeps compiled)
+#: the most model layouts scratch_data keeps an MjData for
 CACHE_SIZE = 8
+#: the most compiled models compile_spec keeps (a payload-mass grid of up to this many masses compiles each once)
+COMPILED_CACHE_SIZE = 32
 _size_names: tuple[str, ...] | None = None
 _scratch: OrderedDict[tuple, mujoco.MjData] = OrderedDict()
 
@@ -328,7 +330,7 @@ def compile_spec(xml: str, assets: dict | None = None, *, where: str, edit=None,
     Returns the model and the compiled model as MJCF text (the log's model.xml).
     MuJoCo's own message is passed on in a ModelError naming `where`.
 
-    The compiled model is kept (the last CACHE_SIZE texts) and the next call with the same text, assets
+    The compiled model is kept (the last COMPILED_CACHE_SIZE texts) and the next call with the same text, assets
     and edit returns a copy of it (mj_copyModel: the same numbers; a study's runs of one model compile it
     once per process, 0.17 ms per copy against 1.2 ms to parse, compile and write the heave vehicle's
     XML). An `edit` is cached only when the caller names what it does in `edit_key` (a tuple of values
@@ -345,7 +347,7 @@ def compile_spec(xml: str, assets: dict | None = None, *, where: str, edit=None,
     model, text = _compile_spec(xml, assets, where=where, edit=edit)
     if key is not None:
         _compiled[key] = (copy.copy(model), text)
-        while len(_compiled) > CACHE_SIZE:
+        while len(_compiled) > COMPILED_CACHE_SIZE:
             _compiled.popitem(last=False)
     return model, text
 
