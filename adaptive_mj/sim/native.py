@@ -290,9 +290,9 @@ class NativeController(ContextOwner):
         """Set the buffers and the context up for the next `rows` physics steps (then the plant steps)."""
         plant, n, h = self.plant, self.n, self.plant.dt
         t = stage_code.step_times(plant.time, h, rows)
-        stage_t = t[:, None] + h * self.stage_offsets[None, :]
-        refs = self.reference(stage_t.ravel(), n)  # (n+1, rows*nst)
-        self.buffers["ref"][: refs.size] = refs.T.ravel()
+        times, which = stage_code.distinct_times((t[:, None] + h * self.stage_offsets[None, :]).ravel())
+        refs = self.reference(times, n)  # (n+1, len(times))
+        self.buffers["ref"][: rows * self.nst * (n + 1)] = refs.T[which].ravel()
         self.buffers["noise"][: rows * n] = 0.0 if noise is None else noise.ravel()
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]

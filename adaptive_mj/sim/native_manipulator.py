@@ -659,16 +659,7 @@ class NativeManipulatorController(ContextOwner):
             raise ValueError(f"rows must be in 1..{self.max_rows}, got {rows}")
         plant, m, nst, h = self.plant, self.m, self.nst, self.plant.dt
         t = stage_code.step_times(plant.time, h, rows)
-        stage_t = (t[:, None] + h * self.stage_offsets[None, :]).ravel()
-        # Each distinct stage time once (RK4: stages 2 and 3 share t + h/2, and stage 4's t + h is
-        # the next step's t, the same number): half the reference evaluations.
-        if np.all(stage_t[1:] >= stage_t[:-1]):
-            new = np.empty(stage_t.size, dtype=bool)
-            new[0] = True
-            np.not_equal(stage_t[1:], stage_t[:-1], out=new[1:])
-            times, which = stage_t[new], np.cumsum(new) - 1
-        else:
-            times, which = np.unique(stage_t, return_inverse=True)
+        times, which = stage_code.distinct_times((t[:, None] + h * self.stage_offsets[None, :]).ravel())
         refs = self.reference(times, 2)  # (3, len(times), m)
         b = self.buffers
         b["ref"][: rows * nst] = np.moveaxis(refs, 1, 0)[which]

@@ -127,3 +127,16 @@ def step_times(t0: float, h: float, rows: int) -> np.ndarray:
     terms = np.full(rows, h)
     terms[0] = t0
     return np.cumsum(terms)
+
+
+def distinct_times(stage_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(times, which): each distinct value of the stage times stage_t (N,) [s] once, and for every stage
+    time the index of its value in `times` (stage_t == times[which]). Under RK4 stages 2 and 3 share
+    t + h/2, and stage 4's t + h is the next step's t, the same number: the reference is evaluated at
+    half the times. Stage times come in order (one pass); otherwise np.unique sorts them."""
+    if np.all(stage_t[1:] >= stage_t[:-1]):
+        new = np.empty(stage_t.size, dtype=bool)
+        new[0] = True
+        np.not_equal(stage_t[1:], stage_t[:-1], out=new[1:])
+        return stage_t[new], np.cumsum(new) - 1
+    return np.unique(stage_t, return_inverse=True)
