@@ -264,3 +264,25 @@ def test_supported():
     assert nm.supported(plant, law)  # one stage
     hv = heave.load()
     assert not nm.supported(hv, SlidingAdaptiveLaw(hv.form, lam=5, k=200, gamma=[1, 1, 1]))
+
+
+@pytest.mark.parametrize("case", ["adaptive_payload", "friction_base_all"])
+def test_v_from_the_mass_matrix_the_callback_recorded_equals_v_from_the_logged_q(case):
+    """The native run's V = ½ sᵀ M(q) s + ... takes M as MuJoCo computed it at each step's start (copied by
+    the callback from mjData.M, made dense by ManipulatorPlant.full_mass): bit for bit the V that
+    ManipulatorPlant.mass_matrices gives at the logged q (four MuJoCo calls per row, the Python path's)."""
+    plant, law, ref, theta0 = _setup(**CASES[case])
+    calls = []
+    recompute = plant.mass_matrices
+    plant.mass_matrices = lambda q: calls.append(len(q)) or recompute(q)  # type: ignore[method-assign]
+    traj = run(plant, law, ref, duration=1.35, theta_hat0=theta0, native=True)  # a chunk of 1000 rows and one of 350
+    assert traj.status == "ok", traj.reason
+    assert calls == []  # every row's M came from the callback
+    M = recompute(traj.x[:, 0])
+    np.testing.assert_array_equal(traj.V, law.lyapunov(traj.s, traj.theta_hat, traj.theta, M=M))
+    d = mujoco.MjData(plant.model)  # full_mass against mj_fullM on a state of its own
+    d.qpos[:] = np.linspace(-1.0, 1.0, plant.model.nq)
+    mujoco.mj_forward(plant.model, d)
+    dense = np.zeros((plant.m, plant.m))
+    mujoco.mj_fullM(plant.model, d, dense)
+    np.testing.assert_array_equal(plant.full_mass(d.M[None, :].copy())[0], dense)

@@ -516,6 +516,7 @@ class ManipulatorPlant:
         self._warning_total0 = int(self.data.warning.number.sum())
         self._warnings0 = self.data.warning.number.copy()
         self._scratch = mujoco.MjData(model)
+        self._full_index: np.ndarray | None = None  # full_mass's map from mjData.M to the dense M
 
     # --- state -------------------------------------------------------------
     @property
@@ -582,6 +583,20 @@ class ManipulatorPlant:
             jid = self.model.dof_jntid[j]
             if self.model.jnt_limited[jid]:
                 out[j] = self.model.jnt_range[jid]
+        return out
+
+    def full_mass(self, sparse: np.ndarray) -> np.ndarray:
+        """(N, m, m) dense M from rows (N, nM) of MuJoCo's sparse mjData.M, as mj_fullM writes it (each entry
+        copied to its place and its mirror, zeros elsewhere: the same numbers)."""
+        if self._full_index is None:
+            d = scratch_data(self.model)
+            d.M[:] = np.arange(1.0, self.model.nM + 1.0)  # mj_fullM of the entries' own numbers: where each goes
+            where = np.zeros((self.m, self.m))
+            mujoco.mj_fullM(self.model, d, where)
+            self._full_index = where.astype(np.int64) - 1
+        index = self._full_index
+        out = np.take(sparse, np.maximum(index, 0).ravel(), axis=1).reshape(len(sparse), self.m, self.m)
+        out[:, index < 0] = 0.0
         return out
 
     def mass_matrices(self, q: np.ndarray) -> np.ndarray:

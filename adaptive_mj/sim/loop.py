@@ -404,7 +404,7 @@ def native_steps(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource,
         yield n
         block = nc.finish(n)
         bad, reason = first_divergence(plant, block[1], block[2], block[5], nc.theta, state_bound)
-        rows.put_block(block, theta_now, n if bad is None else bad)
+        rows.put_block(block, theta_now, n if bad is None else bad, mass=nc.mass_rows(n))
         if bad is not None:
             return "diverged", reason
     return "ok", ""
@@ -468,6 +468,7 @@ class _Rows:
         self.ref, self.theta_hat = np.empty((n, order + 1) + js), np.empty((n, nth))
         self.V = np.empty(n)  # filled block by block (no full-length temporaries at the end)
         self.segments: list[tuple[int, np.ndarray]] = []
+        self.mass: list[tuple[int, np.ndarray]] = []  # (first row, M (N, m, m)) recorded by a native callback
         self.k = self.flushed = 0
         self.events: list[tuple[float, str]] = []  # the events applied so far (the run's EventQueue.applied)
 
@@ -485,15 +486,32 @@ class _Rows:
         if self.k % self.every == 0:
             self.flush(self.k)
 
-    def put_block(self, block, theta: np.ndarray, keep: int) -> None:
-        """A native chunk's (t, x, u, s, ref, theta_hat) rows, of which the first `keep` count."""
+    def put_block(self, block, theta: np.ndarray, keep: int, mass: np.ndarray | None = None) -> None:
+        """A native chunk's (t, x, u, s, ref, theta_hat) rows, of which the first `keep` count; mass: M(q)
+        (n, m, m) at each row, where the callback recorded it (flush uses it for V instead of recomputing)."""
         k, n = self.k, len(block[0])
         rows = slice(k, k + n)
         self.t[rows], self.x[rows], self.u[rows], self.s[rows], self.ref[rows], self.theta_hat[rows] = block
+        if mass is not None:
+            self.mass.append((k, mass))
         self.note_theta(k, theta)
         self.k = k + keep
         if self.k % self.every == 0:
             self.flush(self.k)
+
+    def recorded_mass(self, a: int, b: int) -> np.ndarray | None:
+        """(b - a, m, m) the recorded M(q) of rows a..b-1 when the chunks recorded cover them all (chunks end
+        where flushes do), else None; what is flushed is dropped."""
+        pieces, first = [], a
+        for k, M in self.mass:
+            if k <= first < k + len(M):
+                take = M[first - k:min(len(M), b - k)]
+                pieces.append(take)
+                first += len(take)
+        self.mass = [(k, M) for k, M in self.mass if k + len(M) > b]
+        if first != b:
+            return None
+        return pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
 
     def theta_rows(self, a: int, b: int) -> np.ndarray:
         """(b - a, n_theta) true θ of rows a..b-1."""
@@ -515,8 +533,10 @@ class _Rows:
         self.flushed = upto  # first: a write cut short by an interruption is never repeated
         theta = self.theta_rows(rows.start, rows.stop)
         plant = self.plant
-        if has_joints(plant):  # V = ½ sᵀ M(q) s + ...: the plant gives M at the logged q
-            M = plant.mass_matrices(self.x[rows, 0])
+        if has_joints(plant):  # V = ½ sᵀ M(q) s + ...: M as the callback recorded it, or from the plant at q
+            M = self.recorded_mass(rows.start, rows.stop)
+            if M is None:
+                M = plant.mass_matrices(self.x[rows, 0])
             self.V[rows] = self.law.lyapunov(self.s[rows], self.theta_hat[rows], theta, M=M)
         else:
             self.V[rows] = self.law.lyapunov(self.s[rows], self.theta_hat[rows], theta)

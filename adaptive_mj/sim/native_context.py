@@ -201,6 +201,11 @@ class ContextOwner:
         """chunk()'s second half, after the plant stepped: the rows the callback recorded."""
         raise NotImplementedError
 
+    def mass_rows(self, rows: int) -> np.ndarray | None:
+        """(rows, m, m) the joint-space inertia at each step just taken, where the callback recorded it
+        (the manipulator's, for V); None otherwise (1-DOF plants: V needs no M)."""
+        return None
+
     def bind(self) -> None:
         """Point the plant's MjData at this run's context (the newest run on an MjData owns it); the
         plant holds the owner, so the context lives as long as the MjData can reach it."""

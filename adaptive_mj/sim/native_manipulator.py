@@ -104,6 +104,7 @@ CONTEXT = np.dtype([
     ("sat_hi", _i8),
     # records (one row per physics step)
     ("rec_t", _i8), ("rec_x", _i8), ("rec_u", _i8), ("rec_s", _i8), ("rec_ref", _i8), ("rec_theta", _i8),
+    ("nM", _i8), ("rec_M", _i8),  # MuJoCo's sparse M(q) at each step's start (mjData.M), for V
 ])
 
 MODE_PD_GRAVITY = 2  # laws.slotine_li.Mode.PD_GRAVITY (the regressor at v = w = a = 0)
@@ -355,7 +356,7 @@ def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step'
     functions it calls (regressor, ref_terms, output, the stage functions, pointer intrinsics) are
     globals that compiled() replaces by their numba versions."""
     off_ud, off_qpos, off_qvel, off_ctrl, off_cdof, off_xpos, off_xmat, off_subcom, off_cinert, \
-        off_arm, off_damp, off_gravity, off_qfrc = off
+        off_arm, off_damp, off_gravity, off_qfrc, off_M = off
 
     @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True, cache=True)  # noqa: F821 (injected)
     def callback(m, d):  # noqa: C901 (see above)
@@ -417,6 +418,12 @@ def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step'
                     rref[row, k, j] = r[k, j]
             for i in range(nth):
                 rth[row, i] = theta[i]
+            # M(q) as MuJoCo computed it for this stage (mj_forward at the step's start), for V = ½ sᵀMs + ...:
+            # copied, not recomputed per row in Python (plants.manipulator.ManipulatorPlant.full_mass)
+            nM = ctx.nM
+            rM, Md = carray(fptr(ctx.rec_M), (maxrows, nM)), carray(fptr(pointer_at(base, off_M)), nM)  # noqa: F821,E501 (injected globals; one carray per line)
+            for k in range(nM):
+                rM[row, k] = Md[k]
         stage += 1
         if stage == nst:  # end of the physics step: advance the estimates (continuous: every step)
             if not sampled:
@@ -436,7 +443,7 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
     """One evaluation of the Slotine–Li law at a stage: measure x (+ noise), the stage estimate, the
     regressor on the live MjData, τ clamped into u_hold (and s into s_hold), the rate into ctx.rate."""
     nv, nb, nth, nstd = ctx.nv, ctx.nbody, ctx.nth, ctx.nstd
-    _, _, _, _, off_cdof, off_xpos, off_xmat, off_subcom, off_cinert, off_arm, off_damp, off_gravity, _ = off
+    _, _, _, _, off_cdof, off_xpos, off_xmat, off_subcom, off_cinert, off_arm, off_damp, off_gravity, _, _ = off
     th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
     x = carray(fptr(ctx.x), (2, nv))  # noqa: F821 (injected)
     s, qd_r, qdd_r = carray(fptr(ctx.s), nv), carray(fptr(ctx.qd_r), nv), carray(fptr(ctx.qdd_r), nv)  # noqa: F821 (injected)
@@ -515,7 +522,7 @@ def compiled():
     offsets = mujoco_offsets()
     off = tuple(offsets[k] for k in ("userdata", "qpos", "qvel", "ctrl", "cdof", "xpos", "xmat", "subtree_com",
                                      "cinert", "model.dof_armature", "model.dof_damping", "model.gravity",
-                                     "qfrc_applied"))
+                                     "qfrc_applied", "M"))
     key = source_key(_callback_factory, _law_stage, _regressor, reference_terms, slotine_li_output,
                      stage_code.stage_estimate, stage_code.sense, context_address, extra=(off, numba.__version__))
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
@@ -613,6 +620,7 @@ class NativeManipulatorController(ContextOwner):
             "scratch": np.zeros(18 * nb), "ref": np.zeros((rows * self.nst, 3, nv)), "noise": np.zeros((rows, 2, nv)),
             "rec_t": np.zeros(rows), "rec_x": np.zeros((rows, 2, nv)), "rec_u": np.zeros((rows, nv)),
             "rec_s": np.zeros((rows, nv)), "rec_ref": np.zeros((rows, 3, nv)), "rec_theta": np.zeros((rows, nth)),
+            "rec_M": np.zeros((rows, max(model.nM, 1))),
             "quantum": f64(sensors.quantum if sensors is not None else np.zeros(nv)), "q_prev": np.zeros(nv),
             "v_est": np.zeros(nv), "q_true": np.zeros(nv), "dist": np.zeros((rows, nv)),
             "sat_lo": f64(p["sat_lo"]), "sat_hi": f64(p["sat_hi"]),
@@ -631,7 +639,7 @@ class NativeManipulatorController(ContextOwner):
         for name, arr in buf.items():
             c[name] = addr(arr)
         c["nstages"], c["nv"], c["nbody"], c["nth"], c["nstd"] = self.nst, nv, nb, nth, nstd
-        c["nq"], c["nu"], c["maxrows"] = model.nq, model.nu, rows
+        c["nq"], c["nu"], c["maxrows"], c["nM"] = model.nq, model.nu, rows, model.nM
         c["mode_law"], c["adapt"] = int(p["mode"]), int(bool(p["adapt"]))
         c["dz_on_s"], c["has_base"] = int(bool(p["dz_on_s"])), int(B is not None)
         c["mode"], c["period_steps"], c["delay"], c["period"] = control.mode, control.steps, d, control.period
@@ -678,3 +686,9 @@ class NativeManipulatorController(ContextOwner):
             raise RuntimeError(f"native callback ran {done} steps (stage {int(c['stage'])}), expected {rows}")
         return (b["rec_t"][:rows].copy(), b["rec_x"][:rows].copy(), b["rec_u"][:rows].copy(),
                 b["rec_s"][:rows].copy(), b["rec_ref"][:rows].copy(), b["rec_theta"][:rows].copy())
+
+    def mass_rows(self, rows: int) -> np.ndarray:
+        """(rows, m, m) M(q) at the start of each of the `rows` steps just taken, as MuJoCo computed it in the
+        step (the same numbers ManipulatorPlant.mass_matrices computes from the logged q, without its four
+        MuJoCo calls per row)."""
+        return self.plant.full_mass(self.buffers["rec_M"][:rows])
