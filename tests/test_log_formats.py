@@ -38,7 +38,12 @@ def test_format2_logs_read_and_verify(name, joints, capsys):
     assert run.header.get("law_plugin") is None
     assert run.status == "ok" and len(run.trajectory.joint_names) == joints
     assert main(["replay", str(DATA / name), "--verify"]) == 0
-    assert "verify: bit-identical" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    if joints:  # its payload swap at 0.15 s came mid-second: V before it was computed with the new payload then
+        assert ("verify: bit-identical but for V at 14 rows before the event at t = 0.15 s, which adaptive-mj "
+                "before 0.2.0 computed with the inertia after that event") in out
+    else:
+        assert "verify: bit-identical (" in out
 
 
 @pytest.mark.parametrize("name, joints", [("heave_drift_delay_format3.mcap", 0),
@@ -173,3 +178,21 @@ def test_multi_joint_log_renders_a_video_of_the_whole_arm(tmp_path):
         assert im.size == (800, 400) and im.n_frames == 3
         frame = np.asarray(im.convert("RGB"))
     assert frame[:, :400].std() > 10  # the scene is not blank
+
+
+def test_a_v_difference_is_explained_only_where_the_old_flush_got_v_wrong():
+    """verify._v_before_event: rows before an event in the same simulated second (earlier versions
+    computed their V at the flush after the event) are a known difference; any other row is not."""
+    from types import SimpleNamespace
+
+    from adaptive_mj.log.verify import _v_before_event
+
+    rerun = SimpleNamespace(meta={"dt": 0.001, "events": [(1.25, "payload_swap")]})
+    steps = np.arange(300) * 10  # logged every 10th step, t = 0 .. 2.99 s
+    differ = np.zeros(300, dtype=bool)
+    differ[101:125] = True  # t = 1.01 .. 1.24 s: before the event, in its second
+    assert "24 rows before the event at t = 1.25 s" in _v_before_event(differ, steps, rerun)
+    differ[99] = True  # t = 0.99 s: flushed before the event, so it was right then
+    assert _v_before_event(differ, steps, rerun) == ""
+    differ[99], differ[130] = False, True  # after the event
+    assert _v_before_event(differ, steps, rerun) == ""

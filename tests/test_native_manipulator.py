@@ -286,3 +286,28 @@ def test_v_from_the_mass_matrix_the_callback_recorded_equals_v_from_the_logged_q
     dense = np.zeros((plant.m, plant.m))
     mujoco.mj_fullM(plant.model, d, dense)
     np.testing.assert_array_equal(plant.full_mass(d.M[None, :].copy())[0], dense)
+
+
+@pytest.mark.parametrize("native", [True, False])
+def test_v_before_a_payload_swap_mid_second_has_the_inertia_of_its_own_step(native):
+    """A payload swap at 0.15 s (not at a flush, which comes every simulated second): V at the rows before
+    it is ½ sᵀ M s + ... with M of the arm as it was then. Earlier versions computed those rows' V at the
+    flush after the swap, with the new payload's inertia (tests/test_log_formats.py keeps such a log)."""
+    from pathlib import Path
+
+    from adaptive_mj.data import SCENARIOS
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.setup.build import build
+
+    over = ["simulation.duration=0.3", "events=[{t=0.15, kind='payload_swap', payload='sphere'}]"]
+    setup = build(sc.load(Path(SCENARIOS / "ur5e_payload_swap.toml"), overrides=over))
+    traj = run(setup.plant, setup.law, setup.reference, duration=0.3, theta_hat0=setup.theta_hat0,
+               events=setup.events, native=native)
+    assert traj.status == "ok" and traj.meta["events"][0][0] == pytest.approx(0.15)
+    before = build(sc.load(Path(SCENARIOS / "ur5e_payload_swap.toml"), overrides=[over[0], "events=[]"]))  # the old payload
+    M = before.plant.mass_matrices(traj.x[:150, 0])
+    np.testing.assert_array_equal(traj.V[:150], setup.law.lyapunov(traj.s[:150], traj.theta_hat[:150],
+                                                                   traj.theta[:150], M=M))
+    M_after = setup.plant.mass_matrices(traj.x[150:, 0])  # the plant's model now has the new payload
+    np.testing.assert_array_equal(traj.V[150:], setup.law.lyapunov(traj.s[150:], traj.theta_hat[150:],
+                                                                   traj.theta[150:], M=M_after))

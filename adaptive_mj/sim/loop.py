@@ -204,6 +204,10 @@ class EventQueue:
             if sink is not None:
                 sink.write_event(t_k, event.label)
 
+    def is_due(self, t_k: float) -> bool:
+        """An event is due at the step starting at t_k (`due` would apply it)."""
+        return bool(self.pending) and t_k >= self.pending[0].t - 0.5 * self.dt
+
     def steps_to_next(self, t_k: float) -> int | None:
         """Whole steps from t_k until the next event is due (at least 1), or None without one."""
         if not self.pending:
@@ -366,6 +370,8 @@ def _run_python(plant, step: ControlStep, rows: _Rows) -> tuple[str, str]:
     """Drive the Python control step to the end or the first divergence: (status, reason)."""
     with plant.controlled_by(step.controller):
         while rows.k < rows.n:
+            if has_joints(plant) and step.events.is_due(plant.time):
+                rows.flush(rows.k)  # V of the rows so far with the inertia they had, before an event changes it
             step.apply_due_events()
             row = step.step()
             rows.put(row)
