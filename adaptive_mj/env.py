@@ -387,6 +387,8 @@ class _Episode:
         self.u, self.s = np.empty((n,) + js), np.empty((n,) + js)
         self.ref = np.empty((n, self.order + 1) + js)
         self.theta_hat, self.theta = np.empty((n, n_theta)), np.empty((n, n_theta))
+        self.V = np.full(n, np.nan)  # an arm's V, rows 0..v_done-1 settled (see _settle_V)
+        self.v_done = 0
         self.k = 0
         self.status, self.reason = "ok", ""
         self._criteria, self._preflight, self._verdict = self._verdict_terms(scn, setup, law, drive)
@@ -399,6 +401,8 @@ class _Episode:
     def _apply_due_events(self) -> None:
         """Events due at the coming step's start (t_k >= t_event - dt/2), as loop.run applies
         them; applied now, before the observation, so an observation at t_k already sees them."""
+        if self.events.is_due(self.plant.time):
+            self._settle_V()  # an arm's V of the steps so far with the inertia they had
         self.events.due(self.plant.time, self.plant, self.recorder)
 
     def _next_noise(self) -> np.ndarray | None:
@@ -488,12 +492,23 @@ class _Episode:
         return -float(np.sum(y_tilde * y_tilde)) * self.dt
 
     def _V(self, rows: slice) -> np.ndarray:
+        """V of rows (ending at the current step)."""
         if self.controller is None:
             return np.full(rows.stop - rows.start, np.nan)
-        if self.joint_shape:  # V = ½ sᵀ M(q) s + ...: M at the logged q, as loop.run
-            return self.law.lyapunov(self.s[rows], self.theta_hat[rows], self.theta[rows],
-                                     M=self.plant.mass_matrices(self.x[rows, 0]))
+        if self.joint_shape:  # V = ½ sᵀ M(q) s + ...: M at the logged q with the model of that step, as loop.run
+            self._settle_V()
+            return self.V[rows].copy()
         return self.law.lyapunov(self.s[rows], self.theta_hat[rows], self.theta[rows])
+
+    def _settle_V(self) -> None:
+        """An arm's V for the steps taken since the last call, with M(q) of the model now: called before an
+        event changes the model, so each row's M is the one of its own step."""
+        if not self.joint_shape or self.controller is None or self.k <= self.v_done:
+            return
+        rows = slice(self.v_done, self.k)
+        self.V[rows] = self.law.lyapunov(self.s[rows], self.theta_hat[rows], self.theta[rows],
+                                         M=self.plant.mass_matrices(self.x[rows, 0]))
+        self.v_done = self.k
 
     def _flush(self) -> None:
         if self.recorder is not None and self.k > self.flushed:
