@@ -304,7 +304,8 @@ def test_v_before_a_payload_swap_mid_second_has_the_inertia_of_its_own_step(nati
     traj = run(setup.plant, setup.law, setup.reference, duration=0.3, theta_hat0=setup.theta_hat0,
                events=setup.events, native=native)
     assert traj.status == "ok" and traj.meta["events"][0][0] == pytest.approx(0.15)
-    before = build(sc.load(Path(SCENARIOS / "ur5e_payload_swap.toml"), overrides=[over[0], "events=[]"]))  # the old payload
+    # the same arm without the swap: the old payload's inertia
+    before = build(sc.load(Path(SCENARIOS / "ur5e_payload_swap.toml"), overrides=[over[0], "events=[]"]))
     M = before.plant.mass_matrices(traj.x[:150, 0])
     np.testing.assert_array_equal(traj.V[:150], setup.law.lyapunov(traj.s[:150], traj.theta_hat[:150],
                                                                    traj.theta[:150], M=M))
