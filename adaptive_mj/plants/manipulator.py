@@ -426,7 +426,7 @@ def base_parameters(regressor: "Regressor", *, samples: int = 30, seed: int = 0,
     import scipy.linalg
 
     model = regressor.model
-    data = mujoco.MjData(model)
+    data = scratch_data(model)
     scratch = Regressor(model, data, regressor.layout)
     rng = np.random.default_rng(seed)
     rows = []
@@ -515,7 +515,6 @@ class ManipulatorPlant:
         self.first_contact: tuple[float, str] | None = None  # (t, text) of the first contact seen, see step()
         self._warning_total0 = int(self.data.warning.number.sum())
         self._warnings0 = self.data.warning.number.copy()
-        self._scratch = mujoco.MjData(model)
         self._full_index: np.ndarray | None = None  # full_mass's map from mjData.M to the dense M
 
     # --- state -------------------------------------------------------------
@@ -601,7 +600,7 @@ class ManipulatorPlant:
 
     def mass_matrices(self, q: np.ndarray) -> np.ndarray:
         """(N, m, m) joint-space inertia M(q) (armature included) at rows q (N, m)."""
-        d = self._scratch
+        d = scratch_data(self.model)
         out = np.empty((len(q), self.m, self.m))
         for i, qi in enumerate(q):
             d.qpos[self._qadr] = qi
