@@ -75,7 +75,7 @@ CONTEXT = np.dtype([
     # buffers (addresses)
     ("ref", _i8), ("noise", _i8), ("rec", _i8), ("theta", _i8), ("rsum", _i8), ("prev", _i8), ("th", _i8),
     ("rate", _i8), ("coeffs", _i8), ("gamma", _i8), ("theta0", _i8), ("lower", _i8), ("upper", _i8),
-    ("ring", _i8), ("params", _i8),
+    ("ring", _i8), ("params", _i8), ("xbuf", _i8),
 ])
 _compiled: dict = {}
 
@@ -111,7 +111,7 @@ def _callback_factory(off, key):
         evaluate = is_sample_step(ctx.step, ctx.period_steps) and stage == 0 if sampled else True  # noqa: F821 (injected)
         if evaluate:
             noise = carray(fptr(ctx.noise), (row + 1) * n)  # noqa: F821 (injected)
-            x = np.empty(n)
+            x = carray(fptr(ctx.xbuf), n)  # noqa: F821 (injected)
             x[0] = qpos[ctx.qadr] + noise[row * n]
             x[1] = qvel[ctx.dadr] + noise[row * n + 1]
             stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
@@ -257,7 +257,7 @@ class NativeController(ContextOwner):
             "gamma": f64(p["gamma"]), "theta0": f64(p["theta0"]), "lower": f64(p["lower"]), "upper": f64(p["upper"]),
             "ring": np.zeros(control.delay + 1), "params": f64(p.get("plugin_params", np.zeros(1))),
             "ref": np.zeros(max_rows * self.nst * (n + 1)), "noise": np.zeros(max_rows * n),
-            "rec": np.zeros(max_rows * self.ncol),
+            "rec": np.zeros(max_rows * self.ncol), "xbuf": np.zeros(n),
         }
         self.theta = self.buffers["theta"]
         lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (-math.inf, math.inf)
