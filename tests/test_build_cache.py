@@ -1,6 +1,7 @@
 """What a study's runs share inside one process (issue 20: the per-run Python cost): the compiled model
-kept per MJCF text and edit, one scratch MjData per model layout, the parsed scenario text, the step times
-by cumulative sum, and the whole-chunk divergence check. Each must give exactly what it replaced."""
+kept per MJCF text and edit, one scratch MjData per model layout, the MjData of ended runs, the parsed and
+the validated scenario text, the step times by cumulative sum, and the whole-chunk divergence check.
+Each must give exactly what it replaced."""
 from __future__ import annotations
 
 import math
@@ -110,6 +111,75 @@ def test_parsed_scenario_text_is_not_shared_between_runs():
     first, again = sc.load(path, overrides=[table]), sc.load(path, overrides=[table])
     assert first.law.gamma == again.law.gamma
     assert sc.load(path).law.gamma == b.law.gamma
+
+
+def _rows(traj):
+    return [traj.t, traj.x, traj.u, traj.s, traj.ref, traj.theta_hat, traj.theta, traj.V]
+
+
+@pytest.mark.parametrize("name, first, short", [
+    ("heave_drift", ["noise.std={y=1e-3, y_dot=1e-2}"], []),
+    ("arm_payload_swap", ["simulation.duration=20.5"], ["events=[]"])])
+def test_a_run_on_a_released_mjdata_gives_the_rows_of_a_new_one(name, first, short, monkeypatch):
+    from adaptive_mj.plants import mujoco_plant
+    from adaptive_mj.sim.runner import execute
+
+    path = SCENARIOS / f"{name}.toml"
+    scn = sc.load(path, overrides=["simulation.duration=2", *short], seed=3)
+    monkeypatch.setattr(mujoco_plant, "_spare", mujoco_plant.OrderedDict())
+    fresh = execute(scn)
+    assert not mujoco_plant._spare or all(len(v) == 1 for v in mujoco_plant._spare.values())
+    # another run first (noise, or the payload swap's mass change at 20 s): its MjData, released, serves the next
+    execute(sc.load(path, overrides=first, seed=5))
+    reused_data = next(iter(mujoco_plant._spare.values()))[-1]
+    taken = []
+    run_data = mujoco_plant.run_data
+    monkeypatch.setattr(mujoco_plant, "run_data", lambda model: taken.append(run_data(model)) or taken[-1])
+    again = execute(scn)
+    assert taken[0] is reused_data
+    assert fresh.summary["status"] == again.summary["status"] == "ok"
+    for a, b in zip(_rows(fresh.trajectory), _rows(again.trajectory), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_a_released_plant_has_no_mjdata_left():
+    setup = build(sc.load(SCENARIOS / "heave_drift.toml"))
+    plant = setup.plant
+    plant.release()
+    with pytest.raises(AttributeError):
+        plant.data.qpos  # noqa: B018 (the access is the test)
+
+
+@pytest.mark.parametrize("seed", [None, 0, 7, 10**12])
+@pytest.mark.parametrize("overrides", [(), ("law.k=150",), ("noise.std={y=1e-3}", "noise.seed=3")])
+def test_validated_scenario_kept_per_process_equals_a_fresh_validation(seed, overrides):
+    path = SCENARIOS / "heave_drift.toml"
+    text = path.read_text()
+    kept = sc.load(path, overrides=list(overrides), seed=seed)
+    again = sc.load(path, overrides=list(overrides), seed=seed)
+    fresh = sc._loads(text, where=str(path), base_dir=path.parent, default_name=path.stem, overrides=overrides,
+                      seed=seed)
+    assert kept == fresh and again == fresh
+    assert kept.noise.seed == (seed if seed is not None else fresh.noise.seed)
+
+
+def test_validated_scenario_cache_keeps_errors_and_the_current_directory_apart(tmp_path, monkeypatch):
+    path = SCENARIOS / "heave_drift.toml"
+    with pytest.raises(sc.ScenarioError, match="noise.seed must be an integer >= 0, got -1"):
+        sc.load(path, seed=-1)  # not the cached path: the same error as ever
+    with pytest.raises(sc.ScenarioError, match="noise must be a table"):
+        sc.load(path, overrides=["noise=3"], seed=1)
+    # a model path given with --set is resolved against the current directory: another directory, another result
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    model = (MODELS / "heave_vehicle.xml").read_text()
+    for sub in ("a", "b"):
+        (tmp_path / sub / "mine.xml").write_text(model)
+    loaded = []
+    for sub in ("a", "b"):
+        monkeypatch.chdir(tmp_path / sub)
+        loaded.append(sc.load(path, overrides=["plant.model=mine.xml"], seed=1).plant.model)
+    assert loaded == [(tmp_path / "a" / "mine.xml").resolve(), (tmp_path / "b" / "mine.xml").resolve()]
 
 
 @pytest.mark.parametrize("bad", ["nan_x", "inf_u", "bound", "nan_theta_next", "none"])

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import operator
 from collections import OrderedDict
 from pathlib import Path
 from typing import Callable, Iterator
@@ -126,7 +127,7 @@ class MujocoPlant:
     def __init__(self, model: mujoco.MjModel, *, joint_id: int, actuator_id: int, form: ModelForm,
                  theta_fn: Callable[[mujoco.MjModel], np.ndarray], where: str):
         self.model = model
-        self.data = mujoco.MjData(model)
+        self.data = run_data(model)
         self.form = form
         self.where = where
         self._theta_fn = theta_fn
@@ -253,6 +254,14 @@ class MujocoPlant:
         """A MuJoCo warning raised since the plant was made, as text, or None."""
         return new_warnings(self.data, self._warning_total0, self._warnings0)
 
+    def release(self) -> None:
+        """The run is over: its MjData goes to the spare ones of its layout (release_data), for the next
+        plant of that layout to take instead of a new one. The plant has no MjData after this (any use
+        of it fails loudly, never on another run's state)."""
+        data = self.__dict__.pop("data", None)
+        if data is not None and self.native_owner is None:
+            release_data(self.model, data)
+
 
 def new_warnings(data: mujoco.MjData, total0: int, counts0: np.ndarray) -> str | None:
     """MuJoCo warnings raised since the counts were (total0, counts0), as text, or None."""
@@ -281,6 +290,7 @@ CACHE_SIZE = 8
 #: the most compiled models compile_spec keeps (a payload-mass grid of up to this many masses compiles each once)
 COMPILED_CACHE_SIZE = 32
 _size_names: tuple[str, ...] | None = None
+_sizes_of: Callable[[mujoco.MjModel], tuple[int, ...]]
 _scratch: OrderedDict[tuple, mujoco.MjData] = OrderedDict()
 
 
@@ -288,11 +298,12 @@ def layout(model: mujoco.MjModel) -> tuple[tuple[str, int], ...]:
     """The model's sizes (nq, nv, nbody, ngeom, narena, ...: MjModel's integer attributes named n*), which
     fix MjData's layout: two models with the same sizes give MjData the same arrays and buffer, so one
     model's MjData serves the other's (mujoco.batch's mjb_setModels refuses models that differ here)."""
-    global _size_names
+    global _size_names, _sizes_of
     if _size_names is None:
         _size_names = tuple(name for name in sorted(dir(model)) if name.startswith("n") and not name.startswith("name")
                             and isinstance(getattr(model, name), int))
-    return tuple((name, getattr(model, name)) for name in _size_names)
+        _sizes_of = operator.attrgetter(*_size_names)  # all ~100 sizes in one call (a Python loop cost 50 µs)
+    return tuple(zip(_size_names, _sizes_of(model), strict=True))
 
 
 def scratch_data(model: mujoco.MjModel) -> mujoco.MjData:
@@ -311,6 +322,37 @@ def scratch_data(model: mujoco.MjModel) -> mujoco.MjData:
         _scratch.move_to_end(key)
     mujoco.mj_resetData(model, data)
     return data
+
+
+#: the most spare MjData release_data keeps per model layout
+SPARE_PER_LAYOUT = 4
+_spare: OrderedDict[tuple, list[mujoco.MjData]] = OrderedDict()
+
+
+def run_data(model: mujoco.MjModel) -> mujoco.MjData:
+    """A run's own MjData for `model`: a spare one of its layout that an ended run released
+    (release_data), reset for this model (mj_resetData: qpos = qpos0, mocap from the model, everything
+    else zero, as a new MjData is; MuJoCo reads no value of its buffer it did not write first), or a new
+    one. A study's runs in one process each save the ~0.3 ms of Python-binding setup a new MjData costs
+    (scratch_data); tests/test_build_cache.py shows a run on a reused MjData gives the same rows."""
+    key = layout(model)
+    spare = _spare.get(key)
+    if spare:
+        data = spare.pop()
+        mujoco.mj_resetData(model, data)
+        return data
+    return mujoco.MjData(model)
+
+
+def release_data(model: mujoco.MjModel, data: mujoco.MjData) -> None:
+    """Keep an ended run's MjData (of `model`'s layout) for run_data; the caller holds no reference to it."""
+    key = layout(model)
+    spare = _spare.setdefault(key, [])
+    _spare.move_to_end(key)
+    if len(spare) < SPARE_PER_LAYOUT:
+        spare.append(data)
+    while len(_spare) > CACHE_SIZE:
+        _spare.popitem(last=False)
 
 
 def spec_from_text(xml: str, assets: dict | None = None) -> mujoco.MjSpec:

@@ -9,6 +9,7 @@ The full key reference is docs/SCENARIOS.md.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import math
 import re
@@ -458,7 +459,37 @@ def load(path: str | Path, *, overrides: list[str] | tuple[str, ...] = (), seed:
 
 def loads(text: str, *, where: str = "<string>", base_dir: Path | None = None, default_name: str = "scenario",
           overrides: list[str] | tuple[str, ...] = (), seed: int | None = None) -> Scenario:
-    """Validate scenario TOML text (see `load`)."""
+    """Validate scenario TOML text (see `load`).
+
+    A study loads the same text with the same overrides thousands of times, each run with its own
+    seed: the scenario validated without the seed is kept (per text, overrides, where, base_dir and
+    current directory; `_validated`) and the seed is set on a copy, which is what validating with it
+    gives (noise.seed is the only field it sets). Anything unusual (a validation error, a seed that is
+    not a plain int >= 0) takes the full path, so every error reads as before."""
+    overrides = tuple(overrides)
+    if seed is None or (type(seed) is int and seed >= 0):
+        try:
+            base = _validated(text, where, None if base_dir is None else str(base_dir), default_name, overrides,
+                              str(Path.cwd()))
+        except ScenarioError:
+            pass
+        else:
+            return base if seed is None else dataclasses.replace(base, noise=dataclasses.replace(base.noise, seed=seed))
+    return _loads(text, where=where, base_dir=base_dir, default_name=default_name, overrides=overrides, seed=seed)
+
+
+@functools.lru_cache(maxsize=256)
+def _validated(text: str, where: str, base_dir: str | None, default_name: str, overrides: tuple[str, ...],
+               cwd: str) -> Scenario:
+    """loads without a seed, kept for the next run of a study (see loads). cwd is part of the key: a
+    relative path in an override is resolved against it. Scenario is frozen, and nothing changes one."""
+    return _loads(text, where=where, base_dir=None if base_dir is None else Path(base_dir),
+                  default_name=default_name, overrides=overrides, seed=None)
+
+
+def _loads(text: str, *, where: str, base_dir: Path | None, default_name: str, overrides: tuple[str, ...],
+           seed: int | None) -> Scenario:
+    """Parse, override and validate (loads, without the cache)."""
     try:
         doc = copy.deepcopy(_parsed(text))
     except tomllib.TOMLDecodeError as exc:

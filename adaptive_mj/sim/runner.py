@@ -237,12 +237,20 @@ class Started:
         traj, result = verdict(self.scn, traj, self.crit, self.pre)
         if self.recorder is not None:
             self.recorder.close(traj.status, traj.reason, result)
+        self._release()
         return RunResult(traj, result, self.log_path)
+
+    def _release(self) -> None:
+        """The run's MjData handed back for the next run's plant (MujocoPlant.release), where the plant can."""
+        release = getattr(self.setup.plant, "release", None)
+        if release is not None:
+            release()
 
     def abandon(self, exc: BaseException, partial: Trajectory | None = None) -> None:
         """The run did not end: its log closed as "interrupted" (with the rows it had, a stop signal)
         or "failed" (anything else). partial: the run's rows so far (default: the exception's
         `trajectory`, as loop.run's Interrupted carries it)."""
+        self._release()
         if self.recorder is None:
             return
         if isinstance(exc, KeyboardInterrupt):  # loop.run has handed the recorder every whole row
