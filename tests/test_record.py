@@ -654,19 +654,19 @@ def test_a_signal_during_write_rows_is_raised_after_the_whole_block(tmp_path):
         rec = Recorder(path, make_header())
         import adaptive_mj.log.record as record_mod
 
-        original = record_mod._add_messages
+        original = record_mod._add_rows  # a block of finite rows is written through it
 
-        def add_and_signal(writer, batch):  # a SIGTERM, then a second signal while the first waits
+        def add_and_signal(writer, *block):  # a SIGTERM, then a second signal while the first waits
             os.kill(os.getpid(), signal.SIGTERM)
             os.kill(os.getpid(), signal.SIGINT)
-            return original(writer, batch)
+            return original(writer, *block)
 
-        record_mod._add_messages = add_and_signal
+        record_mod._add_rows = add_and_signal
         try:
             with pytest.raises(Interrupted, match="interrupted by SIGTERM") as stop:
                 write_block(rec, rows, 0, 1000)
         finally:
-            record_mod._add_messages = original
+            record_mod._add_rows = original
         assert stop.value.exit_code == 143
         assert rec.rows_written == 100  # the block went in whole before the signal was raised
         write_block(rec, rows, 1000, 2000)  # the second signal changed nothing
@@ -685,8 +685,10 @@ def test_batched_message_writing_gives_the_same_bytes_as_mcap_add_message(tmp_pa
     rows = synthetic(2500)
     header = make_header()
     paths = {}
-    for name, writer in (("fast", fast_mcap.add_messages_fast), ("public", fast_mcap.add_messages_public)):
+    for name, writer, rows_writer in (("fast", fast_mcap.add_messages_fast, fast_mcap.add_rows_fast),
+                                      ("public", fast_mcap.add_messages_public, fast_mcap.add_rows_public)):
         monkeypatch.setattr(record_mod, "_add_messages", writer)
+        monkeypatch.setattr(record_mod, "_add_rows", rows_writer)
         paths[name] = tmp_path / f"{name}.mcap"
         rec = Recorder(paths[name], header)
         write_block(rec, rows, 0, 1300)
@@ -713,6 +715,10 @@ def test_the_fast_writer_is_taken_only_on_the_mcap_it_was_written_for():
         assert fast_mcap.writer_for(other) is fast_mcap.add_messages_public
     assert record._add_messages is fast_mcap.writer_for(version("mcap"))
     assert record._add_messages is fast_mcap.add_messages_fast  # constraints.txt pins the mcap it was written for
+    assert fast_mcap.rows_writer_for(fast_mcap.WRITTEN_FOR) is fast_mcap.add_rows_fast
+    for other in ("1.5.0", "1.6.1", "2.0.0"):
+        assert fast_mcap.rows_writer_for(other) is fast_mcap.add_rows_public
+    assert record._add_rows is fast_mcap.add_rows_fast
 
 
 def test_only_the_fast_writer_touches_mcap_internals():

@@ -7,8 +7,10 @@ writes and struct calls). The fast path writes the same Message records into the
 struct.pack per message, updates the same chunk index and statistics, then lets the writer finish the
 chunk if it is full. It reads and writes the Writer's name-mangled attributes (`_Writer__statistics`,
 `_Writer__chunk_builder`, `_Writer__maybe_finalize_chunk`) and a chunk's `record_writer._buffer`: this
-module is the only place in adaptive_mj that does (tests/test_record.py checks both paths write the
-same bytes, and the independent @mcap/core reader reads the files, tests/test_foxglove.py).
+module is the only place in adaptive_mj that does (tests/test_record.py checks both paths write the same
+bytes, and the independent @mcap/core reader reads the files, tests/test_foxglove.py). `add_rows_fast` does
+the same for a block of logged rows (six messages a row) with the message heads built by numpy: ~0.45 µs a
+message instead of ~0.7 (600 messages, measured here).
 """
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ import struct
 from importlib.metadata import version
 from typing import Callable
 
+import numpy as np
 from mcap.opcode import Opcode
 from mcap.records import MessageIndex
 from mcap.writer import Writer
@@ -85,10 +88,78 @@ def add_messages_fast(writer: Writer, batch: Batch) -> None:
     writer._Writer__maybe_finalize_chunk()
 
 
+def add_rows_public(writer: Writer, channel_ids: list[int], log_ns: np.ndarray, blob: bytes) -> None:
+    """A block of rows, each row one message per channel of `channel_ids` at its time log_ns[i] [ns]:
+    the payloads are `blob` split at NUL bytes, row by row (row i, channel j is piece i·len(channel_ids) + j),
+    through Writer.add_message (any mcap)."""
+    payloads = blob.split(b"\0")
+    times = [ns for ns in log_ns.tolist() for _ in channel_ids]
+    add_messages_public(writer, list(zip(channel_ids * len(log_ns), times, payloads, strict=True)))
+
+
+_HEAD = np.dtype([("opcode", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"), ("log_time", "<u8"),
+                  ("publish_time", "<u8")])  # _MESSAGE_HEAD as a packed numpy record (31 bytes)
+assert _HEAD.itemsize == _MESSAGE_HEAD.size
+
+
+def add_rows_fast(writer: Writer, channel_ids: list[int], log_ns: np.ndarray, blob: bytes) -> None:
+    """What add_rows_public writes, straight into mcap 1.6.0's open chunk (as add_messages_fast): the
+    message heads built by numpy as one packed array, each record's offset from a cumulative sum of
+    the record sizes, heads and payloads interleaved and written in one go."""
+    chunk = writer._Writer__chunk_builder
+    if chunk is None or len(log_ns) == 0:
+        add_rows_public(writer, channel_ids, log_ns, blob)
+        return
+    stats = writer._Writer__statistics
+    buf = chunk.record_writer._buffer
+    topics, rows = len(channel_ids), len(log_ns)
+    payloads = blob.split(b"\0")
+    count = topics * rows
+    if len(payloads) != count:
+        raise ValueError(f"add_rows_fast: {len(payloads)} payloads for {rows} rows of {topics} channels")
+    lengths = np.fromiter(map(len, payloads), dtype=np.int64, count=count)
+    head = np.zeros(count, dtype=_HEAD)
+    head["opcode"] = _OPCODE_MESSAGE
+    head["length"] = 22 + lengths
+    head["channel"] = np.tile(np.asarray(channel_ids, dtype=np.uint16), rows)
+    head["log_time"] = head["publish_time"] = np.repeat(np.asarray(log_ns, dtype=np.uint64), topics)
+    size = _HEAD.itemsize + lengths
+    offset = buf.tell()
+    offsets = (np.cumsum(size) - size + offset).tolist()  # where each record lands
+    heads = head.tobytes()
+    step = _HEAD.itemsize
+    parts: list[bytes] = [b""] * (2 * count)
+    parts[0::2] = [heads[i:i + step] for i in range(0, step * count, step)]
+    parts[1::2] = payloads
+    buf.write(b"".join(parts))
+    ns = np.asarray(log_ns, dtype=np.int64).tolist()
+    indices, counts = chunk.message_indices, stats.channel_message_counts
+    for j, channel_id in enumerate(channel_ids):
+        index = indices.get(channel_id)
+        if index is None:
+            index = indices[channel_id] = _PackedMessageIndex(channel_id=channel_id, records=[])
+        index.records.extend(zip(ns, offsets[j::topics], strict=True))
+        counts[channel_id] += rows
+    lo, hi = min(ns), max(ns)
+    chunk.message_start_time = lo if chunk.num_messages == 0 else min(chunk.message_start_time, lo)
+    chunk.message_end_time = max(chunk.message_end_time, hi)
+    chunk.num_messages += count
+    stats.message_start_time = lo if stats.message_count == 0 else min(stats.message_start_time, lo)
+    stats.message_end_time = max(stats.message_end_time, hi)
+    stats.message_count += count
+    writer._Writer__maybe_finalize_chunk()
+
+
 def writer_for(mcap_version: str) -> Callable[[Writer, Batch], None]:
     """The batch writer for an installed mcap release: the fast path for WRITTEN_FOR only."""
     return add_messages_fast if mcap_version == WRITTEN_FOR else add_messages_public
 
 
-#: the one used by the Recorder, chosen once for the mcap installed
+def rows_writer_for(mcap_version: str) -> Callable[[Writer, list[int], np.ndarray, bytes], None]:
+    """The row-block writer for an installed mcap release: the fast path for WRITTEN_FOR only."""
+    return add_rows_fast if mcap_version == WRITTEN_FOR else add_rows_public
+
+
+#: the ones used by the Recorder, chosen once for the mcap installed
 add_messages = writer_for(version("mcap"))
+add_rows = rows_writer_for(version("mcap"))

@@ -38,7 +38,7 @@ import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 # the batch writer: fast on the mcap it was written for, mcap's public Writer API on any other
-from adaptive_mj.log.fast_mcap import add_messages as _add_messages
+from adaptive_mj.log.fast_mcap import add_messages as _add_messages, add_rows as _add_rows
 from adaptive_mj.sim.interrupt import deferred
 
 # 5: ctrl_range, joint_limits and embedded_sha256 (checked on every read) in the header;
@@ -278,9 +278,10 @@ def _schemas(order: int, names: tuple[str, ...], joint_names: tuple[str, ...] = 
 
 
 def _template(fields: tuple[str, ...]) -> str:
-    """A %-format string for a payload {t, fields...} of finite Python floats (%r = repr)."""
-    keys = ("t", *fields)
-    return "{" + ",".join(f"{json.dumps(k)}:%r" for k in keys) + "}"
+    """A %-format string for a payload {t, fields...} of finite Python floats (%r = repr). t takes %s: a
+    float formats as its repr there too (str(float) is repr(float)), or it is given as that text already
+    (Recorder._write_finite_block formats a row's t once for its six messages)."""
+    return "{" + ",".join([f"{json.dumps('t')}:%s", *(f"{json.dumps(k)}:%r" for k in fields)]) + "}"
 
 
 def _dumps(payload: Any) -> bytes:
@@ -521,19 +522,31 @@ class Recorder:
     def _write_finite_block(self, tk: np.ndarray, log_ns: list[int], blocks: list[np.ndarray]) -> None:
         """_write_block's payloads for rows of finite numbers, formatted in one %-operation for the whole
         block: every row's messages are the row templates joined by NUL bytes (which no template or float
-        repr contains), repeated per row, then split apart. The same bytes as one template per message,
-        at a fifth of the cost (the per-message Python work was most of a logged run's logging time)."""
-        m, topics = len(tk), len(blocks)
+        repr contains), repeated per row, and the text goes to fast_mcap.add_rows, which splits it into
+        messages. A row's t is formatted once for its six messages. The same bytes as one template per
+        message, at a fifth of the cost (the per-message Python work was most of a logged run's logging
+        time); 100 rows of the heave vehicle: 1.72-1.83 -> 1.46-1.61 ms with add_rows and t once."""
+        m = len(tk)
         values = np.hstack([np.column_stack([tk, b]) for b in blocks]).ravel().tolist()
+        width = len(values) // m  # numbers per row, each topic's t first
+        t_text = list(map(repr, tk.tolist()))  # a row's t formatted once, for its six messages
+        for first in self._t_columns(blocks):
+            values[first::width] = t_text
         if self._row_template is None:
             self._row_template = "\0".join(self._templates)
         text = "\0".join([self._row_template] * m) % tuple(values)
-        payloads = text.encode().split(b"\0")
-        channels = [channel_id for channel_id, _ in self._row_fields] * m
-        times = [ns for ns in log_ns for _ in range(topics)]
-        _add_messages(self._writer, list(zip(channels, times, payloads, strict=True)))
+        _add_rows(self._writer, [channel_id for channel_id, _ in self._row_fields], np.asarray(log_ns), text.encode())
         self._rows += m
         self._t_last = max(self._t_last, float(tk[-1]))
+
+    @staticmethod
+    def _t_columns(blocks: list[np.ndarray]) -> list[int]:
+        """Where each topic's t stands in a row of _write_finite_block's values (t, then the topic's columns)."""
+        firsts, at = [], 0
+        for b in blocks:
+            firsts.append(at)
+            at += 1 + b.shape[1]
+        return firsts
 
     @_whole
     def write_event(self, t: float, label: str, **detail) -> None:
