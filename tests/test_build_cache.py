@@ -203,3 +203,92 @@ def test_whole_chunk_divergence_check_agrees_with_the_row_by_row_one(bad):
     expected = {"nan_x": 17, "inf_u": 31, "bound": 40, "nan_theta_next": n, "none": None}[bad]
     assert keep == expected
     assert (reason == "") == (bad == "none")
+
+
+def test_a_composed_arm_is_kept_until_a_file_it_read_changes(tmp_path):
+    from adaptive_mj.plants import attach
+
+    arm_file, payload_file = tmp_path / "arm.xml", tmp_path / "box.xml"
+    arm_file.write_text((MODELS / "pendulum_arm.xml").read_text())
+    payload_file.write_text((MODELS / "payloads" / "sphere.xml").read_text())
+    first = attach.compose(arm_file, payload_file, payload_mass=0.7, site="tip")
+    assert attach.compose(arm_file, payload_file, payload_mass=0.7, site="tip") == first
+    assert first == attach._compose(arm_file, payload_file, 0.7, "tip", [])  # what composing again gives
+    assert attach.compose(arm_file, payload_file, payload_mass=0.9, site="tip") != first  # another key
+    payload_file.write_text(payload_file.read_text().replace('mass="', 'mass="2'))  # a file it read changed
+    changed = attach.compose(arm_file, payload_file, payload_mass=None, site="tip")
+    assert changed == attach._compose(arm_file, payload_file, None, "tip", [])
+    assert 'mass="2' in changed[1]["payload.xml"].decode()
+
+
+SERVO_ARM = """<mujoco model="two_link_servo">
+  <option timestep="0.001" integrator="RK4"/>
+  <worldbody>
+    <body name="upper" pos="0 0 0.5">
+      <joint name="shoulder" axis="0 1 0" armature="0.05" damping="0.2"/>
+      <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="1.2" contype="0" conaffinity="0"/>
+      <body name="lower" pos="0.3 0 0">
+        <joint name="elbow" axis="0 1 0" armature="0.05" damping="0.2"/>
+        <geom type="capsule" fromto="0 0 0 0.25 0 0" size="0.025" mass="0.6" contype="0" conaffinity="0"/>
+        <site name="tip" pos="0.25 0 0"/>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <position name="shoulder_servo" joint="shoulder" kp="100" forcerange="-40 40"/>
+    <position name="elbow_servo" joint="elbow" kp="60" forcerange="-20 20"/>
+  </actuator>
+</mujoco>
+"""
+
+
+SERVO_SCENARIO = """schema_version = 1
+[plant]
+kind = "manipulator"
+model = "my_arm.xml"
+payload = "sphere"
+servo_to_torque = true
+[simulation]
+duration = 1.0
+[reference]
+kind = "joint_sum_of_sines"
+center = { shoulder = 0.3, elbow = -0.6 }
+amplitudes = { shoulder = [0.2], elbow = [0.2] }
+omegas = { shoulder = [1.0], elbow = [1.5] }
+[law]
+kind = "slotine_li"
+lambda = 10.0
+kd = 10.0
+gamma = 0.2
+"""
+
+
+def test_a_6_joint_edit_answered_by_the_compile_cache_gives_its_notes_and_refusals_again(tmp_path):
+    """The manipulator's model edit (servo_to_torque, friction, torque limits) is cached with what it
+    returned: the second build of the same scenario has the same notes, and a refused key is refused again."""
+    from adaptive_mj.errors import ScenarioError
+
+    (tmp_path / "my_arm.xml").write_text(SERVO_ARM)
+    path = tmp_path / "servo.toml"
+    path.write_text(SERVO_SCENARIO)
+    first, second = (build(sc.load(path)) for _ in range(2))
+    assert first.notes and first.notes == second.notes
+    assert first.notes[0].startswith("actuator 'shoulder_servo': servo rebuilt")
+    _same_model(first.plant.model, second.plant.model)
+    for _ in range(2):
+        with pytest.raises(ScenarioError, match=r"plant\.torque_limit names joint 'wrist_9'"):
+            build(sc.load(path, overrides=["plant.torque_limit={wrist_9=4.0}"]))
+
+
+def test_sampled_reference_positions_are_kept_per_reference_and_never_shared():
+    from adaptive_mj.reference import JointSumOfSines
+    from adaptive_mj.setup.success import reference_positions, sampled_positions
+
+    ref = JointSumOfSines(center=(0.1, -0.2), amplitudes=((0.3, 0.1), (0.2,)), omegas=((1.0, 2.5), (0.7,)))
+    fresh = reference_positions(ref, np.linspace(0.0, 3.0, 101), 2)
+    kept = sampled_positions(ref, 3.0, 101, 2)
+    np.testing.assert_array_equal(kept, fresh)
+    kept[:] = 0.0  # the caller's copy
+    np.testing.assert_array_equal(sampled_positions(ref, 3.0, 101, 2), fresh)
+    other = JointSumOfSines(center=(0.1, -0.2), amplitudes=((0.3, 0.1), (0.2,)), omegas=((1.0, 2.5), (0.8,)))
+    assert not np.array_equal(sampled_positions(other, 3.0, 101, 2), fresh)

@@ -42,7 +42,7 @@ from adaptive_mj.errors import ModelError
 from adaptive_mj.numba_util import with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
 from adaptive_mj.plants import BuiltPlant, ModelSource
-from adaptive_mj.plants.mujoco_plant import (compile_for_scenario, control_callback, new_warnings, scale_body_mass,
+from adaptive_mj.plants.mujoco_plant import (compile_for_scenario_with, control_callback, new_warnings, scale_body_mass,
                                              scratch_data)
 from adaptive_mj.plants.protocol import Policy
 
@@ -696,9 +696,13 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
     from adaptive_mj.errors import ScenarioError
 
     p = scn.plant
-    notes: list[str] = []
+    fr = p.manipulator.friction
+    exact = scn.simulation.integrator != "rk4"
 
-    def edit(spec):
+    def edit(spec) -> tuple[list[str], list[str]]:
+        """(notes, refusals) of the edit; returned, not only said, so that a compile the cache answers
+        (compile_spec_with) gives them as well."""
+        notes: list[str] = []
         if p.manipulator.servo_to_torque:
             try:
                 notes.extend(servo_to_torque(spec, p.manipulator.forcerange))
@@ -706,13 +710,16 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
                 raise ScenarioError(f"{scn.source}: {exc}") from None
         try:  # joint friction and actuator lag (after servo_to_torque: a lag goes on the rebuilt motor)
             set_joint_friction(spec, damping=fr.damping, frictionloss=fr.frictionloss)
-            set_actuator_lag(spec, fr.actuator_lag, exact=scn.simulation.integrator != "rk4")
+            set_actuator_lag(spec, fr.actuator_lag, exact=exact)
             set_torque_limit(spec, fr.torque_limit)
         except ModelError as exc:  # said after compiling, as a scenario error (not as MuJoCo's)
-            bad_keys.append(f"{scn.source}: {exc}")
+            return notes, [f"{scn.source}: {exc}"]
+        return notes, []
 
-    fr, bad_keys = p.manipulator.friction, list[str]()
-    model, model_xml = compile_for_scenario(scn, source, edit=edit)
+    # what the edit does is fixed by these values (repr: some are dicts {joint: number})
+    key = ("manipulator", repr((p.manipulator.servo_to_torque, p.manipulator.forcerange, fr.damping,
+                                fr.frictionloss, fr.actuator_lag, fr.torque_limit, exact)), scn.source)
+    model, model_xml, (notes, bad_keys) = compile_for_scenario_with(scn, source, edit=edit, edit_key=key)
     if bad_keys:
         raise ScenarioError(bad_keys[0])
     plant = ManipulatorPlant(model, unknown=p.manipulator.unknown, joint_params=p.manipulator.joint_params,

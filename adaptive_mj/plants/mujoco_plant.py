@@ -12,7 +12,7 @@ import copy
 import operator
 from collections import OrderedDict
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 import mujoco
 import numpy as np
@@ -362,7 +362,7 @@ def spec_from_text(xml: str, assets: dict | None = None) -> mujoco.MjSpec:
     return mujoco.MjSpec.from_string(xml, include=assets or None, assets=assets or None)
 
 
-_compiled: OrderedDict[tuple, tuple[mujoco.MjModel, str]] = OrderedDict()
+_compiled: OrderedDict[tuple, tuple[mujoco.MjModel, str, Any]] = OrderedDict()
 
 
 def compile_spec(xml: str, assets: dict | None = None, *, where: str, edit=None,
@@ -378,6 +378,14 @@ def compile_spec(xml: str, assets: dict | None = None, *, where: str, edit=None,
     XML). An `edit` is cached only when the caller names what it does in `edit_key` (a tuple of values
     that determine it): an edit without a key compiles every time.
     """
+    model, text, _ = compile_spec_with(xml, assets, where=where, edit=edit, edit_key=edit_key)
+    return model, text
+
+
+def compile_spec_with(xml: str, assets: dict | None = None, *, where: str, edit=None,
+                      edit_key: tuple | None = None) -> tuple[mujoco.MjModel, str, Any]:
+    """compile_spec, and what edit(spec) returned (None without an edit): kept with the compiled model, so
+    a compile the cache answers gives the edit's result too (an edit's notes, say) without running it."""
     key = None
     if edit is None or edit_key is not None:
         key = (xml, tuple(sorted((k, bytes(v) if not isinstance(v, str) else v) for k, v in (assets or {}).items())),
@@ -385,27 +393,27 @@ def compile_spec(xml: str, assets: dict | None = None, *, where: str, edit=None,
         hit = _compiled.get(key)
         if hit is not None:
             _compiled.move_to_end(key)
-            return copy.copy(hit[0]), hit[1]
-    model, text = _compile_spec(xml, assets, where=where, edit=edit)
+            return copy.copy(hit[0]), hit[1], copy.deepcopy(hit[2])
+    model, text, result = _compile_spec(xml, assets, where=where, edit=edit)
     if key is not None:
-        _compiled[key] = (copy.copy(model), text)
+        _compiled[key] = (copy.copy(model), text, copy.deepcopy(result))
         while len(_compiled) > COMPILED_CACHE_SIZE:
             _compiled.popitem(last=False)
-    return model, text
+    return model, text, result
 
 
-def _compile_spec(xml: str, assets: dict | None, *, where: str, edit) -> tuple[mujoco.MjModel, str]:
+def _compile_spec(xml: str, assets: dict | None, *, where: str, edit) -> tuple[mujoco.MjModel, str, Any]:
+    result = None
     try:
         spec = spec_from_text(xml, assets)
         if edit is not None:
-            edit(spec)
+            result = edit(spec)
         model = with_userdata(spec).compile()
     except AdaptiveMJError:  # edit's own one-line refusal (servo_to_torque), not MuJoCo's
         raise
     except ValueError as exc:
         raise ModelError(f"{where}: MuJoCo could not compile the model: {str(exc).strip()}") from None
-    return model, spec.to_xml()
-
+    return model, spec.to_xml(), result
 
 
 INTEGRATORS = {
@@ -448,9 +456,17 @@ def compile_for_scenario(scn, source: ModelSource | None, *, edit=None,
     integrator, timestep (checked against the duration) and plant.viscosity.
     edit(spec), if given, changes the MjSpec before it is compiled (edit_key: see compile_spec).
     source None (a model-free twin's) has nothing to compile: a ModelError."""
+    model, xml, _ = compile_for_scenario_with(scn, source, edit=edit, edit_key=edit_key)
+    return model, xml
+
+
+def compile_for_scenario_with(scn, source: ModelSource | None, *, edit=None,
+                              edit_key: tuple | None = None) -> tuple[mujoco.MjModel, str, Any]:
+    """compile_for_scenario, and what edit(spec) returned (compile_spec_with)."""
     if source is None:
         raise ModelError(f"{scn.plant.model}: no model text to compile")
-    model, xml = compile_spec(source.xml, source.assets, where=str(scn.plant.model), edit=edit, edit_key=edit_key)
+    model, xml, result = compile_spec_with(source.xml, source.assets, where=str(scn.plant.model), edit=edit,
+                                           edit_key=edit_key)
     sim = scn.simulation
     model.opt.integrator = INTEGRATORS[sim.integrator]
     if sim.timestep is not None:
@@ -460,4 +476,4 @@ def compile_for_scenario(scn, source: ModelSource | None, *, edit=None,
                             f"simulation.duration {sim.duration}")
     if scn.plant.viscosity is not None:
         model.opt.viscosity = scn.plant.viscosity
-    return model, xml
+    return model, xml, result

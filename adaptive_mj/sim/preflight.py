@@ -24,7 +24,7 @@ import numpy as np
 
 from adaptive_mj.laws import FirstOrderAdaptiveLaw, FixedNominalLaw, SlidingAdaptiveLaw
 from adaptive_mj.laws.slotine_li import SlotineLiLaw
-from adaptive_mj.setup.success import reference_positions
+from adaptive_mj.setup.success import sampled_positions
 from adaptive_mj.sim.stage import ControlTiming
 
 RK4_REAL_LIMIT = 2.785293563405282  # the RK4 stability region's end on the negative real axis
@@ -85,7 +85,7 @@ def step_limit(timing: ControlTiming, stages: int) -> tuple[float, float, str]:
 
 
 def _reference_positions(reference, duration: float, order: int) -> np.ndarray:
-    return reference_positions(reference, np.linspace(0.0, duration, SAMPLES), order)
+    return sampled_positions(reference, duration, SAMPLES, order)
 
 
 def _worst(M: np.ndarray, kd: np.ndarray) -> tuple[float, np.ndarray]:
