@@ -18,6 +18,7 @@ from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
 from adaptive_mj.sim import loop
 from adaptive_mj.sim.stage import step_times
+from test_manipulator_runs import SERVO_ARM  # a two-link arm driven by position servos
 
 HEAVE_XML = (MODELS / "heave_vehicle.xml").read_text()
 
@@ -219,27 +220,6 @@ def test_a_composed_arm_is_kept_until_a_file_it_read_changes(tmp_path):
     changed = attach.compose(arm_file, payload_file, payload_mass=None, site="tip")
     assert changed == attach._compose(arm_file, payload_file, None, "tip", [])
     assert 'mass="2' in changed[1]["payload.xml"].decode()
-
-
-SERVO_ARM = """<mujoco model="two_link_servo">
-  <option timestep="0.001" integrator="RK4"/>
-  <worldbody>
-    <body name="upper" pos="0 0 0.5">
-      <joint name="shoulder" axis="0 1 0" armature="0.05" damping="0.2"/>
-      <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="1.2" contype="0" conaffinity="0"/>
-      <body name="lower" pos="0.3 0 0">
-        <joint name="elbow" axis="0 1 0" armature="0.05" damping="0.2"/>
-        <geom type="capsule" fromto="0 0 0 0.25 0 0" size="0.025" mass="0.6" contype="0" conaffinity="0"/>
-        <site name="tip" pos="0.25 0 0"/>
-      </body>
-    </body>
-  </worldbody>
-  <actuator>
-    <position name="shoulder_servo" joint="shoulder" kp="100" forcerange="-40 40"/>
-    <position name="elbow_servo" joint="elbow" kp="60" forcerange="-20 20"/>
-  </actuator>
-</mujoco>
-"""
 
 
 SERVO_SCENARIO = """schema_version = 1
