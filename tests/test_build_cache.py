@@ -143,6 +143,22 @@ def test_a_run_on_a_released_mjdata_gives_the_rows_of_a_new_one(name, first, sho
         np.testing.assert_array_equal(a, b)
 
 
+def test_a_plant_built_outside_a_run_never_takes_a_spare_mjdata(monkeypatch):
+    """Only runner.start's plants reuse an ended run's MjData: whoever else builds a plant (dm_env, a user's
+    build) gets a new one, whose `.model` is its own model (dm_control's Physics reads data.model)."""
+    from adaptive_mj.plants import mujoco_plant
+    from adaptive_mj.sim.runner import execute
+
+    monkeypatch.setattr(mujoco_plant, "_spare", mujoco_plant.OrderedDict())
+    scn = sc.load(SCENARIOS / "heave_drift.toml", overrides=["simulation.duration=0.05"])
+    execute(scn)
+    spare = next(iter(mujoco_plant._spare.values()))
+    assert len(spare) == 1
+    plant = build(scn).plant
+    assert plant.data is not spare[0] and len(spare) == 1
+    assert plant.data.model is plant.model
+
+
 def test_a_released_plant_has_no_mjdata_left():
     setup = build(sc.load(SCENARIOS / "heave_drift.toml"))
     plant = setup.plant
@@ -156,20 +172,43 @@ def test_a_released_plant_has_no_mjdata_left():
 def test_validated_scenario_kept_per_process_equals_a_fresh_validation(seed, overrides):
     path = SCENARIOS / "heave_drift.toml"
     text = path.read_text()
-    kept = sc.load(path, overrides=list(overrides), seed=seed)
-    again = sc.load(path, overrides=list(overrides), seed=seed)
+    kept = sc.load(path, overrides=list(overrides), seed=seed, keep=True)
+    again = sc.load(path, overrides=list(overrides), seed=seed, keep=True)
     fresh = sc._loads(text, where=str(path), base_dir=path.parent, default_name=path.stem, overrides=overrides,
                       seed=seed)
     assert kept == fresh and again == fresh
     assert kept.noise.seed == (seed if seed is not None else fresh.noise.seed)
 
 
+def test_only_a_study_keeps_validated_scenarios(tmp_path, monkeypatch):
+    """Outside a study (keep False: the CLI's run, a notebook) every load validates again and sees the
+    files as they are now: a payload file created in the current directory after a first load (which
+    fell back to the place next to the scenario) is found by the next. A study's kept scenario does not
+    look again (documented in scenario.loads)."""
+    (tmp_path / "s").mkdir()
+    scenario = tmp_path / "s" / "arm.toml"
+    scenario.write_text((SCENARIOS / "arm_payload_swap.toml").read_text())
+    monkeypatch.chdir(tmp_path)
+    payload = ["plant.payload='mine.xml'"]
+    before = sc._validated.cache_info()
+    first = sc.load(scenario, overrides=payload, seed=1)
+    kept_first = sc.load(scenario, overrides=payload, seed=1, keep=True)
+    (tmp_path / "mine.xml").write_text((MODELS / "payloads" / "sphere.xml").read_text())
+    second = sc.load(scenario, overrides=payload, seed=1)
+    kept_second = sc.load(scenario, overrides=payload, seed=1, keep=True)
+    next_to_scenario = str(tmp_path / "s" / "mine.xml")
+    assert first.plant.payload == kept_first.plant.payload == kept_second.plant.payload == next_to_scenario
+    assert second.plant.payload == str(tmp_path / "mine.xml")
+    after = sc._validated.cache_info()
+    assert (after.misses - before.misses, after.hits - before.hits) == (1, 1)  # only the two kept loads
+
+
 def test_validated_scenario_cache_keeps_errors_and_the_current_directory_apart(tmp_path, monkeypatch):
     path = SCENARIOS / "heave_drift.toml"
     with pytest.raises(sc.ScenarioError, match="noise.seed must be an integer >= 0, got -1"):
-        sc.load(path, seed=-1)  # not the cached path: the same error as ever
+        sc.load(path, seed=-1, keep=True)  # not the cached path: the same error as ever
     with pytest.raises(sc.ScenarioError, match="noise must be a table"):
-        sc.load(path, overrides=["noise=3"], seed=1)
+        sc.load(path, overrides=["noise=3"], seed=1, keep=True)
     # a model path given with --set is resolved against the current directory: another directory, another result
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
@@ -179,7 +218,7 @@ def test_validated_scenario_cache_keeps_errors_and_the_current_directory_apart(t
     loaded = []
     for sub in ("a", "b"):
         monkeypatch.chdir(tmp_path / sub)
-        loaded.append(sc.load(path, overrides=["plant.model=mine.xml"], seed=1).plant.model)
+        loaded.append(sc.load(path, overrides=["plant.model=mine.xml"], seed=1, keep=True).plant.model)
     assert loaded == [(tmp_path / "a" / "mine.xml").resolve(), (tmp_path / "b" / "mine.xml").resolve()]
 
 
@@ -216,10 +255,12 @@ def test_a_composed_arm_is_kept_until_a_file_it_read_changes(tmp_path):
     assert attach.compose(arm_file, payload_file, payload_mass=0.7, site="tip") == first
     assert first == attach._compose(arm_file, payload_file, 0.7, "tip", [])  # what composing again gives
     assert attach.compose(arm_file, payload_file, payload_mass=0.9, site="tip") != first  # another key
-    payload_file.write_text(payload_file.read_text().replace('mass="', 'mass="2'))  # a file it read changed
+    unscaled = attach.compose(arm_file, payload_file, payload_mass=None, site="tip")
+    text = payload_file.read_text()
+    payload_file.write_text(text.replace('mass="', 'mass="9', 1)[:len(text)])  # the same size, same key
     changed = attach.compose(arm_file, payload_file, payload_mass=None, site="tip")
-    assert changed == attach._compose(arm_file, payload_file, None, "tip", [])
-    assert 'mass="2' in changed[1]["payload.xml"].decode()
+    assert changed != unscaled and changed == attach._compose(arm_file, payload_file, None, "tip", [])
+    assert 'mass="9' in changed[1]["payload.xml"].decode()
 
 
 SERVO_SCENARIO = """schema_version = 1

@@ -92,6 +92,8 @@ def add_rows_public(writer: Writer, channel_ids: list[int], log_ns: np.ndarray, 
     """A block of rows, each row one message per channel of `channel_ids` at its time log_ns[i] [ns]:
     the payloads are `blob` split at NUL bytes, row by row (row i, channel j is piece i·len(channel_ids) + j),
     through Writer.add_message (any mcap)."""
+    if len(log_ns) == 0:
+        return
     payloads = blob.split(b"\0")
     times = [ns for ns in log_ns.tolist() for _ in channel_ids]
     add_messages_public(writer, list(zip(channel_ids * len(log_ns), times, payloads, strict=True)))
@@ -103,11 +105,15 @@ assert _HEAD.itemsize == _MESSAGE_HEAD.size
 
 
 def add_rows_fast(writer: Writer, channel_ids: list[int], log_ns: np.ndarray, blob: bytes) -> None:
-    """What add_rows_public writes, straight into mcap 1.6.0's open chunk (as add_messages_fast): the
-    message heads built by numpy as one packed array, each record's offset from a cumulative sum of
-    the record sizes, heads and payloads interleaved and written in one go."""
+    """The messages add_rows_public writes, straight into mcap 1.6.0's open chunk (as add_messages_fast:
+    the same bytes while the block fits in the chunk; a block that crosses the chunk size closes the
+    chunk after it, not after the message that crossed): the message heads built by numpy as one packed
+    array, each record's offset from a cumulative sum of the record sizes, heads and payloads
+    interleaved and written in one go."""
+    if len(log_ns) == 0:
+        return
     chunk = writer._Writer__chunk_builder
-    if chunk is None or len(log_ns) == 0:
+    if chunk is None:
         add_rows_public(writer, channel_ids, log_ns, blob)
         return
     stats = writer._Writer__statistics

@@ -64,8 +64,8 @@ _MAX_FILENAME = 998
 _MERGED = ("compiler", "option", "size")
 
 
-def _parse(path: Path, what: str, read: list[Path]) -> ET.Element:
-    read.append(path)
+def _parse(path: Path, what: str, read: list[tuple[Path, str | None]]) -> ET.Element:
+    read.append((path, _digest(path)))  # before parsing: an edit made in between is seen next time
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
@@ -77,7 +77,7 @@ def _parse(path: Path, what: str, read: list[Path]) -> ET.Element:
     return root
 
 
-def _merge_includes(root: ET.Element, model_dir: Path, where: Path, read: list[Path]) -> None:
+def _merge_includes(root: ET.Element, model_dir: Path, where: Path, read: list[tuple[Path, str | None]]) -> None:
     """Replace each <include file=.../> of `root` (any depth) by the file's elements, merged into
     root's sections as PyMJCF did; nested includes first. Paths are relative to the model's folder."""
     for parent in list(root.iter()):
@@ -104,7 +104,8 @@ def _merge_includes(root: ET.Element, model_dir: Path, where: Path, read: list[P
                     same.extend(list(section))
 
 
-def _carry_files(root: ET.Element, model_dir: Path, where: Path, assets: dict[str, bytes], read: list[Path]) -> None:
+def _carry_files(root: ET.Element, model_dir: Path, where: Path, assets: dict[str, bytes],
+                 read: list[tuple[Path, str | None]]) -> None:
     """Each file an asset names, read into `assets` under PyMJCF's name for it; the XML names that."""
     dirs: dict[str, str] = {}
     for c in root.findall("compiler"):
@@ -120,12 +121,12 @@ def _carry_files(root: ET.Element, model_dir: Path, where: Path, assets: dict[st
                 if not value:
                     continue
                 path = model_dir / base / value
-                read.append(path)
                 try:
                     data = path.read_bytes()
                 except OSError as exc:
                     raise ModelError(f"{where}: <{el.tag}> {attr}={value!r}: cannot read {path}: "
                                      f"{exc.strerror or exc}") from None
+                read.append((path, hashlib.sha1(data).hexdigest()))
                 stem, ext = Path(value).stem, Path(value).suffix
                 if attr == "file" and not el.get("name"):
                     el.set("name", stem)  # PyMJCF's name for an unnamed asset (MuJoCo's too)
@@ -136,7 +137,7 @@ def _carry_files(root: ET.Element, model_dir: Path, where: Path, assets: dict[st
                 el.set(attr, name)
 
 
-def _load(path: Path, what: str, assets: dict[str, bytes], read: list[Path]) -> ET.Element:
+def _load(path: Path, what: str, assets: dict[str, bytes], read: list[tuple[Path, str | None]]) -> ET.Element:
     root = _parse(path, what, read)
     _merge_includes(root, path.parent, path, read)
     _carry_files(root, path.parent, path, assets, read)
@@ -222,16 +223,15 @@ def _text(root: ET.Element) -> str:
 
 #: composed models kept (compose): a study's runs compose the same arm and payload thousands of times
 COMPOSED_CACHE_SIZE = 32
-_composed: OrderedDict[tuple, tuple[str, dict[str, bytes], tuple[tuple[Path, tuple[int, int]], ...]]] = OrderedDict()
+_composed: OrderedDict[tuple, tuple[str, dict[str, bytes], tuple[tuple[Path, str | None], ...]]] = OrderedDict()
 
 
-def _stamp(path: Path) -> tuple[int, int]:
-    """(mtime [ns], size [B]) of a file, (-1, -1) if it cannot be read."""
+def _digest(path: Path) -> str | None:
+    """SHA-1 of a file's bytes, None if it cannot be read."""
     try:
-        st = path.stat()
+        return hashlib.sha1(path.read_bytes()).hexdigest()
     except OSError:
-        return (-1, -1)
-    return (st.st_mtime_ns, st.st_size)
+        return None
 
 
 def compose(arm: Path, payload: Path | None, *, payload_mass: float | None = None,
@@ -240,25 +240,25 @@ def compose(arm: Path, payload: Path | None, *, payload_mass: float | None = Non
     payload None: the arm alone, through the same steps. Errors: one-line ModelErrors naming the file.
 
     The result is kept per (arm, payload, payload_mass, site) and given again while every file it read
-    (the arm, the payload, their includes and asset files) has the same modification time and size:
-    a 6-joint run composed its arm and payload in 1 ms of ElementTree work, every run."""
+    (the arm, the payload, their includes and asset files) has the same bytes (SHA-1, read again at each
+    call: a few µs a small file, where composing cost a 6-joint run 1 ms of ElementTree work)."""
     key = (str(Path(arm).resolve()), None if payload is None else str(Path(payload).resolve()),
            payload_mass, site)
     hit = _composed.get(key)
-    if hit is not None and all(_stamp(p) == stamp for p, stamp in hit[2]):
+    if hit is not None and all(_digest(p) == digest for p, digest in hit[2]):
         _composed.move_to_end(key)
         return hit[0], dict(hit[1])
-    read: list[Path] = []
+    read: list[tuple[Path, str | None]] = []
     text, assets = _compose(Path(arm), None if payload is None else Path(payload), payload_mass, site, read)
-    _composed[key] = (text, dict(assets), tuple((p, _stamp(p)) for p in read))
+    _composed[key] = (text, dict(assets), tuple(read))
     while len(_composed) > COMPOSED_CACHE_SIZE:
         _composed.popitem(last=False)
     return text, assets
 
 
 def _compose(arm: Path, payload: Path | None, payload_mass: float | None, site: str,
-             read: list[Path]) -> tuple[str, dict[str, bytes]]:
-    """compose, every time (`read` gets each file read)."""
+             read: list[tuple[Path, str | None]]) -> tuple[str, dict[str, bytes]]:
+    """compose, every time (`read` gets each file read, with the SHA-1 of its bytes)."""
     assets: dict[str, bytes] = {}
     root = _load(arm, "model file", assets, read)
     root.set("model", root.get("model") or "unnamed_model")

@@ -256,8 +256,8 @@ class MujocoPlant:
 
     def release(self) -> None:
         """The run is over: its MjData goes to the spare ones of its layout (release_data), for the next
-        plant of that layout to take instead of a new one. The plant has no MjData after this (any use
-        of it fails loudly, never on another run's state)."""
+        plant of that layout made inside reusing_run_data() to take instead of a new one. The plant has
+        no MjData after this (any use of it fails loudly, never on another run's state)."""
         data = self.__dict__.pop("data", None)
         if data is not None and self.native_owner is None:
             release_data(self.model, data)
@@ -289,8 +289,7 @@ def scale_body_mass(model: mujoco.MjModel, body: int, mass: float) -> None:
 CACHE_SIZE = 8
 #: the most compiled models compile_spec keeps (a payload-mass grid of up to this many masses compiles each once)
 COMPILED_CACHE_SIZE = 32
-_size_names: tuple[str, ...] | None = None
-_sizes_of: Callable[[mujoco.MjModel], tuple[int, ...]]
+_sizes: tuple[tuple[str, ...], Callable[[mujoco.MjModel], tuple[int, ...]]] | None = None  # names, getter
 _scratch: OrderedDict[tuple, mujoco.MjData] = OrderedDict()
 
 
@@ -298,12 +297,13 @@ def layout(model: mujoco.MjModel) -> tuple[tuple[str, int], ...]:
     """The model's sizes (nq, nv, nbody, ngeom, narena, ...: MjModel's integer attributes named n*), which
     fix MjData's layout: two models with the same sizes give MjData the same arrays and buffer, so one
     model's MjData serves the other's (mujoco.batch's mjb_setModels refuses models that differ here)."""
-    global _size_names, _sizes_of
-    if _size_names is None:
-        _size_names = tuple(name for name in sorted(dir(model)) if name.startswith("n") and not name.startswith("name")
-                            and isinstance(getattr(model, name), int))
-        _sizes_of = operator.attrgetter(*_size_names)  # all ~100 sizes in one call (a Python loop cost 50 µs)
-    return tuple(zip(_size_names, _sizes_of(model), strict=True))
+    global _sizes
+    if _sizes is None:
+        names = tuple(name for name in sorted(dir(model)) if name.startswith("n") and not name.startswith("name")
+                      and isinstance(getattr(model, name), int))
+        _sizes = (names, operator.attrgetter(*names))  # all ~100 sizes in one call (a Python loop cost 50 µs)
+    names, sizes_of = _sizes
+    return tuple(zip(names, sizes_of(model), strict=True))
 
 
 def scratch_data(model: mujoco.MjModel) -> mujoco.MjData:
@@ -329,23 +329,44 @@ SPARE_PER_LAYOUT = 4
 _spare: OrderedDict[tuple, list[mujoco.MjData]] = OrderedDict()
 
 
+_reuse_depth = 0  # > 0 inside reusing_run_data()
+
+
+@contextlib.contextmanager
+def reusing_run_data() -> Iterator[None]:
+    """Plants made in the block may take a spare MjData (run_data). For runner.start only: its plants are
+    handed back when the run ends (runner.Started) and its code always passes the plant's own model with
+    the MjData; a reused MjData's `.model` (the Python binding's reference) is still the model it was
+    made for, which code that reads `data.model` (dm_control's Physics, adaptive_mj.env) must not see."""
+    global _reuse_depth
+    _reuse_depth += 1
+    try:
+        yield
+    finally:
+        _reuse_depth -= 1
+
+
 def run_data(model: mujoco.MjModel) -> mujoco.MjData:
-    """A run's own MjData for `model`: a spare one of its layout that an ended run released
-    (release_data), reset for this model (mj_resetData: qpos = qpos0, mocap from the model, everything
-    else zero, as a new MjData is; MuJoCo reads no value of its buffer it did not write first), or a new
-    one. A study's runs in one process each save the ~0.3 ms of Python-binding setup a new MjData costs
-    (scratch_data); tests/test_build_cache.py shows a run on a reused MjData gives the same rows."""
-    key = layout(model)
-    spare = _spare.get(key)
-    if spare:
-        data = spare.pop()
-        mujoco.mj_resetData(model, data)
-        return data
+    """A run's own MjData for `model`: inside reusing_run_data(), a spare one of its layout that an ended
+    run released (release_data), reset for this model (mj_resetData: qpos = qpos0, mocap from the model,
+    everything else zero, as in a new MjData; MuJoCo reads no value of its buffer it did not write
+    first); otherwise, or with none spare, or for a model with engine plugins (whose instances are made
+    with the MjData), a new one. A study's runs in one process each save the ~0.3 ms of Python-binding
+    setup a new MjData costs (scratch_data); tests/test_build_cache.py shows a run on a reused MjData
+    gives the same rows."""
+    if _reuse_depth > 0 and model.nplugin == 0:
+        spare = _spare.get(layout(model))
+        if spare:
+            data = spare.pop()
+            mujoco.mj_resetData(model, data)
+            return data
     return mujoco.MjData(model)
 
 
 def release_data(model: mujoco.MjModel, data: mujoco.MjData) -> None:
     """Keep an ended run's MjData (of `model`'s layout) for run_data; the caller holds no reference to it."""
+    if model.nplugin != 0:
+        return
     key = layout(model)
     spare = _spare.setdefault(key, [])
     _spare.move_to_end(key)

@@ -443,8 +443,9 @@ def _suggest(name: str, known: set[str]) -> str:
 
 
 # --------------------------------------------------------------------------
-def load(path: str | Path, *, overrides: list[str] | tuple[str, ...] = (), seed: int | None = None) -> Scenario:
-    """Read, override (``key=value`` dotted paths) and validate a scenario file."""
+def load(path: str | Path, *, overrides: list[str] | tuple[str, ...] = (), seed: int | None = None,
+         keep: bool = False) -> Scenario:
+    """Read, override (``key=value`` dotted paths) and validate a scenario file (keep: see `loads`)."""
     path = Path(path)
     where = str(path)
     if not path.is_file():
@@ -454,24 +455,27 @@ def load(path: str | Path, *, overrides: list[str] | tuple[str, ...] = (), seed:
     except (OSError, UnicodeDecodeError) as exc:
         raise ScenarioError(f"{where}: cannot read the scenario file: {exc}") from None
     return loads(text, where=where, base_dir=path.parent, default_name=path.stem,
-                 overrides=overrides, seed=seed)
+                 overrides=overrides, seed=seed, keep=keep)
 
 
 def loads(text: str, *, where: str = "<string>", base_dir: Path | None = None, default_name: str = "scenario",
-          overrides: list[str] | tuple[str, ...] = (), seed: int | None = None) -> Scenario:
+          overrides: list[str] | tuple[str, ...] = (), seed: int | None = None, keep: bool = False) -> Scenario:
     """Validate scenario TOML text (see `load`).
 
-    A study loads the same text with the same overrides thousands of times, each run with its own
-    seed: the scenario validated without the seed is kept (per text, overrides, where, base_dir and
-    current directory; `_validated`) and the seed is set on a copy, which is what validating with it
-    gives (noise.seed is the only field it sets). Anything unusual (a validation error, a seed that is
-    not a plain int >= 0) takes the full path, so every error reads as before."""
+    keep: for a study's runs (adaptive_mj.study.job), which load the same text with the same overrides
+    thousands of times, each with its own seed. The scenario validated without the seed is kept (per
+    text, overrides, where, base_dir and current directory; `_validated`) and the seed is set on a copy,
+    which is what validating with it gives (noise.seed is the only field it sets). Validation looks at
+    files (which candidate payload or model path exists) and at the installed plugins: a kept scenario
+    does not see those change during the study, as a payload file is checked once per process too.
+    Anything unusual (a validation error, a seed that is not a plain int >= 0, no current directory)
+    takes the full path, so every error reads as before."""
     overrides = tuple(overrides)
-    if seed is None or (type(seed) is int and seed >= 0):
+    if keep and (seed is None or (type(seed) is int and seed >= 0)):
         try:
             base = _validated(text, where, None if base_dir is None else str(base_dir), default_name, overrides,
                               str(Path.cwd()))
-        except ScenarioError:
+        except (ScenarioError, OSError, TypeError):
             pass
         else:
             return base if seed is None else dataclasses.replace(base, noise=dataclasses.replace(base.noise, seed=seed))

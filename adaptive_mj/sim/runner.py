@@ -16,6 +16,7 @@ from typing import Any, Sequence
 
 from adaptive_mj import __version__
 from adaptive_mj.plants import ModelSource
+from adaptive_mj.plants.mujoco_plant import reusing_run_data
 from adaptive_mj.setup.build import Setup, build
 from adaptive_mj.errors import AdaptiveMJError, Interrupted, PreflightRefused, ScenarioError
 from adaptive_mj.sim.loop import limits_meta, plant_order, run
@@ -233,7 +234,8 @@ class Started:
     log_path: Path | None
 
     def finish(self, traj: Trajectory) -> RunResult:
-        """The verdict, and the log closed with it."""
+        """The verdict, and the log closed with it. The plant's MjData is handed back for the next run
+        (MujocoPlant.release): setup.plant has none after this."""
         traj, result = verdict(self.scn, traj, self.crit, self.pre)
         if self.recorder is not None:
             self.recorder.close(traj.status, traj.reason, result)
@@ -249,7 +251,7 @@ class Started:
     def abandon(self, exc: BaseException, partial: Trajectory | None = None) -> None:
         """The run did not end: its log closed as "interrupted" (with the rows it had, a stop signal)
         or "failed" (anything else). partial: the run's rows so far (default: the exception's
-        `trajectory`, as loop.run's Interrupted carries it)."""
+        `trajectory`, as loop.run's Interrupted carries it). The plant's MjData is handed back, as in finish."""
         self._release()
         if self.recorder is None:
             return
@@ -265,8 +267,10 @@ class Started:
 
 def start(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None,
           single: bool = False) -> Started:
-    """Build `scn`, say its notes, check it before flight and open its log (see execute)."""
-    setup = build(scn, source=source)
+    """Build `scn`, say its notes, check it before flight and open its log (see execute). The plant may
+    take the MjData of an ended run (mujoco_plant.reusing_run_data); Started hands it back at the end."""
+    with reusing_run_data():
+        setup = build(scn, source=source)
     plant = setup.plant
     for note in setup.notes:  # model edits the scenario asked for: said on the terminal and kept in the log
         print(f"{scn.source}: note: {note}", file=sys.stderr)

@@ -89,7 +89,7 @@ def _job_scenario(job: Job):
     for name in job.extras:
         if name not in EXTRAS:
             raise AdaptiveMJError(f"unknown analysis {name!r}; expected one of {', '.join(EXTRAS)}")
-    scn = sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed)
+    scn = sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed, keep=True)  # a study's: kept
     if job.log is not None:
         job.log.parent.mkdir(parents=True, exist_ok=True)
         if job.log.exists():
