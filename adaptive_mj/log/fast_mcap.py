@@ -79,12 +79,19 @@ def add_messages_fast(writer: Writer, batch: Batch) -> None:
         parts.append(data)
         counts[channel_id] += 1
     buf.write(b"".join(parts))  # one write: the offsets above are where each record lands
+    _count(writer, chunk, stats, lo, hi, len(batch))
+
+
+def _count(writer: Writer, chunk, stats, lo: int, hi: int, count: int) -> None:
+    """After `count` messages of log times lo..hi [ns] went into the open chunk: its and the file's time
+    range and message counts, as Writer.add_message keeps them; then the writer finishes the chunk if
+    it is full."""
     chunk.message_start_time = lo if chunk.num_messages == 0 else min(chunk.message_start_time, lo)
     chunk.message_end_time = max(chunk.message_end_time, hi)
-    chunk.num_messages += len(batch)
+    chunk.num_messages += count
     stats.message_start_time = lo if stats.message_count == 0 else min(stats.message_start_time, lo)
     stats.message_end_time = max(stats.message_end_time, hi)
-    stats.message_count += len(batch)
+    stats.message_count += count
     writer._Writer__maybe_finalize_chunk()
 
 
@@ -147,13 +154,7 @@ def add_rows_fast(writer: Writer, channel_ids: list[int], log_ns: np.ndarray, bl
         index.records.extend(zip(ns, offsets[j::topics], strict=True))
         counts[channel_id] += rows
     lo, hi = min(ns), max(ns)
-    chunk.message_start_time = lo if chunk.num_messages == 0 else min(chunk.message_start_time, lo)
-    chunk.message_end_time = max(chunk.message_end_time, hi)
-    chunk.num_messages += count
-    stats.message_start_time = lo if stats.message_count == 0 else min(stats.message_start_time, lo)
-    stats.message_end_time = max(stats.message_end_time, hi)
-    stats.message_count += count
-    writer._Writer__maybe_finalize_chunk()
+    _count(writer, chunk, stats, lo, hi, count)
 
 
 def writer_for(mcap_version: str) -> Callable[[Writer, Batch], None]:
