@@ -65,13 +65,15 @@ _MERGED = ("compiler", "option", "size")
 
 
 def _parse(path: Path, what: str, read: list[tuple[Path, str | None]]) -> ET.Element:
-    read.append((path, _digest(path)))  # before parsing: an edit made in between is seen next time
     try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise ModelError(f"{path}: could not parse the MJCF: {exc}") from None
+        data = path.read_bytes()
     except OSError as exc:
         raise ModelError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
+    read.append((path, hashlib.sha1(data).hexdigest()))  # the bytes parsed: compose's cache checks them
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as exc:
+        raise ModelError(f"{path}: could not parse the MJCF: {exc}") from None
     if root.tag != "mujoco":
         raise ModelError(f"{path}: could not parse the MJCF: the root element is <{root.tag}>, expected <mujoco>")
     return root
