@@ -327,7 +327,7 @@ class Progress:
         if self.n == self.total or now - self.last >= PLAIN_PROGRESS_EVERY:
             self.last = now
             self.stream.write(f"{self._counts(now)} after {now - self.t0:.0f} s; {last}\n")
-        self.stream.flush()
+            self.stream.flush()
 
     def retried(self, job: Job, why: str) -> None:
         self.n_retried += 1
