@@ -24,7 +24,10 @@
             1-DOF arm at 1, 2 and 30 s (heave also 5 s; 30 s is the bundled scenarios' length) and the
             6-joint arm at 0.2 s and 2 s (--per-run-runs runs, median of --reps); the ratio bare / run is
             about the most a study of such runs can reach against the bare-stepping limit on any number
-            of cores, whatever the engine (a run's fixed cost weighs less as runs get longer)
+            of cores, whatever the engine (a run's fixed cost weighs less as runs get longer); and the
+            time of the run's physics steps alone, the compiled law in MuJoCo's control callback (its
+            mj_step calls, timed): bare / that is the law's ceiling, what an engine with no Python per
+            run at all would reach
 
 Every figure is the median of --reps repetitions with [min, max] where repeated.
 Usage: python benchmarks/scaling.py [--reps 3] [--runs 8] [--only local,ray,...] [--study-runs 10000] [--json]
@@ -41,6 +44,7 @@ import sys
 import tempfile
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -345,7 +349,8 @@ def per_run(reps: int, runs: int) -> dict:
             steps = int(round(seconds / model.opt.timestep))
             for job in _batch_jobs(name, seconds, vary, 2, None):  # the compiled callback loaded, caches warm
                 run_job(job)
-            times: dict[str, list[float]] = {"bare": [], "start": [], "unlogged": [], "logged": []}
+            times: dict[str, list[float]] = {"bare": [], "start": [], "unlogged": [], "law_stepping": [],
+                                             "logged": []}
             for _rep in range(reps):
                 t0 = time.perf_counter()
                 for _ in range(runs):
@@ -362,9 +367,12 @@ def per_run(reps: int, runs: int) -> dict:
                     folder = Path(tempfile.mkdtemp(prefix="scaling-per-run-")) if logged else None
                     try:
                         jobs = _batch_jobs(name, seconds, vary, runs, folder)
-                        t0 = time.perf_counter()
-                        results = [run_job(job) for job in jobs]
-                        times["logged" if logged else "unlogged"].append((time.perf_counter() - t0) / runs)
+                        with _timed_mj_step() as stepping:
+                            t0 = time.perf_counter()
+                            results = [run_job(job) for job in jobs]
+                            times["logged" if logged else "unlogged"].append((time.perf_counter() - t0) / runs)
+                        if not logged:
+                            times["law_stepping"].append(stepping[0] / runs)
                     finally:
                         if folder is not None:
                             shutil.rmtree(folder, ignore_errors=True)
@@ -373,11 +381,34 @@ def per_run(reps: int, runs: int) -> dict:
             row["steps"] = steps
             row["unlogged_to_bare"] = row["bare"]["median"] / row["unlogged"]["median"]
             row["logged_to_bare"] = row["bare"]["median"] / row["logged"]["median"]
+            row["law_ceiling"] = row["bare"]["median"] / row["law_stepping"]["median"]
             out[f"{label} {seconds:g} s"] = row
             print(f"  per_run {label} {seconds:g} s: " + ", ".join(
                 f"{k} {v['median']:.2f} ms" if isinstance(v, dict) else f"{k} {v:.3g}" for k, v in row.items()),
                 file=sys.stderr, flush=True)
     return out
+
+
+@contextmanager
+def _timed_mj_step():
+    """Inside the block every mujoco.mj_step call (the plants' native chunks: the physics with the compiled
+    law in MuJoCo's control callback) is timed; yields a one-element list holding their total [s]."""
+    import mujoco
+
+    total, step = [0.0], mujoco.mj_step
+
+    def timed(*args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return step(*args, **kwargs)
+        finally:
+            total[0] += time.perf_counter() - t0
+
+    mujoco.mj_step = timed
+    try:
+        yield total
+    finally:
+        mujoco.mj_step = step
 
 
 def print_per_run(fig: dict | None) -> None:
@@ -386,7 +417,8 @@ def print_per_run(fig: dict | None) -> None:
             return f"{m['median']:.2f} [{m['min']:.2f}, {m['max']:.2f}]"
         print(f"per_run {case} ({r['steps']} steps): bare stepping {f(r['bare'])} ms; start (build) {f(r['start'])} "
               f"ms; run unlogged {f(r['unlogged'])} ms ({r['unlogged_to_bare']:.2f}x bare); run logged "
-              f"{f(r['logged'])} ms ({r['logged_to_bare']:.2f}x bare)")
+              f"{f(r['logged'])} ms ({r['logged_to_bare']:.2f}x bare); its physics with the law in the callback "
+              f"{f(r['law_stepping'])} ms (the law's ceiling: {r['law_ceiling']:.2f}x bare)")
 
 
 #: plant -> (scenario, simulated seconds per run, the --set that varies a run i). The 6-joint runs are
