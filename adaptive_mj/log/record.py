@@ -493,10 +493,11 @@ class Recorder:
         self._writer.flush()
 
     def _write_block(self, tk: np.ndarray, blocks: list[np.ndarray]) -> None:
-        log_ns = np.rint(tk * _NS_PER_S).astype(np.int64).tolist()
+        ns = np.rint(tk * _NS_PER_S).astype(np.int64)
         if self._flush_every is None and all(np.isfinite(b).all() for b in blocks):
-            self._write_finite_block(tk, log_ns, blocks)
+            self._write_finite_block(tk, ns, blocks)
             return
+        log_ns = ns.tolist()
         t_list = tk.tolist()
         rows = [b.tolist() for b in blocks]
         finite = [np.isfinite(b).all(axis=1).tolist() for b in blocks]
@@ -519,7 +520,7 @@ class Recorder:
         _add_messages(self._writer, batch)
         self._t_last = max(self._t_last, t_list[-1])
 
-    def _write_finite_block(self, tk: np.ndarray, log_ns: list[int], blocks: list[np.ndarray]) -> None:
+    def _write_finite_block(self, tk: np.ndarray, log_ns: np.ndarray, blocks: list[np.ndarray]) -> None:
         """_write_block's payloads for rows of finite numbers, formatted in one %-operation for the whole
         block: every row's messages are the row templates joined by NUL bytes (which no template or float
         repr contains), repeated per row, and the text goes to fast_mcap.add_rows, which splits it into
@@ -535,7 +536,7 @@ class Recorder:
         if self._row_template is None:
             self._row_template = "\0".join(self._templates)
         text = "\0".join([self._row_template] * m) % tuple(values)
-        _add_rows(self._writer, [channel_id for channel_id, _ in self._row_fields], np.asarray(log_ns), text.encode())
+        _add_rows(self._writer, [channel_id for channel_id, _ in self._row_fields], log_ns, text.encode())
         self._rows += m
         self._t_last = max(self._t_last, float(tk[-1]))
 
