@@ -64,12 +64,12 @@ _MAX_FILENAME = 998
 _MERGED = ("compiler", "option", "size")
 
 
-def _parse(path: Path, what: str, read: list[tuple[Path, str | None]]) -> ET.Element:
+def _parse(path: Path, what: str, read: list[tuple[Path, str]]) -> ET.Element:
     try:
         data = path.read_bytes()
     except OSError as exc:
         raise ModelError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
-    read.append((path, hashlib.sha1(data).hexdigest()))  # the bytes parsed: compose's cache checks them
+    read.append((path, _sha1(data)))  # the bytes parsed: compose's cache checks them
     try:
         root = ET.fromstring(data)
     except ET.ParseError as exc:
@@ -79,7 +79,7 @@ def _parse(path: Path, what: str, read: list[tuple[Path, str | None]]) -> ET.Ele
     return root
 
 
-def _merge_includes(root: ET.Element, model_dir: Path, where: Path, read: list[tuple[Path, str | None]]) -> None:
+def _merge_includes(root: ET.Element, model_dir: Path, where: Path, read: list[tuple[Path, str]]) -> None:
     """Replace each <include file=.../> of `root` (any depth) by the file's elements, merged into
     root's sections as PyMJCF did; nested includes first. Paths are relative to the model's folder."""
     for parent in list(root.iter()):
@@ -107,7 +107,7 @@ def _merge_includes(root: ET.Element, model_dir: Path, where: Path, read: list[t
 
 
 def _carry_files(root: ET.Element, model_dir: Path, where: Path, assets: dict[str, bytes],
-                 read: list[tuple[Path, str | None]]) -> None:
+                 read: list[tuple[Path, str]]) -> None:
     """Each file an asset names, read into `assets` under PyMJCF's name for it; the XML names that."""
     dirs: dict[str, str] = {}
     for c in root.findall("compiler"):
@@ -128,18 +128,18 @@ def _carry_files(root: ET.Element, model_dir: Path, where: Path, assets: dict[st
                 except OSError as exc:
                     raise ModelError(f"{where}: <{el.tag}> {attr}={value!r}: cannot read {path}: "
                                      f"{exc.strerror or exc}") from None
-                read.append((path, hashlib.sha1(data).hexdigest()))
+                digest = _sha1(data)  # the asset's name, and what compose's cache checks
+                read.append((path, digest))
                 stem, ext = Path(value).stem, Path(value).suffix
                 if attr == "file" and not el.get("name"):
                     el.set("name", stem)  # PyMJCF's name for an unnamed asset (MuJoCo's too)
-                digest = hashlib.sha1(data).hexdigest()
                 stem = stem[:max(0, _MAX_FILENAME - len(digest) - len(ext) - 1)]
                 name = f"{stem}-{digest}{ext}"
                 assets[name] = data
                 el.set(attr, name)
 
 
-def _load(path: Path, what: str, assets: dict[str, bytes], read: list[tuple[Path, str | None]]) -> ET.Element:
+def _load(path: Path, what: str, assets: dict[str, bytes], read: list[tuple[Path, str]]) -> ET.Element:
     root = _parse(path, what, read)
     _merge_includes(root, path.parent, path, read)
     _carry_files(root, path.parent, path, assets, read)
@@ -225,13 +225,18 @@ def _text(root: ET.Element) -> str:
 
 #: composed models kept (compose): a study's runs compose the same arm and payload thousands of times
 COMPOSED_CACHE_SIZE = 32
-_composed: OrderedDict[tuple, tuple[str, dict[str, bytes], tuple[tuple[Path, str | None], ...]]] = OrderedDict()
+_composed: OrderedDict[tuple, tuple[str, dict[str, bytes], tuple[tuple[Path, str], ...]]] = OrderedDict()
+
+
+def _sha1(data: bytes) -> str:
+    """SHA-1 of bytes, as hex: an asset's name (PyMJCF's) and compose's check of the files it read."""
+    return hashlib.sha1(data).hexdigest()
 
 
 def _digest(path: Path) -> str | None:
     """SHA-1 of a file's bytes, None if it cannot be read."""
     try:
-        return hashlib.sha1(path.read_bytes()).hexdigest()
+        return _sha1(path.read_bytes())
     except OSError:
         return None
 
@@ -250,7 +255,7 @@ def compose(arm: Path, payload: Path | None, *, payload_mass: float | None = Non
     if hit is not None and all(_digest(p) == digest for p, digest in hit[2]):
         _composed.move_to_end(key)
         return hit[0], dict(hit[1])
-    read: list[tuple[Path, str | None]] = []
+    read: list[tuple[Path, str]] = []
     text, assets = _compose(Path(arm), None if payload is None else Path(payload), payload_mass, site, read)
     _composed[key] = (text, dict(assets), tuple(read))
     while len(_composed) > COMPOSED_CACHE_SIZE:
@@ -259,7 +264,7 @@ def compose(arm: Path, payload: Path | None, *, payload_mass: float | None = Non
 
 
 def _compose(arm: Path, payload: Path | None, payload_mass: float | None, site: str,
-             read: list[tuple[Path, str | None]]) -> tuple[str, dict[str, bytes]]:
+             read: list[tuple[Path, str]]) -> tuple[str, dict[str, bytes]]:
     """compose, every time (`read` gets each file read, with the SHA-1 of its bytes)."""
     assets: dict[str, bytes] = {}
     root = _load(arm, "model file", assets, read)
