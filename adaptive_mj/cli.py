@@ -45,6 +45,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", type=Path, help="log file (default: a new file under logs/)")
     r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario key, e.g. --set law.k=50 (repeatable)")
+    r.add_argument("--law", metavar="NAME", help=LAW_HELP)
     r.add_argument("--seed", type=int, help="noise seed (overrides noise.seed)")
     r.add_argument("--json", action="store_true", help="print the summary object as JSON")
     r.add_argument("--force", action="store_true", help="overwrite -o FILE if it exists")
@@ -85,6 +86,7 @@ def _parser() -> argparse.ArgumentParser:
                     help="a grid axis: KEY=LO:HI:N (N values, linear) or KEY=V1,V2,... (repeatable); "
                          "KEY is a dotted scenario key or a bare key that names one uniquely")
     sw.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    sw.add_argument("--law", metavar="NAME", help=LAW_HELP)
     sw.add_argument("--seeds", type=int, default=1, help="seeds 0..N-1 per grid point")
     sw.add_argument("--resume", type=Path, metavar="DIR",
                     help="finish the study in DIR (the same command that started it): runs whose log is complete "
@@ -117,6 +119,9 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+LAW_HELP = ("swap the scenario's law for this law kind (built in or an installed plugin; `list --laws`): its "
+            "[law] table replaced by the law's defaults, keeping law.initial_estimates and law.nominal, plus the "
+            "--set law.* keys given")
 JOBS_HELP = ("worker processes (default: all cores); with --backend ray and no --address, the CPUs of the Ray "
              "started here")
 
@@ -214,17 +219,16 @@ def cmd_list(args) -> int:
             print(f"(no plant plugins installed: a package registers one under {PLANT_GROUP!r})")
         return EXIT_OK
     if getattr(args, "laws", False):
+        from adaptive_mj.laws import kinds as law_kinds
         from adaptive_mj.laws.plugin import ENTRY_POINT_GROUP, installed
 
-        for kind in (*sc.LAW_KINDS, *sc.MANIPULATOR_LAW_KINDS):
-            print(f"{kind:24s} built in")
         plugins = installed()
-        for name, inst in sorted(plugins.items()):
-            keys = ", ".join(f"{p.name}" + (f" [{p.unit}]" if p.unit else "") + ("" if p.default is None
-                                                                                 else f" = {p.default:g}")
-                             for p in inst.plugin.params)
-            print(f"{name:24s} plugin from {inst.distribution} {inst.version} (source {inst.source_sha256[:12]}): "
-                  f"{inst.plugin.doc}; keys: {keys or 'none'}")
+        for name, kind in law_kinds.all_kinds().items():
+            forms = ", ".join(sorted(f.value for f in kind.forms))
+            line = f"{name:24s} {kind.origin}: serves {forms}; {kind.doc}"
+            if name in plugins:
+                line += f"; keys: {plugins[name].plugin.describe_keys() or 'none'}"
+            print(line)
         if not plugins:
             print(f"(no law plugins installed: a package registers one under the entry-point group "
                   f"{ENTRY_POINT_GROUP!r}; see docs/ADDING_A_LAW.md)")
@@ -244,7 +248,8 @@ def cmd_run(args) -> int:
     from adaptive_mj.setup import scenario as sc
     from adaptive_mj.sim.runner import execute, reserve_log_path
 
-    overrides = [*args.overrides, *(["simulation.python_callback=true"] if args.python_callback else []),
+    overrides = [*([sc.law_swap(args.law)] if args.law else []), *args.overrides,
+                 *(["simulation.python_callback=true"] if args.python_callback else []),
                  *(["success.preflight='refuse'"] if args.strict else [])]
     scn = sc.load(_scenario_path(args.scenario), overrides=overrides, seed=args.seed)
     log = reserve_log_path(scn, out=args.output, force=args.force)
@@ -355,10 +360,10 @@ def _study(args):
                                 "back; leave out --logs summary" if args.logs == "summary" else
                                 "--resume is for a grid sweep; --breaking-point starts a new search")
         return api.breaking_point(_scenario_path(args.scenario), key=args.breaking_point, tail_bound=args.tail_bound,
-                                  seeds=args.seeds, steps=args.steps, overrides=args.overrides, out=args.output,
-                                  **where)
+                                  seeds=args.seeds, steps=args.steps, overrides=api.with_law(args.law, args.overrides),
+                                  out=args.output, **where)
     return api.sweep(_scenario_path(args.scenario), grid=args.grid, seeds=args.seeds, overrides=args.overrides,
-                     metrics=args.metric, out=args.output, resume=args.resume, logs=args.logs, **where)
+                     metrics=args.metric, out=args.output, resume=args.resume, logs=args.logs, law=args.law, **where)
 
 
 def _print_study(study) -> int:

@@ -7,7 +7,8 @@ with 1 and 2 jobs; log size per simulated second; peak memory of a 600 s run.
   b_py  the same law through the Python callback (the path users' own laws take)
   c  closed loop with MCAP logging at the default rate (100 Hz)
   d  closed loop with MCAP logging of every physics step
-  e  the example law plugin (pip install examples/emod_law): compiled, and through the Python callback
+  e  the example law plugin (pip install examples/emod_law; on the UR5e examples/robust_sl_law): compiled, and
+     through the Python callback; e_native/b: the plugin interface's cost against the built-in law
   f  closed loop under sampled-data control at 250 Hz (control.period = 4 ms), native path
   g  6-joint arm only: c with real-robot conditions on (REAL_CONDITIONS: encoder noise and 2^17 counts,
      differentiated velocity, band-limited joint torque noise, saturation-aware adaptation, joint
@@ -92,13 +93,17 @@ PLUGIN_LAW = {
     "heave": "law={kind='emod', lambda=5.0, k=200.0, gamma_d=0.0025, gamma_p=0.1, nu=0.01, "
              "initial_estimates={d=0.0, b=0.0, c=0.0}}",
     "arm": "law={kind='emod', lambda=10.0, k=5.0, gamma_d=0.048, gamma_p=0.02, nu=0.0, initial_estimates='model'}",
+    # the multi-joint example (examples/robust_sl_law) with the scenario's own λ, K_D and Γ and k_s = 0: the same
+    # arithmetic as the built-in Slotine–Li plus the plugin's call and its saturation, so e/b is the interface's cost
+    "ur5e": "law={kind='robust_sl', lambda=10.0, kd=50.0, ks=0.0, gamma=0.2}",
 }
+PLUGIN_NAME = {"heave": "emod", "arm": "emod", "ur5e": "robust_sl"}
 
 
-def plugin_installed() -> bool:
+def plugin_installed(plant: str = "heave") -> bool:
     from adaptive_mj.laws.plugin import installed
 
-    return "emod" in installed()
+    return PLUGIN_NAME[plant] in installed()
 
 
 def plugin_loop(plant: str, steps: int, native: bool) -> float:
@@ -208,7 +213,7 @@ def main() -> None:
                 rows.setdefault("a_friction", []).append(bare(name, args.steps, ("plant.frictionloss=0.5",)))
                 rows.setdefault("g_real_conditions_logged_100Hz", []).append(
                     logged(name, args.steps, None, REAL_CONDITIONS)[0])
-        if plant in PLUGIN_LAW and plugin_installed():
+        if plant in PLUGIN_LAW and plugin_installed(plant):
             plugin_loop(plant, 500, True)  # compile once, outside the timing
             rows["e_plugin_native"], rows["e_plugin_python"] = [], []
             for _ in range(args.reps):
@@ -227,7 +232,8 @@ def main() -> None:
                            "g/a_friction": stats["g_real_conditions_logged_100Hz"]["median"]
                            / stats["a_friction"]["median"]} if "a_friction" in stats else {}),
                        **({"e_native/a": stats["e_plugin_native"]["median"] / a,
-                           "e_python/a": stats["e_plugin_python"]["median"] / a}
+                           "e_python/a": stats["e_plugin_python"]["median"] / a,
+                           "e_native/b": stats["e_plugin_native"]["median"] / stats["b_closed_loop"]["median"]}
                           if "e_plugin_native" in stats else {})},
             "log_bytes_per_sim_second_100Hz": statistics.median(sizes),
         }

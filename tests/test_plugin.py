@@ -16,6 +16,7 @@ from clean_env import make_venv, pip_install, shared_site_packages
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "emod_law"
 SCENARIO = EXAMPLE / "heave_emod.toml"
+JOINT_EXAMPLE = REPO / "examples" / "robust_sl_law"  # a multi-joint law plugin (JointLawPlugin)
 
 BROKEN = '''
 from fractions import Fraction
@@ -34,6 +35,41 @@ def slow(x, ref, theta, phi, f, h, params, rate):
 LAW = LawPlugin(law=slow, params=(Param("k", ge=0.0),), adapts=False, doc="not compilable")
 '''
 
+
+GTAB = '''
+import numpy as np
+
+from adaptive_mj.laws.plugin import LawPlugin, Param
+
+G = 2  # params: [lambda, k, gamma_1 .. gamma_n]
+
+
+def gtab(x, ref, theta, phi, f, h, params, rate):
+    """The lecture's order-2 sliding law with a per-parameter gain table."""
+    lam, k = params[0], params[1]
+    e0, e1 = ref[0] - x[0], ref[1] - x[1]
+    s = e1 + lam * e0
+    s_r_dot = ref[2] + lam * e1
+    acc = theta[0] * s_r_dot - f + k * s
+    for j in range(phi.shape[0]):
+        acc -= phi[j] * theta[j + 1]
+    rate[0] = s_r_dot * s / params[G]
+    for j in range(phi.shape[0]):
+        rate[j + 1] = -phi[j] * s / params[G + 1 + j]
+    return acc / h, s
+
+
+def lyapunov(s, theta_hat, theta, params, M):
+    """V = ½ d s² + ½ Σ γ_i θ̃_i² (d = θ[0], the lecture's V)."""
+    n = theta_hat.shape[-1]
+    return 0.5 * theta[:, 0] * s**2 + 0.5 * np.sum(params[G:G + n] * (theta_hat - theta) ** 2, axis=-1)
+
+
+LAW = LawPlugin(law=gtab, params=(Param("lambda", default=5.0, gt=0.0, unit="1/s"),
+                                  Param("k", default=200.0, ge=0.0, unit="N s/m"),
+                                  Param("gamma", default=0.1, gt=0.0, per_parameter=True)),
+                lyapunov=lyapunov, gain="gamma", doc="sliding law, per-parameter gains")
+'''
 
 CART = """
 from pathlib import Path
@@ -118,7 +154,10 @@ def env(tmp_path_factory):
                       "adaptive_mj.laws", "broken = \"broken_law:LAW\"")
     cart = _package(tmp_path_factory.mktemp("cart_plant"), "cart_plant", CART, "cart-plant", "0.2.0",
                     "adaptive_mj.plants", "cart = \"cart_plant:PLANT\"")
-    pip_install(python, "--no-build-isolation", "-e", str(REPO), str(EXAMPLE), str(broken), str(cart))
+    gtab = _package(tmp_path_factory.mktemp("gtab_law"), "gtab_law", GTAB, "gtab-law", "0.1.0",
+                    "adaptive_mj.laws", "gtab = \"gtab_law:LAW\"")
+    pip_install(python, "--no-build-isolation", "-e", str(REPO), str(EXAMPLE), str(JOINT_EXAMPLE), str(broken),
+                str(cart), str(gtab))
     purelib = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
                                   check=True, capture_output=True, text=True).stdout.strip())
     (purelib / "cart.xml").write_text(CART_XML)  # beside the module, as a package would ship it
@@ -332,3 +371,106 @@ def test_a_clean_environment_sees_no_plugin_of_the_test_environment(tmp_path):
     shared = shared_site_packages(tmp_path / "shared", sources=[str(site)])
     assert sorted(p.name for p in shared.iterdir()) == ["some_dep", "some_dep-1.0.dist-info"]
     assert all(p.is_symlink() for p in shared.iterdir())
+
+
+# --- any law on any plant (issue 31) ------------------------------------------------------------------------
+def test_a_multi_joint_plugin_runs_compiled_on_the_ur5e_and_replays_with_its_v(site, tmp_path):
+    """examples/robust_sl_law, installed by pip: `run ur5e_identification --law robust_sl` runs it in the native
+    callback, logs its declared V, and `replay --verify` re-simulates it bit for bit."""
+    log = tmp_path / "robust_sl.mcap"
+    r = cli(site, "run", "ur5e_identification", "--law", "robust_sl", "--set", "simulation.duration=1",
+            "--set", "law.gamma=0.5", "-o", str(log), "--json")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout)
+    assert summary["metrics"]["rms_tracking_error_tail"] < 5e-3  # [rad] (2.2e-3 measured; 1 s from π̂ = 0)
+    r = cli(site, "replay", str(log), "--verify")
+    assert r.returncode == 0 and "verify: bit-identical" in r.stdout, r.stdout + r.stderr
+    from adaptive_mj.log.replay import read_log
+
+    back = read_log(log)
+    assert back.header["law_plugin"]["name"] == "robust_sl"
+    assert back.header["overrides"][0] == "law=robust_sl"  # the log records the law actually run
+    V = back.trajectory.V
+    assert np.all(np.isfinite(V)) and V[-1] < V[0]  # declared, and it decreases from the start's error
+
+
+@pytest.mark.parametrize("scenario, extra", [
+    ("ur5e_identification.toml", []),
+    ("ur5e_drift.toml", ["law.sigma=0.01", "law.dead_zone={width=1e-5, on='tracking_error'}",
+                         "law.projection='physical'", "law.ks=2.0"]),
+])
+def test_multi_joint_plugin_native_equals_python_bit_for_bit(on_path, scenario, extra):
+    """The JointLawPlugin through the compiled callback and through the Python one: the same rows and V, with
+    the shared modifications (σ, a dead-zone on ‖q̃‖, the physical projection) on as well."""
+    from adaptive_mj import run
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR, law_swap, load
+
+    out = []
+    for native in (False, True):
+        s = build(load(SCENARIOS_DIR / scenario, overrides=[law_swap("robust_sl"), "simulation.duration=0.3", *extra]))
+        out.append(run(s.plant, s.law, s.reference, duration=0.3, theta_hat0=s.theta_hat0, native=native,
+                       noise_std=s.noise_std, rng=s.rng, sensors=s.sensors))
+    py, nat = out
+    assert nat.meta["native"] and not py.meta["native"]
+    for f in ("x", "u", "s", "theta_hat", "V"):
+        np.testing.assert_array_equal(getattr(nat, f), getattr(py, f), err_msg=f)
+    assert np.all(np.isfinite(py.V)) and np.abs(py.theta_hat[-1] - py.theta_hat[0]).max() > 0
+
+
+def test_a_per_parameter_gain_table_reaches_the_law_and_v_is_logged(on_path):
+    """law.gamma = {d = …, b = …, c = …} of a 1-DOF plugin: laid out in θ order in its params, its V (declared)
+    logged, non-increasing over the ideal run's steps to within the integration error, native = Python."""
+    from adaptive_mj import run
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR, law_swap, load
+
+    over = [law_swap("gtab"), "law.gamma={d=0.0025, b=0.1, c=0.05}", "simulation.duration=2"]
+    out = []
+    for native in (False, True):
+        s = build(load(SCENARIOS_DIR / "heave_tracking.toml", overrides=over))
+        np.testing.assert_array_equal(s.law.params, [5.0, 200.0, 0.0025, 0.1, 0.05])
+        np.testing.assert_array_equal(s.law.shared.gamma, [0.0025, 0.1, 0.05])  # Γ of the shared leakage
+        out.append(run(s.plant, s.law, s.reference, duration=2.0, theta_hat0=s.theta_hat0, native=native))
+    assert out[1].meta["native"] and not out[0].meta["native"]
+    for f in ("x", "u", "theta_hat", "V"):
+        np.testing.assert_array_equal(getattr(out[0], f), getattr(out[1], f), err_msg=f)
+    V = out[1].V
+    assert np.all(np.isfinite(V)) and np.max(np.diff(V)) <= 1e-6 * V[0]
+    with pytest.raises(Exception, match=r"law\.gamma must have the keys d, b, c in that order, got d, c"):
+        build(load(SCENARIOS_DIR / "heave_tracking.toml", overrides=[law_swap("gtab"), "law.gamma={d=1.0, c=1.0}"]))
+    with pytest.raises(Exception, match=r"law\.gamma\.b must be > 0\.0, got -1"):
+        load(SCENARIOS_DIR / "heave_tracking.toml", overrides=[law_swap("gtab"), "law.gamma={d=1.0, b=-1, c=1.0}"])
+
+
+def test_law_swap_on_a_bundled_scenario_and_in_a_sweep(site, tmp_path):
+    """`run heave_tracking --law gtab` (the law's defaults, the scenario's initial estimates kept) and one sweep
+    over law.kind = sliding_adaptive, gtab, each law with its own scoped keys."""
+    r = cli(site, "run", "heave_tracking", "--law", "gtab", "--set", "simulation.duration=2", "--json")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["metrics"]["rms_tracking_error_tail"] < 0.05
+    out = tmp_path / "sweep"
+    r = cli(site, "sweep", "heave_tracking", "--grid", "law.kind=sliding_adaptive,gtab", "--set",
+            "simulation.duration=2", "--set", "law.gtab.k=150", "--jobs", "2", "-o", str(out))
+    rows = list(csv_rows(out / "sweep.csv"))
+    assert [r["law.kind"] for r in rows] == ["sliding_adaptive", "gtab"], r.stderr
+    from adaptive_mj.log.replay import read_log
+
+    logs = sorted((out / "logs").glob("*.mcap"))
+    overrides = [read_log(p).header["overrides"] for p in logs]
+    assert any("law=gtab" in o and "law.gtab.k=150" in o for o in overrides), overrides
+    assert all(r_["rms_tracking_error"] not in ("", "nan") for r_ in rows)
+
+
+def test_a_law_offered_to_a_plant_it_does_not_serve_is_refused_in_one_line(site):
+    r = cli(site, "run", "ur5e_drift", "--law", "emod", "--set", "simulation.duration=0.1")
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1, r.stderr
+    assert ("law.kind = 'emod' serves the 1-DOF model form" in err[0]
+            and "plant.kind = 'manipulator' offers the multi-joint rigid-body form" in err[0]
+            and "slotine_li" in err[0] and "robust_sl" in err[0]), err[0]
+    r = cli(site, "run", "heave_tracking", "--law", "robust_sl", "--set", "simulation.duration=0.1")
+    assert r.returncode == 2 and "laws that serve it: sliding_adaptive, fixed_nominal, robust_sliding" in r.stderr
+    r = cli(site, "list", "--laws")
+    line = next(ln for ln in r.stdout.splitlines() if ln.startswith("robust_sl "))
+    assert "serves rigid_body" in line and "gamma[θ] = 0.2" in line and "kd [N m s/rad] = 50" in line

@@ -144,3 +144,16 @@ def clip_into(theta, lower, upper):
             theta[i] = lower[i]
         elif theta[i] > upper[i]:
             theta[i] = upper[i]
+
+
+def plugin_rate(rate, theta, s_abs, signal, adapt, dz_width, sigma, e_mod, theta0, gamma, lower, upper):
+    """What every law plugin's estimate rate goes through after the plugin wrote it (in place; plain loops,
+    compiled with the plugin): zero when the law does not adapt (a baseline) or the dead-zone is closed
+    (dead_zone_open(signal, dz_width); signal |s| or ‖s‖, or |ỹ| / ‖q̃‖), then the leakage and the
+    projection's tangent cone (modify_rate with |s| = s_abs and Γ = gamma). With no dead-zone, no leakage
+    and no box this changes nothing."""
+    if not adapt or not dead_zone_open(signal, dz_width):
+        for i in range(rate.shape[0]):
+            rate[i] = 0.0
+    if adapt:
+        modify_rate(rate, theta, s_abs, sigma, e_mod, theta0, gamma, lower, upper)

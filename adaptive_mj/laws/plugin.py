@@ -1,28 +1,49 @@
 """Users' own laws, installed as packages: the entry-point group ``adaptive_mj.laws``.
 
-A package registers a ``LawPlugin`` under a name, in its pyproject.toml:
+A package registers a ``LawPlugin`` (a law over the 1-DOF model form) or a ``JointLawPlugin`` (a law over
+a multi-joint rigid-body tree) under a name, in its pyproject.toml:
 
     [project.entry-points."adaptive_mj.laws"]
     my_emod = "my_emod_law:LAW"
 
-and a scenario names it: ``law.kind = "my_emod"``. Nothing in a scenario imports code:
-the law must be installed (docs/ADDING_A_LAW.md walks through a complete package).
+and a scenario names it: ``law.kind = "my_emod"`` (or ``adaptive-mj run SCENARIO --law my_emod`` on any
+scenario whose plant offers the form the law serves: adaptive_mj.laws.kinds). Nothing in a scenario imports
+code: the law must be installed (docs/ADDING_A_LAW.md walks through two complete packages).
 
-The law is one plain function over arrays and floats, the shape of the built-in
-``laws.sliding.sliding_law``, so that it can be compiled with numba into MuJoCo's
-native control callback (adaptive_mj.sim.native) and run at built-in speed:
+Each law is plain functions over arrays and floats, so that it can be compiled with numba into MuJoCo's
+native control callback (adaptive_mj.sim.native, .native_manipulator) and run at built-in speed:
+
+1-DOF (``LawPlugin``, the shape of the built-in ``laws.sliding.sliding_law``):
 
     law(x, ref, theta, phi, f, h, params, rate) -> (u, s)
 
       x (n,) measured state [y, y', ...]; ref (n+1,) [y_d, ..., y_d^(n)];
       theta (n_theta,) estimates θ̂ = [d̂, p̂...] (the plant's ModelForm order);
       phi (n_p,), f, h: the plant's known functions at x (d y^(n) = f + φᵀp + h u);
-      params (n_params,): the law's declared keys, in declaration order [their units];
+      params (n_params,): the law's declared keys, in declaration order [their units]; a per-parameter key
+        (Param(per_parameter=True)) takes n_theta slots, in θ order;
       rate (n_theta,): write θ̂' here; return the control u [N or N m] and s.
 
-Its keys are declared with types and ranges (``Param``) and validated like built-in
-keys. The log records the plugin's name, distribution, version and a hash of its
-source; ``replay --verify`` says when the installed plugin differs or is missing.
+Multi-joint (``JointLawPlugin``), over the plant's regressor Y(q, v, w, a) π + τ_known = M(q) a + C(q, v) w
++ g(q) + D v, evaluated at the point the law asks for, on the live MuJoCo kinematics of the measured q:
+
+    point(x, ref, params, v, w, a)                       write v, w, a (m,) [rad/s, rad/s, rad/s²]
+    law(x, ref, theta, Y, tau_known, params, u, s, rate) write u (m,) [N m], s (m,), rate (n_theta,)
+
+      x (2, m) measured [q; q̇]; ref (3, m) [q_d; q̇_d; q̈_d]; theta (n_theta,) π̂ (the plant's parameter
+      order, `list --plants` / the log's names); Y (m, n_theta), tau_known (m,) at (q, v, w, a).
+
+Either may declare ``lyapunov(s, theta_hat, theta, params, M) -> V (N,)`` (plain numpy, vectorised over N
+rows: s (N,) or (N, m), theta_hat and theta (N, n_theta), M (N, m, m) the plant's inertia at each row or
+None on a 1-DOF plant); without it V is logged as NaN. ``gain`` names a per-parameter key that is Γ (the
+adaptation stiffness, θ̂' = Γ⁻¹ ...), which the shared modifications divide by.
+
+What every plugin gets, as the built-in laws do (adaptive_mj.laws.common.plugin_rate, after the plugin wrote
+its rate, on both paths): law.dead_zone (on |s| / ‖s‖ or the tracking error), law.sigma,
+law.e_modification, law.theta0 and law.projection, unless the plugin declares a key of that name itself.
+Its keys are declared with types and ranges (``Param``) and validated like built-in keys. The log records
+the plugin's name, distribution, version and a hash of its source; ``replay --verify`` says when the
+installed plugin differs or is missing.
 """
 from __future__ import annotations
 
@@ -33,8 +54,9 @@ from typing import Any, Callable
 import numpy as np
 
 from adaptive_mj.form import ModelForm
-from adaptive_mj.laws.common import LawStep
-from adaptive_mj.laws.protocol import Law
+from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
+                                     plugin_rate)
+from adaptive_mj.laws.protocol import Box, Law
 from adaptive_mj.plugins import Installed, discover
 
 ENTRY_POINT_GROUP = "adaptive_mj.laws"
@@ -43,7 +65,9 @@ ENTRY_POINT_GROUP = "adaptive_mj.laws"
 @dataclass(frozen=True)
 class Param:
     """A scenario key of a plugin law: law.<name> = number. default None: required;
-    gt / ge: the range (exclusive / inclusive lower bound); unit and doc for `list --laws`."""
+    gt / ge: the range (exclusive / inclusive lower bound); unit and doc for `list --laws`.
+    per_parameter: one number per estimated parameter, given as a number (the same for all) or a table
+    {parameter name = number} in the plant's parameter order; it takes n_theta slots of params."""
 
     name: str
     default: float | None = None
@@ -51,17 +75,63 @@ class Param:
     ge: float | None = None
     unit: str = ""
     doc: str = ""
+    per_parameter: bool = False
+
+    def describe(self) -> str:
+        """`name [unit] = default` as `list --laws` shows it (`name[θ]` for a per-parameter key)."""
+        text = self.name + ("[θ]" if self.per_parameter else "") + (f" [{self.unit}]" if self.unit else "")
+        return text + ("" if self.default is None else f" = {self.default:g}")
 
 
 @dataclass(frozen=True)
 class LawPlugin:
-    """What a package registers: its law function (module docstring), its keys, and whether
-    it adapts (a fixed-parameter law: θ̂ stays at law.initial_estimates / law.nominal)."""
+    """What a package registers for a 1-DOF law: its law function (module docstring), its keys, whether it
+    adapts (a fixed-parameter law: θ̂ stays at law.initial_estimates / law.nominal), its Lyapunov function
+    (or None: V logged as NaN), the per-parameter key that is Γ (or None: Γ = 1 for the shared leakage), and
+    the plant forms it serves (adaptive_mj.laws.kinds.Form values)."""
 
     law: Callable
     params: tuple[Param, ...] = ()
     adapts: bool = True
     doc: str = ""
+    lyapunov: Callable | None = None
+    gain: str | None = None
+    forms: tuple[str, ...] = ("model",)
+
+    def __post_init__(self):
+        names = [p.name for p in self.params]
+        if self.gain is not None and not any(p.name == self.gain and p.per_parameter for p in self.params):
+            raise ValueError(f"gain {self.gain!r} must name a per-parameter Param (params: {', '.join(names)})")
+        if len(set(names)) != len(names):
+            raise ValueError(f"params declares a key twice: {', '.join(names)}")
+
+    def describe_keys(self) -> str:
+        """Its keys as `list --laws` shows them."""
+        return ", ".join(p.describe() for p in self.params)
+
+    def layout(self, n_theta: int) -> dict[str, slice]:
+        """Where each key lies in the params array the law function takes: {name: slice} (a per-parameter
+        key takes n_theta slots, in θ order)."""
+        out, at = {}, 0
+        for p in self.params:
+            width = n_theta if p.per_parameter else 1
+            out[p.name] = slice(at, at + width)
+            at += width
+        return out
+
+
+@dataclass(frozen=True)
+class JointLawPlugin(LawPlugin):
+    """What a package registers for a multi-joint law: `point` chooses where the plant's regressor is
+    evaluated, `law` computes the torques, s and the rate from it (module docstring)."""
+
+    point: Callable | None = None
+    forms: tuple[str, ...] = ("rigid_body",)
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.point is None:
+            raise ValueError("a JointLawPlugin needs point(x, ref, params, v, w, a): where the regressor is evaluated")
 
 
 def installed() -> dict[str, Installed[LawPlugin]]:
@@ -69,41 +139,139 @@ def installed() -> dict[str, Installed[LawPlugin]]:
     return discover(ENTRY_POINT_GROUP, LawPlugin, "law", lambda p: p.law)
 
 
-class PluginLaw(Law):
+@dataclass(frozen=True)
+class Shared:
+    """The shared modifications a plugin's rate goes through (laws.common.plugin_rate): the dead-zone width
+    [unit of its signal] and whether its signal is s (else the tracking error), σ [1/s], ν, θ₀, the box
+    (lower, upper) and Γ (each (n_theta,))."""
+
+    dz_width: float
+    dz_on_s: bool
+    sigma: float
+    e_mod: float
+    theta0: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    gamma: np.ndarray
+
+    @classmethod
+    def of(cls, n_theta: int, *, gamma=None, dead_zone: DeadZone | None = None,
+           modification: Modification | None = None, theta_hat0=None) -> "Shared":
+        sigma, e_mod, theta0, lower, upper = (modification or NO_MODIFICATION).arrays(n_theta, theta_hat0)
+        g = np.ones(n_theta) if gamma is None else as_gamma(gamma, n_theta)
+        return cls(0.0 if dead_zone is None else float(dead_zone.width),
+                   dead_zone is None or dead_zone.on is DeadZoneOn.S, sigma, e_mod, theta0, lower, upper, g)
+
+
+class _PluginBase(Law):
+    """What the 1-DOF and the multi-joint plugin laws share: the plugin, its params, the shared
+    modifications, the Lyapunov hook and the native flag."""
+
+    installed: Installed[LawPlugin]
+    native = True  # set False to force the Python callback (simulation.python_callback)
+
+    def _setup(self, installed: Installed[LawPlugin], names, params: np.ndarray, shared: Shared | None,
+               modification: Modification | None):
+        self.installed = installed
+        self.plugin = installed.plugin
+        self.names = tuple(names)
+        self.params = np.ascontiguousarray(params, dtype=float)
+        self.adapt = bool(self.plugin.adapts)
+        self.shared = shared if shared is not None else Shared.of(len(self.names))
+        self.modification = modification or NO_MODIFICATION
+
+    @property
+    def bounds(self) -> Box | None:
+        """(lower, upper) of law.projection, or None."""
+        return self.modification.box(len(self.names)) if self.adapt else None
+
+    def _shared_rate(self, rate: np.ndarray, theta_hat: np.ndarray, s_abs: float, e_abs: float) -> None:
+        sh = self.shared
+        plugin_rate(rate, theta_hat, s_abs, s_abs if sh.dz_on_s else e_abs, self.adapt, sh.dz_width, sh.sigma,
+                    sh.e_mod, sh.theta0, sh.gamma, sh.lower, sh.upper)
+
+    def native_params(self) -> dict[str, Any]:
+        sh = self.shared
+        return {"plugin_params": self.params, "adapt": self.adapt, "dz_width": sh.dz_width, "dz_on_s": sh.dz_on_s,
+                "sigma": sh.sigma, "e_mod": sh.e_mod, "theta0": sh.theta0, "lower": sh.lower, "upper": sh.upper,
+                "gamma": sh.gamma}
+
+    def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
+        """The plugin's declared V (LawPlugin.lyapunov), or NaN when it declares none (the log's V says so)."""
+        fn = self.plugin.lyapunov
+        if fn is None:
+            return np.full(np.shape(s)[:1], np.nan)
+        return np.asarray(fn(np.asarray(s, dtype=float), np.asarray(theta_hat, dtype=float),
+                             np.asarray(theta, dtype=float), self.params, M), dtype=float)
+
+
+class PluginLaw(_PluginBase):
     """A plugin's law on a 1-DOF plant, with the loop's law interface (laws.protocol.Law);
     ``native_params`` hands the function and its parameters to the native callback
     (adaptive_mj.sim.native)."""
 
-    installed: Installed[LawPlugin]
-
-    def __init__(self, installed: Installed[LawPlugin], form: ModelForm, params: np.ndarray):
-        self.installed = installed
-        self.plugin = installed.plugin
+    def __init__(self, installed: Installed[LawPlugin], form: ModelForm, params: np.ndarray, *,
+                 shared: Shared | None = None, modification: Modification | None = None):
+        self._setup(installed, form.names, params, shared, modification)
         self.form = form
         self.order = form.order
-        self.names = form.names
-        self.params = np.ascontiguousarray(params, dtype=float)
-        self.adapt = bool(self.plugin.adapts)
-
-    native = True  # set False to force the Python callback (simulation.python_callback)
 
     def native_params(self) -> dict[str, Any]:
-        """What adaptive_mj.sim.native needs: the function and its parameters (the sliding-law
-        slots are neutral: no projection, no leakage)."""
-        n = len(self.names)
-        return {"plugin_law": self.plugin.law, "plugin_params": self.params, "coeffs": np.zeros(self.order),
-                "k": 0.0, "gamma": np.ones(n), "adapt": self.adapt, "dz_width": 0.0, "dz_on_s": True, "K": 0.0,
-                "boundary_layer": 1.0, "sigma": 0.0, "e_mod": 0.0, "theta0": np.zeros(n),
-                "lower": np.full(n, -np.inf), "upper": np.full(n, np.inf)}
+        """What adaptive_mj.sim.native needs: the function, its parameters and the shared modifications (the
+        sliding-law slots it does not read are neutral)."""
+        return {**super().native_params(), "plugin_law": self.plugin.law, "coeffs": np.zeros(self.order),
+                "k": 0.0, "K": 0.0, "boundary_layer": 1.0}
 
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
         form = self.form
         rate = np.zeros(len(self.names))
         u, s = self.plugin.law(x, ref, theta_hat, form.phi(x), form.f(x), form.h(x), self.params, rate)
-        if not self.adapt:
-            rate[:] = 0.0
+        self._shared_rate(rate, theta_hat, abs(float(s)), abs(float(ref[0] - x[0])))
         return LawStep(float(u), rate, float(s), math.nan)
 
-    def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
-        """A plugin declares no Lyapunov function: NaN (the log's V column says so)."""
-        return np.full(np.shape(s), np.nan)
+
+class JointPluginLaw(_PluginBase):
+    """A JointLawPlugin's law on a plant of m joints (adaptive_mj.plants.manipulator), with the loop's law
+    interface; regressor(v, w, a) -> (Y (m, n_theta), τ_known (m,)) is the plant's, at its current q.
+    ``native_params`` hands the functions and parameters to adaptive_mj.sim.native_manipulator."""
+
+    order = 2
+
+    def __init__(self, installed: Installed[LawPlugin], regressor, names, m: int, params: np.ndarray, *,
+                 shared: Shared | None = None, modification: Modification | None = None):
+        self._setup(installed, names, params, shared, modification)
+        self.regressor = regressor
+        self.m = int(m)
+
+    def native_params(self) -> dict[str, Any]:
+        plugin = self.plugin
+        assert isinstance(plugin, JointLawPlugin)
+        return {**super().native_params(), "plugin_law": plugin.law, "plugin_point": plugin.point}
+
+    def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
+        plugin, m = self.plugin, self.m
+        assert isinstance(plugin, JointLawPlugin) and plugin.point is not None
+        v, w, a = np.zeros(m), np.zeros(m), np.zeros(m)
+        plugin.point(x, ref, self.params, v, w, a)
+        Y, tau_known = self.regressor(v, w, a)
+        u, s, rate = np.zeros(m), np.zeros(m), np.zeros(len(self.names))
+        plugin.law(x, ref, theta_hat, Y, tau_known, self.params, u, s, rate)
+        self._shared_rate(rate, theta_hat, joint_norm(s), tracking_error_norm(x, ref))
+        return LawStep(u, rate, s, a)
+
+
+def joint_norm(v) -> float:
+    """‖v‖ as a plain sum of squares (the compiled callback's order of operations, not np.linalg.norm's)."""
+    acc = 0.0
+    for j in range(v.shape[0]):
+        acc += v[j] * v[j]
+    return math.sqrt(acc)
+
+
+def tracking_error_norm(x, ref) -> float:
+    """‖q̃‖ = ‖q_d − q‖ of x (2, m) and ref (3, m), as a plain sum of squares (compiled the same way)."""
+    acc = 0.0
+    for j in range(x.shape[1]):
+        e = ref[0, j] - x[0, j]
+        acc += e * e
+    return math.sqrt(acc)

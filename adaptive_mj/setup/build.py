@@ -251,14 +251,32 @@ def _saturation(scn: Scenario, plant):
 
 
 def _plugin(scn: Scenario, plant, modification):
-    """law.kind = an installed law plugin (adaptive_mj.laws.plugin), with its declared keys."""
-    from adaptive_mj.laws.plugin import PluginLaw, installed
+    """law.kind = an installed law plugin (adaptive_mj.laws.plugin): its declared keys laid out as its params
+    array (a per-parameter key: n_theta numbers in the plant's parameter order), the shared modifications,
+    and the law over the plant's form (a JointLawPlugin over an arm's regressor)."""
+    from adaptive_mj.laws.plugin import JointLawPlugin, JointPluginLaw, PluginLaw, Shared, installed
 
     inst = installed().get(scn.law.kind)
     if inst is None:
         raise ScenarioError(f"{scn.source}: law.kind {scn.law.kind!r} is not an installed law plugin")
-    params = [scn.law.plugin_params[p.name] for p in inst.plugin.params]
-    return PluginLaw(inst, plant.form, np.array(params, dtype=float))
+    plugin = inst.plugin
+    names = tuple(plant.names) if has_joints(plant) else plant.form.names
+    values: list[float] = []
+    for p in plugin.params:
+        v = scn.law.plugin_params[p.name]
+        if not p.per_parameter:
+            values.append(float(v))
+        elif isinstance(v, dict):
+            values += list(_named(scn, f"law.{p.name}", v, names))
+        else:
+            values += [float(v)] * len(names)
+    params = np.array(values, dtype=float)
+    gamma = params[plugin.layout(len(names))[plugin.gain]] if plugin.gain is not None else None
+    shared = Shared.of(len(names), gamma=gamma, dead_zone=_dead_zone(scn, plant), modification=modification,
+                       theta_hat0=modification.theta0 if modification is not None else None)
+    if isinstance(plugin, JointLawPlugin):
+        return JointPluginLaw(inst, plant.regressor, names, plant.m, params, shared=shared, modification=modification)
+    return PluginLaw(inst, plant.form, params, shared=shared, modification=modification)
 
 
 def _mrac(scn: Scenario, plant, modification):

@@ -215,7 +215,7 @@ class LawSpec:
     kd: float | dict[str, float] | None = None  # manipulator laws: K_D, scalar or per joint
     lam_joints: dict[str, float] | None = None  # manipulator laws: Λ per joint (else lam for all)
     robust: RobustSpec = RobustSpec()  # σ/e-modification, projection, composite adaptation
-    plugin_params: dict[str, float] | None = None  # a law plugin's declared keys (law.kind = its name)
+    plugin_params: dict[str, Any] | None = None  # a law plugin's declared keys (law.kind = its name)
     saturation: str = "ignore"  # manipulator law: "freeze" = saturation-aware adaptation
     mrac: "MracSpec | None" = None  # law.kind = "mrac" only
 
@@ -498,8 +498,10 @@ def _loads(text: str, *, where: str, base_dir: Path | None, default_name: str, o
         doc = copy.deepcopy(_parsed(text))
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{where}: TOML syntax error: {exc}") from None
-    for expr in overrides:
+    for expr in sorted(overrides, key=lambda e: not is_law_swap(e)):  # a swap first: the law.* keys go into it
         apply_override(doc, expr, where=where)
+    if any(e.strip().startswith("law.") for e in overrides):
+        _scoped_law_keys(doc)
     _model_from_command_line(doc, overrides, base_dir, where)
     if seed is not None:
         doc.setdefault("noise", {})
@@ -533,12 +535,68 @@ def parse_value(raw: str, *, what: str) -> Any:
                             "(expected a number, true/false, a string, an array or an inline table)") from None
 
 
+#: the [law] keys a law swap keeps: what the scenario knows of θ at the start (the plant's, not the law's)
+SWAP_KEEPS = ("initial_estimates", "nominal")
+
+
+def law_swap(kind: str) -> str:
+    """The override that swaps a scenario's law for `kind` (`run --law`, `sweep --grid law.kind=a,b`): the
+    whole [law] table replaced by {kind} (the law's own defaults), keeping SWAP_KEEPS, plus the law.* keys
+    given with --set (applied after it whatever their order; `law.<kind>.<key>` only when that law runs:
+    _scoped_law_keys). A swap to the law the scenario already names keeps its table. The log records it with
+    the other overrides."""
+    return f"law={kind}"
+
+
+def is_law_swap(expr: str) -> bool:
+    """Whether an override is a law swap (`law=NAME`, not `law={...}` or `law.key=...`)."""
+    key, _, raw = expr.partition("=")
+    return key.strip() == "law" and bool(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.-]*", raw.strip().strip("'\"")))
+
+
+#: [law] keys whose value may be a table (a sub-table of another name may be a law kind's scoped keys)
+_LAW_TABLES = ("gamma", "initial_estimates", "nominal", "theta0", "projection", "dead_zone", "composite", "lambda",
+               "kd")
+
+
+def _scoped_law_keys(doc: dict) -> None:
+    """`--set law.<kind>.<key>=v` (a sub-table of [law] named after a law kind): the keys of the law that runs,
+    merged into [law]; another law's scoped keys dropped. So one sweep over law.kind can give each law its own
+    gains (`--grid law.kind=sliding_adaptive,emod --set law.emod.gamma_d=0.0025`)."""
+    law = doc.get("law")
+    if not isinstance(law, dict):
+        return
+    candidates = [k for k, v in law.items() if isinstance(v, dict) and k not in _LAW_TABLES]
+    if not candidates:
+        return
+    from adaptive_mj.laws import kinds as law_kinds
+
+    names = set(law_kinds.BUILT_IN)
+    if any(k not in names for k in candidates):
+        from adaptive_mj.laws.plugin import installed
+
+        names |= set(installed())
+    running = law.get("kind")
+    for k in candidates:
+        if k in names:
+            scoped = law.pop(k)
+            if k == running:
+                law.update(scoped)
+
+
 def apply_override(doc: dict, expr: str, *, where: str) -> None:
-    """Apply ``section.key=value`` to the parsed document (before validation)."""
+    """Apply ``section.key=value`` to the parsed document (before validation); ``law=NAME`` swaps the law
+    (law_swap)."""
     what = f"--set {expr!r}"
     if "=" not in expr:
         raise ScenarioError(f"{what}: expected key=value, e.g. law.k=50")
     key, raw = (part.strip() for part in expr.split("=", 1))
+    if is_law_swap(expr):
+        old = doc.get("law") if isinstance(doc.get("law"), dict) else {}
+        kind = raw.strip("'\"")
+        if old.get("kind") != kind:  # a swap to the scenario's own law keeps its table
+            doc["law"] = {"kind": kind, **{k: old[k] for k in SWAP_KEEPS if k in old}}
+        return
     if not _KEY_RE.match(key):
         raise ScenarioError(f"{what}: key {key!r} must be a dotted path like law.gamma")
     value = parse_value(raw, what=what)
@@ -765,11 +823,18 @@ def _resolve_payload(name: str | None, base_dir: Path) -> tuple[str | None, tupl
 
 
 
-def _plugin_params(t, inst, section: str, kind: str) -> dict[str, float]:
+def _plugin_params(t, inst, section: str, kind: str) -> dict[str, float | dict[str, float]]:
     """A plugin's declared keys read from its table (section "plant" or "law"), each checked against
-    its declared range; a key without a default must be given."""
-    params = {}
+    its declared range; a key without a default must be given. A per-parameter key (Param.per_parameter)
+    is a number or a table {parameter = number}, each entry in range (its names are checked against the
+    plant's parameters when the law is built)."""
+    params: dict[str, float | dict[str, float]] = {}
     for p in inst.plugin.params:
+        if getattr(p, "per_parameter", False) and isinstance(t.data.get(p.name), dict):
+            sub = t.table(p.name)
+            params[p.name] = {name: sub.number(name, gt=p.gt, ge=p.ge) for name in sub.data}
+            sub.finish(tuple(sub.data))
+            continue
         value = t.number(p.name, p.default, gt=p.gt, ge=p.ge)
         if value is None:
             raise ScenarioError(f"{t.where}: {section}.{p.name} is required for {section}.kind = {kind!r} "
@@ -1072,23 +1137,26 @@ def _manipulator_law(t: _Table) -> LawSpec:
 
 
 def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
-    if plant.kind == "manipulator":
-        return _manipulator_law(t)
-    default_kind = "first_order_adaptive" if plant.kind == "first_order" else "sliding_adaptive"
+    """[law]: its kind looked up in the law-kind registry (adaptive_mj.laws.kinds: the built-in kinds and the
+    installed plugins), refused in one line when it serves none of the plant's forms, then its own keys."""
+    from adaptive_mj.laws import kinds as law_kinds
+
     raw_kind = t.data.get("kind")
-    if raw_kind == "mrac" or plant.kind == "linear":
-        return _mrac_law(t, plant, order)
-    if plant.kind == "wing_rock" and raw_kind not in ("sliding_adaptive", "fixed_nominal", "robust_sliding", None):
-        raise t.fail("kind", "'mrac', 'sliding_adaptive', 'fixed_nominal' or 'robust_sliding' for plant.kind = "
-                             "'wing_rock'", raw_kind)
-    plugins = {}
-    if isinstance(raw_kind, str) and raw_kind not in LAW_KINDS:
+    plugins: dict = {}
+    if isinstance(raw_kind, str) and raw_kind not in law_kinds.BUILT_IN:
         from adaptive_mj.laws.plugin import installed
 
         plugins = installed()
-        if raw_kind in plugins:
-            return _plugin_law(t, raw_kind, plugins[raw_kind], plant, order)
-    kind = t.string("kind", default_kind, choices=LAW_KINDS + tuple(sorted(plugins)))
+    known = {**law_kinds.BUILT_IN, **{n: law_kinds.plugin_kind(n, i) for n, i in sorted(plugins.items())}}
+    kind = t.string("kind", law_kinds.default_law(plant.kind), choices=tuple(known))
+    if law_kinds.refusal(known[kind], plant.kind, known) is not None:  # the alternatives named with the plugins
+        raise ScenarioError(f"{t.where}: {law_kinds.refusal(known[kind], plant.kind, law_kinds.all_kinds())}")
+    if kind in plugins:
+        return _plugin_law(t, kind, plugins[kind], plant, order)
+    if law_kinds.Form.RIGID_BODY in known[kind].forms:
+        return _manipulator_law(t)
+    if kind == "mrac":
+        return _mrac_law(t, plant, order)
     if (kind == "first_order_adaptive") != (plant.kind == "first_order"):
         raise t.fail("kind", "'first_order_adaptive' exactly when plant.kind = 'first_order'", kind)
     law_order = t.integer("order", order, ge=1)
@@ -1123,7 +1191,8 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
 
 def _plugin_law(t: _Table, kind: str, inst, plant: PlantSpec, order: int) -> LawSpec:
     """law.kind = an installed plugin: its declared keys (adaptive_mj.laws.plugin.Param), checked
-    like built-in ones, plus initial_estimates and nominal."""
+    like built-in ones, plus initial_estimates and nominal, and the shared modifications (law.dead_zone,
+    law.sigma, law.e_modification, law.theta0, law.projection) where the plugin declares no key of that name."""
     t.string("kind")
     law_order = t.integer("order", order, ge=1)
     if law_order != order:
@@ -1131,9 +1200,16 @@ def _plugin_law(t: _Table, kind: str, inst, plant: PlantSpec, order: int) -> Law
     params = _plugin_params(t, inst, "law", kind)
     initial = _estimate_table(t, "initial_estimates")
     nominal = _estimate_table(t, "nominal")
+    own = set(params)
+    dead_zone = _dead_zone(t) if "dead_zone" not in own else None
+    robust = RobustSpec()
+    if not own & {"sigma", "e_modification", "theta0", "projection"}:
+        presets = ("physical",) if plant.kind == "manipulator" else ()
+        robust = _robust(t, kind, adaptive=bool(inst.plugin.adapts), composite=False, presets=presets)
     t.finish()
-    return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=None, dead_zone=None,
-                   initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None, plugin_params=params)
+    return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=None, dead_zone=dead_zone,
+                   initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None, plugin_params=params,
+                   robust=robust)
 
 
 ROBUST_KEYS = ("sigma", "e_modification", "theta0", "projection", "composite")

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from adaptive_mj.laws.common import plugin_rate
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.laws.sliding import sliding_law_values
 from adaptive_mj.plants.protocol import Plant
@@ -167,12 +168,14 @@ called here, as globals, so no function is passed as a value: numba could not ca
 
 
 def _plugin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rate):
-    """A law plugin's function (laws.plugin: law(x, ref, theta, phi, f, h, params, rate) -> (u, s));
-    the baselines' 'estimates hold still' is applied here."""
+    """A law plugin's function (laws.plugin: law(x, ref, theta, phi, f, h, params, rate) -> (u, s)), then the
+    shared modifications every plugin gets (laws.common.plugin_rate: a baseline's rate is zero, the
+    dead-zone, the leakage and the projection), as PluginLaw does in Python."""
     u, s = user_law(x, r, th, phi_fn(x), f_fn(x), h_fn(x), params, rate)  # noqa: F821 (injected)
-    if ctx.adapt == 0:
-        for j in range(rate.shape[0]):
-            rate[j] = 0.0
+    s_abs = abs(s)
+    signal = s_abs if ctx.dz_on_s != 0 else abs(r[0] - x[0])
+    plugin_rate(rate, th, s_abs, signal, ctx.adapt != 0, ctx.dz_width, ctx.sigma, ctx.e_mod, theta0, gamma,
+                lower, upper)
     return float(u), float(s)
 
 
@@ -192,7 +195,7 @@ def compiled(form, plugin=None):
 
     offsets = mujoco_offsets()
     off = (offsets["userdata"], offsets["qpos"], offsets["qvel"], offsets["ctrl"])
-    key = source_key(*fns, _callback_factory, _builtin_law, _plugin_law, sliding_law_values,
+    key = source_key(*fns, _callback_factory, _builtin_law, _plugin_law, sliding_law_values, plugin_rate,
                      stage_code.stage_estimate, context_address, extra=(off, numba.__version__))
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
     inline = inlined(numba)

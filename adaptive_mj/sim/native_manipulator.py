@@ -40,6 +40,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from adaptive_mj.laws.common import plugin_rate
+from adaptive_mj.laws.plugin import joint_norm, tracking_error_norm
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.numba_util import address_of, jit_tree, pointer
 from adaptive_mj.plants.protocol import Plant
@@ -65,6 +67,10 @@ if TYPE_CHECKING:
     regressor: Any
     ref_terms: Any
     output: Any
+    law_point: Any
+    law_output: Any
+    user_point: Any
+    user_law: Any
     stage_estimate: Any
     accumulate_rate: Any
     advance_estimates: Any
@@ -105,6 +111,8 @@ CONTEXT = np.dtype([
     # records (one row per physics step)
     ("rec_t", _i8), ("rec_x", _i8), ("rec_u", _i8), ("rec_s", _i8), ("rec_ref", _i8), ("rec_theta", _i8),
     ("nM", _i8), ("rec_M", _i8),  # MuJoCo's sparse M(q) at each step's start (mjData.M), for V
+    # a multi-joint law plugin (laws.plugin.JointLawPlugin): its point's v and its params (nparams,)
+    ("vpt", _i8), ("params", _i8), ("nparams", _i8),
 ])
 
 MODE_PD_GRAVITY = 2  # laws.slotine_li.Mode.PD_GRAVITY (the regressor at v = w = a = 0)
@@ -455,7 +463,7 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
           ctx.step == 0, ctx.alpha, ctx.sense_period, carray(fptr(ctx.q_prev), nv),  # noqa: F821 (injected)
           carray(fptr(ctx.v_est), nv), x)  # noqa: F821 (injected)
     stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
-    ref_terms(x, r, carray(fptr(ctx.lam), nv), s, qd_r, qdd_r)  # noqa: F821 (injected)
+    v, w, a = law_point(ctx, x, r, s, qd_r, qdd_r)  # noqa: F821 (injected: where the regressor is evaluated)
     Y_std, tau_known = carray(fptr(ctx.y_std), (nv, nstd)), carray(fptr(ctx.tau_known), nv)  # noqa: F821 (injected)
     cdof, xpos = carray(fptr(pointer_at(base, off_cdof)), (nv, 6)), carray(fptr(pointer_at(base, off_xpos)), (nb, 3))  # noqa: F821,E501 (injected globals; one carray per line)
     xmat, subcom = carray(fptr(pointer_at(base, off_xmat)), (nb, 9)), carray(fptr(pointer_at(base, off_subcom)), (nb, 3))  # noqa: F821,E501 (injected globals; one carray per line)
@@ -468,13 +476,8 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
     col_arm, col_damp = carray(iptr(ctx.col_arm), nv), carray(iptr(ctx.col_damp), nv)  # noqa: F821 (injected)
     col_coul, eps = carray(iptr(ctx.col_coul), nv), ctx.coulomb_eps  # noqa: F821 (injected)
     scratch, need = carray(fptr(ctx.scratch), 18 * nb), carray(iptr(ctx.need), nstd)  # noqa: F821 (injected)
-    if ctx.mode_law == MODE_PD_GRAVITY:
-        zero = carray(fptr(ctx.zero), nv)  # noqa: F821 (injected)
-        regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, col_coul, arm, damp, eps,  # noqa: F821,E501 (injected)
-                  cdof, xpos, xmat, subcom, cinert, gravity, zero, zero, zero, Y_std, tau_known, scratch, need)
-    else:
-        regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, col_coul, arm, damp, eps,  # noqa: F821,E501 (injected)
-                  cdof, xpos, xmat, subcom, cinert, gravity, x[1], qd_r, qdd_r, Y_std, tau_known, scratch, need)
+    regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, col_coul, arm, damp, eps,  # noqa: F821,E501 (injected)
+              cdof, xpos, xmat, subcom, cinert, gravity, v, w, a, Y_std, tau_known, scratch, need)
     if ctx.has_base != 0:  # Y = Y_std B, B stored by columns as (pointer, row index, value)
         Y = carray(fptr(ctx.y), (nv, nth))  # noqa: F821 (injected)
         bptr, bidx = carray(iptr(ctx.bptr), nth + 1), carray(iptr(ctx.bidx), 1 << 30)  # noqa: F821 (injected)
@@ -487,17 +490,8 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
                 Y[j, c] = acc
     else:
         Y = Y_std
-    e_norm = 0.0
-    if ctx.dz_on_s == 0:
-        for j in range(nv):
-            e = r[0, j] - x[0, j]
-            e_norm += e * e
-        e_norm = np.sqrt(e_norm)
     u = carray(fptr(ctx.u), nv)  # noqa: F821 (injected)
-    output(Y, tau_known, th, s, carray(fptr(ctx.kd), nv), carray(fptr(ctx.gamma), nth), ctx.adapt != 0,  # noqa: F821 (injected)
-           ctx.dz_width, ctx.dz_on_s != 0, e_norm, ctx.sigma, ctx.e_mod, carray(fptr(ctx.theta0), nth),  # noqa: F821 (injected)
-           lower, upper, carray(fptr(ctx.sat_lo), nv), carray(fptr(ctx.sat_hi), nv), ctx.freeze != 0,  # noqa: F821
-           u, rate)
+    law_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper)  # noqa: F821 (injected)
     lo, hi = carray(fptr(ctx.lo), nv), carray(fptr(ctx.hi), nv)  # noqa: F821 (injected)
     u_hold, s_hold = carray(fptr(ctx.u_hold), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
     for j in range(nv):
@@ -510,10 +504,60 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
         s_hold[j] = s[j]
 
 
-def compiled():
-    """The control callback (a numba cfunc): in memory once per process, on disk across processes."""
-    if "callback" in _compiled:
-        return _compiled["callback"]
+def _builtin_point(ctx, x, r, s, qd_r, qdd_r):
+    """Slotine–Li's point: s, q̇_r, q̈_r (reference_terms) and the regressor at (q̇, q̇_r, q̈_r); PD + gravity's at
+    v = w = a = 0. Returns (v, w, a)."""
+    nv = ctx.nv
+    ref_terms(x, r, carray(fptr(ctx.lam), nv), s, qd_r, qdd_r)  # noqa: F821 (injected)
+    if ctx.mode_law == MODE_PD_GRAVITY:
+        zero = carray(fptr(ctx.zero), nv)  # noqa: F821 (injected)
+        return zero, zero, zero
+    return x[1], qd_r, qdd_r
+
+
+def _builtin_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper):
+    """slotine_li_output with the run's gains (τ unclamped into u, the rate into rate)."""
+    nv, nth = ctx.nv, ctx.nth
+    e_norm = 0.0
+    if ctx.dz_on_s == 0:
+        for j in range(nv):
+            e = r[0, j] - x[0, j]
+            e_norm += e * e
+        e_norm = np.sqrt(e_norm)
+    output(Y, tau_known, th, s, carray(fptr(ctx.kd), nv), carray(fptr(ctx.gamma), nth), ctx.adapt != 0,  # noqa: F821 (injected)
+           ctx.dz_width, ctx.dz_on_s != 0, e_norm, ctx.sigma, ctx.e_mod, carray(fptr(ctx.theta0), nth),  # noqa: F821 (injected)
+           lower, upper, carray(fptr(ctx.sat_lo), nv), carray(fptr(ctx.sat_hi), nv), ctx.freeze != 0,  # noqa: F821
+           u, rate)
+
+
+def _plugin_point(ctx, x, r, s, qd_r, qdd_r):
+    """A JointLawPlugin's point(x, ref, params, v, w, a): where the regressor is evaluated. Returns (v, w, a)."""
+    v = carray(fptr(ctx.vpt), ctx.nv)  # noqa: F821 (injected)
+    user_point(x, r, carray(fptr(ctx.params), ctx.nparams), v, qd_r, qdd_r)  # noqa: F821 (injected)
+    return v, qd_r, qdd_r
+
+
+def _plugin_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper):
+    """A JointLawPlugin's law(x, ref, theta, Y, tau_known, params, u, s, rate), then the shared modifications
+    (laws.common.plugin_rate with ‖s‖ and ‖q̃‖), as laws.plugin.JointPluginLaw does in Python."""
+    nth = ctx.nth
+    user_law(x, r, th, Y, tau_known, carray(fptr(ctx.params), ctx.nparams), u, s, rate)  # noqa: F821 (injected)
+    s_abs = joint_norm(s)
+    signal = s_abs if ctx.dz_on_s != 0 else tracking_error_norm(x, r)
+    plugin_rate(rate, th, s_abs, signal, ctx.adapt != 0, ctx.dz_width, ctx.sigma, ctx.e_mod,
+                carray(fptr(ctx.theta0), nth), carray(fptr(ctx.gamma), nth), lower, upper)  # noqa: F821 (injected)
+
+
+def compiled(plugin=None):
+    """The control callback (a numba cfunc): in memory once per process, on disk across processes.
+
+    plugin: None for Slotine–Li and its baselines, or (point, law) of a JointLawPlugin (laws.plugin),
+    compiled the same way into the same step."""
+    fns = () if plugin is None else tuple(plugin)
+    mem_key = ("callback",) + tuple((fn.__code__, tuple(c.cell_contents for c in (fn.__closure__ or ())))
+                                    for fn in fns)
+    if mem_key in _compiled:
+        return _compiled[mem_key]
     import numba
     from numba import carray, types
 
@@ -523,7 +567,8 @@ def compiled():
     off = tuple(offsets[k] for k in ("userdata", "qpos", "qvel", "ctrl", "cdof", "xpos", "xmat", "subtree_com",
                                      "cinert", "model.dof_armature", "model.dof_damping", "model.gravity",
                                      "qfrc_applied", "M"))
-    key = source_key(_callback_factory, _law_stage, _regressor, reference_terms, slotine_li_output,
+    key = source_key(*fns, _callback_factory, _law_stage, _regressor, reference_terms, slotine_li_output,
+                     _builtin_point, _builtin_output, _plugin_point, _plugin_output, plugin_rate,
                      stage_code.stage_estimate, stage_code.sense, context_address, extra=(off, numba.__version__))
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
     common = {"carray": carray, "iptr": pointer(types.int64), "fptr": pointer(types.float64), "np": np,
@@ -533,16 +578,32 @@ def compiled():
     stage_fns: dict[str, Any] = {name: jit_tree(getattr(stage_code, name), inline, tag=tag) for name in
                                  ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step",
                                   "period_ends", "delay_slot", "sense")}
+    if plugin is None:
+        law_point = jit_tree(_builtin_point, inline, tag=tag, ref_terms=jit_tree(reference_terms, inline, tag=tag),
+                             **pointers, **common)
+        law_output = jit_tree(_builtin_output, inline, tag=tag,
+                              output=jit_tree(slotine_li_output, inline, tag=tag), **pointers, **common)
+    else:
+        point, law = plugin
+        law_point = jit_tree(_plugin_point, inline, tag=tag, user_point=jit_tree(point, inline, tag=tag),
+                             **pointers, **common)
+        law_output = jit_tree(_plugin_output, inline, tag=tag, user_law=jit_tree(law, inline, tag=tag),
+                              **pointers, **common)
     law_stage = jit_tree(_law_stage, numba.njit, tag=tag,
                          regressor=jit_tree(_regressor, numba.njit, tag=tag, inner=inline),
-                         ref_terms=jit_tree(reference_terms, inline, tag=tag),
-                         output=jit_tree(slotine_li_output, inline, tag=tag), **pointers, **common, **stage_fns)
+                         law_point=law_point, law_output=law_output, **pointers, **common, **stage_fns)
     g = {**_callback_factory.__globals__, **common, **stage_fns, "numba": numba, "types": types,
          "law_stage": law_stage, **pointers, "address": address_of(), "cptr": pointer(numba.from_dtype(CONTEXT)),
          "SAMPLED": stage_code.SAMPLED}
     factory = unique_factory(_callback_factory, g, key)
-    _compiled["callback"] = factory(off, key)
-    return _compiled["callback"]
+    _compiled[mem_key] = factory(off, key)
+    return _compiled[mem_key]
+
+
+def plugin_functions(law: Law):
+    """(point, law) of a multi-joint law plugin for `compiled`, or None for Slotine–Li and its baselines."""
+    p = law.native_params() if getattr(law, "installed", None) is not None else {}
+    return (p["plugin_point"], p["plugin_law"]) if "plugin_point" in p else None
 
 
 def supported(plant: Plant, law: Law) -> bool:
@@ -553,7 +614,9 @@ def supported(plant: Plant, law: Law) -> bool:
     from adaptive_mj.plants.manipulator import ManipulatorPlant
     from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS
 
-    if not (isinstance(plant, ManipulatorPlant) and isinstance(law, SlotineLiLaw) and law.native):
+    from adaptive_mj.laws.plugin import JointPluginLaw
+
+    if not (isinstance(plant, ManipulatorPlant) and isinstance(law, (SlotineLiLaw, JointPluginLaw)) and law.native):
         return False
     return (plant.stages in (1, 4) and law.regressor is plant.regressor
             and len(law.names) == len(plant.names) and int(law.m) == int(plant.m)
@@ -591,7 +654,7 @@ class NativeManipulatorController(ContextOwner):
             raise TypeError(f"the native manipulator callback drives a ManipulatorPlant, got a {type(plant).__name__}")
         self.plant, self.law, self.reference = plant, law, reference
         control = control if control is not None else stage_code.ControlTiming(period=plant.dt)
-        self.callback = compiled()
+        self.callback = compiled(plugin_functions(law))
         model, reg = plant.model, plant.regressor
         nv, nb = int(model.nv), int(model.nbody)
         nth, nstd = len(law.names), int(reg.n_standard)
@@ -610,7 +673,7 @@ class NativeManipulatorController(ContextOwner):
             "col_arm": i64(reg.col_arm), "col_damp": i64(reg.col_damp), "col_coul": i64(reg.col_coul),
             "qadr": i64(plant._qadr), "act": i64(plant._act), "gear": f64(plant._gear),
             "lo": f64(np.broadcast_to(lo, (nv,))), "hi": f64(np.broadcast_to(hi, (nv,))),
-            "lam": f64(p["lam"]), "kd": f64(p["kd"]), "gamma": f64(p["gamma"]),
+            "lam": f64(p.get("lam", np.zeros(nv))), "kd": f64(p.get("kd", np.zeros(nv))), "gamma": f64(p["gamma"]),
             "theta0": f64(p["theta0"]), "lower": f64(p["lower"]), "upper": f64(p["upper"]),
             "theta": self.theta, "rsum": np.zeros(nth), "prev": np.zeros(nth), "th": np.zeros(nth),
             "x": np.zeros((2, nv)), "s": np.zeros(nv), "qd_r": np.zeros(nv), "qdd_r": np.zeros(nv),
@@ -623,7 +686,8 @@ class NativeManipulatorController(ContextOwner):
             "rec_M": np.zeros((rows, max(model.nM, 1))),
             "quantum": f64(sensors.quantum if sensors is not None else np.zeros(nv)), "q_prev": np.zeros(nv),
             "v_est": np.zeros(nv), "q_true": np.zeros(nv), "dist": np.zeros((rows, nv)),
-            "sat_lo": f64(p["sat_lo"]), "sat_hi": f64(p["sat_hi"]),
+            "sat_lo": f64(p.get("sat_lo", np.full(nv, -np.inf))), "sat_hi": f64(p.get("sat_hi", np.full(nv, np.inf))),
+            "vpt": np.zeros(nv), "params": f64(p.get("plugin_params", np.zeros(1))),
         }
         B = reg.base_map
         if B is not None:
@@ -640,7 +704,8 @@ class NativeManipulatorController(ContextOwner):
             c[name] = addr(arr)
         c["nstages"], c["nv"], c["nbody"], c["nth"], c["nstd"] = self.nst, nv, nb, nth, nstd
         c["nq"], c["nu"], c["maxrows"], c["nM"] = model.nq, model.nu, rows, model.nM
-        c["mode_law"], c["adapt"] = int(p["mode"]), int(bool(p["adapt"]))
+        c["mode_law"], c["adapt"] = int(p.get("mode", 0)), int(bool(p["adapt"]))
+        c["nparams"] = len(buf["params"])
         c["dz_on_s"], c["has_base"] = int(bool(p["dz_on_s"])), int(B is not None)
         c["mode"], c["period_steps"], c["delay"], c["period"] = control.mode, control.steps, d, control.period
         c["h"], c["dz_width"], c["sigma"], c["e_mod"] = plant.dt, p["dz_width"], p["sigma"], p["e_mod"]
@@ -649,7 +714,7 @@ class NativeManipulatorController(ContextOwner):
         c["sense_period"] = control.period if control.sampled else plant.dt
         c["diff"] = int(sensors is not None and sensors.differentiated)
         c["alpha"] = sensors.alpha(c["sense_period"]) if sensors is not None else 0.0
-        c["freeze"], c["has_dist"] = int(bool(p["freeze"])), int(plant.joint_disturbance is not None)
+        c["freeze"], c["has_dist"] = int(bool(p.get("freeze", False))), int(plant.joint_disturbance is not None)
         self.context = ctx
         self.bind()
 

@@ -109,8 +109,11 @@ def sweep(scenario: str | Path, *, grid: GridSpec, seeds: int = 1, overrides: Se
           metrics: Sequence[str] = (), out: str | Path | None = None, resume: str | Path | None = None,
           logs: str = "all", backend: str | Backend = "local", jobs: int | None = None,
           address: str | None = None, ray_logs: str = "bytes", retries: int = 3,
-          engine: str = "process") -> Study:
+          engine: str = "process", law: str | None = None) -> Study:
     """Run `scenario` over a grid of keys × seeds 0..seeds-1 (`adaptive-mj sweep`).
+
+    law: swap the scenario's law for this kind (its defaults plus the law.* overrides; setup.scenario.law_swap),
+    as a grid axis law.kind = [a, b] does per point.
 
     grid: {key: [values]} or {key: "LO:HI:N"} or ["KEY=LO:HI:N", "KEY=V1,V2"] (a key dotted, law.k, or
     bare, payload_mass); overrides: --set expressions; metrics: the columns summarised and plotted
@@ -130,9 +133,20 @@ def sweep(scenario: str | Path, *, grid: GridSpec, seeds: int = 1, overrides: Se
         raise ScenarioError("--logs summary writes no logs, and --resume and --breaking-point read the runs' logs "
                             "back; leave out --logs summary")
     return run_sweep(scenario_path(scenario), grid=grid_expressions(grid), seeds=seeds,
-                     overrides=_strings("--set", overrides), metrics=_strings("--metric", metrics),
+                     overrides=with_law(law, _strings("--set", overrides)), metrics=_strings("--metric", metrics),
                      out=None if out is None else Path(out), resume=None if resume is None else Path(resume),
                      logs=logs, backend=backend_)
+
+
+def with_law(law: str | None, overrides: list[str]) -> list[str]:
+    """The overrides with `--law NAME` as its swap in front (setup.scenario.law_swap)."""
+    if law is None:
+        return overrides
+    from adaptive_mj.setup.scenario import law_swap
+
+    if not isinstance(law, str) or not law:
+        raise ScenarioError(f"--law must be a law kind's name (adaptive-mj list --laws), got {law!r}")
+    return [law_swap(law), *overrides]
 
 
 def breaking_point(scenario: str | Path, *, key: str, lo: float | None = None, hi: float | None = None,

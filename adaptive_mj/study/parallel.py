@@ -271,12 +271,12 @@ def _prewarm(jobs: Sequence[Job]) -> None:
         try:
             setup = build(sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed))
             if native.supported(setup.plant, setup.law):
-                native.compiled(setup.plant.form)
+                native.compiled(setup.plant.form, plugin=setup.law.native_params().get("plugin_law"))
             elif getattr(setup.plant, "joint_shape", ()):
                 from adaptive_mj.sim import native_manipulator
 
                 if native_manipulator.supported(setup.plant, setup.law):
-                    native_manipulator.compiled()
+                    native_manipulator.compiled(native_manipulator.plugin_functions(setup.law))
         except AdaptiveMJError:
             continue  # the worker reports it
 

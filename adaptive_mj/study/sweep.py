@@ -467,7 +467,10 @@ def _metrics(requested: Sequence[str]) -> list[str]:
 
 
 def _grid_overrides(point: dict[str, Any]) -> list[str]:
-    return [f"{key}={to_toml(value)}" for key, value in point.items()]
+    """A grid point as overrides; a law.kind axis swaps the whole law (scenario.law_swap: that law's
+    defaults plus the --set law.* keys), so laws with other keys can share a sweep."""
+    return [sc.law_swap(str(value)) if key == "law.kind" else f"{key}={to_toml(value)}"
+            for key, value in point.items()]
 
 
 def _validate_points(path: Path, overrides: Sequence[str], points: Sequence[dict[str, Any]]) -> None:

@@ -1,0 +1,62 @@
+"""The law-kind registry (adaptive_mj.laws.kinds): the forms each law serves and each plant offers, the
+scenario loader's refusal in one line, the docs' table generated from it, and the law swap (law=NAME)."""
+import re
+from pathlib import Path
+
+import pytest
+
+from adaptive_mj.errors import ScenarioError
+from adaptive_mj.laws import kinds
+from adaptive_mj.setup import scenario as sc
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_scenarios_md_shows_the_registry_table():
+    text = (REPO / "docs" / "SCENARIOS.md").read_text()
+    block = re.search(r"<!-- law-kinds -->\n(.*?)\n<!-- /law-kinds -->", text, re.S)
+    assert block is not None and block.group(1) == kinds.docs_table()
+
+
+def test_every_built_in_law_kind_is_documented_with_its_keys_table():
+    """Each built-in kind is named in docs/SCENARIOS.md's [law] tables (a kind added to the registry but not
+    to the docs fails here)."""
+    text = (REPO / "docs" / "SCENARIOS.md").read_text()
+    law_tables = "\n".join(re.findall(r"\| `kind` \|[^\n]*", text))
+    for name in kinds.BUILT_IN:
+        assert f"`{name}`" in law_tables or f"`law.kind` | `{name}`" in text, name
+
+
+@pytest.mark.parametrize("plant, kind", [("heave_tracking", "slotine_li"), ("ur5e_drift", "sliding_adaptive"),
+                                         ("mrac_time_delay", "sliding_adaptive"), ("ur5e_drift", "mrac")])
+def test_a_law_offered_to_a_plant_it_does_not_serve_is_refused_in_one_line(plant, kind):
+    with pytest.raises(ScenarioError) as exc:
+        sc.load(sc.SCENARIOS_DIR / f"{plant}.toml", overrides=[sc.law_swap(kind)])
+    msg = str(exc.value)
+    assert "\n" not in msg and f"law.kind = {kind!r} serves" in msg and "offers" in msg and "laws that serve it" in msg
+    scn = sc.load(sc.SCENARIOS_DIR / f"{plant}.toml")
+    served = kinds.serving(scn.plant.kind, kinds.BUILT_IN)
+    assert all(f"{name}" in msg for name in served)
+
+
+def test_each_plant_kind_is_served_by_its_bundled_scenarios_laws():
+    for path in sc.bundled():
+        scn = sc.load(path)
+        assert kinds.refusal(kinds.BUILT_IN[scn.law.kind], scn.plant.kind, kinds.BUILT_IN) is None, path.name
+
+
+def test_law_swap_replaces_the_table_keeps_the_prior_and_takes_scoped_keys():
+    path = sc.SCENARIOS_DIR / "heave_tracking.toml"
+    base = sc.load(path)
+    # a swap to a baseline: the adaptive law's gamma is gone (it would be refused by a law that lacks it)
+    with pytest.raises(ScenarioError, match=r"law\.lambda is required but missing"):
+        sc.load(path, overrides=[sc.law_swap("fixed_nominal")])
+    swapped = sc.load(path, overrides=["law.lambda=3.0", sc.law_swap("fixed_nominal"), "law.k=10.0"])
+    assert swapped.law.kind == "fixed_nominal" and swapped.law.lam == 3.0 and swapped.law.k == 10.0
+    assert swapped.law.gamma is None and swapped.law.initial_estimates == base.law.initial_estimates
+    # the scenario's own law: its table kept; keys scoped to another law dropped, to this one merged
+    same = sc.load(path, overrides=[sc.law_swap("sliding_adaptive"), "law.fixed_nominal.k=1.0",
+                                    "law.sliding_adaptive.k=123.0"])
+    assert same.law.kind == "sliding_adaptive" and same.law.k == 123.0 and same.law.gamma == base.law.gamma
+    assert sc.is_law_swap("law=emod") and sc.is_law_swap("law='emod'")
+    assert not sc.is_law_swap("law={kind='emod'}") and not sc.is_law_swap("law.kind=emod")
