@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from adaptive_mj.errors import AdaptiveMJError, Interrupted, LogFormatError, ScenarioError
+from adaptive_mj.trajectory import Status
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -276,7 +277,7 @@ def cmd_run(args) -> int:
     _print_summary(result.summary, as_json=args.json, log=None if args.json else log, kind=scn.plant.kind)
     if args.json:
         print(f"log: {log}", file=sys.stderr)
-    return EXIT_OK if result.summary["status"] == "ok" else EXIT_FAILED
+    return EXIT_OK if result.summary["status"] == Status.OK else EXIT_FAILED
 
 
 def cmd_replay(args) -> int:
@@ -311,7 +312,7 @@ def cmd_replay(args) -> int:
               file=sys.stderr if args.json else sys.stdout)
     if logged.damaged:  # what could be read is shown above; the file itself is bad input
         raise LogFormatError(f"{args.log}: damaged log: {logged.note}")
-    code = EXIT_OK if summary["status"] == "ok" else EXIT_FAILED
+    code = EXIT_OK if summary["status"] == Status.OK else EXIT_FAILED
     if args.verify:
         from adaptive_mj.log.verify import verify
 

@@ -98,6 +98,7 @@ from adaptive_mj.report.metrics import clean_json, summary as make_summary  # no
 from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.trajectory import Trajectory  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.trajectory import Status
 
 #: ``law=`` value that runs the scenario's own law (the one ``adaptive-mj run`` runs).
 SCENARIO_LAW = "scenario"
@@ -311,7 +312,7 @@ class TrackingTask(control.Task):
 
     def get_termination(self, physics) -> float | None:
         ep = self._episode
-        if ep.status == "diverged":
+        if ep.status == Status.DIVERGED:
             return DISCOUNT_DIVERGED
         if ep.k >= ep.n_steps:
             return DISCOUNT_TIME_LIMIT
@@ -340,7 +341,7 @@ class TrackingTask(control.Task):
     def close(self) -> None:
         """Close the current episode's log if it is still open (status "interrupted")."""
         if self._episode is not None:
-            self._episode.close_log("interrupted", "the episode was cut short (reset or close)")
+            self._episode.close_log(Status.INTERRUPTED, "the episode was cut short (reset or close)")
 
 
 class _Episode:
@@ -431,20 +432,20 @@ class _Episode:
         try:
             with self.plant.controlled_by(self._policy):
                 for _ in range(n_sub):
-                    if self.k >= self.n_steps or self.status != "ok":
+                    if self.k >= self.n_steps or self.status != Status.OK:
                         break
                     reward += self._one_step()
         except BaseException as exc:
-            status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed"
+            status = Status.INTERRUPTED if isinstance(exc, KeyboardInterrupt) else Status.FAILED
             self.close_log(status, f"{type(exc).__name__}: {exc}")
             raise
         self.last_reward = reward
-        if self.k >= self.n_steps and self.status == "ok":  # the episode ran to its end: its verdict
+        if self.k >= self.n_steps and self.status == Status.OK:  # the episode ran to its end: its verdict
             from adaptive_mj.sim.runner import verdict
 
             traj, self._verdict = verdict(self.scn, self.trajectory(), self._criteria, self._preflight)
             self.status, self.reason = traj.status, traj.reason
-        if self.k >= self.n_steps or self.status != "ok":
+        if self.k >= self.n_steps or self.status != Status.OK:
             self.close_log(self.status, self.reason)
         elif self.k - self.flushed >= self.sink_every:
             self._flush()

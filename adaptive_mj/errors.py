@@ -2,6 +2,9 @@
 
 Messages name the place (file, key), what was expected and what came, e.g.
 ``scenarios/x.toml: law.gamma must be > 0, got -1``.
+
+A run that diverges is not an exception: divergence is decided per step (adaptive_mj.sim.loop.divergence) and
+ends the run as data, a Trajectory with status Status.DIVERGED and the reason (adaptive_mj.trajectory).
 """
 
 
@@ -24,15 +27,6 @@ class PreflightRefused(ScenarioError):
 
 class LogFormatError(AdaptiveMJError, ValueError):
     """A file is not a readable adaptive-mj MCAP log."""
-
-
-class SimulationDiverged(AdaptiveMJError, RuntimeError):
-    """A run produced a non-finite or out-of-bound value, or MuJoCo flagged instability."""
-
-    def __init__(self, reason: str, *, t: float):
-        super().__init__(f"diverged at t={t:.6g} s: {reason}")
-        self.reason = reason
-        self.t = t
 
 
 class Interrupted(KeyboardInterrupt):

@@ -1,9 +1,28 @@
 """Results are data: a run is a Trajectory of arrays (live or replayed)."""
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 
 import numpy as np
+
+
+class Status(enum.StrEnum):
+    """A run's verdict (and a study row's outcome), a closed set. A StrEnum: equal to its text, which is what
+    logs, JSON summaries and CSV rows hold, so older logs and rows compare as before.
+
+    OK: completed and met its [success] criteria; FAILED: completed (or stopped by an error) without them;
+    DIVERGED: stopped at a non-finite or out-of-bound value or a MuJoCo instability (reason says which);
+    INTERRUPTED: stopped by a signal or by reset/close; TRUNCATED: a log never closed (replay recovered its
+    rows); ERROR / REFUSED: a study row whose run could not start / whose pre-flight check refused it."""
+
+    OK = "ok"
+    FAILED = "failed"
+    DIVERGED = "diverged"
+    INTERRUPTED = "interrupted"
+    TRUNCATED = "truncated"
+    ERROR = "error"
+    REFUSED = "refused"
 
 
 @dataclass(frozen=True)
@@ -21,7 +40,7 @@ class Trajectory:
     V: (N,) the law's Lyapunov function
     names: parameter names, len n_theta
     joint_names: () for a 1-DOF plant (scalar y and u), else the m joint names
-    status: "ok", "diverged", "interrupted", "failed" or "truncated"
+    status: a Status: OK, DIVERGED, INTERRUPTED, FAILED or TRUNCATED
     """
 
     t: np.ndarray
@@ -33,10 +52,13 @@ class Trajectory:
     theta: np.ndarray
     V: np.ndarray
     names: tuple[str, ...]
-    status: str = "ok"
+    status: Status = Status.OK
     reason: str = ""
     joint_names: tuple[str, ...] = ()
     meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        object.__setattr__(self, "status", Status(self.status))  # a log's text "ok" becomes Status.OK
 
     @property
     def m(self) -> int:

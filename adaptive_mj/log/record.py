@@ -40,6 +40,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 # the batch writer: fast on the mcap it was written for, mcap's public Writer API on any other
 from adaptive_mj.log.fast_mcap import add_messages as _add_messages, add_rows as _add_rows
 from adaptive_mj.sim.interrupt import deferred
+from adaptive_mj.trajectory import Status
 
 # 5: ctrl_range, joint_limits and embedded_sha256 (checked on every read) in the header;
 # 4: control_mode, control_period in the header; 3: law_plugin, plant_plugin;
@@ -66,7 +67,7 @@ def _finite_or_null(rows):
 
 
 #: Statuses a run can be closed with (replay adds "truncated" for a log that was never closed).
-CLOSE_STATUSES = ("ok", "diverged", "interrupted", "failed")
+CLOSE_STATUSES = (Status.OK, Status.DIVERGED, Status.INTERRUPTED, Status.FAILED)
 
 #: Topics that make up one logged row, in the order they are written.
 ROW_TOPICS = ("/state", "/reference", "/control", "/estimates", "/true_params", "/lyapunov")
@@ -607,7 +608,7 @@ class Recorder:
         if exc_type is None:
             self.close("ok", "", {})
             return
-        status = "interrupted" if issubclass(exc_type, KeyboardInterrupt) else "failed"
+        status = Status.INTERRUPTED if issubclass(exc_type, KeyboardInterrupt) else Status.FAILED
         try:
             self.close(status, f"{exc_type.__name__}: {exc}", {})
         except Exception:

@@ -43,6 +43,7 @@ from adaptive_mj.log.record import (
     row_fields,
 )
 from adaptive_mj.trajectory import Trajectory
+from adaptive_mj.trajectory import Status
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 # Footer record: opcode, record length, summary_start, summary_offset_start, summary CRC.
@@ -184,7 +185,7 @@ def _read(name: str, data: bytes) -> LoggedRun:
         model_assets=assets,
         trajectory=trajectory,
         events=events,
-        summary=None if status == "truncated" else summary,
+        summary=None if status == Status.TRUNCATED else summary,
         status=status,
         recovered_rows=n_rows,
         note=note,
@@ -259,13 +260,13 @@ def _final_status(name: str, scan: _Scan, summary: dict | None, n_rows: int,
         note = f"recovered {n_rows} rows ({span:.1f} s) before {scan.problem}"
         if summary is not None:
             note += f"; the run itself ended with status {summary.get('status')!r}"
-        return "truncated", note, note
+        return Status.TRUNCATED, note, note
     final = summary if summary is not None else (
         scan.metadata.get(STATUS_METADATA) if scan.complete else None)
     if final is None:
         cause = scan.problem or "the log has no final status"
         note = f"recovered {n_rows} rows ({span:.1f} s) of a truncated log ({cause})"
-        return "truncated", note, note
+        return Status.TRUNCATED, note, note
     status = final.get("status")
     if status not in CLOSE_STATUSES:
         raise LogFormatError(f"{name}: final status is {status!r}, expected one of "

@@ -30,7 +30,7 @@ from adaptive_mj.errors import Interrupted
 from adaptive_mj.plants.mujoco_plant import layout
 from adaptive_mj.sim.loop import PreparedRun, drive, native_steps, prepare
 from adaptive_mj.sim.native_context import ContextOwner
-from adaptive_mj.trajectory import Trajectory
+from adaptive_mj.trajectory import Status, Trajectory
 
 __all__ = ["run_batch"]
 
@@ -111,7 +111,7 @@ def _drive(prepared: list[PreparedRun], ncs: list[ContextOwner], nthread: int, o
                     mujoco.mj_setState(pl.model, pl.data, batch.state[i], _STATE)
                     pl.native_poststep()
                     if i in failed:
-                        results[i] = ("diverged", failed[i])
+                        results[i] = (Status.DIVERGED, failed[i])
                         asks.pop(i)
                         continue
                     _advance(steps, i, None, asks, results)
@@ -125,12 +125,12 @@ class _Ended(dict):
         super().__init__()
         self.prepared, self.out, self.ids = prepared, out, ids
 
-    def __setitem__(self, i: int, ended: tuple[str, str]) -> None:
+    def __setitem__(self, i: int, ended: tuple[Status, str]) -> None:
         super().__setitem__(i, ended)
         self.out[self.ids[i]] = self.prepared[i].result(*ended)
 
 
-def _advance(steps, i: int, value, asks: dict[int, int], results: dict[int, tuple[str, str]]) -> None:
+def _advance(steps, i: int, value, asks: dict[int, int], results: dict[int, tuple[Status, str]]) -> None:
     """Resume run i's generator: its next step count into asks, or its (status, reason) into results."""
     try:
         asks[i] = steps[i].send(value) if i in asks else next(steps[i])

@@ -41,6 +41,7 @@ from adaptive_mj.plants.protocol import CtrlRange, Plant, has_joints
 from adaptive_mj.sim import stage as st
 from adaptive_mj.sim.stage import TABLEAU, ControlTiming
 from adaptive_mj.trajectory import Trajectory
+from adaptive_mj.trajectory import Status
 
 if TYPE_CHECKING:
     from adaptive_mj.sim.native_context import ContextOwner
@@ -328,7 +329,7 @@ class PreparedRun:
     state_bound: float
     sensors: st.Sensors | None = None
 
-    def result(self, status: str, reason: str) -> Trajectory:
+    def result(self, status: Status, reason: str) -> Trajectory:
         meta = {"native": self.nc is not None, "events": self.queue.applied, **self.timing.describe()}
         if self.timing.delay:
             meta["control_delay"] = int(self.timing.delay)  # [physics steps]
@@ -366,7 +367,7 @@ def prepare(plant: Plant, law: Law, reference, *, duration: float, theta_hat0, n
     return PreparedRun(plant, rows, queue, noise, timing, nc, theta_hat0, order, state_bound, sensors)
 
 
-def _run_python(plant, step: ControlStep, rows: _Rows) -> tuple[str, str]:
+def _run_python(plant, step: ControlStep, rows: _Rows) -> tuple[Status, str]:
     """Drive the Python control step to the end or the first divergence: (status, reason)."""
     with plant.controlled_by(step.controller):
         while rows.k < rows.n:
@@ -376,8 +377,8 @@ def _run_python(plant, step: ControlStep, rows: _Rows) -> tuple[str, str]:
             row = step.step()
             rows.put(row)
             if row.reason:
-                return "diverged", row.reason
-    return "ok", ""
+                return Status.DIVERGED, row.reason
+    return Status.OK, ""
 
 
 def _run_native(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
@@ -412,8 +413,8 @@ def native_steps(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource,
         bad, reason = first_divergence(plant, block[1], block[2], block[5], nc.theta, state_bound)
         rows.put_block(block, theta_now, n if bad is None else bad, mass=nc.mass_rows(n))
         if bad is not None:
-            return "diverged", reason
-    return "ok", ""
+            return Status.DIVERGED, reason
+    return Status.OK, ""
 
 
 def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: ControlTiming,
@@ -550,7 +551,7 @@ class _Rows:
             self.sink.write_rows(rows.start, self.t[rows], self.x[rows], self.u[rows], self.s[rows], self.ref[rows],
                                  self.theta_hat[rows], theta, self.V[rows])
 
-    def result(self, n: int, status: str, reason: str, meta: dict) -> Trajectory:
+    def result(self, n: int, status: Status, reason: str, meta: dict) -> Trajectory:
         self.flush(n)
         keep = slice(0, n)
         meta = {"dt": self.plant.dt, "order": self.x.shape[1], **meta}
@@ -566,7 +567,7 @@ class _Rows:
     def stopped(self, reason: str) -> Trajectory:
         """Rows 0..k-1 (and all flushed) are whole when an interruption comes."""
         n = max(self.k, self.flushed)
-        return self.result(n, "interrupted", reason, {"events": self.events})
+        return self.result(n, Status.INTERRUPTED, reason, {"events": self.events})
 
 
 @contextmanager

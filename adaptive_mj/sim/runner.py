@@ -26,6 +26,7 @@ from adaptive_mj.setup.scenario import Scenario
 from adaptive_mj.setup.success import Criteria, criteria, judge
 from adaptive_mj.sim import preflight
 from adaptive_mj.trajectory import Trajectory
+from adaptive_mj.trajectory import Status
 
 # Run outputs: logs/ under the current directory (in the repository, its logs/, ignored by git), or
 # $ADAPTIVE_MJ_LOGS; read when a run needs it (default_logs_dir()). A Path set here replaces both.
@@ -213,7 +214,7 @@ def settle_batch(starts: Sequence[Started], exc: BaseException) -> list[RunResul
     partial = getattr(exc, "trajectories", None) or [None] * len(starts)
     out: list[RunResult | None] = []
     for st, traj in zip(starts, partial, strict=True):
-        if traj is not None and traj.status != "interrupted":
+        if traj is not None and traj.status != Status.INTERRUPTED:
             out.append(st.finish(traj))
         else:
             st.abandon(exc, traj)
@@ -258,11 +259,11 @@ class Started:
         if isinstance(exc, KeyboardInterrupt):  # loop.run has handed the recorder every whole row
             partial = partial if partial is not None else getattr(exc, "trajectory", None)
             summary = {} if partial is None else clean_json(make_summary(self.scn.name, partial))
-            self.recorder.close("interrupted", summary.get("reason") or str(exc) or "interrupted", summary)
+            self.recorder.close(Status.INTERRUPTED, summary.get("reason") or str(exc) or "interrupted", summary)
             if isinstance(exc, Interrupted):
                 exc.summary = summary or None
         else:
-            self.recorder.close("failed", f"{type(exc).__name__}: {exc}", {})
+            self.recorder.close(Status.FAILED, f"{type(exc).__name__}: {exc}", {})
 
 
 def start(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None,
@@ -317,13 +318,13 @@ def verdict(scn: Scenario, traj: Trajectory, crit: Criteria, pre: preflight.Pref
     from adaptive_mj import units
 
     result = clean_json(make_summary(scn.name, traj))
-    if traj.status == "ok":
+    if traj.status == Status.OK:
         missed = judge(result, crit, unit=units.OUTPUT.get(scn.plant.kind, ""))
         if missed:
             if not pre.ok:
                 missed.append(f"the pre-flight check had warned: μh = {pre.figure:.3g} > {pre.limit:.3g}"
                               + (f" on {pre.joint}" if pre.joint else ""))
-            traj = dataclasses.replace(traj, status="failed", reason="; ".join(missed))
+            traj = dataclasses.replace(traj, status=Status.FAILED, reason="; ".join(missed))
             result["status"], result["reason"] = traj.status, traj.reason
     result["success"] = clean_json(crit.describe())
     result["preflight"] = clean_json(pre.describe())

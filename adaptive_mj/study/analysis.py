@@ -10,6 +10,7 @@ import numpy as np
 
 from adaptive_mj.report.metrics import tail_mask
 from adaptive_mj.trajectory import Trajectory
+from adaptive_mj.trajectory import Status
 
 RELATIVE_PARAM_TOLERANCE = 0.10  # "converged": every |θ̂_i − θ_i| <= 10 % of |θ_i| (or of max|θ|)
 
@@ -287,7 +288,7 @@ def sudden_failure(traj: Trajectory, setup) -> dict:
     d = float(traj.theta[0, 0])
     delay = traj.meta.get("control_delay", 0) * traj.meta["dt"]
     crit = critical_leading_estimate(d, law.k, law.lam, delay) / d if hasattr(law, "lam") else math.nan
-    if traj.status == "diverged" and t_fail is None:
+    if traj.status == Status.DIVERGED and t_fail is None:
         t_fail = float(t[-1])
     return {"t_fail": t_fail, "t_saturation": t_sat, "bound": bound,
             "ratio_at_saturation": float(ratio[sat[0]]) if len(sat) else None,

@@ -14,6 +14,7 @@ from adaptive_mj.report.html import write_html
 from adaptive_mj.report.metrics import TAIL_FRACTION
 from adaptive_mj.study.parallel import Backend, progress_printer, run_jobs, session
 from adaptive_mj.study.result import Study, Table
+from adaptive_mj.trajectory import Status
 
 
 def _fmt(v, spec=".3g") -> str:
@@ -103,7 +104,7 @@ def _bench(quick: bool, out, sections, jobs, backend) -> Study:
                      f"goes before it fails.\n\n{text}\n\n(Logs in `stress/logs/`. `adaptive-mj stress` runs the "
                      "study at full size: 20 s runs, 4 bisection steps, optionally composite adaptation.)\n")
     elapsed = time.perf_counter() - t0
-    failed = [r for r in results if r.status == "error"]  # diverged runs are results, not failures
+    failed = [r for r in results if r.status == Status.ERROR]  # diverged runs are results, not failures
     header = (f"# adaptive-mj benchmark report{' (quick)' if quick else ''}\n\n"
               f"{n_runs} runs ({sum(r.status == 'ok' for r in results)} of the {len(results)} catalogue runs ok) "
               f"on MuJoCo physics and "
@@ -155,7 +156,7 @@ def plot_tails(rows: list[dict], path) -> Path:
         colors = [f"C{sections.index(r['section']) % 10}" for r in group]
         bars = ax.bar(range(len(group)), [r["tail"] for r in group], color=colors)
         for bar, r in zip(bars, group, strict=True):
-            if r["status"] != "ok":
+            if r["status"] != Status.OK:
                 bar.set_hatch("//")
                 bar.set_edgecolor("k")
         ax.set_yscale("log")

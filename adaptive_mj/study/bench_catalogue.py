@@ -21,6 +21,7 @@ from adaptive_mj.study.parallel import Job, JobResult
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402 (after matplotlib.use("Agg"): figures are drawn headless)
+from adaptive_mj.trajectory import Status
 
 SCN = sc.SCENARIOS_DIR
 @dataclass
@@ -46,7 +47,7 @@ def _job(section: str, variant: str, scenario: str, logs: Path, overrides=(), ex
 
 def _ok(r: JobResult) -> bool:
     """A run that completed (its verdict "ok" or "failed": both have every row to analyse)."""
-    return r.status in ("ok", "failed") and r.trajectory is not None
+    return r.status in (Status.OK, Status.FAILED) and r.trajectory is not None
 
 
 SECTION_PLANT = {"first-order": "first_order", "phase space": "first_order", "Lyapunov": "heave",
@@ -57,7 +58,7 @@ SECTION_PLANT.update({"MRAC delay": "linear", "Rohrs": "linear", "wing rock": "w
 
 def _row(section: str, variant: str, r: JobResult, key: str = "") -> dict:
     m = (r.summary or {}).get("metrics", {})
-    status = r.status if r.status != "error" else "error"
+    status = r.status if r.status != Status.ERROR else Status.ERROR
     kind = SECTION_PLANT.get(section, "")
     return {"section": section, "run": variant, "status": status, "tail": m.get("rms_tracking_error_tail"),
             "u_rms": m.get("control_rms"), "u_tv": m.get("control_total_variation"), "key": key,
@@ -66,7 +67,7 @@ def _row(section: str, variant: str, r: JobResult, key: str = "") -> dict:
 
 def _status_note(results: dict[str, JobResult]) -> str:
     bad = [f"`{tag}`: {r.status}" + (f" ({r.error or (r.summary or {}).get('reason', '')})")
-           for tag, r in results.items() if r.status != "ok"]
+           for tag, r in results.items() if r.status != Status.OK]
     return ("\n\nRuns that did not finish normally: " + "; ".join(bad) + ".\n") if bad else ""
 
 
@@ -1491,7 +1492,7 @@ def _mrac_breaks(quick: bool, logs: Path) -> Section:
         ok_g, bad_g = [], []
         for g in gammas:
             r = res[f"mrac/nguyen_gamma_{g:g}"]
-            div = r.trajectory is not None and r.trajectory.status == "diverged"
+            div = r.trajectory is not None and r.trajectory.status == Status.DIVERGED
             (bad_g if div or r.trajectory is None else ok_g).append(g)
             t_end = f"{r.trajectory.t[-1]:.2f}" if div and r.trajectory is not None else "—"
             tail = (r.summary or {}).get("metrics", {}).get("rms_tracking_error_tail")

@@ -34,6 +34,7 @@ import numpy as np
 from adaptive_mj.study import callable_module
 from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
 from adaptive_mj.study.job import REFUSE_UNSTABLE
+from adaptive_mj.trajectory import Status
 
 CVAR_LEVEL = 0.10  # the worst 10 % of seeds
 # [m], [rad]: the stress study's failure bound on the tail RMS error (the 6-joint arm: RMS over its joints)
@@ -139,7 +140,7 @@ class Margin:
 
 
 #: Runs that completed: the search judges them by its own tail bound, whatever the scenario's verdict.
-COMPLETED = ("ok", "failed")
+COMPLETED = (Status.OK, Status.FAILED)
 
 
 def _tail(result: JobResult, bound: float) -> float:

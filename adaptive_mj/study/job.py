@@ -17,6 +17,7 @@ import numpy as np
 from adaptive_mj.errors import AdaptiveMJError, Interrupted, PreflightRefused
 from adaptive_mj.sim import interrupt
 from adaptive_mj.trajectory import Trajectory
+from adaptive_mj.trajectory import Status
 
 
 @dataclass(frozen=True)
@@ -117,7 +118,7 @@ def run_job(job: Job) -> JobResult:
         return JobResult(job, result.summary["status"], result.summary, extras,
                          decimate(traj, every) if job.keep_trajectory else None)
     except PreflightRefused as exc:  # the loop cannot be stable: a result of the study, not a broken job
-        return JobResult(job, "refused", None, error=str(exc))
+        return JobResult(job, Status.REFUSED, None, error=str(exc))
     except AdaptiveMJError as exc:
         return JobResult(job, "error", None, error=str(exc))
     except OSError as exc:  # the log could not be written (disk full, a file-size limit, a read-only folder)
@@ -138,7 +139,7 @@ def run_jobs_batched(jobs: Sequence[Job], *, nthread: int = 0) -> list[JobResult
         try:
             started[i] = start(_job_scenario(job), log_path=job.log)
         except PreflightRefused as exc:
-            out[i] = JobResult(job, "refused", None, error=str(exc))
+            out[i] = JobResult(job, Status.REFUSED, None, error=str(exc))
         except AdaptiveMJError as exc:
             out[i] = JobResult(job, "error", None, error=str(exc))
         except OSError as exc:

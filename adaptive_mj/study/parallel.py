@@ -34,6 +34,7 @@ from adaptive_mj.errors import AdaptiveMJError, Interrupted
 # Job, JobResult and Backend are imported from here by the study's commands, tests and benchmarks
 from adaptive_mj.study.job import (STOP_TIMEOUT, Backend, Job, JobResult, interrupted_note, run_in_worker, run_job,
                                    run_jobs_batched)
+from adaptive_mj.trajectory import Status
 
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
@@ -217,7 +218,7 @@ def _take(fut: cf.Future, job: Job) -> JobResult:
         result = fut.result()
     except Exception as exc:  # noqa: BLE001 (the job could not be sent or returned)
         result = JobResult(job, "error", None, error=f"{type(exc).__name__}: {exc}")
-    if result.status == "interrupted":  # a worker was told to stop: stop them all
+    if result.status == Status.INTERRUPTED:  # a worker was told to stop: stop them all
         raise Interrupted(signal.SIGTERM)
     return result
 
@@ -314,7 +315,7 @@ class Progress:
 
     def __call__(self, result: JobResult) -> None:
         self.n += 1
-        self.failed += result.status != "ok"
+        self.failed += result.status != Status.OK
         now = self.clock()
         last = f"last: {result.job.tag or result.job.scenario.stem} ({result.status})"
         if self._bar is not None:

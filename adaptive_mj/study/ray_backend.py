@@ -45,6 +45,7 @@ from typing import Callable, Iterator, Sequence
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
 from adaptive_mj.study.job import (STOP_TIMEOUT, Backend, Job, JobResult, interrupted_note, log_write_error, ray_module,
                                    run_in_worker, run_jobs_batched)
+from adaptive_mj.trajectory import Status
 
 #: Tasks in flight per CPU of the cluster: enough to keep every worker busy while results come
 #: back, few enough that the driver holds a bounded number of results and arguments.
@@ -74,7 +75,7 @@ def _task_log(job: Job, logs: str) -> tuple[Path | None, JobResult | None]:
 
         why = (f"{job.scenario}: no such file on the Ray node {socket.gethostname()} (every node must see the "
                "scenarios and models at the same paths)")
-        return None, JobResult(job, "error", None, error=why)
+        return None, JobResult(job, Status.ERROR, None, error=why)
     if job.log is None:
         return None, None
     if logs == "bytes":
@@ -83,7 +84,7 @@ def _task_log(job: Job, logs: str) -> tuple[Path | None, JobResult | None]:
         scratch.mkdir(parents=True)
         return scratch / job.log.name, None
     if job.log.exists():
-        return None, JobResult(job, "error", None, error=f"{job.log}: file exists")
+        return None, JobResult(job, Status.ERROR, None, error=f"{job.log}: file exists")
     where = partial_path(job.log)
     where.unlink(missing_ok=True)  # left by an attempt whose worker died
     return where, None
@@ -150,7 +151,7 @@ def run_task_batch(jobs: Sequence[Job], logs: str) -> list[tuple[JobResult, byte
                 results = run_jobs_batched([replace(jobs[k], log=places[k]) for k in ks], nthread=1)
         except KeyboardInterrupt as exc:
             why = str(exc) or "interrupted"
-            results = [JobResult(jobs[k], "interrupted", None, error=why) for k in ks]
+            results = [JobResult(jobs[k], Status.INTERRUPTED, None, error=why) for k in ks]
         for k, result in zip(ks, results, strict=True):
             out[k] = _task_collect(jobs[k], logs, places[k], result)
     finally:
@@ -247,7 +248,7 @@ def _write_returned_log(job: Job, result: JobResult, data: bytes | None) -> JobR
     if data is None:
         return result
     error = _write_log(job, data)
-    return replace(result, status="error", error=error) if error else result
+    return replace(result, status=Status.ERROR, error=error) if error else result
 
 
 def _system_failure(ray, exc: BaseException) -> bool:
@@ -366,7 +367,7 @@ def _stopped_again(pairs: list[tuple[int, _Returned]], jobs: Sequence[Job], u: i
     an attempt left, to be submitted again. False when no run of it was interrupted."""
     from adaptive_mj.sim import interrupt
 
-    stopped = [res for _, (res, _) in pairs if res.status == "interrupted"]
+    stopped = [res for _, (res, _) in pairs if res.status == Status.INTERRUPTED]
     if not stopped:
         return False
     if interrupt.requested() is not None:

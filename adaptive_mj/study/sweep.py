@@ -40,6 +40,7 @@ from adaptive_mj.study.parallel import Backend, Job, JobResult, iter_results, pr
 from adaptive_mj.study.job import REFUSE_UNSTABLE
 from adaptive_mj.study.result import Study, Table
 from adaptive_mj.trajectory import Trajectory
+from adaptive_mj.trajectory import Status
 
 EXIT_OK, EXIT_FAILED = 0, 1
 DEFAULT_METRIC = "rms_tracking_error_tail"
@@ -274,7 +275,7 @@ def rows(results: Sequence[tuple[dict[str, Any], JobResult]], *, root: Path) -> 
     out = []
     for point, result in results:
         summary = result.summary
-        reason = result.error if result.status == "error" else (summary or {}).get("reason", "")
+        reason = result.error if result.status == Status.ERROR else (summary or {}).get("reason", "")
         log = result.job.log
         row = {"run": result.job.tag, **point, "seed": result.job.seed, "status": result.status, "reason": reason}
         row.update(flat_metrics(summary))
@@ -302,7 +303,7 @@ def point_stats(table: Sequence[dict[str, Any]], keys: Sequence[str], metric: st
         groups.setdefault(to_toml([row[k] for k in keys]), []).append(row)
     out = []
     for group in groups.values():
-        ok = [r for r in group if r["status"] == "ok"]
+        ok = [r for r in group if r["status"] == Status.OK]
         vals = np.array([r.get(metric) for r in ok if isinstance(r.get(metric), (int, float))], dtype=float)
         vals = vals[np.isfinite(vals)]
         mean, lo, hi = (float(vals.mean()), float(vals.min()), float(vals.max())) if vals.size else (math.nan,) * 3
@@ -407,7 +408,7 @@ def plot_sweep(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Se
     if not numeric_x:
         ax.set_xticks(range(len(x_ticks)), list(x_ticks.values()))
     ax.set_xlabel(key_label(x_key, plant_kind))
-    n_ok = sum(r["status"] == "ok" for r in table)
+    n_ok = sum(r["status"] == Status.OK for r in table)
     spread = f"mean over {seeds} seeds, band min–max" if seeds > 1 else "1 seed"
     text = f"{spread}; {n_ok}/{len(table)} runs ok" + (" (the others left out)" if n_ok < len(table) else "")
     axes[0, 0].set_title(f"{title}: {text}" if title else text, fontsize=10)
@@ -641,7 +642,7 @@ def plot_breaking_point(record: dict, path: Path, *, unit: str = "", title: str 
     ys = []
     for e in record["evaluations"]:
         for x, status in zip(e["tail"], e["statuses"], strict=True):
-            if x is not None and status == "ok":
+            if x is not None and status == Status.OK:
                 ax.plot(e["value"], x, "o", color="C0", ms=4)
                 ys.append(x)
             else:
@@ -722,7 +723,8 @@ def finished_results(jobs: Sequence[Job]) -> Iterator[tuple[int, JobResult]]:
             logged = read_log(job.log)
         except LogFormatError:
             logged = None
-        if logged is not None and logged.summary is not None and logged.status in ("ok", "diverged", "failed"):
+        ended = (Status.OK, Status.DIVERGED, Status.FAILED)
+        if logged is not None and logged.summary is not None and logged.status in ended:
             yield i, JobResult(job, logged.status, logged.summary)
         else:
             job.log.unlink()
@@ -855,7 +857,7 @@ def run_sweep(path: Path, *, grid: Sequence[str], seeds: int, overrides: Sequenc
         if name not in present:
             have = [c for c in present if c.startswith("param_error_final.")]
             notes.append(f"--metric {name!r}: no run has this metric (have: {', '.join(sorted(have)) or 'none'})")
-    not_ok = [r for r in table if r["status"] != "ok"]
+    not_ok = [r for r in table if r["status"] != Status.OK]
     notes += [f"  {row['run']}: {row['status']}: {row['reason']}" for row in not_ok[:5]]
     if len(not_ok) > 5:
         notes.append(f"  ... and {len(not_ok) - 5} more (see sweep.csv)")
@@ -883,13 +885,13 @@ def sweep_report(inputs: dict[str, Any], table: Sequence[dict[str, Any]], keys: 
     """report.md of a sweep: what ran, each grid point's metrics (mean over the ok seeds), the figure, the
     runs that were not ok."""
     total = len(table)
-    n_ok = sum(r["status"] == "ok" for r in table)
+    n_ok = sum(r["status"] == Status.OK for r in table)
     grid = "; ".join(f"`{g['key']}` = " + ", ".join(label(v) for v in g["values"]) for g in inputs["grid"])
     stats = {m: point_stats(table, keys, m) for m in metrics}
     points = [{**{key_label(k, plant_kind): label(st.point[k]) for k in keys},
                **{f"mean {metric_label(m, plant_kind)}": stats[m][i].mean for m in metrics},
                "ok/total": f"{st.n_ok}/{st.n}"} for i, st in enumerate(stats[metrics[0]])]
-    not_ok = [r for r in table if r["status"] != "ok"]
+    not_ok = [r for r in table if r["status"] != Status.OK]
     text = (f"# Sweep of {inputs['scenario_name']}\n\n"
             f"{total} runs of `{Path(inputs['scenario']).name}` {where}, created {inputs['created_utc']}: the grid "
             f"{grid} × {inputs['seeds']} seed(s) (0..{inputs['seeds'] - 1})"
