@@ -209,8 +209,13 @@ def cmd_list(args) -> int:
     if getattr(args, "plants", False):
         from adaptive_mj.plants.plugin import ENTRY_POINT_GROUP as PLANT_GROUP, installed as installed_plants
 
-        for kind in sc.PLANT_KINDS:
-            print(f"{kind:24s} built in")
+        from adaptive_mj.plants.kinds import built_in
+
+        for kind in built_in().values():
+            forms = ", ".join(sorted(f.value for f in kind.forms))
+            model = f"; model {kind.default_model}" if kind.default_model else "; analytic"
+            print(f"{kind.name:24s} built in: offers {forms}; {kind.doc}{model}; y [{kind.output_unit}], "
+                  f"u [{kind.control_unit}]; default law {kind.default_law}")
         plants = installed_plants()
         for name, inst in sorted(plants.items()):
             keys = ", ".join(p.name + (f" [{p.unit}]" if p.unit else "") for p in inst.plugin.params)

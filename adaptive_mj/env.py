@@ -93,7 +93,8 @@ from dm_env import specs  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.setup import scenario as scenario_io  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.setup.build import Setup, build  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.errors import ScenarioError  # noqa: E402 (imported after MUJOCO_GL is set above)
-from adaptive_mj.sim.loop import Controller, ControlStep, EventQueue, divergence, limits_meta, plant_order  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.sim.loop import (Controller, ControlStep, EventQueue, Rows, StepRow, divergence,  # noqa: E402 (after MUJOCO_GL is set above)
+                                  plant_order)
 from adaptive_mj.report.metrics import clean_json, summary as make_summary  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
@@ -383,27 +384,32 @@ class _Episode:
             self._policy = lambda t, x: self._u
         self._u = np.zeros(js) if js else 0.0
         self.noise = self._draw()  # the noise of the coming physics step
-        n, n_theta = n_steps, len(self.theta_hat0)
-        self.t, self.x = np.empty(n), np.empty((n, self.order) + js)
-        self.u, self.s = np.empty((n,) + js), np.empty((n,) + js)
-        self.ref = np.empty((n, self.order + 1) + js)
-        self.theta_hat, self.theta = np.empty((n, n_theta)), np.empty((n, n_theta))
-        self.V = np.full(n, np.nan)  # an arm's V, rows 0..v_done-1 settled (see _settle_V)
-        self.v_done = 0
-        self.k = 0
-        self.status, self.reason = "ok", ""
-        self._criteria, self._preflight, self._verdict = self._verdict_terms(scn, setup, law, drive)
-        self.last_reward = 0.0
         self.recorder = recorder
         self.sink_every = max(1, round(1.0 / self.dt))  # flush about once per simulated second
-        self.flushed = 0
+        # the rows, their V and the Trajectory: the loop's own (sim.loop.Rows), as adaptive-mj run keeps them; an
+        # agent's episode has no law estimate (θ̂ NaN) and no V
+        self.rows = Rows(plant, law, n_steps, self, self.sink_every, lyapunov=drive)
+        self.status, self.reason = Status.OK, ""
+        self._criteria, self._preflight, self._verdict = self._verdict_terms(scn, setup, law, drive)
+        self.last_reward = 0.0
         self._apply_due_events()
+
+    @property
+    def k(self) -> int:
+        """Physics steps taken (rows kept)."""
+        return self.rows.k
+
+    def write_rows(self, *rows) -> None:
+        """The rows' sink (Rows flushes here): the episode's log while it is open."""
+        if self.recorder is not None and not self.recorder.closed:
+            self.recorder.write_rows(*rows)
 
     def _apply_due_events(self) -> None:
         """Events due at the coming step's start (t_k >= t_event - dt/2), as loop.run applies
-        them; applied now, before the observation, so an observation at t_k already sees them."""
+        them; applied now, before the observation, so an observation at t_k already sees them. The rows
+        so far are flushed first (their V with the model of their own steps), as loop.run does."""
         if self.events.is_due(self.plant.time):
-            self._settle_V()  # an arm's V of the steps so far with the inertia they had
+            self.rows.flush(self.rows.k)
         self.events.due(self.plant.time, self.plant, self.recorder)
 
     def _next_noise(self) -> np.ndarray | None:
@@ -447,8 +453,6 @@ class _Episode:
             self.status, self.reason = traj.status, traj.reason
         if self.k >= self.n_steps or self.status != Status.OK:
             self.close_log(self.status, self.reason)
-        elif self.k - self.flushed >= self.sink_every:
-            self._flush()
 
     def _verdict_terms(self, scn, setup: Setup, law, drive: bool):
         """(criteria, pre-flight, None): what the episode's verdict needs, as adaptive-mj run has them
@@ -467,75 +471,37 @@ class _Episode:
 
     def _one_step(self) -> float:
         """One physics step, as in loop.run; returns -|y_d - y|^2 * dt at its end."""
-        plant, k = self.plant, self.k
+        plant = self.plant
         if self.step is not None:  # the law: loop.ControlStep, the step adaptive-mj run takes
             row = self.step.step()
-            self.t[k], self.x[k], self.theta[k], self.theta_hat[k] = row.t, row.x, row.theta, row.theta_hat
-            self.u[k], self.s[k], self.ref[k], reason = row.u, row.s, row.ref, row.reason
         else:  # the agent: its held action over the step
             t_k = plant.time
-            self.t[k], self.x[k], self.theta[k] = t_k, plant.observe(), plant.true_theta()
-            self.theta_hat[k] = np.nan
+            x, theta = plant.observe(), plant.true_theta()
             ref = self.reference(t_k, self.order)
-            seen = self.x[k] + self.noise if self.noise is not None else self.x[k]
-            self.s[k] = self.law(t_k, seen, ref, self.theta_hat0).s
-            self.ref[k] = ref
+            seen = x + self.noise if self.noise is not None else x
+            s = self.law(t_k, seen, ref, self.theta_hat0).s
             plant.step()
-            self.u[k] = self._u
             self.noise = self._draw()
-            reason = divergence(plant, self.x[k], self.u[k], self.theta_hat0, self.state_bound)
-        self.k = k + 1
-        if reason:
-            self.status, self.reason = "diverged", reason
+            reason = divergence(plant, x, self._u, self.theta_hat0, self.state_bound)
+            row = StepRow(t_k, x, theta, np.full(len(self.theta_hat0), np.nan), self._u, s, ref, reason)
+        self.rows.put(row)
+        if row.reason:
+            self.status, self.reason = Status.DIVERGED, row.reason
         elif self.k < self.n_steps:
             self._apply_due_events()
         y_tilde = np.asarray(self.reference(plant.time, 0)[0]) - plant.observe()[0]
         return -float(np.sum(y_tilde * y_tilde)) * self.dt
 
-    def _V(self, rows: slice) -> np.ndarray:
-        """V of rows (ending at the current step)."""
-        if self.controller is None:
-            return np.full(rows.stop - rows.start, np.nan)
-        if self.joint_shape:  # V = ½ sᵀ M(q) s + ...: M at the logged q with the model of that step, as loop.run
-            self._settle_V()
-            return self.V[rows].copy()
-        return self.law.lyapunov(self.s[rows], self.theta_hat[rows], self.theta[rows])
-
-    def _settle_V(self) -> None:
-        """An arm's V for the steps taken since the last call, with M(q) of the model now: called before an
-        event changes the model, so each row's M is the one of its own step."""
-        if not self.joint_shape or self.controller is None or self.k <= self.v_done:
-            return
-        rows = slice(self.v_done, self.k)
-        self.V[rows] = self.law.lyapunov(self.s[rows], self.theta_hat[rows], self.theta[rows],
-                                         M=self.plant.mass_matrices(self.x[rows, 0]))
-        self.v_done = self.k
-
-    def _flush(self) -> None:
-        if self.recorder is not None and self.k > self.flushed:
-            rows = slice(self.flushed, self.k)
-            self.recorder.write_rows(self.flushed, self.t[rows], self.x[rows], self.u[rows], self.s[rows],
-                                     self.ref[rows], self.theta_hat[rows], self.theta[rows], self._V(rows))
-        self.flushed = self.k
-
     def trajectory(self) -> Trajectory:
-        keep = slice(0, self.k)
-        return Trajectory(t=self.t[keep].copy(), x=self.x[keep].copy(), u=self.u[keep].copy(),
-                          s=self.s[keep].copy(), ref=self.ref[keep].copy(),
-                          theta_hat=self.theta_hat[keep].copy(), theta=self.theta[keep].copy(),
-                          V=self._V(keep), names=tuple(self.law.names), status=self.status,
-                          reason=self.reason, joint_names=self.joint_names,
-                          meta={"dt": self.dt, "order": self.order, "events": list(self.events.applied),
-                                **limits_meta(self.plant)})
+        """The episode so far (the rows written to the log on the way, as loop.run writes them)."""
+        return self.rows.result(self.k, self.status, self.reason, {"events": list(self.events.applied)})
 
-    def close_log(self, status: str, reason: str) -> None:
+    def close_log(self, status: Status, reason: str) -> None:
         """Write the remaining rows and the summary, and finish the log (no-op without an open log)."""
         if self.recorder is None or self.recorder.closed:
             return
-        recorder = self.recorder
-        self._flush()
-        self.recorder = None
-        traj = dataclasses.replace(self.trajectory(), status=status, reason=reason)
+        traj = dataclasses.replace(self.trajectory(), status=status, reason=reason)  # flushes the rows
+        recorder, self.recorder = self.recorder, None
         summary = clean_json(make_summary(self.name, traj))
         if self._verdict is not None:  # the same success and preflight records as adaptive-mj run
             summary.update(success=self._verdict["success"], preflight=self._verdict["preflight"])

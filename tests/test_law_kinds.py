@@ -7,6 +7,7 @@ import pytest
 
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.laws import kinds
+from adaptive_mj.plants import kinds as plant_kinds
 from adaptive_mj.setup import scenario as sc
 
 REPO = Path(__file__).resolve().parents[1]
@@ -15,7 +16,7 @@ REPO = Path(__file__).resolve().parents[1]
 def test_scenarios_md_shows_the_registry_table():
     text = (REPO / "docs" / "SCENARIOS.md").read_text()
     block = re.search(r"<!-- law-kinds -->\n(.*?)\n<!-- /law-kinds -->", text, re.S)
-    assert block is not None and block.group(1) == kinds.docs_table()
+    assert block is not None and block.group(1) == plant_kinds.docs_table()
 
 
 def test_every_built_in_law_kind_is_documented_with_its_keys_table():
@@ -35,14 +36,15 @@ def test_a_law_offered_to_a_plant_it_does_not_serve_is_refused_in_one_line(plant
     msg = str(exc.value)
     assert "\n" not in msg and f"law.kind = {kind!r} serves" in msg and "offers" in msg and "laws that serve it" in msg
     scn = sc.load(sc.SCENARIOS_DIR / f"{plant}.toml")
-    served = kinds.serving(scn.plant.kind, kinds.BUILT_IN)
+    served = kinds.serving(scn.plant.kind, plant_kinds.forms(scn.plant.kind), kinds.BUILT_IN)
     assert all(f"{name}" in msg for name in served)
 
 
 def test_each_plant_kind_is_served_by_its_bundled_scenarios_laws():
     for path in sc.bundled():
         scn = sc.load(path)
-        assert kinds.refusal(kinds.BUILT_IN[scn.law.kind], scn.plant.kind, kinds.BUILT_IN) is None, path.name
+        assert kinds.refusal(kinds.BUILT_IN[scn.law.kind], scn.plant.kind, plant_kinds.forms(scn.plant.kind),
+                             kinds.BUILT_IN) is None, path.name
 
 
 def test_law_swap_replaces_the_table_keeps_the_prior_and_takes_scoped_keys():

@@ -11,8 +11,9 @@ A plant offers one or more *forms* (how a law sees it), a law kind serves one or
   Form.MRAC_STATE  the state form of model-reference adaptive control: x, the reference model's state and the
                    matched nonlinear terms (adaptive_mj.laws.mrac): the linear plants and wing rock
 
-A law offered to a plant none of whose forms it serves is refused in one line that names the forms on both
-sides and the laws that would serve (`refusal`). No mujoco here.
+A plant kind declares the forms it offers in its own module (adaptive_mj.plants.kinds). A law offered to a
+plant none of whose forms it serves is refused in one line that names the forms on both sides and the laws
+that would serve (`refusal`). No mujoco here.
 """
 from __future__ import annotations
 
@@ -72,31 +73,6 @@ BUILT_IN = {k.name: k for k in (
             "PD plus gravity compensation at the nominal parameters (baseline)"),
 )}
 
-#: The forms each built-in plant kind offers; a plant plugin offers the model form.
-PLANT_FORMS = {
-    "heave": frozenset({Form.MODEL}),
-    "arm": frozenset({Form.MODEL}),
-    "first_order": frozenset({Form.MODEL}),
-    "ship": frozenset({Form.MODEL}),
-    "manipulator": frozenset({Form.RIGID_BODY}),
-    "linear": frozenset({Form.MRAC_STATE}),
-    "wing_rock": frozenset({Form.MODEL, Form.MRAC_STATE}),
-}
-
-#: The law a plant kind runs when its scenario names none.
-DEFAULT_LAW = {"first_order": "first_order_adaptive", "manipulator": "slotine_li", "linear": "mrac"}
-
-
-def plant_forms(plant_kind: str) -> frozenset[Form]:
-    """The forms `plant_kind` offers (a plant plugin: the model form)."""
-    return PLANT_FORMS.get(plant_kind, frozenset({Form.MODEL}))
-
-
-def default_law(plant_kind: str) -> str:
-    """The law kind of a scenario on `plant_kind` with no law.kind."""
-    return DEFAULT_LAW.get(plant_kind, "sliding_adaptive")
-
-
 def plugin_kind(name: str, installed) -> LawKind:
     """The LawKind of an installed law plugin (adaptive_mj.plugins.Installed of a LawPlugin or JointLawPlugin)."""
     plugin = installed.plugin
@@ -115,10 +91,10 @@ def all_kinds(*, plugins: bool = True) -> dict[str, LawKind]:
     return kinds
 
 
-def serving(plant_kind: str, kinds: dict[str, LawKind]) -> list[str]:
-    """The names of the kinds in `kinds` that serve a form `plant_kind` offers (first_order_adaptive only on
-    the first-order plant, which takes no other built-in law of the model form)."""
-    offered = plant_forms(plant_kind)
+def serving(plant_kind: str, offered: frozenset[Form], kinds: dict[str, LawKind]) -> list[str]:
+    """The names of the kinds in `kinds` that serve a form in `offered` (the forms plant_kind offers:
+    adaptive_mj.plants.kinds); first_order_adaptive only on the first-order plant, which takes no other
+    built-in law of the model form."""
     out = []
     for name, k in kinds.items():
         if not k.forms & offered:
@@ -129,25 +105,13 @@ def serving(plant_kind: str, kinds: dict[str, LawKind]) -> list[str]:
     return out
 
 
-def refusal(law: LawKind, plant_kind: str, kinds: dict[str, LawKind]) -> str | None:
-    """None when `law` serves a form plant_kind offers; else the one-line reason (without the file)."""
-    offered = plant_forms(plant_kind)
+def refusal(law: LawKind, plant_kind: str, offered: frozenset[Form], kinds: dict[str, LawKind]) -> str | None:
+    """None when `law` serves a form in `offered` (what plant_kind offers); else the one-line reason (without
+    the file), naming the laws of `kinds` that would serve."""
     if law.forms & offered:
         return None
     serves = " and ".join(f.text for f in sorted(law.forms, key=lambda f: f.value))
     offers = " and ".join(f.text for f in sorted(offered, key=lambda f: f.value))
-    alternatives = ", ".join(serving(plant_kind, kinds)) or "none installed"
+    alternatives = ", ".join(serving(plant_kind, offered, kinds)) or "none installed"
     return (f"law.kind = {law.name!r} serves {serves}; plant.kind = {plant_kind!r} offers {offers} "
             f"(laws that serve it: {alternatives})")
-
-
-def docs_table() -> str:
-    """The built-in law kinds as docs/SCENARIOS.md shows them (tests/test_law_kinds.py keeps the two equal)."""
-    lines = ["| law.kind | serves | adapts | what it is |", "|---|---|---|---|"]
-    for k in BUILT_IN.values():
-        forms = ", ".join(f"`{f.value}`" for f in sorted(k.forms, key=lambda f: f.value))
-        lines.append(f"| `{k.name}` | {forms} | {'yes' if k.adaptive else 'no'} | {k.doc} |")
-    plants = ", ".join(f"`{p}`: " + ", ".join(f"`{f.value}`" for f in sorted(fs, key=lambda f: f.value))
-                       for p, fs in PLANT_FORMS.items())
-    lines += ["", f"Plant kinds offer: {plants}; a plant plugin offers `model`."]
-    return "\n".join(lines)

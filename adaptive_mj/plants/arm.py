@@ -31,6 +31,8 @@ from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.attach import compose
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path, with_userdata,
                                              find_joint_and_actuator, scale_body_mass, scratch_data, spec_from_text)
+from adaptive_mj.laws.kinds import Form
+from adaptive_mj.plants.kinds import PlantKind, register
 
 MODEL_PATH = MODELS / "pendulum_arm.xml"
 THETA_NAMES = ("J", "b", "g_sin", "g_cos")
@@ -173,3 +175,10 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
     model, model_xml = compile_for_scenario(scn, source)
     plant = ArmPlant(model, joint=p.joint, actuator=p.actuator, where=str(p.model))
     return BuiltPlant(twin.as_backend(scn, plant), model_xml)
+
+
+#: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "arm"
+KIND = register(PlantKind(
+    "arm", __name__, frozenset({Form.MODEL}), output_unit="rad", control_unit="N m",
+    params={"J": "kg m²", "b": "N m s/rad", "g_sin": "N m", "g_cos": "N m"},
+    default_model="pendulum_arm", doc="a 1-DOF arm with an unknown payload (MuJoCo's attach)"))

@@ -40,6 +40,8 @@ from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path,
                                              find_joint_and_actuator, read_model_file, scratch_data)
+from adaptive_mj.laws.kinds import Form
+from adaptive_mj.plants.kinds import PlantKind, register
 
 MODEL_PATH = MODELS / "heave_vehicle.xml"
 THETA_NAMES = ("d", "b", "c")
@@ -217,3 +219,10 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
     if p.density is not None:
         plant.set_fluid_density(p.density)
     return BuiltPlant(twin.as_backend(scn, plant), model_xml)
+
+
+#: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "heave"
+KIND = register(PlantKind(
+    "heave", __name__, frozenset({Form.MODEL}), output_unit="m", control_unit="N",
+    params={"d": "kg", "b": "kg/m", "c": "kg", "tau_d": "kg s", "tau_b": "kg s/m"},
+    default_model="heave_vehicle", doc="1-DOF heave vehicle in water, d y'' + b y'|y'| + c g = u"))

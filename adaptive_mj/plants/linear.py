@@ -28,6 +28,8 @@ from adaptive_mj.errors import ScenarioError
 from adaptive_mj.plants import BuiltPlant
 from adaptive_mj.plants.protocol import Policy
 from adaptive_mj.plants.twin import PythonStepped
+from adaptive_mj.laws.kinds import Form
+from adaptive_mj.plants.kinds import PlantKind, register
 
 
 def canonical(num, den) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -186,3 +188,11 @@ def from_scenario(scn, source) -> BuiltPlant:
 def nominal_b(scn) -> float:
     """b of the modelled part b/(s - a) (its sign is MRAC's known sign; |b| enters V)."""
     return first_order_part(scn.plant.linear.num, scn.plant.linear.den)[1]
+
+
+#: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "linear"
+KIND = register(PlantKind(
+    "linear", __name__, frozenset({Form.MRAC_STATE}), output_unit="-", control_unit="-",
+    params={},
+    default_model=None, doc="a linear plant with unmodelled dynamics",
+    default_law="mrac"))

@@ -45,6 +45,8 @@ from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.mujoco_plant import (compile_for_scenario_with, control_callback, new_warnings, scale_body_mass,
                                              scratch_data)
 from adaptive_mj.plants.protocol import Policy
+from adaptive_mj.laws.kinds import Form
+from adaptive_mj.plants.kinds import PlantKind, body_param_unit, register
 
 
 def _name(model, objtype, i: int) -> str:
@@ -726,3 +728,11 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
                              base=p.manipulator.base_parameters, where=str(p.model), notes=tuple(notes),
                              friction_params=fr.friction_params, coulomb_smoothing=fr.coulomb_smoothing)
     return BuiltPlant(plant, model_xml, tuple(notes))
+
+
+#: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "manipulator"
+KIND = register(PlantKind(
+    "manipulator", __name__, frozenset({Form.RIGID_BODY}), output_unit="rad", control_unit="N m",
+    params={},
+    default_model="ur5e_arm", doc="any MJCF arm of hinge/slide joints under Slotine-Li", param_unit=body_param_unit,
+    default_law="slotine_li"))

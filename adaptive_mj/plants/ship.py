@@ -27,6 +27,8 @@ from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path, control_callback,
                                              read_model_file, scale_body_mass)
 from adaptive_mj.plants.nomoto import NomotoFit, fit, nomoto_form
+from adaptive_mj.laws.kinds import Form
+from adaptive_mj.plants.kinds import PlantKind, register
 
 MODEL_PATH = MODELS / "ship.xml"
 HEADING_JOINT, RUDDER_JOINT, SURGE_JOINT, SWAY_JOINT = "yaw", "rudder", "x", "y"
@@ -238,3 +240,9 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
         model.opt.density = scn.plant.density
     return BuiltPlant(ShipPlant(model, where=str(scn.plant.model)), model_xml)
 
+
+#: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "ship"
+KIND = register(PlantKind(
+    "ship", __name__, frozenset({Form.MODEL}), output_unit="rad", control_unit="rad",
+    params={"T_over_K": "s²", "one_over_K": "s", "alpha_over_K": "s³", "rudder_bias": "rad"},
+    default_model="ship", doc="a model-scale hull in MuJoCo's fluid, steered by its rudder"))

@@ -22,6 +22,8 @@ import numpy as np
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant
 from adaptive_mj.plants.protocol import Plant, Policy
+from adaptive_mj.laws.kinds import Form
+from adaptive_mj.plants.kinds import PlantKind, register
 
 if TYPE_CHECKING:
     from adaptive_mj.plants.mujoco_plant import MujocoPlant
@@ -202,3 +204,11 @@ def from_scenario(scn, source) -> BuiltPlant:
     phase-space example x' = sin²x p + u with plant.regressor = "sin_squared")."""
     form = sin_squared_form() if scn.plant.regressor == "sin_squared" else lecture_first_order_form()
     return BuiltPlant(from_theta(scn, form))
+
+
+#: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "first_order"
+KIND = register(PlantKind(
+    "first_order", __name__, frozenset({Form.MODEL}), output_unit="-", control_unit="-",
+    params={"a": "-", "b": "-", "p": "-"},
+    default_model=None, doc="the lecture's first-order plant x' = f + phi p + u",
+    default_law="first_order_adaptive"))

@@ -20,6 +20,8 @@ import numpy as np
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant
 from adaptive_mj.plants.twin import TwinPlant, scenario_integrator
+from adaptive_mj.laws.kinds import Form
+from adaptive_mj.plants.kinds import PlantKind, register
 
 #: Elzebda, Nayfeh and Mook (1989), 25° angle of attack: [x1, x2, |x1| x2, |x2| x2, x1³]
 W_ELZEBDA_25 = 1e-3 * np.array([-18.59521, 15.162375, -62.45153, 9.54708, 21.45291])
@@ -93,3 +95,10 @@ def from_scenario(scn, source) -> BuiltPlant:
         return BuiltPlant(MracWingRock(theta, alpha=L.mrac.alpha, beta=L.mrac.beta, dt=dt, integrator=integrator,
                                        ctrl_range=ctrl))
     return BuiltPlant(TwinPlant(form(), theta, dt=dt, integrator=integrator, ctrl_range=ctrl))
+
+
+#: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "wing_rock"
+KIND = register(PlantKind(
+    "wing_rock", __name__, frozenset({Form.MODEL, Form.MRAC_STATE}), output_unit="rad", control_unit="-",
+    params={},
+    default_model=None, doc="wing rock of a slender delta wing"))

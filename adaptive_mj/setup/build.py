@@ -48,10 +48,9 @@ def plant_kinds(kind: str | None = None) -> dict:
     """plant.kind -> what builds it (``model_source(scn)``, ``from_scenario(scn, source)``): the
     bundled kinds' modules, and installed plant plugins (adaptive_mj.plants.plugin) when `kind` is
     not a bundled one."""
-    from adaptive_mj.plants import arm, heave, linear, manipulator, ship, twin, wing_rock
+    from adaptive_mj.plants.kinds import built_in
 
-    kinds = {"heave": heave, "arm": arm, "first_order": twin, "manipulator": manipulator, "ship": ship,
-             "linear": linear, "wing_rock": wing_rock}
+    kinds = {name: k.builder() for name, k in built_in().items()}
     if kind is not None and kind not in kinds:
         from adaptive_mj.plants.plugin import installed
 

@@ -24,19 +24,35 @@ from adaptive_mj.errors import ScenarioError
 SCHEMA_VERSION = 1
 
 ANALYTIC_PLANT_KINDS = ("linear", "wing_rock")  # analytic plants (adaptive_mj.plants.linear, .wing_rock)
-PLANT_KINDS = ("heave", "arm", "first_order", "manipulator", "ship") + ANALYTIC_PLANT_KINDS
+
+
+def _plant_kinds() -> dict:
+    """The built-in plant kinds, as their modules register them (adaptive_mj.plants.kinds)."""
+    from adaptive_mj.plants.kinds import built_in
+
+    return built_in()
+
+
+PLANT_KINDS = tuple(_plant_kinds())  # the built-in plant.kind values, from the registry
 BACKENDS = ("mujoco", "twin")
 INTEGRATORS = ("rk4", "euler", "implicitfast", "implicit")
 REFERENCE_KINDS = ("constant", "cosine", "sine", "sum_of_sines", "smooth_step", "waypoints", "reference_model")
 JOINT_REFERENCE_KINDS = ("joint_sum_of_sines", "joint_waypoints")
-LAW_KINDS = ("sliding_adaptive", "first_order_adaptive", "fixed_nominal", "robust_sliding", "mrac")
-MANIPULATOR_LAW_KINDS = ("slotine_li", "computed_torque", "pd_gravity")
+
+def _law_kinds(form) -> tuple[str, ...]:
+    from adaptive_mj.laws.kinds import BUILT_IN, Form
+
+    return tuple(k.name for k in BUILT_IN.values() if Form(form) in k.forms)
+
+
+LAW_KINDS = _law_kinds("model") + _law_kinds("mrac_state")  # the built-in law kinds of 1-DOF plants, from the registry
+MANIPULATOR_LAW_KINDS = _law_kinds("rigid_body")  # those of multi-joint plants
 DEAD_ZONE_ON = ("s", "tracking_error")
 DISTURBANCE_KINDS = ("none", "constant", "step", "sine")
 ARM_DISTURBANCE_KINDS = DISTURBANCE_KINDS + ("noise",)  # per joint torques (adaptive_mj.disturbance)
 EVENT_KINDS = ("payload_mass", "payload_swap", "fluid_density_scale", "constant_force", "loading", "thrust_scale",
                "flight_condition")
-DEFAULT_MODEL = {"heave": "heave_vehicle", "arm": "pendulum_arm", "manipulator": "ur5e_arm", "ship": "ship"}
+DEFAULT_MODEL = {k.name: k.default_model for k in _plant_kinds().values() if k.default_model is not None}
 STATE_SIGNALS = ("y", "y_dot", "y_ddot")
 JOINT_SIGNALS = ("q", "q_dot")  # an arm's measured signals (noise.std)
 REGRESSORS = ("lecture", "sin_squared")
@@ -1140,6 +1156,7 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
     """[law]: its kind looked up in the law-kind registry (adaptive_mj.laws.kinds: the built-in kinds and the
     installed plugins), refused in one line when it serves none of the plant's forms, then its own keys."""
     from adaptive_mj.laws import kinds as law_kinds
+    from adaptive_mj.plants import kinds as plant_kinds
 
     raw_kind = t.data.get("kind")
     plugins: dict = {}
@@ -1148,9 +1165,13 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
 
         plugins = installed()
     known = {**law_kinds.BUILT_IN, **{n: law_kinds.plugin_kind(n, i) for n, i in sorted(plugins.items())}}
-    kind = t.string("kind", law_kinds.default_law(plant.kind), choices=tuple(known))
-    if law_kinds.refusal(known[kind], plant.kind, known) is not None:  # the alternatives named with the plugins
-        raise ScenarioError(f"{t.where}: {law_kinds.refusal(known[kind], plant.kind, law_kinds.all_kinds())}")
+    plant_kind = plant_kinds.lookup(plant.kind)
+    offered = plant_kind.forms if plant_kind is not None else frozenset({law_kinds.Form.MODEL})
+    kind = t.string("kind", plant_kind.default_law if plant_kind is not None else "sliding_adaptive",
+                    choices=tuple(known))
+    if law_kinds.refusal(known[kind], plant.kind, offered, known) is not None:  # naming the plugins too
+        raise ScenarioError(f"{t.where}: "
+                            f"{law_kinds.refusal(known[kind], plant.kind, offered, law_kinds.all_kinds())}")
     if kind in plugins:
         return _plugin_law(t, kind, plugins[kind], plant, order)
     if law_kinds.Form.RIGID_BODY in known[kind].forms:

@@ -319,7 +319,7 @@ class PreparedRun:
     control timing and native controller (None: the Python path)."""
 
     plant: Plant
-    rows: _Rows
+    rows: Rows
     queue: EventQueue
     noise: _NoiseSource
     timing: ControlTiming
@@ -354,7 +354,7 @@ def prepare(plant: Plant, law: Law, reference, *, duration: float, theta_hat0, n
     if noise_std is not None and rng is None:
         raise ValueError("noise_std needs an rng (np.random.Generator)")
     timing = ControlTiming.of(plant.dt, mode=control_mode, period=control_period, delay=control_delay)
-    rows = _Rows(plant, law, int(round(duration / plant.dt)), sink, sink_every)
+    rows = Rows(plant, law, int(round(duration / plant.dt)), sink, sink_every)
     queue = EventQueue(events, plant.dt)
     rows.events = queue.applied
     noise = _NoiseSource(noise_std, rng, (order,) + plant.joint_shape)
@@ -367,7 +367,7 @@ def prepare(plant: Plant, law: Law, reference, *, duration: float, theta_hat0, n
     return PreparedRun(plant, rows, queue, noise, timing, nc, theta_hat0, order, state_bound, sensors)
 
 
-def _run_python(plant, step: ControlStep, rows: _Rows) -> tuple[Status, str]:
+def _run_python(plant, step: ControlStep, rows: Rows) -> tuple[Status, str]:
     """Drive the Python control step to the end or the first divergence: (status, reason)."""
     with plant.controlled_by(step.controller):
         while rows.k < rows.n:
@@ -381,7 +381,7 @@ def _run_python(plant, step: ControlStep, rows: _Rows) -> tuple[Status, str]:
     return Status.OK, ""
 
 
-def _run_native(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
+def _run_native(plant, nc, rows: Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
     """Drive the native callback chunk by chunk: (status, reason)."""
     with plant.controlled_natively(nc.callback), nc:
         steps = native_steps(plant, nc, rows, queue, noise, state_bound)
@@ -394,7 +394,7 @@ def _run_native(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource, 
             return done.value
 
 
-def native_steps(plant, nc, rows: _Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
+def native_steps(plant, nc, rows: Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
     """A native run as a generator: each chunk's events and callback buffers are prepared, then it
     yields the chunk's step count n and waits for the plant to have stepped n physics steps (one
     mj_step(nstep=n) here, or a row of a mujoco.batch.Batch in adaptive_mj.sim.batch); it returns
@@ -461,15 +461,18 @@ class _NoiseSource:
         return self.rng.normal(0.0, self.std, size=(rows,) + self.shape) if self.std is not None else None
 
 
-class _Rows:
-    """A run's rows (one per physics step), flushed to the sink in blocks with V computed on the way.
+class Rows:
+    """A run's rows (one per physics step), flushed to the sink in blocks with V computed on the way: the one
+    place rows, V and the Trajectory are made, for loop.run and the dm_env episodes (adaptive_mj.env).
 
     True θ is piecewise constant (it changes only at events): kept as segments (first row, value)
-    and expanded only where asked, so a long run holds no (n_steps, n_theta) copy of a constant."""
+    and expanded only where asked, so a long run holds no (n_steps, n_theta) copy of a constant.
+    lyapunov: False for rows no law's V belongs to (an agent drives the plant): V is NaN."""
 
-    def __init__(self, plant: Plant, law: Law, n: int, sink, every: int):
+    def __init__(self, plant: Plant, law: Law, n: int, sink, every: int, *, lyapunov: bool = True):
         order, js, nth = plant_order(plant), plant.joint_shape, len(law.names)
         self.plant, self.law, self.n, self.sink, self.every, self.nth = plant, law, n, sink, every, nth
+        self.lyapunov = lyapunov
         self.t, self.x = np.empty(n), np.empty((n, order) + js)
         self.u, self.s = np.empty((n,) + js), np.empty((n,) + js)
         self.ref, self.theta_hat = np.empty((n, order + 1) + js), np.empty((n, nth))
@@ -540,7 +543,9 @@ class _Rows:
         self.flushed = upto  # first: a write cut short by an interruption is never repeated
         theta = self.theta_rows(rows.start, rows.stop)
         plant = self.plant
-        if has_joints(plant):  # V = ½ sᵀ M(q) s + ...: M as the callback recorded it, or from the plant at q
+        if not self.lyapunov:
+            self.V[rows] = np.nan
+        elif has_joints(plant):  # V = ½ sᵀ M(q) s + ...: M as the callback recorded it, or from the plant at q
             M = self.recorded_mass(rows.start, rows.stop)
             if M is None:
                 M = plant.mass_matrices(self.x[rows, 0])
