@@ -29,6 +29,11 @@ class LogFormatError(AdaptiveMJError, ValueError):
     """A file is not a readable adaptive-mj MCAP log."""
 
 
+class PluginError(AdaptiveMJError, RuntimeError):
+    """A plugin's own code raised (a law plugin's function): one line naming the plugin, where it comes from
+    and what it raised; the run's log is closed as "failed" with that reason."""
+
+
 class Interrupted(KeyboardInterrupt):
     """SIGINT or SIGTERM arrived; the run in progress stops cleanly, its log closed with
     status "interrupted". adaptive_mj.sim.interrupt's handler raises it for both signals (in the

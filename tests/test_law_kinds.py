@@ -62,3 +62,35 @@ def test_law_swap_replaces_the_table_keeps_the_prior_and_takes_scoped_keys():
     assert same.law.kind == "sliding_adaptive" and same.law.k == 123.0 and same.law.gamma == base.law.gamma
     assert sc.is_law_swap("law=emod") and sc.is_law_swap("law='emod'")
     assert not sc.is_law_swap("law={kind='emod'}") and not sc.is_law_swap("law.kind=emod")
+
+
+def test_a_plugin_that_raises_is_one_line_naming_it():
+    """A plugin's own code raising (an index past its arrays, say) comes out as errors.PluginError naming the
+    plugin, where it comes from and when, not as a traceback from inside adaptive-mj."""
+    import numpy as np
+
+    from adaptive_mj.errors import PluginError
+    from adaptive_mj.form import ModelForm
+    from adaptive_mj.laws.plugin import LawPlugin, PluginLaw
+    from adaptive_mj.plugins import Installed
+
+    def bad(x, ref, theta, phi, f, h, params, rate):
+        return ref[7], 0.0
+
+    inst = Installed("bad", LawPlugin(law=bad), "bad-law", "1.2.3", "0" * 64)
+    law = PluginLaw(inst, ModelForm(order=2, p_names=("b",), phi=lambda x: np.array([x[1]])), np.zeros(0))
+    with pytest.raises(PluginError, match=r"^law plugin 'bad' \(bad-law 1\.2\.3\) raised at t = 0\.5 s: IndexError: "):
+        law(0.5, np.zeros(2), np.zeros(3), np.zeros(2))
+
+
+def test_a_plugin_written_for_another_order_is_refused():
+    from adaptive_mj.laws.plugin import LawPlugin, Param
+    from adaptive_mj.plugins import Installed
+
+    inst = Installed("o2", LawPlugin(law=lambda *a: (0.0, 0.0), params=(Param("k", default=1.0),), orders=(2,)),
+                     "o2-law", "0.1", "0" * 64)
+    t = sc._Table({"kind": "o2"}, "law.", "x.toml")
+    plant = sc.load(sc.SCENARIOS_DIR / "lecture_first_order.toml").plant
+    with pytest.raises(ScenarioError, match=r"law.kind = 'o2' is written for plants of order 2; plant.kind = "
+                                            r"'first_order' here is of order 1"):
+        sc._plugin_law(t, "o2", inst, plant, 1)

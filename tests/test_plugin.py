@@ -68,7 +68,7 @@ def lyapunov(s, theta_hat, theta, params, M):
 LAW = LawPlugin(law=gtab, params=(Param("lambda", default=5.0, gt=0.0, unit="1/s"),
                                   Param("k", default=200.0, ge=0.0, unit="N s/m"),
                                   Param("gamma", default=0.1, gt=0.0, per_parameter=True)),
-                lyapunov=lyapunov, gain="gamma", doc="sliding law, per-parameter gains")
+                lyapunov=lyapunov, gain="gamma", doc="sliding law, per-parameter gains", orders=(2,))
 '''
 
 CART = """

@@ -53,6 +53,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from adaptive_mj.errors import PluginError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
                                      plugin_rate)
@@ -87,8 +88,9 @@ class Param:
 class LawPlugin:
     """What a package registers for a 1-DOF law: its law function (module docstring), its keys, whether it
     adapts (a fixed-parameter law: θ̂ stays at law.initial_estimates / law.nominal), its Lyapunov function
-    (or None: V logged as NaN), the per-parameter key that is Γ (or None: Γ = 1 for the shared leakage), and
-    the plant forms it serves (adaptive_mj.laws.kinds.Form values)."""
+    (or None: V logged as NaN), the per-parameter key that is Γ (or None: Γ = 1 for the shared leakage), the
+    plant forms it serves (adaptive_mj.laws.kinds.Form values) and the orders n of the plants it is written
+    for (None: any; a compiled law has no bounds checks, so an order-2 law that reads ref[2] must say (2,))."""
 
     law: Callable
     params: tuple[Param, ...] = ()
@@ -97,6 +99,7 @@ class LawPlugin:
     lyapunov: Callable | None = None
     gain: str | None = None
     forms: tuple[str, ...] = ("model",)
+    orders: tuple[int, ...] | None = None  # the plant orders n the law is written for (None: any)
 
     def __post_init__(self):
         names = [p.name for p in self.params]
@@ -127,6 +130,7 @@ class JointLawPlugin(LawPlugin):
 
     point: Callable | None = None
     forms: tuple[str, ...] = ("rigid_body",)
+    orders: tuple[int, ...] | None = (2,)
 
     def __post_init__(self):
         super().__post_init__()
@@ -185,6 +189,11 @@ class _PluginBase(Law):
         """(lower, upper) of law.projection, or None."""
         return self.modification.box(len(self.names)) if self.adapt else None
 
+    def _error(self, t: float, exc: Exception) -> PluginError:
+        inst = self.installed
+        return PluginError(f"law plugin {inst.name!r} ({inst.distribution} {inst.version}) raised at t = {t:.6g} s: "
+                           f"{type(exc).__name__}: {exc}")
+
     def _shared_rate(self, rate: np.ndarray, theta_hat: np.ndarray, s_abs: float, e_abs: float) -> None:
         sh = self.shared
         plugin_rate(rate, theta_hat, s_abs, s_abs if sh.dz_on_s else e_abs, self.adapt, sh.dz_width, sh.sigma,
@@ -225,7 +234,10 @@ class PluginLaw(_PluginBase):
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
         form = self.form
         rate = np.zeros(len(self.names))
-        u, s = self.plugin.law(x, ref, theta_hat, form.phi(x), form.f(x), form.h(x), self.params, rate)
+        try:
+            u, s = self.plugin.law(x, ref, theta_hat, form.phi(x), form.f(x), form.h(x), self.params, rate)
+        except Exception as exc:  # the plugin's own code: one line naming it, not a traceback
+            raise self._error(t, exc) from exc
         self._shared_rate(rate, theta_hat, abs(float(s)), abs(float(ref[0] - x[0])))
         return LawStep(float(u), rate, float(s), math.nan)
 
@@ -252,10 +264,13 @@ class JointPluginLaw(_PluginBase):
         plugin, m = self.plugin, self.m
         assert isinstance(plugin, JointLawPlugin) and plugin.point is not None
         v, w, a = np.zeros(m), np.zeros(m), np.zeros(m)
-        plugin.point(x, ref, self.params, v, w, a)
-        Y, tau_known = self.regressor(v, w, a)
         u, s, rate = np.zeros(m), np.zeros(m), np.zeros(len(self.names))
-        plugin.law(x, ref, theta_hat, Y, tau_known, self.params, u, s, rate)
+        try:
+            plugin.point(x, ref, self.params, v, w, a)
+            Y, tau_known = self.regressor(v, w, a)
+            plugin.law(x, ref, theta_hat, Y, tau_known, self.params, u, s, rate)
+        except Exception as exc:  # the plugin's own code: one line naming it, not a traceback
+            raise self._error(t, exc) from exc
         self._shared_rate(rate, theta_hat, joint_norm(s), tracking_error_norm(x, ref))
         return LawStep(u, rate, s, a)
 

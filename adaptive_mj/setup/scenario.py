@@ -551,8 +551,9 @@ def parse_value(raw: str, *, what: str) -> Any:
                             "(expected a number, true/false, a string, an array or an inline table)") from None
 
 
-#: the [law] keys a law swap keeps: what the scenario knows of θ at the start (the plant's, not the law's)
-SWAP_KEEPS = ("initial_estimates", "nominal")
+#: the [law] keys a law swap keeps: what the scenario knows of θ at the start and the order of the dynamics the
+#: law sees (the plant's, not the law's)
+SWAP_KEEPS = ("initial_estimates", "nominal", "order")
 
 
 def law_swap(kind: str) -> str:
@@ -1218,6 +1219,10 @@ def _plugin_law(t: _Table, kind: str, inst, plant: PlantSpec, order: int) -> Law
     law_order = t.integer("order", order, ge=1)
     if law_order != order:
         raise t.fail("order", f"{order} for plant.kind = {plant.kind!r}", law_order)
+    orders = inst.plugin.orders
+    if orders is not None and order not in orders:
+        raise ScenarioError(f"{t.where}: law.kind = {kind!r} is written for plants of order "
+                            f"{' or '.join(map(str, orders))}; plant.kind = {plant.kind!r} here is of order {order}")
     params = _plugin_params(t, inst, "law", kind)
     initial = _estimate_table(t, "initial_estimates")
     nominal = _estimate_table(t, "nominal")

@@ -34,4 +34,5 @@ LAW = LawPlugin(
             Param("gamma_p", gt=0.0, doc="adaptation stiffness of p̂"),
             Param("nu", default=0.0, ge=0.0, doc="e-modification leakage ν")),
     doc="order-2 sliding law with e-modification (leakage ν|s|θ̂)",
+    orders=(2,),  # it reads ref[2] and x[1]: a plant of order 2
 )
