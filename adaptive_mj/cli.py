@@ -29,19 +29,20 @@ class _Parser(argparse.ArgumentParser):
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="adaptive-mj", description="Adaptive control on MuJoCo physics (lecture 7).")
     p.add_argument("--debug", action="store_true", help="show tracebacks")
-    debug = argparse.ArgumentParser(add_help=False)  # --debug also after the command
+    debug = _Parser(add_help=False)  # --debug also after the command
     debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    _add = sub.add_parser
-    sub.add_parser = lambda *a, **kw: _add(*a, parents=[debug], **kw)  # type: ignore[method-assign]
 
-    ls = sub.add_parser("list", help="the bundled scenarios, one line each (--laws: the laws)")
+    def add_parser(name: str, **kw) -> _Parser:  # each command takes --debug after its name too
+        return sub.add_parser(name, parents=[debug], **kw)
+
+    ls = add_parser("list", help="the bundled scenarios, one line each (--laws: the laws)")
     ls.add_argument("--laws", action="store_true",
                     help="the law kinds: built in, and installed plugins with where each comes from and its keys")
     ls.add_argument("--plants", action="store_true",
                     help="the plant kinds: built in, and installed plugins with where each comes from and its keys")
 
-    r = sub.add_parser("run", help="run a scenario headless and write an MCAP log")
+    r = add_parser("run", help="run a scenario headless and write an MCAP log")
     r.add_argument("scenario", help="a scenario file, or the name of a bundled one")
     r.add_argument("-o", "--output", type=Path, help="log file (default: a new file under logs/)")
     r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -58,7 +59,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="refuse a run whose loop the pre-flight check finds unstable by construction (exit 2) "
                         "instead of warning; the same as --set success.preflight='refuse'")
 
-    rp = sub.add_parser("replay", help="read a log: summary, plot, bit-identical re-simulation")
+    rp = add_parser("replay", help="read a log: summary, plot, bit-identical re-simulation")
     rp.add_argument("log", type=Path)
     rp.add_argument("--json", action="store_true", help="print the summary object as JSON")
     rp.add_argument("--plot", type=Path, metavar="FILE.png", help="draw tracking, error, u and s, estimates, V")
@@ -72,7 +73,7 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("--video-groups", metavar="G1,G2,...",
                     help="the model's geom groups to draw (default: MuJoCo's 0, 1, 2 and the groups of any body whose "
                          "geoms are all outside them, e.g. a menagerie arm's collision geoms in group 3)")
-    b = sub.add_parser("bench", help="run the benchmark catalogue: report.md, figures, logs, summary.json")
+    b = add_parser("bench", help="run the benchmark catalogue: report.md, figures, logs, summary.json")
     b.add_argument("--quick", action="store_true",
                    help="shorter runs and fewer variants, no breaking-point study (under a minute on 2 cores)")
     b.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
@@ -81,7 +82,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="also run your own scenario in a section of its own (repeatable; any law, a plugin too)")
     _backend_arguments(b)
 
-    sw = sub.add_parser("sweep", help="run a scenario over a grid of keys and seeds, in parallel")
+    sw = add_parser("sweep", help="run a scenario over a grid of keys and seeds, in parallel")
     sw.add_argument("scenario", help="a scenario file, or the name of a bundled one")
     sw.add_argument("--grid", action="append", default=[], metavar="KEY=LO:HI:N",
                     help="a grid axis: KEY=LO:HI:N (N values, linear) or KEY=V1,V2,... (repeatable); "
@@ -107,8 +108,8 @@ def _parser() -> argparse.ArgumentParser:
                     help="all: an MCAP log per run (default); summary: the table rows only, no logs (very large "
                          "studies; no --resume)")
     _backend_arguments(sw)
-    st = sub.add_parser("stress", help="breaking points: every law x stressor x plant, margins by bisection "
-                                       "over seeded runs; report.md and margins.csv")
+    st = add_parser("stress", help="breaking points: every law x stressor x plant, margins by bisection "
+                    "over seeded runs; report.md and margins.csv")
     st.add_argument("--seeds", type=int, default=5, help="seeds per stress value (default 5)")
     st.add_argument("--steps", type=int, default=4, help="bisection steps after the two ends (default 4)")
     st.add_argument("--duration", type=float, default=20.0, help="seconds per run (default 20)")
@@ -229,9 +230,9 @@ def cmd_list(args) -> int:
         from adaptive_mj.laws.plugin import ENTRY_POINT_GROUP, installed
 
         plugins = installed()
-        for name, kind in law_kinds.all_kinds().items():
-            forms = ", ".join(sorted(f.value for f in kind.forms))
-            line = f"{name:24s} {kind.origin}: serves {forms}; {kind.doc}"
+        for name, law_kind in law_kinds.all_kinds().items():
+            forms = ", ".join(sorted(f.value for f in law_kind.forms))
+            line = f"{name:24s} {law_kind.origin}: serves {forms}; {law_kind.doc}"
             if name in plugins:
                 line += f"; keys: {plugins[name].plugin.describe_keys() or 'none'}"
             print(line)
@@ -328,7 +329,7 @@ def cmd_replay(args) -> int:
     return code
 
 
-def _one_line(text: str) -> str:
+def _one_line(text: object) -> str:
     """A message on one line (MuJoCo's compiler messages span several)."""
     return " ".join(part.strip() for part in str(text).splitlines() if part.strip())
 

@@ -26,24 +26,29 @@ episode's end and `law="scenario"` are the same (see that module's docstring):
 from __future__ import annotations
 
 import os
-from typing import Any
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from adaptive_mj import env as dm_env_module
+from adaptive_mj.errors import AdaptiveMJError
+
+if TYPE_CHECKING:
+    from adaptive_mj.laws.protocol import Law
+
+gymnasium: ModuleType | None  # None without the optional extra
 try:
     import gymnasium
     from gymnasium import spaces
 except ImportError:  # the optional extra is not installed: make() says how to get it
     gymnasium = None
 
-from adaptive_mj import env as dm_env_module
-from adaptive_mj.errors import AdaptiveMJError
-
 INSTALL = "adaptive_mj.gym_env needs gymnasium, an optional extra: pip install 'adaptive-mj[gym]'"
 
 
-def make(scenario, *, law=None, seed: int | None = None, overrides=(), privileged: bool = False,
-         n_sub_steps: int | None = None, control_timestep: float | None = None,
+def make(scenario, *, law: Law | str | None = None, seed: int | None = None, overrides=(),
+         privileged: bool = False, n_sub_steps: int | None = None, control_timestep: float | None = None,
          log: str | os.PathLike | None = None) -> "TrackingEnv":
     """A gymnasium.Env running `scenario`; the arguments are adaptive_mj.env.load's."""
     if gymnasium is None:
@@ -59,16 +64,16 @@ def _box(spec, *, bounded: bool) -> Any:
     return spaces.Box(low=-np.inf, high=np.inf, shape=spec.shape, dtype=np.float64)
 
 
-class TrackingEnv(gymnasium.Env if gymnasium is not None else object):  # type: ignore[misc]
+class TrackingEnv(gymnasium.Env if gymnasium is not None else object):  # type: ignore[misc]  # base set at import
     """See the module docstring. `dm_env` is the wrapped adaptive_mj.env environment (its task has
     the trajectory, the estimates and the logs)."""
 
-    metadata = {"render_modes": []}
+    metadata: dict[str, Any] = {"render_modes": []}
     render_mode = None
 
-    def __init__(self, scenario, *, law=None, seed: int | None = None, overrides: tuple[str, ...] = (),
-                 privileged: bool = False, n_sub_steps: int | None = None, control_timestep: float | None = None,
-                 log=None):
+    def __init__(self, scenario, *, law: Law | str | None = None, seed: int | None = None,
+                 overrides: tuple[str, ...] = (), privileged: bool = False, n_sub_steps: int | None = None,
+                 control_timestep: float | None = None, log=None):
         self._load = dict(law=law, overrides=overrides, privileged=privileged, n_sub_steps=n_sub_steps,
                           control_timestep=control_timestep, log=log)
         self._scenario = scenario

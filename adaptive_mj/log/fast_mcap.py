@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import struct
 from importlib.metadata import version
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 from mcap.opcode import Opcode
@@ -55,8 +55,9 @@ def add_messages_fast(writer: Writer, batch: Batch) -> None:
     """What add_messages_public writes, straight into mcap 1.6.0's open chunk (see the module's doc)."""
     if not batch:
         return
-    stats = writer._Writer__statistics
-    chunk = writer._Writer__chunk_builder
+    internals: Any = writer  # its name-mangled attributes are private: Writer's type does not show them
+    stats = internals._Writer__statistics
+    chunk = internals._Writer__chunk_builder
     if chunk is None:  # a writer without chunking: nothing to write into
         add_messages_public(writer, batch)
         return
@@ -92,7 +93,8 @@ def _count(writer: Writer, chunk, stats, lo: int, hi: int, count: int) -> None:
     stats.message_start_time = lo if stats.message_count == 0 else min(stats.message_start_time, lo)
     stats.message_end_time = max(stats.message_end_time, hi)
     stats.message_count += count
-    writer._Writer__maybe_finalize_chunk()
+    internals: Any = writer  # its name-mangled attributes are private: Writer's type does not show them
+    internals._Writer__maybe_finalize_chunk()
 
 
 def add_rows_public(writer: Writer, channel_ids: list[int], log_ns: np.ndarray, blob: bytes) -> None:
@@ -119,11 +121,12 @@ def add_rows_fast(writer: Writer, channel_ids: list[int], log_ns: np.ndarray, bl
     interleaved and written in one go."""
     if len(log_ns) == 0:
         return
-    chunk = writer._Writer__chunk_builder
+    internals: Any = writer  # its name-mangled attributes are private: Writer's type does not show them
+    chunk = internals._Writer__chunk_builder
     if chunk is None:
         add_rows_public(writer, channel_ids, log_ns, blob)
         return
-    stats = writer._Writer__statistics
+    stats = internals._Writer__statistics
     buf = chunk.record_writer._buffer
     topics, rows = len(channel_ids), len(log_ns)
     payloads = blob.split(b"\0")

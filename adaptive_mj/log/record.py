@@ -32,7 +32,7 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
@@ -172,33 +172,50 @@ class LogHeader:
         return max(1, round(1.0 / (self.log_rate_hz * self.dt)))
 
 
+# The header's checks take its fields as `object`: a LogHeader is built from anything a caller passes
+# (its annotations are not enforced at run time), and these checks are what stands between that and the log.
+
+def _positive_number(value: object) -> bool:
+    """A finite int or float > 0."""
+    return isinstance(value, (int, float)) and math.isfinite(value) and value > 0
+
+
+def _int_at_least(value: object, lowest: int) -> bool:
+    """An int (or numpy integer, not a bool) >= lowest."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and bool(value >= lowest)
+
+
+def _name(value: object) -> bool:
+    """A non-empty str."""
+    return isinstance(value, str) and bool(value)
+
+
 def _check_header(header: LogHeader) -> None:
-    if not (isinstance(header.dt, (int, float)) and math.isfinite(header.dt) and header.dt > 0):
+    if not _positive_number(header.dt):
         raise ValueError(f"LogHeader.dt must be a finite number > 0 [s], got {header.dt!r}")
-    if not (isinstance(header.log_rate_hz, (int, float)) and math.isfinite(header.log_rate_hz)
-            and header.log_rate_hz > 0):
+    if not _positive_number(header.log_rate_hz):
         raise ValueError(f"LogHeader.log_rate_hz must be a finite number > 0 [Hz], "
                          f"got {header.log_rate_hz!r}")
-    if not (isinstance(header.order, (int, np.integer)) and not isinstance(header.order, bool)
-            and header.order >= 1):
+    if not _int_at_least(header.order, 1):
         raise ValueError(f"LogHeader.order must be an int >= 1, got {header.order!r}")
     names = tuple(header.param_names)
     reserved = {"t", NONFINITE_KEY}
-    if (len(set(names)) != len(names) or any(not isinstance(n, str) or not n for n in names)
-            or reserved & set(names)):
+    if len(set(names)) != len(names) or not all(_name(n) for n in names) or reserved & set(names):
         raise ValueError(f"LogHeader.param_names must be distinct non-empty strings other than "
                          f"{sorted(reserved)}, got {names!r}")
     joints = tuple(header.joint_names)
-    if any(not isinstance(j, str) or not j for j in joints):
+    if not all(_name(j) for j in joints):
         raise ValueError(f"LogHeader.joint_names must be non-empty strings, got {joints!r}")
     if joints:
         fields = [f for topic_fields in row_fields(header.order, (), joints).values() for f in topic_fields]
         if len(set(fields)) != len(fields) or len(set(joints)) != len(joints):
             raise ValueError(f"LogHeader.joint_names {joints!r} make clashing field names")
-    for key, value in header.versions.items():
+    versions: Iterable[tuple[object, object]] = header.versions.items()
+    for key, value in versions:
         if not isinstance(key, str) or not isinstance(value, str):
             raise ValueError(f"LogHeader.versions must map str to str, got {key!r}: {value!r}")
-    for name, data in header.model_assets.items():
+    assets: Iterable[tuple[object, object]] = header.model_assets.items()
+    for name, data in assets:
         if not isinstance(name, str) or not isinstance(data, (bytes, bytearray)):
             raise ValueError(f"LogHeader.model_assets must map str to bytes, got {name!r}")
 
@@ -370,8 +387,8 @@ class Recorder:
     def __init__(self, path: str | os.PathLike, header: LogHeader, *,
                  flush_every_rows: int | None = None):
         _check_header(header)
-        if flush_every_rows is not None and (not isinstance(flush_every_rows, int)
-                                             or flush_every_rows < 1):
+        every: object = flush_every_rows  # checked as any value (annotations are not enforced at run time)
+        if every is not None and (not isinstance(every, int) or every < 1):
             raise ValueError(f"flush_every_rows must be an int >= 1 or None, "
                              f"got {flush_every_rows!r}")
         self.path = os.fspath(path)

@@ -250,7 +250,7 @@ def _rows(name: str, messages: list[tuple[str, bytes]], order: int, names: tuple
 
 
 def _final_status(name: str, scan: _Scan, summary: dict | None, n_rows: int,
-                  *, span: float) -> tuple[str, str, str]:
+                  *, span: float) -> tuple[Status, str, str]:
     """(status, reason, note): the run's own status when its rows are all there,
     else "truncated" with a note saying what was recovered (span [s])."""
     if scan.damaged:
@@ -274,7 +274,7 @@ def _final_status(name: str, scan: _Scan, summary: dict | None, n_rows: int,
     # /summary is written after the last row, so its presence means no row is missing.
     note = "" if scan.complete else (
         f"all {n_rows} rows ({span:.1f} s) read; the footer is missing ({scan.problem})")
-    return status, str(final.get("reason", "")), note
+    return Status(status), str(final.get("reason", "")), note
 
 
 # -- the two ways through the file ----------------------------------------------------------
@@ -299,8 +299,8 @@ def _scan_indexed(data: bytes) -> _Scan:
     scan = _Scan(complete=True, library=reader.get_header().library)
     for record in reader.iter_metadata():
         scan.metadata.setdefault(record.name, dict(record.metadata))
-    for record in reader.iter_attachments():
-        scan.attachments[record.name] = record.data
+    for attachment in reader.iter_attachments():
+        scan.attachments[attachment.name] = attachment.data
     scan.messages = [(channel.topic, message.data)
                      for _, channel, message in reader.iter_messages(log_time_order=False)]
     return scan
@@ -394,6 +394,8 @@ def _decode_header(name: str, scan: _Scan) -> dict:
                              f"({scan.problem}), expected an adaptive-mj log header")
     raw_version = meta.get("log_format_version")
     try:
+        if raw_version is None:
+            raise TypeError("no log_format_version")
         version = int(raw_version)
     except (TypeError, ValueError):
         raise LogFormatError(f"{name}: '{HEADER_METADATA}' metadata has log_format_version "

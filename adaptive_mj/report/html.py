@@ -194,7 +194,7 @@ def markdown_to_html(text: str, *, base: Path | None = None) -> tuple[str, str, 
             continue
         if _LIST_ITEM.match(line):
             flush()
-            items = []
+            items: list[str] = []
             while i < len(lines) and (_LIST_ITEM.match(lines[i]) or (lines[i].startswith("  ") and items)):
                 m2 = _LIST_ITEM.match(lines[i])
                 if m2:

@@ -67,7 +67,8 @@ def plot_run(traj: Trajectory, path: str | Path, *, title: str = "", kind: str |
         for (te, _label) in traj.meta.get("events", []):
             a.axvline(te, color="grey", lw=0.8, ls=":")
     for a in fig.axes:
-        if a.get_subplotspec() is not None and a.get_subplotspec().is_last_row():
+        spec = a.get_subplotspec()
+        if spec is not None and spec.is_last_row():
             a.set_xlabel("time t [s]")
     fig.axes[-1].set_xlabel("time t [s]")
     path = Path(path)

@@ -24,7 +24,7 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator, Sequence
+from typing import Generator, Iterator, Sequence
 
 import numpy as np
 
@@ -446,7 +446,7 @@ def _logged(log: str | os.PathLike | LoggedRun) -> tuple[LoggedRun, str]:
 def iter_frames(log: str | os.PathLike | LoggedRun, *, fps: float = DEFAULT_FPS,
                 size: tuple[int, int] | str | None = None,
                 t_range: tuple[float, float] | None = None,
-                groups: Sequence[int] | None = None) -> Iterator[np.ndarray]:
+                groups: Sequence[int] | None = None) -> Generator[np.ndarray, None, None]:
     """Yield the video's frames, (height, width, 3) uint8 RGB, one per 1/fps of simulation time.
 
     log: a log path or a LoggedRun. size: (width, height) or "WxH"; the MuJoCo
@@ -461,7 +461,8 @@ def iter_frames(log: str | os.PathLike | LoggedRun, *, fps: float = DEFAULT_FPS,
 
 
 def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
-            t_range: tuple[float, float] | None, groups: Sequence[int] | None = None) -> Iterator[np.ndarray]:
+            t_range: tuple[float, float] | None,
+            groups: Sequence[int] | None = None) -> Generator[np.ndarray, None, None]:
     width, height = size
     model = _model(logged, where)
     traj = logged.trajectory
@@ -482,6 +483,8 @@ def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
                           aspect=scene_w / height)
 
     data, ghost = mujoco.MjData(model), mujoco.MjData(model)
+    qadr: np.ndarray | int  # the joints' qpos and dof addresses: every joint of an arm, or the one joint
+    dadr: np.ndarray | int
     if traj.joint_names:  # the whole arm; the reference pose as a ghost of the whole arm
         qadr, dadr = _qpos_addresses(model), np.arange(model.nv)
     else:

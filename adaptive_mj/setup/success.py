@@ -10,7 +10,9 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Hashable
 from dataclasses import dataclass, field
+from typing import TypeGuard
 
 import numpy as np
 
@@ -54,12 +56,18 @@ def sampled_positions(reference, duration: float, samples: int, order: int) -> n
     (reference, duration, samples, order) when the reference is a frozen dataclass (every bundled kind:
     equal fields, equal values), as a study's runs share one; a copy each time. A 6-joint reference's
     2001 samples cost ~1 ms a run otherwise."""
-    if dataclasses.is_dataclass(reference) and reference.__dataclass_params__.frozen:  # type: ignore[union-attr]
+    if _frozen_dataclass(reference):
         try:
             return _sampled(reference, float(duration), samples, order).copy()
         except TypeError:  # a field numpy holds (unhashable): evaluated every time
             pass
     return reference_positions(reference, np.linspace(0.0, duration, samples), order)
+
+
+def _frozen_dataclass(value: object) -> TypeGuard[Hashable]:
+    """A frozen dataclass: hashed by its fields (which may still fail to hash: a numpy array). Every
+    dataclass has __dataclass_params__; typeshed's DataclassInstance does not declare it."""
+    return dataclasses.is_dataclass(value) and value.__dataclass_params__.frozen  # type: ignore[union-attr]  # undeclared
 
 
 @functools.lru_cache(maxsize=32)

@@ -144,7 +144,8 @@ def with_law(law: str | None, overrides: list[str]) -> list[str]:
         return overrides
     from adaptive_mj.setup.scenario import law_swap
 
-    if not isinstance(law, str) or not law:
+    name: object = law  # any value a Python caller passed
+    if not isinstance(name, str) or not name:
         raise ScenarioError(f"--law must be a law kind's name (adaptive-mj list --laws), got {law!r}")
     return [law_swap(law), *overrides]
 
@@ -168,7 +169,8 @@ def breaking_point(scenario: str | Path, *, key: str, lo: float | None = None, h
             raise ScenarioError(f"--breaking-point: give key='KEY=LO:HI', or key='KEY' with both lo and hi "
                                 f"(got key={key!r}, lo={lo!r}, hi={hi!r})")
         key = f"{key}={lo!r}:{hi!r}"
-    if tail_bound is None or not isinstance(tail_bound, (int, float)) or not tail_bound > 0:
+    bound: object = tail_bound  # any value a Python caller passed
+    if bound is None or not isinstance(bound, (int, float)) or not bound > 0:
         raise ScenarioError(f"--breaking-point needs --tail-bound B > 0 (the tail RMS tracking error above which "
                             f"a run fails, in the scenario's output unit), got {tail_bound}")
     seeds = count("--seeds", seeds, 1)

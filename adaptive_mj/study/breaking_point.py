@@ -253,7 +253,9 @@ def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path
         if not wanted:
             break
         for (i, v), ev in zip(wanted, evaluate(wanted), strict=True):
-            lo, hi = brackets[i]
+            bracket = brackets[i]
+            assert bracket is not None  # _midpoints wants values of bracketed searches only
+            lo, hi = bracket
             if ev.passes:
                 brackets[i] = (v, hi)
                 margins[i].margin = v

@@ -188,6 +188,11 @@ def interrupted_note(finished: int, total: int) -> str:
     return f"{finished} of {total} runs had finished; the run(s) in progress closed their logs as 'interrupted'"
 
 
+def _int_at_least(value: object, lowest: int) -> bool:
+    """An int (not a bool) >= lowest: an option checked as any value its caller passed."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= lowest
+
+
 @dataclass(frozen=True)
 class Backend:
     """Where the runs go. kind "local": worker processes on this machine (`jobs` of them; 1 runs
@@ -228,14 +233,14 @@ class Backend:
             if value not in choices:
                 raise ScenarioError(f"{opt} must be one of {', '.join(choices)}, got {value!r}")
         if kind != "ray":
-            for opt, value, default in (("--address", address, None), ("--ray-logs", logs, "bytes")):
-                if value != default:
+            for opt, given, default in (("--address", address, None), ("--ray-logs", logs, "bytes")):
+                if given != default:
                     raise ScenarioError(f"{opt} is for --backend ray (this command runs on --backend {kind})")
         if jobs is None:
             jobs = os.cpu_count() or 1
-        if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        if not _int_at_least(jobs, 1):
             raise ScenarioError(f"--jobs must be an integer >= 1, got {jobs}")
-        if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
+        if not _int_at_least(retries, 0):
             raise ScenarioError(f"--retries must be an integer >= 0, got {retries}")
         if kind == "ray":
             ray_module()  # not installed: one line now, before any folder is made

@@ -27,7 +27,7 @@ import time
 from collections import deque
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
-from typing import Callable, Iterator, Sequence
+from typing import Callable, Iterator, Sequence, cast
 
 from adaptive_mj.sim import interrupt
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
@@ -140,7 +140,7 @@ def run_jobs(jobs: Sequence[Job], *, n_jobs: int = 1, on_done: Callable[[JobResu
         results[i] = result
         if on_done:
             on_done(result)
-    return results  # type: ignore[return-value]
+    return cast("list[JobResult]", results)  # every slot filled: iter_results yields each job once
 
 
 #: Runs submitted ahead per worker process: keeps the workers busy while bounding what the
@@ -229,7 +229,7 @@ def _put_back_lost(lost: list[int], jobs: Sequence[Job], attempts: list[int], re
     """The runs a broken pool lost (indices into `jobs`): one that had not started goes back to
     `queue` when a started one is there to blame; a started one is charged an attempt and goes to
     `suspects` (run alone next), or, its retries spent, is yielded as an error."""
-    started = {i for i in lost if jobs[i].log is None or jobs[i].log.exists()}
+    started = {i for i in lost if (log := jobs[i].log) is None or log.exists()}
     for i in sorted(lost, reverse=True):
         job = jobs[i]
         if started and i not in started:
@@ -260,6 +260,7 @@ def _worker_context(jobs: Sequence[Job]):
 
 def _prewarm(jobs: Sequence[Job]) -> None:
     """Compile the native callback of each distinct scenario file among the jobs (in this process)."""
+    from adaptive_mj.plants.protocol import has_form
     from adaptive_mj.sim import native
     from adaptive_mj.setup import scenario as sc
     from adaptive_mj.setup.build import build
@@ -271,7 +272,7 @@ def _prewarm(jobs: Sequence[Job]) -> None:
         seen.add(job.scenario)
         try:
             setup = build(sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed))
-            if native.supported(setup.plant, setup.law):
+            if native.supported(setup.plant, setup.law) and has_form(setup.plant):  # supported: a 1-DOF plant
                 native.compiled(setup.plant.form, plugin=setup.law.native_params().get("plugin_law"))
             elif getattr(setup.plant, "joint_shape", ()):
                 from adaptive_mj.sim import native_manipulator

@@ -98,6 +98,7 @@ def _task_collect(job: Job, logs: str, where: Path | None, result: JobResult) ->
         if logs == "bytes":
             data = where.read_bytes()
         else:
+            assert job.log is not None  # _task_log gives a place only to a job with a log
             os.replace(where, job.log)
     error = result.error.replace(str(where), str(job.log)) if where is not None else result.error
     return replace(result, job=job, error=error), data
@@ -145,8 +146,9 @@ def run_task_batch(jobs: Sequence[Job], logs: str) -> list[tuple[JobResult, byte
     ks = list(places)
     try:
         try:
-            if interrupt.requested() is not None:  # stopped before it started: no run begins (run_in_worker's rule)
-                raise Interrupted(interrupt.requested())
+            signum = interrupt.requested()
+            if signum is not None:  # stopped before it started: no run begins (run_in_worker's rule)
+                raise Interrupted(signum)
             with interrupt.stop_on_signals((signal.SIGINT, signal.SIGTERM)):
                 results = run_jobs_batched([replace(jobs[k], log=places[k]) for k in ks], nthread=1)
         except KeyboardInterrupt as exc:
@@ -230,15 +232,17 @@ def session(backend: Backend):
 
 def _write_log(job: Job, data: bytes) -> str:
     """The returned log bytes to job.log (through NAME.partial); "" or the error's one line."""
-    part = partial_path(job.log)
+    log = job.log
+    assert log is not None  # a task returns log bytes only for a job with a log (_task_log)
+    part = partial_path(log)
     try:
-        job.log.parent.mkdir(parents=True, exist_ok=True)
+        log.parent.mkdir(parents=True, exist_ok=True)
         part.write_bytes(data)
     except OSError as exc:  # disk full, a file-size limit: what was written reads as truncated
         if part.is_file():
-            os.replace(part, job.log)
-        return log_write_error(job.log, exc)
-    os.replace(part, job.log)
+            os.replace(part, log)
+        return log_write_error(log, exc)
+    os.replace(part, log)
     return ""
 
 
@@ -335,7 +339,7 @@ def iter_results(jobs: Sequence[Job], backend: Backend, *,
 
 def _drop_existing(ids: list[int], jobs: Sequence[Job]) -> tuple[list[int], list[tuple[int, JobResult]]]:
     """(the jobs of a task still to run, an error result for each whose log is already there)."""
-    exist = [i for i in ids if jobs[i].log is not None and jobs[i].log.exists()]
+    exist = [i for i in ids if (log := jobs[i].log) is not None and log.exists()]
     return ([i for i in ids if i not in exist],
             [(i, JobResult(jobs[i], "error", None, error=f"{jobs[i].log}: file exists")) for i in exist])
 
@@ -370,10 +374,11 @@ def _stopped_again(pairs: list[tuple[int, _Returned]], jobs: Sequence[Job], u: i
     stopped = [res for _, (res, _) in pairs if res.status == Status.INTERRUPTED]
     if not stopped:
         return False
-    if interrupt.requested() is not None:
+    signum = interrupt.requested()
+    if signum is not None:
         for i, (res, data) in pairs:
             _write_returned_log(jobs[i], res, data)
-        raise Interrupted(interrupt.requested())
+        raise Interrupted(signum)
     return _retry([i for i, _ in pairs], jobs, u, attempts, backend, on_retry,
                   f"its node stopped it: {stopped[0].error}")
 
@@ -404,14 +409,17 @@ def _remove_leftovers(job: Job, backend: Backend) -> None:
 def _keep_leftovers(job: Job, backend: Backend) -> str:
     """A run given up: what its last attempt wrote on shared storage becomes its log (it reads as
     truncated); the text to add to the error."""
-    part = partial_path(job.log) if job.log is not None else None
-    if part is None or backend.logs != "shared" or not part.is_file():
+    log = job.log
+    if log is None or backend.logs != "shared":
+        return ""
+    part = partial_path(log)
+    if not part.is_file():
         return ""
     if part.stat().st_size == 0:  # killed before its first write
         part.unlink()
         return "; its last attempt wrote no log"
-    os.replace(part, job.log)
-    return f"; what its last attempt wrote reads as truncated ({job.log})"
+    os.replace(part, log)
+    return f"; what its last attempt wrote reads as truncated ({log})"
 
 
 def _stop(ray, pending: dict, units: list[list[int]], jobs: Sequence[Job], backend: Backend, *,

@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from adaptive_mj.errors import ScenarioError
 from adaptive_mj.study import callable_module
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.report.metrics import TAIL_FRACTION
@@ -181,6 +182,8 @@ def stressors(p: Plant, duration: float = DURATION) -> list[Stressor]:
         out.append(Stressor("lag τ", lambda v: [f"plant.thruster_time_constant={v!r}"], 1e-3, 1.0, unit="s"))
     else:
         m0 = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml").plant.payload_mass
+        if m0 is None:  # the bundled arm_payload_swap sets it
+            raise ScenarioError(f"{p.scenario}: the payload ratio stressor needs plant.payload_mass")
         t_swap = 0.5 * duration
         out.append(Stressor("payload ratio",
                             lambda v: [f"events=[{{t={t_swap!r}, kind='payload_mass', value={v * m0!r}}}]"],
@@ -223,17 +226,17 @@ def table(margins: list[Margin], *, seeds: int) -> str:
     for label in labels:
         cells = []
         for name in stressor_names:
-            m = by.get((label, name))
-            if m is None:
+            margin = by.get((label, name))
+            if margin is None:
                 cells.append("n/a")
                 continue
-            st = m.stats()
+            st = margin.stats()
             extra = []
             if st["tail_mean"] is not None:
                 extra.append(f"tail {st['tail_mean']:.2g}/{st['tail_cvar10']:.2g}")
             if st["failure_rate_beyond"] is not None:
                 extra.append(f"fail {100 * st['failure_rate_beyond']:.0f} %")
-            cells.append(margin_text(m) + ("<br>" + ", ".join(extra) if extra else ""))
+            cells.append(margin_text(margin) + ("<br>" + ", ".join(extra) if extra else ""))
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

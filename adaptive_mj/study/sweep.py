@@ -119,7 +119,8 @@ def known_keys(doc: dict) -> list[str]:
     keys += [f"{section}.{key}" for section, names in DOCUMENTED_KEYS.items() for key in names]
     ref = doc.get("reference")
     kind = ref.get("kind") if isinstance(ref, dict) else None
-    keys += [f"reference.{key}" for key in ("kind", *sc._REFERENCE_KEYS.get(kind, {}))]
+    defaults = sc._REFERENCE_KEYS.get(kind, {}) if kind is not None else {}  # a dict per kind (typed object there)
+    keys += [f"reference.{key}" for key in ("kind", *(defaults if isinstance(defaults, dict) else {}))]
     return list(dict.fromkeys(keys))
 
 
