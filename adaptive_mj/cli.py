@@ -12,6 +12,7 @@ import argparse
 import json
 import os
 import signal
+import functools
 import sys
 from pathlib import Path
 
@@ -160,10 +161,10 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
     if as_json:
         print(json.dumps(summary, sort_keys=False))
         return
-    from adaptive_mj import units
+    from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 
     m = summary["metrics"]
-    yu, uu = units.OUTPUT.get(kind or "", ""), units.CONTROL.get(kind or "", "")
+    yu, uu = units.output_unit(kind or ""), units.control_unit(kind or "")
     print(f"{summary['scenario']}: {summary['status']}"
           + (f" ({summary['reason']})" if summary.get("reason") else "")
           + f", {summary['duration']:.3f} s simulated, {summary['steps']} steps")
@@ -188,7 +189,8 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
                   f"{f(e['com_error_mm'], 'mm')}, inertia {f(e['inertia_error'], 'kg m²')} "
                   f"({f(None if rel is None else 100 * rel)} % of |I|)")
     final = summary["final"]
-    parts = [f"{n} {f(final['theta_hat'][n], units.param(kind, n))} (true {f(final['theta'][n], units.param(kind, n))})"
+    unit = functools.partial(units.param_unit, kind)
+    parts = [f"{n} {f(final['theta_hat'][n], unit(n))} (true {f(final['theta'][n], unit(n))})"
              for n in final["theta_hat"]]
     if parts:
         print("  estimates: " + ", ".join(parts))
@@ -300,7 +302,7 @@ def cmd_replay(args) -> int:
                                           steps=len(traj) * int(logged.header.get("log_every", 1))))
         summary["status"] = logged.status
         summary["reason"] = logged.trajectory.reason
-    from adaptive_mj.units import plant_kind_of
+    from adaptive_mj.plants.kinds import kind_of as plant_kind_of
 
     kind = plant_kind_of(logged.scenario_text)
     _print_summary(summary, as_json=args.json, note=logged.note, kind=kind)

@@ -17,13 +17,13 @@ def plot_run(traj: Trajectory, path: str | Path, *, title: str = "", kind: str |
 
     kind: the plant kind ("heave", "arm", "first_order"), for the units on the axes.
     A run of m joints is drawn by plot_joints."""
-    from adaptive_mj import units
+    from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 
     if traj.joint_names:
         return plot_joints(traj, path, title=title)
 
-    yu = units.OUTPUT.get(kind or "", "")
-    uu = units.CONTROL.get(kind or "", "")
+    yu = units.output_unit(kind or "")
+    uu = units.control_unit(kind or "")
     n = traj.x.shape[1]
     su = yu if n == 1 or yu in ("", "-") else f"{yu}/s" if n == 2 else f"{yu}/s²"
     vu = "-" if kind == "first_order" else "J" if kind else ""
@@ -55,7 +55,7 @@ def plot_run(traj: Trajectory, path: str | Path, *, title: str = "", kind: str |
         ax = fig.add_subplot(grid[2 + i // 2, i % 2])
         ax.plot(t, traj.theta[:, i], "k--", lw=1, label=f"true {name}")
         ax.plot(t, traj.theta_hat[:, i], lw=1.2, label=f"estimate {name}")
-        ax.set_ylabel(lab(name, units.param(kind, name)))
+        ax.set_ylabel(lab(name, units.param_unit(kind, name)))
         ax.legend(loc="best", fontsize=8)
     ax = fig.add_subplot(grid[-1, :] if n_par % 2 == 0 else grid[-1, 1])
     ax.plot(t, traj.V, lw=1.2, color="C4")

@@ -303,14 +303,14 @@ def panel_groups(names: tuple[str, ...], plant_kind: str | None) -> list[tuple[s
     """The panel's estimate axes: (y label, indices into names). A 1-DOF plant: one axis per parameter,
     "J [kg m²]". An arm (plant_kind "manipulator"): one axis per quantity, all its parameters in it (a
     payload's 10: "mass [kg]", "m·c [kg m]", "inertia [kg m²]"), so every estimate is shown."""
-    from adaptive_mj import units
+    from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 
     if plant_kind != "manipulator":
-        return [(f"{n} [{units.param(plant_kind, n)}]" if units.param(plant_kind, n) else n, [i])
+        return [(f"{n} [{units.param_unit(plant_kind, n)}]" if units.param_unit(plant_kind, n) else n, [i])
                 for i, n in enumerate(names)]
     by_unit: dict[str, list[int]] = {}
     for i, n in enumerate(names):
-        by_unit.setdefault(units.param(plant_kind, n), []).append(i)
+        by_unit.setdefault(units.param_unit(plant_kind, n), []).append(i)
     return [(f"{_QUANTITY.get(u, 'other')} [{u}]" if u else "other", members) for u, members in by_unit.items()]
 
 
@@ -473,9 +473,9 @@ def _frames(logged: LoggedRun, where: str, *, fps: float, size: tuple[int, int],
     unit = "rad" if model.jnt_type[0] == mujoco.mjtJoint.mjJNT_HINGE else "m"
     title = str(logged.header.get("scenario_name", where))
     panel_traj = traj  # every estimate: an arm's in one axis per quantity (panel_groups)
-    from adaptive_mj import units
+    from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 
-    kind = units.plant_kind_of(logged.scenario_text or "") or (
+    kind = units.kind_of(logged.scenario_text or "") or (
         "manipulator" if traj.joint_names else ("arm" if unit == "rad" else "heave"))
     panel = _Panel(panel_traj, rows, width=width - scene_w, height=height, unit=unit, title=title, plant_kind=kind)
     shown = traj.q[rows[0]:rows[-1] + 1]

@@ -315,11 +315,11 @@ def verdict(scn: Scenario, traj: Trajectory, crit: Criteria, pre: preflight.Pref
     """(trajectory, summary) with the verdict: a completed run ("ok") that misses a [success] criterion
     becomes "failed", its reason naming each criterion missed and the measured value (and the
     pre-flight figure when the check had warned)."""
-    from adaptive_mj import units
+    from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 
     result = clean_json(make_summary(scn.name, traj))
     if traj.status == Status.OK:
-        missed = judge(result, crit, unit=units.OUTPUT.get(scn.plant.kind, ""))
+        missed = judge(result, crit, unit=units.output_unit(scn.plant.kind))
         if missed:
             if not pre.ok:
                 missed.append(f"the pre-flight check had warned: μh = {pre.figure:.3g} > {pre.limit:.3g}"

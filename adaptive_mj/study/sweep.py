@@ -314,16 +314,16 @@ def point_stats(table: Sequence[dict[str, Any]], keys: Sequence[str], metric: st
 
 def metric_label(metric: str, plant_kind: str) -> str:
     """The metric name with its unit where known (tracking errors in the plant's output unit)."""
-    from adaptive_mj import units
+    from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 
     if metric.startswith(f"{RELATIVE}."):
         return f"{metric} [-] (p̂/p − 1)"
     if metric.startswith("param_error_final."):
-        unit = units.param(plant_kind, metric.split(".", 1)[1])
+        unit = units.param_unit(plant_kind, metric.split(".", 1)[1])
     elif metric in _OUTPUT_METRICS:
-        unit = units.OUTPUT.get(plant_kind, "")
+        unit = units.output_unit(plant_kind)
     elif metric in _CONTROL_METRICS:
-        unit = units.CONTROL.get(plant_kind, "")
+        unit = units.control_unit(plant_kind)
     else:
         unit = {"saturation_fraction": "-"}.get(metric, "")
     if unit == "-" and metric != "saturation_fraction":  # the first-order example: dimensionless
@@ -332,9 +332,9 @@ def metric_label(metric: str, plant_kind: str) -> str:
 
 
 def key_label(key: str, plant_kind: str) -> str:
-    from adaptive_mj import units
+    from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 
-    y_unit = units.OUTPUT.get(plant_kind, "")
+    y_unit = units.output_unit(plant_kind)
     y_unit = "" if y_unit == "-" else y_unit
     unit = _KEY_UNITS.get(key) or {"noise.std.y": y_unit, "noise.std.y_dot": y_unit and f"{y_unit}/s"}.get(key, "")
     return f"{key} [{unit}]" if unit else key
