@@ -36,7 +36,7 @@ of a kinematic tree read from MjData's kinematics; the stage logic is shared (ad
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -114,6 +114,29 @@ CONTEXT = np.dtype([
     # a multi-joint law plugin (laws.plugin.JointLawPlugin): its point's v and its params (nparams,)
     ("vpt", _i8), ("params", _i8), ("nparams", _i8),
 ])
+
+class Offsets(NamedTuple):
+    """Byte offsets of the MjData (and MjModel: dof_armature, dof_damping, gravity) fields the callback reads,
+    by name (adaptive_mj.sim.native_context.mujoco_offsets), instead of slots of a tuple kept in step by hand."""
+
+    userdata: int
+    qpos: int
+    qvel: int
+    ctrl: int
+    cdof: int
+    xpos: int
+    xmat: int
+    subtree_com: int
+    cinert: int
+    dof_armature: int
+    dof_damping: int
+    gravity: int
+    qfrc_applied: int
+    M: int
+
+
+#: the Offsets fields that name a field of MjModel (mujoco_offsets' "model." keys)
+MUJOCO_FIELDS = {"dof_armature": "model.dof_armature", "dof_damping": "model.dof_damping", "gravity": "model.gravity"}
 
 MODE_PD_GRAVITY = 2  # laws.slotine_li.Mode.PD_GRAVITY (the regressor at v = w = a = 0)
 _compiled: dict = {}
@@ -363,8 +386,8 @@ def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step'
     """The callback's Python source, closed over MuJoCo's struct offsets and the cache key only; the
     functions it calls (regressor, ref_terms, output, the stage functions, pointer intrinsics) are
     globals that compiled() replaces by their numba versions."""
-    off_ud, off_qpos, off_qvel, off_ctrl, off_cdof, off_xpos, off_xmat, off_subcom, off_cinert, \
-        off_arm, off_damp, off_gravity, off_qfrc, off_M = off
+    off_ud, off_qpos, off_qvel, off_ctrl = off.userdata, off.qpos, off.qvel, off.ctrl
+    off_qfrc, off_M = off.qfrc_applied, off.M
 
     @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True, cache=True)  # noqa: F821 (injected)
     def callback(m, d):  # noqa: C901 (see above)
@@ -451,7 +474,8 @@ def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower
     """One evaluation of the Slotine–Li law at a stage: measure x (+ noise), the stage estimate, the
     regressor on the live MjData, τ clamped into u_hold (and s into s_hold), the rate into ctx.rate."""
     nv, nb, nth, nstd = ctx.nv, ctx.nbody, ctx.nth, ctx.nstd
-    _, _, _, _, off_cdof, off_xpos, off_xmat, off_subcom, off_cinert, off_arm, off_damp, off_gravity, _, _ = off
+    off_cdof, off_xpos, off_xmat, off_subcom, off_cinert = off.cdof, off.xpos, off.xmat, off.subtree_com, off.cinert
+    off_arm, off_damp, off_gravity = off.dof_armature, off.dof_damping, off.gravity
     th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
     x = carray(fptr(ctx.x), (2, nv))  # noqa: F821 (injected)
     s, qd_r, qdd_r = carray(fptr(ctx.s), nv), carray(fptr(ctx.qd_r), nv), carray(fptr(ctx.qdd_r), nv)  # noqa: F821 (injected)
@@ -564,9 +588,7 @@ def compiled(plugin=None):
     from adaptive_mj.laws.slotine_li import reference_terms, slotine_li_output
 
     offsets = mujoco_offsets()
-    off = tuple(offsets[k] for k in ("userdata", "qpos", "qvel", "ctrl", "cdof", "xpos", "xmat", "subtree_com",
-                                     "cinert", "model.dof_armature", "model.dof_damping", "model.gravity",
-                                     "qfrc_applied", "M"))
+    off = Offsets(**{name: offsets[MUJOCO_FIELDS.get(name, name)] for name in Offsets._fields})
     key = source_key(*fns, _callback_factory, _law_stage, _regressor, reference_terms, slotine_li_output,
                      _builtin_point, _builtin_output, _plugin_point, _plugin_output, plugin_rate,
                      stage_code.stage_estimate, stage_code.sense, context_address, extra=(off, numba.__version__))
