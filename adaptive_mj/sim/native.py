@@ -23,7 +23,7 @@ tests/test_native.py shows the Python and native paths give the same rows bit fo
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -81,6 +81,25 @@ CONTEXT = np.dtype([
 _compiled: dict = {}
 
 
+class RecordColumns(NamedTuple):
+    """Where each quantity of a step's row lies in the callback's record buffer (first column of each; width:
+    the row's length): t, x (n), u, s, ref (n+1), θ̂ (n_theta). One definition for the callback that writes
+    the rows and NativeController.finish that reads them."""
+
+    t: int
+    x: int
+    u: int
+    s: int
+    ref: int
+    theta: int
+    width: int
+
+
+def record_columns(n: int, nth: int) -> RecordColumns:
+    """The record layout of a plant of order n with n_theta parameters (compiled into the callback too)."""
+    return RecordColumns(0, 1, 1 + n, 2 + n, 3 + n, 4 + 2 * n, 4 + 2 * n + nth)
+
+
 def _callback_factory(off, key):
     """The callback's Python source, closed over MuJoCo's struct offsets and the cache key only;
     `law`, `phi_fn`, `f_fn`, `h_fn`, the stage functions and the pointer intrinsics are globals that
@@ -131,18 +150,18 @@ def _callback_factory(off, key):
             u = ctx.held
         ctrl[ctx.act] = u
         if stage == 0:  # the step's row: t, true x, u, s, ref, θ̂ at the step's start
-            ncol = 1 + n + 2 + (n + 1) + nth
-            rec = carray(fptr(ctx.rec), (row + 1) * ncol)  # noqa: F821 (injected)
-            o = row * ncol
-            rec[o] = ctx.t
-            rec[o + 1] = qpos[ctx.qadr]
-            rec[o + 2] = qvel[ctx.dadr]
-            rec[o + 1 + n] = u
-            rec[o + 2 + n] = ctx.s_hold
+            col = record_columns(n, nth)  # noqa: F821 (injected: the row's named columns)
+            rec = carray(fptr(ctx.rec), (row + 1) * col.width)  # noqa: F821 (injected)
+            o = row * col.width
+            rec[o + col.t] = ctx.t
+            rec[o + col.x] = qpos[ctx.qadr]
+            rec[o + col.x + 1] = qvel[ctx.dadr]
+            rec[o + col.u] = u
+            rec[o + col.s] = ctx.s_hold
             for i in range(n + 1):
-                rec[o + 3 + n + i] = r[i]
+                rec[o + col.ref + i] = r[i]
             for j in range(nth):
-                rec[o + 4 + 2 * n + j] = theta[j]
+                rec[o + col.theta + j] = theta[j]
         stage += 1
         if stage == nst:  # end of the physics step: advance the estimates (continuous: every step)
             if not sampled:
@@ -196,7 +215,7 @@ def compiled(form, plugin=None):
     offsets = mujoco_offsets()
     off = (offsets["userdata"], offsets["qpos"], offsets["qvel"], offsets["ctrl"])
     key = source_key(*fns, _callback_factory, _builtin_law, _plugin_law, sliding_law_values, plugin_rate,
-                     stage_code.stage_estimate, context_address, extra=(off, numba.__version__))
+                     record_columns, stage_code.stage_estimate, context_address, extra=(off, numba.__version__))
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
     inline = inlined(numba)
     forms: dict[str, Any] = {name: jit_tree(fn, inline, tag=tag)
@@ -210,7 +229,8 @@ def compiled(form, plugin=None):
                   "delay_slot")}
     pointers = context_functions(numba, carray, pointer(types.int64), tag)
     g = {**_callback_factory.__globals__, **stage_fns, "numba": numba, "types": types, "carray": carray,
-         "law": law, "address": address_of(), "iptr": pointer(types.int64), "fptr": pointer(types.float64),
+         "law": law, "record_columns": jit_tree(record_columns, inline, tag=tag), "address": address_of(),
+         "iptr": pointer(types.int64), "fptr": pointer(types.float64),
          "cptr": pointer(numba.from_dtype(CONTEXT)), "SAMPLED": stage_code.SAMPLED, **pointers}
     factory = unique_factory(_callback_factory, g, key)
     callback = factory(off, key)
@@ -252,7 +272,8 @@ class NativeController(ContextOwner):
         self.callback = compiled(plant.form, plugin=p.get("plugin_law"))
         n, nth = plant.form.order, len(law.names)
         self.n, self.nth, self.nst = n, nth, plant.stages
-        self.ncol = 1 + n + 2 + (n + 1) + nth
+        self.columns = record_columns(n, nth)
+        self.ncol = self.columns.width
         f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731 (a short local converter)
         self.buffers = {
             "theta": f64(np.array(theta_hat0, dtype=float).reshape(nth)), "rsum": np.zeros(nth),
@@ -307,6 +328,6 @@ class NativeController(ContextOwner):
         if int(c["row"]) != rows or int(c["stage"]) != 0:
             raise RuntimeError(f"native callback ran {int(c['row'])} steps (stage {int(c['stage'])}), "
                                f"expected {rows}")
-        rec = self.buffers["rec"][: rows * self.ncol].reshape(rows, self.ncol)
-        return (rec[:, 0].copy(), rec[:, 1:1 + n].copy(), rec[:, 1 + n].copy(), rec[:, 2 + n].copy(),
-                rec[:, 3 + n:4 + 2 * n].copy(), rec[:, 4 + 2 * n:].copy())
+        rec, col = self.buffers["rec"][: rows * self.ncol].reshape(rows, self.ncol), self.columns
+        return (rec[:, col.t].copy(), rec[:, col.x:col.x + n].copy(), rec[:, col.u].copy(), rec[:, col.s].copy(),
+                rec[:, col.ref:col.ref + n + 1].copy(), rec[:, col.theta:].copy())
