@@ -2,8 +2,8 @@
 parallel.py runs jobs in worker processes (or, for --backend ray, hands them to
 ray_backend.py, which runs each as a Ray task), sweep.py runs a scenario over a grid
 of overrides and seeds, bench.py runs the catalogue of the lecture's phenomena
-(bench_catalogue.py) and writes the report, with the analyses beyond the summary
-metrics in analysis.py.
+(bench_catalogue.py, assembled from one module per report section in sections/) and
+writes the report, with the analyses beyond the summary metrics in analysis.py.
 
 From Python (api.py): ``adaptive_mj.study.sweep(scenario, grid=..., seeds=...)``, ``.breaking_point``,
 ``.stress`` and ``.bench`` run a study and return a Study (result.py). Those four names are also the
