@@ -94,3 +94,42 @@ def test_a_plugin_written_for_another_order_is_refused():
     with pytest.raises(ScenarioError, match=r"law.kind = 'o2' is written for plants of order 2; plant.kind = "
                                             r"'first_order' here is of order 1"):
         sc._plugin_law(t, "o2", inst, plant, 1)
+
+
+# Each built-in law kind on a bundled scenario of a plant it serves, with the keys it requires
+LAW_CASES = {
+    "sliding_adaptive": ("heave_tracking", []),
+    "first_order_adaptive": ("lecture_first_order", []),
+    "fixed_nominal": ("heave_tracking", ["law.kind='fixed_nominal'"]),
+    "robust_sliding": ("heave_tracking", ["law.kind='robust_sliding'", "law.K=10.0", "law.boundary_layer=0.05"]),
+    "mrac": ("mrac_time_delay", []),
+    "slotine_li": ("ur5e_identification", []),
+    "computed_torque": ("ur5e_identification", ["law.kind='computed_torque'", "law.nominal='model'"]),
+    "pd_gravity": ("ur5e_identification", ["law.kind='pd_gravity'", "law.nominal='model'"]),
+}
+
+
+def test_every_key_a_law_kind_reads_is_documented(monkeypatch):
+    """The keys each built-in law kind's loader asks for (every _Table.get of its [law] table and sub-tables,
+    present or not) appear in docs/SCENARIOS.md: a key added in code but not in the docs fails here."""
+    assert set(LAW_CASES) == set(kinds.BUILT_IN)
+    tables: list = []
+    real_init = sc._Table.__init__
+
+    def spy(self, data, prefix, where):
+        real_init(self, data, prefix, where)
+        tables.append(self)
+
+    monkeypatch.setattr(sc._Table, "__init__", spy)
+    docs = (REPO / "docs" / "SCENARIOS.md").read_text()
+    for kind, (scenario, over) in LAW_CASES.items():
+        tables.clear()
+        scn = sc.load(sc.SCENARIOS_DIR / f"{scenario}.toml", overrides=over)
+        assert scn.law.kind == kind
+        named = tuple(f"law.{k}." for k in sc._LAW_TABLES if k not in ("dead_zone", "composite"))
+        keys = {t.key(name) for t in tables if t.prefix.startswith("law.") and not t.prefix.startswith(named)
+                for name in t.used}  # (a table keyed by parameter or joint names is not a key of the law)
+        for key in sorted(keys):
+            short = key.removeprefix("law.")
+            documented = f"`{short}`" in docs or f"`{key}`" in docs or f"`{short.rsplit('.', 1)[-1]}`" in docs
+            assert documented, f"{kind}: {key} is read by the loader but not in docs/SCENARIOS.md"

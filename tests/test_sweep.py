@@ -178,7 +178,7 @@ def test_rows_flatten_metrics_and_keep_failures(tmp_path):
 def test_metric_units_follow_the_plant():
     assert sweep.metric_label("rms_tracking_error_tail", "arm") == "rms_tracking_error_tail [rad]"
     assert sweep.metric_label("max_abs_tracking_error_tail", "heave") == "max_abs_tracking_error_tail [m]"
-    assert sweep.metric_label("control_rms", "arm") == "control_rms [N m]"  # adaptive_mj.units' spelling
+    assert sweep.metric_label("control_rms", "arm") == "control_rms [N m]"  # the arm kind's declared unit
     assert sweep.metric_label("rms_tracking_error", "first_order") == "rms_tracking_error"
     assert sweep.key_label("noise.std.y", "heave") == "noise.std.y [m]"
 

@@ -12,7 +12,7 @@ from typing import Callable
 
 import matplotlib
 
-from adaptive_mj import units
+from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import analysis
 from adaptive_mj.study.parallel import Job, JobResult
@@ -107,7 +107,7 @@ def _row(section: str, variant: str, r: JobResult, key: str = "") -> dict:
     kind = SECTION_PLANT.get(section, "")
     return {"section": section, "run": variant, "status": status, "tail": m.get("rms_tracking_error_tail"),
             "u_rms": m.get("control_rms"), "u_tv": m.get("control_total_variation"), "key": key,
-            "y_unit": units.OUTPUT.get(kind, ""), "u_unit": units.CONTROL.get(kind, "")}
+            "y_unit": units.output_unit(kind), "u_unit": units.control_unit(kind)}
 
 
 def _status_note(results: dict[str, JobResult]) -> str:
@@ -125,7 +125,7 @@ def _save(fig, out: Path, name: str) -> str:
 
 
 def _unit(name: str, plant: str) -> str:
-    return units.param(plant, name)
+    return units.param_unit(plant, name)
 
 
 def _g(v, spec=".3g") -> str:

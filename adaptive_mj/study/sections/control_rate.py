@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from adaptive_mj import units
+from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.parallel import JobResult
 from adaptive_mj.study.sections.common import (Built, SCN, SectionReport, _g, _job, _row, _save, _status_note, plt,
@@ -148,7 +148,7 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
         for label, name, kind, rate, T, n, job in plan:
             r, loop = res[job.tag], loops[name]
             figure, where = loop.figure(T)
-            unit = units.OUTPUT.get(kind, "")
+            unit = units.output_unit(kind)
             bound = TAIL_BOUND[_BOUND_PLANT[kind]]
             m = (r.summary or {}).get("metrics", {})
             tail = m.get("rms_tracking_error_tail")
@@ -163,7 +163,7 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
                          f"{'holds' if holds else 'breaks'} |")
             row = _row("control rate", f"{name} {rate:g} Hz", r, f"figure {figure:.3g}, "
                        f"{'holds' if holds else 'breaks'}")
-            row.update({"y_unit": unit, "u_unit": units.CONTROL.get(kind, ""), "plant": name, "rate_hz": rate,
+            row.update({"y_unit": unit, "u_unit": units.control_unit(kind), "plant": name, "rate_hz": rate,
                         "period": T, "figure": figure, "figure_at": where, "predicted_stable": predicted,
                         "holds": holds, "identification_error": ident_value})
             rows.append(row)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from adaptive_mj import units
+from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.parallel import Job
 from adaptive_mj.study.sections.common import Section, SectionReport, _final_table, _g, _ok, _row, _status_note
@@ -29,7 +29,7 @@ def user_section(paths: list[Path], logs: Path) -> Section:
                 lines.append(f"| `{job.scenario}` | {scn.law.kind} | {r.status} {r.error} |||")
                 continue
             m = r.summary["metrics"]
-            yu, uu = units.OUTPUT.get(kind, ""), units.CONTROL.get(kind, "")
+            yu, uu = units.output_unit(kind), units.control_unit(kind)
             lines.append(f"| `{job.scenario.name}` | {scn.law.kind} | {r.status} | "
                          f"{_g(m.get('rms_tracking_error'))} {yu} | {_g(m.get('rms_tracking_error_tail'))} {yu} | "
                          f"{_g(m.get('control_rms'))} {uu} |")
