@@ -70,6 +70,7 @@ class LinearPlant(PythonStepped):
     joint_shape: tuple[int, ...] = ()
     joint_names: tuple[str, ...] = ()
     first_contact: tuple[float, str] | None = None
+    joint_limits: np.ndarray | None = None  # a 1-DOF plant's joint is not limited
     order = 1
     stages = 4
 

@@ -122,6 +122,7 @@ class MujocoPlant:
     joint_shape: tuple[int, ...] = ()  # 1-DOF: scalar y and u
     joint_names: tuple[str, ...] = ()
     first_contact: tuple[float, str] | None = None  # contacts are not tracked on a 1-DOF plant
+    joint_limits: np.ndarray | None = None  # a 1-DOF plant's joint is not limited
     native_owner: object | None = None  # the native controller whose context data points at
 
     def __init__(self, model: mujoco.MjModel, *, joint_id: int, actuator_id: int, form: ModelForm,

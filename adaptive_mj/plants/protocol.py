@@ -19,6 +19,7 @@ so must a plant plugin's plant (a MujocoPlant subclass does).
                JointPlant)
   joint_names  () on a 1-DOF plant, else the m joint names
   first_contact  (t [s], text) of the first contact in the run, or None (always, on a 1-DOF plant)
+  joint_limits (m, 2) joint ranges [rad or m] (±inf where unlimited), or None (a 1-DOF plant: unlimited)
   set_state(x0)  x0: the initial state, shaped like observe(); the time restarts at 0
   observe()    the true state now [m or rad, and their derivatives]
   true_theta() (n_theta,) the true parameters
@@ -83,6 +84,9 @@ class Plant(Protocol):
 
     @property
     def first_contact(self) -> tuple[float, str] | None: ...
+
+    @property
+    def joint_limits(self) -> np.ndarray | None: ...
 
     @property
     def ctrl_range(self) -> CtrlRange | None: ...

@@ -60,6 +60,7 @@ class TwinPlant(PythonStepped):
     joint_shape: tuple[int, ...] = ()  # 1-DOF: scalar y and u
     joint_names: tuple[str, ...] = ()
     first_contact: tuple[float, str] | None = None  # no contacts in the analytic twin
+    joint_limits: np.ndarray | None = None  # a 1-DOF plant's joint is not limited
 
     def __init__(self, form: ModelForm, theta, *, dt: float, integrator: Integrator = Integrator.RK4,
                  ctrl_range: tuple[float, float] | None = None, x0=None):

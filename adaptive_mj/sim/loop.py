@@ -258,7 +258,7 @@ def limits_meta(plant) -> dict:
     out: dict = {}
     if plant.ctrl_range is not None:
         out["ctrl_range"] = tuple(np.atleast_1d(np.asarray(b, dtype=float)).tolist() for b in plant.ctrl_range)
-    limits = getattr(plant, "joint_limits", None)
+    limits = plant.joint_limits
     if limits is not None and np.isfinite(limits).any():
         out["joint_limits"] = np.asarray(limits, dtype=float).tolist()
     return out

@@ -624,7 +624,7 @@ def compiled(plugin=None):
 
 def plugin_functions(law: Law):
     """(point, law) of a multi-joint law plugin for `compiled`, or None for Slotine–Li and its baselines."""
-    p = law.native_params() if getattr(law, "installed", None) is not None else {}
+    p = law.native_params() if law.installed is not None else {}
     return (p["plugin_point"], p["plugin_law"]) if "plugin_point" in p else None
 
 

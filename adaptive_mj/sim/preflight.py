@@ -186,12 +186,12 @@ def check(plant, law, reference, *, duration: float, timing: ControlTiming) -> P
 
 def _outside_range(plant, reference, duration: float, order: int) -> tuple[str, ...]:
     """One line per limited joint whose reference position leaves [lo, hi] during the run."""
-    limits = getattr(plant, "joint_limits", None)
+    limits = plant.joint_limits
     if limits is None:
         return ()
     q = _reference_positions(reference, duration, order)
     ts = np.linspace(0.0, duration, SAMPLES)
-    names = getattr(plant, "joint_names", ()) or ("the joint",)
+    names = plant.joint_names or ("the joint",)
     out = []
     for j, (lo, hi) in enumerate(np.atleast_2d(limits)):
         below, above = q[:, j] < lo, q[:, j] > hi

@@ -274,7 +274,7 @@ def _prewarm(jobs: Sequence[Job]) -> None:
             setup = build(sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed))
             if native.supported(setup.plant, setup.law) and has_form(setup.plant):  # supported: a 1-DOF plant
                 native.compiled(setup.plant.form, plugin=setup.law.native_params().get("plugin_law"))
-            elif getattr(setup.plant, "joint_shape", ()):
+            elif setup.plant.joint_shape:
                 from adaptive_mj.sim import native_manipulator
 
                 if native_manipulator.supported(setup.plant, setup.law):
