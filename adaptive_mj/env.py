@@ -98,6 +98,7 @@ from adaptive_mj.sim.loop import (Controller, ControlStep, EventQueue, Rows, Ste
 from adaptive_mj.report.metrics import clean_json, summary as make_summary  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.plants.protocol import Policy, has_joints  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.trajectory import Trajectory  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.trajectory import Status
 
@@ -194,10 +195,10 @@ class PlantPhysics(dm_mujoco.Physics):
     episode: "_Episode | None" = None
 
     @classmethod
-    def of(cls, plant: MujocoPlant) -> PlantPhysics:
+    def of(cls, plant: MujocoPlant | ManipulatorPlant) -> PlantPhysics:
         return cls(wrapper.MjData(plant.data))
 
-    def use(self, plant: MujocoPlant) -> None:
+    def use(self, plant: MujocoPlant | ManipulatorPlant) -> None:
         """Wrap another plant's model and data (a new episode's)."""
         self._reload_from_data(wrapper.MjData(plant.data))
 
@@ -269,6 +270,8 @@ class TrackingTask(control.Task):
         setup = build(self.scenario)
         if self._own_law:
             self.law = setup.law
+        # the scenario's plant, of the kind load() accepted (a new build of the same scenario)
+        assert isinstance(setup.plant, (MujocoPlant, ManipulatorPlant))
         physics.use(setup.plant)
         recorder = None
         if self.log_dir is not None:
@@ -287,6 +290,7 @@ class TrackingTask(control.Task):
         if self.drives_law:
             return
         spec = self._action_spec
+        assert self._episode is not None  # set by initialize_episode, which dm_control's reset calls first
         u = np.asarray(action, dtype=np.float64)
         if u.shape != spec.shape:
             what = f"the joint torques tau of {', '.join(self._episode.joint_names)}" if self.joint_shape \
@@ -299,6 +303,7 @@ class TrackingTask(control.Task):
 
     def get_observation(self, physics) -> collections.OrderedDict:
         ep = self._episode
+        assert ep is not None  # set by initialize_episode, which dm_control's reset calls first
         t = ep.plant.time
         obs = collections.OrderedDict()
         obs["state"] = ep.measured_state()
@@ -309,10 +314,12 @@ class TrackingTask(control.Task):
         return obs
 
     def get_reward(self, physics) -> float:
+        assert self._episode is not None  # set by initialize_episode, which dm_control's reset calls first
         return self._episode.last_reward
 
     def get_termination(self, physics) -> float | None:
         ep = self._episode
+        assert ep is not None  # set by initialize_episode, which dm_control's reset calls first
         if ep.status == Status.DIVERGED:
             return DISCOUNT_DIVERGED
         if ep.k >= ep.n_steps:
@@ -379,7 +386,7 @@ class _Episode:
                                          plant.stages, plant.dt, js, control_timing(scn, setup), setup.sensors)
             self.step = ControlStep(plant, self.controller, self.events, state_bound=self.state_bound,
                                     noise=self._next_noise)
-            self._policy = self.controller
+            self._policy: Policy = self.controller
         else:
             self._policy = lambda t, x: self._u
         self._u = np.zeros(js) if js else 0.0
@@ -429,6 +436,7 @@ class _Episode:
         """(n,)+J the state the law sees at the coming step: true state + that step's noise."""
         x = self.plant.observe()
         if self.joint_shape:  # a law called outside the callback (law_policy) reads Y at this state
+            assert has_joints(self.plant)  # joint_shape (m,): a plant of joints
             self.plant.update_kinematics()
         return x + self.noise if self.noise is not None else x
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Callable, cast
 
 import numpy as np
 
@@ -20,10 +21,15 @@ from adaptive_mj.laws import (CompositeSlidingLaw, DeadZone, DeadZoneOn, FirstOr
                               Law, Modification, RobustSlidingLaw, SlidingAdaptiveLaw)
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.plants import ModelSource
-from adaptive_mj.plants.protocol import Plant, has_joints
-from adaptive_mj.setup.scenario import JOINT_REFERENCE_KINDS, JOINT_SIGNALS, STATE_SIGNALS, Scenario
+from adaptive_mj.plants.protocol import CtrlRange, JointPlant, Plant, has_form, has_joints
+from adaptive_mj.setup.scenario import JOINT_REFERENCE_KINDS, JOINT_SIGNALS, STATE_SIGNALS, EventSpec, Scenario
 from adaptive_mj.sensors import Sensors
 from adaptive_mj.plants import Event, plant_order
+
+if TYPE_CHECKING:
+    from adaptive_mj.plants.arm import ArmPlant
+    from adaptive_mj.plants.manipulator import ManipulatorPlant
+    from adaptive_mj.plants.protocol import NativePlant
 
 
 @dataclass
@@ -33,7 +39,7 @@ class Setup:
 
     plant: Plant
     law: Law
-    reference: object
+    reference: Callable[[float | np.ndarray, int], np.ndarray]
     theta_hat0: np.ndarray
     noise_std: np.ndarray | None
     rng: np.random.Generator
@@ -153,6 +159,7 @@ def with_event_payloads(scn: Scenario, source: ModelSource | None) -> ModelSourc
         return source
     assets = dict(source.assets)
     for e in swaps:
+        assert e.payload is not None  # swaps holds only events with a payload
         key = pl.ASSET_PREFIX + e.payload
         if key in assets:
             continue
@@ -163,32 +170,36 @@ def with_event_payloads(scn: Scenario, source: ModelSource | None) -> ModelSourc
     return ModelSource(source.xml, assets)
 
 
-def _swap_key(e) -> str:
+def _swap_key(e: EventSpec) -> str:
     return f"the payload_swap event at t={e.t:g} s: payload"
 
 
-def _check_event(scn: Scenario, e, plant, source: ModelSource | None = None) -> None:
+def _check_event(scn: Scenario, e: EventSpec, plant: Plant, source: ModelSource | None = None) -> None:
     if e.kind not in ("payload_mass", "payload_swap"):
         return
     if scn.plant.payload is None and e.body.startswith("payload/"):
         raise ScenarioError(f"{scn.source}: events: a {e.kind} event on {e.body!r} needs a payload "
                             "(plant.payload is 'none'); attach one or name a body of your model with "
                             "events[].body")
-    plant.body_id(e.body)
+    # payload_mass and payload_swap events are only on plant.kind 'arm' or 'manipulator' (scenario._events)
+    cast("ArmPlant | ManipulatorPlant", plant).body_id(e.body)
     if e.kind == "payload_swap":
         _payload_inertial(scn, e, source)
 
 
-def _named(scn: Scenario, key: str, values, names: tuple[str, ...], plant=None) -> np.ndarray:
+def _named(scn: Scenario, key: str, values: dict[str, float] | str, names: tuple[str, ...],
+           plant: Plant | None = None) -> np.ndarray:
     if values == "model":
+        assert plant is not None  # "model" is an estimate table's value, read with the plant (_estimates)
         return np.array(plant.true_theta(), dtype=float)
     if tuple(values) != names:
         raise ScenarioError(f"{scn.source}: {key} must have the keys {', '.join(names)} in that order, "
                             f"got {', '.join(values) or 'none'}")
+    assert isinstance(values, dict)  # the one string value is "model" (scenario._estimate_table)
     return np.array(list(values.values()), dtype=float)
 
 
-def _law(scn: Scenario, plant, modification: Modification | None = None):
+def _law(scn: Scenario, plant: Plant, modification: Modification | None = None) -> Law:
     """The law of law.kind for `plant`; a law's own ValueError becomes a one-line ScenarioError."""
     try:
         return LAW_KINDS.get(scn.law.kind, _plugin)(scn, plant, modification)
@@ -198,38 +209,53 @@ def _law(scn: Scenario, plant, modification: Modification | None = None):
         raise ScenarioError(f"{scn.source}: law: {exc}") from None
 
 
-def _first_order_adaptive(scn: Scenario, plant, modification):
+def _first_order_adaptive(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
+    assert has_form(plant)  # a 1-DOF law kind: the scenario checked that it serves the plant's forms
     L, form = scn.law, plant.form
     return FirstOrderAdaptiveLaw(form, k=L.k, gamma=_gamma(scn, form.names), dead_zone=_dead_zone(scn, plant),
                                  modification=modification)
 
 
-def _sliding_adaptive(scn: Scenario, plant, modification):
+def _sliding_adaptive(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
+    assert has_form(plant)  # a 1-DOF law kind: the scenario checked that it serves the plant's forms
     L, form = scn.law, plant.form
+    assert L.lam is not None  # law.lambda is required for this law kind (scenario._law)
     if L.robust.composite_gain is not None:
+        assert L.robust.composite_filter is not None  # law.composite gives gain and filter together
         return CompositeSlidingLaw(form, lam=L.lam, k=L.k, gamma=_gamma(scn, form.names),
                                    kappa=L.robust.composite_gain, filter_rate=L.robust.composite_filter,
                                    dead_zone=_dead_zone(scn, plant), modification=modification)
     return SlidingAdaptiveLaw(form, lam=L.lam, k=L.k, gamma=_gamma(scn, form.names),
                               dead_zone=_dead_zone(scn, plant), modification=modification,
-                              saturation=_saturation(scn, plant) if L.saturation == "freeze" else None)
+                              # floats on a 1-DOF plant (Plant.ctrl_range)
+                              saturation=cast("tuple[float, float]", _saturation(scn, plant))
+                              if L.saturation == "freeze" else None)
 
 
-def _fixed_nominal(scn: Scenario, plant, modification):
+def _fixed_nominal(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
+    assert has_form(plant)  # a 1-DOF law kind: the scenario checked that it serves the plant's forms
+    assert scn.law.lam is not None  # law.lambda is required for this law kind (scenario._law)
     return FixedNominalLaw(plant.form, lam=scn.law.lam, k=scn.law.k)
 
 
-def _robust_sliding(scn: Scenario, plant, modification):
+def _robust_sliding(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
+    assert has_form(plant)  # a 1-DOF law kind: the scenario checked that it serves the plant's forms
     L = scn.law
+    # law.lambda, law.K and law.boundary_layer are required for law.kind = 'robust_sliding' (scenario._law)
+    assert L.lam is not None and L.K is not None and L.boundary_layer is not None
     return RobustSlidingLaw(plant.form, lam=L.lam, k=L.k, K=L.K, boundary_layer=L.boundary_layer)
 
 
-def _slotine_li(scn: Scenario, plant, modification):
+def _slotine_li(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
     """Slotine-Li (law.kind = "slotine_li") and its baselines on a manipulator plant."""
     from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
 
+    assert has_joints(plant)  # a rigid-body law kind: the scenario checked that it serves the plant's forms
     L = scn.law
-    lam = _per_joint(scn, "law.lambda", L.lam_joints if L.lam_joints is not None else L.lam, plant.joint_names)
+    lam_value = L.lam_joints if L.lam_joints is not None else L.lam
+    # law.lambda (a number, or lam_joints) and law.kd are required for these kinds (scenario._manipulator_law)
+    assert lam_value is not None and L.kd is not None
+    lam = _per_joint(scn, "law.lambda", lam_value, plant.joint_names)
     kd = _per_joint(scn, "law.kd", L.kd, plant.joint_names)
     mode = {"slotine_li": Mode.ADAPTIVE, "computed_torque": Mode.COMPUTED_TORQUE,
             "pd_gravity": Mode.PD_GRAVITY}[L.kind]
@@ -237,10 +263,12 @@ def _slotine_li(scn: Scenario, plant, modification):
                         gamma=_gamma(scn, plant.names) if L.gamma is not None else 1.0,
                         dead_zone=_dead_zone(scn, plant), mode=mode,
                         modification=modification if mode is Mode.ADAPTIVE else None,
-                        saturation=_saturation(scn, plant) if L.saturation == "freeze" else None)
+                        # (m,) arrays on a plant of m joints (Plant.ctrl_range)
+                        saturation=cast("tuple[np.ndarray, np.ndarray]", _saturation(scn, plant))
+                        if L.saturation == "freeze" else None)
 
 
-def _saturation(scn: Scenario, plant):
+def _saturation(scn: Scenario, plant: Plant) -> CtrlRange:
     """law.saturation = "freeze": the plant's limits (lo, hi): (m,) [N m] on an arm, floats [N or N m] on a 1-DOF
     plant; they must exist."""
     if plant.ctrl_range is None:
@@ -249,7 +277,7 @@ def _saturation(scn: Scenario, plant):
     return plant.ctrl_range
 
 
-def _plugin(scn: Scenario, plant, modification):
+def _plugin(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
     """law.kind = an installed law plugin (adaptive_mj.laws.plugin): its declared keys laid out as its params
     array (a per-parameter key: n_theta numbers in the plant's parameter order), the shared modifications,
     and the law over the plant's form (a JointLawPlugin over an arm's regressor)."""
@@ -259,10 +287,16 @@ def _plugin(scn: Scenario, plant, modification):
     if inst is None:
         raise ScenarioError(f"{scn.source}: law.kind {scn.law.kind!r} is not an installed law plugin")
     plugin = inst.plugin
-    names = tuple(plant.names) if has_joints(plant) else plant.form.names
+    if has_joints(plant):
+        names = tuple(plant.names)
+    else:
+        assert has_form(plant)  # joint_shape () when not has_joints
+        names = plant.form.names
+    plugin_params = scn.law.plugin_params
+    assert plugin_params is not None  # set for every law plugin (scenario._plugin_law)
     values: list[float] = []
     for p in plugin.params:
-        v = scn.law.plugin_params[p.name]
+        v = plugin_params[p.name]
         if not p.per_parameter:
             values.append(float(v))
         elif isinstance(v, dict):
@@ -274,20 +308,25 @@ def _plugin(scn: Scenario, plant, modification):
     shared = Shared.of(len(names), gamma=gamma, dead_zone=_dead_zone(scn, plant), modification=modification,
                        theta_hat0=modification.theta0 if modification is not None else None)
     if isinstance(plugin, JointLawPlugin):
+        assert has_joints(plant)  # a JointLawPlugin serves only plants of joints (scenario._law: its forms)
         return JointPluginLaw(inst, plant.regressor, names, plant.m, params, shared=shared, modification=modification)
+    assert has_form(plant)  # a LawPlugin serves only 1-DOF plants (scenario._law: its forms)
     return PluginLaw(inst, plant.form, params, shared=shared, modification=modification)
 
 
-def _mrac(scn: Scenario, plant, modification):
+def _mrac(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
     """law.kind = "mrac" (laws.mrac) on a linear plant (sign and size of b from its modelled part) or
     the wing rock (b = L_δ, the nonlinear terms of its regressor as matched terms)."""
     from adaptive_mj.laws.mrac import MracLaw, Rule
     from adaptive_mj.plants import linear, wing_rock
 
-    M, psi, psi_names = scn.law.mrac, None, ()
+    M, psi = scn.law.mrac, None
+    psi_names: tuple[str, ...] = ()
+    assert M is not None and scn.law.order is not None  # set for law.kind = 'mrac' (scenario._mrac_law)
     if scn.plant.kind == "linear":
         b = linear.nominal_b(scn)
     else:
+        assert scn.plant.wing_rock is not None  # set for plant.kind = 'wing_rock' (scenario._analytic_plant)
         b, psi, psi_names = scn.plant.wing_rock.l_delta, wing_rock.nonlinear_terms, wing_rock.NONLINEAR
     return MracLaw(order=scn.law.order, alpha=M.alpha, beta=M.beta, gamma=_gamma(scn, tuple(plant.names)),
                    sign_b=1.0 if b > 0 else -1.0, rule=Rule(M.rule), psi=psi, psi_names=psi_names, b_abs=abs(b),
@@ -295,7 +334,7 @@ def _mrac(scn: Scenario, plant, modification):
 
 
 #: law.kind -> builder(scn, plant) (the scenario has checked that the kind fits the plant kind)
-LAW_KINDS = {
+LAW_KINDS: dict[str, Callable[[Scenario, Plant, Modification | None], Law]] = {
     "mrac": _mrac,
     "first_order_adaptive": _first_order_adaptive,
     "sliding_adaptive": _sliding_adaptive,
@@ -307,12 +346,12 @@ LAW_KINDS = {
 }
 
 
-def _gamma(scn: Scenario, names):
+def _gamma(scn: Scenario, names: tuple[str, ...]) -> np.ndarray | float | None:
     g = scn.law.gamma
     return _named(scn, "law.gamma", g, names) if isinstance(g, dict) else g
 
 
-def _dead_zone(scn: Scenario, plant) -> DeadZone | None:
+def _dead_zone(scn: Scenario, plant: Plant) -> DeadZone | None:
     """law.dead_zone; with width_in_noise_std = k, ε = k σ where σ is the standard deviation the
     noise gives the tested signal: σ_s = sqrt(Σ c_i² σ_i²) for s = Σ c_i ỹ^(i) (σ_i: noise.std of
     the i-th state component), or σ_y for the tracking error."""
@@ -320,6 +359,7 @@ def _dead_zone(scn: Scenario, plant) -> DeadZone | None:
     if dz is None:
         return None
     if dz.width_in_noise_std is None:
+        assert dz.width is not None  # law.dead_zone gives width or width_in_noise_std (scenario._dead_zone)
         return DeadZone(dz.width, DeadZoneOn(dz.on))
     if has_joints(plant):
         return DeadZone(dz.width_in_noise_std * _arm_noise_scale(scn, plant, dz.on), DeadZoneOn(dz.on))
@@ -334,7 +374,7 @@ def _dead_zone(scn: Scenario, plant) -> DeadZone | None:
     return DeadZone(dz.width_in_noise_std * sigma, DeadZoneOn(dz.on))
 
 
-def _arm_noise_scale(scn: Scenario, plant, on: str) -> float:
+def _arm_noise_scale(scn: Scenario, plant: JointPlant, on: str) -> float:
     """σ of an arm's dead-zone signal: sqrt(Σ_j σ_s,j²) for ‖s‖ (sensors.surface_noise_std, with the
     encoders and the velocity estimate), sqrt(Σ_j σ_q,j² + Δ_j²/12) for ‖q̃‖."""
     from adaptive_mj.sensors import surface_noise_std as arm_surface_noise
@@ -349,7 +389,10 @@ def _arm_noise_scale(scn: Scenario, plant, on: str) -> float:
     if on != "s":
         quantum = sensors.quantum if sensors is not None else 0.0
         return float(np.sqrt(np.sum(sig_q**2 + np.asarray(quantum) ** 2 / 12.0)))
-    lam = _per_joint(scn, "law.lambda", scn.law.lam_joints if scn.law.lam_joints is not None else scn.law.lam, joints)
+    lam_value = scn.law.lam_joints if scn.law.lam_joints is not None else scn.law.lam
+    # lam_value is None under a law plugin (no law.lambda): _per_joint's float(None) raises a TypeError there, as
+    # it always has; typing that case needs a behaviour change (a ScenarioError), left for its own fix
+    lam = _per_joint(scn, "law.lambda", lam_value, joints)  # type: ignore[arg-type]  # None: see the comment above
     period = scn.control.period if scn.control.mode == "sampled" and scn.control.period else plant.dt
     return float(np.sqrt(np.sum(arm_surface_noise(lam, sig_q, sig_dq, sensors, period) ** 2)))
 
@@ -368,6 +411,7 @@ def _modification(scn: Scenario, names: tuple[str, ...], theta_hat0: np.ndarray)
                 if name.rsplit(".", 1)[-1] in PHYSICAL_NONNEGATIVE:
                     lower[i] = 0.0
         else:
+            assert not isinstance(R.projection, str)  # the one preset is "physical" (scenario._robust)
             for name, (lo, hi) in R.projection.items():
                 if name not in names:
                     raise ScenarioError(f"{scn.source}: law.projection names parameter {name!r}, which the law "
@@ -386,7 +430,7 @@ def _modification(scn: Scenario, names: tuple[str, ...], theta_hat0: np.ndarray)
 PHYSICAL_NONNEGATIVE = ("m", "Ixx", "Iyy", "Izz", "armature", "damping", "coulomb")
 
 
-def _estimates(scn: Scenario, names, plant) -> np.ndarray:
+def _estimates(scn: Scenario, names: tuple[str, ...], plant: Plant) -> np.ndarray:
     """theta_hat(0). Baselines hold law.nominal (else law.initial_estimates); adaptive laws
     start from law.initial_estimates (else law.nominal, else zeros)."""
     L = scn.law
@@ -400,12 +444,14 @@ def _estimates(scn: Scenario, names, plant) -> np.ndarray:
     return np.zeros(len(names))
 
 
-def _reference(scn: Scenario, plant):
+def _reference(scn: Scenario, plant: Plant) -> Callable[[float | np.ndarray, int], np.ndarray]:
     r = scn.reference
     if r.kind in JOINT_REFERENCE_KINDS:
-        return _joint_reference(scn, plant.model, plant.joint_names)
+        # joint references are for plant.kind = 'manipulator' (scenario._reference), a MuJoCo plant
+        return _joint_reference(scn, cast("NativePlant", plant).model, plant.joint_names)
     if r.kind == "reference_model":
         M = scn.law.mrac
+        assert M is not None  # reference.kind = 'reference_model' needs law.kind = 'mrac' (scenario._validate)
         try:
             return refs.ModelResponse(alpha=M.alpha, beta=M.beta, **r.params)
         except ValueError as exc:
@@ -415,7 +461,7 @@ def _reference(scn: Scenario, plant):
     return cls(**r.params)
 
 
-def _sensors(scn: Scenario, plant) -> Sensors | None:
+def _sensors(scn: Scenario, plant: JointPlant) -> Sensors | None:
     """[sensors] of an arm as a stage.Sensors: encoder counts N -> quantum 2π/N rad (a slide joint:
     1/N m per count, i.e. counts per metre); None when ideal."""
     import mujoco
@@ -424,17 +470,20 @@ def _sensors(scn: Scenario, plant) -> Sensors | None:
     joints = tuple(plant.joint_names)
     counts = np.zeros(len(joints)) if sn.encoder_counts is None else \
         _per_joint(scn, "sensors.encoder_counts", sn.encoder_counts, joints)
-    hinge = np.array([plant.model.jnt_type[plant.model.dof_jntid[j]] == mujoco.mjtJoint.mjJNT_HINGE
+    model = cast("NativePlant", plant).model  # a plant of joints is a MuJoCo plant (ManipulatorPlant, a plugin's)
+    hinge = np.array([model.jnt_type[model.dof_jntid[j]] == mujoco.mjtJoint.mjJNT_HINGE
                       for j in range(len(joints))])
     quantum = np.where(counts > 0, np.where(hinge, 2.0 * np.pi, 1.0) / np.where(counts > 0, counts, 1.0), 0.0)
     out = Sensors(quantum=quantum, differentiated=sn.velocity == "differentiated", cutoff_hz=sn.velocity_cutoff_hz)
     return None if out.ideal else out
 
 
-def _arm_disturbance(scn: Scenario, plant) -> None:
+def _arm_disturbance(scn: Scenario, joint_plant: JointPlant) -> None:
     """[disturbance] on an arm: joint torques (adaptive_mj.disturbance) and unmodelled loads."""
     from adaptive_mj.disturbance import JointDisturbance
 
+    # the joint torques and loads of [disturbance] are a manipulator's (scenario._disturbance: arm keys)
+    plant = cast("ManipulatorPlant", joint_plant)
     d = scn.disturbance
     joints = tuple(plant.joint_names)
     if d.load:
@@ -450,41 +499,46 @@ def _arm_disturbance(scn: Scenario, plant) -> None:
                                                bandwidth_hz=d.bandwidth_hz, dt=plant.dt, rng=rng)
 
 
-def _disturbance(scn: Scenario):
+def _disturbance(scn: Scenario) -> Callable[[float], float] | None:
     d = scn.disturbance
     if d.kind == "none" or d.magnitude == 0.0:
         return None
+    magnitude = d.magnitude
+    assert not isinstance(magnitude, dict)  # a table by joint only on a manipulator (scenario._disturbance)
     if d.kind == "constant":
-        return lambda t: d.magnitude
+        return lambda t: magnitude
     if d.kind == "step":
-        return lambda t: d.magnitude if t >= d.t0 else 0.0
-    return lambda t: d.magnitude * float(np.sin(d.omega * t + d.phase))
+        return lambda t: magnitude if t >= d.t0 else 0.0
+    return lambda t: magnitude * float(np.sin(d.omega * t + d.phase))
 
 
-def _event(e, scn: Scenario | None = None, source: ModelSource | None = None) -> Event:
+def _event(e: EventSpec, scn: Scenario | None = None, source: ModelSource | None = None) -> Event:
     if e.kind == "payload_swap":
+        assert scn is not None  # build passes the scenario
         inertial = _payload_inertial(scn, e, source)
         return Event(e.t, f"payload_swap {e.body} = {e.payload} ({inertial['mass']:g} kg)",
-                     lambda plant, e=e: plant.set_body_inertial(e.body, **inertial))
+                     lambda plant: plant.set_body_inertial(e.body, **inertial))
     if e.kind == "payload_mass":
         return Event(e.t, f"payload_mass {e.body} = {e.value} kg",
-                     lambda plant, e=e: plant.set_body_mass(e.body, e.value))
+                     lambda plant: plant.set_body_mass(e.body, e.value))
     if e.kind == "loading":
         return Event(e.t, f"loading: hull mass and inertia x {e.value}",
-                     lambda plant, e=e: plant.set_loading(e.value))
+                     lambda plant: plant.set_loading(e.value))
     if e.kind == "thrust_scale":
-        return Event(e.t, f"propeller thrust x {e.value}", lambda plant, e=e: plant.set_thrust_scale(e.value))
+        return Event(e.t, f"propeller thrust x {e.value}", lambda plant: plant.set_thrust_scale(e.value))
     if e.kind == "fluid_density_scale":
         return Event(e.t, f"fluid density x {e.value}",
-                     lambda plant, e=e: plant.set_fluid_density(plant.model.opt.density * e.value))
+                     lambda plant: plant.set_fluid_density(plant.model.opt.density * e.value))
 
     if e.kind == "flight_condition":
         from adaptive_mj.plants.wing_rock import form_theta
 
+        # flight_condition events are on plant.kind = 'wing_rock' (scenario._events), with W
+        assert scn is not None and scn.plant.wing_rock is not None and e.W is not None
         l_delta = e.l_delta if e.l_delta is not None else scn.plant.wing_rock.l_delta
         theta = form_theta(e.W, l_delta)
         return Event(e.t, f"flight condition W = {list(e.W)}, L_delta = {l_delta:g}",
-                     lambda plant, theta=theta: plant.set_true_theta(theta))
+                     lambda plant: plant.set_true_theta(theta))
 
     def add_force(plant, e=e):
         plant.force_offset += e.value
@@ -496,7 +550,7 @@ def _event(e, scn: Scenario | None = None, source: ModelSource | None = None) ->
 # manipulators: per-joint gains, poses and references
 
 
-def _per_joint(scn: Scenario, key: str, value, joints: tuple[str, ...]) -> np.ndarray:
+def _per_joint(scn: Scenario, key: str, value: float | dict[str, float], joints: tuple[str, ...]) -> np.ndarray:
     if not isinstance(value, dict):
         return np.full(len(joints), float(value))
     unknown = [j for j in value if j not in joints]
@@ -546,7 +600,7 @@ def _joint_reference(scn: Scenario, model, joints: tuple[str, ...]):
             raise ScenarioError(f"{scn.source}: reference: {exc}") from None
     center = qpos0 if r.params["center"] is None else _pose(scn, "reference.center", r.params["center"], model,
                                                               joints, qpos0)
-    terms = {}
+    terms: dict[str, tuple[tuple[float, ...], ...] | None] = {}
     for key in ("amplitudes", "omegas", "phases"):
         v = r.params[key]
         if v is None:
@@ -556,10 +610,12 @@ def _joint_reference(scn: Scenario, model, joints: tuple[str, ...]):
             terms[key] = tuple(tuple(v.get(j, ())) for j in joints)
         else:
             terms[key] = tuple(tuple(v) for _ in joints)
+    amplitudes, omegas = terms["amplitudes"], terms["omegas"]
+    assert amplitudes is not None and omegas is not None  # required (scenario._joint_reference)
     if terms["phases"] is None:
-        terms["phases"] = tuple(tuple(0.0 for _ in a) for a in terms["amplitudes"])
+        terms["phases"] = tuple(tuple(0.0 for _ in a) for a in amplitudes)
     try:
-        return refs.JointSumOfSines(center=tuple(center), amplitudes=terms["amplitudes"], omegas=terms["omegas"],
+        return refs.JointSumOfSines(center=tuple(center), amplitudes=amplitudes, omegas=omegas,
                                     phases=terms["phases"])
     except ValueError as exc:
         raise ScenarioError(f"{scn.source}: reference: {exc}") from None
@@ -572,11 +628,12 @@ def _per_joint_names(scn: Scenario, key: str, value: dict, joints: tuple[str, ..
                                 f"(joints: {', '.join(joints)})")
 
 
-def _payload_inertial(scn: Scenario, e, source: ModelSource | None) -> dict:
+def _payload_inertial(scn: Scenario, e: EventSpec, source: ModelSource | None) -> dict:
     """mass, ipos, iquat, inertia of the body named "body" of a payload_swap's file, compiled alone:
     the text the run's source carries (with_event_payloads; a log's), else the file found now."""
     from adaptive_mj.plants import payload as pl
 
+    assert e.payload is not None  # payload_swap events name their payload (scenario._events)
     data = (source.assets if source is not None else {}).get(pl.ASSET_PREFIX + e.payload)
     if data is not None:
         path = Path(f"{e.payload} (embedded)")

@@ -16,17 +16,24 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, Literal, cast, overload
 
 from adaptive_mj.data import MODELS as MODELS_DIR, SCENARIOS as SCENARIOS_DIR
 from adaptive_mj.errors import ScenarioError
+
+if TYPE_CHECKING:
+    from adaptive_mj.laws.plugin import LawPlugin
+    from adaptive_mj.plants.kinds import PlantKind
+    from adaptive_mj.plants.plugin import PlantPlugin
+    from adaptive_mj.plugins import Installed
 
 SCHEMA_VERSION = 1
 
 ANALYTIC_PLANT_KINDS = ("linear", "wing_rock")  # analytic plants (adaptive_mj.plants.linear, .wing_rock)
 
 
-def _plant_kinds() -> dict:
+def _plant_kinds() -> dict[str, PlantKind]:
     """The built-in plant kinds, as their modules register them (adaptive_mj.plants.kinds)."""
     from adaptive_mj.plants.kinds import built_in
 
@@ -39,7 +46,7 @@ INTEGRATORS = ("rk4", "euler", "implicitfast", "implicit")
 REFERENCE_KINDS = ("constant", "cosine", "sine", "sum_of_sines", "smooth_step", "waypoints", "reference_model")
 JOINT_REFERENCE_KINDS = ("joint_sum_of_sines", "joint_waypoints")
 
-def _law_kinds(form) -> tuple[str, ...]:
+def _law_kinds(form: str) -> tuple[str, ...]:
     from adaptive_mj.laws.kinds import BUILT_IN, Form
 
     return tuple(k.name for k in BUILT_IN.values() if Form(form) in k.forms)
@@ -79,7 +86,8 @@ class PlantSpec:
     thruster_time_constant: float | None = None  # heave: first-order thruster lag tau [s]
     regressor: str = "lecture"  # first_order: "lecture" (sin x - a x + b x²) or "sin_squared"
     manipulator: "ManipulatorSpec | None" = None  # kind = "manipulator" only
-    plugin_params: dict[str, float] | None = None  # kind = an installed plant plugin: its declared keys
+    # kind = an installed plant plugin: its declared keys (a per-parameter key: {parameter = number})
+    plugin_params: dict[str, float | dict[str, float]] | None = None
     payload_paths: tuple[Path, ...] = ()  # where plant.payload was looked for (see EventSpec.payload_paths)
     linear: "LinearSpec | None" = None  # kind = "linear" only
     wing_rock: "WingRockSpec | None" = None  # kind = "wing_rock" only
@@ -320,11 +328,19 @@ class Scenario:
 
 # --------------------------------------------------------------------------
 # a small strict reader over the parsed TOML tables
-_MISSING = object()
+class _Missing:
+    """The type of _MISSING: "no default given" (the key is required), told apart from a default of None."""
+
+
+_MISSING = _Missing()
 
 
 class _Table:
-    """Typed, range-checked access to one TOML table; reports unknown keys."""
+    """Typed, range-checked access to one TOML table; reports unknown keys.
+
+    Each reader returns the checked value, or its default when the key is absent (the key is required
+    when no default is given). The overloads say so to the checker: a reader returns None only when
+    its default may be None."""
 
     def __init__(self, data: dict, prefix: str, where: str):
         self.data, self.prefix, self.where = data, prefix, where
@@ -348,7 +364,14 @@ class _Table:
             return default
         return self.data[name]
 
-    def number(self, name, default=_MISSING, *, gt=None, ge=None, allow_inf=False) -> float | None:
+    @overload
+    def number(self, name: str, default: None, *, gt: float | None = None, ge: float | None = None,
+               allow_inf: bool = False) -> float | None: ...
+    @overload
+    def number(self, name: str, default: float | _Missing = ..., *, gt: float | None = None,
+               ge: float | None = None, allow_inf: bool = False) -> float: ...
+    def number(self, name: str, default: float | _Missing | None = _MISSING, *, gt: float | None = None,
+               ge: float | None = None, allow_inf: bool = False) -> float | None:
         if name not in self.data:
             return self.get(name, default)
         v = self.get(name)
@@ -363,7 +386,11 @@ class _Table:
             raise self.fail(name, f">= {ge}", v)
         return v
 
-    def integer(self, name, default=_MISSING, *, ge=None) -> int | None:
+    @overload
+    def integer(self, name: str, default: None, *, ge: int | None = None) -> int | None: ...
+    @overload
+    def integer(self, name: str, default: int | _Missing = ..., *, ge: int | None = None) -> int: ...
+    def integer(self, name: str, default: int | _Missing | None = _MISSING, *, ge: int | None = None) -> int | None:
         if name not in self.data:
             return self.get(name, default)
         v = self.get(name)
@@ -373,7 +400,12 @@ class _Table:
             raise self.fail(name, f"an integer >= {ge}", v)
         return v
 
-    def string(self, name, default=_MISSING, *, choices=None) -> str | None:
+    @overload
+    def string(self, name: str, default: None, *, choices: Sequence[str] | None = None) -> str | None: ...
+    @overload
+    def string(self, name: str, default: str | _Missing = ..., *, choices: Sequence[str] | None = None) -> str: ...
+    def string(self, name: str, default: str | _Missing | None = _MISSING, *,
+               choices: Sequence[str] | None = None) -> str | None:
         if name not in self.data:
             return self.get(name, default)
         v = self.get(name)
@@ -383,7 +415,7 @@ class _Table:
             raise self.fail(name, "one of " + ", ".join(repr(c) for c in choices), v)
         return v
 
-    def boolean(self, name, default=_MISSING) -> bool:
+    def boolean(self, name: str, default: bool | _Missing = _MISSING) -> bool:
         if name not in self.data:
             return self.get(name, default)
         v = self.get(name)
@@ -391,7 +423,11 @@ class _Table:
             raise self.fail(name, "true or false", v)
         return v
 
-    def table(self, name, default=_MISSING) -> "_Table | None":
+    @overload
+    def table(self, name: str, default: None) -> _Table | None: ...
+    @overload
+    def table(self, name: str, default: dict[str, Any] | _Missing = ...) -> _Table: ...
+    def table(self, name: str, default: dict[str, Any] | _Missing | None = _MISSING) -> _Table | None:
         if name not in self.data:
             v = self.get(name, default)
             return None if v is None else _Table(v, self.key(name) + ".", self.where)
@@ -400,7 +436,13 @@ class _Table:
             raise self.fail(name, "a table", v)
         return _Table(v, self.key(name) + ".", self.where)
 
-    def numbers(self, name, default=_MISSING, *, length=None) -> tuple[float, ...] | None:
+    @overload
+    def numbers(self, name: str, default: None, *, length: int | None = None) -> tuple[float, ...] | None: ...
+    @overload
+    def numbers(self, name: str, default: tuple[float, ...] | _Missing = ..., *,
+                length: int | None = None) -> tuple[float, ...]: ...
+    def numbers(self, name: str, default: tuple[float, ...] | _Missing | None = _MISSING, *,
+                length: int | None = None) -> tuple[float, ...] | None:
         if name not in self.data:
             return self.get(name, default)
         v = self.get(name)
@@ -415,7 +457,7 @@ class _Table:
             out.append(float(item))
         return tuple(out)
 
-    def numbers_with_inf(self, name, *, length: int) -> tuple[float, ...]:
+    def numbers_with_inf(self, name: str, *, length: int) -> tuple[float, ...]:
         """An array of `length` numbers, each finite or ±inf (TOML's inf)."""
         v = self.get(name)
         if not isinstance(v, list) or len(v) != length:
@@ -425,7 +467,13 @@ class _Table:
                 raise self.fail(f"{name}[{i}]", "a number (inf allowed)", item)
         return tuple(float(item) for item in v)
 
-    def named_numbers(self, name, default=_MISSING, *, gt=None) -> dict[str, float] | None:
+    @overload
+    def named_numbers(self, name: str, default: None, *, gt: float | None = None) -> dict[str, float] | None: ...
+    @overload
+    def named_numbers(self, name: str, default: dict[str, Any] | _Missing = ..., *,
+                      gt: float | None = None) -> dict[str, float]: ...
+    def named_numbers(self, name: str, default: dict[str, Any] | _Missing | None = _MISSING, *,
+                      gt: float | None = None) -> dict[str, float] | None:
         sub = self.table(name, default)
         if sub is None:
             return None
@@ -534,7 +582,7 @@ _NAME_RE = re.compile(r"[^./\\\x00-\x1f\x7f][^/\\\x00-\x1f\x7f]{0,99}")
 
 
 @functools.lru_cache(maxsize=64)
-def _parsed(text: str) -> dict:
+def _parsed(text: str) -> dict[str, Any]:
     """TOML text parsed, kept for the next run of a study (the same file and --set values, thousands of
     times): callers take a deep copy, since overrides edit the document."""
     return tomllib.loads(text)
@@ -609,7 +657,8 @@ def apply_override(doc: dict, expr: str, *, where: str) -> None:
         raise ScenarioError(f"{what}: expected key=value, e.g. law.k=50")
     key, raw = (part.strip() for part in expr.split("=", 1))
     if is_law_swap(expr):
-        old = doc.get("law") if isinstance(doc.get("law"), dict) else {}
+        law = doc.get("law")
+        old = law if isinstance(law, dict) else {}
         kind = raw.strip("'\"")
         if old.get("kind") != kind:  # a swap to the scenario's own law keeps its table
             doc["law"] = {"kind": kind, **{k: old[k] for k in SWAP_KEEPS if k in old}}
@@ -667,7 +716,7 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
                     sensors=sensors)
 
 
-def _model_from_command_line(doc: dict, overrides, base_dir: Path | None, where: str) -> None:
+def _model_from_command_line(doc: dict, overrides: tuple[str, ...], base_dir: Path | None, where: str) -> None:
     """A plant.model path given with --set is the user's, typed from where they stand: resolve it
     against the current directory first, then next to the scenario; neither is an error naming both."""
     if not any(expr.split("=", 1)[0].strip() == "plant.model" for expr in overrides):
@@ -678,6 +727,7 @@ def _model_from_command_line(doc: dict, overrides, base_dir: Path | None, where:
         return
     here, there = Path.cwd() / name, (base_dir or Path.cwd()) / name
     if here.is_file():
+        assert isinstance(plant, dict)  # name is a str above only when plant is a table
         plant["model"] = str(here.resolve())
     elif not there.is_file():
         raise ScenarioError(f"{where}: plant.model {name!r} (from --set) not found in the current directory "
@@ -696,7 +746,7 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:  # noqa: C901 (one branch pe
     raw_kind = t.data.get("kind")
     if raw_kind in ANALYTIC_PLANT_KINDS:
         return _analytic_plant(t, raw_kind)
-    plugins = {}
+    plugins: dict[str, Installed[PlantPlugin]] = {}
     if isinstance(raw_kind, str) and raw_kind not in PLANT_KINDS:
         from adaptive_mj.plants.plugin import installed
 
@@ -756,7 +806,8 @@ def _plant(t: _Table, base_dir: Path) -> PlantSpec:  # noqa: C901 (one branch pe
     g = t.number("g", 9.81, gt=0)
     density = t.number("density", None, ge=0)
     viscosity = t.number("viscosity", None, ge=0)
-    ctrl = t.numbers("ctrl_range", None, length=2)
+    # length=2: a pair [lo, hi] when given
+    ctrl = cast("tuple[float, float] | None", t.numbers("ctrl_range", None, length=2))
     if ctrl is not None and not ctrl[0] < ctrl[1]:
         raise t.fail("ctrl_range", "[lo, hi] with lo < hi", list(ctrl))
     lag = t.number("thruster_time_constant", None, gt=0)
@@ -779,7 +830,8 @@ def _analytic_plant(t: _Table, kind: str) -> PlantSpec:
     """plant.kind = "linear" or "wing_rock": analytic plants on the twin backend (no model)."""
     t.string("kind")
     backend = t.string("backend", "twin", choices=("twin",))
-    ctrl = t.numbers("ctrl_range", None, length=2)
+    # length=2: a pair [lo, hi] when given
+    ctrl = cast("tuple[float, float] | None", t.numbers("ctrl_range", None, length=2))
     if ctrl is not None and not ctrl[0] < ctrl[1]:
         raise t.fail("ctrl_range", "[lo, hi] with lo < hi", list(ctrl))
     linear = wing_rock = None
@@ -840,7 +892,8 @@ def _resolve_payload(name: str | None, base_dir: Path) -> tuple[str | None, tupl
 
 
 
-def _plugin_params(t, inst, section: str, kind: str) -> dict[str, float | dict[str, float]]:
+def _plugin_params(t: _Table, inst: Installed[PlantPlugin] | Installed[LawPlugin], section: str,
+                   kind: str) -> dict[str, float | dict[str, float]]:
     """A plugin's declared keys read from its table (section "plant" or "law"), each checked against
     its declared range; a key without a default must be given. A per-parameter key (Param.per_parameter)
     is a number or a table {parameter = number}, each entry in range (its names are checked against the
@@ -860,7 +913,7 @@ def _plugin_params(t, inst, section: str, kind: str) -> dict[str, float | dict[s
     return params
 
 
-def _plugin_plant(t: _Table, kind: str, inst, base_dir: Path) -> PlantSpec:
+def _plugin_plant(t: _Table, kind: str, inst: Installed[PlantPlugin], base_dir: Path) -> PlantSpec:
     """plant.kind = an installed plant plugin: plant.model (default: the plugin's own MJCF),
     plant.viscosity, and the plugin's declared keys."""
     t.string("kind")
@@ -964,6 +1017,7 @@ def _simulation(t: _Table, plant: PlantSpec, order: int) -> SimulationSpec:
     duration = t.number("duration", gt=0)
     if timestep is not None and timestep > duration:
         raise t.fail("timestep", f"<= simulation.duration ({duration})", timestep)
+    x0: tuple[float, ...] | str | None
     if plant.kind == "manipulator":  # starts on the reference (joint positions and velocities)
         x0 = t.string("initial_state", "reference", choices=("reference",))
     elif t.data.get("initial_state") == "reference":
@@ -1010,7 +1064,7 @@ def _success(t: _Table) -> SuccessSpec:
     return spec
 
 
-_REFERENCE_KEYS = {
+_REFERENCE_KEYS: dict[str, dict[str, float | None]] = {
     "constant": {"value": 0.0},
     "cosine": {"amplitude": 1.0, "omega": 1.0, "phase": 0.0, "offset": 0.0},
     "sine": {"amplitude": 1.0, "omega": 1.0, "phase": 0.0, "offset": 0.0},
@@ -1019,12 +1073,20 @@ _REFERENCE_KEYS = {
 }
 
 
-def _joint_values(t: _Table, name: str, *, arrays: bool):
+@overload
+def _joint_values(t: _Table, name: str, *, arrays: Literal[False]) -> float | dict[str, float]: ...
+@overload
+def _joint_values(t: _Table, name: str, *,
+                  arrays: Literal[True]) -> tuple[float, ...] | dict[str, tuple[float, ...]]: ...
+def _joint_values(t: _Table, name: str, *, arrays: bool) -> (
+        float | dict[str, float] | tuple[float, ...] | dict[str, tuple[float, ...]]):
     """A value for every joint (a number, or an array with arrays=True), or a table by joint name."""
     v = t.get(name)
     if isinstance(v, dict):
         sub = t.table(name)
-        return {key: (sub.numbers(key) if arrays else sub.number(key)) for key in v}
+        if arrays:
+            return {key: sub.numbers(key) for key in v}
+        return {key: sub.number(key) for key in v}
     return t.numbers(name) if arrays else t.number(name)
 
 
@@ -1044,7 +1106,7 @@ def _joint_reference(t: _Table, kind: str) -> ReferenceSpec:
         if not isinstance(raw, list) or len(raw) < 2:
             raise t.fail("waypoints", "an array of at least 2 poses (keyframe names or tables {joint = position})",
                          raw)
-        points = []
+        points: list[str | dict[str, float]] = []
         for i, item in enumerate(raw):
             if isinstance(item, str):
                 points.append(item)
@@ -1116,7 +1178,7 @@ def _model_reference(t: _Table) -> ReferenceSpec:
     return ReferenceSpec(kind="reference_model", params=params)
 
 
-def _gamma(t: _Table):
+def _gamma(t: _Table) -> float | dict[str, float] | None:
     v = t.get("gamma", None)
     if v is None:
         return None
@@ -1160,7 +1222,7 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
     from adaptive_mj.plants import kinds as plant_kinds
 
     raw_kind = t.data.get("kind")
-    plugins: dict = {}
+    plugins: dict[str, Installed[LawPlugin]] = {}
     if isinstance(raw_kind, str) and raw_kind not in law_kinds.BUILT_IN:
         from adaptive_mj.laws.plugin import installed
 
@@ -1211,7 +1273,7 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
                    saturation=saturation)
 
 
-def _plugin_law(t: _Table, kind: str, inst, plant: PlantSpec, order: int) -> LawSpec:
+def _plugin_law(t: _Table, kind: str, inst: Installed[LawPlugin], plant: PlantSpec, order: int) -> LawSpec:
     """law.kind = an installed plugin: its declared keys (adaptive_mj.laws.plugin.Param), checked
     like built-in ones, plus initial_estimates and nominal, and the shared modifications (law.dead_zone,
     law.sigma, law.e_modification, law.theta0, law.projection) where the plugin declares no key of that name."""
@@ -1280,7 +1342,7 @@ def _robust(t: _Table, kind: str, *, adaptive: bool, composite: bool, presets: t
     sigma = t.number("sigma", 0.0, ge=0)
     e_mod = t.number("e_modification", 0.0, ge=0)
     theta0 = t.named_numbers("theta0", None)
-    projection = None
+    projection: dict[str, tuple[float, float]] | str | None = None
     if isinstance(t.data.get("projection"), str):
         if not presets:
             raise t.fail("projection", "a table {parameter = [lower, upper]}", t.data["projection"])
@@ -1325,7 +1387,7 @@ def _dead_zone(t: _Table) -> DeadZoneSpec | None:
     return spec
 
 
-def _estimate_table(t: _Table, name: str):
+def _estimate_table(t: _Table, name: str) -> dict[str, float] | str | None:
     """A table {name = value}, or the string "model": the true values of the compiled model at t = 0."""
     if isinstance(t.data.get(name), str):
         return t.string(name, choices=("model",))
@@ -1384,10 +1446,10 @@ def _sensors(t: _Table, *, arm: bool) -> SensorSpec:
     return spec
 
 
-def _events(raw, top: _Table, plant: PlantSpec, sim: SimulationSpec, base_dir: Path) -> tuple[EventSpec, ...]:
+def _events(raw: Any, top: _Table, plant: PlantSpec, sim: SimulationSpec, base_dir: Path) -> tuple[EventSpec, ...]:
     if not isinstance(raw, list):
         raise top.fail("events", "an array of tables ([[events]])", raw)
-    out = []
+    out: list[EventSpec] = []
     for i, item in enumerate(raw):
         if not isinstance(item, dict):
             raise top.fail(f"events[{i}]", "a table", item)

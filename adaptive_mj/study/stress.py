@@ -36,6 +36,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypedDict
 
 import numpy as np
 
@@ -51,9 +52,20 @@ from adaptive_mj.study.result import Study
 NOMINAL_NOISE = {"heave": 5e-4, "arm": 5e-4, "ur5e": 1e-4}  # σ_y [m], [rad]; σ_y' = 10 σ_y [per s]
 LEAK_TIME = 5.0  # s: σ = γ_1 / LEAK_TIME; ν = γ_1 / (LEAK_TIME σ_s)
 DURATION = 20.0  # s per run (its tail: report.metrics.TAIL_FRACTION, the last 25 %)
+
+
+class BenchSettings(TypedDict):
+    """run_study's keyword arguments that BENCH_SETTINGS sets."""
+
+    seeds: int
+    steps: int
+    duration: float
+    arm_laws: tuple[str, ...]
+
+
 # the full bench's reduced study: 5 s runs, and on the 6-joint arm four laws (the full study: eight)
-BENCH_SETTINGS = {"seeds": 5, "steps": 2, "duration": 5.0, "arm_laws": ("adaptive", "dead_zone", "sigma",
-                                                                         "computed_torque")}
+BENCH_SETTINGS: BenchSettings = {"seeds": 5, "steps": 2, "duration": 5.0,
+                                 "arm_laws": ("adaptive", "dead_zone", "sigma", "computed_torque")}
 ROBUST_K_FRACTION = 0.1  # robust sliding: K = 10 % of the actuator's limit, boundary layer Φ = 0.05
 PERIOD_MAX = 1.0  # s: the control period stressor's high end (heave: 2d/k = 0.37 s; the 1-DOF arm: 2J/k = 0.085 s)
 PERIOD = "control period"  # the control period stressor's name

@@ -119,8 +119,8 @@ def known_keys(doc: dict) -> list[str]:
     keys += [f"{section}.{key}" for section, names in DOCUMENTED_KEYS.items() for key in names]
     ref = doc.get("reference")
     kind = ref.get("kind") if isinstance(ref, dict) else None
-    defaults = sc._REFERENCE_KEYS.get(kind, {}) if kind is not None else {}  # a dict per kind (typed object there)
-    keys += [f"reference.{key}" for key in ("kind", *(defaults if isinstance(defaults, dict) else {}))]
+    defaults = sc._REFERENCE_KEYS.get(kind, {}) if kind is not None else {}  # the keys of that kind, with defaults
+    keys += [f"reference.{key}" for key in ("kind", *defaults)]
     return list(dict.fromkeys(keys))
 
 

@@ -6,11 +6,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from adaptive_mj.plants import kinds as units  # the units each plant kind declares
+from adaptive_mj.plants.protocol import has_joints
 from adaptive_mj.setup import scenario as sc
+
+if TYPE_CHECKING:
+    from adaptive_mj.laws.sliding import SlidingAdaptiveLaw
+    from adaptive_mj.laws.slotine_li import SlotineLiLaw
 from adaptive_mj.study.parallel import JobResult
 from adaptive_mj.study.sections.common import (Built, SCN, SectionReport, _g, _job, _row, _save, _status_note, plt,
                                                register)
@@ -65,16 +71,19 @@ def sampled_loop(scn_path: Path, overrides=(), *, samples_per_second: float = 10
     setup = build(scn)
     if scn.plant.kind == "manipulator":
         plant = setup.plant
+        assert has_joints(plant)  # plant.kind = 'manipulator': a plant of joints
+        arm_law = cast("SlotineLiLaw", setup.law)  # the manipulator laws (slotine_li and its baselines) are one class
         t = np.arange(0.0, scn.simulation.duration, 1.0 / samples_per_second)
         M = plant.mass_matrices(np.asarray(setup.reference(t, 0))[0])
-        kd = np.broadcast_to(np.asarray(setup.law.kd, dtype=float), (plant.m,)).copy()
-        lam = np.broadcast_to(np.asarray(setup.law.lam, dtype=float), (plant.m,)).copy()
+        kd = np.broadcast_to(np.asarray(arm_law.kd, dtype=float), (plant.m,)).copy()
+        lam = np.broadcast_to(np.asarray(arm_law.lam, dtype=float), (plant.m,)).copy()
         coupled = max(float(np.linalg.eigvals(np.linalg.solve(Mi, np.diag(kd))).real.max()) for Mi in M)
         return SampledLoop("manipulator", tuple(plant.joint_names), kd, np.einsum("nii->ni", M).min(axis=0),
                            lam, coupled)
     d = float(setup.plant.true_theta()[0])
-    return SampledLoop(scn.plant.kind, ("d",), np.array([float(setup.law.k)]), np.array([d]),
-                       np.array([float(setup.law.lam)]))
+    law = cast("SlidingAdaptiveLaw", setup.law)  # heave_tracking.toml: law.kind = 'sliding_adaptive'
+    return SampledLoop(scn.plant.kind, ("d",), np.array([float(law.k)]), np.array([d]),
+                       np.array([float(law.lam)]))
 
 
 def _pole_text(loop: SampledLoop, T: float) -> str:
@@ -107,7 +116,7 @@ def _identification(r: JobResult, kind: str) -> tuple[str, float | None]:
     rels = {n: abs(v - tr[n]) / abs(tr[n]) for n, v in th.items() if v is not None and tr[n]}
     if not rels:
         return "n/a", None
-    worst = max(rels, key=rels.get)
+    worst = max(rels, key=rels.__getitem__)
     return f"max \\|θ̂ᵢ−θᵢ\\|/\\|θᵢ\\| {_g(100 * rels[worst])} % ({worst})", rels[worst]
 
 
@@ -128,6 +137,7 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
     for label, name in CONTROL_RATE_PLANTS:
         scn = sc.load(SCN / f"{name}.toml", overrides=dur)
         dt = scn.simulation.timestep
+        assert dt is not None  # both scenarios give simulation.timestep
         for rate in CONTROL_RATES_HZ:
             n = max(1, round(1.0 / (rate * dt)))
             T = n * dt
@@ -173,6 +183,7 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
                 e = np.abs(tr.joint_errors).max(axis=1) if kind == "manipulator" else np.abs(tr.y_tilde)
                 a.semilogy(tr.t, np.where(e > 0, e, np.nan), lw=1, label=f"{rate:g} Hz (figure {figure:.2g})")
         arm, heave = (loops[name] for _, name in CONTROL_RATE_PLANTS)
+        assert arm.coupled is not None  # sampled_loop sets it on the manipulator
         ax[0].set_ylabel("max_j |q̃_j| [rad]")
         ax[0].set_title(f"6-joint arm, K_D = {_g(float(arm.gain.max()))} N m s/rad: predicted stable above "
                         f"{arm.lowest_stable_rate():.0f} Hz")

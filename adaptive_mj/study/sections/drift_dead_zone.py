@@ -22,6 +22,7 @@ CLAIM = ("without persistent excitation, noise makes the estimates drift while t
 def section(quick: bool, logs: Path) -> Built:
     path = SCN / "heave_drift.toml"
     base = sc.load(path)
+    assert base.law.lam is not None  # law.lambda is required for law.kind = 'sliding_adaptive' (scenario._law)
     sig_s = surface_noise_std(2, base.law.lam, [base.noise.std.get(k, 0.0) for k in sc.STATE_SIGNALS[:2]])
     width = 3.0 * sig_s
     dur = ["simulation.duration=60.0"] if quick else []

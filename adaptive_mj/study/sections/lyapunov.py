@@ -4,10 +4,14 @@ ideal and with a viscous drag the regressor does not model (c_v a fraction of k,
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from adaptive_mj.setup import scenario as sc
+
+if TYPE_CHECKING:
+    from adaptive_mj.plants.protocol import NativePlant
 from adaptive_mj.study.parallel import Job
 from adaptive_mj.study.sections.common import (Built, SCN, SectionReport, _g, _job, _ok, _row, _save, _status_note, plt,
                                                register)
@@ -28,7 +32,7 @@ def section(quick: bool, logs: Path) -> Built:
 
     dur = ["simulation.duration=15.0"] if quick else []
     base = sc.load(SCN / "heave_tracking.toml")
-    model = build(base).plant.model
+    model = cast("NativePlant", build(base).plant).model  # the heave vehicle is a MuJoCo plant (HeavePlant)
     cv_per_viscosity = unmodelled_linear_drag(model) / model.opt.viscosity  # [N s/m per Pa s]
     viscosity = UNMODELLED_DRAG_FRACTION * base.law.k / cv_per_viscosity
     jobs = (_job("lyapunov", "heave_ideal", "heave_tracking", logs, ["plant.viscosity=0.0", *dur], ["lyapunov_check"]),

@@ -10,7 +10,8 @@ from adaptive_mj.study.sections.common import Built, SectionReport, _g, _job, _o
 
 
 ARM_LIMITS = "plant.torque_limit={shoulder_pan=60, shoulder_lift=60, elbow=60, wrist_1=4, wrist_2=4, wrist_3=4}"
-ARM_CONDITIONS = (  # (variant, what it is, overrides): each on ur5e_identification, 10 s
+# (variant, what it is, overrides): each on ur5e_identification, 10 s
+ARM_CONDITIONS: tuple[tuple[str, str, list[str]], ...] = (
     ("ideal", "exact state, continuous control, no friction", []),
     ("noise", "σ_q = 0.1 mrad, σ_q' = 1 mrad/s", ["noise.std={q=1e-4, q_dot=1e-3}"]),
     ("encoder_4096", "12-bit encoders (Δ = 1.5 mrad)", ["sensors={encoder_counts=4096}"]),

@@ -4,16 +4,21 @@ and the dead-zone, σ-modification and physical projection.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from adaptive_mj.setup import scenario as sc
+
+if TYPE_CHECKING:
+    from adaptive_mj.laws.slotine_li import SlotineLiLaw
 from adaptive_mj.study.sections.common import (Built, SCN, SectionReport, _g, _job, _ok, _row, _save, _status_note, plt,
                                                register)
 
 
-ARM_DRIFT_VARIANTS = (("adaptive", []), ("dead_zone_3sigma", ["law.dead_zone={width_in_noise_std=3.0}"]),
-                      ("sigma", ["law.sigma=0.02"]), ("projection", ["law.projection='physical'"]))
+ARM_DRIFT_VARIANTS: tuple[tuple[str, list[str]], ...] = (
+    ("adaptive", []), ("dead_zone_3sigma", ["law.dead_zone={width_in_noise_std=3.0}"]),
+    ("sigma", ["law.sigma=0.02"]), ("projection", ["law.projection='physical'"]))
 ARM_DRIFT_ONSET = 100.0  # a failure: max_j |q̃_j| above this many encoder noise σ_q
 
 
@@ -37,7 +42,8 @@ def section(quick: bool, logs: Path) -> Built:
         scn = sc.load(SCN / f"{name}.toml")
         sigma_q = float(scn.noise.std["q"])
         setup = build(sc.load(SCN / f"{name}.toml", overrides=list(ARM_DRIFT_VARIANTS[1][1])))
-        width = setup.law.dead_zone.width if setup.law.dead_zone is not None else float("nan")
+        law = cast("SlotineLiLaw", setup.law)  # ur5e_drift.toml: law.kind = 'slotine_li'
+        width = law.dead_zone.width if law.dead_zone is not None else float("nan")
         bound = ARM_DRIFT_ONSET * sigma_q
         fig, ax = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True, constrained_layout=True)
         lines = ["| law | drift of ‖θ̃‖/‖θ‖ over the first 60 s [per 100 s] | failure onset (max_j abs(q̃_j) > "

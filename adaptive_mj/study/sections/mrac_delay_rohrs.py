@@ -59,7 +59,8 @@ def section(quick: bool, logs: Path) -> Built:
 
     def analyze(res, out):
         rows, lines = [], ["| γ | verdict | diverged at [s] | tail RMS e |", "|---|---|---|---|"]
-        ok_g, bad_g = [], []
+        ok_g: list[float] = []
+        bad_g: list[float] = []
         for g in gammas:
             r = res[f"mrac/nguyen_gamma_{g:g}"]
             div = r.trajectory is not None and r.trajectory.status == Status.DIVERGED

@@ -24,12 +24,14 @@ CLAIM = ("with one uncertain parameter the closed loop is a 2-D system in (x̃, 
 @register(2, "phase", TITLE, CLAIM)
 def section(quick: bool, logs: Path) -> Built:
     base = sc.load(SCN / "lecture_phase_space.toml")
+    assert base.plant.theta is not None  # plant.theta is required for plant.kind = 'first_order' (scenario._plant)
     p_true = base.plant.theta["p"]
     points = PHASE_POINTS[:4] if quick else PHASE_POINTS
     jobs = tuple(_job("phase", f"x{xe:+g}_p{pe:+g}", "lecture_phase_space", logs,
                       [f"simulation.initial_state=[{-xe!r}]", f"law.initial_estimates={{p={p_true + pe!r}}}"])
                  for xe, pe in points)
     k, gamma = base.law.k, base.law.gamma
+    assert isinstance(gamma, float)  # lecture_phase_space.toml gives law.gamma as one number
 
     def analyze(res, out):
         fig, ax = plt.subplots(figsize=(7.5, 6.5), constrained_layout=True)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from adaptive_mj.plants.protocol import has_form
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import analysis
 from adaptive_mj.study.parallel import JobResult
@@ -23,6 +24,7 @@ def _robust_gain(scn_path: Path, nominal: dict, margin: float = 1.1) -> float:
     from adaptive_mj.setup.build import build
 
     setup = build(sc.load(scn_path))
+    assert has_form(setup.plant)  # the heave vehicle is a 1-DOF plant
     d, b, c = setup.plant.true_theta()
     g = -setup.plant.form.phi(np.zeros(2))[1]
     return float(margin * (abs(nominal["d"] - d) * 1.0 + abs(nominal["b"] - b) * 1.0 + abs(nominal["c"] - c) * g))

@@ -83,7 +83,7 @@ def _ship_fits(res) -> str:
         K, T, al, b = _ship_theta(r.trajectory, row)
         model.actuator_biasprm[prop, 0] = F0 * thrust
         U = ship.cruise_speed(model) if thrust != 1.0 else u0
-        K0, T0 = (K, T) if K0 is None else (K0, T0)
+        K0, T0 = (K, T) if K0 is None or T0 is None else (K0, T0)  # (both are None until the first row)
         lines.append(f"| {label} | {U:.3f} | {K:.4f} ({K / K0:.2f}x) | {T:.3f} ({T / T0:.2f}x) | {al:.3g} | "
                      f"{math.degrees(b):.2f} | {K * L / U:.2f} | {T * U / L:.2f} |")
     return ("**The plant** (`models/ship.xml`): a 3 m model-scale hull in MuJoCo's ellipsoid fluid, rudder ±35° at "
