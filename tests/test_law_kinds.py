@@ -133,3 +133,19 @@ def test_every_key_a_law_kind_reads_is_documented(monkeypatch):
             short = key.removeprefix("law.")
             documented = f"`{short}`" in docs or f"`{key}`" in docs or f"`{short.rsplit('.', 1)[-1]}`" in docs
             assert documented, f"{kind}: {key} is read by the loader but not in docs/SCENARIOS.md"
+
+
+def test_a_noise_sized_dead_zone_on_s_takes_a_plugins_lambda_or_says_it_cannot():
+    """width_in_noise_std on s needs the surface's slope: law.lambda, or a plugin's own `lambda` key; without
+    one, one line (it was a TypeError from float(None) on an arm)."""
+    import dataclasses
+
+    from adaptive_mj.setup import build
+
+    scn = sc.load(sc.SCENARIOS_DIR / "heave_drift.toml")
+    plugin_law = dataclasses.replace(scn.law, kind="mine", lam=None, plugin_params={"lambda": 7.0, "k": 1.0})
+    assert build._surface_slope(dataclasses.replace(scn, law=plugin_law)) == 7.0
+    no_slope = dataclasses.replace(plugin_law, plugin_params={"k": 1.0})
+    with pytest.raises(ScenarioError, match=r"width_in_noise_std on s needs the surface's slope, and law.kind = "
+                                            r"'mine' declares no number key 'lambda'"):
+        build._surface_slope(dataclasses.replace(scn, law=no_slope))

@@ -351,6 +351,19 @@ def _gamma(scn: Scenario, names: tuple[str, ...]) -> np.ndarray | float | None:
     return _named(scn, "law.gamma", g, names) if isinstance(g, dict) else g
 
 
+def _surface_slope(scn: Scenario) -> float:
+    """λ of s = ỹ' + λỹ, for a dead-zone sized from the noise in s: law.lambda, or a law plugin's own key
+    `lambda`; a plugin without one is refused in one line (its s is its own: adaptive-mj cannot size it)."""
+    if scn.law.lam is not None:
+        return scn.law.lam
+    lam = (scn.law.plugin_params or {}).get("lambda")
+    if not isinstance(lam, (int, float)):
+        raise ScenarioError(f"{scn.source}: law.dead_zone.width_in_noise_std on s needs the surface's slope, and "
+                            f"law.kind = {scn.law.kind!r} declares no number key 'lambda'; give law.dead_zone.width, "
+                            "or on = 'tracking_error'")
+    return float(lam)
+
+
 def _dead_zone(scn: Scenario, plant: Plant) -> DeadZone | None:
     """law.dead_zone; with width_in_noise_std = k, ε = k σ where σ is the standard deviation the
     noise gives the tested signal: σ_s = sqrt(Σ c_i² σ_i²) for s = Σ c_i ỹ^(i) (σ_i: noise.std of
@@ -367,8 +380,8 @@ def _dead_zone(scn: Scenario, plant: Plant) -> DeadZone | None:
     if not np.any(std > 0):
         raise ScenarioError(f"{scn.source}: law.dead_zone.width_in_noise_std needs noise.std (the noise its "
                             "width is a multiple of), got no noise")
-    if dz.on == "s" and scn.law.lam is not None:
-        sigma = surface_noise_std(len(std), scn.law.lam, std)
+    if dz.on == "s" and (scn.law.lam is not None or scn.law.plugin_params is not None):
+        sigma = surface_noise_std(len(std), _surface_slope(scn), std)
     else:
         sigma = float(std[0])
     return DeadZone(dz.width_in_noise_std * sigma, DeadZoneOn(dz.on))
@@ -389,10 +402,8 @@ def _arm_noise_scale(scn: Scenario, plant: JointPlant, on: str) -> float:
     if on != "s":
         quantum = sensors.quantum if sensors is not None else 0.0
         return float(np.sqrt(np.sum(sig_q**2 + np.asarray(quantum) ** 2 / 12.0)))
-    lam_value = scn.law.lam_joints if scn.law.lam_joints is not None else scn.law.lam
-    # lam_value is None under a law plugin (no law.lambda): _per_joint's float(None) raises a TypeError there, as
-    # it always has; typing that case needs a behaviour change (a ScenarioError), left for its own fix
-    lam = _per_joint(scn, "law.lambda", lam_value, joints)  # type: ignore[arg-type]  # None: see the comment above
+    lam_value = scn.law.lam_joints if scn.law.lam_joints is not None else _surface_slope(scn)
+    lam = _per_joint(scn, "law.lambda", lam_value, joints)
     period = scn.control.period if scn.control.mode == "sampled" and scn.control.period else plant.dt
     return float(np.sqrt(np.sum(arm_surface_noise(lam, sig_q, sig_dq, sensors, period) ** 2)))
 
