@@ -149,3 +149,16 @@ def test_a_noise_sized_dead_zone_on_s_takes_a_plugins_lambda_or_says_it_cannot()
     with pytest.raises(ScenarioError, match=r"width_in_noise_std on s needs the surface's slope, and law.kind = "
                                             r"'mine' declares no number key 'lambda'"):
         build._surface_slope(dataclasses.replace(scn, law=no_slope))
+
+
+def test_a_plugin_declares_only_the_form_its_functions_are_called_in():
+    from adaptive_mj.laws.plugin import JointLawPlugin, LawPlugin
+
+    with pytest.raises(ValueError, match=r"LawPlugin.forms must be \('model',\) .*got \('mrac_state',\)"):
+        LawPlugin(law=print, forms=("mrac_state",))
+    with pytest.raises(ValueError, match=r"JointLawPlugin.forms must be \('rigid_body',\)"):
+        JointLawPlugin(law=print, point=print, forms=("model",))
+    with pytest.raises(ValueError, match=r"a JointLawPlugin needs point"):
+        JointLawPlugin(law=print)
+    with pytest.raises(ValueError, match=r"gain 'g' must name a per-parameter Param"):
+        LawPlugin(law=print, gain="g")

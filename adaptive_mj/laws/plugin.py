@@ -107,6 +107,14 @@ class LawPlugin:
             raise ValueError(f"gain {self.gain!r} must name a per-parameter Param (params: {', '.join(names)})")
         if len(set(names)) != len(names):
             raise ValueError(f"params declares a key twice: {', '.join(names)}")
+        allowed = self._allowed_forms()
+        if not self.forms or not set(self.forms) <= set(allowed):
+            raise ValueError(f"{type(self).__name__}.forms must be {allowed!r} (a law over MRAC's state form is "
+                             f"not a plugin yet), got {self.forms!r}")
+
+    def _allowed_forms(self) -> tuple[str, ...]:
+        """The forms this kind of plugin's functions are called in (the model form's phi, f, h)."""
+        return ("model",)
 
     def describe_keys(self) -> str:
         """Its keys as `list --laws` shows them."""
@@ -131,6 +139,10 @@ class JointLawPlugin(LawPlugin):
     point: Callable | None = None
     forms: tuple[str, ...] = ("rigid_body",)
     orders: tuple[int, ...] | None = (2,)
+
+    def _allowed_forms(self) -> tuple[str, ...]:
+        """A multi-joint law is called with the rigid-body form's regressor."""
+        return ("rigid_body",)
 
     def __post_init__(self):
         super().__post_init__()
