@@ -59,6 +59,7 @@ if TYPE_CHECKING:
     is_sample_step: Any
     period_ends: Any
     delay_slot: Any
+    end_stage: Any
     SAMPLED: int
 
 _i8, _f8 = np.int64, np.float64
@@ -162,17 +163,7 @@ def _callback_factory(off, key):
                 rec[o + col.ref + i] = r[i]
             for j in range(nth):
                 rec[o + col.theta + j] = theta[j]
-        stage += 1
-        if stage == nst:  # end of the physics step: advance the estimates (continuous: every step)
-            if not sampled:
-                advance_estimates(theta, rsum, ctx.h, lower, upper)  # noqa: F821 (injected)
-            elif period_ends(ctx.step, ctx.period_steps):  # noqa: F821 (injected)
-                advance_estimates(theta, rsum, ctx.period, lower, upper)  # noqa: F821 (injected)
-            ctx.row = row + 1
-            ctx.step = ctx.step + 1
-            ctx.t = ctx.t + ctx.h
-            stage = 0
-        ctx.stage = stage
+        end_stage(ctx, stage, theta, rsum, lower, upper, sampled)  # noqa: F821 (injected: stage.end_stage)
 
     return callback
 
@@ -215,7 +206,8 @@ def compiled(form, plugin=None):
     offsets = mujoco_offsets()
     off = (offsets["userdata"], offsets["qpos"], offsets["qvel"], offsets["ctrl"])
     key = source_key(*fns, _callback_factory, _builtin_law, _plugin_law, sliding_law_values, plugin_rate,
-                     record_columns, stage_code.stage_estimate, context_address, extra=(off, numba.__version__))
+                     record_columns, stage_code.stage_estimate, stage_code.end_stage, context_address,
+                     extra=(off, numba.__version__))
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
     inline = inlined(numba)
     forms: dict[str, Any] = {name: jit_tree(fn, inline, tag=tag)
@@ -226,7 +218,7 @@ def compiled(form, plugin=None):
         law = jit_tree(_plugin_law, inline, tag=tag, user_law=jit_tree(plugin, inline, tag=tag), **forms)
     stage_fns = {name: jit_tree(getattr(stage_code, name), inline, tag=tag) for name in
                  ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
-                  "delay_slot")}
+                  "delay_slot", "end_stage")}
     pointers = context_functions(numba, carray, pointer(types.int64), tag)
     g = {**_callback_factory.__globals__, **stage_fns, "numba": numba, "types": types, "carray": carray,
          "law": law, "record_columns": jit_tree(record_columns, inline, tag=tag), "address": address_of(),

@@ -77,6 +77,7 @@ if TYPE_CHECKING:
     is_sample_step: Any
     period_ends: Any
     delay_slot: Any
+    end_stage: Any
     sense: Any
     SAMPLED: int
 
@@ -455,17 +456,7 @@ def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step'
             rM, Md = carray(fptr(ctx.rec_M), (maxrows, nM)), carray(fptr(pointer_at(base, off_M)), nM)  # noqa: F821,E501 (injected globals; one carray per line)
             for k in range(nM):
                 rM[row, k] = Md[k]
-        stage += 1
-        if stage == nst:  # end of the physics step: advance the estimates (continuous: every step)
-            if not sampled:
-                advance_estimates(theta, rsum, ctx.h, lower, upper)  # noqa: F821 (injected)
-            elif period_ends(ctx.step, ctx.period_steps):  # noqa: F821 (injected)
-                advance_estimates(theta, rsum, ctx.period, lower, upper)  # noqa: F821 (injected)
-            ctx.row = row + 1
-            ctx.step = ctx.step + 1
-            ctx.t = ctx.t + ctx.h
-            stage = 0
-        ctx.stage = stage
+        end_stage(ctx, stage, theta, rsum, lower, upper, sampled)  # noqa: F821 (injected: stage.end_stage)
 
     return callback
 
@@ -591,7 +582,8 @@ def compiled(plugin=None):
     off = Offsets(**{name: offsets[MUJOCO_FIELDS.get(name, name)] for name in Offsets._fields})
     key = source_key(*fns, _callback_factory, _law_stage, _regressor, reference_terms, slotine_li_output,
                      _builtin_point, _builtin_output, _plugin_point, _plugin_output, plugin_rate,
-                     stage_code.stage_estimate, stage_code.sense, context_address, extra=(off, numba.__version__))
+                     stage_code.stage_estimate, stage_code.end_stage, stage_code.sense, context_address,
+                     extra=(off, numba.__version__))
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
     common = {"carray": carray, "iptr": pointer(types.int64), "fptr": pointer(types.float64), "np": np,
               "MODE_PD_GRAVITY": MODE_PD_GRAVITY}
@@ -599,7 +591,7 @@ def compiled(plugin=None):
     inline = inlined(numba)
     stage_fns: dict[str, Any] = {name: jit_tree(getattr(stage_code, name), inline, tag=tag) for name in
                                  ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step",
-                                  "period_ends", "delay_slot", "sense")}
+                                  "period_ends", "delay_slot", "sense", "end_stage")}
     if plugin is None:
         law_point = jit_tree(_builtin_point, inline, tag=tag, ref_terms=jit_tree(reference_terms, inline, tag=tag),
                              **pointers, **common)

@@ -120,6 +120,26 @@ def delay_slot(step: int, delay: int) -> tuple[int, int]:
     return step % size, ((step - delay) % size if step >= delay else -1)
 
 
+def end_stage(ctx, stage, theta, rsum, lower, upper, sampled):
+    """A compiled callback's stage is done: the next stage, or at the end of the physics step the estimates
+    advanced once (continuous control: every step, by h; sampled-data control: at the end of each control
+    period, by the period) and the run's row, step and time moved on. ctx: either callback's context record
+    (adaptive_mj.sim.native.CONTEXT, native_manipulator.CONTEXT: the fields stage, row, step, t, h, period,
+    period_steps, nstages are the same in both); stage: the stage just evaluated; theta, rsum, lower, upper
+    (n_theta,). The one definition of the step's end for both compiled callbacks."""
+    stage += 1
+    if stage == ctx.nstages:
+        if not sampled:
+            advance_estimates(theta, rsum, ctx.h, lower, upper)
+        elif period_ends(ctx.step, ctx.period_steps):
+            advance_estimates(theta, rsum, ctx.period, lower, upper)
+        ctx.row = ctx.row + 1
+        ctx.step = ctx.step + 1
+        ctx.t = ctx.t + ctx.h
+        stage = 0
+    ctx.stage = stage
+
+
 def step_times(t0: float, h: float, rows: int) -> np.ndarray:
     """(rows,) the times [s] at the start of `rows` physics steps of h [s] from t0, as MuJoCo accumulates
     them (t += h at each step), bit for bit: numpy's cumulative sum adds left to right, one term at a
