@@ -99,8 +99,7 @@ from adaptive_mj.report.metrics import clean_json, summary as make_summary  # no
 from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.protocol import Policy, has_joints  # noqa: E402 (imported after MUJOCO_GL is set above)
-from adaptive_mj.trajectory import Trajectory  # noqa: E402 (imported after MUJOCO_GL is set above)
-from adaptive_mj.trajectory import Status
+from adaptive_mj.trajectory import Status, Trajectory
 
 #: ``law=`` value that runs the scenario's own law (the one ``adaptive-mj run`` runs).
 SCENARIO_LAW = "scenario"

@@ -42,8 +42,7 @@ from adaptive_mj.log.record import (
     VERSION_KEY_PREFIX,
     row_fields,
 )
-from adaptive_mj.trajectory import Trajectory
-from adaptive_mj.trajectory import Status
+from adaptive_mj.trajectory import Status, Trajectory
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 # Footer record: opcode, record length, summary_start, summary_offset_start, summary CRC.

@@ -39,9 +39,9 @@ from adaptive_mj.laws.protocol import Law
 from adaptive_mj.plants import Event, plant_order
 from adaptive_mj.plants.protocol import CtrlRange, Plant, has_joints
 from adaptive_mj.sim import stage as st
+from adaptive_mj.sim.interrupt import deferred
 from adaptive_mj.sim.stage import TABLEAU, ControlTiming
-from adaptive_mj.trajectory import Trajectory
-from adaptive_mj.trajectory import Status
+from adaptive_mj.trajectory import Status, Trajectory
 
 if TYPE_CHECKING:
     from adaptive_mj.sim.native_context import ContextOwner
@@ -536,9 +536,15 @@ class Rows:
         return out
 
     def flush(self, upto: int) -> None:
-        """Compute V for rows not yet flushed and hand them to the sink."""
+        """Compute V for rows not yet flushed and hand them to the sink. A stop signal that comes meanwhile is
+        raised when the rows are written (interrupt.deferred): before, one that came after `flushed` moved on
+        but before the write left those rows out of the log while the run's summary counted them."""
         if upto <= self.flushed:
             return
+        with deferred():
+            self._flush(upto)
+
+    def _flush(self, upto: int) -> None:
         rows = slice(self.flushed, upto)
         self.flushed = upto  # first: a write cut short by an interruption is never repeated
         theta = self.theta_rows(rows.start, rows.stop)

@@ -25,8 +25,7 @@ from adaptive_mj.report.metrics import clean_json, summary as make_summary
 from adaptive_mj.setup.scenario import Scenario
 from adaptive_mj.setup.success import Criteria, criteria, judge
 from adaptive_mj.sim import preflight
-from adaptive_mj.trajectory import Trajectory
-from adaptive_mj.trajectory import Status
+from adaptive_mj.trajectory import Status, Trajectory
 
 # Run outputs: logs/ under the current directory (in the repository, its logs/, ignored by git), or
 # $ADAPTIVE_MJ_LOGS; read when a run needs it (default_logs_dir()). A Path set here replaces both.

@@ -9,8 +9,7 @@ import math
 import numpy as np
 
 from adaptive_mj.report.metrics import tail_mask
-from adaptive_mj.trajectory import Trajectory
-from adaptive_mj.trajectory import Status
+from adaptive_mj.trajectory import Status, Trajectory
 
 RELATIVE_PARAM_TOLERANCE = 0.10  # "converged": every |θ̂_i − θ_i| <= 10 % of |θ_i| (or of max|θ|)
 

@@ -16,8 +16,7 @@ import numpy as np
 
 from adaptive_mj.errors import AdaptiveMJError, Interrupted, PreflightRefused
 from adaptive_mj.sim import interrupt
-from adaptive_mj.trajectory import Trajectory
-from adaptive_mj.trajectory import Status
+from adaptive_mj.trajectory import Status, Trajectory
 
 
 @dataclass(frozen=True)

@@ -39,8 +39,7 @@ from adaptive_mj.report.metrics import TAIL_FRACTION, clean_json, metrics as run
 from adaptive_mj.study.parallel import Backend, Job, JobResult, iter_results, progress_printer, session
 from adaptive_mj.study.job import REFUSE_UNSTABLE
 from adaptive_mj.study.result import Study, Table
-from adaptive_mj.trajectory import Trajectory
-from adaptive_mj.trajectory import Status
+from adaptive_mj.trajectory import Status, Trajectory
 
 EXIT_OK, EXIT_FAILED = 0, 1
 DEFAULT_METRIC = "rms_tracking_error_tail"
