@@ -181,4 +181,5 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
 KIND = register(PlantKind(
     "arm", __name__, frozenset({Form.MODEL}), output_unit="rad", control_unit="N m",
     params={"J": "kg m²", "b": "N m s/rad", "g_sin": "N m", "g_cos": "N m"},
-    default_model="pendulum_arm", doc="a 1-DOF arm with an unknown payload (MuJoCo's attach)"))
+    default_model="pendulum_arm", doc="a 1-DOF arm with an unknown payload (MuJoCo's attach)",
+    tail_bound=0.05, nominal_noise=5e-4))

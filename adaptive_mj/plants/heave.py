@@ -225,4 +225,5 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
 KIND = register(PlantKind(
     "heave", __name__, frozenset({Form.MODEL}), output_unit="m", control_unit="N",
     params={"d": "kg", "b": "kg/m", "c": "kg", "tau_d": "kg s", "tau_b": "kg s/m"},
-    default_model="heave_vehicle", doc="1-DOF heave vehicle in water, d y'' + b y'|y'| + c g = u"))
+    default_model="heave_vehicle", doc="1-DOF heave vehicle in water, d y'' + b y'|y'| + c g = u",
+    tail_bound=0.01, nominal_noise=5e-4))

@@ -44,6 +44,11 @@ class PlantKind:
     doc: str = ""
     param_unit: Callable[[str], str] | None = None
     default_law: str = "sliding_adaptive"  # the law.kind of a scenario that names none
+    # what studies judge it by: the tail RMS tracking error above which a run has failed [output unit] (on a
+    # multi-joint plant the RMS over its joints), and the nominal measurement noise σ_y [output unit] of the
+    # stress study (σ of ẏ is 10 σ_y per second); None: not in the stress study
+    tail_bound: float | None = None
+    nominal_noise: float | None = None
     origin: str = "built in"
 
     def unit_of(self, name: str) -> str:

@@ -735,4 +735,5 @@ KIND = register(PlantKind(
     "manipulator", __name__, frozenset({Form.RIGID_BODY}), output_unit="rad", control_unit="N m",
     params={},
     default_model="ur5e_arm", doc="any MJCF arm of hinge/slide joints under Slotine-Li", param_unit=body_param_unit,
-    default_law="slotine_li"))
+    default_law="slotine_li",
+    tail_bound=0.01, nominal_noise=1e-4))

@@ -45,11 +45,13 @@ from adaptive_mj.study import callable_module
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.report.metrics import TAIL_FRACTION
 from adaptive_mj.setup import scenario as sc
-from adaptive_mj.study.breaking_point import TAIL_BOUND, Margin, Search, Stressor, margin_text, search_all
+from adaptive_mj.study.breaking_point import (STRESS_PLANT_KIND, TAIL_BOUND, Margin, Search, Stressor, kind_number,
+                                             margin_text, search_all)
 from adaptive_mj.study.result import Study
 
 # TAIL_BOUND (breaking_point, shared with the bench): [m], [rad]: tail RMS above this is a failure
-NOMINAL_NOISE = {"heave": 5e-4, "arm": 5e-4, "ur5e": 1e-4}  # σ_y [m], [rad]; σ_y' = 10 σ_y [per s]
+# σ_y [m], [rad]; σ_y' = 10 σ_y [per s]: each kind's own
+NOMINAL_NOISE = {name: kind_number(kind, "nominal_noise") for name, kind in STRESS_PLANT_KIND.items()}
 LEAK_TIME = 5.0  # s: σ = γ_1 / LEAK_TIME; ν = γ_1 / (LEAK_TIME σ_s)
 DURATION = 20.0  # s per run (its tail: report.metrics.TAIL_FRACTION, the last 25 %)
 
