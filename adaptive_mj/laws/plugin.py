@@ -172,8 +172,9 @@ class Shared:
 
     @classmethod
     def of(cls, n_theta: int, *, gamma=None, dead_zone: DeadZone | None = None,
-           modification: Modification | None = None, theta_hat0=None) -> "Shared":
-        sigma, e_mod, theta0, lower, upper = (modification or NO_MODIFICATION).arrays(n_theta, theta_hat0)
+           modification: Modification | None = None) -> "Shared":
+        """From the law's Γ (None: ones), dead-zone and modification (its θ₀ already resolved by the builder)."""
+        sigma, e_mod, theta0, lower, upper = (modification or NO_MODIFICATION).arrays(n_theta)
         g = np.ones(n_theta) if gamma is None else as_gamma(gamma, n_theta)
         return cls(0.0 if dead_zone is None else float(dead_zone.width),
                    dead_zone is None or dead_zone.on is DeadZoneOn.S, sigma, e_mod, theta0, lower, upper, g)

@@ -81,8 +81,11 @@ def built_in() -> dict[str, PlantKind]:
 
         for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
             importlib.import_module(f"{package.__name__}.{info.name}")
+        ordered = sorted(_BUILT_IN.items(), key=lambda kv: ORDER.index(kv[0]) if kv[0] in ORDER else len(ORDER))
+        _BUILT_IN.clear()
+        _BUILT_IN.update(ordered)  # sorted once; every later call copies it (a lookup per report label)
         _SCANNED = True
-    return dict(sorted(_BUILT_IN.items(), key=lambda kv: ORDER.index(kv[0]) if kv[0] in ORDER else len(ORDER)))
+    return dict(_BUILT_IN)
 
 
 #: the order the built-in kinds are listed in (a kind missing here comes last): the lecture's order

@@ -305,8 +305,7 @@ def _plugin(scn: Scenario, plant: Plant, modification: Modification | None) -> L
             values += [float(v)] * len(names)
     params = np.array(values, dtype=float)
     gamma = params[plugin.layout(len(names))[plugin.gain]] if plugin.gain is not None else None
-    shared = Shared.of(len(names), gamma=gamma, dead_zone=_dead_zone(scn, plant), modification=modification,
-                       theta_hat0=modification.theta0 if modification is not None else None)
+    shared = Shared.of(len(names), gamma=gamma, dead_zone=_dead_zone(scn, plant), modification=modification)
     if isinstance(plugin, JointLawPlugin):
         assert has_joints(plant)  # a JointLawPlugin serves only plants of joints (scenario._law: its forms)
         return JointPluginLaw(inst, plant.regressor, names, plant.m, params, shared=shared, modification=modification)

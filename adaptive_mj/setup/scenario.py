@@ -1232,9 +1232,8 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
     offered = plant_kind.forms if plant_kind is not None else frozenset({law_kinds.Form.MODEL})
     kind = t.string("kind", plant_kind.default_law if plant_kind is not None else "sliding_adaptive",
                     choices=tuple(known))
-    if law_kinds.refusal(known[kind], plant.kind, offered, known) is not None:  # naming the plugins too
-        raise ScenarioError(f"{t.where}: "
-                            f"{law_kinds.refusal(known[kind], plant.kind, offered, law_kinds.all_kinds())}")
+    if not known[kind].forms & offered:  # refused: the message names every law that serves, plugins too
+        raise ScenarioError(f"{t.where}: {law_kinds.refusal(known[kind], plant.kind, offered, law_kinds.all_kinds())}")
     if kind in plugins:
         return _plugin_law(t, kind, plugins[kind], plant, order)
     if law_kinds.Form.RIGID_BODY in known[kind].forms:

@@ -533,12 +533,7 @@ def _builtin_point(ctx, x, r, s, qd_r, qdd_r):
 def _builtin_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper):
     """slotine_li_output with the run's gains (τ unclamped into u, the rate into rate)."""
     nv, nth = ctx.nv, ctx.nth
-    e_norm = 0.0
-    if ctx.dz_on_s == 0:
-        for j in range(nv):
-            e = r[0, j] - x[0, j]
-            e_norm += e * e
-        e_norm = np.sqrt(e_norm)
+    e_norm = tracking_error_norm(x, r) if ctx.dz_on_s == 0 else 0.0
     output(Y, tau_known, th, s, carray(fptr(ctx.kd), nv), carray(fptr(ctx.gamma), nth), ctx.adapt != 0,  # noqa: F821 (injected)
            ctx.dz_width, ctx.dz_on_s != 0, e_norm, ctx.sigma, ctx.e_mod, carray(fptr(ctx.theta0), nth),  # noqa: F821 (injected)
            lower, upper, carray(fptr(ctx.sat_lo), nv), carray(fptr(ctx.sat_hi), nv), ctx.freeze != 0,  # noqa: F821
