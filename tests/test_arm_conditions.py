@@ -306,15 +306,17 @@ def test_env_refuses_sensors_with_an_agent_and_runs_them_with_the_scenario_law()
 
 # --- saturation-aware adaptation on the 1-DOF sliding law ---------------------------------------
 def test_sliding_freeze_stops_adaptation_only_outside_the_limits():
-    from adaptive_mj.laws.sliding import sliding_law_values
+    from adaptive_mj.laws.sliding import SlidingArrays, SlidingGains, sliding_law_values
 
     x, ref, th = np.array([0.1, -0.2]), np.array([0.3, 0.1, -0.5]), np.array([50.0, 5.0, 1.0])
     coeffs, gamma, inf3 = np.array([4.0, 1.0]), np.array([1.0, 2.0, 3.0]), np.full(3, math.inf)
+    arrays = SlidingArrays(coeffs=coeffs, gamma=gamma, theta0=th, lower=-inf3, upper=inf3)
 
     def call(lo, hi, freeze):
         rate = np.empty(3)
-        u, s, _ = sliding_law_values(x, ref, th, coeffs, 10.0, gamma, True, 0.0, True, 0.0, 1.0, 0.0, 0.0, th, -inf3,
-                                     inf3, lo, hi, freeze, np.array([-x[1], -1.0]), 0.0, 1.0, rate)
+        gains = SlidingGains(k=10.0, dz_width=0.0, K=0.0, boundary_layer=1.0, sigma=0.0, e_mod=0.0, sat_lo=lo,
+                             sat_hi=hi, adapt=True, dz_on_s=True, freeze=freeze)
+        u, s, _ = sliding_law_values(x, ref, th, gains, arrays, np.array([-x[1], -1.0]), 0.0, 1.0, rate)
         return u, rate
 
     u, free = call(-math.inf, math.inf, False)

@@ -158,18 +158,18 @@ def _compiled(fn, numba):
 
 def test_compiled_sliding_law_has_the_same_boundary():
     numba = pytest.importorskip("numba")
-    from adaptive_mj.laws.sliding import sliding_law
+    from adaptive_mj.laws.sliding import SlidingArrays, SlidingGains, sliding_law_values
 
-    law = _compiled(sliding_law, numba)
-    phi_fn, f_fn, h_fn = numba.njit(FORM.phi), numba.njit(FORM.f), numba.njit(FORM.h)
+    law = _compiled(sliding_law_values, numba)
     x, ref = CASES[0]
     inf3 = np.full(3, math.inf)
-    coeffs = _sliding()._coeffs
+    arrays = SlidingArrays(coeffs=_sliding()._coeffs, gamma=GAMMA, theta0=TH, lower=-inf3, upper=inf3)
 
     def rate(width, on_s):
         out = np.empty(3)
-        law(x, ref, TH, coeffs, 200.0, GAMMA, True, width, on_s, 0.0, 1.0, 0.0, 0.0, TH, -inf3, inf3,
-            -math.inf, math.inf, False, phi_fn, f_fn, h_fn, out)
+        gains = SlidingGains(k=200.0, dz_width=width, K=0.0, boundary_layer=1.0, sigma=0.0, e_mod=0.0,
+                             sat_lo=-math.inf, sat_hi=math.inf, adapt=True, dz_on_s=on_s, freeze=False)
+        law(x, ref, TH, gains.record()[0], arrays, FORM.phi(x), FORM.f(x), FORM.h(x), out)  # the compiled record
         return out
 
     plain = _sliding()(0.0, x, ref, TH).theta_hat_dot

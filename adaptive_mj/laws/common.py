@@ -1,10 +1,12 @@
-"""Pieces shared by the laws: the step result, the dead-zone, gain checks."""
+"""Pieces shared by the laws: the step result, the dead-zone, gain checks, the records of their
+compiled gains."""
 from __future__ import annotations
 
+import dataclasses
 import enum
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -22,6 +24,33 @@ class LawStep(NamedTuple):
     theta_hat_dot: np.ndarray
     s: float | np.ndarray
     s_r_dot: float | np.ndarray
+
+
+_RECORD_TYPES = {"float": np.float64, "bool": np.bool_, "int": np.int64}
+
+
+def record_dtype(cls: type) -> np.dtype:
+    """The numpy structured dtype of a dataclass of scalars (fields annotated float, bool or int), one
+    field per dataclass field, by name and in its order. A law's gains dataclass is the contract by name
+    between the law and its compiled code: the Python path reads the dataclass's attributes, the compiled
+    callback the same names as fields of a record of this dtype (adaptive_mj.sim.native reads it through
+    its address)."""
+    out = []
+    for f in dataclasses.fields(cls):
+        kind = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
+        if kind not in _RECORD_TYPES:
+            raise TypeError(f"{cls.__name__}.{f.name}: a record field is a float, bool or int, not {kind!r}")
+        out.append((f.name, _RECORD_TYPES[kind]))
+    return np.dtype(out, align=True)
+
+
+def as_record(gains: Any, dtype: np.dtype) -> np.ndarray:
+    """(1,) array of `dtype` (record_dtype of gains' class) holding gains' values, field by field (a float
+    is stored as the float64 it is: the compiled code reads the same bits the Python path uses)."""
+    out = np.zeros(1, dtype=dtype)
+    for name in dtype.names or ():
+        out[name] = getattr(gains, name)
+    return out
 
 
 def dead_zone_open(signal: float, width: float) -> bool:

@@ -18,7 +18,7 @@ import numpy as np
 
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws.common import NO_MODIFICATION, DeadZone, LawStep, Modification, as_gamma, modify_rate
-from adaptive_mj.laws.protocol import Box, Law
+from adaptive_mj.laws.protocol import Box, Law, SurfaceFeedback
 
 
 class FirstOrderAdaptiveLaw(Law):
@@ -47,6 +47,10 @@ class FirstOrderAdaptiveLaw(Law):
     def bounds(self) -> Box | None:
         """(lower, upper) of the projection, or None (common.Modification.box)."""
         return self.modification.box(len(self.names))
+
+    def feedback(self) -> SurfaceFeedback:
+        """k on s = x̃ (no surface: λ None, nothing added to the loop's fastest mode)."""
+        return SurfaceFeedback(k=self.k, lam=None, effective=self.k, surface_rate=0.0, keys="law.k")
 
     def __call__(self, t, x, ref, theta_hat) -> LawStep:
         form = self.form

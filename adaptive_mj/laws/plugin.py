@@ -56,7 +56,7 @@ import numpy as np
 from adaptive_mj.errors import PluginError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
-                                     plugin_rate)
+                                     as_record, plugin_rate, record_dtype)
 from adaptive_mj.laws.protocol import Box, Law
 from adaptive_mj.plugins import Installed, discover
 
@@ -180,6 +180,26 @@ class Shared:
                    dead_zone is None or dead_zone.on is DeadZoneOn.S, sigma, e_mod, theta0, lower, upper, g)
 
 
+@dataclass(frozen=True)
+class PluginGains:
+    """The scalars of the shared modifications a compiled 1-DOF plugin law reads by name (adaptive_mj.sim.native
+    reads them as fields of a PLUGIN_GAINS record, through its address): the dead-zone's width and whether its
+    signal is |s| (else |ỹ|), σ, ν, and whether the law adapts (laws.common.plugin_rate)."""
+
+    dz_width: float
+    sigma: float
+    e_mod: float
+    adapt: bool
+    dz_on_s: bool
+
+    def record(self) -> np.ndarray:
+        """(1,) PLUGIN_GAINS array of these values."""
+        return as_record(self, PLUGIN_GAINS)
+
+
+PLUGIN_GAINS = record_dtype(PluginGains)
+
+
 class _PluginBase(Law):
     """What the 1-DOF and the multi-joint plugin laws share: the plugin, its params, the shared
     modifications, the Lyapunov hook and the native flag."""
@@ -238,11 +258,18 @@ class PluginLaw(_PluginBase):
         self.form = form
         self.order = form.order
 
+    def gains(self) -> PluginGains:
+        """The shared modifications' scalars, by name."""
+        sh = self.shared
+        return PluginGains(dz_width=sh.dz_width, sigma=sh.sigma, e_mod=sh.e_mod, adapt=self.adapt, dz_on_s=sh.dz_on_s)
+
     def native_params(self) -> dict[str, Any]:
-        """What adaptive_mj.sim.native needs: the function, its parameters and the shared modifications (the
-        sliding-law slots it does not read are neutral)."""
-        return {**super().native_params(), "plugin_law": self.plugin.law, "coeffs": np.zeros(self.order),
-                "k": 0.0, "K": 0.0, "boundary_layer": 1.0}
+        """What adaptive_mj.sim.native needs: the function and its parameters, "gains" (the PLUGIN_GAINS record
+        of `gains()`) and the shared modifications' arrays by name (coeffs: the sliding law's, unused)."""
+        sh = self.shared
+        return {"plugin_law": self.plugin.law, "plugin_params": self.params, "gains": self.gains().record(),
+                "coeffs": np.zeros(self.order), "gamma": sh.gamma, "theta0": sh.theta0, "lower": sh.lower,
+                "upper": sh.upper}
 
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
         form = self.form

@@ -28,10 +28,19 @@ Optional (the default in brackets):
                [None: not a plugin]
   native       a compiled control callback can run it (adaptive_mj.sim.native for 1-DOF plants,
                native_manipulator for Slotine–Li) [False: the Python callback]
-  native_params()  the numbers that callback takes (a dict, by name) [none: raises]
+  native_params()  the numbers that callback takes (a dict, by name; a 1-DOF law's scalar gains as one
+               record under "gains", read by field name: laws.sliding.SlidingGains, laws.plugin.PluginGains)
+               [none: raises]
+  adapt        the estimates move (False: a fixed-parameter baseline) [True]
+  feedback()   the law's feedback on its tracking error, as the pre-flight check
+               (adaptive_mj.sim.preflight) and the analyses (adaptive_mj.study.analysis) read it: a
+               SurfaceFeedback (a 1-DOF law on its sliding variable s), a JointFeedback (a law of m
+               joints: K_D and Λ), or None where it declares none (the pre-flight then does not check
+               the run) [None]
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
@@ -40,6 +49,35 @@ from adaptive_mj.laws.common import LawStep
 from adaptive_mj.plugins import Installed
 
 Box = tuple[np.ndarray, np.ndarray]
+
+
+@dataclass(frozen=True)
+class SurfaceFeedback:
+    """A 1-DOF law's feedback on its sliding variable s (s = x̃ for the first-order law).
+
+    k: the gain on s in u [u per unit of s] (V' = -k s² in the ideal case); lam: λ of the surface
+    s = (d/dt + λ)^(n-1) ỹ [1/s], None where s is the tracking error itself; effective: the gain of the
+    linearised velocity feedback the pre-flight check scales by h(x)/d (k, plus K/Φ under robust
+    sliding); surface_rate: what the surface adds to the loop's fastest mode, (n - 1) λ [1/s];
+    keys: the scenario keys that set `effective`, as the pre-flight's fix names them."""
+
+    k: float
+    lam: float | None
+    effective: float
+    surface_rate: float
+    keys: str
+
+
+@dataclass(frozen=True)
+class JointFeedback:
+    """A law of m joints' feedback on s = q̃' + Λ q̃: kd K_D (m,) [N m s/rad] (V' = -sᵀ K_D s in the ideal
+    case), lam Λ (m,) [1/s]."""
+
+    kd: np.ndarray
+    lam: np.ndarray
+
+
+Feedback = SurfaceFeedback | JointFeedback
 
 
 class Law(Protocol):
@@ -56,6 +94,7 @@ class Law(Protocol):
     has_filters: bool = False
     installed: Installed[object] | None = None
     native: bool = False
+    adapt: bool = True
 
     @property
     def bounds(self) -> Box | None:
@@ -79,3 +118,7 @@ class Law(Protocol):
     def native_params(self) -> dict[str, Any]:
         """The numbers the compiled callback takes (asked only when `native`)."""
         raise TypeError(f"{type(self).__name__} has no compiled form (its native is False)")
+
+    def feedback(self) -> Feedback | None:
+        """The law's feedback gains (SurfaceFeedback, JointFeedback), or None where it declares none."""
+        return None

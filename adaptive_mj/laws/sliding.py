@@ -18,14 +18,15 @@ gamma may be a scalar (the lecture) or one value per entry of theta.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
-                                     dead_zone_open, modify_rate)
-from adaptive_mj.laws.protocol import Box, Law
+                                     as_record, dead_zone_open, modify_rate, record_dtype)
+from adaptive_mj.laws.protocol import Box, Law, SurfaceFeedback
 
 
 def surface_coefficients(order: int, lam: float) -> np.ndarray:
@@ -58,50 +59,95 @@ def sliding_terms(coeffs: np.ndarray, x: np.ndarray, ref: np.ndarray) -> tuple[f
     return s, s_r_dot, ref[0] - x[0]
 
 
-def sliding_law(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, boundary_layer,
-                sigma, e_mod, theta0, lower, upper, lo, hi, freeze, phi_fn, f_fn, h_fn, rate):
+@dataclass(frozen=True)
+class SlidingGains:
+    """The sliding laws' scalar gains and switches, by name: what `sliding_law_values` reads of them.
+
+    k: gain on s [u per unit of s]; dz_width: the dead-zone's width [unit of its signal] (0: none), on |s|
+    when dz_on_s, else on |ỹ| (common.dead_zone_open); K, boundary_layer: the robust term K sat(s/Φ)
+    (K = 0: none); sigma, e_mod: the leakage (common.modify_rate); sat_lo, sat_hi: the actuator's limits
+    [u] for saturation-aware adaptation, which is on when freeze; adapt: the estimates move (False for the
+    baselines). The Python path passes this object; the compiled callback (adaptive_mj.sim.native) reads
+    the same names as fields of a SLIDING_GAINS record (`record()`), through its address."""
+
+    k: float
+    dz_width: float
+    K: float
+    boundary_layer: float
+    sigma: float
+    e_mod: float
+    sat_lo: float
+    sat_hi: float
+    adapt: bool
+    dz_on_s: bool
+    freeze: bool
+
+    def record(self) -> np.ndarray:
+        """(1,) SLIDING_GAINS array of these values (the compiled callback reads it by address)."""
+        return as_record(self, SLIDING_GAINS)
+
+
+SLIDING_GAINS = record_dtype(SlidingGains)
+
+
+class SlidingArrays(NamedTuple):
+    """The sliding laws' arrays, by name (a NamedTuple: numba passes it to compiled code as it is).
+
+    coeffs (n,): the surface's coefficients (surface_coefficients); gamma (n_theta,): the adaptation
+    gains; theta0 (n_theta,): the prior the leakage pulls toward; lower, upper (n_theta,): the projection's
+    box (±inf where free)."""
+
+    coeffs: np.ndarray
+    gamma: np.ndarray
+    theta0: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+
+
+def sliding_law(x, ref, theta, gains: SlidingGains, arrays: SlidingArrays, form: ModelForm, rate):
     """One evaluation of the sliding laws (adaptive, fixed nominal, robust), as plain array code.
 
-    x (n,), ref (n+1,), theta (n_theta,) = [d̂, p̂...], coeffs (n,) surface coefficients,
-    k gain on s, gamma (n_theta,) adaptation gains, adapt: estimates move (False for the
-    baselines), dead-zone: adaptation off while |s| (dz_on_s) or |ỹ| < dz_width (common.dead_zone_open),
-    K, boundary_layer: robust term K sat(s/Phi) (K = 0: none); sigma, e_mod, theta0
-    (n_theta,), lower, upper (n_theta,): the robust modifications (common.modify_rate:
-    leakage toward theta0, projection onto the box); freeze: saturation-aware adaptation, no
-    adaptation while u lies outside the actuator's [lo, hi] (the 1-DOF case of Slotine–Li's
-    per-joint rule). Writes θ̂' into rate (n_theta,) and returns (u, s, ṡ_r):
+    x (n,), ref (n+1,), theta (n_theta,) = [d̂, p̂...]; gains: the scalar gains and switches
+    (SlidingGains: k on s; adapt: estimates move (False for the baselines); the dead-zone: adaptation off
+    while |s| (dz_on_s) or |ỹ| < dz_width (common.dead_zone_open); K, boundary_layer: the robust term
+    K sat(s/Phi) (K = 0: none); sigma, e_mod: the leakage toward theta0 (common.modify_rate); freeze:
+    saturation-aware adaptation, no adaptation while u lies outside the actuator's [sat_lo, sat_hi] (the
+    1-DOF case of Slotine–Li's per-joint rule)); arrays: coeffs (n,) surface coefficients, gamma (n_theta,)
+    adaptation gains, theta0, and the projection's box lower, upper (SlidingArrays); form: the plant's
+    ModelForm (phi, f, h evaluated at x). Writes θ̂' into rate (n_theta,) and returns (u, s, ṡ_r):
 
         u = h^-1 (d̂ ṡ_r - f - phi p̂ + k s [+ K sat(s/Phi)])
         d̂' = ṡ_r s / gamma_d,   p̂' = -phi^T s / gamma_p   [- (σ + ν|s|)(θ̂ - θ₀)/γ, projected]
 
-    The Python laws below call it; adaptive_mj.sim.native compiles this same function.
+    The Python laws below call it; adaptive_mj.sim.native compiles sliding_law_values, its body.
     """
-    return sliding_law_values(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, boundary_layer,
-                              sigma, e_mod, theta0, lower, upper, lo, hi, freeze, phi_fn(x), f_fn(x), h_fn(x), rate)
+    return sliding_law_values(x, ref, theta, gains, arrays, form.phi(x), form.f(x), form.h(x), rate)
 
 
-def sliding_law_values(x, ref, theta, coeffs, k, gamma, adapt, dz_width, dz_on_s, K, boundary_layer,
-                       sigma, e_mod, theta0, lower, upper, lo, hi, freeze, phi, f, h, rate):
-    """sliding_law with the regressor's values at x: phi (n_p,), f, h (floats), not its functions
-    (the compiled callback evaluates the plant's functions itself and calls this)."""
-    s, s_r_dot, y_tilde = sliding_terms(coeffs, x, ref)
-    acc = theta[0] * s_r_dot - f + k * s
+def sliding_law_values(x, ref, theta, gains, arrays, phi, f, h, rate):
+    """sliding_law with the regressor's values at x: phi (n_p,), f, h (floats), not the form's functions
+    (the compiled callback evaluates the plant's functions itself and calls this, with gains a
+    SLIDING_GAINS record: the same names, read as fields)."""
+    s, s_r_dot, y_tilde = sliding_terms(arrays.coeffs, x, ref)
+    acc = theta[0] * s_r_dot - f + gains.k * s
     for j in range(phi.shape[0]):
         acc -= phi[j] * theta[j + 1]
-    if K > 0.0:
-        z = s / boundary_layer
-        acc += K * min(1.0, max(-1.0, z))
+    if gains.K > 0.0:
+        z = s / gains.boundary_layer
+        acc += gains.K * min(1.0, max(-1.0, z))
     u = acc / h
-    signal = s if dz_on_s else y_tilde
-    if adapt and dead_zone_open(signal, dz_width) and not (freeze and (u < lo or u > hi)):
+    signal = s if gains.dz_on_s else y_tilde
+    gamma = arrays.gamma
+    if gains.adapt and dead_zone_open(signal, gains.dz_width) and not (gains.freeze and (u < gains.sat_lo or
+                                                                                          u > gains.sat_hi)):
         rate[0] = s_r_dot * s / gamma[0]
         for j in range(phi.shape[0]):
             rate[j + 1] = -phi[j] * s / gamma[j + 1]
     else:
         for j in range(rate.shape[0]):
             rate[j] = 0.0
-    if adapt:  # leakage acts inside the dead-zone too; projection always
-        modify_rate(rate, theta, abs(s), sigma, e_mod, theta0, gamma, lower, upper)
+    if gains.adapt:  # leakage acts inside the dead-zone too; projection always
+        modify_rate(rate, theta, abs(s), gains.sigma, gains.e_mod, arrays.theta0, gamma, arrays.lower, arrays.upper)
     return u, s, s_r_dot
 
 
@@ -112,13 +158,6 @@ def _check_gains(form: ModelForm, lam: float, k: float) -> None:
         raise ValueError(f"lambda must be finite and > 0, got {lam}")
     if not (math.isfinite(k) and k >= 0):
         raise ValueError(f"k must be finite and >= 0, got {k}")
-
-
-# sliding_law's arguments between theta and rate: the gains (fixed after construction) and the form's
-# phi, f, h
-_SlidingArgs = tuple[np.ndarray, float, np.ndarray, bool, float, bool, float, float, float, float, np.ndarray,
-                     np.ndarray, np.ndarray, float, float, bool, Callable[[np.ndarray], np.ndarray],
-                     Callable[[np.ndarray], float], Callable[[np.ndarray], float]]
 
 
 class _SlidingBase(Law):
@@ -141,32 +180,47 @@ class _SlidingBase(Law):
         self.boundary_layer = 1.0
         self.modification = NO_MODIFICATION
         self.saturation: tuple[float, float] | None = None  # (lo, hi) [control units]: saturation-aware adaptation
-        self._args: _SlidingArgs | None = None
+        self._fixed: tuple[SlidingGains, SlidingArrays] | None = None
 
     @property
     def bounds(self) -> Box | None:
         """(lower, upper) of the projection, or None (common.Modification.box)."""
         return self.modification.box(len(self.names))
 
-    def native_params(self) -> dict[str, Any]:
-        """The numbers `sliding_law` takes, for the native (numba) callback."""
+    def gains(self) -> SlidingGains:
+        """The law's scalar gains and switches, by name (what sliding_law reads of them)."""
         dz = self.dead_zone
-        sigma, e_mod, theta0, lower, upper = self.modification.arrays(len(self.names))
-        return {"coeffs": self._coeffs, "k": self.k, "gamma": self.gamma, "adapt": self.adapt,
-                "dz_width": 0.0 if dz is None else dz.width, "dz_on_s": dz is None or dz.on is DeadZoneOn.S,
-                "K": self.K, "boundary_layer": self.boundary_layer, "sigma": sigma, "e_mod": e_mod,
-                "theta0": theta0, "lower": lower, "upper": upper, "freeze": self.saturation is not None,
-                "sat_lo": -math.inf if self.saturation is None else float(self.saturation[0]),
-                "sat_hi": math.inf if self.saturation is None else float(self.saturation[1])}
+        sigma, e_mod, _, _, _ = self.modification.arrays(len(self.names))
+        return SlidingGains(k=self.k, dz_width=0.0 if dz is None else dz.width, K=self.K,
+                            boundary_layer=self.boundary_layer, sigma=sigma, e_mod=e_mod,
+                            sat_lo=-math.inf if self.saturation is None else float(self.saturation[0]),
+                            sat_hi=math.inf if self.saturation is None else float(self.saturation[1]),
+                            adapt=self.adapt, dz_on_s=dz is None or dz.on is DeadZoneOn.S,
+                            freeze=self.saturation is not None)
+
+    def arrays(self) -> SlidingArrays:
+        """The law's arrays, by name (what sliding_law reads of them)."""
+        _, _, theta0, lower, upper = self.modification.arrays(len(self.names))
+        return SlidingArrays(coeffs=self._coeffs, gamma=self.gamma, theta0=theta0, lower=lower, upper=upper)
+
+    def native_params(self) -> dict[str, Any]:
+        """What the native (numba) callback takes: "gains", the SLIDING_GAINS record of `gains()` (read by
+        name through its address), and the arrays of `arrays()` by their names."""
+        return {"gains": self.gains().record(), **self.arrays()._asdict()}
+
+    def feedback(self) -> SurfaceFeedback:
+        """k on s, λ, and the gain of the linearised velocity feedback k + K/Φ (robust sliding) with the
+        (n - 1) λ the surface adds to the loop's fastest mode (the pre-flight check)."""
+        effective = self.k + (self.K / self.boundary_layer if self.K > 0 else 0.0)
+        keys = "law.k" + (" (+ law.K / law.boundary_layer)" if self.K > 0 else "")
+        return SurfaceFeedback(k=self.k, lam=self.lam, effective=effective, surface_rate=(self.order - 1) * self.lam,
+                               keys=keys)
 
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
-        if self._args is None:  # the gains, once (they are fixed after construction)
-            p = self.native_params()
-            self._args = (p["coeffs"], p["k"], p["gamma"], p["adapt"], p["dz_width"], p["dz_on_s"], p["K"],
-                          p["boundary_layer"], p["sigma"], p["e_mod"], p["theta0"], p["lower"], p["upper"],
-                          p["sat_lo"], p["sat_hi"], p["freeze"], self.form.phi, self.form.f, self.form.h)
+        if self._fixed is None:  # the gains, once (they are fixed after construction)
+            self._fixed = (self.gains(), self.arrays())
         rate = np.empty(len(self.names))
-        u, s, s_r_dot = sliding_law(x, ref, theta_hat, *self._args, rate)
+        u, s, s_r_dot = sliding_law(x, ref, theta_hat, *self._fixed, self.form, rate)
         return LawStep(u, rate, s, s_r_dot)
 
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
                                      dead_zone_open, modify_rate)
-from adaptive_mj.laws.protocol import Box, Law
+from adaptive_mj.laws.protocol import Box, JointFeedback, Law
 
 
 class Mode(enum.IntEnum):
@@ -142,6 +142,10 @@ class SlotineLiLaw(Law):
                 "dz_width": self._dz_width, "dz_on_s": self._dz_on_s, "sigma": sigma, "e_mod": e_mod,
                 "theta0": theta0, "lower": lower, "upper": upper, "freeze": self.freeze,
                 "sat_lo": self.lo, "sat_hi": self.hi}
+
+    def feedback(self) -> JointFeedback:
+        """K_D and Λ (every mode: the baselines close the same feedback on s)."""
+        return JointFeedback(kd=self.kd, lam=self.lam)
 
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
         m = self.m

@@ -153,6 +153,13 @@ class HeavePlant(MujocoPlant):
         self._act_adr = int(model.actuator_actadr[a]) if self.lag > 0 else -1
         super().__init__(model, joint_id=j, actuator_id=a, form=form, theta_fn=theta_fn, where=where)
 
+    def unmodelled_drag(self) -> float | None:
+        """unmodelled_linear_drag's c_v [N s/m] on the lecture's order-2 form in a viscous fluid; None in an inviscid
+        one, or on the order-3 form."""
+        if self.form.order != 2 or self.model.opt.viscosity == 0:
+            return None
+        return unmodelled_linear_drag(self.model)
+
     def _thrust_per_act(self) -> float:
         m, a = self.model, self.actuator_id
         return float(m.actuator_gear[a, 0] * m.actuator_gainprm[a, 0])

@@ -658,6 +658,14 @@ class ManipulatorPlant:
         """A MuJoCo warning raised since the state was set, as text, or None."""
         return new_warnings(self.data, self._warning_total0, self._warnings0)
 
+    def unmodelled_drag(self) -> float | None:
+        """None: no drag the regressor leaves out is known (plants.protocol)."""
+        return None
+
+    def release(self) -> None:
+        """Nothing handed back: its MjData is its own (no spare pool of its layout)."""
+        return None
+
     # --- events ------------------------------------------------------------
     def body_id(self, name: str) -> int:
         idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)

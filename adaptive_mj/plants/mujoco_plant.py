@@ -255,6 +255,10 @@ class MujocoPlant:
         """A MuJoCo warning raised since the plant was made, as text, or None."""
         return new_warnings(self.data, self._warning_total0, self._warnings0)
 
+    def unmodelled_drag(self) -> float | None:
+        """The viscous drag coefficient absent from the regressor [N s/m] (plants.protocol), where a plant knows it."""
+        return None
+
     def release(self) -> None:
         """The run is over: its MjData goes to the spare ones of its layout (release_data), for the next
         plant of that layout made inside reusing_run_data() to take instead of a new one. The plant has

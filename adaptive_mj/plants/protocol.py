@@ -27,6 +27,12 @@ so must a plant plugin's plant (a MujocoPlant subclass does).
                dynamics (MuJoCo's control callback, or the twin's integrator stages)
   step()       advance one physics step
   instability()  text of a numerical instability since set_state (a MuJoCo warning), or None
+Optional (a plant that names Plant as its base inherits the default in brackets):
+  unmodelled_drag()  c_v [N s/m]: a viscous drag −c_v y' that acts on the plant but is absent from its
+               regressor (the heave vehicle's in water, on its order-2 form), or None where the plant has none
+               it knows of (the Lyapunov analysis: adaptive_mj.study.analysis) [None]
+  release()    the run is over: hand back what the plant holds for the next run's plant (a MujocoPlant's
+               MjData: MujocoPlant.release) [nothing]
 
 `FormPlant`, a 1-DOF plant or twin (joint_shape ()):
   form         the ModelForm d y^(n) = f(x) + φ(x)ᵀp + h(x) u the 1-DOF laws are built on
@@ -105,6 +111,16 @@ class Plant(Protocol):
     def step(self) -> None: ...
 
     def instability(self) -> str | None: ...
+
+    # --- optional members, with their defaults (a plant that names Plant as its base inherits them;
+    # the bodies `return None`, not `...`: a type checker takes a trivial body for one a plant must write)
+    def unmodelled_drag(self) -> float | None:
+        """c_v [N s/m] of a viscous drag the regressor leaves out, or None."""
+        return None
+
+    def release(self) -> None:
+        """The run is over: hand back what the plant holds for the next run's plant."""
+        return None
 
 
 class FormPlant(Plant, Protocol):

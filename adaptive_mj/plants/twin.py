@@ -43,6 +43,14 @@ class PythonStepped:
     def instability(self) -> str | None:
         return None
 
+    def unmodelled_drag(self) -> float | None:
+        """None: the twin integrates its own form, nothing acts outside it."""
+        return None
+
+    def release(self) -> None:
+        """Nothing to hand back (no MjData)."""
+        return None
+
     @contextlib.contextmanager
     def controlled_by(self, policy: Policy) -> Iterator[None]:
         self._policy = policy

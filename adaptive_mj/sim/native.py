@@ -28,8 +28,9 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from adaptive_mj.laws.common import plugin_rate
+from adaptive_mj.laws.plugin import PLUGIN_GAINS
 from adaptive_mj.laws.protocol import Law
-from adaptive_mj.laws.sliding import sliding_law_values
+from adaptive_mj.laws.sliding import SLIDING_GAINS, SlidingArrays, sliding_law_values
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import stage as stage_code
 from adaptive_mj.sim.native_context import (ContextOwner, addr, context_address, context_functions, inlined,
@@ -50,6 +51,7 @@ if TYPE_CHECKING:
     pointer_at: Any
     law: Any
     user_law: Any
+    gains_ptr: Any
     phi_fn: Any
     f_fn: Any
     h_fn: Any
@@ -71,9 +73,9 @@ CONTEXT = np.dtype([
     ("nstages", _i8), ("n", _i8), ("nth", _i8), ("qadr", _i8), ("dadr", _i8), ("act", _i8), ("delay", _i8),
     ("mode", _i8), ("period_steps", _i8), ("h", _f8), ("period", _f8), ("lo", _f8), ("hi", _f8),
     ("inc", _f8, 4), ("weights", _f8, 4),
-    # the law's numbers (sliding_law's scalars)
-    ("k", _f8), ("adapt", _i8), ("dz_width", _f8), ("dz_on_s", _i8), ("K", _f8), ("boundary_layer", _f8),
-    ("sigma", _f8), ("e_mod", _f8), ("freeze", _i8), ("sat_lo", _f8), ("sat_hi", _f8),
+    # the law's scalar gains: the address of its record (laws.sliding.SLIDING_GAINS, or laws.plugin.PLUGIN_GAINS
+    # for a plugin law), read by name
+    ("gains", _i8),
     # buffers (addresses)
     ("ref", _i8), ("noise", _i8), ("rec", _i8), ("theta", _i8), ("rsum", _i8), ("prev", _i8), ("th", _i8),
     ("rate", _i8), ("coeffs", _i8), ("gamma", _i8), ("theta0", _i8), ("lower", _i8), ("upper", _i8),
@@ -169,24 +171,36 @@ def _callback_factory(off, key):
 
 
 def _builtin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rate):
-    """laws.sliding.sliding_law with its scalars read from the context (the plant's functions are
-called here, as globals, so no function is passed as a value: numba could not cache that)."""
-    u, s, _ = sliding_law_values(x, r, th, coeffs, ctx.k, gamma, ctx.adapt != 0, ctx.dz_width, ctx.dz_on_s != 0,
-                                 ctx.K, ctx.boundary_layer, ctx.sigma, ctx.e_mod, theta0, lower, upper, ctx.sat_lo,
-                                 ctx.sat_hi, ctx.freeze != 0, phi_fn(x), f_fn(x), h_fn(x), rate)  # noqa: F821
+    """laws.sliding.sliding_law_values with the law's gains read by name from its SLIDING_GAINS record (at the
+    context's `gains` address) and its arrays by name (the plant's functions are called here, as globals, so
+    no function is passed as a value: numba could not cache that)."""
+    gains = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
+    u, s, _ = sliding_law_values(x, r, th, gains, SlidingArrays(coeffs, gamma, theta0, lower, upper),
+                                 phi_fn(x), f_fn(x), h_fn(x), rate)  # noqa: F821 (injected)
     return u, s
 
 
 def _plugin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rate):
     """A law plugin's function (laws.plugin: law(x, ref, theta, phi, f, h, params, rate) -> (u, s)), then the
     shared modifications every plugin gets (laws.common.plugin_rate: a baseline's rate is zero, the
-    dead-zone, the leakage and the projection), as PluginLaw does in Python."""
+    dead-zone, the leakage and the projection), as PluginLaw does in Python; their scalars read by name from
+    the law's PLUGIN_GAINS record (at the context's `gains` address)."""
     u, s = user_law(x, r, th, phi_fn(x), f_fn(x), h_fn(x), params, rate)  # noqa: F821 (injected)
+    shared = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
     s_abs = abs(s)
-    signal = s_abs if ctx.dz_on_s != 0 else abs(r[0] - x[0])
-    plugin_rate(rate, th, s_abs, signal, ctx.adapt != 0, ctx.dz_width, ctx.sigma, ctx.e_mod, theta0, gamma,
+    signal = s_abs if shared.dz_on_s else abs(r[0] - x[0])
+    plugin_rate(rate, th, s_abs, signal, shared.adapt, shared.dz_width, shared.sigma, shared.e_mod, theta0, gamma,
                 lower, upper)
     return float(u), float(s)
+
+
+def gains_record(record: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """A law's gains record as the callback reads it: a (1,) C-contiguous array of `dtype` exactly (the compiled
+    code reads its fields at that dtype's offsets), checked."""
+    if record.dtype != dtype or record.shape != (1,) or not record.flags.c_contiguous:
+        raise TypeError(f"a law's native gains must be a (1,) record array of {dtype}, got {record.dtype} "
+                        f"{record.shape}")
+    return record
 
 
 def compiled(form, plugin=None):
@@ -207,15 +221,17 @@ def compiled(form, plugin=None):
     off = (offsets["userdata"], offsets["qpos"], offsets["qvel"], offsets["ctrl"])
     key = source_key(*fns, _callback_factory, _builtin_law, _plugin_law, sliding_law_values, plugin_rate,
                      record_columns, stage_code.stage_estimate, stage_code.end_stage, context_address,
-                     extra=(off, numba.__version__))
+                     extra=(off, numba.__version__, str(SLIDING_GAINS), str(PLUGIN_GAINS)))
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
     inline = inlined(numba)
     forms: dict[str, Any] = {name: jit_tree(fn, inline, tag=tag)
                              for name, fn in (("phi_fn", form.phi), ("f_fn", form.f), ("h_fn", form.h))}
     if plugin is None:
-        law = jit_tree(_builtin_law, inline, tag=tag, **forms)
+        law = jit_tree(_builtin_law, inline, tag=tag, carray=carray, gains_ptr=pointer(numba.from_dtype(SLIDING_GAINS)),
+                       **forms)
     else:
-        law = jit_tree(_plugin_law, inline, tag=tag, user_law=jit_tree(plugin, inline, tag=tag), **forms)
+        law = jit_tree(_plugin_law, inline, tag=tag, user_law=jit_tree(plugin, inline, tag=tag), carray=carray,
+                       gains_ptr=pointer(numba.from_dtype(PLUGIN_GAINS)), **forms)
     stage_fns = {name: jit_tree(getattr(stage_code, name), inline, tag=tag) for name in
                  ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
                   "delay_slot", "end_stage")}
@@ -261,7 +277,9 @@ class NativeController(ContextOwner):
         self.max_rows = int(max_rows)
         control = control if control is not None else stage_code.ControlTiming(period=plant.dt)
         p = law.native_params()
-        self.callback = compiled(plant.form, plugin=p.get("plugin_law"))
+        plugin = p.get("plugin_law")
+        self.gains = gains_record(p["gains"], SLIDING_GAINS if plugin is None else PLUGIN_GAINS)
+        self.callback = compiled(plant.form, plugin=plugin)
         n, nth = plant.form.order, len(law.names)
         self.n, self.nth, self.nst = n, nth, plant.stages
         self.columns = record_columns(n, nth)
@@ -286,11 +304,7 @@ class NativeController(ContextOwner):
         c["delay"], c["mode"], c["period_steps"], c["period"] = control.delay, control.mode, control.steps, \
             control.period
         c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
-        c["k"], c["adapt"], c["dz_width"], c["dz_on_s"] = p["k"], int(bool(p["adapt"])), p["dz_width"], \
-            int(bool(p["dz_on_s"]))
-        c["K"], c["boundary_layer"], c["sigma"], c["e_mod"] = p["K"], p["boundary_layer"], p["sigma"], p["e_mod"]
-        c["freeze"] = int(bool(p.get("freeze", False)))  # saturation-aware adaptation (sliding_law's freeze)
-        c["sat_lo"], c["sat_hi"] = p.get("sat_lo", -np.inf), p.get("sat_hi", np.inf)
+        c["gains"] = self.gains.ctypes.data  # the law's record (kept alive by self.gains)
         for name, buf in self.buffers.items():
             c[name] = addr(buf)
         self.context = ctx

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from adaptive_mj.laws import FirstOrderAdaptiveLaw, FixedNominalLaw, SlidingAdaptiveLaw
-from adaptive_mj.laws.slotine_li import SlotineLiLaw
+from adaptive_mj.laws.protocol import JointFeedback, Law, SurfaceFeedback
+from adaptive_mj.plants.protocol import FormPlant, JointPlant, Plant, has_form, has_joints
 from adaptive_mj.setup.success import sampled_positions
 from adaptive_mj.sim.stage import ControlTiming
 
@@ -126,36 +126,30 @@ def _armature_within(M: np.ndarray, kd: np.ndarray, target: float) -> dict[int, 
     return {}
 
 
-def _arm_check(plant, law: SlotineLiLaw, q: np.ndarray, h: float, limit: float) -> dict:
+def _arm_check(plant: JointPlant, feedback: JointFeedback, q: np.ndarray, h: float, limit: float) -> dict:
     M = plant.mass_matrices(q)
-    mu, v = _worst(M, law.kd)
-    rate = mu + float(law.lam.max())
-    j = int(np.argmax(law.kd * v ** 2))  # the joint with the largest share of the fastest mode
+    mu, v = _worst(M, feedback.kd)
+    rate = mu + float(feedback.lam.max())
+    j = int(np.argmax(feedback.kd * v ** 2))  # the joint with the largest share of the fastest mode
     name = plant.joint_names[j]
     if rate * h < limit:
         return {"rate": rate, "joint": name, "fixes": ()}
     fixes = []
-    target = 0.9 * limit / h - float(law.lam.max())
+    target = 0.9 * limit / h - float(feedback.lam.max())
     if target > 0:
-        table = _kd_within(M, law.kd, target)
+        table = _kd_within(M, feedback.kd, target)
         fixes.append("law.kd = {" + ", ".join(f"{plant.joint_names[i]} = {k:.3g}" for i, k in sorted(table.items()))
                      + "} (the other joints as they are)")
     fixes.append(f"a timestep or control.period <= {0.9 * limit / rate:.3g} s")
-    armature = _armature_within(M, law.kd, target) if target > 0 else {}
+    armature = _armature_within(M, feedback.kd, target) if target > 0 else {}
     if armature:
         fixes.append("more armature on " + ", ".join(f"{plant.joint_names[i]} (+{a:.3g})"
                                                      for i, a in sorted(armature.items())) + " [kg m² or kg]")
     return {"rate": rate, "joint": name, "fixes": tuple(fixes)}
 
 
-def _one_dof_check(plant, law, order: int, h: float, limit: float) -> dict | None:
-    if isinstance(law, FirstOrderAdaptiveLaw):
-        gain, lam_part, what = law.k, 0.0, "law.k"
-    elif isinstance(law, (SlidingAdaptiveLaw, FixedNominalLaw)):
-        gain = law.k + (law.K / law.boundary_layer if law.K > 0 else 0.0)
-        lam_part, what = (order - 1) * law.lam, "law.k" + (" (+ law.K / law.boundary_layer)" if law.K > 0 else "")
-    else:
-        return None
+def _one_dof_check(plant: FormPlant, feedback: SurfaceFeedback, h: float, limit: float) -> dict:
+    gain, lam_part, what = feedback.effective, feedback.surface_rate, feedback.keys
     form = plant.form
     theta = np.asarray(plant.true_theta(), dtype=float)
     d = float(theta[0]) if form.d_name is not None else 1.0
@@ -167,16 +161,18 @@ def _one_dof_check(plant, law, order: int, h: float, limit: float) -> dict | Non
     return {"rate": rate, "joint": "", "fixes": tuple(fixes)}
 
 
-def check(plant, law, reference, *, duration: float, timing: ControlTiming) -> Preflight:
+def check(plant: Plant, law: Law, reference, *, duration: float, timing: ControlTiming) -> Preflight:
     """The pre-flight of one run (before its first step). Reads the plant's inertia along the
-    reference; a law whose velocity feedback it does not know (a plugin) is not checked."""
+    reference; a law that declares no feedback gains (Law.feedback: a plugin, MRAC) is not checked."""
     order = law.order
     h, limit, scheme = step_limit(timing, plant.stages)
     outside = _outside_range(plant, reference, duration, order)
-    if isinstance(law, SlotineLiLaw):
-        found: dict | None = _arm_check(plant, law, _reference_positions(reference, duration, order), h, limit)
-    else:
-        found = _one_dof_check(plant, law, order, h, limit)
+    feedback = law.feedback()
+    found: dict | None = None
+    if isinstance(feedback, JointFeedback) and has_joints(plant):
+        found = _arm_check(plant, feedback, _reference_positions(reference, duration, order), h, limit)
+    elif isinstance(feedback, SurfaceFeedback) and has_form(plant):
+        found = _one_dof_check(plant, feedback, h, limit)
     if found is None:
         return Preflight(checked=False, outside=outside,
                          note=f"not checked: the law {type(law).__name__} declares no velocity feedback gain")
@@ -184,7 +180,7 @@ def check(plant, law, reference, *, duration: float, timing: ControlTiming) -> P
                      scheme=scheme, joint=found["joint"], fixes=found["fixes"], outside=outside)
 
 
-def _outside_range(plant, reference, duration: float, order: int) -> tuple[str, ...]:
+def _outside_range(plant: Plant, reference, duration: float, order: int) -> tuple[str, ...]:
     """One line per limited joint whose reference position leaves [lo, hi] during the run."""
     limits = plant.joint_limits
     if limits is None:

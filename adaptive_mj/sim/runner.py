@@ -244,9 +244,7 @@ class Started:
 
     def _release(self) -> None:
         """The run's MjData handed back for the next run's plant (MujocoPlant.release), where the plant can."""
-        release = getattr(self.setup.plant, "release", None)
-        if release is not None:
-            release()
+        self.setup.plant.release()
 
     def abandon(self, exc: BaseException, partial: Trajectory | None = None) -> None:
         """The run did not end: its log closed as "interrupted" (with the rows it had, a stop signal)

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from adaptive_mj.laws.protocol import JointFeedback, Law, SurfaceFeedback
 from adaptive_mj.report.metrics import tail_mask
 from adaptive_mj.trajectory import Status, Trajectory
 
@@ -139,7 +140,8 @@ def lyapunov_check(traj: Trajectory, setup) -> dict:
     and mean |V'| over the first and the last 10 % of the run (V' -> 0, Barbalat)."""
     dt = traj.meta["dt"]
     dV = np.diff(traj.V)
-    k = getattr(setup.law, "k", math.nan)
+    feedback = setup.law.feedback()
+    k = feedback.k if isinstance(feedback, SurfaceFeedback) else math.nan
     ks2 = k * 0.5 * (traj.s[:-1] ** 2 + traj.s[1:] ** 2)
     scale = float(np.max(k * traj.s**2)) or 1.0
     return {
@@ -155,16 +157,14 @@ def lyapunov_check(traj: Trajectory, setup) -> dict:
 
 
 def _unmodelled_drag_power(traj: Trajectory, setup, k: float) -> dict:
-    """With MuJoCo's viscous drag −c_v y' acting on the vehicle but absent from the regressor,
+    """With MuJoCo's viscous drag −c_v y' acting on the vehicle but absent from the regressor (the plant's
+    unmodelled_drag(); nothing is returned for a plant that has none),
     d ṡ gains + c_v y' and V' = −k s² + c_v y' s exactly: V grows where c_v y' s > k s². Returns
     c_v [N s/m], the total growth of V measured (Σ max(ΔV, 0)) and predicted
     (∫ max(0, c_v y' s − k s²) dt), and max |ΔV/Δt − (−k s² + c_v y' s)| / max k s²."""
-    model = getattr(setup.plant, "model", None)
-    if model is None or not hasattr(setup.plant, "form") or setup.plant.form.order != 2 or model.opt.viscosity == 0:
+    cv = setup.plant.unmodelled_drag()
+    if cv is None:
         return {}
-    from adaptive_mj.plants.heave import unmodelled_linear_drag
-
-    cv = unmodelled_linear_drag(model)
     dt = traj.meta["dt"]
     s, yd = traj.s, traj.x[:, 1]
     p = -k * s ** 2 + cv * yd * s  # the predicted V'
@@ -188,7 +188,9 @@ def manipulator_response(traj: Trajectory, setup) -> dict:
     tail = tail_mask(traj)
     out: dict = {"tail_rms_per_joint": np.sqrt(np.mean(e[tail] ** 2, axis=0)).tolist()}
     dt = traj.meta["dt"]
-    kd = np.asarray(getattr(setup.law, "kd", np.zeros(e.shape[1])))
+    law: Law = setup.law
+    feedback = law.feedback()
+    kd = np.asarray(feedback.kd if isinstance(feedback, JointFeedback) else np.zeros(e.shape[1]))
     s = np.asarray(traj.s).reshape(e.shape)
     sks = np.sum(kd * s * s, axis=1)
     dV = np.diff(traj.V)
@@ -200,7 +202,7 @@ def manipulator_response(traj: Trajectory, setup) -> dict:
     scale = float(np.max(sks)) or 1.0
     out["lyapunov_max_increase_rel"] = float(max(0.0, dV[keep].max()) / traj.V[0]) if dV.size and traj.V[0] else 0.0
     out["lyapunov_rate_error_rel"] = float(np.max(np.abs(dV / dt + 0.5 * (sks[:-1] + sks[1:]))[keep]) / scale) \
-        if dV.size and getattr(setup.law, "adapt", False) else None
+        if dV.size and law.adapt else None
     if t_e is not None:
         after = traj.t >= t_e
         worst = np.abs(e).max(axis=1)
@@ -283,10 +285,11 @@ def sudden_failure(traj: Trajectory, setup) -> dict:
     lo, hi = setup.plant.ctrl_range if setup.plant.ctrl_range is not None else (-math.inf, math.inf)
     sat = np.nonzero((traj.u <= lo) | (traj.u >= hi))[0]
     t_sat = float(t[sat[0]]) if len(sat) else None
-    law = setup.law
+    feedback = setup.law.feedback()
     d = float(traj.theta[0, 0])
     delay = traj.meta.get("control_delay", 0) * traj.meta["dt"]
-    crit = critical_leading_estimate(d, law.k, law.lam, delay) / d if hasattr(law, "lam") else math.nan
+    crit = critical_leading_estimate(d, feedback.k, feedback.lam, delay) / d \
+        if isinstance(feedback, SurfaceFeedback) and feedback.lam is not None else math.nan
     if traj.status == Status.DIVERGED and t_fail is None:
         t_fail = float(t[-1])
     return {"t_fail": t_fail, "t_saturation": t_sat, "bound": bound,
