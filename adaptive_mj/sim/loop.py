@@ -51,19 +51,46 @@ __all__ = ["Event", "ControlTiming", "Controller", "ControlStep", "StepRow", "Si
            "divergence", "TABLEAU", "NATIVE_CHUNK"]
 
 
+class StepContext:
+    """The Python path's context for stage.control_stage: the fields a compiled callback's context record has
+    (adaptive_mj.sim.native.CONTEXT, native_manipulator.CONTEXT), as attributes, its buffers as arrays.
+    theta (n_theta,): the estimate at the step's start, advanced in place at each step's end (or control
+    period's); u_hold (m,): the law's clamped control, held; rows: the steps armed so far (Controller.arm)."""
+
+    def __init__(self, theta: np.ndarray, lower: np.ndarray, upper: np.ndarray, m: int, stages: int, dt: float,
+                 timing: ControlTiming):
+        nth = theta.shape[0]
+        self.stage, self.row, self.rows, self.step, self.t = 0, 0, 0, 0, 0.0
+        self.nstages, self.nth, self.m, self.h = stages, nth, m, dt
+        self.mode, self.period_steps, self.period, self.delay = timing.mode, timing.steps, timing.period, timing.delay
+        self.weights = TABLEAU[stages][1]
+        self.theta, self.lower, self.upper = theta, lower, upper
+        self.rsum, self.prev, self.rate = np.zeros(nth), np.zeros(nth), np.zeros(nth)
+        self.u_hold, self.delayed, self.ring = np.zeros(m), np.zeros(m), np.zeros((timing.delay + 1, m))
+
+
+def _as_array(a: np.ndarray, shape) -> np.ndarray:
+    """stage.control_stage's `view` on the Python path: the context's buffers are arrays of their shape."""
+    return a
+
+
 class Controller:
-    """The policy the plant calls at every stage: see the module docstring and adaptive_mj.sim.stage.
+    """The policy the plant calls at every stage: stage.control_stage (the order of a control step, the one the
+    compiled callbacks run too) with this path's pieces: the law through the Law protocol, the control handed
+    back to the plant (which applies it), the row kept for ControlStep. See the module docstring.
 
     theta_hat: (n_theta,) the estimate at the step's start; after each step, step_u (the applied
-    control), step_s and step_ref hold what the step's row records."""
+    control), step_out (the law's LawStep) and step_ref hold what the step's row records."""
 
     def __init__(self, law: Law, reference, theta_hat0, ctrl_range: CtrlRange | None, order: int, stages: int,
                  dt: float, joint_shape: tuple = (), timing: ControlTiming | None = None,
                  sensors: st.Sensors | None = None):
+        from adaptive_mj.numba_util import with_globals
+
         self.law, self.reference, self.order = law, reference, order
         self.timing = timing or ControlTiming(period=dt)
-        self.theta_hat = np.array(theta_hat0, dtype=float)
-        n_theta = self.theta_hat.shape[0]
+        theta_hat = np.array(theta_hat0, dtype=float)
+        n_theta = theta_hat.shape[0]
         self.lo: float | np.ndarray = -math.inf  # control limits: floats, or (m,) on a plant of m joints
         self.hi: float | np.ndarray = math.inf
         if ctrl_range is not None:
@@ -79,29 +106,32 @@ class Controller:
             self.alpha = self.sensors.alpha(self.sense_period)
         self.inc, self.weights = TABLEAU[stages]
         self.h = dt
-        self.stage, self.step_index = len(self.inc), 0
-        self.prev, self.rsum, self.th = np.zeros(n_theta), np.zeros(n_theta), np.zeros(n_theta)
         box = law.bounds
-        self.lower, self.upper = box if box is not None else (np.full(n_theta, -np.inf), np.full(n_theta, np.inf))
-        self.held: tuple[float | np.ndarray, LawStep] | None = None  # the law's clamped u and its LawStep
+        lower, upper = box if box is not None else (np.full(n_theta, -np.inf), np.full(n_theta, np.inf))
+        self.ctx = StepContext(theta_hat, np.asarray(lower, dtype=float), np.asarray(upper, dtype=float),
+                               joint_shape[0] if self.joints else 1, stages, dt, self.timing)
+        self.theta_hat = self.ctx.theta  # the same array, advanced in place
+        self.th = np.zeros(n_theta)  # the stage estimate the law sees
+        self.held_out: LawStep | None = None  # the LawStep of the law's last evaluation (held with u_hold)
         self.step_out: LawStep | None = None
         self.step_ref: np.ndarray | None = None
         self.step_u: float | np.ndarray = 0.0
-        self.ring: list = [None] * (self.timing.delay + 1)  # the last D + 1 stage-0 controls
-        self.delayed: float | np.ndarray = 0.0  # the control of D steps ago, set at each step's stage 0
+        self._applied: float | np.ndarray = 0.0  # the control of the current stage, handed back to the plant
         self._ref_t, self._ref_v = (math.nan, math.nan), (None, None)
         self.filters = law.has_filters  # a law with filters of its own (composite)
         if self.filters and self.timing.sampled:
             raise ValueError("composite adaptation runs under continuous control only")
         self.stage_xs: list = []
         self.stage_us: list = []
+        self._stage = with_globals(st.control_stage, view=_as_array, law_stage=self._law_stage,
+                                   apply_control=self._apply_control, record_row=self._record_row)
         law.reset()
 
     def arm(self, noise: np.ndarray | None) -> None:
         """Mark the start of a physics step; noise: that step's measurement noise (None: none)."""
         if noise is not None:
             self.noise = noise
-        self.stage = 0
+        self.ctx.rows = self.ctx.row + 1
 
     def _ref(self, t: float):
         # RK4 evaluates stages 2 and 3 at the same t + h/2, and stage 4 at the next step's t:
@@ -115,60 +145,58 @@ class Controller:
         return ref
 
     def __call__(self, t: float, x: np.ndarray):
-        i = self.stage
-        if i >= len(self.inc):  # a call past the step's stages (an extra mj_forward): change nothing
-            return self.step_u
-        sampled = self.timing.sampled
-        if not sampled or (i == 0 and st.is_sample_step(self.step_index, self.timing.steps)):
-            self.held = self._evaluate(t, x, i)
-        held = self.held
-        assert held is not None  # the law ran at stage 0 of the first step (continuous: every stage)
-        u = held[0]
-        if self.timing.delay:
-            if i == 0:
-                put, get = st.delay_slot(self.step_index, self.timing.delay)
-                self.ring[put] = u
-                self.delayed = self.ring[get] if get >= 0 else 0.0 * u
-            u = self.delayed
-        if self.filters:
-            self.stage_us.append(u)
-        if i == 0:  # the row: the applied control, the law's (held) output, the reference at t_k
-            self.step_u, self.step_out, self.step_ref = u, held[1], self._ref(t)
-        self.stage = i + 1
-        return u
+        ctx = self.ctx
+        if ctx.stage >= ctx.nstages or ctx.row >= ctx.rows:  # a call past the step's stages (an extra
+            return self.step_u                                # mj_forward): change nothing
+        self._stage(ctx, (t, x))
+        return self._applied
 
-    def _evaluate(self, t: float, x: np.ndarray, i: int):
-        """The law at stage i on the measured state: (clamped u, its LawStep)."""
+    def _law_stage(self, ctx: StepContext, io, stage: int, row: int, theta, prev, lower, upper) -> None:
+        """This path's law at a stage (stage.control_stage's law_stage): the law on the measured state, its
+        clamped u into ctx.u_hold, its rate into ctx.rate, its LawStep kept."""
+        t, x = io
         ref = self._ref(t)
-        st.stage_estimate(self.theta_hat, self.prev, self.inc[i], self.h, self.lower, self.upper, self.th)
+        st.stage_estimate(theta, prev, self.inc[stage], self.h, lower, upper, self.th)
         if self.sensors is None:
             seen = x + self.noise
         else:
             seen = np.empty_like(x)
             sn = self.sensors
-            st.sense(x[0], x[1], self.noise, sn.quantum, sn.differentiated, i == 0, self.step_index == 0,
+            st.sense(x[0], x[1], self.noise, sn.quantum, sn.differentiated, stage == 0, ctx.step == 0,
                      self.alpha, self.sense_period, self.q_prev, self.v_est, seen)
         if self.filters:
-            if i == 0:
+            if stage == 0:
                 self.law.step_begins(seen)
                 self.stage_xs, self.stage_us = [], []
             self.stage_xs.append(seen)
         out = self.law(t, seen, ref, self.th.copy())
-        u = np.minimum(np.maximum(out.u, self.lo), self.hi) if self.joints else min(max(out.u, self.lo), self.hi)
-        weight = 1.0 if self.timing.sampled else self.weights[i]
-        st.accumulate_rate(self.rsum, self.prev, np.asarray(out.theta_hat_dot, dtype=float), weight)
-        return u, out
+        if self.joints:
+            ctx.u_hold[:] = np.minimum(np.maximum(out.u, self.lo), self.hi)
+        else:
+            ctx.u_hold[0] = min(max(out.u, self.lo), self.hi)
+        ctx.rate[:] = np.asarray(out.theta_hat_dot, dtype=float)
+        self.held_out = out
+
+    def _apply_control(self, ctx: StepContext, io, row: int, u: np.ndarray) -> None:
+        """This path's "apply" (stage.control_stage's apply_control): u handed back to the plant, which applies
+        it (a copy: the held buffers change at the next evaluation)."""
+        self._applied = u.copy() if self.joints else float(u[0])
+        if self.filters:
+            self.stage_us.append(self._applied)
+
+    def _record_row(self, ctx: StepContext, io, row: int, u: np.ndarray, theta) -> None:
+        """This path's row (stage.control_stage's record_row): the applied control, the law's (held) output and
+        the reference at t_k, for ControlStep.step."""
+        t, _ = io
+        self.step_u, self.step_out, self.step_ref = self._applied, self.held_out, self._ref(t)
 
     def finish_step(self) -> None:
-        """Advance the estimates: every step (continuous), or at the end of a control period (sampled)."""
-        if self.stage != len(self.inc):
-            raise RuntimeError(f"the plant called the controller {self.stage} times in a step, "
-                               f"expected {len(self.inc)}")
-        if not self.timing.sampled:
-            st.advance_estimates(self.theta_hat, self.rsum, self.h, self.lower, self.upper)
-        elif st.period_ends(self.step_index, self.timing.steps):
-            st.advance_estimates(self.theta_hat, self.rsum, self.timing.period, self.lower, self.upper)
-        self.step_index += 1
+        """After the plant's step: every stage was called (the estimates advanced at its last: every step under
+        continuous control, at the end of a control period under sampled), and a law with filters updated."""
+        ctx = self.ctx
+        if ctx.row != ctx.rows or ctx.stage != 0:
+            raise RuntimeError(f"the plant called the controller {ctx.stage} times in a step, "
+                               f"expected {ctx.nstages}")
         if self.filters:
             self.law.step_ends(self.stage_xs, self.stage_us, self.weights, self.h)
 
