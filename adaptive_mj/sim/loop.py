@@ -6,10 +6,12 @@ The order of a control step, written once:
     events due → measure (true state + the step's noise) → reference → law (at the integrator's
     stages, or once per control period) → limits (clamp) → delay line → apply → physics →
     advance the estimates → divergence check → the step's row
-`ControlStep.step` runs it on the Python path; inside the callback, `Controller.__call__` runs
-"measure … apply" with the functions of adaptive_mj.sim.stage, which the compiled callbacks also
-run (the same source compiled by numba). The native path runs the callback over chunks of steps
-and does the events, divergence check and rows between chunks, in the same order.
+Within the physics step, what happens at each integrator stage ("law … apply", the row's control, the estimates'
+advance at the step's end) is adaptive_mj.sim.stage.control_stage: `Controller` runs it with this path's pieces
+(the Law protocol, the control handed back to the plant), and the compiled callbacks run the same function
+compiled with theirs (adaptive_mj.sim.native_step). `ControlStep.step` runs a physics step around it on the
+Python path (adaptive_mj.env drives it one agent step at a time); the native path runs the callback over chunks of
+steps and does the events, divergence check and rows between chunks, in the same order (`native_steps`).
 
 How the estimates are integrated (adaptive_mj.sim.stage): under continuous control the law is
 evaluated at every stage MuJoCo's integrator calls the callback at, with the stage estimate of the

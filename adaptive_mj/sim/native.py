@@ -3,21 +3,17 @@ law plugin's function) and the plant's regressor functions, compiled with numba 
 callback that MuJoCo calls without the GIL; physics advances with mj_step(m, d, nstep) in chunks,
 and Python only works between chunks (events, noise, logging, divergence checks).
 
-At every call the callback does what the Python controller (adaptive_mj.sim.loop.Controller)
-does, with the same functions from adaptive_mj.sim.stage: measure [q, q'] (+ noise), take the
-stage estimate, evaluate the law (continuous control: at every stage; sampled-data control: at the
-first stage of each control period, its output held), clamp u, apply the control delay, and advance
-θ̂ at the end of the step (or of the control period). The references at the stage times
-t_k + c_i h are evaluated in Python, vectorised, before each chunk (MuJoCo's stage times are
-reproduced bit for bit).
+At every call the callback runs adaptive_mj.sim.stage.control_stage, the step's order that the Python
+controller (adaptive_mj.sim.loop.Controller) runs too, compiled (adaptive_mj.sim.native_step) with this module's
+pieces: `_law_stage` (measure [q, q'] (+ noise), the stage estimate, the law on the plant's ModelForm, u
+clamped), `_apply_control` (ctrl) and `_record_row` (the step's row). The references at the stage times
+t_k + c_i h are evaluated in Python, vectorised, before each chunk (MuJoCo's stage times are reproduced bit
+for bit).
 
 The callback finds its run through mjData.userdata (adaptive_mj.sim.native_context): the context
 block `CONTEXT` (named fields) holds the run's settings, its state (stage, row, the held control)
 and the addresses of its buffers. Nothing is compiled in but the law, the plant's form and
 MuJoCo's struct layout, so the compiled callback is cached on disk and reused by every process.
-The 1-DOF and the manipulator callbacks are two functions because what the law needs differs: here
-a ModelForm's phi/f/h on the 2-vector [q, q'], there the regressor of a kinematic tree read from
-MjData's kinematics (adaptive_mj.sim.native_manipulator); the stage logic is the same code.
 tests/test_native.py shows the Python and native paths give the same rows bit for bit.
 """
 from __future__ import annotations
