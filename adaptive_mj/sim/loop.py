@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, NamedTuple, Protocol, Sequence
+from typing import TYPE_CHECKING, Callable, Generator, NamedTuple, Protocol, Sequence
 
 import numpy as np
 
@@ -46,6 +46,7 @@ from adaptive_mj.sim.stage import TABLEAU, ControlTiming
 from adaptive_mj.trajectory import Status, Trajectory
 
 if TYPE_CHECKING:
+    from adaptive_mj.plants.protocol import NativePlant
     from adaptive_mj.sim.native_context import ContextOwner
 
 __all__ = ["Event", "ControlTiming", "Controller", "ControlStep", "StepRow", "Sink", "run", "prepare", "PreparedRun",
@@ -226,7 +227,7 @@ class EventQueue:
         self.applied: list[tuple[float, str]] = []
         self.dt = dt
 
-    def due(self, t_k: float, plant, sink=None) -> None:
+    def due(self, t_k: float, plant: Plant, sink: Sink | None = None) -> None:
         """Apply every event with t_k >= t_event - dt/2 (told to sink as it is applied)."""
         while self.pending and t_k >= self.pending[0].t - 0.5 * self.dt:
             event = self.pending.pop(0)
@@ -251,7 +252,7 @@ class ControlStep:
     step of `plant` under `controller` and returns its StepRow. adaptive_mj.env drives it one agent
     step at a time; `run` drives it to the end."""
 
-    def __init__(self, plant, controller: Controller, events: EventQueue, *, state_bound: float,
+    def __init__(self, plant: Plant, controller: Controller, events: EventQueue, *, state_bound: float,
                  noise: Callable[[], np.ndarray | None], sink=None):
         self.plant, self.controller, self.events = plant, controller, events
         self.state_bound, self.noise, self.sink = state_bound, noise, sink
@@ -281,7 +282,7 @@ class Sink(Protocol):
     def write_event(self, t: float, label: str) -> None: ...
 
 
-def limits_meta(plant) -> dict:
+def limits_meta(plant: Plant) -> dict:
     """A trajectory's meta entries for the verdict's metrics: "ctrl_range" (lo, hi) [control units],
     lists of one entry per actuator (saturation), and "joint_limits" (m, 2) [rad or m] when a joint is
     limited (joints reaching their range); also used by adaptive_mj.env."""
@@ -333,7 +334,7 @@ def drive(r: PreparedRun, law: Law, reference) -> Trajectory:
     plant = r.plant
     with _interruptible(r.rows.stopped):
         if r.nc is not None:
-            status, reason = _run_native(plant, r.nc, r.rows, r.queue, r.noise, r.state_bound)
+            status, reason = _run_native(r.nc.plant, r.nc, r.rows, r.queue, r.noise, r.state_bound)
         else:
             ctrl = Controller(law, reference, r.theta_hat0, plant.ctrl_range, r.order, plant.stages, plant.dt,
                               plant.joint_shape, r.timing, r.sensors)
@@ -397,7 +398,7 @@ def prepare(plant: Plant, law: Law, reference, *, duration: float, theta_hat0, n
     return PreparedRun(plant, rows, queue, noise, timing, nc, theta_hat0, order, state_bound, sensors)
 
 
-def _run_python(plant, step: ControlStep, rows: Rows) -> tuple[Status, str]:
+def _run_python(plant: Plant, step: ControlStep, rows: Rows) -> tuple[Status, str]:
     """Drive the Python control step to the end or the first divergence: (status, reason)."""
     with plant.controlled_by(step.controller):
         while rows.k < rows.n:
@@ -411,7 +412,8 @@ def _run_python(plant, step: ControlStep, rows: Rows) -> tuple[Status, str]:
     return Status.OK, ""
 
 
-def _run_native(plant, nc, rows: Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
+def _run_native(plant: NativePlant, nc: ContextOwner, rows: Rows, queue: EventQueue, noise: _NoiseSource,
+                state_bound: float) -> tuple[Status, str]:
     """Drive the native callback chunk by chunk: (status, reason)."""
     with plant.controlled_natively(nc.callback), nc:
         steps = native_steps(plant, nc, rows, queue, noise, state_bound)
@@ -424,7 +426,8 @@ def _run_native(plant, nc, rows: Rows, queue: EventQueue, noise: _NoiseSource, s
             return done.value
 
 
-def native_steps(plant, nc, rows: Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
+def native_steps(plant: Plant, nc: ContextOwner, rows: Rows, queue: EventQueue, noise: _NoiseSource,
+                 state_bound: float) -> Generator[int, None, tuple[Status, str]]:
     """A native run as a generator: each chunk's events and callback buffers are prepared, then it
     yields the chunk's step count n and waits for the plant to have stepped n physics steps (one
     mj_step(nstep=n) here, or a row of a mujoco.batch.Batch in adaptive_mj.sim.batch); it returns
@@ -624,7 +627,7 @@ def _interruptible(stopped: Callable[[str], Trajectory]):
         raise interrupted from exc
 
 
-def first_divergence(plant, x, u, theta_hat, theta_next, bound):
+def first_divergence(plant: Plant, x, u, theta_hat, theta_next, bound):
     """For a native chunk: (rows to keep, reason) at the first step that diverged, or (None, '').
 
     Row j's state and estimate are the result of step j-1; the state after the chunk's
@@ -678,7 +681,7 @@ def _what_diverged(x_next, u_k, theta_hat, bound) -> str:
     return f"state {np.asarray(x_next).tolist()} beyond the bound {bound}"
 
 
-def divergence(plant, x_k, u_k, theta_hat, bound) -> str:
+def divergence(plant: Plant, x_k, u_k, theta_hat, bound) -> str:
     """Text naming the first sign of divergence after a step, or ''."""
     x_next = plant.observe()
     if not (_all_within(x_next.ravel().tolist(), bound) and _all_within(np.ravel(u_k).tolist(), math.inf)
