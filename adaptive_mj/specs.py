@@ -181,6 +181,9 @@ class LawSpec:
     plugin_params: dict[str, Any] | None = None  # a law plugin's declared keys (law.kind = its name)
     saturation: str = "ignore"  # manipulator law: "freeze" = saturation-aware adaptation
     mrac: "MracSpec | None" = None  # law.kind = "mrac" only
+    # a law kind's own keys that no field above holds ({key: value}, as its reader checked them; None: none):
+    # a new built-in kind's keys land here without a field of their own (adaptive_mj.laws.kinds)
+    params: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,16 @@ import math
 import re
 import tomllib
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, cast, overload
+from typing import TYPE_CHECKING, Any, cast
 
 from adaptive_mj.data import MODELS as MODELS_DIR, SCENARIOS as SCENARIOS_DIR
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.keys import _MISSING, Table as _Table, _Missing, _show, _suggest  # noqa: F401 (re-exported)
+from adaptive_mj.keys import joint_values as _joint_values
+from adaptive_mj.laws import kinds as law_kinds
+from adaptive_mj.laws.law_keys import (DEAD_ZONE_ON, read_dead_zone as _dead_zone,  # noqa: F401 (re-exported)
+                                       read_estimates as _estimate_table, read_gamma as _gamma,
+                                       read_robust as _robust)
 from adaptive_mj.specs import (ControlSpec, DeadZoneSpec, DisturbanceSpec, EventSpec, JointFrictionSpec,  # noqa: F401
                                LawSpec, LinearSpec, ManipulatorSpec, MracSpec, NoiseSpec, PlantSpec, ReferenceSpec,
                                RobustSpec, Scenario, SensorSpec, SimulationSpec, SuccessSpec, WingRockSpec,
@@ -50,14 +55,11 @@ REFERENCE_KINDS = ("constant", "cosine", "sine", "sum_of_sines", "smooth_step", 
 JOINT_REFERENCE_KINDS = ("joint_sum_of_sines", "joint_waypoints")
 
 def _law_kinds(form: str) -> tuple[str, ...]:
-    from adaptive_mj.laws.kinds import BUILT_IN, Form
-
-    return tuple(k.name for k in BUILT_IN.values() if Form(form) in k.forms)
+    return tuple(k.name for k in law_kinds.built_in().values() if law_kinds.Form(form) in k.forms)
 
 
 LAW_KINDS = _law_kinds("model") + _law_kinds("mrac_state")  # the built-in law kinds of 1-DOF plants, from the registry
 MANIPULATOR_LAW_KINDS = _law_kinds("rigid_body")  # those of multi-joint plants
-DEAD_ZONE_ON = ("s", "tracking_error")
 DISTURBANCE_KINDS = ("none", "constant", "step", "sine")
 ARM_DISTURBANCE_KINDS = DISTURBANCE_KINDS + ("noise",)  # per joint torques (adaptive_mj.disturbance)
 EVENT_KINDS = ("payload_mass", "payload_swap", "fluid_density_scale", "constant_force", "loading", "thrust_scale",
@@ -183,11 +185,6 @@ def is_law_swap(expr: str) -> bool:
     return key.strip() == "law" and bool(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.-]*", raw.strip().strip("'\"")))
 
 
-#: [law] keys whose value may be a table (a sub-table of another name may be a law kind's scoped keys)
-_LAW_TABLES = ("gamma", "initial_estimates", "nominal", "theta0", "projection", "dead_zone", "composite", "lambda",
-               "kd")
-
-
 def _scoped_law_keys(doc: dict) -> None:
     """`--set law.<kind>.<key>=v` (a sub-table of [law] named after a law kind): the keys of the law that runs,
     merged into [law]; another law's scoped keys dropped. So one sweep over law.kind can give each law its own
@@ -195,12 +192,11 @@ def _scoped_law_keys(doc: dict) -> None:
     law = doc.get("law")
     if not isinstance(law, dict):
         return
-    candidates = [k for k, v in law.items() if isinstance(v, dict) and k not in _LAW_TABLES]
+    tables = law_kinds.table_keys()  # [law] keys a law kind declares may be a table: never a law's scoped keys
+    candidates = [k for k, v in law.items() if isinstance(v, dict) and k not in tables]
     if not candidates:
         return
-    from adaptive_mj.laws import kinds as law_kinds
-
-    names = set(law_kinds.BUILT_IN)
+    names = set(law_kinds.built_in())
     if any(k not in names for k in candidates):
         from adaptive_mj.laws.plugin import installed
 
@@ -257,7 +253,7 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
     sim = _simulation(top.table("simulation"), plant, order)
     reference = _reference(top.table("reference"), plant)
     law = _law(top.table("law"), plant, order)
-    if reference.kind == "reference_model" and law.kind != "mrac":
+    if reference.kind == "reference_model" and law.mrac is None:  # the reference model is MRAC's (law.model)
         raise ScenarioError(f"{where}: reference.kind = 'reference_model' needs law.kind = 'mrac' (its model is "
                             f"law.model), got law.kind = {law.kind!r}")
     arm = plant.kind == "manipulator"
@@ -637,23 +633,6 @@ _REFERENCE_KEYS: dict[str, dict[str, float | None]] = {
 }
 
 
-@overload
-def _joint_values(t: _Table, name: str, *, arrays: Literal[False]) -> float | dict[str, float]: ...
-@overload
-def _joint_values(t: _Table, name: str, *,
-                  arrays: Literal[True]) -> tuple[float, ...] | dict[str, tuple[float, ...]]: ...
-def _joint_values(t: _Table, name: str, *, arrays: bool) -> (
-        float | dict[str, float] | tuple[float, ...] | dict[str, tuple[float, ...]]):
-    """A value for every joint (a number, or an array with arrays=True), or a table by joint name."""
-    v = t.get(name)
-    if isinstance(v, dict):
-        sub = t.table(name)
-        if arrays:
-            return {key: sub.numbers(key) for key in v}
-        return {key: sub.number(key) for key in v}
-    return t.numbers(name) if arrays else t.number(name)
-
-
 def _joint_reference(t: _Table, kind: str) -> ReferenceSpec:
     """Joint-space references; joint names and keyframes are resolved against the model in build."""
     params: dict[str, Any] = {}
@@ -742,56 +721,20 @@ def _model_reference(t: _Table) -> ReferenceSpec:
     return ReferenceSpec(kind="reference_model", params=params)
 
 
-def _gamma(t: _Table) -> float | dict[str, float] | None:
-    v = t.get("gamma", None)
-    if v is None:
-        return None
-    if isinstance(v, dict):
-        return t.named_numbers("gamma", gt=0)
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise t.fail("gamma", "a number > 0, or a table {parameter = number > 0}", v)
-    return t.number("gamma", gt=0)
-
-
-def _manipulator_law(t: _Table) -> LawSpec:
-    kind = t.string("kind", "slotine_li", choices=MANIPULATOR_LAW_KINDS)
-    lam = _joint_values(t, "lambda", arrays=False)
-    kd = _joint_values(t, "kd", arrays=False)
-    for key, value in (("lambda", lam), ("kd", kd)):
-        for j, v in (value.items() if isinstance(value, dict) else [("", value)]):
-            if not v > 0:
-                raise t.fail(key + (f".{j}" if j else ""), "> 0", v)
-    gamma = _gamma(t)
-    if gamma is None and kind == "slotine_li":
-        raise ScenarioError(f"{t.where}: law.gamma is required for law.kind = 'slotine_li'")
-    dead_zone = _dead_zone(t)
-    initial = _estimate_table(t, "initial_estimates")
-    nominal = _estimate_table(t, "nominal")
-    if kind != "slotine_li" and nominal is None and initial is None:
-        raise ScenarioError(f"{t.where}: law.nominal (or law.initial_estimates) is required for law.kind = {kind!r}")
-    robust = _robust(t, kind, adaptive=kind == "slotine_li", composite=False, presets=("physical",))
-    saturation = t.string("saturation", "ignore", choices=("ignore", "freeze"))
-    if saturation != "ignore" and kind != "slotine_li":
-        raise t.fail("saturation", "'ignore' for a law without adaptation", saturation)
-    t.finish()
-    return LawSpec(kind=kind, order=2, lam=None if isinstance(lam, dict) else lam, k=0.0, gamma=gamma,
-                   dead_zone=dead_zone, initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None,
-                   kd=kd, lam_joints=lam if isinstance(lam, dict) else None, robust=robust, saturation=saturation)
-
-
 def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
     """[law]: its kind looked up in the law-kind registry (adaptive_mj.laws.kinds: the built-in kinds and the
-    installed plugins), refused in one line when it serves none of the plant's forms, then its own keys."""
-    from adaptive_mj.laws import kinds as law_kinds
+    installed plugins), refused in one line when it serves none of the plant's forms, then its own keys, read
+    by the kind's reader (a plugin's: _plugin_law)."""
     from adaptive_mj.plants import kinds as plant_kinds
 
+    built_in = law_kinds.built_in()
     raw_kind = t.data.get("kind")
     plugins: dict[str, Installed[LawPlugin]] = {}
-    if isinstance(raw_kind, str) and raw_kind not in law_kinds.BUILT_IN:
+    if isinstance(raw_kind, str) and raw_kind not in built_in:
         from adaptive_mj.laws.plugin import installed
 
         plugins = installed()
-    known = {**law_kinds.BUILT_IN, **{n: law_kinds.plugin_kind(n, i) for n, i in sorted(plugins.items())}}
+    known = {**built_in, **{n: law_kinds.plugin_kind(n, i) for n, i in sorted(plugins.items())}}
     plant_kind = plant_kinds.lookup(plant.kind)
     offered = plant_kind.forms if plant_kind is not None else frozenset({law_kinds.Form.MODEL})
     kind = t.string("kind", plant_kind.default_law if plant_kind is not None else "sliding_adaptive",
@@ -800,40 +743,12 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
         raise ScenarioError(f"{t.where}: {law_kinds.refusal(known[kind], plant.kind, offered, law_kinds.all_kinds())}")
     if kind in plugins:
         return _plugin_law(t, kind, plugins[kind], plant, order)
-    if law_kinds.Form.RIGID_BODY in known[kind].forms:
-        return _manipulator_law(t)
-    if kind == "mrac":
-        return _mrac_law(t, plant, order)
-    if (kind == "first_order_adaptive") != (plant.kind == "first_order"):
-        raise t.fail("kind", "'first_order_adaptive' exactly when plant.kind = 'first_order'", kind)
-    law_order = t.integer("order", order, ge=1)
-    if law_order != order:
-        allowed = "2, or 3 with plant.thruster_time_constant" if plant.kind == "heave" else str(order)
-        raise t.fail("order", f"{allowed} for plant.kind = {plant.kind!r}", law_order)
-    lam = None if kind == "first_order_adaptive" else t.number("lambda", gt=0)
-    k = t.number("k", ge=0)
-    gamma = _gamma(t)
-    if gamma is None and kind in ("sliding_adaptive", "first_order_adaptive"):
-        raise ScenarioError(f"{t.where}: law.gamma is required for law.kind = {kind!r}")
-    dead_zone = _dead_zone(t)
-    initial = _estimate_table(t, "initial_estimates")
-    nominal = _estimate_table(t, "nominal")
-    if kind in ("fixed_nominal", "robust_sliding") and nominal is None and initial is None:
-        raise ScenarioError(f"{t.where}: law.nominal (or law.initial_estimates) is required for law.kind = {kind!r}")
-    K = t.number("K", None, ge=0) if kind == "robust_sliding" else None
-    phi = t.number("boundary_layer", None, gt=0) if kind == "robust_sliding" else None
-    if kind == "robust_sliding" and (K is None or phi is None):
-        raise ScenarioError(f"{t.where}: law.K and law.boundary_layer are required for law.kind = 'robust_sliding'")
-    robust = _robust(t, kind, adaptive=kind in ("sliding_adaptive", "first_order_adaptive"),
-                     composite=kind == "sliding_adaptive", presets=())
-    saturation = t.string("saturation", "ignore", choices=("ignore", "freeze"))
-    if saturation != "ignore" and (kind != "sliding_adaptive" or robust.composite_gain is not None):
-        raise t.fail("saturation", "'ignore' except for law.kind = 'sliding_adaptive' (without law.composite)",
-                     saturation)
-    t.finish()
-    return LawSpec(kind=kind, order=law_order, lam=lam, k=k, gamma=gamma, dead_zone=dead_zone,
-                   initial_estimates=initial, nominal=nominal, K=K, boundary_layer=phi, robust=robust,
-                   saturation=saturation)
+    misfit = law_kinds.misfit(known[kind], plant.kind)
+    if misfit is not None:
+        raise t.fail("kind", misfit, kind)
+    read = known[kind].read
+    assert read is not None  # every built-in kind declares its reader (adaptive_mj.laws.kinds.LawKind)
+    return read(t, kind, plant, order)
 
 
 def _plugin_law(t: _Table, kind: str, inst: Installed[LawPlugin], plant: PlantSpec, order: int) -> LawSpec:
@@ -861,100 +776,6 @@ def _plugin_law(t: _Table, kind: str, inst: Installed[LawPlugin], plant: PlantSp
     return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=None, dead_zone=dead_zone,
                    initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None, plugin_params=params,
                    robust=robust)
-
-
-ROBUST_KEYS = ("sigma", "e_modification", "theta0", "projection", "composite")
-
-
-def _mrac_law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
-    """law.kind = "mrac" (adaptive_mj.laws.mrac), on plant.kind = "linear" (which takes no other law)
-    or "wing_rock": law.model, law.model_gain, law.rule, law.gamma (rates), law.initial_estimates and
-    the modifications (law.sigma, law.e_modification, law.theta0, law.projection, law.dead_zone)."""
-    kind = t.string("kind", "mrac", choices=("mrac",))
-    if plant.kind not in ("linear", "wing_rock"):
-        raise t.fail("kind", "a law of plant.kind = 'linear' or 'wing_rock' (law.kind = 'mrac' needs an analytic "
-                             f"plant), not of plant.kind = {plant.kind!r}", kind)
-    law_order = t.integer("order", order, ge=1)
-    if law_order != order:
-        raise t.fail("order", f"{order} for plant.kind = {plant.kind!r}", law_order)
-    alpha = t.numbers("model", length=order)
-    if any(a <= 0 for a in alpha):
-        raise t.fail("model", f"{order} coefficient(s) > 0 (a stable reference model)", list(alpha))
-    beta = t.number("model_gain", alpha[0])
-    if beta == 0:
-        raise t.fail("model_gain", "non-zero", beta)
-    rule = t.string("rule", "lyapunov", choices=("lyapunov", "mit"))
-    if rule == "mit" and order != 1:
-        raise t.fail("rule", "'lyapunov' for a law of order 2 (the MIT rule is written for order 1)", rule)
-    gamma = _gamma(t)
-    if gamma is None:
-        raise ScenarioError(f"{t.where}: law.gamma is required for law.kind = 'mrac'")
-    dead_zone = _dead_zone(t)
-    initial = _estimate_table(t, "initial_estimates")
-    robust = _robust(t, kind, adaptive=True, composite=False, presets=())
-    t.finish()
-    return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=gamma, dead_zone=dead_zone,
-                   initial_estimates=initial, nominal=None, K=None, boundary_layer=None, robust=robust,
-                   mrac=MracSpec(alpha=alpha, beta=beta, rule=rule))
-
-
-def _robust(t: _Table, kind: str, *, adaptive: bool, composite: bool, presets: tuple[str, ...]) -> RobustSpec:
-    """law.sigma, law.e_modification, law.theta0, law.projection, law.composite: checked for every
-    law; the baselines ignore them (as they ignore gamma and dead_zone), so law.kind = a baseline
-    turns any adaptive scenario into its baseline."""
-    sigma = t.number("sigma", 0.0, ge=0)
-    e_mod = t.number("e_modification", 0.0, ge=0)
-    theta0 = t.named_numbers("theta0", None)
-    projection: dict[str, tuple[float, float]] | str | None = None
-    if isinstance(t.data.get("projection"), str):
-        if not presets:
-            raise t.fail("projection", "a table {parameter = [lower, upper]}", t.data["projection"])
-        projection = t.string("projection", choices=presets)
-    else:
-        box = t.table("projection", None)
-        if box is not None:
-            projection = {}
-            for name in box.data:
-                lo, hi = box.numbers_with_inf(name, length=2)
-                if not lo <= hi:
-                    raise box.fail(name, "[lower, upper] with lower <= upper", [lo, hi])
-                projection[name] = (lo, hi)
-            box.finish(tuple(box.data))
-    gain = filt = None
-    if "composite" in t.data and adaptive and not composite:
-        raise t.fail("composite", f"absent for law.kind = {kind!r} (composite adaptation is implemented for "
-                                  "law.kind = 'sliding_adaptive')", t.data["composite"])
-    c = t.table("composite", None)
-    if c is not None:
-        gain, filt = c.number("gain", gt=0), c.number("filter", gt=0)
-        c.finish()
-    if not adaptive:
-        return RobustSpec()
-    return RobustSpec(sigma=sigma, e_modification=e_mod, theta0=theta0, projection=projection,
-                      composite_gain=gain, composite_filter=filt)
-
-
-def _dead_zone(t: _Table) -> DeadZoneSpec | None:
-    """law.dead_zone = {width, on}, or None."""
-    dz = t.table("dead_zone", None)
-    if dz is None:
-        return None
-    if "width_in_noise_std" in dz.data:
-        if "width" in dz.data:
-            raise dz.fail("width", "absent when law.dead_zone.width_in_noise_std is given", dz.data["width"])
-        spec = DeadZoneSpec(width=None, on=dz.string("on", "s", choices=DEAD_ZONE_ON),
-                            width_in_noise_std=dz.number("width_in_noise_std", gt=0))
-    else:
-        spec = DeadZoneSpec(width=dz.number("width", ge=0), on=dz.string("on", "s", choices=DEAD_ZONE_ON))
-    dz.finish()
-    return spec
-
-
-def _estimate_table(t: _Table, name: str) -> dict[str, float] | str | None:
-    """A table {name = value}, or the string "model": the true values of the compiled model at t = 0."""
-    if isinstance(t.data.get(name), str):
-        return t.string(name, choices=("model",))
-    return t.named_numbers(name, None)
 
 
 def _noise(t: _Table, order: int, *, arm: bool = False) -> NoiseSpec:
