@@ -214,7 +214,8 @@ class Key:
     name: under the kind's table (e.g. "lambda" for law.lambda); type: what the value is, in words ("number",
     "string", "table {parameter = number}", ...); unit: its SI unit ('' when none); default: the value when
     absent (None: required, or absent means off; `required` says which); bounds: the range in words
-    ("> 0", ">= 0", "one of 'a', 'b'"); doc: a line."""
+    ("> 0", ">= 0", "one of 'a', 'b'"); doc: a line; when: the condition beyond its kind under which it applies,
+    in words ("built from a model"), said when it is refused."""
 
     name: str
     type: str
@@ -223,6 +224,7 @@ class Key:
     bounds: str = ""
     doc: str = ""
     required: bool = False
+    when: str = ""
 
     @property
     def takes_table(self) -> bool:

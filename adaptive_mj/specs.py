@@ -30,6 +30,9 @@ class PlantSpec:
     payload_paths: tuple[Path, ...] = ()  # where plant.payload was looked for (see EventSpec.payload_paths)
     linear: "LinearSpec | None" = None  # kind = "linear" only
     wing_rock: "WingRockSpec | None" = None  # kind = "wing_rock" only
+    # a plant kind's own keys without a field here (its reader's frozen dataclass or a mapping; None: none): a
+    # new kind's module reads and builds it, nothing else needs a field (adaptive_mj.plants.kinds)
+    kind_spec: object | None = None
 
 
 @dataclass(frozen=True)
