@@ -237,6 +237,8 @@ def cmd_list(args) -> int:
             line = f"{name:24s} {law_kind.origin}: serves {forms}; {law_kind.doc}"
             if name in plugins:
                 line += f"; keys: {plugins[name].plugin.describe_keys() or 'none'}"
+            elif law_kind.keys:  # a built-in kind's declared keys (law.kind itself left out)
+                line += "; keys: " + ", ".join(k.describe() for k in law_kind.keys if k.name != "kind")
             print(line)
         if not plugins:
             print(f"(no law plugins installed: a package registers one under the entry-point group "

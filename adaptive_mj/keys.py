@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, overload
+from typing import Any, Literal, overload
 
 from adaptive_mj.errors import ScenarioError
 
@@ -175,6 +175,22 @@ class Table:
                                     + _suggest(name, self.used))
 
 
+@overload
+def joint_values(t: Table, name: str, *, arrays: Literal[False]) -> float | dict[str, float]: ...
+@overload
+def joint_values(t: Table, name: str, *, arrays: Literal[True]) -> tuple[float, ...] | dict[str, tuple[float, ...]]: ...
+def joint_values(t: Table, name: str, *, arrays: bool) -> (
+        float | dict[str, float] | tuple[float, ...] | dict[str, tuple[float, ...]]):
+    """A value for every joint (a number, or an array with arrays=True), or a table by joint name."""
+    v = t.get(name)
+    if isinstance(v, dict):
+        sub = t.table(name)
+        if arrays:
+            return {key: sub.numbers(key) for key in v}
+        return {key: sub.number(key) for key in v}
+    return t.numbers(name) if arrays else t.number(name)
+
+
 def _show(v: Any) -> str:
     if isinstance(v, float):
         return repr(v)
@@ -198,7 +214,8 @@ class Key:
     name: under the kind's table (e.g. "lambda" for law.lambda); type: what the value is, in words ("number",
     "string", "table {parameter = number}", ...); unit: its SI unit ('' when none); default: the value when
     absent (None: required, or absent means off; `required` says which); bounds: the range in words
-    ("> 0", ">= 0", "one of 'a', 'b'"); doc: a line."""
+    ("> 0", ">= 0", "one of 'a', 'b'"); doc: a line; when: the condition beyond its kind under which it applies,
+    in words ("built from a model"), said when it is refused."""
 
     name: str
     type: str
@@ -207,3 +224,19 @@ class Key:
     bounds: str = ""
     doc: str = ""
     required: bool = False
+    when: str = ""
+
+    @property
+    def takes_table(self) -> bool:
+        """Whether its value may be a TOML table (its type says so)."""
+        return "table" in self.type
+
+    def describe(self) -> str:
+        """The key as `list --laws` shows it: name [unit] = default, or (required)."""
+        unit = f" [{self.unit}]" if self.unit else ""
+        if self.required:
+            return f"{self.name}{unit} (required)"
+        if self.default is None:
+            return f"{self.name}{unit}"
+        number = isinstance(self.default, (int, float)) and not isinstance(self.default, bool)
+        return f"{self.name}{unit} = " + (f"{self.default:g}" if number else repr(self.default))

@@ -30,6 +30,9 @@ class PlantSpec:
     payload_paths: tuple[Path, ...] = ()  # where plant.payload was looked for (see EventSpec.payload_paths)
     linear: "LinearSpec | None" = None  # kind = "linear" only
     wing_rock: "WingRockSpec | None" = None  # kind = "wing_rock" only
+    # a plant kind's own keys without a field here (its reader's frozen dataclass or a mapping; None: none): a
+    # new kind's module reads and builds it, nothing else needs a field (adaptive_mj.plants.kinds)
+    kind_spec: object | None = None
 
 
 @dataclass(frozen=True)
@@ -181,6 +184,9 @@ class LawSpec:
     plugin_params: dict[str, Any] | None = None  # a law plugin's declared keys (law.kind = its name)
     saturation: str = "ignore"  # manipulator law: "freeze" = saturation-aware adaptation
     mrac: "MracSpec | None" = None  # law.kind = "mrac" only
+    # a law kind's own keys that no field above holds ({key: value}, as its reader checked them; None: none):
+    # a new built-in kind's keys land here without a field of their own (adaptive_mj.laws.kinds)
+    params: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)

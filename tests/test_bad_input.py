@@ -357,6 +357,8 @@ REVIEWED = {
         "the modules of the adaptive_mj.plants package itself (pkgutil over its own folder)",
     ("adaptive_mj/plants/kinds.py", "importlib.import_module(self.module)"):
         "a built-in kind's module is the __name__ of the module that registered it, never scenario text",
+    ("adaptive_mj/laws/kinds.py", 'importlib.import_module(f"{package.__name__}.{info.name}")'):
+        "the modules of the adaptive_mj.laws package itself (pkgutil over its own folder)",
 }
 
 

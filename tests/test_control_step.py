@@ -181,3 +181,22 @@ def test_a_single_short_run_takes_the_python_callback_with_the_same_rows():
     assert long.simulation.timestep == 1e-3 and execute(long, single=True).trajectory.meta["native"]
     arm = load_scenario(SCENARIOS_DIR / "ur5e_payload_swap.toml", overrides=["simulation.duration=0.05", "events=[]"])
     assert execute(arm, single=True).trajectory.meta["native"]
+
+
+def test_the_step_order_is_written_once():
+    """stage.control_stage is the one definition of a stage's order: the Python Controller runs its code, and no
+    other module of the loop or the compiled callbacks calls the pieces of the order itself (the delay line, the
+    rate's sum, the end of a stage), so a change of order cannot be made in one path only."""
+    import inspect
+    import re
+
+    from adaptive_mj.sim import loop, native, native_manipulator, native_step, stage
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
+    from adaptive_mj.setup.build import build
+
+    s = build(load(SCENARIOS_DIR / "heave_tracking.toml", overrides=["simulation.duration=0.01"]))
+    ctrl = loop.Controller(s.law, s.reference, s.theta_hat0, s.plant.ctrl_range, 2, s.plant.stages, s.plant.dt)
+    assert ctrl._stage.__code__ is stage.control_stage.__code__
+    for module in (loop, native, native_manipulator, native_step):
+        calls = re.findall(r"\b(delay_slot|accumulate_rate|end_stage|is_sample_step)\(", inspect.getsource(module))
+        assert calls == [], f"{module.__name__} calls {calls}: the step's order belongs to stage.control_stage"

@@ -126,7 +126,7 @@ def test_every_key_a_law_kind_reads_is_documented(monkeypatch):
         tables.clear()
         scn = sc.load(sc.SCENARIOS_DIR / f"{scenario}.toml", overrides=over)
         assert scn.law.kind == kind
-        named = tuple(f"law.{k}." for k in sc._LAW_TABLES if k not in ("dead_zone", "composite"))
+        named = tuple(f"law.{k}." for k in kinds.table_keys() if k not in ("dead_zone", "composite"))
         keys = {t.key(name) for t in tables if t.prefix.startswith("law.") and not t.prefix.startswith(named)
                 for name in t.used}  # (a table keyed by parameter or joint names is not a key of the law)
         for key in sorted(keys):
@@ -162,3 +162,115 @@ def test_a_plugin_declares_only_the_form_its_functions_are_called_in():
         JointLawPlugin(law=print)
     with pytest.raises(ValueError, match=r"gain 'g' must name a per-parameter Param"):
         LawPlugin(law=print, gain="g")
+
+
+def _law_tables_read(monkeypatch, scenario: str, over: list[str]) -> set[str]:
+    """The keys of [law] itself (not of its sub-tables) the loader asked for, present or not."""
+    tables: list = []
+    real_init = sc._Table.__init__
+
+    def spy(self, data, prefix, where):
+        real_init(self, data, prefix, where)
+        tables.append(self)
+
+    monkeypatch.setattr(sc._Table, "__init__", spy)
+    sc.load(sc.SCENARIOS_DIR / f"{scenario}.toml", overrides=over)
+    monkeypatch.undo()
+    return {name for t in tables if t.prefix == "law." for name in t.used}
+
+
+@pytest.mark.parametrize("kind", sorted(LAW_CASES))
+def test_each_law_kind_reads_exactly_the_keys_it_declares(monkeypatch, kind):
+    """A built-in kind's declared keys (LawKind.keys: what `list --laws` shows) are the keys its reader takes: a
+    key read but not declared, or declared but not read, fails here."""
+    scenario, over = LAW_CASES[kind]
+    declared = {k.name for k in kinds.built_in()[kind].keys}
+    assert len(declared) == len(kinds.built_in()[kind].keys), f"{kind}: a key declared twice"
+    read = _law_tables_read(monkeypatch, scenario, over)
+    assert read - declared == set(), f"{kind}: read but not declared"
+    assert declared - read == set(), f"{kind}: declared but not read"
+
+
+def test_every_built_in_law_kind_registers_itself_with_keys_a_reader_and_a_builder():
+    for name, kind in kinds.built_in().items():
+        assert kind.read is not None and kind.build is not None and kind.keys, name
+        assert kind.module.startswith("adaptive_mj.laws."), name
+    assert set(kinds.table_keys()) == {"gamma", "initial_estimates", "nominal", "theta0", "projection", "dead_zone",
+                                   "composite", "lambda", "kd"}
+
+
+TOY_LAW = '''"""A toy law kind for tests/test_law_kinds.py: fixed-gain PD over the model form,
+u = (kp ỹ + kv ỹ') / h(x), with keys of its own (law.kp [u/m], law.kv [u s/m]) that no LawSpec field
+holds: LawSpec.params."""
+import numpy as np
+
+from adaptive_mj.keys import Key
+from adaptive_mj.laws import law_keys as shared
+from adaptive_mj.laws.common import LawStep
+from adaptive_mj.laws.kinds import Form, LawKind, register
+from adaptive_mj.laws.protocol import Law
+from adaptive_mj.specs import LawSpec
+
+
+class ToyPD(Law):
+    def __init__(self, form, *, kp, kv):
+        self.form, self.order, self.names, self.kp, self.kv = form, form.order, form.names, kp, kv
+
+    def __call__(self, t, x, ref, theta_hat):
+        e, de = ref[0] - x[0], ref[1] - x[1]
+        return LawStep((self.kp * e + self.kv * de) / self.form.h(x), np.zeros(len(self.names)), e, 0.0)
+
+    def lyapunov(self, s, theta_hat, theta, *, M=None):
+        return 0.5 * np.asarray(s, dtype=float) ** 2
+
+
+def read(t, kind, plant, order):
+    law_order = shared.read_order(t, plant, order)
+    params = {"kp": t.number("kp", gt=0), "kv": t.number("kv", 10.0, ge=0)}
+    initial = shared.read_estimates(t, "initial_estimates")
+    t.finish()
+    return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=None, dead_zone=None, initial_estimates=initial,
+                   nominal=None, K=None, boundary_layer=None, params=params)
+
+
+def build(ctx):
+    return ToyPD(ctx.model_form(), **ctx.law.params)
+
+
+KIND = register(LawKind(
+    "toy_pd", frozenset({Form.MODEL}), False, "fixed-gain PD (a test's toy)",
+    keys=(shared.KIND, shared.ORDER, Key("kp", "number", unit="u/m", bounds="> 0", required=True),
+          Key("kv", "number", unit="u s/m", default=10.0, bounds=">= 0"), shared.INITIAL_ESTIMATES),
+    read=read, build=build, module=__name__))
+'''
+
+
+def test_a_new_law_kind_lands_by_its_own_module_alone(tmp_path, monkeypatch):
+    """Acceptance by construction: a law kind in a module of its own (its law, keys, reader and builder, and its
+    register call) is loaded, listed and run, with no table elsewhere touched."""
+    import importlib.util
+
+    import numpy as np
+
+    from adaptive_mj.sim.runner import execute
+
+    monkeypatch.setattr(kinds, "_BUILT_IN", kinds.built_in())  # the toy leaves the registry with the test
+    path = tmp_path / "toy_pd_law.py"
+    path.write_text(TOY_LAW)
+    spec = importlib.util.spec_from_file_location("toy_pd_law", path)
+    assert spec is not None and spec.loader is not None
+    spec.loader.exec_module(importlib.util.module_from_spec(spec))
+    assert "toy_pd" in kinds.BUILT_IN and "toy_pd" in kinds.serving("heave", frozenset({kinds.Form.MODEL}),
+                                                                     kinds.built_in())
+    scn = sc.load(sc.SCENARIOS_DIR / "heave_tracking.toml",
+                  overrides=[sc.law_swap("toy_pd"), "law.kp=400.0", "simulation.duration=0.05",
+                             "simulation.python_callback=true"])
+    assert scn.law.kind == "toy_pd" and scn.law.params == {"kp": 400.0, "kv": 10.0}
+    with pytest.raises(ScenarioError, match=r"law\.kv must be >= 0"):
+        sc.load(sc.SCENARIOS_DIR / "heave_tracking.toml", overrides=[sc.law_swap("toy_pd"), "law.kp=1.0", "law.kv=-1"])
+    with pytest.raises(ScenarioError, match=r"law\.kind = 'toy_pd' serves the 1-DOF model form"):
+        sc.load(sc.SCENARIOS_DIR / "ur5e_drift.toml", overrides=[sc.law_swap("toy_pd")])
+    result = execute(scn)
+    assert result.summary["status"].value == "ok" and result.summary["steps"] == 50
+    assert "the law ToyPD" in result.summary["preflight"]["note"]  # the toy's law object is what ran
+    assert np.all(np.isfinite(result.trajectory.u))

@@ -17,8 +17,12 @@ import math
 import numpy as np
 
 from adaptive_mj.form import ModelForm
+from adaptive_mj.keys import Table
 from adaptive_mj.laws.common import NO_MODIFICATION, DeadZone, LawStep, Modification, as_gamma, modify_rate
+from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, Law, SurfaceFeedback
+from adaptive_mj.laws.sliding import model_law_keys, read_model_law
+from adaptive_mj.specs import LawSpec, PlantSpec
 
 
 class FirstOrderAdaptiveLaw(Law):
@@ -69,3 +73,23 @@ class FirstOrderAdaptiveLaw(Law):
         """V = ½ x̃² + ½ sum_i gamma_i p̃_i²."""
         err = np.asarray(theta_hat, dtype=float) - np.asarray(theta, dtype=float)
         return 0.5 * np.asarray(s, dtype=float) ** 2 + 0.5 * np.sum(self.gamma * err**2, axis=-1)
+
+
+# --- the law kind: its keys (law.*; those of the sliding laws without law.lambda), and its builder -------
+def _read(t: Table, kind: str, plant: PlantSpec, order: int) -> LawSpec:
+    return read_model_law(t, kind, plant, order, adaptive=True, surface=False)
+
+
+def _build(ctx: BuildContext) -> Law:
+    form = ctx.model_form()
+    return FirstOrderAdaptiveLaw(form, k=ctx.law.k, gamma=ctx.gamma(form.names), dead_zone=ctx.dead_zone(),
+                                 modification=ctx.modification)
+
+
+#: this law kind, registered (adaptive_mj.laws.kinds): law.kind = "first_order_adaptive", exactly on
+#: plant.kind = "first_order" (which takes no other built-in law)
+KIND = register(LawKind(
+    "first_order_adaptive", frozenset({Form.MODEL}), True,
+    "the lecture's first-order adaptive law (plant.kind = 'first_order' only)",
+    keys=model_law_keys(adaptive=True, surface=False), read=_read, build=_build, plant_kinds=frozenset({"first_order"}),
+    module=__name__))

@@ -39,8 +39,12 @@ from typing import Callable
 
 import numpy as np
 
+from adaptive_mj.keys import Key, Table
+from adaptive_mj.laws import law_keys as shared
 from adaptive_mj.laws.common import NO_MODIFICATION, DeadZone, LawStep, Modification, as_gamma, modify_rate
+from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, Law
+from adaptive_mj.specs import LawSpec, MracSpec, PlantSpec
 
 
 class Rule(enum.Enum):
@@ -172,3 +176,53 @@ class MracLaw(Law):
         if self.order != 1 or self.rule is not Rule.LYAPUNOV:
             return np.full(s.shape[:1] if s.ndim else (), math.nan)
         return 0.5 * s**2 + 0.5 * self.b_abs * np.sum(err**2 / self.gamma, axis=-1)
+
+
+# --- the law kind: its keys (law.*), read from a scenario, and its builder -----------------------------
+OWN_KEYS = (
+    Key("model", "array of n numbers", unit="1/s^k", bounds="> 0", required=True,
+        doc="the reference model's polynomial [α_0, …, α_{n−1}] of s^n + … + α_0"),
+    Key("model_gain", "number", bounds="!= 0", doc="β in y_m^(n) + … + α_0 y_m = β r (default α_0: unit DC gain)"),
+    Key("rule", "string", default="lyapunov", bounds="one of 'lyapunov', 'mit'", doc="the update ('mit': n = 1)"),
+)
+
+
+def _read(t: Table, kind: str, plant: PlantSpec, order: int) -> LawSpec:
+    """law.model, law.model_gain, law.rule, law.gamma (rates, required), law.dead_zone, law.initial_estimates and
+    the robust modifications (no law.nominal: MRAC has no baseline)."""
+    law_order = shared.read_order(t, plant, order)
+    alpha = t.numbers("model", length=order)
+    if any(a <= 0 for a in alpha):
+        raise t.fail("model", f"{order} coefficient(s) > 0 (a stable reference model)", list(alpha))
+    beta = t.number("model_gain", alpha[0])
+    if beta == 0:
+        raise t.fail("model_gain", "non-zero", beta)
+    rule = t.string("rule", "lyapunov", choices=tuple(r.value for r in Rule))
+    if rule == "mit" and order != 1:
+        raise t.fail("rule", "'lyapunov' for a law of order 2 (the MIT rule is written for order 1)", rule)
+    gamma = shared.read_gamma(t)
+    shared.required(t, gamma, "law.gamma", kind)
+    dead_zone = shared.read_dead_zone(t)
+    initial = shared.read_estimates(t, "initial_estimates")
+    robust = shared.read_robust(t, kind, adaptive=True, composite=False, presets=())
+    t.finish()
+    return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=gamma, dead_zone=dead_zone,
+                   initial_estimates=initial, nominal=None, K=None, boundary_layer=None, robust=robust,
+                   mrac=MracSpec(alpha=alpha, beta=beta, rule=rule))
+
+
+def _build(ctx: BuildContext) -> Law:
+    """MracLaw on the plant's MRAC state form: the sign and size of its b, its matched nonlinear terms."""
+    M, plant = ctx.law.mrac, ctx.mrac_state()
+    assert M is not None  # set for law.kind = 'mrac' (_read)
+    return MracLaw(order=plant.order, alpha=M.alpha, beta=M.beta, gamma=ctx.gamma(plant.names),
+                   sign_b=1.0 if plant.b > 0 else -1.0, rule=Rule(M.rule), psi=plant.psi, psi_names=plant.psi_names,
+                   b_abs=abs(plant.b), dead_zone=ctx.dead_zone(), modification=ctx.modification)
+
+
+#: this law kind, registered (adaptive_mj.laws.kinds): law.kind = "mrac"
+KIND = register(LawKind(
+    "mrac", frozenset({Form.MRAC_STATE}), True, "model-reference adaptive control (Lyapunov rule or the MIT rule)",
+    keys=(shared.KIND, shared.ORDER, *OWN_KEYS, shared.GAMMA_REQUIRED, shared.DEAD_ZONE, shared.INITIAL_ESTIMATES,
+          *shared.ROBUST),
+    read=_read, build=_build, module=__name__))

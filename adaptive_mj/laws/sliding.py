@@ -23,10 +23,15 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from adaptive_mj.errors import ScenarioError
 from adaptive_mj.form import ModelForm
+from adaptive_mj.keys import Key, Table
+from adaptive_mj.laws import law_keys as shared
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
                                      as_record, dead_zone_open, modify_rate, record_dtype)
+from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, Law, SurfaceFeedback
+from adaptive_mj.specs import LawSpec, PlantSpec
 
 
 def surface_coefficients(order: int, lam: float) -> np.ndarray:
@@ -278,3 +283,110 @@ class RobustSlidingLaw(FixedNominalLaw):
             raise ValueError(f"boundary_layer must be finite and > 0, got {boundary_layer}")
         self.K = float(K)
         self.boundary_layer = float(boundary_layer)
+
+
+# --- the law kinds: their keys (law.*), read from a scenario, and their builders ----------------------
+LAMBDA = Key("lambda", "number", unit="1/s", bounds="> 0", required=True,
+             doc="λ of the surface s = (d/dt + λ)^(n−1) ỹ")
+K_GAIN = Key("k", "number", unit="u per unit of s", bounds=">= 0", required=True, doc="gain on s")
+SWITCHING = (Key("K", "number", unit="u", bounds=">= 0", required=True, doc="switching gain of u = … + K sat(s/Φ)"),
+             Key("boundary_layer", "number", unit="unit of s", bounds="> 0", required=True,
+                 doc="Φ, the boundary layer's width"))
+
+
+def model_law_keys(*, adaptive: bool, surface: bool = True, switching: bool = False) -> tuple[Key, ...]:
+    """The keys `read_model_law` reads, in its order (adaptive: law.gamma is required; surface: law.lambda;
+    switching: law.K and law.boundary_layer)."""
+    gamma = shared.GAMMA_REQUIRED if adaptive else shared.GAMMA
+    return (shared.KIND, shared.ORDER, *((LAMBDA,) if surface else ()), K_GAIN, gamma, shared.DEAD_ZONE,
+            shared.INITIAL_ESTIMATES, shared.NOMINAL, *(SWITCHING if switching else ()), *shared.ROBUST,
+            shared.SATURATION)
+
+
+def read_model_law(t: Table, kind: str, plant: PlantSpec, order: int, *, adaptive: bool, surface: bool = True,
+                   switching: bool = False, composite: bool = False) -> LawSpec:
+    """The [law] keys of a law of the model form (a sliding law; surface=False: the first-order law): adaptive,
+    law.gamma is required and the robust modifications are kept; else law.nominal or law.initial_estimates is;
+    switching: law.K and law.boundary_layer (required); composite: law.composite and law.saturation = "freeze"
+    are taken."""
+    law_order = shared.read_order(t, plant, order)
+    lam = t.number("lambda", gt=0) if surface else None
+    k = t.number("k", ge=0)
+    gamma = shared.read_gamma(t)
+    if adaptive:
+        shared.required(t, gamma, "law.gamma", kind)
+    dead_zone = shared.read_dead_zone(t)
+    initial = shared.read_estimates(t, "initial_estimates")
+    nominal = shared.read_estimates(t, "nominal")
+    if not adaptive and nominal is None and initial is None:
+        raise ScenarioError(f"{t.where}: law.nominal (or law.initial_estimates) is required for law.kind = {kind!r}")
+    K = t.number("K", None, ge=0) if switching else None
+    phi = t.number("boundary_layer", None, gt=0) if switching else None
+    if switching and (K is None or phi is None):
+        raise ScenarioError(f"{t.where}: law.K and law.boundary_layer are required for law.kind = {kind!r}")
+    robust = shared.read_robust(t, kind, adaptive=adaptive, composite=composite, presets=())
+    saturation = shared.read_saturation(t)
+    if saturation != "ignore" and (not composite or robust.composite_gain is not None):
+        raise t.fail("saturation", "'ignore' except for law.kind = 'sliding_adaptive' (without law.composite)",
+                     saturation)
+    t.finish()
+    return LawSpec(kind=kind, order=law_order, lam=lam, k=k, gamma=gamma, dead_zone=dead_zone,
+                   initial_estimates=initial, nominal=nominal, K=K, boundary_layer=phi, robust=robust,
+                   saturation=saturation)
+
+
+def _read_sliding_adaptive(t: Table, kind: str, plant: PlantSpec, order: int) -> LawSpec:
+    return read_model_law(t, kind, plant, order, adaptive=True, composite=True)
+
+
+def _read_fixed_nominal(t: Table, kind: str, plant: PlantSpec, order: int) -> LawSpec:
+    return read_model_law(t, kind, plant, order, adaptive=False)
+
+
+def _read_robust_sliding(t: Table, kind: str, plant: PlantSpec, order: int) -> LawSpec:
+    return read_model_law(t, kind, plant, order, adaptive=False, switching=True)
+
+
+def _build_sliding_adaptive(ctx: BuildContext) -> Law:
+    """SlidingAdaptiveLaw, or with law.composite the CompositeSlidingLaw (adaptive_mj.laws.composite)."""
+    L, form = ctx.law, ctx.model_form()
+    assert L.lam is not None  # law.lambda is required for this law kind (read_model_law)
+    if L.robust.composite_gain is not None:
+        from adaptive_mj.laws.composite import CompositeSlidingLaw
+
+        assert L.robust.composite_filter is not None  # law.composite gives gain and filter together
+        return CompositeSlidingLaw(form, lam=L.lam, k=L.k, gamma=ctx.gamma(form.names),
+                                   kappa=L.robust.composite_gain, filter_rate=L.robust.composite_filter,
+                                   dead_zone=ctx.dead_zone(), modification=ctx.modification)
+    return SlidingAdaptiveLaw(form, lam=L.lam, k=L.k, gamma=ctx.gamma(form.names), dead_zone=ctx.dead_zone(),
+                              modification=ctx.modification,
+                              saturation=ctx.saturation() if L.saturation == "freeze" else None)
+
+
+def _build_fixed_nominal(ctx: BuildContext) -> Law:
+    assert ctx.law.lam is not None  # law.lambda is required for this law kind (read_model_law)
+    return FixedNominalLaw(ctx.model_form(), lam=ctx.law.lam, k=ctx.law.k)
+
+
+def _build_robust_sliding(ctx: BuildContext) -> Law:
+    L = ctx.law
+    # law.lambda, law.K and law.boundary_layer are required for this law kind (read_model_law)
+    assert L.lam is not None and L.K is not None and L.boundary_layer is not None
+    return RobustSlidingLaw(ctx.model_form(), lam=L.lam, k=L.k, K=L.K, boundary_layer=L.boundary_layer)
+
+
+#: these law kinds, registered (adaptive_mj.laws.kinds): law.kind = "sliding_adaptive", "fixed_nominal",
+#: "robust_sliding"
+SLIDING_ADAPTIVE = register(LawKind(
+    "sliding_adaptive", frozenset({Form.MODEL}), True,
+    "the lecture's sliding-surface adaptive law of order n (with its modifications)",
+    keys=model_law_keys(adaptive=True), read=_read_sliding_adaptive, build=_build_sliding_adaptive, module=__name__))
+FIXED_NOMINAL = register(LawKind(
+    "fixed_nominal", frozenset({Form.MODEL}), False,
+    "the sliding law with the estimates frozen at law.nominal (baseline)",
+    keys=model_law_keys(adaptive=False), read=_read_fixed_nominal, build=_build_fixed_nominal, module=__name__))
+ROBUST_SLIDING = register(LawKind(
+    "robust_sliding", frozenset({Form.MODEL}), False,
+    "sliding control with a boundary layer, K sat(s/phi), no adaptation (baseline)",
+    keys=model_law_keys(adaptive=False, switching=True), read=_read_robust_sliding, build=_build_robust_sliding,
+    module=__name__))

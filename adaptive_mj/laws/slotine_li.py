@@ -27,13 +27,18 @@ from __future__ import annotations
 
 import enum
 import math
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
+from adaptive_mj.errors import ScenarioError
+from adaptive_mj.keys import Key, Table, joint_values
+from adaptive_mj.laws import law_keys as shared
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
                                      dead_zone_open, modify_rate)
+from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, JointFeedback, Law
+from adaptive_mj.specs import LawSpec, PlantSpec
 
 
 class Mode(enum.IntEnum):
@@ -173,3 +178,83 @@ class SlotineLiLaw(Law):
             err = np.asarray(theta_hat, dtype=float) - np.asarray(theta, dtype=float)
             V = V + 0.5 * np.sum(self.gamma * err**2, axis=-1)
         return V
+
+
+# --- the law kinds: their keys (law.*), read from a scenario, and their builders ----------------------
+OWN_KEYS = (
+    Key("lambda", "number or table {joint = number}", unit="1/s", bounds="> 0", required=True,
+        doc="Λ of s = q̃' + Λ q̃, one for every joint or a table giving every joint"),
+    Key("kd", "number or table {joint = number}", unit="N m s/rad (N s/m on a slide)", bounds="> 0", required=True,
+        doc="K_D of τ = … + K_D s, one for every joint or a table giving every joint"),
+)
+
+
+def _keys(adaptive: bool) -> tuple[Key, ...]:
+    """The keys `_read` reads (law.gamma is required when adapting)."""
+    return (shared.KIND, *OWN_KEYS, shared.GAMMA_REQUIRED if adaptive else shared.GAMMA, shared.DEAD_ZONE,
+            shared.INITIAL_ESTIMATES, shared.NOMINAL, *shared.ROBUST, shared.SATURATION)
+
+
+def _reader(adaptive: bool) -> Callable[[Table, str, PlantSpec, int], LawSpec]:
+    """The key reader of the adaptive kind or of a baseline (`_read`)."""
+    return lambda t, kind, plant, order: _read(t, kind, adaptive=adaptive)
+
+
+def _read(t: Table, kind: str, *, adaptive: bool) -> LawSpec:
+    """law.lambda and law.kd (a number, or a table by joint), law.gamma (required when adapting), law.dead_zone,
+    the estimates (a baseline needs law.nominal or law.initial_estimates), the robust modifications (projection
+    may be "physical") and law.saturation ("freeze" when adapting). The law is of order 2 (law.order is not a
+    key of these kinds)."""
+    lam = joint_values(t, "lambda", arrays=False)
+    kd = joint_values(t, "kd", arrays=False)
+    for key, value in (("lambda", lam), ("kd", kd)):
+        for j, v in (value.items() if isinstance(value, dict) else [("", value)]):
+            if not v > 0:
+                raise t.fail(key + (f".{j}" if j else ""), "> 0", v)
+    gamma = shared.read_gamma(t)
+    if adaptive:
+        shared.required(t, gamma, "law.gamma", kind)
+    dead_zone = shared.read_dead_zone(t)
+    initial = shared.read_estimates(t, "initial_estimates")
+    nominal = shared.read_estimates(t, "nominal")
+    if not adaptive and nominal is None and initial is None:
+        raise ScenarioError(f"{t.where}: law.nominal (or law.initial_estimates) is required for law.kind = {kind!r}")
+    robust = shared.read_robust(t, kind, adaptive=adaptive, composite=False, presets=("physical",))
+    saturation = shared.read_saturation(t)
+    if saturation != "ignore" and not adaptive:
+        raise t.fail("saturation", "'ignore' for a law without adaptation", saturation)
+    t.finish()
+    return LawSpec(kind=kind, order=2, lam=None if isinstance(lam, dict) else lam, k=0.0, gamma=gamma,
+                   dead_zone=dead_zone, initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None,
+                   kd=kd, lam_joints=lam if isinstance(lam, dict) else None, robust=robust, saturation=saturation)
+
+
+def _builder(mode: Mode) -> Callable[[BuildContext], Law]:
+    """The builder of the kind of `mode`: SlotineLiLaw on the plant's regressor, Λ and K_D per joint."""
+
+    def build(ctx: BuildContext) -> Law:
+        L, arm = ctx.law, ctx.rigid_body()
+        lam_value = L.lam_joints if L.lam_joints is not None else L.lam
+        # law.lambda (a number, or lam_joints) and law.kd are required for these kinds (_read)
+        assert lam_value is not None and L.kd is not None
+        return SlotineLiLaw(arm.regressor, arm.names, arm.m, lam=ctx.per_joint("law.lambda", lam_value),
+                            kd=ctx.per_joint("law.kd", L.kd),
+                            gamma=ctx.gamma(arm.names) if L.gamma is not None else 1.0,
+                            dead_zone=ctx.dead_zone(), mode=mode,
+                            modification=ctx.modification if mode is Mode.ADAPTIVE else None,
+                            saturation=ctx.saturation() if L.saturation == "freeze" else None)
+
+    return build
+
+
+def _kind(name: str, mode: Mode, doc: str) -> LawKind:
+    adaptive = mode is Mode.ADAPTIVE
+    return register(LawKind(name, frozenset({Form.RIGID_BODY}), adaptive, doc, keys=_keys(adaptive),
+                            read=_reader(adaptive), build=_builder(mode), module=__name__))
+
+
+#: these law kinds, registered (adaptive_mj.laws.kinds): law.kind = "slotine_li" and its two baselines
+SLOTINE_LI = _kind("slotine_li", Mode.ADAPTIVE, "Slotine-Li adaptive control of a manipulator, tau = Y pi_hat + K_D s")
+COMPUTED_TORQUE = _kind("computed_torque", Mode.COMPUTED_TORQUE,
+                        "computed torque at the nominal parameters (baseline)")
+PD_GRAVITY = _kind("pd_gravity", Mode.PD_GRAVITY, "PD plus gravity compensation at the nominal parameters (baseline)")

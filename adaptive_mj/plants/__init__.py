@@ -16,8 +16,9 @@ and the 1-DOF plants their ModelForm (``form``: the structure the law assumes).
 Each plant kind (heave, arm, first_order in twin.py, manipulator) builds itself
 from its scenario section: its module has ``model_source(scn) -> ModelSource |
 None`` (the MJCF text to compile) and ``from_scenario(scn, source) -> BuiltPlant``.
-``adaptive_mj.setup.build`` looks the kind up in a table (``PLANT_KINDS`` there)
-and calls those two; it has no branch per kind.
+``adaptive_mj.setup.build`` looks the kind up in the registry (``plants/kinds.py``)
+and calls those two; it has no branch per kind. The kind's scenario keys are its own
+too (``PlantKind.keys`` and ``.reader``; shared ones in ``plants/plant_keys.py``).
 """
 from __future__ import annotations
 

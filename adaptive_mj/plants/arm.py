@@ -32,7 +32,9 @@ from adaptive_mj.plants.attach import compose
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path, with_userdata,
                                              find_joint_and_actuator, scale_body_mass, scratch_data, spec_from_text)
 from adaptive_mj.laws.kinds import Form
-from adaptive_mj.plants.kinds import PlantKind, register
+from adaptive_mj.plants.kinds import PlantKind, StressPlant, register
+from adaptive_mj.plants import plant_keys
+from adaptive_mj.keys import Table
 
 MODEL_PATH = MODELS / "pendulum_arm.xml"
 THETA_NAMES = ("J", "b", "g_sin", "g_cos")
@@ -177,9 +179,20 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
     return BuiltPlant(twin.as_backend(scn, plant), model_xml)
 
 
+def theta_names(t: Table) -> tuple[str, ...]:
+    """plant.theta's keys, in order: the arm form's θ names (J, b, g_sin, g_cos)."""
+    return arm_form().names
+
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "arm"
 KIND = register(PlantKind(
     "arm", __name__, frozenset({Form.MODEL}), output_unit="rad", control_unit="N m",
     params={"J": "kg m²", "b": "N m s/rad", "g_sin": "N m", "g_cos": "N m"},
     default_model="pendulum_arm", doc="a 1-DOF arm with an unknown payload (MuJoCo's attach)",
-    tail_bound=0.05, nominal_noise=5e-4))
+    tail_bound=0.05, nominal_noise=5e-4,
+    keys=plant_keys.keys(payload=True, default_payload="sphere"),
+    reader=plant_keys.SharedReader(theta=theta_names),
+    events={"payload_mass": "mujoco", "constant_force": None},
+    stress=StressPlant("arm", "arm_payload_swap", ("events=[]",), composite="{gain=1.0, filter=2.0}",
+                       stressors=("payload ratio",)),
+    sections=("payload swap",)))

@@ -41,7 +41,10 @@ from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path,
                                              find_joint_and_actuator, read_model_file, scratch_data)
 from adaptive_mj.laws.kinds import Form
-from adaptive_mj.plants.kinds import PlantKind, register
+from adaptive_mj.plants.kinds import PlantKind, StressPlant, register
+from adaptive_mj.plants import plant_keys
+from adaptive_mj.keys import Key, Table
+from adaptive_mj.specs import PlantSpec
 
 MODEL_PATH = MODELS / "heave_vehicle.xml"
 THETA_NAMES = ("d", "b", "c")
@@ -228,9 +231,40 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
     return BuiltPlant(twin.as_backend(scn, plant), model_xml)
 
 
+# --- its scenario keys -----------------------------------------------------------
+THRUSTER_TIME_CONSTANT = Key("thruster_time_constant", "number", "s", None, "> 0",
+                             "first-order thruster lag τ (the actuator becomes a filter); with law.order = 3 the "
+                             "plant is of order 3", when="built from a model")
+
+
+def theta_names(t: Table) -> tuple[str, ...]:
+    """plant.theta's keys, in order: the second-order form's θ names (d, b, c)."""
+    return heave_form(9.81).names
+
+
+def _thruster_lag(t: Table, fields: dict) -> dict:
+    """plant.thruster_time_constant τ [s]: only on a vehicle built from a model (not a twin given theta)."""
+    lag = t.number("thruster_time_constant", None, gt=0)
+    if lag is not None and fields["theta"] is not None:
+        raise t.fail("thruster_time_constant", f"absent unless plant.kind = 'heave' {THRUSTER_TIME_CONSTANT.when}",
+                     lag)
+    return {"thruster_time_constant": lag}
+
+
+def order(plant: PlantSpec, law_order: object) -> int:
+    """n: 3 with a thruster lag and law.order = 3 (the lag modelled: θ = τd, τb, d, b, c), else 2."""
+    return 3 if law_order == 3 and plant.thruster_time_constant is not None else 2
+
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "heave"
 KIND = register(PlantKind(
     "heave", __name__, frozenset({Form.MODEL}), output_unit="m", control_unit="N",
     params={"d": "kg", "b": "kg/m", "c": "kg", "tau_d": "kg s", "tau_b": "kg s/m"},
     default_model="heave_vehicle", doc="1-DOF heave vehicle in water, d y'' + b y'|y'| + c g = u",
-    tail_bound=0.01, nominal_noise=5e-4))
+    tail_bound=0.01, nominal_noise=5e-4,
+    keys=plant_keys.keys(THRUSTER_TIME_CONSTANT),
+    reader=plant_keys.SharedReader(theta=theta_names, late=_thruster_lag),
+    events={"fluid_density_scale": "mujoco", "constant_force": None}, order=order,
+    stress=StressPlant("heave", "heave_tracking", ("simulation.initial_state='reference'",),
+                       disturbance=(1.0, 1000.0), composite="{gain=3e-4, filter=1.0}", stressors=("lag τ",)),
+    sections=("Lyapunov", "2nd order", "n-th order", "drift", "excitation", "failure")))

@@ -7,16 +7,27 @@ table elsewhere.
 
 A kind declares: its name, the module that builds it, the forms a law can see it in
 (adaptive_mj.laws.kinds.Form), its bundled model (None: an analytic plant), the SI units of its output, its
-control and its parameters (for labels, summaries and the verdict's messages), and a line of doc.
+control and its parameters (for labels, summaries and the verdict's messages), and a line of doc; and what
+a scenario may say of it: its plant.* keys as data (adaptive_mj.keys.Key) with the reader that checks them
+(a function of the kind, the [plant] table and the scenario's folder, giving the PlantSpec; shared keys read by
+adaptive_mj.plants.plant_keys), the [[events]] kinds it accepts, the order of its dynamics and whether it
+starts only on the reference; and what studies and reports see of it (the stress study's plant, the bench
+sections that run it, how a video draws its estimates).
 """
 from __future__ import annotations
 
 import importlib
 import pkgutil
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, Mapping
 
+from adaptive_mj.keys import Key, Table
 from adaptive_mj.laws.kinds import Form
+from adaptive_mj.specs import PlantSpec
+
+if TYPE_CHECKING:
+    Reader = Callable[["PlantKind", Table, Path], PlantSpec]
 
 #: the units of a rigid body's (and a joint's) parameters on a multi-joint plant, by the name's last part
 BODY_PARAM_UNITS = {"m": "kg", "mcx": "kg m", "mcy": "kg m", "mcz": "kg m", "Ixx": "kg m²", "Ixy": "kg m²",
@@ -27,6 +38,34 @@ BODY_PARAM_UNITS = {"m": "kg", "mcx": "kg m", "mcy": "kg m", "mcz": "kg m", "Ixx
 def body_param_unit(name: str) -> str:
     """Unit of a multi-joint parameter "<body>.<param>" or "<joint>.armature" (a base parameter ends in "*")."""
     return BODY_PARAM_UNITS.get(name.rstrip("*").rsplit(".", 1)[-1], "")
+
+
+def second_order(plant: PlantSpec, law_order: Any) -> int:
+    """The order n of a mechanical plant's dynamics (y'' = ...): 2, whatever law.order says."""
+    return 2
+
+
+def first_order(plant: PlantSpec, law_order: Any) -> int:
+    """The order n of a first-order plant (x' = ...): 1."""
+    return 1
+
+
+@dataclass(frozen=True)
+class StressPlant:
+    """A plant kind's row in the breaking-point study (adaptive_mj.study.stress): name (its label, e.g. "ur5e"),
+    the bundled scenario it runs (without ".toml"), and the overrides that make it a stress run beyond the
+    duration, the estimates at the truth and the nominal noise (e.g. "events=[]"; each plant's own);
+    noise_signals: the measured signals the nominal noise σ_y [output unit] and 10 σ_y [per s] are on; label,
+    disturbance, composite, stressors: see each (a stressor by its name in adaptive_mj.study.stress)."""
+
+    name: str
+    scenario: str
+    overrides: tuple[str, ...] = ()
+    noise_signals: tuple[str, str] = ("y", "y_dot")
+    label: str = ""  # how the report names it beside its failure bound (default: name)
+    disturbance: tuple[float, float] = (0.1, 100.0)  # the sinusoidal disturbance's range [control unit]
+    composite: str | None = None  # law.composite of the composite law (None: no composite row)
+    stressors: tuple[str, ...] = ()  # the study's stressors of this plant beyond the common ones, by name
 
 
 @dataclass(frozen=True)
@@ -50,6 +89,32 @@ class PlantKind:
     tail_bound: float | None = None
     nominal_noise: float | None = None
     origin: str = "built in"
+    # what a scenario may say of it: its plant.* keys (shared ones too, as this kind reads them), the reader
+    # (None: no built-in reader, a plant plugin's keys are read from its plugin); [[events]] kinds it accepts,
+    # each with the backend it needs (None: any); the order n of its dynamics from the PlantSpec and the raw
+    # law.order; starts_on_reference: simulation.initial_state may only be "reference" (its default)
+    keys: tuple[Key, ...] = ()
+    reader: "Reader | None" = None
+    events: Mapping[str, str | None] = field(default_factory=dict)
+    order: Callable[[PlantSpec, Any], int] = second_order
+    starts_on_reference: bool = False
+    # what studies and reports see of it: its row in the stress study (None: not in it), the bench sections
+    # that run it (their titles, for the plant's units in their tables), and whether a video's estimate panel
+    # groups its parameters by unit (a multi-joint plant: many parameters, one axis per unit)
+    stress: StressPlant | None = None
+    sections: tuple[str, ...] = ()
+    group_params_by_unit: bool = False
+
+    def key_names(self) -> tuple[str, ...]:
+        """The names of its declared plant.* keys, in order."""
+        return tuple(k.name for k in self.keys)
+
+    def read(self, t: Table, base_dir: Path) -> PlantSpec:
+        """Its [plant] table `t` (plant.kind already this kind's name) checked into a PlantSpec; base_dir: the
+        scenario's folder (relative model and payload paths)."""
+        if self.reader is None:
+            raise ValueError(f"plant kind {self.name!r} has no key reader (plants/kinds.py: PlantKind.reader)")
+        return self.reader(self, t, base_dir)
 
     def unit_of(self, name: str) -> str:
         """Unit of parameter `name` ('' when not declared)."""
@@ -72,6 +137,11 @@ def register(kind: PlantKind) -> PlantKind:
     return kind
 
 
+def unregister(name: str) -> None:
+    """Removes a kind registered at run time (a test's toy kind); a built-in kind's module still holds it."""
+    _BUILT_IN.pop(name, None)
+
+
 def built_in() -> dict[str, PlantKind]:
     """The built-in plant kinds by name, in the order their modules register (every module of the package is
     imported once: a kind is found by its own module, not by a list)."""
@@ -90,6 +160,30 @@ def built_in() -> dict[str, PlantKind]:
 
 #: the order the built-in kinds are listed in (a kind missing here comes last): the lecture's order
 ORDER = ("heave", "arm", "first_order", "manipulator", "ship", "linear", "wing_rock")
+
+
+#: the order [[events]] kinds are listed in (`events[i].kind must be one of ...`); a kind's own event kind
+#: missing here comes last, in the order the plant kinds declare them
+EVENT_ORDER = ("payload_mass", "payload_swap", "fluid_density_scale", "constant_force", "loading", "thrust_scale",
+               "flight_condition")
+
+
+def event_kinds() -> tuple[str, ...]:
+    """Every [[events]] kind some built-in plant kind accepts (PlantKind.events), in EVENT_ORDER."""
+    names = list(dict.fromkeys(e for k in built_in().values() for e in k.events))
+    return tuple(sorted(names, key=lambda e: EVENT_ORDER.index(e) if e in EVENT_ORDER else len(EVENT_ORDER)))
+
+
+def accepting(event: str) -> tuple[tuple[str, ...], str | None]:
+    """The built-in plant kinds that accept [[events]] kind `event` (in the registry's order) and the backend
+    it needs (None: any; the first accepting kind's word, as they agree)."""
+    names = tuple(k.name for k in built_in().values() if event in k.events)
+    return names, (built_in()[names[0]].events[event] if names else None)
+
+
+def declaring(key: str) -> tuple[PlantKind, ...]:
+    """The built-in plant kinds that declare plant.`key` (in the registry's order)."""
+    return tuple(k for k in built_in().values() if key in k.key_names())
 
 
 def plugin_kind(name: str, installed) -> PlantKind:

@@ -29,7 +29,10 @@ from adaptive_mj.plants import BuiltPlant
 from adaptive_mj.plants.protocol import Policy
 from adaptive_mj.plants.twin import PythonStepped
 from adaptive_mj.laws.kinds import Form
-from adaptive_mj.plants.kinds import PlantKind, register
+from adaptive_mj.plants.kinds import PlantKind, first_order, register
+from adaptive_mj.plants import plant_keys
+from adaptive_mj.keys import Key, Table
+from adaptive_mj.specs import LinearSpec, PlantSpec
 
 
 def canonical(num, den) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -191,9 +194,57 @@ def nominal_b(scn) -> float:
     return first_order_part(scn.plant.linear.num, scn.plant.linear.den)[1]
 
 
+# --- its scenario keys -----------------------------------------------------------
+KEYS = plant_keys.analytic_keys(
+    Key("num", "array of numbers", doc="the modelled part's numerator b (highest power first)", required=True),
+    Key("den", "array of numbers", doc="the modelled part's denominator s - a (highest power first)", required=True),
+    Key("unmodelled_num", "array of numbers", default=(1.0,), doc="the unmodelled factor's numerator"),
+    Key("unmodelled_den", "array of numbers", default=(1.0,), doc="the unmodelled factor's denominator"),
+    Key("input_delay", "number", "s", 0.0, ">= 0", "input delay τ, a whole number of timesteps"),
+    Key("A", "array of n arrays of n numbers", doc="the whole plant x' = A x + B u, y = C x (rows)"),
+    Key("B", "array of n numbers", doc="see A"),
+    Key("C", "array of n numbers", doc="see A"))
+
+
+def state_space(t: Table) -> dict:
+    """plant.A, plant.B, plant.C: all three or none; A square (n, n), B and C (n,); not with
+    unmodelled_num/den (the matrices are the whole plant)."""
+    given = [k for k in ("A", "B", "C") if k in t.data]
+    if not given:
+        return {}
+    if len(given) != 3:
+        missing = next(k for k in ("A", "B", "C") if k not in t.data)
+        raise t.fail(missing, "given with plant.A, plant.B and plant.C together", None)
+    for key in ("unmodelled_num", "unmodelled_den"):
+        if key in t.data:
+            raise t.fail(key, "absent when plant.A, B and C give the whole plant", t.data[key])
+    rows = t.get("A")
+    if not isinstance(rows, list) or not rows or any(not isinstance(r, list) or len(r) != len(rows) for r in rows):
+        raise t.fail("A", "a square array of arrays (rows)", rows)
+    sub = Table({f"A[{i}]": r for i, r in enumerate(rows)}, t.prefix, t.where)
+    A = tuple(sub.numbers(f"A[{i}]", length=len(rows)) for i in range(len(rows)))
+    return {"A": A, "B": t.numbers("B", length=len(rows)), "C": t.numbers("C", length=len(rows))}
+
+
+def read_keys(kind: PlantKind, t: Table, base_dir) -> PlantSpec:
+    """plant.* of kind "linear" (analytic, twin backend): num/den, the unmodelled factor, input_delay [s] or
+    the state space A, B, C."""
+    head = plant_keys.read_analytic(t)
+    linear = LinearSpec(num=t.numbers("num"), den=t.numbers("den"),
+                        unmodelled_num=t.numbers("unmodelled_num", (1.0,)),
+                        unmodelled_den=t.numbers("unmodelled_den", (1.0,)),
+                        input_delay=t.number("input_delay", 0.0, ge=0), **state_space(t))
+    for key in ("den", "unmodelled_den"):
+        if not any(getattr(linear, key)):
+            raise t.fail(key, "a polynomial with a non-zero coefficient", list(getattr(linear, key)))
+    t.finish()
+    return PlantSpec(kind=kind.name, **head, linear=linear)
+
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "linear"
 KIND = register(PlantKind(
     "linear", __name__, frozenset({Form.MRAC_STATE}), output_unit="-", control_unit="-",
     params={},
     default_model=None, doc="a linear plant with unmodelled dynamics",
-    default_law="mrac"))
+    default_law="mrac", keys=KEYS, reader=read_keys, events={"constant_force": None}, order=first_order,
+    sections=("MRAC delay", "Rohrs")))

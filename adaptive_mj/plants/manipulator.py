@@ -46,7 +46,10 @@ from adaptive_mj.plants.mujoco_plant import (compile_for_scenario_with, control_
                                              scratch_data)
 from adaptive_mj.plants.protocol import Policy
 from adaptive_mj.laws.kinds import Form
-from adaptive_mj.plants.kinds import PlantKind, body_param_unit, register
+from adaptive_mj.plants.kinds import PlantKind, StressPlant, body_param_unit, register
+from adaptive_mj.plants import plant_keys
+from adaptive_mj.keys import Key, Table
+from adaptive_mj.specs import JointFrictionSpec, ManipulatorSpec
 
 
 def _name(model, objtype, i: int) -> str:
@@ -738,10 +741,108 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
     return BuiltPlant(plant, model_xml, tuple(notes))
 
 
+# --- its scenario keys -----------------------------------------------------------
+_PER_JOINT = "number, or table {joint = number}"
+OWN_KEYS = (
+    Key("unknown", "'payload', 'all' or array of body names", doc="whose parameters the law estimates "
+        "(default: 'payload' with a payload, else 'all')"),
+    Key("joint_params", "boolean", default=False, doc="also estimate each joint's armature and damping"),
+    Key("base_parameters", "boolean", default=False, doc="reduce the parameters to a base (identifiable) set"),
+    Key("servo_to_torque", "boolean", default=False, doc="rebuild position servos as torque motors"),
+    Key("forcerange", "number, or table {joint or actuator = number}", "N m", None, "> 0",
+        "with servo_to_torque: the rebuilt servos' torque limit"),
+    Key("damping", _PER_JOINT, "N m s/rad", None, ">= 0", "viscous joint damping (default: the model's)"),
+    Key("frictionloss", _PER_JOINT, "N m", None, ">= 0", "dry joint friction (default: the model's)"),
+    Key("actuator_lag", _PER_JOINT, "s", None, ">= 0", "a first-order lag T on the joint's motor"),
+    Key("torque_limit", _PER_JOINT, "N m", None, "> 0", "|τ| <= L on the joint's motor (default: the model's)"),
+    Key("friction_params", "boolean", default=False, doc="also estimate each joint's damping and Coulomb friction"),
+    Key("coulomb_smoothing", "number", "rad/s", 0.01, "> 0", "with friction_params: ε of the column tanh(q'/ε)"))
+FRICTION_KEYS = ("damping", "frictionloss", "actuator_lag", "torque_limit", "friction_params", "coulomb_smoothing")
+
+
+def _own_keys(t: Table, fields: dict) -> dict:
+    """A manipulator's own plant.* keys (after the payload keys): MuJoCo only, which parameters are unknown,
+    model edits, joint friction."""
+    if fields["backend"] != "mujoco":
+        raise t.fail("backend", "'mujoco' for plant.kind = 'manipulator' (its truth is the MuJoCo model)",
+                     fields["backend"])
+    if fields["payload_mass"] is not None and fields["payload"] is None:
+        raise t.fail("payload_mass", "absent when plant.payload is 'none'", fields["payload_mass"])
+    return {"manipulator": joint_friction(t, manipulator_keys(t, fields["payload"]))}
+
+
+def manipulator_keys(t: Table, payload: str | None) -> ManipulatorSpec:
+    """plant.unknown, .joint_params, .base_parameters, .servo_to_torque and .forcerange."""
+    raw = t.get("unknown", "payload" if payload is not None else "all")
+    if isinstance(raw, list):
+        if not raw or not all(isinstance(v, str) and v for v in raw):
+            raise t.fail("unknown", "'payload', 'all' or a non-empty array of body names", raw)
+        unknown: str | tuple[str, ...] = tuple(raw)
+    else:
+        unknown = t.string("unknown", "payload" if payload is not None else "all", choices=("payload", "all"))
+        if unknown == "payload" and payload is None:
+            raise t.fail("unknown", "'all' or an array of body names when there is no payload (plant.payload "
+                                    "is 'none')", unknown)
+    servo = t.boolean("servo_to_torque", False)
+    return ManipulatorSpec(unknown=unknown, joint_params=t.boolean("joint_params", False),
+                           base_parameters=t.boolean("base_parameters", False),
+                           servo_to_torque=servo, forcerange=forcerange(t, servo))
+
+
+def forcerange(t: Table, servo_to_torque: bool) -> float | dict[str, float] | None:
+    """plant.forcerange: |tau| limit [N m or N] for servos without a forcerange, one number for every
+    joint or a table {joint or actuator name = number} (names are checked against the model in build)."""
+    raw = t.get("forcerange", None)
+    if raw is None:
+        return None
+    if not servo_to_torque:
+        raise t.fail("forcerange", "absent unless plant.servo_to_torque = true (it limits the rebuilt servos)",
+                     raw)
+    if isinstance(raw, dict):
+        if not raw:
+            raise t.fail("forcerange", "a number > 0 or a non-empty table {joint = number > 0}", raw)
+        return t.named_numbers("forcerange", gt=0)
+    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+        raise t.fail("forcerange", "a number > 0 or a table {joint = number > 0}", raw)
+    return t.number("forcerange", gt=0)
+
+
+def _per_joint(t: Table, key: str, bound: str) -> float | dict[str, float]:
+    """plant.<key>: a number for every joint or {joint = number}, each >= 0 (bound ">= 0") or > 0."""
+    v = plant_keys.joint_values(t, key)
+    for j, x in (v.items() if isinstance(v, dict) else [("", v)]):
+        if not (x >= 0 if bound == ">= 0" else x > 0):
+            raise t.fail(key + (f".{j}" if j else ""), bound if bound == ">= 0" else "> 0 [N m]", x)
+    return v
+
+
+def joint_friction(t: Table, spec: ManipulatorSpec) -> ManipulatorSpec:
+    """plant.damping, .frictionloss, .actuator_lag, .torque_limit, .friction_params, .coulomb_smoothing into
+    spec.friction (joint names are checked against the model in build)."""
+    values: dict[str, Any] = {key: _per_joint(t, key, ">= 0") for key in ("damping", "frictionloss", "actuator_lag")
+                              if key in t.data}
+    if "torque_limit" in t.data:
+        values["torque_limit"] = _per_joint(t, "torque_limit", "> 0")
+    friction_params = t.boolean("friction_params", False)
+    eps = t.number("coulomb_smoothing", 0.01, gt=0)
+    if "coulomb_smoothing" in t.data and not friction_params:
+        raise t.fail("coulomb_smoothing", "absent unless plant.friction_params = true (it shapes the Coulomb "
+                                          "column)", eps)
+    return dataclasses.replace(spec, friction=JointFrictionSpec(**values, friction_params=friction_params,
+                                                                 coulomb_smoothing=eps))
+
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "manipulator"
 KIND = register(PlantKind(
     "manipulator", __name__, frozenset({Form.RIGID_BODY}), output_unit="rad", control_unit="N m",
     params={},
     default_model="ur5e_arm", doc="any MJCF arm of hinge/slide joints under Slotine-Li", param_unit=body_param_unit,
     default_law="slotine_li",
-    tail_bound=0.01, nominal_noise=1e-4))
+    tail_bound=0.01, nominal_noise=1e-4,
+    keys=plant_keys.keys(*OWN_KEYS, payload=True),
+    reader=plant_keys.SharedReader(body=_own_keys),
+    events={"payload_mass": "mujoco", "payload_swap": "mujoco"}, starts_on_reference=True,
+    group_params_by_unit=True, stress=StressPlant(
+        "ur5e", "ur5e_identification", noise_signals=("q", "q_dot"), disturbance=(0.1, 1000.0),
+        label="the 6-joint arm: the RMS over its joints and the tail's rows, ‖q̃‖'s RMS / √6"),
+    sections=("manipulator",)))

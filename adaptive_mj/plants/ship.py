@@ -29,6 +29,7 @@ from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, 
 from adaptive_mj.plants.nomoto import NomotoFit, fit, nomoto_form
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, register
+from adaptive_mj.plants import plant_keys
 
 MODEL_PATH = MODELS / "ship.xml"
 HEADING_JOINT, RUDDER_JOINT, SURGE_JOINT, SWAY_JOINT = "yaw", "rudder", "x", "y"
@@ -245,4 +246,7 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
 KIND = register(PlantKind(
     "ship", __name__, frozenset({Form.MODEL}), output_unit="rad", control_unit="rad",
     params={"T_over_K": "s²", "one_over_K": "s", "alpha_over_K": "s³", "rudder_bias": "rad"},
-    default_model="ship", doc="a model-scale hull in MuJoCo's fluid, steered by its rudder"))
+    default_model="ship", doc="a model-scale hull in MuJoCo's fluid, steered by its rudder",
+    keys=plant_keys.keys(),
+    reader=plant_keys.SharedReader(backend=("mujoco", "its true Nomoto parameters are fitted to the MuJoCo model")),
+    events={"constant_force": None, "loading": "mujoco", "thrust_scale": "mujoco"}, sections=("ship",)))

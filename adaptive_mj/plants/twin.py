@@ -23,7 +23,9 @@ from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant
 from adaptive_mj.plants.protocol import Plant, Policy
 from adaptive_mj.laws.kinds import Form
-from adaptive_mj.plants.kinds import PlantKind, register
+from adaptive_mj.plants.kinds import PlantKind, first_order, register
+from adaptive_mj.plants import plant_keys
+from adaptive_mj.keys import Key, Table
 
 if TYPE_CHECKING:
     from adaptive_mj.plants.mujoco_plant import MujocoPlant
@@ -215,9 +217,31 @@ def from_scenario(scn, source) -> BuiltPlant:
     return BuiltPlant(from_theta(scn, form))
 
 
+# --- its scenario keys -----------------------------------------------------------
+#: plant.regressor: the form of each (its θ names are plant.theta's keys)
+FORMS: dict[str, Callable[[], ModelForm]] = {"lecture": lecture_first_order_form, "sin_squared": sin_squared_form}
+REGRESSOR = Key("regressor", "string", default="lecture", bounds="one of 'lecture', 'sin_squared'",
+                doc="x' = sin x - a x + b x² + u (θ = a, b) or x' = sin²(x) p + u (θ = p)")
+
+
+def theta_names(t: Table) -> tuple[str, ...]:
+    """plant.theta's keys, in order: those of plant.regressor's form (an unknown one: the lecture's)."""
+    raw = t.data.get("regressor", "lecture")
+    return FORMS.get(raw if isinstance(raw, str) else "lecture", lecture_first_order_form)().names
+
+
+def _regressor(t: Table, fields: dict) -> dict:
+    """plant.regressor (read after plant.ctrl_range)."""
+    return {"regressor": t.string("regressor", "lecture", choices=tuple(FORMS))}
+
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "first_order"
 KIND = register(PlantKind(
     "first_order", __name__, frozenset({Form.MODEL}), output_unit="-", control_unit="-",
     params={"a": "-", "b": "-", "p": "-"},
     default_model=None, doc="the lecture's first-order plant x' = f + phi p + u",
-    default_law="first_order_adaptive"))
+    default_law="first_order_adaptive",
+    keys=tuple(k for k in plant_keys.keys(REGRESSOR) if k.name != "model"),
+    reader=plant_keys.SharedReader(backend=("twin", "it is not a mechanical system"), theta=theta_names,
+                                   theta_positive=False, theta_example="{a = 2, b = 1.5}", late=_regressor),
+    events={"constant_force": None}, order=first_order, sections=("first-order", "phase space")))

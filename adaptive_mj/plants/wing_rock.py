@@ -22,6 +22,9 @@ from adaptive_mj.plants import BuiltPlant
 from adaptive_mj.plants.twin import TwinPlant, scenario_integrator
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, register
+from adaptive_mj.plants import plant_keys
+from adaptive_mj.keys import Key, Table
+from adaptive_mj.specs import PlantSpec, WingRockSpec
 
 #: Elzebda, Nayfeh and Mook (1989), 25° angle of attack: [x1, x2, |x1| x2, |x2| x2, x1³]
 W_ELZEBDA_25 = 1e-3 * np.array([-18.59521, 15.162375, -62.45153, 9.54708, 21.45291])
@@ -97,8 +100,27 @@ def from_scenario(scn, source) -> BuiltPlant:
     return BuiltPlant(TwinPlant(form(), theta, dt=dt, integrator=integrator, ctrl_range=ctrl))
 
 
+# --- its scenario keys -----------------------------------------------------------
+WING_ROCK_W = (-18.59521e-3, 15.162375e-3, -62.45153e-3, 9.54708e-3, 21.45291e-3)  # Elzebda et al., 25°
+KEYS = plant_keys.analytic_keys(
+    Key("W", "array of 5 numbers", default=WING_ROCK_W,
+        doc="roll-moment coefficients of [x1, x2, |x1| x2, |x2| x2, x1³] (default Elzebda's 25° set)"),
+    Key("l_delta", "number", default=1.0, bounds="non-zero", doc="L_δ, the control effectiveness"))
+
+
+def read_keys(kind: PlantKind, t: Table, base_dir) -> PlantSpec:
+    """plant.* of kind "wing_rock" (analytic, twin backend): W (5,) and l_delta."""
+    head = plant_keys.read_analytic(t)
+    wing_rock = WingRockSpec(W=t.numbers("W", WING_ROCK_W, length=5), l_delta=t.number("l_delta", 1.0))
+    if wing_rock.l_delta == 0:
+        raise t.fail("l_delta", "non-zero", 0.0)
+    t.finish()
+    return PlantSpec(kind=kind.name, **head, wing_rock=wing_rock)
+
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "wing_rock"
 KIND = register(PlantKind(
     "wing_rock", __name__, frozenset({Form.MODEL, Form.MRAC_STATE}), output_unit="rad", control_unit="-",
     params={},
-    default_model=None, doc="wing rock of a slender delta wing"))
+    default_model=None, doc="wing rock of a slender delta wing", keys=KEYS, reader=read_keys,
+    events={"constant_force": None, "flight_condition": "twin"}, sections=("wing rock",)))

@@ -305,7 +305,8 @@ def panel_groups(names: tuple[str, ...], plant_kind: str | None) -> list[tuple[s
     payload's 10: "mass [kg]", "m·c [kg m]", "inertia [kg m²]"), so every estimate is shown."""
     from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 
-    if plant_kind != "manipulator":
+    kind = units.lookup(plant_kind)
+    if kind is None or not kind.group_params_by_unit:
         return [(f"{n} [{units.param_unit(plant_kind, n)}]" if units.param_unit(plant_kind, n) else n, [i])
                 for i, n in enumerate(names)]
     by_unit: dict[str, list[int]] = {}

@@ -1,7 +1,8 @@
 """Scenario -> the objects of a run: plant, law, reference, initial estimates,
 noise, events. One call per box of the data flow; nothing here steps physics.
 Each plant kind builds itself (``plant_kinds()``: its module's ``model_source``
-and ``from_scenario``), and each law kind has one builder (``LAW_KINDS``).
+and ``from_scenario``), and each law kind too (its ``build`` in the law-kind registry,
+adaptive_mj.laws.kinds, called with a `LawContext`: the scenario and the plant as the law sees it).
 
 The model is compiled from an XML *string* (`model_source`) so that a log
 can carry that exact string and `replay --verify` recompiles a bit-identical
@@ -17,12 +18,14 @@ import numpy as np
 
 from adaptive_mj import reference as refs
 from adaptive_mj.errors import ScenarioError
-from adaptive_mj.laws import (CompositeSlidingLaw, DeadZone, DeadZoneOn, FirstOrderAdaptiveLaw, FixedNominalLaw,
-                              Law, Modification, RobustSlidingLaw, SlidingAdaptiveLaw)
+from adaptive_mj.form import ModelForm
+from adaptive_mj.laws import DeadZone, DeadZoneOn, Law, Modification
+from adaptive_mj.laws import kinds as law_kinds
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.plants import ModelSource
 from adaptive_mj.plants.protocol import CtrlRange, JointPlant, Plant, has_form, has_joints
-from adaptive_mj.setup.scenario import JOINT_REFERENCE_KINDS, JOINT_SIGNALS, STATE_SIGNALS, EventSpec, Scenario
+from adaptive_mj.setup.scenario import (JOINT_REFERENCE_KINDS, JOINT_SIGNALS, STATE_SIGNALS, EventSpec, LawSpec,
+                                       Scenario)
 from adaptive_mj.sensors import Sensors
 from adaptive_mj.plants import Event, plant_order
 
@@ -200,72 +203,71 @@ def _named(scn: Scenario, key: str, values: dict[str, float] | str, names: tuple
 
 
 def _law(scn: Scenario, plant: Plant, modification: Modification | None = None) -> Law:
-    """The law of law.kind for `plant`; a law's own ValueError becomes a one-line ScenarioError."""
+    """The law of law.kind for `plant`, built by its kind (adaptive_mj.laws.kinds; a law plugin: `_plugin`); a
+    law's own ValueError becomes a one-line ScenarioError."""
+    kind = law_kinds.built_in().get(scn.law.kind)
     try:
-        return LAW_KINDS.get(scn.law.kind, _plugin)(scn, plant, modification)
+        if kind is None or kind.build is None:
+            return _plugin(scn, plant, modification)
+        return kind.build(LawContext(scn, plant, modification))
     except ScenarioError:
         raise
     except ValueError as exc:
         raise ScenarioError(f"{scn.source}: law: {exc}") from None
 
 
-def _first_order_adaptive(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
-    assert has_form(plant)  # a 1-DOF law kind: the scenario checked that it serves the plant's forms
-    L, form = scn.law, plant.form
-    return FirstOrderAdaptiveLaw(form, k=L.k, gamma=_gamma(scn, form.names), dead_zone=_dead_zone(scn, plant),
-                                 modification=modification)
+@dataclass(frozen=True)
+class LawContext:
+    """What a law kind's builder sees (adaptive_mj.laws.kinds.BuildContext): the scenario, the shared
+    modifications and the plant through the form the law serves (the scenario checked that it offers it)."""
+
+    scenario: Scenario
+    plant: Plant
+    modification: Modification | None
+
+    @property
+    def law(self) -> LawSpec:
+        return self.scenario.law
+
+    def model_form(self) -> ModelForm:
+        assert has_form(self.plant)  # a law of the model form: the scenario checked that the plant offers it
+        return self.plant.form
+
+    def rigid_body(self) -> law_kinds.RigidBody:
+        plant = self.plant
+        assert has_joints(plant)  # a rigid-body law: the scenario checked that the plant offers the form
+        return law_kinds.RigidBody(plant.regressor, plant.names, plant.m, tuple(plant.joint_names))
+
+    def mrac_state(self) -> law_kinds.MracState:
+        return _mrac_state(self.scenario, self.plant)
+
+    def gamma(self, names: tuple[str, ...]) -> np.ndarray | float | None:
+        return _gamma(self.scenario, names)
+
+    def dead_zone(self) -> DeadZone | None:
+        return _dead_zone(self.scenario, self.plant)
+
+    def saturation(self) -> CtrlRange:
+        return _saturation(self.scenario, self.plant)
+
+    def per_joint(self, key: str, value: float | dict[str, float]) -> np.ndarray:
+        return _per_joint(self.scenario, key, value, tuple(self.plant.joint_names))
+
+    def named(self, key: str, values: dict[str, float], names: tuple[str, ...]) -> np.ndarray:
+        return _named(self.scenario, key, values, names)
 
 
-def _sliding_adaptive(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
-    assert has_form(plant)  # a 1-DOF law kind: the scenario checked that it serves the plant's forms
-    L, form = scn.law, plant.form
-    assert L.lam is not None  # law.lambda is required for this law kind (scenario._law)
-    if L.robust.composite_gain is not None:
-        assert L.robust.composite_filter is not None  # law.composite gives gain and filter together
-        return CompositeSlidingLaw(form, lam=L.lam, k=L.k, gamma=_gamma(scn, form.names),
-                                   kappa=L.robust.composite_gain, filter_rate=L.robust.composite_filter,
-                                   dead_zone=_dead_zone(scn, plant), modification=modification)
-    return SlidingAdaptiveLaw(form, lam=L.lam, k=L.k, gamma=_gamma(scn, form.names),
-                              dead_zone=_dead_zone(scn, plant), modification=modification,
-                              # floats on a 1-DOF plant (Plant.ctrl_range)
-                              saturation=cast("tuple[float, float]", _saturation(scn, plant))
-                              if L.saturation == "freeze" else None)
+def _mrac_state(scn: Scenario, plant: Plant) -> law_kinds.MracState:
+    """The plant in MRAC's state form: a linear plant (b from its modelled part, no matched terms) or the wing
+    rock (b = L_δ, the nonlinear terms of its regressor as matched terms)."""
+    from adaptive_mj.plants import linear, wing_rock
 
-
-def _fixed_nominal(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
-    assert has_form(plant)  # a 1-DOF law kind: the scenario checked that it serves the plant's forms
-    assert scn.law.lam is not None  # law.lambda is required for this law kind (scenario._law)
-    return FixedNominalLaw(plant.form, lam=scn.law.lam, k=scn.law.k)
-
-
-def _robust_sliding(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
-    assert has_form(plant)  # a 1-DOF law kind: the scenario checked that it serves the plant's forms
-    L = scn.law
-    # law.lambda, law.K and law.boundary_layer are required for law.kind = 'robust_sliding' (scenario._law)
-    assert L.lam is not None and L.K is not None and L.boundary_layer is not None
-    return RobustSlidingLaw(plant.form, lam=L.lam, k=L.k, K=L.K, boundary_layer=L.boundary_layer)
-
-
-def _slotine_li(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
-    """Slotine-Li (law.kind = "slotine_li") and its baselines on a manipulator plant."""
-    from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
-
-    assert has_joints(plant)  # a rigid-body law kind: the scenario checked that it serves the plant's forms
-    L = scn.law
-    lam_value = L.lam_joints if L.lam_joints is not None else L.lam
-    # law.lambda (a number, or lam_joints) and law.kd are required for these kinds (scenario._manipulator_law)
-    assert lam_value is not None and L.kd is not None
-    lam = _per_joint(scn, "law.lambda", lam_value, plant.joint_names)
-    kd = _per_joint(scn, "law.kd", L.kd, plant.joint_names)
-    mode = {"slotine_li": Mode.ADAPTIVE, "computed_torque": Mode.COMPUTED_TORQUE,
-            "pd_gravity": Mode.PD_GRAVITY}[L.kind]
-    return SlotineLiLaw(plant.regressor, plant.names, plant.m, lam=lam, kd=kd,
-                        gamma=_gamma(scn, plant.names) if L.gamma is not None else 1.0,
-                        dead_zone=_dead_zone(scn, plant), mode=mode,
-                        modification=modification if mode is Mode.ADAPTIVE else None,
-                        # (m,) arrays on a plant of m joints (Plant.ctrl_range)
-                        saturation=cast("tuple[np.ndarray, np.ndarray]", _saturation(scn, plant))
-                        if L.saturation == "freeze" else None)
+    assert scn.law.order is not None  # set for a law of this form (its reader)
+    if scn.plant.kind == "linear":
+        return law_kinds.MracState(scn.law.order, linear.nominal_b(scn), None, (), tuple(plant.names))
+    assert scn.plant.wing_rock is not None  # set for plant.kind = 'wing_rock' (scenario._analytic_plant)
+    return law_kinds.MracState(scn.law.order, scn.plant.wing_rock.l_delta, wing_rock.nonlinear_terms,
+                               wing_rock.NONLINEAR, tuple(plant.names))
 
 
 def _saturation(scn: Scenario, plant: Plant) -> CtrlRange:
@@ -313,49 +315,18 @@ def _plugin(scn: Scenario, plant: Plant, modification: Modification | None) -> L
     return PluginLaw(inst, plant.form, params, shared=shared, modification=modification)
 
 
-def _mrac(scn: Scenario, plant: Plant, modification: Modification | None) -> Law:
-    """law.kind = "mrac" (laws.mrac) on a linear plant (sign and size of b from its modelled part) or
-    the wing rock (b = L_δ, the nonlinear terms of its regressor as matched terms)."""
-    from adaptive_mj.laws.mrac import MracLaw, Rule
-    from adaptive_mj.plants import linear, wing_rock
-
-    M, psi = scn.law.mrac, None
-    psi_names: tuple[str, ...] = ()
-    assert M is not None and scn.law.order is not None  # set for law.kind = 'mrac' (scenario._mrac_law)
-    if scn.plant.kind == "linear":
-        b = linear.nominal_b(scn)
-    else:
-        assert scn.plant.wing_rock is not None  # set for plant.kind = 'wing_rock' (scenario._analytic_plant)
-        b, psi, psi_names = scn.plant.wing_rock.l_delta, wing_rock.nonlinear_terms, wing_rock.NONLINEAR
-    return MracLaw(order=scn.law.order, alpha=M.alpha, beta=M.beta, gamma=_gamma(scn, tuple(plant.names)),
-                   sign_b=1.0 if b > 0 else -1.0, rule=Rule(M.rule), psi=psi, psi_names=psi_names, b_abs=abs(b),
-                   dead_zone=_dead_zone(scn, plant), modification=modification)
-
-
-#: law.kind -> builder(scn, plant) (the scenario has checked that the kind fits the plant kind)
-LAW_KINDS: dict[str, Callable[[Scenario, Plant, Modification | None], Law]] = {
-    "mrac": _mrac,
-    "first_order_adaptive": _first_order_adaptive,
-    "sliding_adaptive": _sliding_adaptive,
-    "fixed_nominal": _fixed_nominal,
-    "robust_sliding": _robust_sliding,
-    "slotine_li": _slotine_li,
-    "computed_torque": _slotine_li,
-    "pd_gravity": _slotine_li,
-}
-
-
 def _gamma(scn: Scenario, names: tuple[str, ...]) -> np.ndarray | float | None:
     g = scn.law.gamma
     return _named(scn, "law.gamma", g, names) if isinstance(g, dict) else g
 
 
 def _surface_slope(scn: Scenario) -> float:
-    """λ of s = ỹ' + λỹ, for a dead-zone sized from the noise in s: law.lambda, or a law plugin's own key
-    `lambda`; a plugin without one is refused in one line (its s is its own: adaptive-mj cannot size it)."""
+    """λ of s = ỹ' + λỹ, for a dead-zone sized from the noise in s: law.lambda, or a law plugin's (or a law
+    kind's LawSpec.params) own key `lambda`; a law without one is refused in one line (its s is its own:
+    adaptive-mj cannot size it)."""
     if scn.law.lam is not None:
         return scn.law.lam
-    lam = (scn.law.plugin_params or {}).get("lambda")
+    lam = (scn.law.plugin_params or scn.law.params or {}).get("lambda")
     if not isinstance(lam, (int, float)):
         raise ScenarioError(f"{scn.source}: law.dead_zone.width_in_noise_std on s needs the surface's slope, and "
                             f"law.kind = {scn.law.kind!r} declares no number key 'lambda'; give law.dead_zone.width, "
@@ -379,7 +350,7 @@ def _dead_zone(scn: Scenario, plant: Plant) -> DeadZone | None:
     if not np.any(std > 0):
         raise ScenarioError(f"{scn.source}: law.dead_zone.width_in_noise_std needs noise.std (the noise its "
                             "width is a multiple of), got no noise")
-    if dz.on == "s" and (scn.law.lam is not None or scn.law.plugin_params is not None):
+    if dz.on == "s" and (scn.law.lam is not None or scn.law.plugin_params is not None or scn.law.params is not None):
         sigma = surface_noise_std(len(std), _surface_slope(scn), std)
     else:
         sigma = float(std[0])
@@ -444,8 +415,9 @@ def _estimates(scn: Scenario, names: tuple[str, ...], plant: Plant) -> np.ndarra
     """theta_hat(0). Baselines hold law.nominal (else law.initial_estimates); adaptive laws
     start from law.initial_estimates (else law.nominal, else zeros)."""
     L = scn.law
+    kind = law_kinds.built_in().get(L.kind)
     first, second = ("nominal", "initial_estimates")
-    if L.kind not in ("fixed_nominal", "robust_sliding", "computed_torque", "pd_gravity"):
+    if kind is None or kind.adaptive:  # a law plugin, or an adaptive built-in kind
         first, second = second, first
     for key in (first, second):
         values = getattr(L, key)

@@ -15,11 +15,20 @@ import math
 import re
 import tomllib
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, cast, overload
+from typing import TYPE_CHECKING, Any
 
-from adaptive_mj.data import MODELS as MODELS_DIR, SCENARIOS as SCENARIOS_DIR
+from adaptive_mj.data import SCENARIOS as SCENARIOS_DIR
 from adaptive_mj.errors import ScenarioError
+from adaptive_mj.plants import kinds as _kinds
+from adaptive_mj.plants.plant_keys import BACKENDS, SharedReader, payload_paths, resolve_model as _resolve_model  # noqa: F401
+from adaptive_mj.plants.twin import FORMS as _FIRST_ORDER_FORMS
+from adaptive_mj.plants.wing_rock import WING_ROCK_W  # noqa: F401 (re-exported)
 from adaptive_mj.keys import _MISSING, Table as _Table, _Missing, _show, _suggest  # noqa: F401 (re-exported)
+from adaptive_mj.keys import joint_values as _joint_values
+from adaptive_mj.laws import kinds as law_kinds
+from adaptive_mj.laws.law_keys import (DEAD_ZONE_ON, read_dead_zone as _dead_zone,  # noqa: F401 (re-exported)
+                                       read_estimates as _estimate_table, read_gamma as _gamma,
+                                       read_robust as _robust)
 from adaptive_mj.specs import (ControlSpec, DeadZoneSpec, DisturbanceSpec, EventSpec, JointFrictionSpec,  # noqa: F401
                                LawSpec, LinearSpec, ManipulatorSpec, MracSpec, NoiseSpec, PlantSpec, ReferenceSpec,
                                RobustSpec, Scenario, SensorSpec, SimulationSpec, SuccessSpec, WingRockSpec,
@@ -33,7 +42,9 @@ if TYPE_CHECKING:
 
 SCHEMA_VERSION = 1
 
-ANALYTIC_PLANT_KINDS = ("linear", "wing_rock")  # analytic plants (adaptive_mj.plants.linear, .wing_rock)
+# analytic plants (their own readers, no model: adaptive_mj.plants.linear, .wing_rock), from the registry
+ANALYTIC_PLANT_KINDS = tuple(k.name for k in _kinds.built_in().values()
+                             if k.reader is not None and not isinstance(k.reader, SharedReader))
 
 
 def _plant_kinds() -> dict[str, PlantKind]:
@@ -44,29 +55,24 @@ def _plant_kinds() -> dict[str, PlantKind]:
 
 
 PLANT_KINDS = tuple(_plant_kinds())  # the built-in plant.kind values, from the registry
-BACKENDS = ("mujoco", "twin")
 INTEGRATORS = ("rk4", "euler", "implicitfast", "implicit")
 REFERENCE_KINDS = ("constant", "cosine", "sine", "sum_of_sines", "smooth_step", "waypoints", "reference_model")
 JOINT_REFERENCE_KINDS = ("joint_sum_of_sines", "joint_waypoints")
 
 def _law_kinds(form: str) -> tuple[str, ...]:
-    from adaptive_mj.laws.kinds import BUILT_IN, Form
-
-    return tuple(k.name for k in BUILT_IN.values() if Form(form) in k.forms)
+    return tuple(k.name for k in law_kinds.built_in().values() if law_kinds.Form(form) in k.forms)
 
 
 LAW_KINDS = _law_kinds("model") + _law_kinds("mrac_state")  # the built-in law kinds of 1-DOF plants, from the registry
 MANIPULATOR_LAW_KINDS = _law_kinds("rigid_body")  # those of multi-joint plants
-DEAD_ZONE_ON = ("s", "tracking_error")
 DISTURBANCE_KINDS = ("none", "constant", "step", "sine")
 ARM_DISTURBANCE_KINDS = DISTURBANCE_KINDS + ("noise",)  # per joint torques (adaptive_mj.disturbance)
-EVENT_KINDS = ("payload_mass", "payload_swap", "fluid_density_scale", "constant_force", "loading", "thrust_scale",
-               "flight_condition")
+EVENT_KINDS = _kinds.event_kinds()  # what the built-in plant kinds accept (PlantKind.events), from the registry
 DEFAULT_MODEL = {k.name: k.default_model for k in _plant_kinds().values() if k.default_model is not None}
 STATE_SIGNALS = ("y", "y_dot", "y_ddot")
 JOINT_SIGNALS = ("q", "q_dot")  # an arm's measured signals (noise.std)
-REGRESSORS = ("lecture", "sin_squared")
-FIRST_ORDER_PARAMS = {"lecture": ("a", "b"), "sin_squared": ("p",)}
+REGRESSORS = tuple(_FIRST_ORDER_FORMS)  # plant.regressor of kind "first_order" (adaptive_mj.plants.twin)
+FIRST_ORDER_PARAMS = {name: form().names for name, form in _FIRST_ORDER_FORMS.items()}
 
 
 
@@ -183,11 +189,6 @@ def is_law_swap(expr: str) -> bool:
     return key.strip() == "law" and bool(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.-]*", raw.strip().strip("'\"")))
 
 
-#: [law] keys whose value may be a table (a sub-table of another name may be a law kind's scoped keys)
-_LAW_TABLES = ("gamma", "initial_estimates", "nominal", "theta0", "projection", "dead_zone", "composite", "lambda",
-               "kd")
-
-
 def _scoped_law_keys(doc: dict) -> None:
     """`--set law.<kind>.<key>=v` (a sub-table of [law] named after a law kind): the keys of the law that runs,
     merged into [law]; another law's scoped keys dropped. So one sweep over law.kind can give each law its own
@@ -195,12 +196,11 @@ def _scoped_law_keys(doc: dict) -> None:
     law = doc.get("law")
     if not isinstance(law, dict):
         return
-    candidates = [k for k, v in law.items() if isinstance(v, dict) and k not in _LAW_TABLES]
+    tables = law_kinds.table_keys()  # [law] keys a law kind declares may be a table: never a law's scoped keys
+    candidates = [k for k, v in law.items() if isinstance(v, dict) and k not in tables]
     if not candidates:
         return
-    from adaptive_mj.laws import kinds as law_kinds
-
-    names = set(law_kinds.BUILT_IN)
+    names = set(law_kinds.built_in())
     if any(k not in names for k in candidates):
         from adaptive_mj.laws.plugin import installed
 
@@ -257,7 +257,7 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
     sim = _simulation(top.table("simulation"), plant, order)
     reference = _reference(top.table("reference"), plant)
     law = _law(top.table("law"), plant, order)
-    if reference.kind == "reference_model" and law.kind != "mrac":
+    if reference.kind == "reference_model" and law.mrac is None:  # the reference model is MRAC's (law.model)
         raise ScenarioError(f"{where}: reference.kind = 'reference_model' needs law.kind = 'mrac' (its model is "
                             f"law.model), got law.kind = {law.kind!r}")
     arm = plant.kind == "manipulator"
@@ -298,162 +298,25 @@ def _model_from_command_line(doc: dict, overrides: tuple[str, ...], base_dir: Pa
                             f"({here}) nor next to the scenario ({there})")
 
 
-def _resolve_model(name: str, base_dir: Path) -> Path:
-    """A bundled model name ("heave_vehicle") or a path relative to the scenario file."""
-    if "/" not in name and not name.endswith(".xml"):
-        return MODELS_DIR / f"{name}.xml"
-    p = Path(name)
-    return p if p.is_absolute() else (base_dir / p)
+def _plant(t: _Table, base_dir: Path) -> PlantSpec:
+    """[plant]: its kind looked up in the plant-kind registry (adaptive_mj.plants.kinds), which reads the
+    kind's own keys (PlantKind.read), else an installed plant plugin's; an unknown kind is refused naming
+    every kind there is."""
+    from adaptive_mj.plants import kinds as plant_kinds
 
-
-def _plant(t: _Table, base_dir: Path) -> PlantSpec:  # noqa: C901 (one branch per plant kind; split in issue 19)
     raw_kind = t.data.get("kind")
-    if raw_kind in ANALYTIC_PLANT_KINDS:
-        return _analytic_plant(t, raw_kind)
+    kind = plant_kinds.built_in().get(raw_kind) if isinstance(raw_kind, str) else None
+    if kind is not None and kind.reader is not None:
+        return kind.read(t, base_dir)
     plugins: dict[str, Installed[PlantPlugin]] = {}
-    if isinstance(raw_kind, str) and raw_kind not in PLANT_KINDS:
+    if isinstance(raw_kind, str):
         from adaptive_mj.plants.plugin import installed
 
         plugins = installed()
         if raw_kind in plugins:
             return _plugin_plant(t, raw_kind, plugins[raw_kind], base_dir)
-    kind = t.string("kind", choices=PLANT_KINDS + tuple(sorted(plugins)))
-    backend = t.string("backend", "mujoco", choices=BACKENDS)
-    if kind == "first_order" and backend != "twin":
-        raise t.fail("backend", "'twin' for plant.kind = 'first_order' (it is not a mechanical system)", backend)
-    if kind == "ship" and backend != "mujoco":
-        raise t.fail("backend", "'mujoco' for plant.kind = 'ship' (its true Nomoto parameters are fitted to the "
-                                "MuJoCo model)", backend)
-    model_name = t.string("model", DEFAULT_MODEL.get(kind))
-    model = None if model_name is None else _resolve_model(model_name, base_dir)
-    if kind == "first_order" and "model" in t.data:
-        raise t.fail("model", "absent for plant.kind = 'first_order'", model_name)
-    joint = t.string("joint", None)
-    actuator = t.string("actuator", None)
-    payload = t.string("payload", "sphere" if kind == "arm" else None)
-    if payload == "none":
-        payload = None
-    payload, payload_paths = _resolve_payload(payload, base_dir)
-    payload_mass = t.number("payload_mass", None, gt=0)
-    site = t.string("site", "tip")
-    if kind not in ("arm", "manipulator"):
-        for key in ("payload", "payload_mass", "site"):
-            if key in t.data:
-                raise t.fail(key, "absent unless plant.kind = 'arm' or 'manipulator'", t.data[key])
-    manipulator = None
-    if kind == "manipulator":
-        if backend != "mujoco":
-            raise t.fail("backend", "'mujoco' for plant.kind = 'manipulator' (its truth is the MuJoCo model)", backend)
-        if payload_mass is not None and payload is None:
-            raise t.fail("payload_mass", "absent when plant.payload is 'none'", payload_mass)
-        manipulator = _manipulator(t, payload)
-    else:
-        for key in ("unknown", "joint_params", "base_parameters", "servo_to_torque", "forcerange"):
-            if key in t.data:
-                raise t.fail(key, "absent unless plant.kind = 'manipulator'", t.data[key])
-    manipulator = _joint_friction(t, kind, manipulator)
-    theta = t.named_numbers("theta", None)
-    if theta is not None and backend != "twin":
-        raise t.fail("theta", "absent for backend 'mujoco' (true parameters come from the compiled model)", theta)
-    if kind == "first_order" and theta is None:
-        raise ScenarioError(f"{t.where}: plant.theta is required for plant.kind = 'first_order' "
-                            "(e.g. {a = 2, b = 1.5})")
-    if theta is not None:
-        regressor = t.data.get("regressor", "lecture")
-        regressor = regressor if isinstance(regressor, str) else "lecture"  # its type is checked below
-        expected = {"heave": ("d", "b", "c"), "arm": ("J", "b", "g_sin", "g_cos"),
-                    "first_order": FIRST_ORDER_PARAMS.get(regressor, ("a", "b"))}[kind]
-        if tuple(theta) != expected:
-            raise t.fail("theta", f"a table with keys {', '.join(expected)} in that order", list(theta))
-        if kind != "first_order" and theta[expected[0]] <= 0:
-            raise t.fail(f"theta.{expected[0]}", "> 0", theta[expected[0]])
-    g = t.number("g", 9.81, gt=0)
-    density = t.number("density", None, ge=0)
-    viscosity = t.number("viscosity", None, ge=0)
-    # length=2: a pair [lo, hi] when given
-    ctrl = cast("tuple[float, float] | None", t.numbers("ctrl_range", None, length=2))
-    if ctrl is not None and not ctrl[0] < ctrl[1]:
-        raise t.fail("ctrl_range", "[lo, hi] with lo < hi", list(ctrl))
-    lag = t.number("thruster_time_constant", None, gt=0)
-    if lag is not None and (kind != "heave" or theta is not None):
-        raise t.fail("thruster_time_constant", "absent unless plant.kind = 'heave' built from a model", lag)
-    regressor = t.string("regressor", "lecture", choices=REGRESSORS)
-    if "regressor" in t.data and kind != "first_order":
-        raise t.fail("regressor", "absent unless plant.kind = 'first_order'", regressor)
-    t.finish()
-    return PlantSpec(kind=kind, backend=backend, model=model, joint=joint, actuator=actuator, payload=payload,
-                     payload_mass=payload_mass, site=site, theta=theta, g=g, density=density,
-                     viscosity=viscosity, ctrl_range=ctrl, thruster_time_constant=lag, regressor=regressor,
-                     manipulator=manipulator, payload_paths=payload_paths)
-
-
-WING_ROCK_W = (-18.59521e-3, 15.162375e-3, -62.45153e-3, 9.54708e-3, 21.45291e-3)  # Elzebda et al., 25°
-
-
-def _analytic_plant(t: _Table, kind: str) -> PlantSpec:
-    """plant.kind = "linear" or "wing_rock": analytic plants on the twin backend (no model)."""
-    t.string("kind")
-    backend = t.string("backend", "twin", choices=("twin",))
-    # length=2: a pair [lo, hi] when given
-    ctrl = cast("tuple[float, float] | None", t.numbers("ctrl_range", None, length=2))
-    if ctrl is not None and not ctrl[0] < ctrl[1]:
-        raise t.fail("ctrl_range", "[lo, hi] with lo < hi", list(ctrl))
-    linear = wing_rock = None
-    if kind == "linear":
-        linear = LinearSpec(num=t.numbers("num"), den=t.numbers("den"),
-                            unmodelled_num=t.numbers("unmodelled_num", (1.0,)),
-                            unmodelled_den=t.numbers("unmodelled_den", (1.0,)),
-                            input_delay=t.number("input_delay", 0.0, ge=0), **_state_space(t))
-        for key in ("den", "unmodelled_den"):
-            if not any(getattr(linear, key)):
-                raise t.fail(key, "a polynomial with a non-zero coefficient", list(getattr(linear, key)))
-    else:
-        wing_rock = WingRockSpec(W=t.numbers("W", WING_ROCK_W, length=5), l_delta=t.number("l_delta", 1.0))
-        if wing_rock.l_delta == 0:
-            raise t.fail("l_delta", "non-zero", 0.0)
-    t.finish()
-    return PlantSpec(kind=kind, backend=backend, model=None, joint=None, actuator=None, payload=None,
-                     payload_mass=None, site="tip", theta=None, g=9.81, density=None, viscosity=None,
-                     ctrl_range=ctrl, linear=linear, wing_rock=wing_rock)
-
-
-def _state_space(t: _Table) -> dict:
-    """plant.A, plant.B, plant.C (kind "linear"): all three or none; A square, B and C of its size; not
-    with unmodelled_num/den (the matrices are the whole plant)."""
-    given = [k for k in ("A", "B", "C") if k in t.data]
-    if not given:
-        return {}
-    if len(given) != 3:
-        missing = next(k for k in ("A", "B", "C") if k not in t.data)
-        raise t.fail(missing, "given with plant.A, plant.B and plant.C together", None)
-    for key in ("unmodelled_num", "unmodelled_den"):
-        if key in t.data:
-            raise t.fail(key, "absent when plant.A, B and C give the whole plant", t.data[key])
-    rows = t.get("A")
-    if not isinstance(rows, list) or not rows or any(not isinstance(r, list) or len(r) != len(rows) for r in rows):
-        raise t.fail("A", "a square array of arrays (rows)", rows)
-    sub = _Table({f"A[{i}]": r for i, r in enumerate(rows)}, t.prefix, t.where)
-    A = tuple(sub.numbers(f"A[{i}]", length=len(rows)) for i in range(len(rows)))
-    return {"A": A, "B": t.numbers("B", length=len(rows)), "C": t.numbers("C", length=len(rows))}
-
-
-def _payload_paths(name: str | None, base_dir: Path) -> tuple[Path, ...]:
-    """Where a payload file is looked for (adaptive_mj.plants.payload.candidates); checked in build."""
-    from adaptive_mj.plants.payload import candidates
-
-    return () if name is None else candidates(name, base_dir)
-
-
-def _resolve_payload(name: str | None, base_dir: Path) -> tuple[str | None, tuple[Path, ...]]:
-    """plant.payload: a bundled name as it is; a path as the first place it is found (next to the
-    scenario, then the current directory), else the first place looked; and the places looked."""
-    from adaptive_mj.plants.payload import is_bundled
-
-    paths = _payload_paths(name, base_dir)
-    if name is None or is_bundled(name):
-        return name, paths
-    return str(next((p for p in paths if p.is_file()), paths[0])), paths
-
+    t.string("kind", choices=tuple(plant_kinds.built_in()) + tuple(sorted(plugins)))
+    raise ScenarioError(f"{t.where}: plant.kind {raw_kind!r} has no key reader")  # a kind registered without one
 
 
 def _plugin_params(t: _Table, inst: Installed[PlantPlugin] | Installed[LawPlugin], section: str,
@@ -491,87 +354,14 @@ def _plugin_plant(t: _Table, kind: str, inst: Installed[PlantPlugin], base_dir: 
                      ctrl_range=None, plugin_params=params)
 
 
-def _manipulator(t: _Table, payload: str | None) -> ManipulatorSpec:
-    raw = t.get("unknown", "payload" if payload is not None else "all")
-    if isinstance(raw, list):
-        if not raw or not all(isinstance(v, str) and v for v in raw):
-            raise t.fail("unknown", "'payload', 'all' or a non-empty array of body names", raw)
-        unknown: str | tuple[str, ...] = tuple(raw)
-    else:
-        unknown = t.string("unknown", "payload" if payload is not None else "all", choices=("payload", "all"))
-        if unknown == "payload" and payload is None:
-            raise t.fail("unknown", "'all' or an array of body names when there is no payload (plant.payload "
-                                    "is 'none')", unknown)
-    servo = t.boolean("servo_to_torque", False)
-    return ManipulatorSpec(unknown=unknown, joint_params=t.boolean("joint_params", False),
-                           base_parameters=t.boolean("base_parameters", False),
-                           servo_to_torque=servo, forcerange=_forcerange(t, servo))
-
-
-def _forcerange(t: _Table, servo_to_torque: bool) -> float | dict[str, float] | None:
-    """plant.forcerange: |tau| limit [N m or N] for servos without a forcerange, one number for every
-    joint or a table {joint or actuator name = number} (names are checked against the model in build)."""
-    raw = t.get("forcerange", None)
-    if raw is None:
-        return None
-    if not servo_to_torque:
-        raise t.fail("forcerange", "absent unless plant.servo_to_torque = true (it limits the rebuilt servos)",
-                     raw)
-    if isinstance(raw, dict):
-        if not raw:
-            raise t.fail("forcerange", "a number > 0 or a non-empty table {joint = number > 0}", raw)
-        return t.named_numbers("forcerange", gt=0)
-    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
-        raise t.fail("forcerange", "a number > 0 or a table {joint = number > 0}", raw)
-    return t.number("forcerange", gt=0)
-
-
-FRICTION_KEYS = ("damping", "frictionloss", "actuator_lag", "torque_limit", "friction_params", "coulomb_smoothing")
-
-
-def _joint_friction(t: _Table, kind: str, spec: "ManipulatorSpec | None") -> "ManipulatorSpec | None":
-    """plant.damping, .frictionloss, .actuator_lag, .friction_params, .coulomb_smoothing of a manipulator
-    into spec.friction (joint names are checked against the model in build); refused on other kinds."""
-    if spec is None:
-        for key in FRICTION_KEYS:
-            if key in t.data:
-                raise t.fail(key, "absent unless plant.kind = 'manipulator'", t.data[key])
-        return None
-    values: dict[str, Any] = {}
-    for key in ("damping", "frictionloss", "actuator_lag"):
-        if key not in t.data:
-            continue
-        v = _joint_values(t, key, arrays=False)
-        for j, x in (v.items() if isinstance(v, dict) else [("", v)]):
-            if not x >= 0:
-                raise t.fail(key + (f".{j}" if j else ""), ">= 0", x)
-        values[key] = v
-    if "torque_limit" in t.data:
-        v = _joint_values(t, "torque_limit", arrays=False)
-        for j, x in (v.items() if isinstance(v, dict) else [("", v)]):
-            if not x > 0:
-                raise t.fail("torque_limit" + (f".{j}" if j else ""), "> 0 [N m]", x)
-        values["torque_limit"] = v
-    friction_params = t.boolean("friction_params", False)
-    eps = t.number("coulomb_smoothing", 0.01, gt=0)
-    if "coulomb_smoothing" in t.data and not friction_params:
-        raise t.fail("coulomb_smoothing", "absent unless plant.friction_params = true (it shapes the Coulomb "
-                                          "column)", eps)
-    import dataclasses
-
-    return dataclasses.replace(spec, friction=JointFrictionSpec(**values, friction_params=friction_params,
-                                                                 coulomb_smoothing=eps))
-
-
 def _order(doc: dict, plant: PlantSpec, where: str) -> int:
-    """n: 1 for first_order; 2, or 3 for a heave vehicle with a thruster lag and law.order = 3."""
-    if plant.kind in ("first_order", "linear"):
-        return 1
+    """n, the order of the plant's dynamics: its kind's (PlantKind.order) from the plant and law.order."""
+    from adaptive_mj.plants import kinds as plant_kinds
+
     law = doc.get("law")
-    order = law.get("order", 2) if isinstance(law, dict) else 2
-    if order == 3 and plant.thruster_time_constant is not None:
-        return 3
-    return 2
+    law_order = law.get("order", 2) if isinstance(law, dict) else 2
+    kind = plant_kinds.lookup(plant.kind)
+    return kind.order(plant, law_order) if kind is not None else plant_kinds.second_order(plant, law_order)
 
 
 def _simulation(t: _Table, plant: PlantSpec, order: int) -> SimulationSpec:
@@ -581,8 +371,11 @@ def _simulation(t: _Table, plant: PlantSpec, order: int) -> SimulationSpec:
     duration = t.number("duration", gt=0)
     if timestep is not None and timestep > duration:
         raise t.fail("timestep", f"<= simulation.duration ({duration})", timestep)
+    from adaptive_mj.plants import kinds as plant_kinds
+
+    kind = plant_kinds.lookup(plant.kind)
     x0: tuple[float, ...] | str | None
-    if plant.kind == "manipulator":  # starts on the reference (joint positions and velocities)
+    if kind is not None and kind.starts_on_reference:  # e.g. a manipulator's joint positions and velocities
         x0 = t.string("initial_state", "reference", choices=("reference",))
     elif t.data.get("initial_state") == "reference":
         x0 = t.string("initial_state")  # start on the reference: x0 = [y_d(0), ..., y_d^(n-1)(0)]
@@ -635,23 +428,6 @@ _REFERENCE_KEYS: dict[str, dict[str, float | None]] = {
     "sum_of_sines": {"amplitudes": None, "omegas": None, "phases": None, "offset": 0.0},
     "smooth_step": {"start": 0.0, "end": 1.0, "t0": 1.0, "rise_time": 2.0},
 }
-
-
-@overload
-def _joint_values(t: _Table, name: str, *, arrays: Literal[False]) -> float | dict[str, float]: ...
-@overload
-def _joint_values(t: _Table, name: str, *,
-                  arrays: Literal[True]) -> tuple[float, ...] | dict[str, tuple[float, ...]]: ...
-def _joint_values(t: _Table, name: str, *, arrays: bool) -> (
-        float | dict[str, float] | tuple[float, ...] | dict[str, tuple[float, ...]]):
-    """A value for every joint (a number, or an array with arrays=True), or a table by joint name."""
-    v = t.get(name)
-    if isinstance(v, dict):
-        sub = t.table(name)
-        if arrays:
-            return {key: sub.numbers(key) for key in v}
-        return {key: sub.number(key) for key in v}
-    return t.numbers(name) if arrays else t.number(name)
 
 
 def _joint_reference(t: _Table, kind: str) -> ReferenceSpec:
@@ -742,56 +518,20 @@ def _model_reference(t: _Table) -> ReferenceSpec:
     return ReferenceSpec(kind="reference_model", params=params)
 
 
-def _gamma(t: _Table) -> float | dict[str, float] | None:
-    v = t.get("gamma", None)
-    if v is None:
-        return None
-    if isinstance(v, dict):
-        return t.named_numbers("gamma", gt=0)
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise t.fail("gamma", "a number > 0, or a table {parameter = number > 0}", v)
-    return t.number("gamma", gt=0)
-
-
-def _manipulator_law(t: _Table) -> LawSpec:
-    kind = t.string("kind", "slotine_li", choices=MANIPULATOR_LAW_KINDS)
-    lam = _joint_values(t, "lambda", arrays=False)
-    kd = _joint_values(t, "kd", arrays=False)
-    for key, value in (("lambda", lam), ("kd", kd)):
-        for j, v in (value.items() if isinstance(value, dict) else [("", value)]):
-            if not v > 0:
-                raise t.fail(key + (f".{j}" if j else ""), "> 0", v)
-    gamma = _gamma(t)
-    if gamma is None and kind == "slotine_li":
-        raise ScenarioError(f"{t.where}: law.gamma is required for law.kind = 'slotine_li'")
-    dead_zone = _dead_zone(t)
-    initial = _estimate_table(t, "initial_estimates")
-    nominal = _estimate_table(t, "nominal")
-    if kind != "slotine_li" and nominal is None and initial is None:
-        raise ScenarioError(f"{t.where}: law.nominal (or law.initial_estimates) is required for law.kind = {kind!r}")
-    robust = _robust(t, kind, adaptive=kind == "slotine_li", composite=False, presets=("physical",))
-    saturation = t.string("saturation", "ignore", choices=("ignore", "freeze"))
-    if saturation != "ignore" and kind != "slotine_li":
-        raise t.fail("saturation", "'ignore' for a law without adaptation", saturation)
-    t.finish()
-    return LawSpec(kind=kind, order=2, lam=None if isinstance(lam, dict) else lam, k=0.0, gamma=gamma,
-                   dead_zone=dead_zone, initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None,
-                   kd=kd, lam_joints=lam if isinstance(lam, dict) else None, robust=robust, saturation=saturation)
-
-
 def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
     """[law]: its kind looked up in the law-kind registry (adaptive_mj.laws.kinds: the built-in kinds and the
-    installed plugins), refused in one line when it serves none of the plant's forms, then its own keys."""
-    from adaptive_mj.laws import kinds as law_kinds
+    installed plugins), refused in one line when it serves none of the plant's forms, then its own keys, read
+    by the kind's reader (a plugin's: _plugin_law)."""
     from adaptive_mj.plants import kinds as plant_kinds
 
+    built_in = law_kinds.built_in()
     raw_kind = t.data.get("kind")
     plugins: dict[str, Installed[LawPlugin]] = {}
-    if isinstance(raw_kind, str) and raw_kind not in law_kinds.BUILT_IN:
+    if isinstance(raw_kind, str) and raw_kind not in built_in:
         from adaptive_mj.laws.plugin import installed
 
         plugins = installed()
-    known = {**law_kinds.BUILT_IN, **{n: law_kinds.plugin_kind(n, i) for n, i in sorted(plugins.items())}}
+    known = {**built_in, **{n: law_kinds.plugin_kind(n, i) for n, i in sorted(plugins.items())}}
     plant_kind = plant_kinds.lookup(plant.kind)
     offered = plant_kind.forms if plant_kind is not None else frozenset({law_kinds.Form.MODEL})
     kind = t.string("kind", plant_kind.default_law if plant_kind is not None else "sliding_adaptive",
@@ -800,40 +540,12 @@ def _law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
         raise ScenarioError(f"{t.where}: {law_kinds.refusal(known[kind], plant.kind, offered, law_kinds.all_kinds())}")
     if kind in plugins:
         return _plugin_law(t, kind, plugins[kind], plant, order)
-    if law_kinds.Form.RIGID_BODY in known[kind].forms:
-        return _manipulator_law(t)
-    if kind == "mrac":
-        return _mrac_law(t, plant, order)
-    if (kind == "first_order_adaptive") != (plant.kind == "first_order"):
-        raise t.fail("kind", "'first_order_adaptive' exactly when plant.kind = 'first_order'", kind)
-    law_order = t.integer("order", order, ge=1)
-    if law_order != order:
-        allowed = "2, or 3 with plant.thruster_time_constant" if plant.kind == "heave" else str(order)
-        raise t.fail("order", f"{allowed} for plant.kind = {plant.kind!r}", law_order)
-    lam = None if kind == "first_order_adaptive" else t.number("lambda", gt=0)
-    k = t.number("k", ge=0)
-    gamma = _gamma(t)
-    if gamma is None and kind in ("sliding_adaptive", "first_order_adaptive"):
-        raise ScenarioError(f"{t.where}: law.gamma is required for law.kind = {kind!r}")
-    dead_zone = _dead_zone(t)
-    initial = _estimate_table(t, "initial_estimates")
-    nominal = _estimate_table(t, "nominal")
-    if kind in ("fixed_nominal", "robust_sliding") and nominal is None and initial is None:
-        raise ScenarioError(f"{t.where}: law.nominal (or law.initial_estimates) is required for law.kind = {kind!r}")
-    K = t.number("K", None, ge=0) if kind == "robust_sliding" else None
-    phi = t.number("boundary_layer", None, gt=0) if kind == "robust_sliding" else None
-    if kind == "robust_sliding" and (K is None or phi is None):
-        raise ScenarioError(f"{t.where}: law.K and law.boundary_layer are required for law.kind = 'robust_sliding'")
-    robust = _robust(t, kind, adaptive=kind in ("sliding_adaptive", "first_order_adaptive"),
-                     composite=kind == "sliding_adaptive", presets=())
-    saturation = t.string("saturation", "ignore", choices=("ignore", "freeze"))
-    if saturation != "ignore" and (kind != "sliding_adaptive" or robust.composite_gain is not None):
-        raise t.fail("saturation", "'ignore' except for law.kind = 'sliding_adaptive' (without law.composite)",
-                     saturation)
-    t.finish()
-    return LawSpec(kind=kind, order=law_order, lam=lam, k=k, gamma=gamma, dead_zone=dead_zone,
-                   initial_estimates=initial, nominal=nominal, K=K, boundary_layer=phi, robust=robust,
-                   saturation=saturation)
+    misfit = law_kinds.misfit(known[kind], plant.kind)
+    if misfit is not None:
+        raise t.fail("kind", misfit, kind)
+    read = known[kind].read
+    assert read is not None  # every built-in kind declares its reader (adaptive_mj.laws.kinds.LawKind)
+    return read(t, kind, plant, order)
 
 
 def _plugin_law(t: _Table, kind: str, inst: Installed[LawPlugin], plant: PlantSpec, order: int) -> LawSpec:
@@ -861,100 +573,6 @@ def _plugin_law(t: _Table, kind: str, inst: Installed[LawPlugin], plant: PlantSp
     return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=None, dead_zone=dead_zone,
                    initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None, plugin_params=params,
                    robust=robust)
-
-
-ROBUST_KEYS = ("sigma", "e_modification", "theta0", "projection", "composite")
-
-
-def _mrac_law(t: _Table, plant: PlantSpec, order: int) -> LawSpec:
-    """law.kind = "mrac" (adaptive_mj.laws.mrac), on plant.kind = "linear" (which takes no other law)
-    or "wing_rock": law.model, law.model_gain, law.rule, law.gamma (rates), law.initial_estimates and
-    the modifications (law.sigma, law.e_modification, law.theta0, law.projection, law.dead_zone)."""
-    kind = t.string("kind", "mrac", choices=("mrac",))
-    if plant.kind not in ("linear", "wing_rock"):
-        raise t.fail("kind", "a law of plant.kind = 'linear' or 'wing_rock' (law.kind = 'mrac' needs an analytic "
-                             f"plant), not of plant.kind = {plant.kind!r}", kind)
-    law_order = t.integer("order", order, ge=1)
-    if law_order != order:
-        raise t.fail("order", f"{order} for plant.kind = {plant.kind!r}", law_order)
-    alpha = t.numbers("model", length=order)
-    if any(a <= 0 for a in alpha):
-        raise t.fail("model", f"{order} coefficient(s) > 0 (a stable reference model)", list(alpha))
-    beta = t.number("model_gain", alpha[0])
-    if beta == 0:
-        raise t.fail("model_gain", "non-zero", beta)
-    rule = t.string("rule", "lyapunov", choices=("lyapunov", "mit"))
-    if rule == "mit" and order != 1:
-        raise t.fail("rule", "'lyapunov' for a law of order 2 (the MIT rule is written for order 1)", rule)
-    gamma = _gamma(t)
-    if gamma is None:
-        raise ScenarioError(f"{t.where}: law.gamma is required for law.kind = 'mrac'")
-    dead_zone = _dead_zone(t)
-    initial = _estimate_table(t, "initial_estimates")
-    robust = _robust(t, kind, adaptive=True, composite=False, presets=())
-    t.finish()
-    return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=gamma, dead_zone=dead_zone,
-                   initial_estimates=initial, nominal=None, K=None, boundary_layer=None, robust=robust,
-                   mrac=MracSpec(alpha=alpha, beta=beta, rule=rule))
-
-
-def _robust(t: _Table, kind: str, *, adaptive: bool, composite: bool, presets: tuple[str, ...]) -> RobustSpec:
-    """law.sigma, law.e_modification, law.theta0, law.projection, law.composite: checked for every
-    law; the baselines ignore them (as they ignore gamma and dead_zone), so law.kind = a baseline
-    turns any adaptive scenario into its baseline."""
-    sigma = t.number("sigma", 0.0, ge=0)
-    e_mod = t.number("e_modification", 0.0, ge=0)
-    theta0 = t.named_numbers("theta0", None)
-    projection: dict[str, tuple[float, float]] | str | None = None
-    if isinstance(t.data.get("projection"), str):
-        if not presets:
-            raise t.fail("projection", "a table {parameter = [lower, upper]}", t.data["projection"])
-        projection = t.string("projection", choices=presets)
-    else:
-        box = t.table("projection", None)
-        if box is not None:
-            projection = {}
-            for name in box.data:
-                lo, hi = box.numbers_with_inf(name, length=2)
-                if not lo <= hi:
-                    raise box.fail(name, "[lower, upper] with lower <= upper", [lo, hi])
-                projection[name] = (lo, hi)
-            box.finish(tuple(box.data))
-    gain = filt = None
-    if "composite" in t.data and adaptive and not composite:
-        raise t.fail("composite", f"absent for law.kind = {kind!r} (composite adaptation is implemented for "
-                                  "law.kind = 'sliding_adaptive')", t.data["composite"])
-    c = t.table("composite", None)
-    if c is not None:
-        gain, filt = c.number("gain", gt=0), c.number("filter", gt=0)
-        c.finish()
-    if not adaptive:
-        return RobustSpec()
-    return RobustSpec(sigma=sigma, e_modification=e_mod, theta0=theta0, projection=projection,
-                      composite_gain=gain, composite_filter=filt)
-
-
-def _dead_zone(t: _Table) -> DeadZoneSpec | None:
-    """law.dead_zone = {width, on}, or None."""
-    dz = t.table("dead_zone", None)
-    if dz is None:
-        return None
-    if "width_in_noise_std" in dz.data:
-        if "width" in dz.data:
-            raise dz.fail("width", "absent when law.dead_zone.width_in_noise_std is given", dz.data["width"])
-        spec = DeadZoneSpec(width=None, on=dz.string("on", "s", choices=DEAD_ZONE_ON),
-                            width_in_noise_std=dz.number("width_in_noise_std", gt=0))
-    else:
-        spec = DeadZoneSpec(width=dz.number("width", ge=0), on=dz.string("on", "s", choices=DEAD_ZONE_ON))
-    dz.finish()
-    return spec
-
-
-def _estimate_table(t: _Table, name: str) -> dict[str, float] | str | None:
-    """A table {name = value}, or the string "model": the true values of the compiled model at t = 0."""
-    if isinstance(t.data.get(name), str):
-        return t.string(name, choices=("model",))
-    return t.named_numbers(name, None)
 
 
 def _noise(t: _Table, order: int, *, arm: bool = False) -> NoiseSpec:
@@ -1009,6 +627,18 @@ def _sensors(t: _Table, *, arm: bool) -> SensorSpec:
     return spec
 
 
+def _accepted(t: _Table, kind: str, plant: PlantSpec) -> None:
+    """Refuses an event of `kind` on a plant kind that does not accept it (PlantKind.events) or on another
+    backend than the one it needs."""
+    from adaptive_mj.plants import kinds as plant_kinds
+
+    names, backend = plant_kinds.accepting(kind)
+    backend = plant.backend if backend is None else backend
+    if plant.kind not in names or plant.backend != backend:
+        raise t.fail("kind", f"used only with plant.kind = {' or '.join(repr(k) for k in names)} on backend "
+                             f"{backend!r}", kind)
+
+
 def _events(raw: Any, top: _Table, plant: PlantSpec, sim: SimulationSpec, base_dir: Path) -> tuple[EventSpec, ...]:
     if not isinstance(raw, list):
         raise top.fail("events", "an array of tables ([[events]])", raw)
@@ -1020,7 +650,7 @@ def _events(raw: Any, top: _Table, plant: PlantSpec, sim: SimulationSpec, base_d
         time = t.number("t", ge=0)
         if time > sim.duration:
             raise t.fail("t", f"<= simulation.duration ({sim.duration})", time)
-        kind = t.string("kind", choices=EVENT_KINDS)
+        kind = t.string("kind", choices=_event_kinds())
         value = 0.0 if kind in ("payload_swap", "flight_condition") else \
             t.number("value", gt=0 if kind != "constant_force" else None)
         W = t.numbers("W", length=5) if kind == "flight_condition" else None
@@ -1029,21 +659,21 @@ def _events(raw: Any, top: _Table, plant: PlantSpec, sim: SimulationSpec, base_d
             raise t.fail("l_delta", "non-zero", l_delta)
         body = t.string("body", "payload/body")
         payload = t.string("payload") if kind == "payload_swap" else None
-        needs = {"payload_mass": (("arm", "manipulator"), "mujoco"), "fluid_density_scale": (("heave",), "mujoco"),
-                 "payload_swap": (("manipulator",), "mujoco"),
-                 "constant_force": (("heave", "arm", "first_order", "ship", "linear", "wing_rock"), plant.backend),
-                 "loading": (("ship",), "mujoco"), "thrust_scale": (("ship",), "mujoco"),
-                 "flight_condition": (("wing_rock",), "twin")}.get(kind)
-        if needs and (plant.kind not in needs[0] or plant.backend != needs[1]):
-            kinds = " or ".join(repr(k) for k in needs[0])
-            raise t.fail("kind", f"used only with plant.kind = {kinds} on backend {needs[1]!r}", kind)
+        _accepted(t, kind, plant)
         if kind in ("payload_mass", "payload_swap") and plant.kind == "manipulator" and plant.payload is None \
                 and body.startswith("payload/"):
             raise t.fail("kind", "an event on a payload body needs plant.payload (it is 'none')", kind)
         t.finish()
         out.append(EventSpec(t=time, kind=kind, value=value, body=body, payload=payload,
-                             payload_paths=_payload_paths(payload, base_dir), W=W, l_delta=l_delta))
+                             payload_paths=payload_paths(payload, base_dir), W=W, l_delta=l_delta))
     return tuple(sorted(out, key=lambda e: e.t))
+
+
+def _event_kinds() -> tuple[str, ...]:
+    """The [[events]] kinds the plant kinds accept (adaptive_mj.plants.kinds.event_kinds)."""
+    from adaptive_mj.plants.kinds import event_kinds
+
+    return event_kinds()
 
 
 def bundled() -> list[Path]:

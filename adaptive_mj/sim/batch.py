@@ -93,6 +93,7 @@ def _drive(prepared: list[PreparedRun], ncs: list[ContextOwner], nthread: int, o
     with control_callback(ncs[0].callback.ctypes), _all_bound(ncs):
         asks: dict[int, int] = {}
         for i, p in enumerate(prepared):
+            assert p.nc is not None  # every run here has its native controller (grouped by its callback above)
             steps[i] = native_steps(p.plant, p.nc, p.rows, p.queue, p.noise, p.state_bound)
             _advance(steps, i, None, asks, results)
         while asks:

@@ -6,10 +6,12 @@ The order of a control step, written once:
     events due → measure (true state + the step's noise) → reference → law (at the integrator's
     stages, or once per control period) → limits (clamp) → delay line → apply → physics →
     advance the estimates → divergence check → the step's row
-`ControlStep.step` runs it on the Python path; inside the callback, `Controller.__call__` runs
-"measure … apply" with the functions of adaptive_mj.sim.stage, which the compiled callbacks also
-run (the same source compiled by numba). The native path runs the callback over chunks of steps
-and does the events, divergence check and rows between chunks, in the same order.
+Within the physics step, what happens at each integrator stage ("law … apply", the row's control, the estimates'
+advance at the step's end) is adaptive_mj.sim.stage.control_stage: `Controller` runs it with this path's pieces
+(the Law protocol, the control handed back to the plant), and the compiled callbacks run the same function
+compiled with theirs (adaptive_mj.sim.native_step). `ControlStep.step` runs a physics step around it on the
+Python path (adaptive_mj.env drives it one agent step at a time); the native path runs the callback over chunks of
+steps and does the events, divergence check and rows between chunks, in the same order (`native_steps`).
 
 How the estimates are integrated (adaptive_mj.sim.stage): under continuous control the law is
 evaluated at every stage MuJoCo's integrator calls the callback at, with the stage estimate of the
@@ -29,7 +31,7 @@ from __future__ import annotations
 import math
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, NamedTuple, Protocol, Sequence
+from typing import TYPE_CHECKING, Callable, Generator, NamedTuple, Protocol, Sequence
 
 import numpy as np
 
@@ -44,6 +46,7 @@ from adaptive_mj.sim.stage import TABLEAU, ControlTiming
 from adaptive_mj.trajectory import Status, Trajectory
 
 if TYPE_CHECKING:
+    from adaptive_mj.plants.protocol import NativePlant
     from adaptive_mj.sim.native_context import ContextOwner
 
 __all__ = ["Event", "ControlTiming", "Controller", "ControlStep", "StepRow", "Sink", "run", "prepare", "PreparedRun",
@@ -51,19 +54,46 @@ __all__ = ["Event", "ControlTiming", "Controller", "ControlStep", "StepRow", "Si
            "divergence", "TABLEAU", "NATIVE_CHUNK"]
 
 
+class StepContext:
+    """The Python path's context for stage.control_stage: the fields a compiled callback's context record has
+    (adaptive_mj.sim.native.CONTEXT, native_manipulator.CONTEXT), as attributes, its buffers as arrays.
+    theta (n_theta,): the estimate at the step's start, advanced in place at each step's end (or control
+    period's); u_hold (m,): the law's clamped control, held; rows: the steps armed so far (Controller.arm)."""
+
+    def __init__(self, theta: np.ndarray, lower: np.ndarray, upper: np.ndarray, m: int, stages: int, dt: float,
+                 timing: ControlTiming):
+        nth = theta.shape[0]
+        self.stage, self.row, self.rows, self.step, self.t = 0, 0, 0, 0, 0.0
+        self.nstages, self.nth, self.m, self.h = stages, nth, m, dt
+        self.mode, self.period_steps, self.period, self.delay = timing.mode, timing.steps, timing.period, timing.delay
+        self.weights = TABLEAU[stages][1]
+        self.theta, self.lower, self.upper = theta, lower, upper
+        self.rsum, self.prev, self.rate = np.zeros(nth), np.zeros(nth), np.zeros(nth)
+        self.u_hold, self.delayed, self.ring = np.zeros(m), np.zeros(m), np.zeros((timing.delay + 1, m))
+
+
+def _as_array(a: np.ndarray, shape) -> np.ndarray:
+    """stage.control_stage's `view` on the Python path: the context's buffers are arrays of their shape."""
+    return a
+
+
 class Controller:
-    """The policy the plant calls at every stage: see the module docstring and adaptive_mj.sim.stage.
+    """The policy the plant calls at every stage: stage.control_stage (the order of a control step, the one the
+    compiled callbacks run too) with this path's pieces: the law through the Law protocol, the control handed
+    back to the plant (which applies it), the row kept for ControlStep. See the module docstring.
 
     theta_hat: (n_theta,) the estimate at the step's start; after each step, step_u (the applied
-    control), step_s and step_ref hold what the step's row records."""
+    control), step_out (the law's LawStep) and step_ref hold what the step's row records."""
 
     def __init__(self, law: Law, reference, theta_hat0, ctrl_range: CtrlRange | None, order: int, stages: int,
                  dt: float, joint_shape: tuple = (), timing: ControlTiming | None = None,
                  sensors: st.Sensors | None = None):
+        from adaptive_mj.numba_util import with_globals
+
         self.law, self.reference, self.order = law, reference, order
         self.timing = timing or ControlTiming(period=dt)
-        self.theta_hat = np.array(theta_hat0, dtype=float)
-        n_theta = self.theta_hat.shape[0]
+        theta_hat = np.array(theta_hat0, dtype=float)
+        n_theta = theta_hat.shape[0]
         self.lo: float | np.ndarray = -math.inf  # control limits: floats, or (m,) on a plant of m joints
         self.hi: float | np.ndarray = math.inf
         if ctrl_range is not None:
@@ -79,29 +109,32 @@ class Controller:
             self.alpha = self.sensors.alpha(self.sense_period)
         self.inc, self.weights = TABLEAU[stages]
         self.h = dt
-        self.stage, self.step_index = len(self.inc), 0
-        self.prev, self.rsum, self.th = np.zeros(n_theta), np.zeros(n_theta), np.zeros(n_theta)
         box = law.bounds
-        self.lower, self.upper = box if box is not None else (np.full(n_theta, -np.inf), np.full(n_theta, np.inf))
-        self.held: tuple[float | np.ndarray, LawStep] | None = None  # the law's clamped u and its LawStep
+        lower, upper = box if box is not None else (np.full(n_theta, -np.inf), np.full(n_theta, np.inf))
+        self.ctx = StepContext(theta_hat, np.asarray(lower, dtype=float), np.asarray(upper, dtype=float),
+                               joint_shape[0] if self.joints else 1, stages, dt, self.timing)
+        self.theta_hat = self.ctx.theta  # the same array, advanced in place
+        self.th = np.zeros(n_theta)  # the stage estimate the law sees
+        self.held_out: LawStep | None = None  # the LawStep of the law's last evaluation (held with u_hold)
         self.step_out: LawStep | None = None
         self.step_ref: np.ndarray | None = None
         self.step_u: float | np.ndarray = 0.0
-        self.ring: list = [None] * (self.timing.delay + 1)  # the last D + 1 stage-0 controls
-        self.delayed: float | np.ndarray = 0.0  # the control of D steps ago, set at each step's stage 0
+        self._applied: float | np.ndarray = 0.0  # the control of the current stage, handed back to the plant
         self._ref_t, self._ref_v = (math.nan, math.nan), (None, None)
         self.filters = law.has_filters  # a law with filters of its own (composite)
         if self.filters and self.timing.sampled:
             raise ValueError("composite adaptation runs under continuous control only")
         self.stage_xs: list = []
         self.stage_us: list = []
+        self._stage = with_globals(st.control_stage, view=_as_array, law_stage=self._law_stage,
+                                   apply_control=self._apply_control, record_row=self._record_row)
         law.reset()
 
     def arm(self, noise: np.ndarray | None) -> None:
         """Mark the start of a physics step; noise: that step's measurement noise (None: none)."""
         if noise is not None:
             self.noise = noise
-        self.stage = 0
+        self.ctx.rows = self.ctx.row + 1
 
     def _ref(self, t: float):
         # RK4 evaluates stages 2 and 3 at the same t + h/2, and stage 4 at the next step's t:
@@ -115,60 +148,58 @@ class Controller:
         return ref
 
     def __call__(self, t: float, x: np.ndarray):
-        i = self.stage
-        if i >= len(self.inc):  # a call past the step's stages (an extra mj_forward): change nothing
-            return self.step_u
-        sampled = self.timing.sampled
-        if not sampled or (i == 0 and st.is_sample_step(self.step_index, self.timing.steps)):
-            self.held = self._evaluate(t, x, i)
-        held = self.held
-        assert held is not None  # the law ran at stage 0 of the first step (continuous: every stage)
-        u = held[0]
-        if self.timing.delay:
-            if i == 0:
-                put, get = st.delay_slot(self.step_index, self.timing.delay)
-                self.ring[put] = u
-                self.delayed = self.ring[get] if get >= 0 else 0.0 * u
-            u = self.delayed
-        if self.filters:
-            self.stage_us.append(u)
-        if i == 0:  # the row: the applied control, the law's (held) output, the reference at t_k
-            self.step_u, self.step_out, self.step_ref = u, held[1], self._ref(t)
-        self.stage = i + 1
-        return u
+        ctx = self.ctx
+        if ctx.stage >= ctx.nstages or ctx.row >= ctx.rows:  # a call past the step's stages (an extra
+            return self.step_u                                # mj_forward): change nothing
+        self._stage(ctx, (t, x))
+        return self._applied
 
-    def _evaluate(self, t: float, x: np.ndarray, i: int):
-        """The law at stage i on the measured state: (clamped u, its LawStep)."""
+    def _law_stage(self, ctx: StepContext, io, stage: int, row: int, theta, prev, lower, upper) -> None:
+        """This path's law at a stage (stage.control_stage's law_stage): the law on the measured state, its
+        clamped u into ctx.u_hold, its rate into ctx.rate, its LawStep kept."""
+        t, x = io
         ref = self._ref(t)
-        st.stage_estimate(self.theta_hat, self.prev, self.inc[i], self.h, self.lower, self.upper, self.th)
+        st.stage_estimate(theta, prev, self.inc[stage], self.h, lower, upper, self.th)
         if self.sensors is None:
             seen = x + self.noise
         else:
             seen = np.empty_like(x)
             sn = self.sensors
-            st.sense(x[0], x[1], self.noise, sn.quantum, sn.differentiated, i == 0, self.step_index == 0,
+            st.sense(x[0], x[1], self.noise, sn.quantum, sn.differentiated, stage == 0, ctx.step == 0,
                      self.alpha, self.sense_period, self.q_prev, self.v_est, seen)
         if self.filters:
-            if i == 0:
+            if stage == 0:
                 self.law.step_begins(seen)
                 self.stage_xs, self.stage_us = [], []
             self.stage_xs.append(seen)
         out = self.law(t, seen, ref, self.th.copy())
-        u = np.minimum(np.maximum(out.u, self.lo), self.hi) if self.joints else min(max(out.u, self.lo), self.hi)
-        weight = 1.0 if self.timing.sampled else self.weights[i]
-        st.accumulate_rate(self.rsum, self.prev, np.asarray(out.theta_hat_dot, dtype=float), weight)
-        return u, out
+        if self.joints:
+            ctx.u_hold[:] = np.minimum(np.maximum(out.u, self.lo), self.hi)
+        else:
+            ctx.u_hold[0] = min(max(out.u, self.lo), self.hi)
+        ctx.rate[:] = np.asarray(out.theta_hat_dot, dtype=float)
+        self.held_out = out
+
+    def _apply_control(self, ctx: StepContext, io, row: int, u: np.ndarray) -> None:
+        """This path's "apply" (stage.control_stage's apply_control): u handed back to the plant, which applies
+        it (a copy: the held buffers change at the next evaluation)."""
+        self._applied = u.copy() if self.joints else float(u[0])
+        if self.filters:
+            self.stage_us.append(self._applied)
+
+    def _record_row(self, ctx: StepContext, io, row: int, u: np.ndarray, theta) -> None:
+        """This path's row (stage.control_stage's record_row): the applied control, the law's (held) output and
+        the reference at t_k, for ControlStep.step."""
+        t, _ = io
+        self.step_u, self.step_out, self.step_ref = self._applied, self.held_out, self._ref(t)
 
     def finish_step(self) -> None:
-        """Advance the estimates: every step (continuous), or at the end of a control period (sampled)."""
-        if self.stage != len(self.inc):
-            raise RuntimeError(f"the plant called the controller {self.stage} times in a step, "
-                               f"expected {len(self.inc)}")
-        if not self.timing.sampled:
-            st.advance_estimates(self.theta_hat, self.rsum, self.h, self.lower, self.upper)
-        elif st.period_ends(self.step_index, self.timing.steps):
-            st.advance_estimates(self.theta_hat, self.rsum, self.timing.period, self.lower, self.upper)
-        self.step_index += 1
+        """After the plant's step: every stage was called (the estimates advanced at its last: every step under
+        continuous control, at the end of a control period under sampled), and a law with filters updated."""
+        ctx = self.ctx
+        if ctx.row != ctx.rows or ctx.stage != 0:
+            raise RuntimeError(f"the plant called the controller {ctx.stage} times in a step, "
+                               f"expected {ctx.nstages}")
         if self.filters:
             self.law.step_ends(self.stage_xs, self.stage_us, self.weights, self.h)
 
@@ -196,7 +227,7 @@ class EventQueue:
         self.applied: list[tuple[float, str]] = []
         self.dt = dt
 
-    def due(self, t_k: float, plant, sink=None) -> None:
+    def due(self, t_k: float, plant: Plant, sink: Sink | None = None) -> None:
         """Apply every event with t_k >= t_event - dt/2 (told to sink as it is applied)."""
         while self.pending and t_k >= self.pending[0].t - 0.5 * self.dt:
             event = self.pending.pop(0)
@@ -221,7 +252,7 @@ class ControlStep:
     step of `plant` under `controller` and returns its StepRow. adaptive_mj.env drives it one agent
     step at a time; `run` drives it to the end."""
 
-    def __init__(self, plant, controller: Controller, events: EventQueue, *, state_bound: float,
+    def __init__(self, plant: Plant, controller: Controller, events: EventQueue, *, state_bound: float,
                  noise: Callable[[], np.ndarray | None], sink=None):
         self.plant, self.controller, self.events = plant, controller, events
         self.state_bound, self.noise, self.sink = state_bound, noise, sink
@@ -251,7 +282,7 @@ class Sink(Protocol):
     def write_event(self, t: float, label: str) -> None: ...
 
 
-def limits_meta(plant) -> dict:
+def limits_meta(plant: Plant) -> dict:
     """A trajectory's meta entries for the verdict's metrics: "ctrl_range" (lo, hi) [control units],
     lists of one entry per actuator (saturation), and "joint_limits" (m, 2) [rad or m] when a joint is
     limited (joints reaching their range); also used by adaptive_mj.env."""
@@ -303,7 +334,7 @@ def drive(r: PreparedRun, law: Law, reference) -> Trajectory:
     plant = r.plant
     with _interruptible(r.rows.stopped):
         if r.nc is not None:
-            status, reason = _run_native(plant, r.nc, r.rows, r.queue, r.noise, r.state_bound)
+            status, reason = _run_native(r.nc.plant, r.nc, r.rows, r.queue, r.noise, r.state_bound)
         else:
             ctrl = Controller(law, reference, r.theta_hat0, plant.ctrl_range, r.order, plant.stages, plant.dt,
                               plant.joint_shape, r.timing, r.sensors)
@@ -367,7 +398,7 @@ def prepare(plant: Plant, law: Law, reference, *, duration: float, theta_hat0, n
     return PreparedRun(plant, rows, queue, noise, timing, nc, theta_hat0, order, state_bound, sensors)
 
 
-def _run_python(plant, step: ControlStep, rows: Rows) -> tuple[Status, str]:
+def _run_python(plant: Plant, step: ControlStep, rows: Rows) -> tuple[Status, str]:
     """Drive the Python control step to the end or the first divergence: (status, reason)."""
     with plant.controlled_by(step.controller):
         while rows.k < rows.n:
@@ -381,7 +412,8 @@ def _run_python(plant, step: ControlStep, rows: Rows) -> tuple[Status, str]:
     return Status.OK, ""
 
 
-def _run_native(plant, nc, rows: Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
+def _run_native(plant: NativePlant, nc: ContextOwner, rows: Rows, queue: EventQueue, noise: _NoiseSource,
+                state_bound: float) -> tuple[Status, str]:
     """Drive the native callback chunk by chunk: (status, reason)."""
     with plant.controlled_natively(nc.callback), nc:
         steps = native_steps(plant, nc, rows, queue, noise, state_bound)
@@ -394,7 +426,8 @@ def _run_native(plant, nc, rows: Rows, queue: EventQueue, noise: _NoiseSource, s
             return done.value
 
 
-def native_steps(plant, nc, rows: Rows, queue: EventQueue, noise: _NoiseSource, state_bound: float):
+def native_steps(plant: Plant, nc: ContextOwner, rows: Rows, queue: EventQueue, noise: _NoiseSource,
+                 state_bound: float) -> Generator[int, None, tuple[Status, str]]:
     """A native run as a generator: each chunk's events and callback buffers are prepared, then it
     yields the chunk's step count n and waits for the plant to have stepped n physics steps (one
     mj_step(nstep=n) here, or a row of a mujoco.batch.Batch in adaptive_mj.sim.batch); it returns
@@ -594,7 +627,7 @@ def _interruptible(stopped: Callable[[str], Trajectory]):
         raise interrupted from exc
 
 
-def first_divergence(plant, x, u, theta_hat, theta_next, bound):
+def first_divergence(plant: Plant, x, u, theta_hat, theta_next, bound):
     """For a native chunk: (rows to keep, reason) at the first step that diverged, or (None, '').
 
     Row j's state and estimate are the result of step j-1; the state after the chunk's
@@ -648,7 +681,7 @@ def _what_diverged(x_next, u_k, theta_hat, bound) -> str:
     return f"state {np.asarray(x_next).tolist()} beyond the bound {bound}"
 
 
-def divergence(plant, x_k, u_k, theta_hat, bound) -> str:
+def divergence(plant: Plant, x_k, u_k, theta_hat, bound) -> str:
     """Text naming the first sign of divergence after a step, or ''."""
     x_next = plant.observe()
     if not (_all_within(x_next.ravel().tolist(), bound) and _all_within(np.ravel(u_k).tolist(), math.inf)

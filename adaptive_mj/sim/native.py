@@ -3,21 +3,17 @@ law plugin's function) and the plant's regressor functions, compiled with numba 
 callback that MuJoCo calls without the GIL; physics advances with mj_step(m, d, nstep) in chunks,
 and Python only works between chunks (events, noise, logging, divergence checks).
 
-At every call the callback does what the Python controller (adaptive_mj.sim.loop.Controller)
-does, with the same functions from adaptive_mj.sim.stage: measure [q, q'] (+ noise), take the
-stage estimate, evaluate the law (continuous control: at every stage; sampled-data control: at the
-first stage of each control period, its output held), clamp u, apply the control delay, and advance
-θ̂ at the end of the step (or of the control period). The references at the stage times
-t_k + c_i h are evaluated in Python, vectorised, before each chunk (MuJoCo's stage times are
-reproduced bit for bit).
+At every call the callback runs adaptive_mj.sim.stage.control_stage, the step's order that the Python
+controller (adaptive_mj.sim.loop.Controller) runs too, compiled (adaptive_mj.sim.native_step) with this module's
+pieces: `_law_stage` (measure [q, q'] (+ noise), the stage estimate, the law on the plant's ModelForm, u
+clamped), `_apply_control` (ctrl) and `_record_row` (the step's row). The references at the stage times
+t_k + c_i h are evaluated in Python, vectorised, before each chunk (MuJoCo's stage times are reproduced bit
+for bit).
 
 The callback finds its run through mjData.userdata (adaptive_mj.sim.native_context): the context
 block `CONTEXT` (named fields) holds the run's settings, its state (stage, row, the held control)
 and the addresses of its buffers. Nothing is compiled in but the law, the plant's form and
 MuJoCo's struct layout, so the compiled callback is cached on disk and reused by every process.
-The 1-DOF and the manipulator callbacks are two functions because what the law needs differs: here
-a ModelForm's phi/f/h on the 2-vector [q, q'], there the regressor of a kinematic tree read from
-MjData's kinematics (adaptive_mj.sim.native_manipulator); the stage logic is the same code.
 tests/test_native.py shows the Python and native paths give the same rows bit for bit.
 """
 from __future__ import annotations
@@ -33,8 +29,8 @@ from adaptive_mj.laws.protocol import Law
 from adaptive_mj.laws.sliding import SLIDING_GAINS, SlidingArrays, sliding_law_values
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_context import (ContextOwner, addr, context_address, context_functions, inlined,
-                                            mujoco_offsets, source_key, unique_factory)
+from adaptive_mj.sim import native_step
+from adaptive_mj.sim.native_context import ContextOwner, addr, context_address, inlined, offsets, source_key
 
 if TYPE_CHECKING:
     from adaptive_mj.plants.mujoco_plant import MujocoPlant
@@ -67,10 +63,10 @@ if TYPE_CHECKING:
 _i8, _f8 = np.int64, np.float64
 CONTEXT = np.dtype([
     # run state
-    ("stage", _i8), ("row", _i8), ("rows", _i8), ("step", _i8), ("t", _f8), ("u_hold", _f8), ("s_hold", _f8),
-    ("held", _f8),
+    ("stage", _i8), ("row", _i8), ("rows", _i8), ("step", _i8), ("t", _f8),
     # settings
-    ("nstages", _i8), ("n", _i8), ("nth", _i8), ("qadr", _i8), ("dadr", _i8), ("act", _i8), ("delay", _i8),
+    ("nstages", _i8), ("n", _i8), ("m", _i8), ("nth", _i8), ("qadr", _i8), ("dadr", _i8), ("act", _i8),
+    ("delay", _i8),
     ("mode", _i8), ("period_steps", _i8), ("h", _f8), ("period", _f8), ("lo", _f8), ("hi", _f8),
     ("inc", _f8, 4), ("weights", _f8, 4),
     # the law's scalar gains: the address of its record (laws.sliding.SLIDING_GAINS, or laws.plugin.PLUGIN_GAINS
@@ -79,7 +75,7 @@ CONTEXT = np.dtype([
     # buffers (addresses)
     ("ref", _i8), ("noise", _i8), ("rec", _i8), ("theta", _i8), ("rsum", _i8), ("prev", _i8), ("th", _i8),
     ("rate", _i8), ("coeffs", _i8), ("gamma", _i8), ("theta0", _i8), ("lower", _i8), ("upper", _i8),
-    ("ring", _i8), ("params", _i8), ("xbuf", _i8),
+    ("ring", _i8), ("params", _i8), ("xbuf", _i8), ("u_hold", _i8), ("s_hold", _i8), ("delayed", _i8),
 ])
 _compiled: dict = {}
 
@@ -103,71 +99,55 @@ def record_columns(n: int, nth: int) -> RecordColumns:
     return RecordColumns(0, 1, 1 + n, 2 + n, 3 + n, 4 + 2 * n, 4 + 2 * n + nth)
 
 
-def _callback_factory(off, key):
-    """The callback's Python source, closed over MuJoCo's struct offsets and the cache key only;
-    `law`, `phi_fn`, `f_fn`, `h_fn`, the stage functions and the pointer intrinsics are globals that
-    compiled() replaces by their numba versions (numba, types, carray likewise)."""
-    off_ud, off_qpos, off_qvel, off_ctrl = off
+def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
+    """This shape's law at a stage (adaptive_mj.sim.native_step): measure x = [q, q'] + the step's noise, the
+    stage estimate θ̂_i, the law (the built-in sliding law or a plugin's) on the stage's reference, u clamped
+    into [lo, hi] and held with s (u_hold, s_hold (1,)), the rate into ctx.rate."""
+    base, mbase, off = io
+    n, nth, nst = ctx.n, ctx.nth, ctx.nstages
+    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.qadr + 1)  # noqa: F821 (injected)
+    qvel = carray(fptr(pointer_at(base, off.qvel)), ctx.dadr + 1)  # noqa: F821 (injected)
+    th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
+    r0 = (row * nst + stage) * (n + 1)
+    r = carray(fptr(ctx.ref), r0 + n + 1)[r0:r0 + n + 1]  # noqa: F821 (injected)
+    noise = carray(fptr(ctx.noise), (row + 1) * n)  # noqa: F821 (injected)
+    x = carray(fptr(ctx.xbuf), n)  # noqa: F821 (injected)
+    x[0] = qpos[ctx.qadr] + noise[row * n]
+    x[1] = qvel[ctx.dadr] + noise[row * n + 1]
+    stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
+    u, s = law(x, r, th, ctx, carray(fptr(ctx.coeffs), n), carray(fptr(ctx.gamma), nth),  # noqa: F821 (injected)
+               carray(fptr(ctx.theta0), nth), lower, upper, carray(fptr(ctx.params), 1 << 30), rate)  # noqa: F821,E501 (injected globals; one carray per line)
+    carray(fptr(ctx.u_hold), 1)[0] = min(max(u, ctx.lo), ctx.hi)  # noqa: F821 (injected)
+    carray(fptr(ctx.s_hold), 1)[0] = s  # noqa: F821 (injected)
 
-    @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True, cache=True)  # noqa: F821 (injected)
-    def callback(m, d):
-        if key == 0:  # never: keeps the cache key in the closure
-            return
-        base = address(d)  # noqa: F821 (injected)
-        c = context_address(base, off_ud)  # noqa: F821 (injected)
-        if c == 0:  # an MjData no native run owns (a scratch copy): leave it alone
-            return
-        ctx = carray(cptr(c), 1)[0]  # noqa: F821 (injected)
-        stage, row, nst = ctx.stage, ctx.row, ctx.nstages
-        if stage >= nst or row >= ctx.rows:  # past the step's stages (an extra mj_forward) or the chunk
-            return
-        n, nth = ctx.n, ctx.nth
-        qpos = carray(fptr(pointer_at(base, off_qpos)), ctx.qadr + 1)  # noqa: F821 (injected)
-        qvel = carray(fptr(pointer_at(base, off_qvel)), ctx.dadr + 1)  # noqa: F821 (injected)
-        ctrl = carray(fptr(pointer_at(base, off_ctrl)), ctx.act + 1)  # noqa: F821 (injected)
-        theta, rsum, prev = carray(fptr(ctx.theta), nth), carray(fptr(ctx.rsum), nth), carray(fptr(ctx.prev), nth)  # noqa: F821,E501 (injected globals; one carray per line)
-        th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
-        lower, upper = carray(fptr(ctx.lower), nth), carray(fptr(ctx.upper), nth)  # noqa: F821 (injected)
-        r0 = (row * nst + stage) * (n + 1)
-        r = carray(fptr(ctx.ref), r0 + n + 1)[r0:r0 + n + 1]  # noqa: F821 (injected)
-        sampled = ctx.mode == SAMPLED  # noqa: F821 (injected)
-        evaluate = is_sample_step(ctx.step, ctx.period_steps) and stage == 0 if sampled else True  # noqa: F821 (injected)
-        if evaluate:
-            noise = carray(fptr(ctx.noise), (row + 1) * n)  # noqa: F821 (injected)
-            x = carray(fptr(ctx.xbuf), n)  # noqa: F821 (injected)
-            x[0] = qpos[ctx.qadr] + noise[row * n]
-            x[1] = qvel[ctx.dadr] + noise[row * n + 1]
-            stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
-            u, s = law(x, r, th, ctx, carray(fptr(ctx.coeffs), n), carray(fptr(ctx.gamma), nth),  # noqa: F821 (injected)
-                       carray(fptr(ctx.theta0), nth), lower, upper, carray(fptr(ctx.params), 1 << 30), rate)  # noqa: F821,E501 (injected globals; one carray per line)
-            u = min(max(u, ctx.lo), ctx.hi)
-            accumulate_rate(rsum, prev, rate, 1.0 if sampled else ctx.weights[stage])  # noqa: F821 (injected)
-            ctx.u_hold, ctx.s_hold = u, s
-        u = ctx.u_hold
-        if ctx.delay > 0:  # apply the stage-0 control of D steps ago, held over the step (zero before)
-            if stage == 0:
-                ring = carray(fptr(ctx.ring), ctx.delay + 1)  # noqa: F821 (injected)
-                put, get = delay_slot(ctx.step, ctx.delay)  # noqa: F821 (injected)
-                ring[put] = u
-                ctx.held = ring[get] if get >= 0 else 0.0
-            u = ctx.held
-        ctrl[ctx.act] = u
-        if stage == 0:  # the step's row: t, true x, u, s, ref, θ̂ at the step's start
-            col = record_columns(n, nth)  # noqa: F821 (injected: the row's named columns)
-            rec = carray(fptr(ctx.rec), (row + 1) * col.width)  # noqa: F821 (injected)
-            o = row * col.width
-            rec[o + col.t] = ctx.t
-            rec[o + col.x] = qpos[ctx.qadr]
-            rec[o + col.x + 1] = qvel[ctx.dadr]
-            rec[o + col.u] = u
-            rec[o + col.s] = ctx.s_hold
-            for i in range(n + 1):
-                rec[o + col.ref + i] = r[i]
-            for j in range(nth):
-                rec[o + col.theta + j] = theta[j]
-        end_stage(ctx, stage, theta, rsum, lower, upper, sampled)  # noqa: F821 (injected: stage.end_stage)
 
-    return callback
+def _apply_control(ctx, io, row, u):
+    """This shape's "apply" (adaptive_mj.sim.native_step): ctrl[act] = u."""
+    base, mbase, off = io
+    carray(fptr(pointer_at(base, off.ctrl)), ctx.act + 1)[ctx.act] = u[0]  # noqa: F821 (injected)
+
+
+def _record_row(ctx, io, row, u, theta):
+    """This shape's row (adaptive_mj.sim.native_step) in the record buffer's named columns (record_columns):
+    t, true x = [q, q'], u, s, ref (n+1,), θ̂ at the step's start."""
+    base, mbase, off = io
+    n, nth = ctx.n, ctx.nth
+    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.qadr + 1)  # noqa: F821 (injected)
+    qvel = carray(fptr(pointer_at(base, off.qvel)), ctx.dadr + 1)  # noqa: F821 (injected)
+    r0 = row * ctx.nstages * (n + 1)
+    r = carray(fptr(ctx.ref), r0 + n + 1)[r0:r0 + n + 1]  # noqa: F821 (injected)
+    col = record_columns(n, nth)  # noqa: F821 (injected: the row's named columns)
+    rec = carray(fptr(ctx.rec), (row + 1) * col.width)  # noqa: F821 (injected)
+    o = row * col.width
+    rec[o + col.t] = ctx.t
+    rec[o + col.x] = qpos[ctx.qadr]
+    rec[o + col.x + 1] = qvel[ctx.dadr]
+    rec[o + col.u] = u[0]
+    rec[o + col.s] = carray(fptr(ctx.s_hold), 1)[0]  # noqa: F821 (injected)
+    for i in range(n + 1):
+        rec[o + col.ref + i] = r[i]
+    for j in range(nth):
+        rec[o + col.theta + j] = theta[j]
 
 
 def _builtin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rate):
@@ -213,35 +193,33 @@ def compiled(form, plugin=None):
     if mem_key in _compiled:
         return _compiled[mem_key]
     import numba
-    from numba import carray, types
 
-    from adaptive_mj.numba_util import address_of, jit_tree, pointer
+    from adaptive_mj.numba_util import jit_tree, pointer
 
-    offsets = mujoco_offsets()
-    off = (offsets["userdata"], offsets["qpos"], offsets["qvel"], offsets["ctrl"])
-    key = source_key(*fns, _callback_factory, _builtin_law, _plugin_law, sliding_law_values, plugin_rate,
-                     record_columns, stage_code.stage_estimate, stage_code.end_stage, context_address,
+    off = offsets()
+    key = source_key(*fns, native_step.callback_factory, stage_code.control_stage, _law_stage, _apply_control,
+                     _record_row, _builtin_law, _plugin_law, sliding_law_values, plugin_rate, record_columns,
+                     stage_code.stage_estimate, stage_code.end_stage, context_address,
                      extra=(off, numba.__version__, str(SLIDING_GAINS), str(PLUGIN_GAINS)))
-    tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
-    inline = inlined(numba)
-    forms: dict[str, Any] = {name: jit_tree(fn, inline, tag=tag)
-                             for name, fn in (("phi_fn", form.phi), ("f_fn", form.f), ("h_fn", form.h))}
-    if plugin is None:
-        law = jit_tree(_builtin_law, inline, tag=tag, carray=carray, gains_ptr=pointer(numba.from_dtype(SLIDING_GAINS)),
-                       **forms)
-    else:
-        law = jit_tree(_plugin_law, inline, tag=tag, user_law=jit_tree(plugin, inline, tag=tag), carray=carray,
-                       gains_ptr=pointer(numba.from_dtype(PLUGIN_GAINS)), **forms)
-    stage_fns = {name: jit_tree(getattr(stage_code, name), inline, tag=tag) for name in
-                 ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
-                  "delay_slot", "end_stage")}
-    pointers = context_functions(numba, carray, pointer(types.int64), tag)
-    g = {**_callback_factory.__globals__, **stage_fns, "numba": numba, "types": types, "carray": carray,
-         "law": law, "record_columns": jit_tree(record_columns, inline, tag=tag), "address": address_of(),
-         "iptr": pointer(types.int64), "fptr": pointer(types.float64),
-         "cptr": pointer(numba.from_dtype(CONTEXT)), "SAMPLED": stage_code.SAMPLED, **pointers}
-    factory = unique_factory(_callback_factory, g, key)
-    callback = factory(off, key)
+
+    def pieces(common: dict[str, Any], tag: str) -> dict[str, Any]:
+        """This shape's law_stage (the form's functions and the law inlined into it), apply_control and
+        record_row."""
+        inline = inlined(numba)
+        forms: dict[str, Any] = {name: jit_tree(fn, inline, tag=tag)
+                                 for name, fn in (("phi_fn", form.phi), ("f_fn", form.f), ("h_fn", form.h))}
+        if plugin is None:  # the law reads its gains through a pointer of its record's dtype (gains_ptr)
+            law = jit_tree(_builtin_law, inline, tag=tag, carray=common["carray"],
+                           gains_ptr=pointer(numba.from_dtype(SLIDING_GAINS)), **forms)
+        else:
+            law = jit_tree(_plugin_law, inline, tag=tag, user_law=jit_tree(plugin, inline, tag=tag),
+                           carray=common["carray"], gains_ptr=pointer(numba.from_dtype(PLUGIN_GAINS)), **forms)
+        return {"law_stage": jit_tree(_law_stage, inline, tag=tag, law=law, **common),
+                "apply_control": jit_tree(_apply_control, inline, tag=tag, **common),
+                "record_row": jit_tree(_record_row, inline, tag=tag, **common,
+                                       record_columns=jit_tree(record_columns, inline, tag=tag))}
+
+    callback = native_step.compiled_callback(CONTEXT, off, key, pieces)
     _compiled[mem_key] = callback
     return callback
 
@@ -289,7 +267,8 @@ class NativeController(ContextOwner):
             "theta": f64(np.array(theta_hat0, dtype=float).reshape(nth)), "rsum": np.zeros(nth),
             "prev": np.zeros(nth), "th": np.zeros(nth), "rate": np.zeros(nth), "coeffs": f64(p["coeffs"]),
             "gamma": f64(p["gamma"]), "theta0": f64(p["theta0"]), "lower": f64(p["lower"]), "upper": f64(p["upper"]),
-            "ring": np.zeros(control.delay + 1), "params": f64(p.get("plugin_params", np.zeros(1))),
+            "ring": np.zeros((control.delay + 1, 1)), "params": f64(p.get("plugin_params", np.zeros(1))),
+            "u_hold": np.zeros(1), "s_hold": np.zeros(1), "delayed": np.zeros(1),
             "ref": np.zeros(max_rows * self.nst * (n + 1)), "noise": np.zeros(max_rows * n),
             "rec": np.zeros(max_rows * self.ncol), "xbuf": np.zeros(n),
         }
@@ -299,7 +278,7 @@ class NativeController(ContextOwner):
         self.stage_offsets = np.asarray(inc)  # RK4: c_i = a_i (see stage.TABLEAU)
         ctx = np.zeros(1, dtype=CONTEXT)
         c = ctx[0]
-        c["nstages"], c["n"], c["nth"], c["h"], c["lo"], c["hi"] = self.nst, n, nth, plant.dt, lo, hi
+        c["nstages"], c["n"], c["m"], c["nth"], c["h"], c["lo"], c["hi"] = self.nst, n, 1, nth, plant.dt, lo, hi
         c["qadr"], c["dadr"], c["act"] = plant._qadr, plant._dadr, plant.actuator_id
         c["delay"], c["mode"], c["period_steps"], c["period"] = control.delay, control.mode, control.steps, \
             control.period

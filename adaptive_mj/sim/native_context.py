@@ -27,7 +27,7 @@ import ctypes
 import hashlib
 import inspect
 import types as pytypes
-from typing import TYPE_CHECKING, Any, Callable, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable, NamedTuple
 
 import numpy as np
 
@@ -132,6 +132,36 @@ def mujoco_offsets() -> dict[str, int]:
         out["model.gravity"] = m.opt.gravity.ctypes.data - m._address
         _offsets = out
     return _offsets
+
+
+class Offsets(NamedTuple):
+    """Byte offsets of the MjData (and MjModel: dof_armature, dof_damping, gravity) fields the callback reads,
+    by name (adaptive_mj.sim.native_context.mujoco_offsets), instead of slots of a tuple kept in step by hand."""
+
+    userdata: int
+    qpos: int
+    qvel: int
+    ctrl: int
+    cdof: int
+    xpos: int
+    xmat: int
+    subtree_com: int
+    cinert: int
+    dof_armature: int
+    dof_damping: int
+    gravity: int
+    qfrc_applied: int
+    M: int
+
+
+#: the Offsets fields that name a field of MjModel (mujoco_offsets' "model." keys)
+MUJOCO_FIELDS = {"dof_armature": "model.dof_armature", "dof_damping": "model.dof_damping", "gravity": "model.gravity"}
+
+
+def offsets() -> Offsets:
+    """The Offsets of this process's MuJoCo (mujoco_offsets, by field name)."""
+    found = mujoco_offsets()
+    return Offsets(**{name: found[MUJOCO_FIELDS.get(name, name)] for name in Offsets._fields})
 
 
 def bind_context(data, context: np.ndarray) -> None:

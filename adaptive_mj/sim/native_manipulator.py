@@ -29,25 +29,27 @@ process, and several runs (each on its own MjData) can be stepped in one process
 ignores an MjData without a context (a scratch copy), calls past the step's stages (an extra
 mj_forward) and calls past the chunk's rows: ctrl is left as it is.
 
-Why a second callback rather than one with m as a parameter: the 1-DOF plants' law needs a
-ModelForm's phi/f/h on [q, q'] (any ODE-shaped plant, including plugins), this one the regressor
-of a kinematic tree read from MjData's kinematics; the stage logic is shared (adaptive_mj.sim.stage).
+The order of the step is not here: both compiled callbacks are adaptive_mj.sim.native_step's one
+`control_stage`, into which this module compiles its three pieces: `_law_stage` (the regressor of a
+kinematic tree read from MjData's kinematics, the law's point and output), `_apply_control` (τ / gear,
+the disturbance torques) and `_record_row` (the row and M(q)). The 1-DOF plants bring their own
+(a ModelForm's phi/f/h on [q, q'], any ODE-shaped plant, plugins included).
 """
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from adaptive_mj.laws.common import plugin_rate
 from adaptive_mj.laws.plugin import joint_norm, tracking_error_norm
 from adaptive_mj.laws.protocol import Law
-from adaptive_mj.numba_util import address_of, jit_tree, pointer
+from adaptive_mj.numba_util import jit_tree
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_context import (ContextOwner, addr, context_address, context_functions, inlined,
-                                            mujoco_offsets, source_key, unique_factory)
+from adaptive_mj.sim import native_step
+from adaptive_mj.sim.native_context import ContextOwner, addr, context_address, inlined, offsets, source_key
 
 if TYPE_CHECKING:
     from adaptive_mj.plants.manipulator import ManipulatorPlant
@@ -88,7 +90,7 @@ CONTEXT = np.dtype([
     # run state
     ("stage", _i8), ("row", _i8), ("rows", _i8), ("step", _i8), ("t", _f8),
     # settings
-    ("nstages", _i8), ("nv", _i8), ("nbody", _i8), ("nth", _i8), ("nstd", _i8), ("nq", _i8), ("nu", _i8),
+    ("nstages", _i8), ("nv", _i8), ("m", _i8), ("nbody", _i8), ("nth", _i8), ("nstd", _i8), ("nq", _i8), ("nu", _i8),
     ("maxrows", _i8), ("mode_law", _i8), ("adapt", _i8), ("dz_on_s", _i8), ("has_base", _i8),
     ("mode", _i8), ("period_steps", _i8), ("delay", _i8),
     ("h", _f8), ("period", _f8), ("dz_width", _f8), ("sigma", _f8), ("e_mod", _f8),
@@ -115,29 +117,6 @@ CONTEXT = np.dtype([
     # a multi-joint law plugin (laws.plugin.JointLawPlugin): its point's v and its params (nparams,)
     ("vpt", _i8), ("params", _i8), ("nparams", _i8),
 ])
-
-class Offsets(NamedTuple):
-    """Byte offsets of the MjData (and MjModel: dof_armature, dof_damping, gravity) fields the callback reads,
-    by name (adaptive_mj.sim.native_context.mujoco_offsets), instead of slots of a tuple kept in step by hand."""
-
-    userdata: int
-    qpos: int
-    qvel: int
-    ctrl: int
-    cdof: int
-    xpos: int
-    xmat: int
-    subtree_com: int
-    cinert: int
-    dof_armature: int
-    dof_damping: int
-    gravity: int
-    qfrc_applied: int
-    M: int
-
-
-#: the Offsets fields that name a field of MjModel (mujoco_offsets' "model." keys)
-MUJOCO_FIELDS = {"dof_armature": "model.dof_armature", "dof_damping": "model.dof_damping", "gravity": "model.gravity"}
 
 MODE_PD_GRAVITY = 2  # laws.slotine_li.Mode.PD_GRAVITY (the regressor at v = w = a = 0)
 _compiled: dict = {}
@@ -383,88 +362,59 @@ def kernel():
     return _KERNEL
 
 
-def _callback_factory(off, key):  # noqa: C901 (the compiled callback: the step's order read top to bottom)
-    """The callback's Python source, closed over MuJoCo's struct offsets and the cache key only; the
-    functions it calls (regressor, ref_terms, output, the stage functions, pointer intrinsics) are
-    globals that compiled() replaces by their numba versions."""
-    off_ud, off_qpos, off_qvel, off_ctrl = off.userdata, off.qpos, off.qvel, off.ctrl
-    off_qfrc, off_M = off.qfrc_applied, off.M
-
-    @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True, cache=True)  # noqa: F821 (injected)
-    def callback(m, d):  # noqa: C901 (see above)
-        if key == 0:  # never: keeps the cache key in the closure
-            return
-        base, mbase = address(d), address(m)  # noqa: F821 (injected)
-        c = context_address(base, off_ud)  # noqa: F821 (injected)
-        if c == 0:  # an MjData no native run owns (a scratch copy): leave it alone
-            return
-        ctx = carray(cptr(c), 1)[0]  # noqa: F821 (injected)
-        stage, row, nst = ctx.stage, ctx.row, ctx.nstages
-        if stage >= nst or row >= ctx.rows:  # past the step's stages or the chunk: leave ctrl as it is
-            return
-        nv, nth = ctx.nv, ctx.nth
-        qpos = carray(fptr(pointer_at(base, off_qpos)), ctx.nq)  # noqa: F821 (injected)
-        qvel = carray(fptr(pointer_at(base, off_qvel)), nv)  # noqa: F821 (injected)
-        ctrl = carray(fptr(pointer_at(base, off_ctrl)), ctx.nu)  # noqa: F821 (injected)
-        qadr, act = carray(iptr(ctx.qadr), nv), carray(iptr(ctx.act), nv)  # noqa: F821 (injected)
-        theta, rsum, prev = carray(fptr(ctx.theta), nth), carray(fptr(ctx.rsum), nth), carray(fptr(ctx.prev), nth)  # noqa: F821,E501 (injected globals; one carray per line)
-        lower, upper = carray(fptr(ctx.lower), nth), carray(fptr(ctx.upper), nth)  # noqa: F821 (injected)
-        u_hold, s_hold = carray(fptr(ctx.u_hold), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
-        refs = carray(fptr(ctx.ref), (ctx.maxrows * nst, 3, nv))  # noqa: F821 (injected)
-        r = refs[row * nst + stage]
-        sampled = ctx.mode == SAMPLED  # noqa: F821 (injected)
-        if (is_sample_step(ctx.step, ctx.period_steps) and stage == 0) if sampled else True:  # noqa: F821 (injected)
-            law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower, upper, r)  # noqa: F821 (injected)
-            rate = carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
-            accumulate_rate(rsum, prev, rate, 1.0 if sampled else ctx.weights[stage])  # noqa: F821 (injected)
-        u = u_hold
-        if ctx.delay > 0:  # the stage-0 control of D steps ago, held over the step (zero before)
-            delayed = carray(fptr(ctx.delayed), nv)  # noqa: F821 (injected)
-            if stage == 0:
-                ring = carray(fptr(ctx.ring), (ctx.delay + 1, nv))  # noqa: F821 (injected)
-                put, get = delay_slot(ctx.step, ctx.delay)  # noqa: F821 (injected)
-                for j in range(nv):
-                    ring[put, j] = u_hold[j]
-                    delayed[j] = ring[get, j] if get >= 0 else 0.0
-            u = delayed
-        gear = carray(fptr(ctx.gear), nv)  # noqa: F821 (injected)
+def _apply_control(ctx, io, row, u):
+    """This shape's "apply" (adaptive_mj.sim.native_step): ctrl = τ / gear on each joint's actuator, and the
+    step's disturbance torques into qfrc_applied, held over its stages."""
+    base, mbase, off = io
+    nv = ctx.nv
+    ctrl = carray(fptr(pointer_at(base, off.ctrl)), ctx.nu)  # noqa: F821 (injected)
+    act, gear = carray(iptr(ctx.act), nv), carray(fptr(ctx.gear), nv)  # noqa: F821 (injected)
+    for j in range(nv):
+        ctrl[act[j]] = u[j] / gear[j]
+    if ctx.has_dist != 0:
+        qfrc = carray(fptr(pointer_at(base, off.qfrc_applied)), nv)  # noqa: F821 (injected)
+        dist = carray(fptr(ctx.dist), (ctx.maxrows, nv))  # noqa: F821 (injected)
         for j in range(nv):
-            ctrl[act[j]] = u[j] / gear[j]
-        if ctx.has_dist != 0:  # the step's disturbance torques, held over its stages
-            qfrc = carray(fptr(pointer_at(base, off_qfrc)), nv)  # noqa: F821 (injected)
-            dist = carray(fptr(ctx.dist), (ctx.maxrows, nv))  # noqa: F821 (injected)
-            for j in range(nv):
-                qfrc[j] = dist[row, j]
-        if stage == 0:  # the step's row: t, true x, u, s, ref, θ̂ at the step's start
-            maxrows = ctx.maxrows
-            carray(fptr(ctx.rec_t), maxrows)[row] = ctx.t  # noqa: F821 (injected)
-            rx = carray(fptr(ctx.rec_x), (maxrows, 2, nv))  # noqa: F821 (injected)
-            ru, rs = carray(fptr(ctx.rec_u), (maxrows, nv)), carray(fptr(ctx.rec_s), (maxrows, nv))  # noqa: F821 (injected)
-            rref, rth = carray(fptr(ctx.rec_ref), (maxrows, 3, nv)), carray(fptr(ctx.rec_theta), (maxrows, nth))  # noqa: F821,E501 (injected globals; one carray per line)
-            for j in range(nv):
-                rx[row, 0, j] = qpos[qadr[j]]
-                rx[row, 1, j] = qvel[j]
-                ru[row, j] = u[j]
-                rs[row, j] = s_hold[j]
-                for k in range(3):
-                    rref[row, k, j] = r[k, j]
-            for i in range(nth):
-                rth[row, i] = theta[i]
-            # M(q) as MuJoCo computed it for this stage (mj_forward at the step's start), for V = ½ sᵀMs + ...:
-            # copied, not recomputed per row in Python (plants.manipulator.ManipulatorPlant.full_mass)
-            nM = ctx.nM
-            rM, Md = carray(fptr(ctx.rec_M), (maxrows, nM)), carray(fptr(pointer_at(base, off_M)), nM)  # noqa: F821,E501 (injected globals; one carray per line)
-            for k in range(nM):
-                rM[row, k] = Md[k]
-        end_stage(ctx, stage, theta, rsum, lower, upper, sampled)  # noqa: F821 (injected: stage.end_stage)
-
-    return callback
+            qfrc[j] = dist[row, j]
 
 
-def _law_stage(ctx, base, mbase, off, stage, row, qpos, qvel, theta, prev, lower, upper, r):
+def _record_row(ctx, io, row, u, theta):
+    """This shape's row (adaptive_mj.sim.native_step): t, true x = [q; q̇], u, s, ref, θ̂ at the step's start, and
+    M(q) as MuJoCo computed it for this stage (mj_forward at the step's start), for V = ½ sᵀMs + ...: copied, not
+    recomputed per row in Python (plants.manipulator.ManipulatorPlant.full_mass)."""
+    base, mbase, off = io
+    nv, nth, maxrows, nst = ctx.nv, ctx.nth, ctx.maxrows, ctx.nstages
+    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)  # noqa: F821 (injected)
+    qvel = carray(fptr(pointer_at(base, off.qvel)), nv)  # noqa: F821 (injected)
+    qadr, s_hold = carray(iptr(ctx.qadr), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
+    r = carray(fptr(ctx.ref), (maxrows * nst, 3, nv))[row * nst]  # noqa: F821 (injected)
+    carray(fptr(ctx.rec_t), maxrows)[row] = ctx.t  # noqa: F821 (injected)
+    rx = carray(fptr(ctx.rec_x), (maxrows, 2, nv))  # noqa: F821 (injected)
+    ru, rs = carray(fptr(ctx.rec_u), (maxrows, nv)), carray(fptr(ctx.rec_s), (maxrows, nv))  # noqa: F821 (injected)
+    rref, rth = carray(fptr(ctx.rec_ref), (maxrows, 3, nv)), carray(fptr(ctx.rec_theta), (maxrows, nth))  # noqa: F821,E501 (injected globals; one carray per line)
+    for j in range(nv):
+        rx[row, 0, j] = qpos[qadr[j]]
+        rx[row, 1, j] = qvel[j]
+        ru[row, j] = u[j]
+        rs[row, j] = s_hold[j]
+        for k in range(3):
+            rref[row, k, j] = r[k, j]
+    for i in range(nth):
+        rth[row, i] = theta[i]
+    nM = ctx.nM
+    rM, Md = carray(fptr(ctx.rec_M), (maxrows, nM)), carray(fptr(pointer_at(base, off.M)), nM)  # noqa: F821,E501 (injected globals; one carray per line)
+    for k in range(nM):
+        rM[row, k] = Md[k]
+
+
+def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
     """One evaluation of the Slotine–Li law at a stage: measure x (+ noise), the stage estimate, the
     regressor on the live MjData, τ clamped into u_hold (and s into s_hold), the rate into ctx.rate."""
+    base, mbase, off = io
     nv, nb, nth, nstd = ctx.nv, ctx.nbody, ctx.nth, ctx.nstd
+    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)  # noqa: F821 (injected)
+    qvel = carray(fptr(pointer_at(base, off.qvel)), nv)  # noqa: F821 (injected)
+    r = carray(fptr(ctx.ref), (ctx.maxrows * ctx.nstages, 3, nv))[row * ctx.nstages + stage]  # noqa: F821 (injected)
     off_cdof, off_xpos, off_xmat, off_subcom, off_cinert = off.cdof, off.xpos, off.xmat, off.subtree_com, off.cinert
     off_arm, off_damp, off_gravity = off.dof_armature, off.dof_damping, off.gravity
     th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
@@ -569,43 +519,38 @@ def compiled(plugin=None):
     if mem_key in _compiled:
         return _compiled[mem_key]
     import numba
-    from numba import carray, types
 
     from adaptive_mj.laws.slotine_li import reference_terms, slotine_li_output
 
-    offsets = mujoco_offsets()
-    off = Offsets(**{name: offsets[MUJOCO_FIELDS.get(name, name)] for name in Offsets._fields})
-    key = source_key(*fns, _callback_factory, _law_stage, _regressor, reference_terms, slotine_li_output,
-                     _builtin_point, _builtin_output, _plugin_point, _plugin_output, plugin_rate,
-                     stage_code.stage_estimate, stage_code.end_stage, stage_code.sense, context_address,
-                     extra=(off, numba.__version__))
-    tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
-    common = {"carray": carray, "iptr": pointer(types.int64), "fptr": pointer(types.float64), "np": np,
-              "MODE_PD_GRAVITY": MODE_PD_GRAVITY}
-    pointers = context_functions(numba, carray, common["iptr"], tag)
-    inline = inlined(numba)
-    stage_fns: dict[str, Any] = {name: jit_tree(getattr(stage_code, name), inline, tag=tag) for name in
-                                 ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step",
-                                  "period_ends", "delay_slot", "sense", "end_stage")}
-    if plugin is None:
-        law_point = jit_tree(_builtin_point, inline, tag=tag, ref_terms=jit_tree(reference_terms, inline, tag=tag),
-                             **pointers, **common)
-        law_output = jit_tree(_builtin_output, inline, tag=tag,
-                              output=jit_tree(slotine_li_output, inline, tag=tag), **pointers, **common)
-    else:
-        point, law = plugin
-        law_point = jit_tree(_plugin_point, inline, tag=tag, user_point=jit_tree(point, inline, tag=tag),
-                             **pointers, **common)
-        law_output = jit_tree(_plugin_output, inline, tag=tag, user_law=jit_tree(law, inline, tag=tag),
-                              **pointers, **common)
-    law_stage = jit_tree(_law_stage, numba.njit, tag=tag,
-                         regressor=jit_tree(_regressor, numba.njit, tag=tag, inner=inline),
-                         law_point=law_point, law_output=law_output, **pointers, **common, **stage_fns)
-    g = {**_callback_factory.__globals__, **common, **stage_fns, "numba": numba, "types": types,
-         "law_stage": law_stage, **pointers, "address": address_of(), "cptr": pointer(numba.from_dtype(CONTEXT)),
-         "SAMPLED": stage_code.SAMPLED}
-    factory = unique_factory(_callback_factory, g, key)
-    _compiled[mem_key] = factory(off, key)
+    off = offsets()
+    key = source_key(*fns, native_step.callback_factory, stage_code.control_stage, _law_stage, _apply_control,
+                     _record_row, _regressor, reference_terms, slotine_li_output, _builtin_point, _builtin_output,
+                     _plugin_point, _plugin_output, plugin_rate, stage_code.stage_estimate, stage_code.end_stage,
+                     stage_code.sense, context_address, extra=(off, numba.__version__))
+
+    def pieces(common: dict[str, Any], tag: str) -> dict[str, Any]:
+        """This shape's law_stage (the regressor compiled apart, the law's point and output inlined into it),
+        apply_control and record_row."""
+        inline = inlined(numba)
+        common = {**common, "MODE_PD_GRAVITY": MODE_PD_GRAVITY}
+        if plugin is None:
+            law_point = jit_tree(_builtin_point, inline, tag=tag,
+                                 ref_terms=jit_tree(reference_terms, inline, tag=tag), **common)
+            law_output = jit_tree(_builtin_output, inline, tag=tag,
+                                  output=jit_tree(slotine_li_output, inline, tag=tag), **common)
+        else:
+            point, law = plugin
+            law_point = jit_tree(_plugin_point, inline, tag=tag, user_point=jit_tree(point, inline, tag=tag),
+                                 **common)
+            law_output = jit_tree(_plugin_output, inline, tag=tag, user_law=jit_tree(law, inline, tag=tag),
+                                  **common)
+        return {"law_stage": jit_tree(_law_stage, numba.njit, tag=tag,
+                                      regressor=jit_tree(_regressor, numba.njit, tag=tag, inner=inline),
+                                      law_point=law_point, law_output=law_output, **common),
+                "apply_control": jit_tree(_apply_control, inline, tag=tag, **common),
+                "record_row": jit_tree(_record_row, inline, tag=tag, **common)}
+
+    _compiled[mem_key] = native_step.compiled_callback(CONTEXT, off, key, pieces)
     return _compiled[mem_key]
 
 
@@ -711,7 +656,7 @@ class NativeManipulatorController(ContextOwner):
         c = ctx[0]
         for name, arr in buf.items():
             c[name] = addr(arr)
-        c["nstages"], c["nv"], c["nbody"], c["nth"], c["nstd"] = self.nst, nv, nb, nth, nstd
+        c["nstages"], c["nv"], c["m"], c["nbody"], c["nth"], c["nstd"] = self.nst, nv, nv, nb, nth, nstd
         c["nq"], c["nu"], c["maxrows"], c["nM"] = model.nq, model.nu, rows, model.nM
         c["mode_law"], c["adapt"] = int(p.get("mode", 0)), int(bool(p["adapt"]))
         c["nparams"] = len(buf["params"])

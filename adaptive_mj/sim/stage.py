@@ -140,6 +140,71 @@ def end_stage(ctx, stage, theta, rsum, lower, upper, sampled):
     ctx.stage = stage
 
 
+def control_stage(ctx, io):
+    """One call of the control policy at an integrator stage: the order of a control step, written once. The
+    Python path (adaptive_mj.sim.loop.Controller) and both compiled callbacks (adaptive_mj.sim.native_step: the
+    1-DOF plants and the arms) run this same function; each binds the names below to its own pieces
+    (numba_util.with_globals in Python, numba_util.jit_tree compiled):
+        view(a, shape)                        a buffer of the context as an array (compiled: from its address)
+        law_stage(ctx, io, stage, row, θ̂, k_{i-1}, lower, upper)
+                                              measure x (+ noise), the stage estimate θ̂_i, the law's u, s and
+                                              rate; u clamped into the limits, held in u_hold with s in s_hold
+        apply_control(ctx, io, row, u)        u (m,) to the plant (and the step's disturbance)
+        record_row(ctx, io, row, u, θ̂)        at stage 0, the step's row: t, true x, u, s, ref, θ̂
+    In order: the law when due (every stage under continuous control; the first stage of each control period
+    under sampled-data control, its output then held: zero-order hold) → the rate weighted into the step's sum
+    → the delay line (the stage-0 control of D steps ago, held over the step; zero before) → apply → the row
+    at stage 0 → end_stage (at the step's end θ̂ advanced once, row, step and t moved on).
+
+    ctx: the run's context (a compiled callback's CONTEXT record, or the Python path's loop.StepContext): the
+    fields stage, row, step, nstages, nth, m (controls), mode, period_steps, delay, h, period, t, weights and
+    the buffers theta, rsum, prev, rate, lower, upper (n_theta,), u_hold, delayed (m,), ring (delay + 1, m).
+    io: what the pieces reach the plant through (compiled: (mjData address, mjModel address, struct offsets);
+    Python: (t [s], x) of the stage)."""
+    stage, row, nth, m = ctx.stage, ctx.row, ctx.nth, ctx.m
+    theta, rsum, prev = view(ctx.theta, nth), view(ctx.rsum, nth), view(ctx.prev, nth)
+    lower, upper = view(ctx.lower, nth), view(ctx.upper, nth)
+    sampled = ctx.mode == SAMPLED
+    if (is_sample_step(ctx.step, ctx.period_steps) and stage == 0) if sampled else True:
+        law_stage(ctx, io, stage, row, theta, prev, lower, upper)
+        accumulate_rate(rsum, prev, view(ctx.rate, nth), 1.0 if sampled else ctx.weights[stage])
+    u = view(ctx.u_hold, m)
+    if ctx.delay > 0:
+        delayed = view(ctx.delayed, m)
+        if stage == 0:
+            ring = view(ctx.ring, (ctx.delay + 1, m))
+            put, get = delay_slot(ctx.step, ctx.delay)
+            for j in range(m):
+                ring[put, j] = u[j]
+                delayed[j] = ring[get, j] if get >= 0 else 0.0
+        u = delayed
+    apply_control(ctx, io, row, u)
+    if stage == 0:
+        record_row(ctx, io, row, u, theta)
+    end_stage(ctx, stage, theta, rsum, lower, upper, sampled)
+
+
+# The names control_stage calls that each path binds to its own (see control_stage); unbound, they say so.
+def view(a, shape):
+    """A context buffer as an array of `shape` (bound by each path)."""
+    raise NotImplementedError("control_stage runs with its pieces bound (loop.Controller, native_step)")
+
+
+def law_stage(ctx, io, stage, row, theta, prev, lower, upper):
+    """The law at a stage (bound by each path; see control_stage)."""
+    raise NotImplementedError("control_stage runs with its pieces bound (loop.Controller, native_step)")
+
+
+def apply_control(ctx, io, row, u):
+    """The control to the plant (bound by each path; see control_stage)."""
+    raise NotImplementedError("control_stage runs with its pieces bound (loop.Controller, native_step)")
+
+
+def record_row(ctx, io, row, u, theta):
+    """The step's row at stage 0 (bound by each path; see control_stage)."""
+    raise NotImplementedError("control_stage runs with its pieces bound (loop.Controller, native_step)")
+
+
 def step_times(t0: float, h: float, rows: int) -> np.ndarray:
     """(rows,) the times [s] at the start of `rows` physics steps of h [s] from t0, as MuJoCo accumulates
     them (t += h at each step), bit for bit: numpy's cumulative sum adds left to right, one term at a

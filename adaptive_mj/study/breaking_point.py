@@ -39,8 +39,8 @@ from adaptive_mj.trajectory import Status
 
 CVAR_LEVEL = 0.10  # the worst 10 % of seeds
 # [m], [rad]: the stress study's failure bound on the tail RMS error (the 6-joint arm: RMS over its joints)
-#: the stress study's plants (heave_tracking, arm_payload_swap, ur5e_identification) and their plant kinds
-STRESS_PLANT_KIND = {"heave": "heave", "arm": "arm", "ur5e": "manipulator"}
+#: the stress study's plants by name -> their plant kinds: each kind that declares its row (PlantKind.stress)
+STRESS_PLANT_KIND = {k.stress.name: k.name for k in kinds.built_in().values() if k.stress is not None}
 
 
 def kind_number(kind: str, field: str) -> float:

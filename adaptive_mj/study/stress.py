@@ -43,6 +43,8 @@ import numpy as np
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.study import callable_module
 from adaptive_mj.laws.sliding import surface_noise_std
+from adaptive_mj.laws.kinds import Form
+from adaptive_mj.plants import kinds
 from adaptive_mj.report.metrics import TAIL_FRACTION
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.breaking_point import (STRESS_PLANT_KIND, TAIL_BOUND, Margin, Search, Stressor, kind_number,
@@ -75,22 +77,43 @@ PERIOD = "control period"  # the control period stressor's name
 
 @dataclass(frozen=True)
 class Plant:
+    """A row of the study: its name, its scenario, the overrides of its every run and its plant kind."""
+
     name: str
     scenario: str
     base: tuple[str, ...]
+    kind: str = ""  # "": STRESS_PLANT_KIND[name]
+
+
+def _kind(p: Plant) -> kinds.PlantKind:
+    """The plant kind of row p."""
+    return kinds.built_in()[p.kind or STRESS_PLANT_KIND[p.name]]
+
+
+def _row(p: Plant) -> kinds.StressPlant:
+    """What p's plant kind declares for the study (PlantKind.stress)."""
+    row = _kind(p).stress
+    assert row is not None  # the study's plants are the kinds that declare one (STRESS_PLANT_KIND)
+    return row
+
+
+def _on_joints(p: Plant) -> bool:
+    """Whether p is a multi-joint plant (the rigid-body form: Slotine–Li's laws and the arm's conditions)."""
+    return Form.RIGID_BODY in _kind(p).forms
 
 
 def plants(duration: float = DURATION) -> list[Plant]:
-    def noise(p):
-        return f"noise.std={{y={NOMINAL_NOISE[p]!r}, y_dot={10 * NOMINAL_NOISE[p]!r}}}"
-
-    sig = NOMINAL_NOISE["ur5e"]
-    return [Plant("heave", "heave_tracking", (f"simulation.duration={duration}", "simulation.initial_state='reference'",
-                                              "law.initial_estimates='model'", noise("heave"))),
-            Plant("arm", "arm_payload_swap", (f"simulation.duration={duration}", "events=[]",
-                                              "law.initial_estimates='model'", noise("arm"))),
-            Plant("ur5e", "ur5e_identification", (f"simulation.duration={duration}", "law.initial_estimates='model'",
-                                                  f"noise.std={{q={sig!r}, q_dot={10 * sig!r}}}"))]
+    """The study's plants: each plant kind that declares its row (PlantKind.stress), in the registry's order, on
+    its scenario for `duration` [s] with its own overrides, the estimates at the truth and its nominal noise."""
+    out = []
+    for name, kind in STRESS_PLANT_KIND.items():
+        row = kinds.built_in()[kind].stress
+        assert row is not None  # STRESS_PLANT_KIND holds the kinds that declare one
+        sig, (y, y_dot) = NOMINAL_NOISE[name], row.noise_signals
+        out.append(Plant(name, row.scenario, (f"simulation.duration={duration}", *row.overrides,
+                                              "law.initial_estimates='model'",
+                                              f"noise.std={{{y}={sig!r}, {y_dot}={10 * sig!r}}}"), kind))
+    return out
 
 
 def _setup(p: Plant):
@@ -102,7 +125,7 @@ def _setup(p: Plant):
 
 def laws(p: Plant, *, composite: bool) -> list[tuple[str, list[str]]]:
     """(law name, overrides) for plant p; every number derived from the scenario and its model."""
-    if p.name == "ur5e":
+    if _on_joints(p):
         return _arm_laws(p)
     scn, s = _setup(p)
     names, theta = s.law.names, s.plant.true_theta()
@@ -118,9 +141,8 @@ def laws(p: Plant, *, composite: bool) -> list[tuple[str, list[str]]]:
            ("sigma", [f"law.sigma={gamma1 / LEAK_TIME!r}", f"law.theta0={theta0}"]),
            ("e_modification", [f"law.e_modification={gamma1 / (LEAK_TIME * sig_s)!r}", f"law.theta0={theta0}"]),
            ("projection", [f"law.projection={box}"])]
-    if composite:
-        out.append(("composite", ["law.composite={gain=1.0, filter=2.0}" if p.name == "arm"
-                                  else "law.composite={gain=3e-4, filter=1.0}"]))
+    if composite and _row(p).composite is not None:
+        out.append(("composite", [f"law.composite={_row(p).composite}"]))
     out += [("fixed_nominal", ["law.kind='fixed_nominal'", "law.nominal='model'"]),
             ("robust_sliding", ["law.kind='robust_sliding'", "law.nominal='model'", f"law.K={K!r}",
                                 "law.boundary_layer=0.05"])]
@@ -169,8 +191,7 @@ def _arm_stressors(p: Plant, duration: float) -> list[Stressor]:
                                 f"sensors={{velocity='differentiated', velocity_cutoff_hz={1 / (2 * math.pi * v)!r}}}"],
                      1e-3, 0.5, unit="s"),  # from f_c = 159 Hz: a shorter τ passes more encoder noise (the
             # stress is not monotone there: 0.1 ms failed for the plain law where 7 ms passed), a longer more lag
-            Stressor("disturbance", lambda v: [f"disturbance={{kind='sine', magnitude={v!r}, omega=2.0}}"], 0.1, 1000.0,
-                     unit="N m"),
+            _disturbance(p),
             # from one physics step: a lag much shorter than the step is stiff for an explicit integrator (RK4:
             # h/τ < 2.785), a failure of the numerics, not of the loop
             Stressor("lag τ", lambda v: [f"plant.actuator_lag={v!r}"], 1e-3, 1.0, unit="s"),
@@ -180,28 +201,43 @@ def _arm_stressors(p: Plant, duration: float) -> list[Stressor]:
                      unit="×")]
 
 
+def _disturbance(p: Plant) -> Stressor:
+    """A sinusoidal disturbance (ω = 2 rad/s) of magnitude in the plant's range [its control unit]."""
+    lo, hi = _row(p).disturbance
+    return Stressor("disturbance", lambda v: [f"disturbance={{kind='sine', magnitude={v!r}, omega=2.0}}"], lo, hi,
+                    unit=_kind(p).control_unit)
+
+
+def _thruster_lag(p: Plant, duration: float) -> Stressor:
+    """An unmodelled thruster lag τ [s] (plant.thruster_time_constant)."""
+    return Stressor("lag τ", lambda v: [f"plant.thruster_time_constant={v!r}"], 1e-3, 1.0, unit="s")
+
+
+def _payload_ratio(p: Plant, duration: float) -> Stressor:
+    """The payload's mass × ratio at half the run (a payload_mass event; the scenario sets plant.payload_mass)."""
+    m0 = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml").plant.payload_mass
+    if m0 is None:  # the bundled arm_payload_swap sets it
+        raise ScenarioError(f"{p.scenario}: the payload ratio stressor needs plant.payload_mass")
+    t_swap = 0.5 * duration
+    return Stressor("payload ratio", lambda v: [f"events=[{{t={t_swap!r}, kind='payload_mass', value={v * m0!r}}}]"],
+                    1.0, 100.0, unit="×")
+
+
+#: the stressors a 1-DOF plant kind may name (StressPlant.stressors), each built for a plant and a duration [s]
+OWN_STRESSORS = {"lag τ": _thruster_lag, "payload ratio": _payload_ratio}
+
+
 def stressors(p: Plant, duration: float = DURATION) -> list[Stressor]:
-    if p.name == "ur5e":
+    if _on_joints(p):
         out = _arm_stressors(p, duration)
         out.append(Stressor("delay", lambda v: [f"simulation.control_delay={int(v)}"], 0, 200, integer=True,
                             unit="steps"))
         out.append(Stressor.control_period(0.001, min(PERIOD_MAX, duration), 0.001, name=PERIOD))
         return out
-    unit_y = "m" if p.name == "heave" else "rad"
-    unit_u = "N" if p.name == "heave" else "N m"
-    out = [Stressor("noise σ_y", lambda v: [f"noise.std={{y={v!r}, y_dot={10 * v!r}}}"], 1e-4, 0.1, unit=unit_y),
-           Stressor("disturbance", lambda v: [f"disturbance={{kind='sine', magnitude={v!r}, omega=2.0}}"],
-                    1.0 if p.name == "heave" else 0.1, 1000.0 if p.name == "heave" else 100.0, unit=unit_u)]
-    if p.name == "heave":
-        out.append(Stressor("lag τ", lambda v: [f"plant.thruster_time_constant={v!r}"], 1e-3, 1.0, unit="s"))
-    else:
-        m0 = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml").plant.payload_mass
-        if m0 is None:  # the bundled arm_payload_swap sets it
-            raise ScenarioError(f"{p.scenario}: the payload ratio stressor needs plant.payload_mass")
-        t_swap = 0.5 * duration
-        out.append(Stressor("payload ratio",
-                            lambda v: [f"events=[{{t={t_swap!r}, kind='payload_mass', value={v * m0!r}}}]"],
-                            1.0, 100.0, unit="×"))
+    out = [Stressor("noise σ_y", lambda v: [f"noise.std={{y={v!r}, y_dot={10 * v!r}}}"], 1e-4, 0.1,
+                    unit=_kind(p).output_unit),
+           _disturbance(p)]
+    out += [OWN_STRESSORS[name](p, duration) for name in _row(p).stressors]
     out.append(Stressor("delay", lambda v: [f"simulation.control_delay={int(v)}"], 0, 200, integer=True,
                         unit="steps"))
     dt = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml", overrides=list(p.base)).simulation.timestep
@@ -217,7 +253,7 @@ def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, .
     for p in plants(duration):
         path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
         for law, over in laws(p, composite=composite):
-            if p.name == "ur5e" and arm_laws is not None and law not in arm_laws:
+            if _on_joints(p) and arm_laws is not None and law not in arm_laws:
                 continue
             for st in stressors(p, duration):
                 if law == "composite" and st.name == PERIOD:  # composite adaptation: continuous control only
@@ -255,6 +291,17 @@ def table(margins: list[Margin], *, seeds: int) -> str:
     return "\n".join(lines)
 
 
+def _bounds_text() -> str:
+    """Each plant's failure bound in words: "0.01 m (heave), 0.05 rad (arm) or ..." (PlantKind.tail_bound, its
+    output unit and StressPlant.label)."""
+    parts = []
+    for name, kind in STRESS_PLANT_KIND.items():
+        k = kinds.built_in()[kind]
+        assert k.stress is not None  # STRESS_PLANT_KIND holds the kinds that declare one
+        parts.append(f"{TAIL_BOUND[name]:g} {k.output_unit} ({k.stress.label or name})")
+    return ", ".join(parts[:-1]) + " or " + parts[-1] if len(parts) > 1 else "".join(parts)
+
+
 def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int,
               duration: float = DURATION, backend=None,
               arm_laws: tuple[str, ...] | None = None) -> tuple[list[Margin], str, float]:
@@ -277,9 +324,7 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
     runs = sum(len(e.tails) for m in margins for e in m.evaluations)
     text = (f"{len(searches)} breaking-point searches (plant × law × stressor), {seeds} seeds per value, "
             f"the two ends and {steps} bisection steps: {runs} runs of {duration:g} s in {wall:.0f} s. "
-            f"A run fails when it diverges or its tail RMS ỹ exceeds {TAIL_BOUND['heave']:g} m (heave), "
-            f"{TAIL_BOUND['arm']:g} rad (arm) or {TAIL_BOUND['ur5e']:g} rad (the 6-joint arm: the RMS over its joints "
-            "and the tail's rows, ‖q̃‖'s RMS / √6); the tail is the last "
+            f"A run fails when it diverges or its tail RMS ỹ exceeds {_bounds_text()}; the tail is the last "
             f"{100 * TAIL_FRACTION:g} % of a run; "
             "a value passes when every seed passes. Each cell: the margin (the "
             "largest value that passed) and, in brackets, the smallest that failed: their gap is the resolution; "

@@ -95,10 +95,9 @@ def _ok(r: JobResult) -> bool:
     return r.status in (Status.OK, Status.FAILED) and r.trajectory is not None
 
 
-SECTION_PLANT = {"first-order": "first_order", "phase space": "first_order", "Lyapunov": "heave",
-                 "2nd order": "heave", "n-th order": "heave", "drift": "heave", "payload swap": "arm",
-                 "excitation": "heave", "manipulator": "manipulator", "failure": "heave", "ship": "ship"}
-SECTION_PLANT.update({"MRAC delay": "linear", "Rohrs": "linear", "wing rock": "wing_rock"})
+#: section title -> the plant kind it runs (each kind declares its sections: PlantKind.sections), for the units
+#: of its rows
+SECTION_PLANT = {section: kind.name for kind in units.built_in().values() for section in kind.sections}
 
 
 def _row(section: str, variant: str, r: JobResult, key: str = "") -> dict:

@@ -1,0 +1,94 @@
+"""The compiled control callback of both native paths (the 1-DOF plants: adaptive_mj.sim.native; the
+multi-joint arms: adaptive_mj.sim.native_manipulator): MuJoCo calls it at every stage of its integrator, and it
+runs adaptive_mj.sim.stage.control_stage, the one definition of a control step's order that the Python path
+(adaptive_mj.sim.loop.Controller) runs too, compiled with the plant shape's pieces:
+    law_stage      measure x (+ noise), the stage estimate, the law, u clamped and held: the shape's own (a
+                   ModelForm's phi/f/h on [q, q'], or the regressor of a kinematic tree read from MjData)
+    apply_control  ctrl (and the step's disturbance torques)
+    record_row     the step's row in the shape's record buffers
+`compiled_callback` compiles them into control_stage and control_stage into the callback; the callback only
+finds its run (mjData.userdata → the context record) and leaves alone an MjData no run owns, a call past the
+step's stages (an extra mj_forward) and a call past the chunk's rows. tests/test_native.py,
+tests/test_native_manipulator.py and tests/test_control_rate.py show the compiled and the Python paths give the
+same rows bit for bit.
+
+Each shape's context record (its CONTEXT dtype) holds the fields control_stage reads (stage.control_stage's
+docstring), the buffers by address. Nothing here imports numba at import time: `carray`, `fptr`, the pointer
+intrinsics and the pieces are globals that `compiled_callback` injects (as numba_util.jit_tree does for every
+compiled function).
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Callable
+
+from adaptive_mj.sim import stage as stage_code
+from adaptive_mj.sim.native_context import context_functions, inlined, unique_factory
+
+if TYPE_CHECKING:
+    # injected by compiled_callback; declared for the type checker only
+    numba: Any
+    types: Any
+    carray: Any
+    address: Any
+    cptr: Any
+    fptr: Any
+    context_address: Any
+    control_stage: Any
+
+#: the stage functions (adaptive_mj.sim.stage) compiled into every callback and its pieces
+STAGE_FUNCTIONS = ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",
+                   "delay_slot", "sense", "end_stage")
+
+
+def callback_factory(off, key):
+    """The callback's Python source, closed over MuJoCo's struct offsets (off: native_context.Offsets) and the
+    cache key only: it finds its run's context through mjData.userdata and leaves alone an MjData no run owns
+    (a scratch copy), a call past the step's stages (an extra mj_forward) and a call past the chunk's rows."""
+    off_ud = off.userdata
+
+    @numba.cfunc(types.void(types.voidptr, types.voidptr), nogil=True, cache=True)  # noqa: F821 (injected)
+    def callback(m, d):
+        if key == 0:  # never: keeps the cache key in the closure
+            return
+        base, mbase = address(d), address(m)  # noqa: F821 (injected)
+        c = context_address(base, off_ud)  # noqa: F821 (injected)
+        if c == 0:
+            return
+        ctx = carray(cptr(c), 1)[0]  # noqa: F821 (injected)
+        if ctx.stage >= ctx.nstages or ctx.row >= ctx.rows:
+            return
+        control_stage(ctx, (base, mbase, off))  # noqa: F821 (injected: stage.control_stage, compiled)
+
+    return callback
+
+
+def view(a, shape):
+    """A context buffer at address `a` as an array of `shape` (stage.control_stage's `view`, compiled)."""
+    return carray(fptr(a), shape)  # noqa: F821 (injected)
+
+
+def compiled_callback(context_dtype, off, key: int, pieces: Callable[[dict, str], dict[str, Any]]):
+    """The cfunc of one plant shape and law: control_stage with the shape's pieces, in the callback.
+
+    context_dtype: the shape's CONTEXT; off: native_context.Offsets; key: the cache key (native_context.source_key
+    over every function compiled in, this module's included); pieces(common, tag) -> {"law_stage",
+    "apply_control", "record_row"}: the shape's pieces compiled (common: the globals every compiled function
+    here sees: carray, fptr, iptr, np, the pointer intrinsics and the stage functions, compiled)."""
+    import numba
+    import numpy as np
+    from numba import carray, types
+
+    from adaptive_mj.numba_util import address_of, jit_tree, pointer
+
+    tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
+    inline = inlined(numba)
+    common: dict[str, Any] = {"carray": carray, "iptr": pointer(types.int64), "fptr": pointer(types.float64),
+                              "np": np, "SAMPLED": stage_code.SAMPLED}
+    common.update(context_functions(numba, carray, common["iptr"], tag))
+    common.update({name: jit_tree(getattr(stage_code, name), inline, tag=tag) for name in STAGE_FUNCTIONS})
+    shape = pieces(common, tag)
+    step = jit_tree(stage_code.control_stage, inline, tag=tag, view=jit_tree(view, inline, tag=tag, **common),
+                    **common, **shape)
+    g = {**callback_factory.__globals__, **common, "numba": numba, "types": types, "address": address_of(),
+         "cptr": pointer(numba.from_dtype(context_dtype)), "control_stage": step}
+    return unique_factory(callback_factory, g, key)(off, key)
