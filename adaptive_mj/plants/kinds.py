@@ -27,6 +27,10 @@ from adaptive_mj.laws.kinds import Form
 from adaptive_mj.specs import PlantSpec
 
 if TYPE_CHECKING:
+    from adaptive_mj.laws.kinds import MracState
+    from adaptive_mj.plants.events import EventKind
+    from adaptive_mj.specs import Scenario
+
     Reader = Callable[["PlantKind", Table, Path], PlantSpec]
 
 #: the units of a rigid body's (and a joint's) parameters on a multi-joint plant, by the name's last part
@@ -95,7 +99,7 @@ class PlantKind:
     # law.order; starts_on_reference: simulation.initial_state may only be "reference" (its default)
     keys: tuple[Key, ...] = ()
     reader: "Reader | None" = None
-    events: Mapping[str, str | None] = field(default_factory=dict)
+    events: Mapping[EventKind, str | None] = field(default_factory=dict)
     order: Callable[[PlantSpec, Any], int] = second_order
     starts_on_reference: bool = False
     # what studies and reports see of it: its row in the stress study (None: not in it), the bench sections
@@ -104,6 +108,15 @@ class PlantKind:
     stress: StressPlant | None = None
     sections: tuple[str, ...] = ()
     group_params_by_unit: bool = False
+    # what a law of Form.MRAC_STATE sees of it (the scenario, the built plant -> laws.kinds.MracState: the sign
+    # and size of b, the matched nonlinear terms); None: it does not offer that form
+    mrac_state: Callable[[Scenario, Any], MracState] | None = None
+
+    @property
+    def rigid_body(self) -> bool:
+        """Whether it is a multi-joint plant (offers Form.RIGID_BODY): joint-space noise, disturbance, sensors
+        and references."""
+        return Form.RIGID_BODY in self.forms
 
     def key_names(self) -> tuple[str, ...]:
         """The names of its declared plant.* keys, in order."""
@@ -170,15 +183,25 @@ EVENT_ORDER = ("payload_mass", "payload_swap", "fluid_density_scale", "constant_
 
 def event_kinds() -> tuple[str, ...]:
     """Every [[events]] kind some built-in plant kind accepts (PlantKind.events), in EVENT_ORDER."""
-    names = list(dict.fromkeys(e for k in built_in().values() for e in k.events))
+    names = list(dict.fromkeys(e.name for k in built_in().values() for e in k.events))
     return tuple(sorted(names, key=lambda e: EVENT_ORDER.index(e) if e in EVENT_ORDER else len(EVENT_ORDER)))
+
+
+def event_kind(name: str) -> EventKind | None:
+    """The [[events]] kind called `name` that a built-in plant kind accepts (adaptive_mj.plants.events), or
+    None."""
+    for k in built_in().values():
+        for e in k.events:
+            if e.name == name:
+                return e
+    return None
 
 
 def accepting(event: str) -> tuple[tuple[str, ...], str | None]:
     """The built-in plant kinds that accept [[events]] kind `event` (in the registry's order) and the backend
     it needs (None: any; the first accepting kind's word, as they agree)."""
-    names = tuple(k.name for k in built_in().values() if event in k.events)
-    return names, (built_in()[names[0]].events[event] if names else None)
+    found = [(k.name, backend) for k in built_in().values() for e, backend in k.events.items() if e.name == event]
+    return tuple(n for n, _ in found), (found[0][1] if found else None)
 
 
 def declaring(key: str) -> tuple[PlantKind, ...]:
@@ -218,6 +241,12 @@ def forms(name: str) -> frozenset[Form]:
     """The forms plant kind `name` offers (an unknown kind: the model form, as a plant plugin)."""
     kind = lookup(name)
     return kind.forms if kind is not None else frozenset({Form.MODEL})
+
+
+def is_rigid_body(name: str | None) -> bool:
+    """Whether plant kind `name` is a multi-joint plant (offers Form.RIGID_BODY; an unknown kind: no)."""
+    kind = lookup(name)
+    return kind is not None and kind.rigid_body
 
 
 def output_unit(name: str | None) -> str:
