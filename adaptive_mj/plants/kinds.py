@@ -10,7 +10,8 @@ A kind declares: its name, the module that builds it, the forms a law can see it
 control and its parameters (for labels, summaries and the verdict's messages), and a line of doc; and what
 a scenario may say of it: its plant.* keys as data (adaptive_mj.keys.Key) with the reader that checks them
 (a function of the kind, the [plant] table and the scenario's folder, giving the PlantSpec; shared keys read by
-adaptive_mj.plants.plant_keys), the [[events]] kinds it accepts, the order of its dynamics and whether it
+adaptive_mj.plants.plant_keys), the [[events]] kinds it accepts (adaptive_mj.plants.events: each declared as data,
+a kind's own in its module), what a law of the MRAC state form sees of it, the order of its dynamics and whether it
 starts only on the reference; and what studies and reports see of it (the stress study's plant, the bench
 sections that run it, how a video draws its estimates).
 """
@@ -94,8 +95,9 @@ class PlantKind:
     nominal_noise: float | None = None
     origin: str = "built in"
     # what a scenario may say of it: its plant.* keys (shared ones too, as this kind reads them), the reader
-    # (None: no built-in reader, a plant plugin's keys are read from its plugin); [[events]] kinds it accepts,
-    # each with the backend it needs (None: any); the order n of its dynamics from the PlantSpec and the raw
+    # (None: no built-in reader, a plant plugin's keys are read from its plugin); [[events]] kinds it accepts
+    # (adaptive_mj.plants.events.EventKind, declared in its own module or shared), each with the backend it
+    # needs (None: any); the order n of its dynamics from the PlantSpec and the raw
     # law.order; starts_on_reference: simulation.initial_state may only be "reference" (its default)
     keys: tuple[Key, ...] = ()
     reader: "Reader | None" = None
