@@ -217,8 +217,11 @@ def cmd_list(args) -> int:
         for kind in built_in().values():
             forms = ", ".join(sorted(f.value for f in kind.forms))
             model = f"; model {kind.default_model}" if kind.default_model else "; analytic"
+            keys = ", ".join(k.describe() for k in kind.keys if k.name != "kind")  # its declared plant.* keys
+            events = ", ".join(e.name for e in kind.events)
             print(f"{kind.name:24s} built in: offers {forms}; {kind.doc}{model}; y [{kind.output_unit}], "
-                  f"u [{kind.control_unit}]; default law {kind.default_law}")
+                  f"u [{kind.control_unit}]; default law {kind.default_law}; keys: {keys or 'none'}; "
+                  f"events: {events or 'none'}")
         plants = installed_plants()
         for name, inst in sorted(plants.items()):
             keys = ", ".join(p.name + (f" [{p.unit}]" if p.unit else "") for p in inst.plugin.params)

@@ -98,7 +98,8 @@ from adaptive_mj.sim.loop import (Controller, ControlStep, EventQueue, Rows, Ste
 from adaptive_mj.report.metrics import clean_json, summary as make_summary  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
-from adaptive_mj.plants.protocol import Policy, has_joints  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.laws.protocol import Law  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.plants.protocol import Plant, Policy, has_joints  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.trajectory import Status, Trajectory
 
 #: ``law=`` value that runs the scenario's own law (the one ``adaptive-mj run`` runs).
@@ -109,7 +110,7 @@ DISCOUNT_TIME_LIMIT = 1.0
 DISCOUNT_DIVERGED = 0.0
 
 
-def load(scenario, *, law=None, log: str | os.PathLike | None = None, seed: int | None = None,
+def load(scenario, *, law: Law | str | None = None, log: str | os.PathLike | None = None, seed: int | None = None,
          overrides=(), privileged: bool = False, n_sub_steps: int | None = None,
          control_timestep: float | None = None) -> TrackingEnvironment:
     """A dm_env.Environment running `scenario` (see the module docstring).
@@ -217,8 +218,8 @@ class TrackingTask(control.Task):
     log_paths: the MCAP logs written so far, one per episode.
     """
 
-    def __init__(self, scn: scenario_io.Scenario, setup: Setup, *, law=None, privileged: bool = False,
-                 n_sub_steps: int = 1, log_dir: Path | None = None):
+    def __init__(self, scn: scenario_io.Scenario, setup: Setup, *, law: Law | str | None = None,
+                 privileged: bool = False, n_sub_steps: int = 1, log_dir: Path | None = None):
         plant = setup.plant
         self.scenario = scn
         self.privileged = bool(privileged)
@@ -233,10 +234,10 @@ class TrackingTask(control.Task):
         # The scenario's law is rebuilt with each episode's plant (an arm's law reads that plant's
         # regressor); a law object passed in serves every episode (1-DOF laws are pure).
         self._own_law = law is None or (isinstance(law, str) and law == SCENARIO_LAW)
-        if self._own_law:
+        if law is None or isinstance(law, str):
+            if not self._own_law:
+                raise ValueError(f"law must be None, {SCENARIO_LAW!r} or a law object, got {law!r}")
             law = setup.law
-        elif isinstance(law, str):
-            raise ValueError(f"law must be None, {SCENARIO_LAW!r} or a law object, got {law!r}")
         elif self.joint_shape:
             raise ValueError(f"on a manipulator, law must be None or {SCENARIO_LAW!r} (the Slotine-Li law is "
                              "built with each episode's plant, whose regressor it reads); set its gains in the "
@@ -359,9 +360,9 @@ class _Episode:
     where J is the plant's joint shape: () for 1-DOF plants, (m,) for an arm.
     """
 
-    def __init__(self, scn, setup: Setup, *, law, drive: bool, n_steps: int, control_dt: float,
-                 recorder=None):
-        plant = setup.plant
+    def __init__(self, scn: scenario_io.Scenario, setup: Setup, *, law: Law, drive: bool, n_steps: int,
+                 control_dt: float, recorder=None):
+        plant: Plant = setup.plant
         self.name = scn.name
         self.scn = scn
         self.plant = plant
@@ -461,7 +462,7 @@ class _Episode:
         if self.k >= self.n_steps or self.status != Status.OK:
             self.close_log(self.status, self.reason)
 
-    def _verdict_terms(self, scn, setup: Setup, law, drive: bool):
+    def _verdict_terms(self, scn: scenario_io.Scenario, setup: Setup, law: Law, drive: bool):
         """(criteria, pre-flight, None): what the episode's verdict needs, as adaptive-mj run has them
         (the pre-flight of the law that drives the plant; none for an agent's policy)."""
         from adaptive_mj.setup.success import criteria
@@ -517,7 +518,7 @@ class _Episode:
         recorder.close(status, reason, summary)
 
 
-def law_policy(env: control.Environment, law=SCENARIO_LAW) -> LawPolicy:
+def law_policy(env: control.Environment, law: Law | str = SCENARIO_LAW) -> LawPolicy:
     """The scenario's law (or `law`) as an ordinary agent: policy(timestep) -> action (1,) or (m,)."""
     return LawPolicy(env, law)
 
@@ -533,22 +534,24 @@ class LawPolicy:
     held over the RK4 stages and θ̂ is staged by Euler at the agent's rate.
     """
 
-    def __init__(self, env: control.Environment, law=SCENARIO_LAW):
+    def __init__(self, env: control.Environment, law: Law | str = SCENARIO_LAW):
         task = env.task
         if task.drives_law:
             raise ValueError("law_policy needs an environment the agent drives (load without law=)")
         self._task = task
+        own: Law | None = None  # None: the task's current law, read at each call (an arm's is rebuilt per episode)
         if isinstance(law, str):
             if law != SCENARIO_LAW:
                 raise ValueError(f"law must be {SCENARIO_LAW!r} or a law object, got {law!r}")
-            law = None  # the task's current law, read at each call (an arm's is rebuilt per episode)
         elif task.joint_shape:
             raise ValueError(f"on a manipulator, law_policy takes {SCENARIO_LAW!r} only (the Slotine-Li law "
                              "reads the episode plant's regressor)")
         elif law.order != task.order or tuple(law.names) != task.param_names:
             raise ValueError(f"law of order {law.order} with parameters {tuple(law.names)} does not fit "
                              f"the plant (order {task.order}, parameters {task.param_names})")
-        self.law = law
+        else:
+            own = law
+        self.law = own
         self.theta_hat0 = task.theta_hat0.copy()
         self.theta_hat = self.theta_hat0.copy()
         self._h = env.control_timestep()

@@ -3,7 +3,7 @@ plant kind's and law kind's key reader builds: adaptive_mj.plants.kinds, adaptiv
 nothing here reads a file or imports another adaptive_mj module. The key reference is docs/SCENARIOS.md."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -235,18 +235,27 @@ class DisturbanceSpec:
     load: dict[str, float] | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class EventSpec:
+    """An [[events]] entry, read by its kind's declaration (adaptive_mj.plants.events.EventKind)."""
+
     t: float
     kind: str
     value: float
-    body: str
+    body: str = "payload/body"  # the body the event changes (events[i].body)
     payload: str | None = None  # payload_swap: the payload file (name in models/payloads or path), as written
     # payload_swap: where the file was looked for, in order (bundled: models/payloads; a relative path: next to
     # the scenario, then the current directory); the first that exists is used (adaptive_mj.plants.payload)
     payload_paths: tuple[Path, ...] = ()
     W: tuple[float, ...] | None = None  # flight_condition: the wing-rock coefficients from t on
     l_delta: float | None = None  # flight_condition: L_δ from t on
+    # the fields an event kind declares beyond these (a plant kind's own event kind: e.g. a gust's direction)
+    params: dict[str, Any] = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        """The dataclass repr; params only when an event kind declares fields of its own."""
+        shown = [(f.name, getattr(self, f.name)) for f in fields(self) if f.name != "params" or self.params]
+        return f"EventSpec({', '.join(f'{name}={value!r}' for name, value in shown)})"
 
 
 @dataclass(frozen=True)

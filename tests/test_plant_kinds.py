@@ -10,7 +10,7 @@ import pytest
 
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.keys import Key, Table
-from adaptive_mj.plants import heave, kinds, plant_keys
+from adaptive_mj.plants import events, heave, kinds, plant_keys
 from adaptive_mj.setup import scenario as sc
 
 REPO = Path(__file__).resolve().parents[1]
@@ -89,7 +89,7 @@ def test_each_kind_accepts_exactly_its_declared_keys():
 
 
 def test_event_kinds_come_from_the_plant_kinds():
-    assert set(sc.EVENT_KINDS) == {e for k in kinds.built_in().values() for e in k.events}
+    assert set(sc.EVENT_KINDS) == {e.name for k in kinds.built_in().values() for e in k.events}
     assert kinds.accepting("payload_mass") == (("arm", "manipulator"), "mujoco")
     assert kinds.accepting("constant_force")[1] is None
 
@@ -110,7 +110,7 @@ def toy_kind():
         "toy_heave", heave.__name__, heave.KIND.forms, output_unit="m", control_unit="N", params=heave.KIND.params,
         default_model="heave_vehicle", doc="a toy kind (tests)",
         keys=plant_keys.keys(TOY_GAIN), reader=plant_keys.SharedReader(theta=heave.theta_names, late=_toy_late),
-        events={"constant_force": None}))
+        events={events.CONSTANT_FORCE: None}))
     yield kind
     kinds.unregister("toy_heave")
 
@@ -130,3 +130,101 @@ def test_a_kind_registered_at_run_time_loads_and_builds_with_no_table_elsewhere(
         sc.loads(text, overrides=["plant.kind='toy_heave'", "plant.toy_gain=-1"])
     with pytest.raises(ScenarioError, match=r"used only with plant\.kind = 'heave' on backend 'mujoco'"):
         sc.loads(text, overrides=["plant.kind='toy_heave'", "events=[{t=1.0, kind='fluid_density_scale', value=2}]"])
+
+
+def test_list_plants_shows_each_kind_s_declared_keys_and_events(capsys):
+    """`list --plants` shows each built-in kind's plant.* keys with units and defaults from its declaration
+    (keys.Key.describe, as `list --laws` does) and the [[events]] kinds it accepts."""
+    from adaptive_mj.cli import main
+
+    assert main(["list", "--plants"]) == 0
+    lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line and line[0] != "("}
+    assert set(lines) == set(kinds.built_in())
+    for name, kind in kinds.built_in().items():
+        keys = ", ".join(k.describe() for k in kind.keys if k.name != "kind")
+        assert f"; keys: {keys}; events: {', '.join(e.name for e in kind.events)}" in lines[name], name
+    assert "thruster_time_constant [s]" in lines["heave"] and "g [m/s²] = 9.81" in lines["heave"]
+    assert "coulomb_smoothing [rad/s] = 0.01" in lines["manipulator"]
+
+
+GUSTS: list[tuple[float, float, float]] = []  # (t, value, direction) of each wind_gust the toy plant received
+
+
+def _gust(e, scn, source):
+    """A toy event kind's effect: a force of value along its own field `direction` (±1), recorded."""
+    direction = e.params["direction"]
+
+    def apply(plant):
+        GUSTS.append((plant.time, e.value, direction))
+        plant.force_offset += direction * e.value
+
+    return events.Event(e.t, f"wind gust {direction * e.value:+g} N", apply)
+
+
+def _direction(t: Table) -> float:
+    d = t.number("direction", 1.0)
+    if d not in (-1.0, 1.0):
+        raise t.fail("direction", "1 or -1", d)
+    return d
+
+
+WIND_GUST = events.EventKind("wind_gust", _gust, value="positive",
+                             fields=(events.EventField("direction", _direction, "+1 up, -1 down"),),
+                             doc="a toy gust (tests)")
+
+
+@pytest.fixture
+def gusty_kind():
+    """A toy plant kind (the heave module under another name) bringing a toy event kind of its own, both
+    registered at run time through the same register: no table of event kinds edited."""
+    kind = kinds.register(kinds.PlantKind(
+        "gusty_heave", heave.__name__, heave.KIND.forms, output_unit="m", control_unit="N", params=heave.KIND.params,
+        default_model="heave_vehicle", doc="a toy kind with a toy event kind (tests)",
+        keys=plant_keys.keys(), reader=plant_keys.SharedReader(theta=heave.theta_names),
+        events={WIND_GUST: None, events.CONSTANT_FORCE: None}))
+    GUSTS.clear()
+    yield kind
+    kinds.unregister("gusty_heave")
+
+
+def test_a_plant_kind_brings_its_own_event_kind_with_no_table_elsewhere(gusty_kind):
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.sim.runner import execute
+
+    text = (sc.SCENARIOS_DIR / "heave_tracking.toml").read_text()
+    gust = ["plant.kind='gusty_heave'", "simulation.duration=0.05",
+            "events=[{t=0.02, kind='wind_gust', value=3.0, direction=-1.0}]"]
+    scn = sc.loads(text, overrides=gust)
+    assert "wind_gust" in kinds.event_kinds() and kinds.accepting("wind_gust") == (("gusty_heave",), None)
+    e = scn.events[0]
+    assert (e.kind, e.value, e.params) == ("wind_gust", 3.0, {"direction": -1.0})
+    assert "params={'direction': -1.0}" in repr(e)  # shown only when a kind has fields of its own
+    assert "params" not in repr(sc.loads(text, overrides=["events=[{t=0.02, kind='constant_force', value=1.0}]"])
+                                .events[0])
+    assert build(scn).events[0].label == "wind gust -3 N"
+    result = execute(scn)
+    assert [(v, d) for _, v, d in GUSTS] == [(3.0, -1.0)] and abs(GUSTS[0][0] - 0.02) <= 0.002
+    assert result.trajectory.meta["events"] == [(pytest.approx(GUSTS[0][0]), "wind gust -3 N")]
+    # its value rule and its own field are checked like a built-in kind's; another plant kind refuses it
+    with pytest.raises(ScenarioError, match=r"events\[0\]\.value must be > 0, got -3\.0"):
+        sc.loads(text, overrides=gust[:2] + ["events=[{t=0.02, kind='wind_gust', value=-3.0}]"])
+    with pytest.raises(ScenarioError, match=r"events\[0\]\.direction must be 1 or -1, got 2\.0"):
+        sc.loads(text, overrides=gust[:2] + ["events=[{t=0.02, kind='wind_gust', value=3.0, direction=2.0}]"])
+    with pytest.raises(ScenarioError, match=r"events\[0\]\.kind must be used only with plant\.kind = "
+                                            r"'gusty_heave' on backend 'mujoco'"):
+        sc.loads(text, overrides=["events=[{t=0.02, kind='wind_gust', value=3.0}]"])
+    with pytest.raises(ScenarioError, match=r"events\[0\]\.body"):  # it declares no body field
+        sc.loads(text, overrides=gust[:2] + ["events=[{t=0.02, kind='wind_gust', value=3.0, body='x'}]"])
+    sc.loads(text, overrides=gust[:2] + ["events=[{t=0.02, kind='constant_force', value=3.0}]"])
+    kinds.unregister("gusty_heave")
+    assert "wind_gust" not in kinds.event_kinds()
+
+
+def test_what_a_law_sees_of_a_plant_comes_from_its_kind():
+    """MRAC's state form (b, the matched terms) is declared by exactly the kinds that offer it; the joint-space
+    keys (noise, disturbance, sensors, references) go with the rigid-body form."""
+    from adaptive_mj.laws.kinds import Form
+
+    for k in kinds.built_in().values():
+        assert (k.mrac_state is not None) == (Form.MRAC_STATE in k.forms), k.name
+        assert k.rigid_body == (Form.RIGID_BODY in k.forms) == kinds.is_rigid_body(k.name), k.name

@@ -80,7 +80,8 @@ class LawKind:
     A built-in kind also declares: keys, its scenario keys under [law] (law.kind and the shared keys it
     takes included, as `read` reads them; tests/test_law_kinds.py keeps the two equal); read, its key
     reader; build, its builder; plant_kinds, when not empty the only plant kinds it serves, which then take
-    no other built-in law (first_order_adaptive on the first-order plant); module, where it is declared."""
+    no other built-in law (first_order_adaptive on the first-order plant); module, where it is declared;
+    filters_key, the key that turns on its filters (integrated in the stage states: continuous control only)."""
 
     name: str
     forms: frozenset[Form]
@@ -92,6 +93,9 @@ class LawKind:
     build: Builder | None = None
     plant_kinds: frozenset[str] = frozenset()
     module: str = ""
+    # the key that gives the law its filters, as the refusal of a sampled-data controller names it (a law plugin
+    # and a built-in kind that declares none: law.composite)
+    filters_key: str = "law.composite"
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,7 @@ from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, 
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, StressPlant, register
 from adaptive_mj.plants import plant_keys
+from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Table
 
 MODEL_PATH = MODELS / "pendulum_arm.xml"
@@ -192,7 +193,7 @@ KIND = register(PlantKind(
     tail_bound=0.05, nominal_noise=5e-4,
     keys=plant_keys.keys(payload=True, default_payload="sphere"),
     reader=plant_keys.SharedReader(theta=theta_names),
-    events={"payload_mass": "mujoco", "constant_force": None},
+    events={ev.PAYLOAD_MASS: "mujoco", ev.CONSTANT_FORCE: None},
     stress=StressPlant("arm", "arm_payload_swap", ("events=[]",), composite="{gain=1.0, filter=2.0}",
                        stressors=("payload ratio",)),
     sections=("payload swap",)))

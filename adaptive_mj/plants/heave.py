@@ -43,6 +43,7 @@ from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, 
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, StressPlant, register
 from adaptive_mj.plants import plant_keys
+from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
 from adaptive_mj.specs import PlantSpec
 
@@ -256,6 +257,15 @@ def order(plant: PlantSpec, law_order: object) -> int:
     return 3 if law_order == 3 and plant.thruster_time_constant is not None else 2
 
 
+def _fluid_density(e, scn, source) -> ev.Event:
+    return ev.Event(e.t, f"fluid density x {e.value}",
+                    lambda plant: plant.set_fluid_density(plant.model.opt.density * e.value))
+
+
+#: [[events]] kind "fluid_density_scale": the water's density times value from t on
+FLUID_DENSITY_SCALE = ev.EventKind("fluid_density_scale", _fluid_density,
+                                   doc="multiplies the fluid density by value from t on")
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "heave"
 KIND = register(PlantKind(
     "heave", __name__, frozenset({Form.MODEL}), output_unit="m", control_unit="N",
@@ -264,7 +274,7 @@ KIND = register(PlantKind(
     tail_bound=0.01, nominal_noise=5e-4,
     keys=plant_keys.keys(THRUSTER_TIME_CONSTANT),
     reader=plant_keys.SharedReader(theta=theta_names, late=_thruster_lag),
-    events={"fluid_density_scale": "mujoco", "constant_force": None}, order=order,
+    events={FLUID_DENSITY_SCALE: "mujoco", ev.CONSTANT_FORCE: None}, order=order,
     stress=StressPlant("heave", "heave_tracking", ("simulation.initial_state='reference'",),
                        disturbance=(1.0, 1000.0), composite="{gain=3e-4, filter=1.0}", stressors=("lag τ",)),
     sections=("Lyapunov", "2nd order", "n-th order", "drift", "excitation", "failure")))

@@ -10,7 +10,8 @@ A kind declares: its name, the module that builds it, the forms a law can see it
 control and its parameters (for labels, summaries and the verdict's messages), and a line of doc; and what
 a scenario may say of it: its plant.* keys as data (adaptive_mj.keys.Key) with the reader that checks them
 (a function of the kind, the [plant] table and the scenario's folder, giving the PlantSpec; shared keys read by
-adaptive_mj.plants.plant_keys), the [[events]] kinds it accepts, the order of its dynamics and whether it
+adaptive_mj.plants.plant_keys), the [[events]] kinds it accepts (adaptive_mj.plants.events: each declared as data,
+a kind's own in its module), what a law of the MRAC state form sees of it, the order of its dynamics and whether it
 starts only on the reference; and what studies and reports see of it (the stress study's plant, the bench
 sections that run it, how a video draws its estimates).
 """
@@ -27,6 +28,10 @@ from adaptive_mj.laws.kinds import Form
 from adaptive_mj.specs import PlantSpec
 
 if TYPE_CHECKING:
+    from adaptive_mj.laws.kinds import MracState
+    from adaptive_mj.plants.events import EventKind
+    from adaptive_mj.specs import Scenario
+
     Reader = Callable[["PlantKind", Table, Path], PlantSpec]
 
 #: the units of a rigid body's (and a joint's) parameters on a multi-joint plant, by the name's last part
@@ -90,12 +95,13 @@ class PlantKind:
     nominal_noise: float | None = None
     origin: str = "built in"
     # what a scenario may say of it: its plant.* keys (shared ones too, as this kind reads them), the reader
-    # (None: no built-in reader, a plant plugin's keys are read from its plugin); [[events]] kinds it accepts,
-    # each with the backend it needs (None: any); the order n of its dynamics from the PlantSpec and the raw
+    # (None: no built-in reader, a plant plugin's keys are read from its plugin); [[events]] kinds it accepts
+    # (adaptive_mj.plants.events.EventKind, declared in its own module or shared), each with the backend it
+    # needs (None: any); the order n of its dynamics from the PlantSpec and the raw
     # law.order; starts_on_reference: simulation.initial_state may only be "reference" (its default)
     keys: tuple[Key, ...] = ()
     reader: "Reader | None" = None
-    events: Mapping[str, str | None] = field(default_factory=dict)
+    events: Mapping[EventKind, str | None] = field(default_factory=dict)
     order: Callable[[PlantSpec, Any], int] = second_order
     starts_on_reference: bool = False
     # what studies and reports see of it: its row in the stress study (None: not in it), the bench sections
@@ -104,6 +110,15 @@ class PlantKind:
     stress: StressPlant | None = None
     sections: tuple[str, ...] = ()
     group_params_by_unit: bool = False
+    # what a law of Form.MRAC_STATE sees of it (the scenario, the built plant -> laws.kinds.MracState: the sign
+    # and size of b, the matched nonlinear terms); None: it does not offer that form
+    mrac_state: Callable[[Scenario, Any], MracState] | None = None
+
+    @property
+    def rigid_body(self) -> bool:
+        """Whether it is a multi-joint plant (offers Form.RIGID_BODY): joint-space noise, disturbance, sensors
+        and references."""
+        return Form.RIGID_BODY in self.forms
 
     def key_names(self) -> tuple[str, ...]:
         """The names of its declared plant.* keys, in order."""
@@ -170,15 +185,25 @@ EVENT_ORDER = ("payload_mass", "payload_swap", "fluid_density_scale", "constant_
 
 def event_kinds() -> tuple[str, ...]:
     """Every [[events]] kind some built-in plant kind accepts (PlantKind.events), in EVENT_ORDER."""
-    names = list(dict.fromkeys(e for k in built_in().values() for e in k.events))
+    names = list(dict.fromkeys(e.name for k in built_in().values() for e in k.events))
     return tuple(sorted(names, key=lambda e: EVENT_ORDER.index(e) if e in EVENT_ORDER else len(EVENT_ORDER)))
+
+
+def event_kind(name: str) -> EventKind | None:
+    """The [[events]] kind called `name` that a built-in plant kind accepts (adaptive_mj.plants.events), or
+    None."""
+    for k in built_in().values():
+        for e in k.events:
+            if e.name == name:
+                return e
+    return None
 
 
 def accepting(event: str) -> tuple[tuple[str, ...], str | None]:
     """The built-in plant kinds that accept [[events]] kind `event` (in the registry's order) and the backend
     it needs (None: any; the first accepting kind's word, as they agree)."""
-    names = tuple(k.name for k in built_in().values() if event in k.events)
-    return names, (built_in()[names[0]].events[event] if names else None)
+    found = [(k.name, backend) for k in built_in().values() for e, backend in k.events.items() if e.name == event]
+    return tuple(n for n, _ in found), (found[0][1] if found else None)
 
 
 def declaring(key: str) -> tuple[PlantKind, ...]:
@@ -218,6 +243,12 @@ def forms(name: str) -> frozenset[Form]:
     """The forms plant kind `name` offers (an unknown kind: the model form, as a plant plugin)."""
     kind = lookup(name)
     return kind.forms if kind is not None else frozenset({Form.MODEL})
+
+
+def is_rigid_body(name: str | None) -> bool:
+    """Whether plant kind `name` is a multi-joint plant (offers Form.RIGID_BODY; an unknown kind: no)."""
+    kind = lookup(name)
+    return kind is not None and kind.rigid_body
 
 
 def output_unit(name: str | None) -> str:

@@ -28,9 +28,10 @@ from adaptive_mj.errors import ScenarioError
 from adaptive_mj.plants import BuiltPlant
 from adaptive_mj.plants.protocol import Policy
 from adaptive_mj.plants.twin import PythonStepped
-from adaptive_mj.laws.kinds import Form
+from adaptive_mj.laws.kinds import Form, MracState
 from adaptive_mj.plants.kinds import PlantKind, first_order, register
 from adaptive_mj.plants import plant_keys
+from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
 from adaptive_mj.specs import LinearSpec, PlantSpec
 
@@ -241,10 +242,18 @@ def read_keys(kind: PlantKind, t: Table, base_dir) -> PlantSpec:
     return PlantSpec(kind=kind.name, **head, linear=linear)
 
 
+def mrac_state(scn, plant) -> MracState:
+    """The linear plant as MRAC sees it (Form.MRAC_STATE): b from its modelled part (nominal_b), no matched
+    nonlinear terms."""
+    assert scn.law.order is not None  # set for a law of this form (its reader)
+    return MracState(scn.law.order, nominal_b(scn), None, (), tuple(plant.names))
+
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "linear"
 KIND = register(PlantKind(
     "linear", __name__, frozenset({Form.MRAC_STATE}), output_unit="-", control_unit="-",
     params={},
     default_model=None, doc="a linear plant with unmodelled dynamics",
-    default_law="mrac", keys=KEYS, reader=read_keys, events={"constant_force": None}, order=first_order,
+    default_law="mrac", keys=KEYS, reader=read_keys, events={ev.CONSTANT_FORCE: None}, order=first_order,
+    mrac_state=mrac_state,
     sections=("MRAC delay", "Rohrs")))

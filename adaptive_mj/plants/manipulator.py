@@ -48,6 +48,7 @@ from adaptive_mj.plants.protocol import Policy
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, StressPlant, body_param_unit, register
 from adaptive_mj.plants import plant_keys
+from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
 from adaptive_mj.specs import JointFrictionSpec, ManipulatorSpec
 
@@ -841,7 +842,7 @@ KIND = register(PlantKind(
     tail_bound=0.01, nominal_noise=1e-4,
     keys=plant_keys.keys(*OWN_KEYS, payload=True),
     reader=plant_keys.SharedReader(body=_own_keys),
-    events={"payload_mass": "mujoco", "payload_swap": "mujoco"}, starts_on_reference=True,
+    events={ev.PAYLOAD_MASS: "mujoco", ev.PAYLOAD_SWAP: "mujoco"}, starts_on_reference=True,
     group_params_by_unit=True, stress=StressPlant(
         "ur5e", "ur5e_identification", noise_signals=("q", "q_dot"), disturbance=(0.1, 1000.0),
         label="the 6-joint arm: the RMS over its joints and the tail's rows, ‖q̃‖'s RMS / √6"),

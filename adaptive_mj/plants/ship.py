@@ -30,6 +30,7 @@ from adaptive_mj.plants.nomoto import NomotoFit, fit, nomoto_form
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, register
 from adaptive_mj.plants import plant_keys
+from adaptive_mj.plants import events as ev
 
 MODEL_PATH = MODELS / "ship.xml"
 HEADING_JOINT, RUDDER_JOINT, SURGE_JOINT, SWAY_JOINT = "yaw", "rudder", "x", "y"
@@ -242,6 +243,18 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
     return BuiltPlant(ShipPlant(model, where=str(scn.plant.model)), model_xml)
 
 
+def _loading(e, scn, source) -> ev.Event:
+    return ev.Event(e.t, f"loading: hull mass and inertia x {e.value}", lambda plant: plant.set_loading(e.value))
+
+
+def _thrust_scale(e, scn, source) -> ev.Event:
+    return ev.Event(e.t, f"propeller thrust x {e.value}", lambda plant: plant.set_thrust_scale(e.value))
+
+
+#: [[events]] kinds of the ship: its loading (hull mass and inertia) and its propeller's thrust, times value
+LOADING = ev.EventKind("loading", _loading, doc="multiplies the hull's mass and inertia by value from t on")
+THRUST_SCALE = ev.EventKind("thrust_scale", _thrust_scale, doc="multiplies the propeller's thrust by value from t on")
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "ship"
 KIND = register(PlantKind(
     "ship", __name__, frozenset({Form.MODEL}), output_unit="rad", control_unit="rad",
@@ -249,4 +262,4 @@ KIND = register(PlantKind(
     default_model="ship", doc="a model-scale hull in MuJoCo's fluid, steered by its rudder",
     keys=plant_keys.keys(),
     reader=plant_keys.SharedReader(backend=("mujoco", "its true Nomoto parameters are fitted to the MuJoCo model")),
-    events={"constant_force": None, "loading": "mujoco", "thrust_scale": "mujoco"}, sections=("ship",)))
+    events={ev.CONSTANT_FORCE: None, LOADING: "mujoco", THRUST_SCALE: "mujoco"}, sections=("ship",)))

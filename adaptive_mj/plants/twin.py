@@ -25,6 +25,7 @@ from adaptive_mj.plants.protocol import Plant, Policy
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, first_order, register
 from adaptive_mj.plants import plant_keys
+from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
 
 if TYPE_CHECKING:
@@ -244,4 +245,4 @@ KIND = register(PlantKind(
     keys=tuple(k for k in plant_keys.keys(REGRESSOR) if k.name != "model"),
     reader=plant_keys.SharedReader(backend=("twin", "it is not a mechanical system"), theta=theta_names,
                                    theta_positive=False, theta_example="{a = 2, b = 1.5}", late=_regressor),
-    events={"constant_force": None}, order=first_order, sections=("first-order", "phase space")))
+    events={ev.CONSTANT_FORCE: None}, order=first_order, sections=("first-order", "phase space")))

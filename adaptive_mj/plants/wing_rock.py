@@ -20,9 +20,10 @@ import numpy as np
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant
 from adaptive_mj.plants.twin import TwinPlant, scenario_integrator
-from adaptive_mj.laws.kinds import Form
+from adaptive_mj.laws.kinds import Form, MracState
 from adaptive_mj.plants.kinds import PlantKind, register
 from adaptive_mj.plants import plant_keys
+from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
 from adaptive_mj.specs import PlantSpec, WingRockSpec
 
@@ -118,9 +119,39 @@ def read_keys(kind: PlantKind, t: Table, base_dir) -> PlantSpec:
     return PlantSpec(kind=kind.name, **head, wing_rock=wing_rock)
 
 
+def mrac_state(scn, plant) -> MracState:
+    """The wing rock as MRAC sees it (Form.MRAC_STATE): b = L_δ, the nonlinear terms of its regressor as
+    matched terms."""
+    assert scn.law.order is not None and scn.plant.wing_rock is not None  # set by the readers
+    return MracState(scn.law.order, scn.plant.wing_rock.l_delta, nonlinear_terms, NONLINEAR, tuple(plant.names))
+
+
+def _read_l_delta(t: Table) -> float | None:
+    l_delta = t.number("l_delta", None)
+    if l_delta == 0:
+        raise t.fail("l_delta", "non-zero", l_delta)
+    return l_delta
+
+
+def _flight_condition(e, scn, source) -> ev.Event:
+    # flight_condition events are on plant.kind = 'wing_rock' (its reader sets plant.wing_rock), with W
+    assert scn.plant.wing_rock is not None and e.W is not None
+    l_delta = e.l_delta if e.l_delta is not None else scn.plant.wing_rock.l_delta
+    theta = form_theta(e.W, l_delta)
+    return ev.Event(e.t, f"flight condition W = {list(e.W)}, L_delta = {l_delta:g}",
+                    lambda plant: plant.set_true_theta(theta))
+
+
+#: [[events]] kind "flight_condition": the wing-rock coefficients W (5,) and optionally L_δ from t on
+FLIGHT_CONDITION = ev.EventKind(
+    "flight_condition", _flight_condition, value="none",
+    fields=(ev.EventField("W", lambda t: t.numbers("W", length=5), "the wing-rock coefficients (5,) from t on"),
+            ev.EventField("l_delta", _read_l_delta, "L_delta from t on (default: plant.l_delta)"), ev.BODY),
+    doc="changes the flight condition (W, L_delta) from t on")
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "wing_rock"
 KIND = register(PlantKind(
     "wing_rock", __name__, frozenset({Form.MODEL, Form.MRAC_STATE}), output_unit="rad", control_unit="-",
     params={},
     default_model=None, doc="wing rock of a slender delta wing", keys=KEYS, reader=read_keys,
-    events={"constant_force": None, "flight_condition": "twin"}, sections=("wing rock",)))
+    events={ev.CONSTANT_FORCE: None, FLIGHT_CONDITION: "twin"}, mrac_state=mrac_state, sections=("wing rock",)))

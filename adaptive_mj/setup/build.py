@@ -11,7 +11,6 @@ model without the repo that made it.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Callable, cast
 
 import numpy as np
@@ -28,9 +27,10 @@ from adaptive_mj.setup.scenario import (JOINT_REFERENCE_KINDS, JOINT_SIGNALS, ST
                                        Scenario)
 from adaptive_mj.sensors import Sensors
 from adaptive_mj.plants import Event, plant_order
+from adaptive_mj.plants import kinds as plant_kinds_registry
+from adaptive_mj.plants.events import swap_key
 
 if TYPE_CHECKING:
-    from adaptive_mj.plants.arm import ArmPlant
     from adaptive_mj.plants.manipulator import ManipulatorPlant
     from adaptive_mj.plants.protocol import NativePlant
 
@@ -157,7 +157,7 @@ def with_event_payloads(scn: Scenario, source: ModelSource | None) -> ModelSourc
     as written), read and checked now; a source that already carries one (a log's) keeps it."""
     from adaptive_mj.plants import payload as pl
 
-    swaps = [e for e in scn.events if e.kind == "payload_swap" and e.payload is not None]
+    swaps = [e for e in scn.events if e.payload is not None]  # a payload field: payload_swap's
     if source is None or not swaps:
         return source
     assets = dict(source.assets)
@@ -166,28 +166,18 @@ def with_event_payloads(scn: Scenario, source: ModelSource | None) -> ModelSourc
         key = pl.ASSET_PREFIX + e.payload
         if key in assets:
             continue
-        path = pl.locate(e.payload, e.payload_paths, where=scn.source, key=_swap_key(e))
+        path = pl.locate(e.payload, e.payload_paths, where=scn.source, key=swap_key(e))
         text = pl.read(path)
         pl.swap_inertial(pl.check_text(text, path, on_disk=True), path)
         assets[key] = text.encode("utf-8")
     return ModelSource(source.xml, assets)
 
 
-def _swap_key(e: EventSpec) -> str:
-    return f"the payload_swap event at t={e.t:g} s: payload"
-
-
 def _check_event(scn: Scenario, e: EventSpec, plant: Plant, source: ModelSource | None = None) -> None:
-    if e.kind not in ("payload_mass", "payload_swap"):
-        return
-    if scn.plant.payload is None and e.body.startswith("payload/"):
-        raise ScenarioError(f"{scn.source}: events: a {e.kind} event on {e.body!r} needs a payload "
-                            "(plant.payload is 'none'); attach one or name a body of your model with "
-                            "events[].body")
-    # payload_mass and payload_swap events are only on plant.kind 'arm' or 'manipulator' (scenario._events)
-    cast("ArmPlant | ManipulatorPlant", plant).body_id(e.body)
-    if e.kind == "payload_swap":
-        _payload_inertial(scn, e, source)
+    """An event's own check before anything runs (its kind's EventKind.on_build: a missing body or payload)."""
+    kind = plant_kinds_registry.event_kind(e.kind)
+    if kind is not None and kind.on_build is not None:
+        kind.on_build(scn, e, plant, source)
 
 
 def _named(scn: Scenario, key: str, values: dict[str, float] | str, names: tuple[str, ...],
@@ -258,16 +248,14 @@ class LawContext:
 
 
 def _mrac_state(scn: Scenario, plant: Plant) -> law_kinds.MracState:
-    """The plant in MRAC's state form: a linear plant (b from its modelled part, no matched terms) or the wing
-    rock (b = L_δ, the nonlinear terms of its regressor as matched terms)."""
-    from adaptive_mj.plants import linear, wing_rock
-
-    assert scn.law.order is not None  # set for a law of this form (its reader)
-    if scn.plant.kind == "linear":
-        return law_kinds.MracState(scn.law.order, linear.nominal_b(scn), None, (), tuple(plant.names))
-    assert scn.plant.wing_rock is not None  # set for plant.kind = 'wing_rock' (scenario._analytic_plant)
-    return law_kinds.MracState(scn.law.order, scn.plant.wing_rock.l_delta, wing_rock.nonlinear_terms,
-                               wing_rock.NONLINEAR, tuple(plant.names))
+    """The plant in MRAC's state form, as its kind declares it (PlantKind.mrac_state in the kind's module: the
+    sign and size of b, the matched nonlinear terms)."""
+    kind = plant_kinds_registry.lookup(scn.plant.kind)
+    # a law of Form.MRAC_STATE runs only on a plant kind offering it (scenario._law), which declares mrac_state
+    if kind is None or kind.mrac_state is None:
+        raise ScenarioError(f"{scn.source}: plant.kind {scn.plant.kind!r} declares no MRAC state form "
+                            "(plants/kinds.py: PlantKind.mrac_state)")
+    return kind.mrac_state(scn, plant)
 
 
 def _saturation(scn: Scenario, plant: Plant) -> CtrlRange:
@@ -494,38 +482,12 @@ def _disturbance(scn: Scenario) -> Callable[[float], float] | None:
     return lambda t: magnitude * float(np.sin(d.omega * t + d.phase))
 
 
-def _event(e: EventSpec, scn: Scenario | None = None, source: ModelSource | None = None) -> Event:
-    if e.kind == "payload_swap":
-        assert scn is not None  # build passes the scenario
-        inertial = _payload_inertial(scn, e, source)
-        return Event(e.t, f"payload_swap {e.body} = {e.payload} ({inertial['mass']:g} kg)",
-                     lambda plant: plant.set_body_inertial(e.body, **inertial))
-    if e.kind == "payload_mass":
-        return Event(e.t, f"payload_mass {e.body} = {e.value} kg",
-                     lambda plant: plant.set_body_mass(e.body, e.value))
-    if e.kind == "loading":
-        return Event(e.t, f"loading: hull mass and inertia x {e.value}",
-                     lambda plant: plant.set_loading(e.value))
-    if e.kind == "thrust_scale":
-        return Event(e.t, f"propeller thrust x {e.value}", lambda plant: plant.set_thrust_scale(e.value))
-    if e.kind == "fluid_density_scale":
-        return Event(e.t, f"fluid density x {e.value}",
-                     lambda plant: plant.set_fluid_density(plant.model.opt.density * e.value))
-
-    if e.kind == "flight_condition":
-        from adaptive_mj.plants.wing_rock import form_theta
-
-        # flight_condition events are on plant.kind = 'wing_rock' (scenario._events), with W
-        assert scn is not None and scn.plant.wing_rock is not None and e.W is not None
-        l_delta = e.l_delta if e.l_delta is not None else scn.plant.wing_rock.l_delta
-        theta = form_theta(e.W, l_delta)
-        return Event(e.t, f"flight condition W = {list(e.W)}, L_delta = {l_delta:g}",
-                     lambda plant: plant.set_true_theta(theta))
-
-    def add_force(plant, e=e):
-        plant.force_offset += e.value
-
-    return Event(e.t, f"constant force {e.value:+g}", add_force)
+def _event(e: EventSpec, scn: Scenario, source: ModelSource | None = None) -> Event:
+    """The Event the loop applies, by its kind's effect builder (adaptive_mj.plants.events.EventKind.effect)."""
+    kind = plant_kinds_registry.event_kind(e.kind)
+    if kind is None:
+        raise ScenarioError(f"{scn.source}: events: no plant kind accepts an event of kind {e.kind!r}")
+    return kind.effect(e, scn, source)
 
 
 # --------------------------------------------------------------------------
@@ -610,15 +572,3 @@ def _per_joint_names(scn: Scenario, key: str, value: dict, joints: tuple[str, ..
                                 f"(joints: {', '.join(joints)})")
 
 
-def _payload_inertial(scn: Scenario, e: EventSpec, source: ModelSource | None) -> dict:
-    """mass, ipos, iquat, inertia of the body named "body" of a payload_swap's file, compiled alone:
-    the text the run's source carries (with_event_payloads; a log's), else the file found now."""
-    from adaptive_mj.plants import payload as pl
-
-    assert e.payload is not None  # payload_swap events name their payload (scenario._events)
-    data = (source.assets if source is not None else {}).get(pl.ASSET_PREFIX + e.payload)
-    if data is not None:
-        path = Path(f"{e.payload} (embedded)")
-        return pl.swap_inertial(pl.check_text(bytes(data).decode("utf-8"), path, on_disk=False), path)
-    path = pl.locate(e.payload, e.payload_paths, where=scn.source, key=_swap_key(e))
-    return pl.swap_inertial(pl.check_text(pl.read(path), path, on_disk=True), path)

@@ -260,7 +260,7 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
     if reference.kind == "reference_model" and law.mrac is None:  # the reference model is MRAC's (law.model)
         raise ScenarioError(f"{where}: reference.kind = 'reference_model' needs law.kind = 'mrac' (its model is "
                             f"law.model), got law.kind = {law.kind!r}")
-    arm = plant.kind == "manipulator"
+    arm = _rigid_body(plant)  # a multi-joint plant: joint-space noise, disturbance and sensors
     noise = _noise(top.table("noise", {}), order, arm=arm)
     disturbance = _disturbance(top.table("disturbance", {}), arm=arm)
     sensors = _sensors(top.table("sensors", {}), arm=arm)
@@ -466,8 +466,18 @@ def _joint_reference(t: _Table, kind: str) -> ReferenceSpec:
     return ReferenceSpec(kind=kind, params=params)
 
 
+def _rigid_body(plant: PlantSpec) -> bool:
+    """Whether the plant's kind is a multi-joint plant (offers the rigid-body form: PlantKind.rigid_body)."""
+    return _kinds.is_rigid_body(plant.kind)
+
+
+def _rigid_body_kinds() -> str:
+    """The plant kinds that offer the rigid-body form, for messages: "'manipulator'"."""
+    return " or ".join(repr(k.name) for k in _kinds.built_in().values() if k.rigid_body)
+
+
 def _reference(t: _Table, plant: PlantSpec) -> ReferenceSpec:
-    if plant.kind == "manipulator":
+    if _rigid_body(plant):  # joint references
         kind = t.string("kind", choices=JOINT_REFERENCE_KINDS)
         return _joint_reference(t, kind)
     kind = t.string("kind", choices=REFERENCE_KINDS)
@@ -567,7 +577,7 @@ def _plugin_law(t: _Table, kind: str, inst: Installed[LawPlugin], plant: PlantSp
     dead_zone = _dead_zone(t) if "dead_zone" not in own else None
     robust = RobustSpec()
     if not own & {"sigma", "e_modification", "theta0", "projection"}:
-        presets = ("physical",) if plant.kind == "manipulator" else ()
+        presets = ("physical",) if _rigid_body(plant) else ()  # a physical box needs bodies' parameters
         robust = _robust(t, kind, adaptive=bool(inst.plugin.adapts), composite=False, presets=presets)
     t.finish()
     return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=None, dead_zone=dead_zone,
@@ -603,7 +613,7 @@ def _disturbance(t: _Table, *, arm: bool = False) -> DisturbanceSpec:
     load = None
     if "load" in t.data:
         if not arm:
-            raise t.fail("load", "absent unless plant.kind = 'manipulator'", t.data["load"])
+            raise t.fail("load", f"absent unless plant.kind = {_rigid_body_kinds()}", t.data["load"])
         load = t.named_numbers("load", gt=0)
     spec = DisturbanceSpec(kind=kind, magnitude=magnitude, t0=t.number("t0", 0.0, ge=0),
                            omega=t.number("omega", 1.0, gt=0), phase=t.number("phase", 0.0), bandwidth_hz=bandwidth,
@@ -615,7 +625,7 @@ def _disturbance(t: _Table, *, arm: bool = False) -> DisturbanceSpec:
 def _sensors(t: _Table, *, arm: bool) -> SensorSpec:
     if t.data and not arm:
         raise ScenarioError(f"{t.where}: [sensors] ({', '.join(repr(k) for k in t.data)}) is for plant.kind = "
-                            "'manipulator'; a 1-DOF plant's sensors are noise.std")
+                            f"{_rigid_body_kinds()}; a 1-DOF plant's sensors are noise.std")
     counts = _joint_values(t, "encoder_counts", arrays=False) if "encoder_counts" in t.data else None
     for j, v in (counts.items() if isinstance(counts, dict) else [("", counts)] if counts is not None else []):
         if not v >= 1:
@@ -651,22 +661,25 @@ def _events(raw: Any, top: _Table, plant: PlantSpec, sim: SimulationSpec, base_d
         if time > sim.duration:
             raise t.fail("t", f"<= simulation.duration ({sim.duration})", time)
         kind = t.string("kind", choices=_event_kinds())
-        value = 0.0 if kind in ("payload_swap", "flight_condition") else \
-            t.number("value", gt=0 if kind != "constant_force" else None)
-        W = t.numbers("W", length=5) if kind == "flight_condition" else None
-        l_delta = t.number("l_delta", None) if kind == "flight_condition" else None
-        if l_delta == 0:
-            raise t.fail("l_delta", "non-zero", l_delta)
-        body = t.string("body", "payload/body")
-        payload = t.string("payload") if kind == "payload_swap" else None
+        event_kind = _kinds.event_kind(kind)
+        assert event_kind is not None  # kind is one the plant kinds accept (its choices)
+        value = event_kind.read_value(t)  # its value rule, then its fields in the order it declares them
+        fields = event_kind.read_fields(t)
         _accepted(t, kind, plant)
-        if kind in ("payload_mass", "payload_swap") and plant.kind == "manipulator" and plant.payload is None \
-                and body.startswith("payload/"):
-            raise t.fail("kind", "an event on a payload body needs plant.payload (it is 'none')", kind)
+        if event_kind.on_load is not None:
+            event_kind.on_load(t, plant, fields)
         t.finish()
-        out.append(EventSpec(t=time, kind=kind, value=value, body=body, payload=payload,
-                             payload_paths=payload_paths(payload, base_dir), W=W, l_delta=l_delta))
+        own = {k: v for k, v in fields.items() if k in _EVENT_SPEC_FIELDS}
+        params = {k: v for k, v in fields.items() if k not in _EVENT_SPEC_FIELDS}
+        out.append(EventSpec(t=time, kind=kind, value=value, **own,
+                             payload_paths=payload_paths(own.get("payload"), base_dir), params=params))
     return tuple(sorted(out, key=lambda e: e.t))
+
+
+#: the fields of an [[events]] table that EventSpec holds by name (body, payload, W, l_delta); an event kind's
+#: other fields go to EventSpec.params
+_EVENT_SPEC_FIELDS = frozenset(f.name for f in dataclasses.fields(EventSpec)) - {"t", "kind", "value", "params",
+                                                                                 "payload_paths"}
 
 
 def _event_kinds() -> tuple[str, ...]:

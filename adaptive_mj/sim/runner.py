@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from adaptive_mj import __version__
+from adaptive_mj.laws import kinds as law_kinds
 from adaptive_mj.plants import ModelSource
 from adaptive_mj.plants.mujoco_plant import reusing_run_data
 from adaptive_mj.setup.build import Setup, build
@@ -102,7 +103,8 @@ def control_timing(scn: Scenario, setup: Setup) -> ControlTiming:
         raise ScenarioError(f"{scn.source}: control.period must be a whole multiple of the physics timestep "
                             f"{setup.plant.dt!r} s, got {c.period!r}") from None
     if timing.sampled and setup.law.has_filters:
-        key = "law.rule = 'mit'" if scn.law.kind == "mrac" else "law.composite"  # MRAC's MIT rule filters too
+        kind = law_kinds.built_in().get(scn.law.kind)
+        key = kind.filters_key if kind is not None else "law.composite"  # the law kind's own (MRAC: its MIT rule)
         raise ScenarioError(f"{scn.source}: {key} runs under control.mode = 'continuous' only "
                             "(its filters integrate the stage states), got control.mode = 'sampled'")
     return timing

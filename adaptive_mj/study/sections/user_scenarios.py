@@ -33,7 +33,7 @@ def user_section(paths: list[Path], logs: Path) -> Section:
             lines.append(f"| `{job.scenario.name}` | {scn.law.kind} | {r.status} | "
                          f"{_g(m.get('rms_tracking_error'))} {yu} | {_g(m.get('rms_tracking_error_tail'))} {yu} | "
                          f"{_g(m.get('control_rms'))} {uu} |")
-            if kind != "manipulator":
+            if not units.is_rigid_body(kind):  # a multi-joint plant's many parameters: no table of them here
                 parts.append(f"`{job.scenario.name}` (law `{scn.law.kind}`), final estimates:\n\n"
                              + _final_table(r, kind))
         return SectionReport(f"{len(jobs)} scenario(s) given with `bench --scenario`, each logged in `logs/` "
