@@ -11,7 +11,7 @@ import pytest
 
 from adaptive_mj.disturbance import JointDisturbance
 from adaptive_mj.errors import ScenarioError
-from adaptive_mj.laws.slotine_li import slotine_li_output
+from adaptive_mj.laws.slotine_li import SlotineLiArrays, SlotineLiGains, slotine_li_output
 from adaptive_mj.sensors import Sensors, sense
 from adaptive_mj.setup.build import build
 from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
@@ -132,9 +132,10 @@ def test_freeze_leaves_the_saturated_joints_out_of_the_rate():
     lo, hi = -np.abs(u_free) - 1.0, np.abs(u_free) + 1.0
     lo[1], hi[1] = u_free[1] - 1.0, u_free[1] - 0.1  # joint 1 above its limit
     u, rate, rate_all = np.empty(3), np.empty(4), np.empty(4)
-    args = (Y, np.zeros(3), th, s, kd, gamma, True, 0.0, True, 0.0, 0.0, 0.0, th, -inf4, inf4)
-    slotine_li_output(*args, lo, hi, True, u, rate)
-    slotine_li_output(*args, lo, hi, False, u, rate_all)
+    arrays = SlotineLiArrays(kd=kd, gamma=gamma, theta0=th, lower=-inf4, upper=inf4, sat_lo=lo, sat_hi=hi)
+    for freeze, out in ((True, rate), (False, rate_all)):
+        gains = SlotineLiGains(mode=0, adapt=True, dz_width=0.0, dz_on_s=True, sigma=0.0, e_mod=0.0, freeze=freeze)
+        slotine_li_output(Y, np.zeros(3), th, s, 0.0, gains, arrays, u, out)
     np.testing.assert_allclose(u, u_free, rtol=1e-14)  # the law's τ is unclamped: the loop clamps it
     masked = s.copy()
     masked[1] = 0.0

@@ -180,7 +180,7 @@ def test_compiled_sliding_law_has_the_same_boundary():
 
 def test_compiled_slotine_li_output_has_the_same_boundary():
     numba = pytest.importorskip("numba")
-    from adaptive_mj.laws.slotine_li import slotine_li_output
+    from adaptive_mj.laws.slotine_li import SlotineLiArrays, SlotineLiGains, slotine_li_output
 
     out_fn = _compiled(slotine_li_output, numba)
     s = np.array([1.5, 2.0])
@@ -189,8 +189,10 @@ def test_compiled_slotine_li_output_has_the_same_boundary():
 
     def rate(width, on_s):
         u, r = np.empty(2), np.empty(4)
-        out_fn(Y, np.zeros(2), th, s, kd, gamma, True, width, on_s, 1.25, 0.0, 0.0, th, -inf4, inf4,
-               -inf4[:2], inf4[:2], False, u, r)
+        gains = SlotineLiGains(mode=0, adapt=True, dz_width=width, dz_on_s=on_s, sigma=0.0, e_mod=0.0, freeze=False)
+        arrays = SlotineLiArrays(kd=kd, gamma=gamma, theta0=th, lower=-inf4, upper=inf4, sat_lo=-inf4[:2],
+                                 sat_hi=inf4[:2])
+        out_fn(Y, np.zeros(2), th, s, 1.25, gains.record()[0], arrays, u, r)  # the compiled path reads a record
         return r
 
     plain = _slotine()(0.0, *ARM_CASES[0], th).theta_hat_dot

@@ -232,11 +232,17 @@ class _PluginBase(Law):
         plugin_rate(rate, theta_hat, s_abs, s_abs if sh.dz_on_s else e_abs, self.adapt, sh.dz_width, sh.sigma,
                     sh.e_mod, sh.theta0, sh.gamma, sh.lower, sh.upper)
 
-    def native_params(self) -> dict[str, Any]:
+    def gains(self) -> PluginGains:
+        """The shared modifications' scalars, by name."""
         sh = self.shared
-        return {"plugin_params": self.params, "adapt": self.adapt, "dz_width": sh.dz_width, "dz_on_s": sh.dz_on_s,
-                "sigma": sh.sigma, "e_mod": sh.e_mod, "theta0": sh.theta0, "lower": sh.lower, "upper": sh.upper,
-                "gamma": sh.gamma}
+        return PluginGains(dz_width=sh.dz_width, sigma=sh.sigma, e_mod=sh.e_mod, adapt=self.adapt, dz_on_s=sh.dz_on_s)
+
+    def native_params(self) -> dict[str, Any]:
+        """Its parameters, "gains" (the PLUGIN_GAINS record of `gains()`) and the shared modifications' arrays by
+        name (a multi-joint plugin's, for adaptive_mj.sim.native_manipulator; PluginLaw's own for the 1-DOF)."""
+        sh = self.shared
+        return {"plugin_params": self.params, "gains": self.gains().record(), "theta0": sh.theta0,
+                "lower": sh.lower, "upper": sh.upper, "gamma": sh.gamma}
 
     def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
         """The plugin's declared V (LawPlugin.lyapunov), or NaN when it declares none (the log's V says so)."""
@@ -257,11 +263,6 @@ class PluginLaw(_PluginBase):
         self._setup(installed, form.names, params, shared, modification)
         self.form = form
         self.order = form.order
-
-    def gains(self) -> PluginGains:
-        """The shared modifications' scalars, by name."""
-        sh = self.shared
-        return PluginGains(dz_width=sh.dz_width, sigma=sh.sigma, e_mod=sh.e_mod, adapt=self.adapt, dz_on_s=sh.dz_on_s)
 
     def native_params(self) -> dict[str, Any]:
         """What adaptive_mj.sim.native needs: the function and its parameters, "gains" (the PLUGIN_GAINS record

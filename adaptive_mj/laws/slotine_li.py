@@ -27,7 +27,8 @@ from __future__ import annotations
 
 import enum
 import math
-from typing import Any, Callable
+from dataclasses import dataclass
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
@@ -35,7 +36,7 @@ from adaptive_mj.errors import ScenarioError
 from adaptive_mj.keys import Key, Table, joint_values
 from adaptive_mj.laws import law_keys as shared
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
-                                     dead_zone_open, modify_rate)
+                                     as_record, dead_zone_open, modify_rate, record_dtype)
 from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, JointFeedback, Law
 from adaptive_mj.specs import LawSpec, PlantSpec
@@ -58,14 +59,57 @@ def reference_terms(x, ref, lam, s, qd_r, qdd_r):
         qdd_r[j] = ref[2, j] + lam[j] * de
 
 
-def slotine_li_output(Y, tau_known, theta, s, kd, gamma, adapt, dz_width, dz_on_s, e_norm,
-                      sigma, e_mod, theta0, lower, upper, lo, hi, freeze, u, rate):
-    """τ = Y θ + τ_known + K_D s into u (m,) (unclamped); θ' = Γ⁻¹ Yᵀ s into rate (unless not adapt,
-    or the dead-zone signal ‖s‖ (dz_on_s) or ‖q̃‖ = e_norm is below dz_width: common.dead_zone_open), then the
-    modifications (common.modify_rate with |s| = ‖s‖) when adapting. freeze (saturation-aware
-    adaptation): a joint whose τ_j lies outside its limits [lo_j, hi_j] (m,) gives no s_j to the rate
-    (θ' = Γ⁻¹ Σ_{j unsaturated} Y_jᵀ s_j)."""
+@dataclass(frozen=True)
+class SlotineLiGains:
+    """Slotine–Li's scalar gains and switches, by name: what `slotine_li_output` (and the compiled callback's
+    point, adaptive_mj.sim.native_manipulator) read of them.
+
+    mode: Mode (ADAPTIVE, COMPUTED_TORQUE, PD_GRAVITY: where the regressor is evaluated); adapt: the estimates
+    move (ADAPTIVE only); dz_width: the dead-zone's width [rad/s on ‖s‖, rad on ‖q̃‖] (0: none), on ‖s‖ when
+    dz_on_s, else on ‖q̃‖; sigma, e_mod: the leakage (common.modify_rate); freeze: saturation-aware adaptation.
+    The Python path passes this object; the compiled callback reads the same names as fields of a
+    SLOTINE_LI_GAINS record (`record()`), through its address."""
+
+    mode: int
+    adapt: bool
+    dz_width: float
+    dz_on_s: bool
+    sigma: float
+    e_mod: float
+    freeze: bool
+
+    def record(self) -> np.ndarray:
+        """(1,) SLOTINE_LI_GAINS array of these values (the compiled callback reads it by address)."""
+        return as_record(self, SLOTINE_LI_GAINS)
+
+
+SLOTINE_LI_GAINS = record_dtype(SlotineLiGains)
+
+
+class SlotineLiArrays(NamedTuple):
+    """Slotine–Li's arrays, by name (a NamedTuple: numba passes it to compiled code as it is). kd (m,): K_D
+    [N m s/rad]; gamma (n_params,): Γ; theta0, lower, upper (n_params,): the leakage's prior and the
+    projection's box (±inf where free); sat_lo, sat_hi (m,): the torque limits [N m] of saturation-aware
+    adaptation (±inf when off)."""
+
+    kd: np.ndarray
+    gamma: np.ndarray
+    theta0: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    sat_lo: np.ndarray
+    sat_hi: np.ndarray
+
+
+def slotine_li_output(Y, tau_known, theta, s, e_norm, gains, arrays, u, rate):
+    """τ = Y θ + τ_known + K_D s into u (m,) (unclamped); θ' = Γ⁻¹ Yᵀ s into rate (unless not gains.adapt,
+    or the dead-zone signal ‖s‖ (gains.dz_on_s) or ‖q̃‖ = e_norm is below gains.dz_width:
+    common.dead_zone_open), then the modifications (common.modify_rate with |s| = ‖s‖) when adapting.
+    gains.freeze (saturation-aware adaptation): a joint whose τ_j lies outside its limits [sat_lo_j, sat_hi_j]
+    gives no s_j to the rate (θ' = Γ⁻¹ Σ_{j unsaturated} Y_jᵀ s_j). Y (m, n_params), tau_known (m,), theta
+    (n_params,), s (m,); gains: SlotineLiGains (or its record); arrays: SlotineLiArrays."""
     m, n = Y.shape[0], Y.shape[1]
+    kd, gamma, lo, hi = arrays.kd, arrays.gamma, arrays.sat_lo, arrays.sat_hi
     s_norm = 0.0
     for j in range(m):
         acc = tau_known[j] + kd[j] * s[j]
@@ -74,20 +118,20 @@ def slotine_li_output(Y, tau_known, theta, s, kd, gamma, adapt, dz_width, dz_on_
         u[j] = acc
         s_norm += s[j] * s[j]
     s_norm = math.sqrt(s_norm)
-    signal = s_norm if dz_on_s else e_norm
-    if adapt and dead_zone_open(signal, dz_width):  # signal >= 0: abs() changes nothing
+    signal = s_norm if gains.dz_on_s else e_norm
+    if gains.adapt and dead_zone_open(signal, gains.dz_width):  # signal >= 0: abs() changes nothing
         for i in range(n):
             acc = 0.0
             for j in range(m):
-                if freeze and (u[j] < lo[j] or u[j] > hi[j]):
+                if gains.freeze and (u[j] < lo[j] or u[j] > hi[j]):
                     continue
                 acc += Y[j, i] * s[j]
             rate[i] = acc / gamma[i]
     else:
         for i in range(n):
             rate[i] = 0.0
-    if adapt:
-        modify_rate(rate, theta, s_norm, sigma, e_mod, theta0, gamma, lower, upper)
+    if gains.adapt:
+        modify_rate(rate, theta, s_norm, gains.sigma, gains.e_mod, arrays.theta0, gamma, arrays.lower, arrays.upper)
 
 
 def _per_joint(value, m: int, what: str) -> np.ndarray:
@@ -135,18 +179,29 @@ class SlotineLiLaw(Law):
         lo, hi = saturation if saturation is not None else (-np.inf, np.inf)
         self.lo = np.broadcast_to(np.asarray(lo, dtype=float), (self.m,)).copy()
         self.hi = np.broadcast_to(np.asarray(hi, dtype=float), (self.m,)).copy()
+        self._gains, self._arrays = self.gains(), self.arrays()  # once: the Python path reads them by name
 
     @property
     def bounds(self) -> Box | None:
         """(lower, upper) of the projection, or None (common.Modification.box)."""
         return self.modification.box(len(self.names))
 
+    def gains(self) -> SlotineLiGains:
+        """The law's scalar gains and switches, by name."""
+        sigma, e_mod = self._mod[0], self._mod[1]
+        return SlotineLiGains(mode=int(self.mode), adapt=self.adapt, dz_width=self._dz_width, dz_on_s=self._dz_on_s,
+                              sigma=sigma, e_mod=e_mod, freeze=self.freeze)
+
+    def arrays(self) -> SlotineLiArrays:
+        """The law's arrays, by name."""
+        theta0, lower, upper = self._mod[2], self._mod[3], self._mod[4]
+        return SlotineLiArrays(kd=self.kd, gamma=self.gamma, theta0=theta0, lower=lower, upper=upper, sat_lo=self.lo,
+                               sat_hi=self.hi)
+
     def native_params(self) -> dict[str, Any]:
-        sigma, e_mod, theta0, lower, upper = self._mod
-        return {"lam": self.lam, "kd": self.kd, "gamma": self.gamma, "adapt": self.adapt, "mode": int(self.mode),
-                "dz_width": self._dz_width, "dz_on_s": self._dz_on_s, "sigma": sigma, "e_mod": e_mod,
-                "theta0": theta0, "lower": lower, "upper": upper, "freeze": self.freeze,
-                "sat_lo": self.lo, "sat_hi": self.hi}
+        """What adaptive_mj.sim.native_manipulator needs: "gains" (the SLOTINE_LI_GAINS record of `gains()`), Λ and
+        the arrays by name."""
+        return {"gains": self.gains().record(), "lam": self.lam, **self.arrays()._asdict()}
 
     def feedback(self) -> JointFeedback:
         """K_D and Λ (every mode: the baselines close the same feedback on s)."""
@@ -162,10 +217,7 @@ class SlotineLiLaw(Law):
             Y, tau_known = self.regressor(x[1], qd_r, qdd_r)
         u, rate = np.empty(m), np.empty(len(self.names))
         e_norm = float(np.linalg.norm(ref[0] - x[0]))
-        sigma, e_mod, theta0, lower, upper = self._mod
-        slotine_li_output(Y, tau_known, theta_hat, s, self.kd, self.gamma, self.adapt, self._dz_width,
-                          self._dz_on_s, e_norm, sigma, e_mod, theta0, lower, upper, self.lo, self.hi, self.freeze,
-                          u, rate)
+        slotine_li_output(Y, tau_known, theta_hat, s, e_norm, self._gains, self._arrays, u, rate)
         return LawStep(u, rate, s, qdd_r)
 
     def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:

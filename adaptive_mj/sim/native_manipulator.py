@@ -43,12 +43,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from adaptive_mj.laws.common import plugin_rate
-from adaptive_mj.laws.plugin import joint_norm, tracking_error_norm
+from adaptive_mj.laws.plugin import PLUGIN_GAINS, joint_norm, tracking_error_norm
+from adaptive_mj.laws.slotine_li import SLOTINE_LI_GAINS, SlotineLiArrays
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.numba_util import jit_tree
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import stage as stage_code
 from adaptive_mj.sim import native_step
+from adaptive_mj.sim.native import gains_record
 from adaptive_mj.sim.native_context import ContextOwner, addr, context_address, inlined, offsets, source_key
 
 if TYPE_CHECKING:
@@ -73,6 +75,7 @@ if TYPE_CHECKING:
     law_output: Any
     user_point: Any
     user_law: Any
+    gains_ptr: Any
     stage_estimate: Any
     accumulate_rate: Any
     advance_estimates: Any
@@ -91,9 +94,11 @@ CONTEXT = np.dtype([
     ("stage", _i8), ("row", _i8), ("rows", _i8), ("step", _i8), ("t", _f8),
     # settings
     ("nstages", _i8), ("nv", _i8), ("m", _i8), ("nbody", _i8), ("nth", _i8), ("nstd", _i8), ("nq", _i8), ("nu", _i8),
-    ("maxrows", _i8), ("mode_law", _i8), ("adapt", _i8), ("dz_on_s", _i8), ("has_base", _i8),
-    ("mode", _i8), ("period_steps", _i8), ("delay", _i8),
-    ("h", _f8), ("period", _f8), ("dz_width", _f8), ("sigma", _f8), ("e_mod", _f8),
+    ("maxrows", _i8), ("has_base", _i8), ("mode", _i8), ("period_steps", _i8), ("delay", _i8),
+    ("h", _f8), ("period", _f8),
+    # the law's scalar gains: the address of its record (laws.slotine_li.SLOTINE_LI_GAINS, or
+    # laws.plugin.PLUGIN_GAINS for a multi-joint plugin), read by name
+    ("gains", _i8),
     ("inc", _f8, 4), ("weights", _f8, 4),
     # the regressor's static arrays
     ("parent", _i8), ("dofadr", _i8), ("dofnum", _i8), ("rootid", _i8), ("body_col", _i8), ("body_known", _i8),
@@ -108,7 +113,7 @@ CONTEXT = np.dtype([
     ("ring", _i8), ("rate", _i8), ("y_std", _i8), ("y", _i8), ("tau_known", _i8), ("ref", _i8), ("noise", _i8),
     ("scratch", _i8),
     # sensors (stage.sense), disturbance torques and saturation-aware adaptation
-    ("diff", _i8), ("freeze", _i8), ("has_dist", _i8), ("alpha", _f8), ("sense_period", _f8),
+    ("diff", _i8), ("has_dist", _i8), ("alpha", _f8), ("sense_period", _f8),
     ("quantum", _i8), ("q_prev", _i8), ("v_est", _i8), ("q_true", _i8), ("dist", _i8), ("sat_lo", _i8),
     ("sat_hi", _i8),
     # records (one row per physics step)
@@ -474,20 +479,22 @@ def _builtin_point(ctx, x, r, s, qd_r, qdd_r):
     v = w = a = 0. Returns (v, w, a)."""
     nv = ctx.nv
     ref_terms(x, r, carray(fptr(ctx.lam), nv), s, qd_r, qdd_r)  # noqa: F821 (injected)
-    if ctx.mode_law == MODE_PD_GRAVITY:
+    if carray(gains_ptr(ctx.gains), 1)[0].mode == MODE_PD_GRAVITY:  # noqa: F821 (injected)
         zero = carray(fptr(ctx.zero), nv)  # noqa: F821 (injected)
         return zero, zero, zero
     return x[1], qd_r, qdd_r
 
 
 def _builtin_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper):
-    """slotine_li_output with the run's gains (τ unclamped into u, the rate into rate)."""
+    """slotine_li_output with the law's gains read by name from its SLOTINE_LI_GAINS record (at the context's
+    `gains` address) and its arrays by name (τ unclamped into u, the rate into rate)."""
     nv, nth = ctx.nv, ctx.nth
-    e_norm = tracking_error_norm(x, r) if ctx.dz_on_s == 0 else 0.0
-    output(Y, tau_known, th, s, carray(fptr(ctx.kd), nv), carray(fptr(ctx.gamma), nth), ctx.adapt != 0,  # noqa: F821 (injected)
-           ctx.dz_width, ctx.dz_on_s != 0, e_norm, ctx.sigma, ctx.e_mod, carray(fptr(ctx.theta0), nth),  # noqa: F821 (injected)
-           lower, upper, carray(fptr(ctx.sat_lo), nv), carray(fptr(ctx.sat_hi), nv), ctx.freeze != 0,  # noqa: F821
-           u, rate)
+    gains = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
+    e_norm = tracking_error_norm(x, r) if not gains.dz_on_s else 0.0
+    arrays = SlotineLiArrays(carray(fptr(ctx.kd), nv), carray(fptr(ctx.gamma), nth),  # noqa: F821 (injected)
+                             carray(fptr(ctx.theta0), nth), lower, upper,  # noqa: F821 (injected)
+                             carray(fptr(ctx.sat_lo), nv), carray(fptr(ctx.sat_hi), nv))  # noqa: F821 (injected)
+    output(Y, tau_known, th, s, e_norm, gains, arrays, u, rate)  # noqa: F821 (injected)
 
 
 def _plugin_point(ctx, x, r, s, qd_r, qdd_r):
@@ -502,9 +509,10 @@ def _plugin_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper):
     (laws.common.plugin_rate with ‖s‖ and ‖q̃‖), as laws.plugin.JointPluginLaw does in Python."""
     nth = ctx.nth
     user_law(x, r, th, Y, tau_known, carray(fptr(ctx.params), ctx.nparams), u, s, rate)  # noqa: F821 (injected)
+    shared = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected: the PLUGIN_GAINS record)
     s_abs = joint_norm(s)
-    signal = s_abs if ctx.dz_on_s != 0 else tracking_error_norm(x, r)
-    plugin_rate(rate, th, s_abs, signal, ctx.adapt != 0, ctx.dz_width, ctx.sigma, ctx.e_mod,
+    signal = s_abs if shared.dz_on_s else tracking_error_norm(x, r)
+    plugin_rate(rate, th, s_abs, signal, shared.adapt, shared.dz_width, shared.sigma, shared.e_mod,
                 carray(fptr(ctx.theta0), nth), carray(fptr(ctx.gamma), nth), lower, upper)  # noqa: F821 (injected)
 
 
@@ -521,18 +529,21 @@ def compiled(plugin=None):
     import numba
 
     from adaptive_mj.laws.slotine_li import reference_terms, slotine_li_output
+    from adaptive_mj.numba_util import pointer
 
     off = offsets()
     key = source_key(*fns, native_step.callback_factory, stage_code.control_stage, _law_stage, _apply_control,
                      _record_row, _regressor, reference_terms, slotine_li_output, _builtin_point, _builtin_output,
                      _plugin_point, _plugin_output, plugin_rate, stage_code.stage_estimate, stage_code.end_stage,
-                     stage_code.sense, context_address, extra=(off, numba.__version__))
+                     stage_code.sense, context_address,
+                     extra=(off, numba.__version__, str(SLOTINE_LI_GAINS), str(PLUGIN_GAINS)))
 
     def pieces(common: dict[str, Any], tag: str) -> dict[str, Any]:
         """This shape's law_stage (the regressor compiled apart, the law's point and output inlined into it),
         apply_control and record_row."""
         inline = inlined(numba)
-        common = {**common, "MODE_PD_GRAVITY": MODE_PD_GRAVITY}
+        common = {**common, "MODE_PD_GRAVITY": MODE_PD_GRAVITY,  # the law reads its gains through a pointer of
+                  "gains_ptr": pointer(numba.from_dtype(SLOTINE_LI_GAINS if plugin is None else PLUGIN_GAINS))}
         if plugin is None:
             law_point = jit_tree(_builtin_point, inline, tag=tag,
                                  ref_terms=jit_tree(reference_terms, inline, tag=tag), **common)
@@ -658,17 +669,18 @@ class NativeManipulatorController(ContextOwner):
             c[name] = addr(arr)
         c["nstages"], c["nv"], c["m"], c["nbody"], c["nth"], c["nstd"] = self.nst, nv, nv, nb, nth, nstd
         c["nq"], c["nu"], c["maxrows"], c["nM"] = model.nq, model.nu, rows, model.nM
-        c["mode_law"], c["adapt"] = int(p.get("mode", 0)), int(bool(p["adapt"]))
+        self.gains = gains_record(p["gains"], SLOTINE_LI_GAINS if "plugin_law" not in p else PLUGIN_GAINS)
+        c["gains"] = self.gains.ctypes.data  # held by self for the run's lifetime
         c["nparams"] = len(buf["params"])
-        c["dz_on_s"], c["has_base"] = int(bool(p["dz_on_s"])), int(B is not None)
+        c["has_base"] = int(B is not None)
         c["mode"], c["period_steps"], c["delay"], c["period"] = control.mode, control.steps, d, control.period
-        c["h"], c["dz_width"], c["sigma"], c["e_mod"] = plant.dt, p["dz_width"], p["sigma"], p["e_mod"]
+        c["h"] = plant.dt
         c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
         c["coulomb_eps"] = reg.coulomb_eps
         c["sense_period"] = control.period if control.sampled else plant.dt
         c["diff"] = int(sensors is not None and sensors.differentiated)
         c["alpha"] = sensors.alpha(c["sense_period"]) if sensors is not None else 0.0
-        c["freeze"], c["has_dist"] = int(bool(p.get("freeze", False))), int(plant.joint_disturbance is not None)
+        c["has_dist"] = int(plant.joint_disturbance is not None)
         self.context = ctx
         self.bind()
 
