@@ -33,6 +33,10 @@ class PlantSpec:
     # a plant kind's own keys without a field here (its reader's frozen dataclass or a mapping; None: none): a
     # new kind's module reads and builds it, nothing else needs a field (adaptive_mj.plants.kinds)
     kind_spec: object | None = None
+    # law.order's allowed values as the plant kind words them (PlantKind.orders_text, set when its reader reads the
+    # [plant] table; None: the order n alone), for the law readers' message (adaptive_mj.laws.law_keys.read_order);
+    # a copy of the kind's declaration, so neither repr nor equality shows it
+    orders_text: str | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass(frozen=True)

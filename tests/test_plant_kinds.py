@@ -228,3 +228,26 @@ def test_what_a_law_sees_of_a_plant_comes_from_its_kind():
     for k in kinds.built_in().values():
         assert (k.mrac_state is not None) == (Form.MRAC_STATE in k.forms), k.name
         assert k.rigid_body == (Form.RIGID_BODY in k.forms) == kinds.is_rigid_body(k.name), k.name
+
+
+def test_messages_and_units_that_differ_by_kind_come_from_its_declaration():
+    """law.order's allowed values (PlantKind.orders_text, carried by the PlantSpec to the law readers), the unit
+    of V on a run's plot (PlantKind.lyapunov_unit) and the keys an event overrides (EventKind.overrides, which a
+    sweep over plant.payload_mass notes) are declared, not found by a kind's name."""
+    from adaptive_mj.study.sweep import sweep_notes
+
+    heave_scn = sc.load(REPO / "scenarios" / "heave_tracking.toml")
+    assert heave_scn.plant.orders_text == heave.KIND.orders_text
+    assert "orders_text" not in repr(heave_scn.plant)
+    with pytest.raises(ScenarioError, match=r"law\.order must be 2, or 3 with plant\.thruster_time_constant for "
+                                            r"plant\.kind = 'heave', got 4"):
+        sc.load(REPO / "scenarios" / "heave_tracking.toml", overrides=["law.order=4"])
+    with pytest.raises(ScenarioError, match=r"law\.order must be 1 for plant\.kind = 'first_order', got 2"):
+        sc.load(REPO / "scenarios" / "lecture_first_order.toml", overrides=["law.order=2"])
+    assert {k.name: kinds.lyapunov_unit(k.name) for k in kinds.built_in().values()} == {
+        k.name: "-" if k.name == "first_order" else "J" for k in kinds.built_in().values()}
+    assert kinds.lyapunov_unit(None) == ""
+    assert {e.name for k in kinds.built_in().values() for e in k.events if "plant.payload_mass" in e.overrides} \
+        == {"payload_mass", "payload_swap"}
+    swap = sc.load(REPO / "scenarios" / "ur5e_payload_swap.toml")
+    assert any("sets it to payload 'sphere'" in n for n in sweep_notes(swap, ["plant.payload_mass"], 1))

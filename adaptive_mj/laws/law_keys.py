@@ -42,10 +42,11 @@ SATURATION = Key("saturation", "string", default="ignore", bounds="one of 'ignor
 
 
 def read_order(t: Table, plant: PlantSpec, order: int) -> int:
-    """law.order: the plant's order n (a heave vehicle with a thruster lag: 2 or 3)."""
+    """law.order: the plant's order n (a heave vehicle with a thruster lag: 2 or 3); the message words the
+    values allowed as the plant kind declares them (PlantSpec.orders_text, else n)."""
     law_order = t.integer("order", order, ge=1)
     if law_order != order:
-        allowed = "2, or 3 with plant.thruster_time_constant" if plant.kind == "heave" else str(order)
+        allowed = plant.orders_text if plant.orders_text is not None else str(order)
         raise t.fail("order", f"{allowed} for plant.kind = {plant.kind!r}", law_order)
     return law_order
 

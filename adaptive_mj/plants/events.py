@@ -53,7 +53,9 @@ VALUE_RULES = ("positive", "any", "none")
 class EventKind:
     """An [[events]] kind (see the module docstring): name; effect, its effect builder; value, its value rule
     (VALUE_RULES); fields, what else it takes, in the order they are read; on_load and on_build, its checks
-    (None: none); doc, a line for `list --plants`. Compared by identity (a plant kind references it)."""
+    (None: none); doc, a line for `list --plants`; overrides, the scenario keys whose value it replaces from t on
+    (e.g. "plant.payload_mass": a sweep over one of them notes the event), and sets, what it sets them to, as a
+    message says it (e.g. "2.5 kg"). Compared by identity (a plant kind references it)."""
 
     name: str
     effect: Effect
@@ -62,6 +64,8 @@ class EventKind:
     on_load: LoadCheck | None = None
     on_build: BuildCheck | None = None
     doc: str = ""
+    overrides: tuple[str, ...] = ()
+    sets: Callable[["EventSpec"], str] | None = None
 
     def __post_init__(self) -> None:
         if self.value not in VALUE_RULES:
@@ -149,7 +153,9 @@ def _payload_swap(e: EventSpec, scn: Scenario, source: ModelSource | None) -> Ev
 PAYLOAD = EventField("payload", lambda t: t.string("payload"), "the payload file (models/payloads or a path)")
 
 PAYLOAD_MASS = EventKind("payload_mass", _payload_mass, on_load=_payload_on_load, on_build=_payload_on_build,
-                         doc="sets the mass of body [kg] from t on")
+                         doc="sets the mass of body [kg] from t on",
+                         overrides=("plant.payload_mass",), sets=lambda e: f"{e.value:g} kg")
 PAYLOAD_SWAP = EventKind("payload_swap", _payload_swap, value="none", fields=(BODY, PAYLOAD),
                          on_load=_payload_on_load, on_build=_payload_on_build,
-                         doc="gives body the inertia of another payload file from t on")
+                         doc="gives body the inertia of another payload file from t on",
+                         overrides=("plant.payload_mass",), sets=lambda e: f"payload {e.payload!r}")

@@ -275,6 +275,7 @@ KIND = register(PlantKind(
     keys=plant_keys.keys(THRUSTER_TIME_CONSTANT),
     reader=plant_keys.SharedReader(theta=theta_names, late=_thruster_lag),
     events={FLUID_DENSITY_SCALE: "mujoco", ev.CONSTANT_FORCE: None}, order=order,
+    orders_text="2, or 3 with plant.thruster_time_constant",
     stress=StressPlant("heave", "heave_tracking", ("simulation.initial_state='reference'",),
                        disturbance=(1.0, 1000.0), composite="{gain=3e-4, filter=1.0}", stressors=("lag τ",)),
     sections=("Lyapunov", "2nd order", "n-th order", "drift", "excitation", "failure")))

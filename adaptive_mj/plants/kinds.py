@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping
 
@@ -103,6 +103,9 @@ class PlantKind:
     reader: "Reader | None" = None
     events: Mapping[EventKind, str | None] = field(default_factory=dict)
     order: Callable[[PlantSpec, Any], int] = second_order
+    # how a message words the law.order values it allows (e.g. "2, or 3 with plant.thruster_time_constant"; None:
+    # the order n alone); its reader copies it into the PlantSpec (PlantSpec.orders_text) for the law readers
+    orders_text: str | None = None
     starts_on_reference: bool = False
     # what studies and reports see of it: its row in the stress study (None: not in it), the bench sections
     # that run it (their titles, for the plant's units in their tables), and whether a video's estimate panel
@@ -113,6 +116,8 @@ class PlantKind:
     # what a law of Form.MRAC_STATE sees of it (the scenario, the built plant -> laws.kinds.MracState: the sign
     # and size of b, the matched nonlinear terms); None: it does not offer that form
     mrac_state: Callable[[Scenario, Any], MracState] | None = None
+    # the unit of a run's Lyapunov function V on its axes (the plant's energy, J; "-" on a dimensionless plant)
+    lyapunov_unit: str = "J"
 
     @property
     def rigid_body(self) -> bool:
@@ -129,7 +134,8 @@ class PlantKind:
         scenario's folder (relative model and payload paths)."""
         if self.reader is None:
             raise ValueError(f"plant kind {self.name!r} has no key reader (plants/kinds.py: PlantKind.reader)")
-        return self.reader(self, t, base_dir)
+        spec = self.reader(self, t, base_dir)
+        return spec if self.orders_text is None else replace(spec, orders_text=self.orders_text)
 
     def unit_of(self, name: str) -> str:
         """Unit of parameter `name` ('' when not declared)."""
@@ -261,6 +267,15 @@ def control_unit(name: str | None) -> str:
     """SI unit of the kind's control u ('' when unknown)."""
     kind = lookup(name)
     return kind.control_unit if kind is not None else ""
+
+
+def lyapunov_unit(name: str | None) -> str:
+    """Unit of a run's Lyapunov function V on plant kind `name` (PlantKind.lyapunov_unit; an unknown kind: J, as
+    a plant plugin's; none: '')."""
+    if not name:
+        return ""
+    kind = lookup(name)
+    return kind.lyapunov_unit if kind is not None else "J"
 
 
 def param_unit(name: str | None, param: str) -> str:

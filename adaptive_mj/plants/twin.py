@@ -245,4 +245,5 @@ KIND = register(PlantKind(
     keys=tuple(k for k in plant_keys.keys(REGRESSOR) if k.name != "model"),
     reader=plant_keys.SharedReader(backend=("twin", "it is not a mechanical system"), theta=theta_names,
                                    theta_positive=False, theta_example="{a = 2, b = 1.5}", late=_regressor),
-    events={ev.CONSTANT_FORCE: None}, order=first_order, sections=("first-order", "phase space")))
+    events={ev.CONSTANT_FORCE: None}, order=first_order, sections=("first-order", "phase space"),
+    lyapunov_unit="-"))

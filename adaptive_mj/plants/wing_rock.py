@@ -95,7 +95,7 @@ def from_scenario(scn, source) -> BuiltPlant:
     ctrl = p.ctrl_range if p.ctrl_range is not None else (-INPUT_LIMIT, INPUT_LIMIT)
     theta = form_theta(wr.W, wr.l_delta)
     integrator = scenario_integrator(scn)
-    if L.kind == "mrac":
+    if L.mrac is not None:  # a law of the MRAC state form (law.kind = "mrac": its reference model)
         return BuiltPlant(MracWingRock(theta, alpha=L.mrac.alpha, beta=L.mrac.beta, dt=dt, integrator=integrator,
                                        ctrl_range=ctrl))
     return BuiltPlant(TwinPlant(form(), theta, dt=dt, integrator=integrator, ctrl_range=ctrl))

@@ -26,7 +26,7 @@ def plot_run(traj: Trajectory, path: str | Path, *, title: str = "", kind: str |
     uu = units.control_unit(kind or "")
     n = traj.x.shape[1]
     su = yu if n == 1 or yu in ("", "-") else f"{yu}/s" if n == 2 else f"{yu}/s²"
-    vu = "-" if kind == "first_order" else "J" if kind else ""
+    vu = units.lyapunov_unit(kind)
 
     def lab(text, unit):
         return f"{text} [{unit}]" if unit else text

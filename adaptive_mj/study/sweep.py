@@ -534,9 +534,12 @@ def sweep_notes(base, keys: Sequence[str], seeds: int) -> list[str]:
                      f"so the {seeds} runs of each point are identical; set noise.std (--set or --grid) or use "
                      "--seeds 1")
     if "plant.payload_mass" in keys:
+        from adaptive_mj.plants.kinds import event_kind
+
         for i, e in enumerate(base.events):
-            if e.kind in ("payload_mass", "payload_swap"):
-                what = f"{e.value:g} kg" if e.kind == "payload_mass" else f"payload {e.payload!r}"
+            kind = event_kind(e.kind)  # its declaration says which keys it overrides (EventKind.overrides)
+            if kind is not None and "plant.payload_mass" in kind.overrides:
+                what = kind.sets(e) if kind.sets is not None else f"{e.value:g}"
                 notes.append(f"plant.payload_mass sets the payload's initial mass only: events[{i}] still sets it "
                              f"to {what} at t = {e.t:g} s in every run (override `events` to change or remove it)")
     return notes
