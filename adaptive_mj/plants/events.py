@@ -20,6 +20,7 @@ from adaptive_mj.plants import Event, ModelSource
 
 if TYPE_CHECKING:
     from adaptive_mj.keys import Table
+    from adaptive_mj.plants.protocol import Plant
     from adaptive_mj.specs import EventSpec, PlantSpec, Scenario
 
 #: an event kind's effect builder: (the event, the scenario, the run's model source) -> the Event the loop
@@ -87,7 +88,7 @@ class EventKind:
 
 
 def _constant_force(e: EventSpec, scn: Scenario, source: ModelSource | None) -> Event:
-    def add_force(plant, e=e):
+    def add_force(plant: Plant, e: EventSpec = e) -> None:
         plant.force_offset += e.value
 
     return Event(e.t, f"constant force {e.value:+g}", add_force)

@@ -26,14 +26,14 @@ import numpy as np
 
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.plants import BuiltPlant
-from adaptive_mj.plants.protocol import Policy
+from adaptive_mj.plants.protocol import Plant, Policy
 from adaptive_mj.plants.twin import PythonStepped
 from adaptive_mj.laws.kinds import Form, MracState
 from adaptive_mj.plants.kinds import PlantKind, first_order, register
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
-from adaptive_mj.specs import LinearSpec, PlantSpec
+from adaptive_mj.specs import LinearSpec, PlantSpec, Scenario
 
 
 def canonical(num, den) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -242,7 +242,7 @@ def read_keys(kind: PlantKind, t: Table, base_dir) -> PlantSpec:
     return PlantSpec(kind=kind.name, **head, linear=linear)
 
 
-def mrac_state(scn, plant) -> MracState:
+def mrac_state(scn: Scenario, plant: Plant) -> MracState:
     """The linear plant as MRAC sees it (Form.MRAC_STATE): b from its modelled part (nominal_b), no matched
     nonlinear terms."""
     assert scn.law.order is not None  # set for a law of this form (its reader)

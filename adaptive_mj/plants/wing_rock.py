@@ -25,7 +25,8 @@ from adaptive_mj.plants.kinds import PlantKind, register
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
-from adaptive_mj.specs import PlantSpec, WingRockSpec
+from adaptive_mj.specs import PlantSpec, Scenario, WingRockSpec
+from adaptive_mj.plants.protocol import Plant
 
 #: Elzebda, Nayfeh and Mook (1989), 25° angle of attack: [x1, x2, |x1| x2, |x2| x2, x1³]
 W_ELZEBDA_25 = 1e-3 * np.array([-18.59521, 15.162375, -62.45153, 9.54708, 21.45291])
@@ -119,7 +120,7 @@ def read_keys(kind: PlantKind, t: Table, base_dir) -> PlantSpec:
     return PlantSpec(kind=kind.name, **head, wing_rock=wing_rock)
 
 
-def mrac_state(scn, plant) -> MracState:
+def mrac_state(scn: Scenario, plant: Plant) -> MracState:
     """The wing rock as MRAC sees it (Form.MRAC_STATE): b = L_δ, the nonlinear terms of its regressor as
     matched terms."""
     assert scn.law.order is not None and scn.plant.wing_rock is not None  # set by the readers
