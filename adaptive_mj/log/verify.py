@@ -49,6 +49,8 @@ def verify(logged) -> tuple[bool, str]:
     rows = np.arange(len(logged_traj)) * every
     if len(logged_traj) and rows[-1] >= len(rerun):
         return False, f"verify: MISMATCH: the log has more rows than the re-run ({len(rerun)} steps){note}"
+    if len(logged_traj) and not np.array_equal(logged_traj.theta[0], rerun.theta[0]):
+        return False, _parameters_differ(logged_traj.theta[0], rerun.theta[0], note)
     v_note = ""
     for name in _FIELDS:
         a = getattr(logged_traj, name)
@@ -86,3 +88,16 @@ def _v_before_event(differ: np.ndarray, steps: np.ndarray, rerun) -> str:
     when = ", ".join(f"{t:.6g}" for t in events)
     return (f"{len(rows)} rows before the event at t = {when} s, which adaptive-mj before 0.2.0 computed with the "
             "inertia after that event (docs/LOG_FORMAT.md)")
+
+
+def _parameters_differ(logged: np.ndarray, rerun: np.ndarray, note: str) -> str:
+    """The message when the true parameters at t = 0 already differ: nothing has been controlled yet, so the
+    log's model itself gives other numbers on this machine (MuJoCo's compiled inertias, or the BLAS that turns
+    them into parameters, round differently on another CPU class), and no re-run here can be bit-identical."""
+    i = int(np.argwhere(logged != rerun)[0][0])
+    ulps = abs(float(logged[i]) - float(rerun[i])) / float(np.spacing(abs(float(logged[i])) or 1.0))
+    return (f"verify: MISMATCH before the first step: the true parameters the log's model gives at t = 0 differ "
+            f"on this machine (parameter {i}: log {float(logged[i])!r} vs re-run {float(rerun[i])!r}, "
+            f"{ulps:.3g} ulp), so the model compiles to other numbers here than on the machine that wrote the log: "
+            f"a re-run is bit-identical on that machine's CPU class, not on this one{note}")
+
