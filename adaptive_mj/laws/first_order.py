@@ -92,4 +92,4 @@ KIND = register(LawKind(
     "first_order_adaptive", frozenset({Form.MODEL}), True,
     "the lecture's first-order adaptive law (plant.kind = 'first_order' only)",
     keys=model_law_keys(adaptive=True, surface=False), read=_read, build=_build, plant_kinds=frozenset({"first_order"}),
-    module=__name__))
+    module=__name__, example=("lecture_first_order", ())))

@@ -96,6 +96,9 @@ class LawKind:
     # the key that gives the law its filters, as the refusal of a sampled-data controller names it (a law plugin
     # and a built-in kind that declares none: law.composite)
     filters_key: str = "law.composite"
+    # a bundled scenario and the --set overrides that run this kind (tests load it to check the keys the reader
+    # takes against `keys` and docs/SCENARIOS.md): a new kind names its own, no test table changes
+    example: tuple[str, tuple[str, ...]] | None = None
 
 
 @dataclass(frozen=True)

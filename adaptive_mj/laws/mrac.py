@@ -225,4 +225,5 @@ KIND = register(LawKind(
     "mrac", frozenset({Form.MRAC_STATE}), True, "model-reference adaptive control (Lyapunov rule or the MIT rule)",
     keys=(shared.KIND, shared.ORDER, *OWN_KEYS, shared.GAMMA_REQUIRED, shared.DEAD_ZONE, shared.INITIAL_ESTIMATES,
           *shared.ROBUST),
-    read=_read, build=_build, module=__name__, filters_key="law.rule = 'mit'"))
+    read=_read, build=_build, module=__name__, filters_key="law.rule = 'mit'",
+    example=("mrac_time_delay", ())))

@@ -380,13 +380,16 @@ def _build_robust_sliding(ctx: BuildContext) -> Law:
 SLIDING_ADAPTIVE = register(LawKind(
     "sliding_adaptive", frozenset({Form.MODEL}), True,
     "the lecture's sliding-surface adaptive law of order n (with its modifications)",
-    keys=model_law_keys(adaptive=True), read=_read_sliding_adaptive, build=_build_sliding_adaptive, module=__name__))
+    keys=model_law_keys(adaptive=True), read=_read_sliding_adaptive, build=_build_sliding_adaptive, module=__name__,
+    example=("heave_tracking", ())))
 FIXED_NOMINAL = register(LawKind(
     "fixed_nominal", frozenset({Form.MODEL}), False,
     "the sliding law with the estimates frozen at law.nominal (baseline)",
-    keys=model_law_keys(adaptive=False), read=_read_fixed_nominal, build=_build_fixed_nominal, module=__name__))
+    keys=model_law_keys(adaptive=False), read=_read_fixed_nominal, build=_build_fixed_nominal, module=__name__,
+    example=("heave_tracking", ("law.kind='fixed_nominal'",))))
 ROBUST_SLIDING = register(LawKind(
     "robust_sliding", frozenset({Form.MODEL}), False,
     "sliding control with a boundary layer, K sat(s/phi), no adaptation (baseline)",
     keys=model_law_keys(adaptive=False, switching=True), read=_read_robust_sliding, build=_build_robust_sliding,
-    module=__name__))
+    module=__name__,
+    example=("heave_tracking", ("law.kind='robust_sliding'", "law.K=10.0", "law.boundary_layer=0.05"))))

@@ -301,8 +301,9 @@ def _builder(mode: Mode) -> Callable[[BuildContext], Law]:
 
 def _kind(name: str, mode: Mode, doc: str) -> LawKind:
     adaptive = mode is Mode.ADAPTIVE
+    example = ("ur5e_identification", () if adaptive else (f"law.kind='{name}'", "law.nominal='model'"))
     return register(LawKind(name, frozenset({Form.RIGID_BODY}), adaptive, doc, keys=_keys(adaptive),
-                            read=_reader(adaptive), build=_builder(mode), module=__name__))
+                            read=_reader(adaptive), build=_builder(mode), module=__name__, example=example))
 
 
 #: these law kinds, registered (adaptive_mj.laws.kinds): law.kind = "slotine_li" and its two baselines

@@ -309,3 +309,7 @@ def docs_table() -> str:
                        for p in built_in().values())
     lines += ["", f"Plant kinds offer: {offers}; a plant plugin offers `model`."]
     return "\n".join(lines)
+
+
+if __name__ == "__main__":  # `python -m adaptive_mj.plants.kinds`: the law-kinds block of docs/SCENARIOS.md
+    print(docs_table())
