@@ -64,3 +64,19 @@ def discover(group: str, expected: type[P], what: str, code: Callable[[P], Calla
         out[ep.name] = Installed(ep.name, obj, dist.name if dist else "?", dist.version if dist else "?",
                                  source_hash(code(obj)))
     return out
+
+
+def scan_built_in(package: str, registry: dict, order: tuple[str, ...]) -> None:
+    """Import every module of `package` once (each built-in kind registers itself into `registry` when its
+    module is imported: found by its own module, not by a list), then put `registry` in `order` in place (a name
+    missing from `order` comes last, in registration order). Used by the plant and law kind registries."""
+    import importlib
+    import pkgutil
+
+    pkg = importlib.import_module(package)
+    for info in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda m: m.name):
+        importlib.import_module(f"{package}.{info.name}")
+    ordered = sorted(registry.items(), key=lambda kv: order.index(kv[0]) if kv[0] in order else len(order))
+    registry.clear()
+    registry.update(ordered)
+

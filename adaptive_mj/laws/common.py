@@ -53,6 +53,21 @@ def as_record(gains: Any, dtype: np.dtype) -> np.ndarray:
     return out
 
 
+class Gains:
+    """Base of a law's gains dataclass (fields of float, bool or int): `record()` is its values as the (1,) record
+    of `record_dtype` of its class, which the compiled callbacks read by name through its address."""
+
+    def record(self) -> np.ndarray:
+        """(1,) record_dtype(type(self)) array of these values (the dtype made once per class)."""
+        cls = type(self)
+        if cls not in _DTYPES:
+            _DTYPES[cls] = record_dtype(cls)
+        return as_record(self, _DTYPES[cls])
+
+
+_DTYPES: dict[type, np.dtype] = {}
+
+
 def dead_zone_open(signal: float, width: float) -> bool:
     """The dead-zone of every law: adaptation is on while |signal| >= width (off while
     |signal| < width; width 0 never stops it). signal: s for the 1-DOF laws with the

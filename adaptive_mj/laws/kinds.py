@@ -28,10 +28,10 @@ lists which of them it takes. A new law kind touches no table elsewhere.
 from __future__ import annotations
 
 import enum
-import importlib
-import pkgutil
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Protocol
+
+from adaptive_mj.plugins import scan_built_in
 
 if TYPE_CHECKING:
     import numpy as np
@@ -198,13 +198,7 @@ def built_in() -> dict[str, LawKind]:
     found by its own module, not by a list); a kind registered later (a test's) joins at the end."""
     global _SCANNED
     if not _SCANNED:
-        import adaptive_mj.laws as package
-
-        for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
-            importlib.import_module(f"{package.__name__}.{info.name}")
-        ordered = sorted(_BUILT_IN.items(), key=lambda kv: ORDER.index(kv[0]) if kv[0] in ORDER else len(ORDER))
-        _BUILT_IN.clear()
-        _BUILT_IN.update(ordered)
+        scan_built_in("adaptive_mj.laws", _BUILT_IN, ORDER)
         _SCANNED = True
     return dict(_BUILT_IN)
 

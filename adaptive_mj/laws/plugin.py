@@ -56,7 +56,7 @@ import numpy as np
 from adaptive_mj.errors import PluginError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
-                                     as_record, plugin_rate, record_dtype)
+                                     Gains, plugin_rate, record_dtype)
 from adaptive_mj.laws.protocol import Box, Law
 from adaptive_mj.plugins import Installed, discover
 
@@ -181,7 +181,7 @@ class Shared:
 
 
 @dataclass(frozen=True)
-class PluginGains:
+class PluginGains(Gains):
     """The scalars of the shared modifications a compiled 1-DOF plugin law reads by name (adaptive_mj.sim.native
     reads them as fields of a PLUGIN_GAINS record, through its address): the dead-zone's width and whether its
     signal is |s| (else |ỹ|), σ, ν, and whether the law adapts (laws.common.plugin_rate)."""
@@ -191,10 +191,6 @@ class PluginGains:
     e_mod: float
     adapt: bool
     dz_on_s: bool
-
-    def record(self) -> np.ndarray:
-        """(1,) PLUGIN_GAINS array of these values."""
-        return as_record(self, PLUGIN_GAINS)
 
 
 PLUGIN_GAINS = record_dtype(PluginGains)

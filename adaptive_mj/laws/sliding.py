@@ -28,7 +28,7 @@ from adaptive_mj.form import ModelForm
 from adaptive_mj.keys import Key, Table
 from adaptive_mj.laws import law_keys as shared
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
-                                     as_record, dead_zone_open, modify_rate, record_dtype)
+                                     Gains, dead_zone_open, modify_rate, record_dtype)
 from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, Law, SurfaceFeedback
 from adaptive_mj.specs import LawSpec, PlantSpec
@@ -65,7 +65,7 @@ def sliding_terms(coeffs: np.ndarray, x: np.ndarray, ref: np.ndarray) -> tuple[f
 
 
 @dataclass(frozen=True)
-class SlidingGains:
+class SlidingGains(Gains):
     """The sliding laws' scalar gains and switches, by name: what `sliding_law_values` reads of them.
 
     k: gain on s [u per unit of s]; dz_width: the dead-zone's width [unit of its signal] (0: none), on |s|
@@ -86,10 +86,6 @@ class SlidingGains:
     adapt: bool
     dz_on_s: bool
     freeze: bool
-
-    def record(self) -> np.ndarray:
-        """(1,) SLIDING_GAINS array of these values (the compiled callback reads it by address)."""
-        return as_record(self, SLIDING_GAINS)
 
 
 SLIDING_GAINS = record_dtype(SlidingGains)

@@ -36,7 +36,7 @@ from adaptive_mj.errors import ScenarioError
 from adaptive_mj.keys import Key, Table, joint_values
 from adaptive_mj.laws import law_keys as shared
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
-                                     as_record, dead_zone_open, modify_rate, record_dtype)
+                                     Gains, dead_zone_open, modify_rate, record_dtype)
 from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, JointFeedback, Law
 from adaptive_mj.specs import LawSpec, PlantSpec
@@ -60,7 +60,7 @@ def reference_terms(x, ref, lam, s, qd_r, qdd_r):
 
 
 @dataclass(frozen=True)
-class SlotineLiGains:
+class SlotineLiGains(Gains):
     """Slotine–Li's scalar gains and switches, by name: what `slotine_li_output` (and the compiled callback's
     point, adaptive_mj.sim.native_manipulator) read of them.
 
@@ -77,10 +77,6 @@ class SlotineLiGains:
     sigma: float
     e_mod: float
     freeze: bool
-
-    def record(self) -> np.ndarray:
-        """(1,) SLOTINE_LI_GAINS array of these values (the compiled callback reads it by address)."""
-        return as_record(self, SLOTINE_LI_GAINS)
 
 
 SLOTINE_LI_GAINS = record_dtype(SlotineLiGains)

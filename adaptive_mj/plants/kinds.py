@@ -18,13 +18,13 @@ sections that run it, how a video draws its estimates).
 from __future__ import annotations
 
 import importlib
-import pkgutil
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 from adaptive_mj.keys import Key, Table
 from adaptive_mj.laws.kinds import Form
+from adaptive_mj.plugins import scan_built_in
 from adaptive_mj.specs import PlantSpec
 
 if TYPE_CHECKING:
@@ -168,13 +168,7 @@ def built_in() -> dict[str, PlantKind]:
     imported once: a kind is found by its own module, not by a list)."""
     global _SCANNED
     if not _SCANNED:
-        import adaptive_mj.plants as package
-
-        for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
-            importlib.import_module(f"{package.__name__}.{info.name}")
-        ordered = sorted(_BUILT_IN.items(), key=lambda kv: ORDER.index(kv[0]) if kv[0] in ORDER else len(ORDER))
-        _BUILT_IN.clear()
-        _BUILT_IN.update(ordered)  # sorted once; every later call copies it (a lookup per report label)
+        scan_built_in("adaptive_mj.plants", _BUILT_IN, ORDER)  # sorted once; later calls copy it
         _SCANNED = True
     return dict(_BUILT_IN)
 
