@@ -353,12 +353,12 @@ REVIEWED = {
         "a fixed name: a study command module's call goes to the API module",
     ("adaptive_mj/study/__init__.py", 'importlib.import_module(f"adaptive_mj.study.{name}")'):
         "name is one of the fixed tuple COMMANDS (checked on the line before)",
-    ("adaptive_mj/plants/kinds.py", 'importlib.import_module(f"{package.__name__}.{info.name}")'):
-        "the modules of the adaptive_mj.plants package itself (pkgutil over its own folder)",
+    ("adaptive_mj/plugins.py", "importlib.import_module(package)"):
+        "scan_built_in's package is a fixed name its two callers pass: adaptive_mj.plants or adaptive_mj.laws",
+    ("adaptive_mj/plugins.py", 'importlib.import_module(f"{package}.{info.name}")'):
+        "the modules of that package itself (pkgutil over its own folder)",
     ("adaptive_mj/plants/kinds.py", "importlib.import_module(self.module)"):
         "a built-in kind's module is the __name__ of the module that registered it, never scenario text",
-    ("adaptive_mj/laws/kinds.py", 'importlib.import_module(f"{package.__name__}.{info.name}")'):
-        "the modules of the adaptive_mj.laws package itself (pkgutil over its own folder)",
 }
 
 
