@@ -118,7 +118,33 @@ def _parser() -> argparse.ArgumentParser:
                     help="also composite adaptation (runs on the Python callback path: several times slower)")
     st.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help=JOBS_HELP)
     st.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
+    st.add_argument("--law", metavar="NAME", help="also this law kind (built in or an installed plugin), beside the "
+                    "built-in laws on every plant it serves, with its --set law.* keys")
+    st.add_argument("--set", dest="overrides", action="append", default=[], metavar="law.KEY=VALUE",
+                    help="with --law: a key of that law (repeatable)")
     _backend_arguments(st)
+    sc_ = add_parser("score", help="rank a law against the baselines on every plant it serves: tasks, breaking "
+                     "points, scores with 95 %% intervals; scorecard.json/.md/.html")
+    sc_.add_argument("law", nargs="?", metavar="LAW",
+                     help="a law kind, built in or an installed plugin (`list --laws`); leave out with --merge, or "
+                          "to score the baselines alone")
+    sc_.add_argument("--set", dest="overrides", action="append", default=[], metavar="law.KEY=VALUE",
+                     help="a key of the law, on every plant (repeatable)")
+    sc_.add_argument("--gains", type=Path, metavar="FILE.toml",
+                     help="the law's keys per plant kind: a table each, e.g. [heave] lambda = 5.0")
+    sc_.add_argument("--against", metavar="A,B,...", help="only these baselines (default: all of each plant's)")
+    sc_.add_argument("--suite", choices=("quick", "full"), default="quick",
+                     help="quick: 3 seeds, 6 bisection steps, 5 s margin runs (default); full: 5 seeds, 8 steps, 20 s")
+    sc_.add_argument("--seeds", type=int, help="seeds per figure (default: the suite's)")
+    sc_.add_argument("--plants", metavar="P,Q,...", help="only these plants (heave, arm, ur5e)")
+    sc_.add_argument("--label", metavar="NAME", help="the law's name on the card (default LAW)")
+    sc_.add_argument("--full-logs", action="store_true",
+                     help="the margin runs' logs at the scenario's rate (default: their summary and a row per second)")
+    sc_.add_argument("--merge", nargs="+", type=Path, metavar="CARD.json",
+                     help="instead of running: join cards of one suite version into one leaderboard")
+    sc_.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help=JOBS_HELP)
+    sc_.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
+    _backend_arguments(sc_)
     return p
 
 
@@ -365,7 +391,15 @@ def _study(args):
                          **where)
     if args.command == "stress":
         return api.stress(seeds=args.seeds, steps=args.steps, duration=args.duration, composite=args.composite,
-                          out=args.output, **where)
+                          out=args.output, law=args.law, set=args.overrides, **where)
+    if args.command == "score":
+        if args.merge and args.law:
+            raise ScenarioError("score: give LAW or --merge, not both")
+        if not args.merge and args.overrides and not args.law:
+            raise ScenarioError("score: --set needs LAW (the baselines keep their own keys)")
+        return api.score(args.law, set=args.overrides, gains=args.gains, against=args.against, suite=args.suite,
+                         seeds=args.seeds, plants=args.plants, label=args.label, out=args.output,
+                         full_logs=args.full_logs, merge=args.merge or (), **where)
     if args.breaking_point:  # sweep --breaking-point: one key bisected instead of a grid
         if args.grid:
             raise ScenarioError("--breaking-point and --grid cannot be combined (one stressor at a time)")
@@ -447,7 +481,7 @@ def _before_exit() -> None:
 
 def _dispatch(args) -> int:
     try:
-        if args.command in ("bench", "sweep", "stress"):
+        if args.command in ("bench", "sweep", "stress", "score"):
             return _print_study(_study(args))
         return {"list": cmd_list, "run": cmd_run, "replay": cmd_replay}[args.command](args)
     except AdaptiveMJError as exc:

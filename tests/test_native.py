@@ -88,6 +88,29 @@ def test_arm_with_payload_swap_event():
     assert b.meta["events"] == [(b.t[700], "swap")]
 
 
+@pytest.mark.parametrize("kind", ["sine", "step"])
+def test_a_time_varying_disturbance_and_a_force_event_give_the_python_path_s_rows_bit_for_bit(kind):
+    """The disturbance force (force_offset + d(t) per step, as MujocoPlant.step adds them) prepared per chunk and
+    written into qfrc_applied by the callback: the same rows as the Python path, across a constant_force event."""
+    def plant():
+        p = heave_plant()()
+        p.disturbance = ((lambda t: 20.0 * float(np.sin(2.0 * t + 0.3))) if kind == "sine"
+                         else (lambda t: 15.0 if t >= 0.77 else 0.0))
+        return p
+
+    def push(p):
+        p.force_offset += 5.0
+
+    a, b = both(plant, lambda p: SlidingAdaptiveLaw(p.form, lam=5, k=200, gamma=GAMMA), Cosine(), duration=2.5,
+                theta_hat0=[0, 0, 0], events=lambda: [Event(1.3, "push", push)])
+    np.testing.assert_array_equal(b.u, a.u)
+    assert_same(a, b, tol=0.0)
+    calm = heave_plant()()
+    c = run(calm, SlidingAdaptiveLaw(calm.form, lam=5, k=200, gamma=GAMMA), Cosine(), duration=2.5,
+            theta_hat0=[0, 0, 0], native=True)
+    assert np.max(np.abs(c.u - b.u)) > 1.0  # the callback applied the disturbance: the thrust answers it
+
+
 def test_divergence_is_found_at_the_same_step():
     a, b = both(heave_plant(x0=(0.0, 0.0)), lambda p: SlidingAdaptiveLaw(p.form, lam=5, k=200, gamma=GAMMA),
                 Cosine(), duration=3.0, theta_hat0=[0, 0, 0], state_bound=0.5)
@@ -100,7 +123,7 @@ def test_native_is_chosen_only_where_supported():
     law = SlidingAdaptiveLaw(p.form, lam=5, k=200, gamma=GAMMA)
     assert native.supported(p, law)
     p.disturbance = lambda t: 1.0
-    assert not native.supported(p, law)  # a time-varying disturbance needs the per-step Python loop
+    assert native.supported(p, law)  # a time-varying disturbance: evaluated per chunk, applied by the callback
 
     class UserLaw(Law):  # a user's own law in plain Python is not native (Law's default): Python path
         order, names = 2, ("d", "b", "c")

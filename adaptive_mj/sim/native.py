@@ -66,7 +66,7 @@ CONTEXT = np.dtype([
     ("stage", _i8), ("row", _i8), ("rows", _i8), ("step", _i8), ("t", _f8),
     # settings
     ("nstages", _i8), ("n", _i8), ("m", _i8), ("nth", _i8), ("qadr", _i8), ("dadr", _i8), ("act", _i8),
-    ("delay", _i8),
+    ("delay", _i8), ("has_dist", _i8),
     ("mode", _i8), ("period_steps", _i8), ("h", _f8), ("period", _f8), ("lo", _f8), ("hi", _f8),
     ("inc", _f8, 4), ("weights", _f8, 4),
     # the law's scalar gains: the address of its record (laws.sliding.SLIDING_GAINS, or laws.plugin.PLUGIN_GAINS
@@ -76,6 +76,7 @@ CONTEXT = np.dtype([
     ("ref", _i8), ("noise", _i8), ("rec", _i8), ("theta", _i8), ("rsum", _i8), ("prev", _i8), ("th", _i8),
     ("rate", _i8), ("coeffs", _i8), ("gamma", _i8), ("theta0", _i8), ("lower", _i8), ("upper", _i8),
     ("ring", _i8), ("params", _i8), ("xbuf", _i8), ("u_hold", _i8), ("s_hold", _i8), ("delayed", _i8),
+    ("dist", _i8),
 ])
 _compiled: dict = {}
 
@@ -122,9 +123,13 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
 
 
 def _apply_control(ctx, io, row, u):
-    """This shape's "apply" (adaptive_mj.sim.native_step): ctrl[act] = u."""
+    """This shape's "apply" (adaptive_mj.sim.native_step): ctrl[act] = u, and with a disturbance the step's
+    external force (force_offset + disturbance(t), prepared per chunk) into qfrc_applied, held over its stages."""
     base, mbase, off = io
     carray(fptr(pointer_at(base, off.ctrl)), ctx.act + 1)[ctx.act] = u[0]  # noqa: F821 (injected)
+    if ctx.has_dist != 0:
+        qfrc = carray(fptr(pointer_at(base, off.qfrc_applied)), ctx.dadr + 1)  # noqa: F821 (injected)
+        qfrc[ctx.dadr] = carray(fptr(ctx.dist), row + 1)[row]  # noqa: F821 (injected)
 
 
 def _record_row(ctx, io, row, u, theta):
@@ -228,12 +233,12 @@ def supported(plant: Plant, law: Law) -> bool:
     """Native path: a 1-DOF MuJoCo plant (a MujocoPlant: the callback reads its joint and actuator
     addresses) of order 2 (its state is [q, q'], which the callback reads directly) compiled with a
     userdata slot, a law the callback compiles (``law.native``: a sliding law or a law plugin; not
-    the composite law, whose filters run in Python), no time-varying disturbance (held per step in
-    Python)."""
+    the composite law, whose filters run in Python). A time-varying disturbance is evaluated per step in Python
+    when a chunk is prepared and written into qfrc_applied by the callback."""
     from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS, MujocoPlant
 
     return (isinstance(plant, MujocoPlant) and plant.order == 2 and law.native
-            and plant.stages in (1, 4) and plant.disturbance is None
+            and plant.stages in (1, 4)
             and plant.model.nuserdata >= USERDATA_SLOTS)
 
 
@@ -270,7 +275,7 @@ class NativeController(ContextOwner):
             "ring": np.zeros((control.delay + 1, 1)), "params": f64(p.get("plugin_params", np.zeros(1))),
             "u_hold": np.zeros(1), "s_hold": np.zeros(1), "delayed": np.zeros(1),
             "ref": np.zeros(max_rows * self.nst * (n + 1)), "noise": np.zeros(max_rows * n),
-            "rec": np.zeros(max_rows * self.ncol), "xbuf": np.zeros(n),
+            "rec": np.zeros(max_rows * self.ncol), "xbuf": np.zeros(n), "dist": np.zeros(max_rows),
         }
         self.theta = self.buffers["theta"]
         lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (-math.inf, math.inf)
@@ -282,6 +287,7 @@ class NativeController(ContextOwner):
         c["qadr"], c["dadr"], c["act"] = plant._qadr, plant._dadr, plant.actuator_id
         c["delay"], c["mode"], c["period_steps"], c["period"] = control.delay, control.mode, control.steps, \
             control.period
+        c["has_dist"] = int(plant.disturbance is not None)
         c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
         c["gains"] = self.gains.ctypes.data  # the law's record (kept alive by self.gains)
         for name, buf in self.buffers.items():
@@ -303,6 +309,12 @@ class NativeController(ContextOwner):
         refs = self.reference(times, n)  # (n+1, len(times))
         self.buffers["ref"][: rows * self.nst * (n + 1)] = refs.T[which].ravel()
         self.buffers["noise"][: rows * n] = 0.0 if noise is None else noise.ravel()
+        if plant.disturbance is not None:  # the Python path's force per step (MujocoPlant.step), the same arithmetic
+            dist = self.buffers["dist"]
+            for k in range(rows):
+                force = plant.force_offset
+                force += plant.disturbance(float(t[k]))
+                dist[k] = force
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
         self.bind()

@@ -134,6 +134,27 @@ def swap_response(traj: Trajectory, setup) -> dict:
     }
 
 
+CHANGE_WINDOW = 0.01  # s: the envelope's window in change_response
+
+
+def change_response(traj: Trajectory, setup) -> dict:
+    """After the first event (a parameter change): the peak of the tracking error's norm (|ỹ| [m or rad], or
+    ‖q̃‖ on m joints) and its envelope, the maximum over each CHANGE_WINDOW after the event, for a caller to
+    read a recovery time against its own bound (adaptive_mj.study.score). Empty without an event."""
+    t_e = first_event_time(setup)
+    if t_e is None:
+        return {}
+    e = np.abs(traj.y_tilde) if traj.y_tilde.ndim == 1 else np.linalg.norm(traj.y_tilde, axis=1)
+    after = traj.t >= t_e
+    if not after.any():
+        return {}
+    idx = np.floor((traj.t[after] - t_e) / CHANGE_WINDOW + 1e-9).astype(int)
+    env = np.zeros(int(idx[-1]) + 1)
+    np.maximum.at(env, idx, e[after])
+    return {"event_time": float(t_e), "peak_error_after": float(e[after].max()), "window": CHANGE_WINDOW,
+            "envelope": env.tolist()}
+
+
 def lyapunov_check(traj: Trajectory, setup) -> dict:
     """V non-increasing and V' = -k s² (ideal case): the largest one-step increase of V,
     max |ΔV/Δt + k mean(s²)| relative to max k s² (midpoint rule, as the discrete V' check),

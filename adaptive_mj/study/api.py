@@ -27,7 +27,7 @@ from adaptive_mj.errors import ScenarioError
 from adaptive_mj.study.job import Backend
 from adaptive_mj.study.result import Study, Table
 
-__all__ = ["Study", "Table", "bench", "breaking_point", "stress", "sweep"]
+__all__ = ["Study", "Table", "bench", "breaking_point", "score", "stress", "sweep"]
 
 GridSpec = Mapping[str, Any] | Sequence[str]
 
@@ -184,17 +184,38 @@ def breaking_point(scenario: str | Path, *, key: str, lo: float | None = None, h
 def stress(*, seeds: int = 5, steps: int = 4, duration: float = 20.0, composite: bool = False,
            out: str | Path | None = None, backend: str | Backend = "local", jobs: int | None = None,
            address: str | None = None, ray_logs: str = "bytes", retries: int = 3,
-           engine: str = "process") -> Study:
+           engine: str = "process", law: str | None = None, set: Sequence[str] = ()) -> Study:  # noqa: A002
     """The breaking-point study, every plant × law × stressor (`adaptive-mj stress`): `seeds` per value,
-    `steps` bisection steps, runs of `duration` s; composite: also composite adaptation. Returns the Study:
+    `steps` bisection steps, runs of `duration` s; composite: also composite adaptation; law: also this law
+    kind (built in or a plugin) on every plant it serves, with its `set` keys (law.KEY=V). Returns the Study:
     one row per plant/law × stressor (margin, first_fail, resolution, tail statistics), as margins.csv."""
     from adaptive_mj.study.stress import run_stress
+
+    sets = _law_sets(law, set)
 
     seeds, steps = count("--seeds", seeds, 1), count("--steps", steps, 0)
     duration = positive("--duration", duration, "s")
     backend_ = where(backend, jobs=jobs, address=address, ray_logs=ray_logs, retries=retries, engine=engine)
     return run_stress(seeds=seeds, steps=steps, duration=duration, composite=bool(composite),
-                      out=None if out is None else Path(out), backend=backend_)
+                      out=None if out is None else Path(out), backend=backend_, law=law, sets=tuple(sets))
+
+
+def _law_sets(law: str | None, sets: Sequence[str] | str) -> list[str]:
+    """A law kind's name checked (one line naming the close ones) and its --set law.KEY=V expressions."""
+    items = [sets] if isinstance(sets, str) else list(sets)
+    if law is None:
+        if items:
+            raise ScenarioError("--set needs --law (the built-in laws keep their own keys)")
+        return []
+    if not isinstance(law, str) or not law:
+        raise ScenarioError(f"--law must be a law kind's name (adaptive-mj list --laws), got {law!r}")
+    from adaptive_mj.study.score import law_kind_checked
+
+    law_kind_checked(law)
+    for expr in items:
+        if not isinstance(expr, str) or not expr.startswith("law.") or "=" not in expr:
+            raise ScenarioError(f"--set: only the law's own keys, law.KEY=VALUE, got {expr!r}")
+    return items
 
 
 def bench(*, quick: bool = False, scenarios: Sequence[str | Path] = (), out: str | Path | None = None,
@@ -208,3 +229,42 @@ def bench(*, quick: bool = False, scenarios: Sequence[str | Path] = (), out: str
     backend_ = where(backend, jobs=jobs, address=address, ray_logs=ray_logs, retries=retries, engine=engine)
     paths = [scenario_path(p) for p in ([scenarios] if isinstance(scenarios, (str, Path)) else scenarios)]
     return run_bench(quick=bool(quick), scenarios=paths, out=None if out is None else Path(out), backend=backend_)
+
+
+def _names(option: str, value: Any) -> list[str] | None:
+    """A list of names from "a,b" or a sequence of strings (None stays None)."""
+    if value is None:
+        return None
+    items = value.split(",") if isinstance(value, str) else list(value)
+    if not items or not all(isinstance(x, str) and x.strip() for x in items):
+        raise ScenarioError(f"{option} must be names separated by commas, got {value!r}")
+    return [x.strip() for x in items]
+
+
+def score(law: str | None = None, *, set: Sequence[str] = (), gains: str | Path | None = None,  # noqa: A002
+          against: str | Sequence[str] | None = None, suite: str = "quick", seeds: int | None = None,
+          plants: str | Sequence[str] | None = None, label: str | None = None, out: str | Path | None = None,
+          full_logs: bool = False, cost: bool = True, merge: Sequence[str | Path] = (),
+          backend: str | Backend = "local", jobs: int | None = None, address: str | None = None,
+          ray_logs: str = "bytes", retries: int = 3, engine: str = "process"):
+    """A law scored against the baselines on every plant kind it serves (`adaptive-mj score`): the suite of
+    adaptive_mj.study.score_suite (`suite` "quick" or "full"), `seeds` per figure (default the suite's), the law's
+    gains per plant kind from `gains` (a TOML file, a table per plant kind) and `set` (law.KEY=V), against every
+    baseline or those named in `against`, on every plant it serves or those named in `plants`. merge: instead,
+    join these scorecard.json files (one suite version) into one leaderboard. Returns a
+    adaptive_mj.study.score.Scorecard (its data is scorecard.json; .figure(plant, law, name), .rank(...))."""
+    from adaptive_mj.study import score as sc_
+    from adaptive_mj.study.score_suite import SUITES
+
+    if merge:
+        return sc_.merge([Path(p) for p in merge], None if out is None else Path(out))
+    sets = _law_sets(law, set)
+    if suite not in SUITES:
+        raise ScenarioError(f"--suite must be one of {', '.join(SUITES)}, got {suite!r}")
+    if seeds is not None:
+        seeds = count("--seeds", seeds, 2)
+    backend_ = where(backend, jobs=jobs, address=address, ray_logs=ray_logs, retries=retries, engine=engine)
+    return sc_.run_score(law, label=label, sets=sets, gains=None if gains is None else Path(gains),
+                         against=_names("--against", against), suite_name=suite, seeds=seeds,
+                         plants=_names("--plants", plants), out=None if out is None else Path(out),
+                         backend=backend_, full_logs=bool(full_logs), cost=bool(cost))

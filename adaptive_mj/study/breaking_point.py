@@ -106,6 +106,7 @@ class Search:
     overrides: tuple[str, ...]
     stressor: Stressor
     tail_bound: float  # [m or rad] tail RMS above this is a failure
+    seed: int = 0  # the first seed: the search runs seeds seed .. seed + seeds - 1 (the scorecard: one each)
 
 
 @dataclass
@@ -219,11 +220,12 @@ def _midpoints(searches: Sequence[Search], brackets: list[tuple[float, float] | 
 
 def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path, n_jobs: int = 1,
                backend: Backend | None = None, on_batch: Callable[[int, int], None] | None = None,
-               on_done: Callable[[JobResult], None] | None = None) -> list[Margin]:
+               on_done: Callable[[JobResult], None] | None = None, keep_trajectory: bool = True) -> list[Margin]:
     """Run every search to its margin, in lockstep batches (see the module docstring).
 
     seeds: seeds 0..seeds-1 per stress value; steps: bisection steps after the two ends;
-    logs: every run's MCAP log goes to logs/<label>/<stressor>=<value>-seed<k>.mcap."""
+    logs: every run's MCAP log goes to logs/<label>/<stressor>=<value>-seed<k>.mcap;
+    keep_trajectory: whether each run sends its decimated rows back (False: the summary only)."""
     margins = [Margin(s, None, None) for s in searches]
     brackets: list[tuple[float, float] | None] = [None] * len(searches)
 
@@ -233,7 +235,8 @@ def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path
         text = str(int(value)) if s.stressor.integer else f"{value:.6g}"
         return [Job(s.scenario, overrides=(REFUSE_UNSTABLE, *s.overrides, *s.stressor.overrides(value)), seed=k,
                     log=logs / safe / f"{_file_name(s.stressor.name)}={text}-seed{k}.mcap",
-                    tag=f"{s.label} {s.stressor.name}={text} seed {k}") for k in range(seeds)]
+                    tag=f"{s.label} {s.stressor.name}={text} seed {k}", keep_trajectory=keep_trajectory)
+                for k in range(s.seed, s.seed + seeds)]
 
     def evaluate(wanted: list[tuple[int, float]]) -> list[Evaluation]:
         jobs = [job for i, v in wanted for job in jobs_for(i, v)]

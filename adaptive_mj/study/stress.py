@@ -247,18 +247,36 @@ def stressors(p: Plant, duration: float = DURATION) -> list[Stressor]:
     return out
 
 
-def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, ...] | None = None) -> list[Search]:
-    """Every plant × law × stressor search; arm_laws: the 6-joint arm's laws to include (None: all)."""
+def with_law(p: Plant, entries: list[tuple[str, list[str]]], law: str | None,
+             sets: tuple[str, ...] = ()) -> list[tuple[str, list[str]]]:
+    """The plant's laws with law kind `law` (a built-in kind or an installed plugin) after them, swapped in
+    (setup.scenario.law_swap) with its --set keys, when it serves a form of the plant's kind; the label is the
+    kind's name ("NAME (yours)" when a built-in label has it)."""
+    if law is None:
+        return entries
+    from adaptive_mj.laws.kinds import all_kinds, serving
+
+    k = _kind(p)
+    if law not in serving(k.name, k.forms, {law: all_kinds()[law]}):
+        return entries
+    label = f"{law} (yours)" if any(name == law for name, _ in entries) else law
+    return [*entries, (label, [sc.law_swap(law), *sets])]
+
+
+def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, ...] | None = None,
+          law: str | None = None, sets: tuple[str, ...] = ()) -> list[Search]:
+    """Every plant × law × stressor search; arm_laws: the 6-joint arm's built-in laws to include (None: all);
+    law: a law kind added on the plants it serves, with its --set keys `sets` (with_law)."""
     out = []
     for p in plants(duration):
         path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
-        for law, over in laws(p, composite=composite):
-            if _on_joints(p) and arm_laws is not None and law not in arm_laws:
+        for name, over in with_law(p, laws(p, composite=composite), law, sets):
+            if _on_joints(p) and arm_laws is not None and name not in arm_laws and not (law and name.startswith(law)):
                 continue
             for st in stressors(p, duration):
-                if law == "composite" and st.name == PERIOD:  # composite adaptation: continuous control only
+                if name == "composite" and st.name == PERIOD:  # composite adaptation: continuous control only
                     continue
-                out.append(Search(path, f"{p.name}/{law}", (*p.base, *over), st, TAIL_BOUND[p.name]))
+                out.append(Search(path, f"{p.name}/{name}", (*p.base, *over), st, TAIL_BOUND[p.name]))
     return out
 
 
@@ -304,14 +322,15 @@ def _bounds_text() -> str:
 
 def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int,
               duration: float = DURATION, backend=None,
-              arm_laws: tuple[str, ...] | None = None) -> tuple[list[Margin], str, float]:
+              arm_laws: tuple[str, ...] | None = None, law: str | None = None,
+              sets: tuple[str, ...] = ()) -> tuple[list[Margin], str, float]:
     """Run the study (on `backend`: a parallel.Backend, default n_jobs local processes); returns the
     margins, the report text and the wall time [s]."""
     import sys
 
     from adaptive_mj.study.parallel import progress_printer
 
-    searches = study(composite=composite, duration=duration, arm_laws=arm_laws)
+    searches = study(composite=composite, duration=duration, arm_laws=arm_laws, law=law, sets=sets)
     t0 = time.perf_counter()
     at_most = len(searches) * seeds * (2 + steps)  # bisection stops early where a bracket closes
 
@@ -334,7 +353,8 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
     return margins, text, wall
 
 
-def run_stress(*, seeds: int, steps: int, duration: float, composite: bool, out: Path | None, backend) -> Study:
+def run_stress(*, seeds: int, steps: int, duration: float, composite: bool, out: Path | None, backend,
+               law: str | None = None, sets: tuple[str, ...] = ()) -> Study:
     """The study with options adaptive_mj.study.api.stress has checked: report.md, report.html and
     margins.csv in `out` (default a new logs/stress-...)."""
     from adaptive_mj.report.html import write_html
@@ -344,7 +364,7 @@ def run_stress(*, seeds: int, steps: int, duration: float, composite: bool, out:
     out = new_output_dir(out, "stress")
     with session(backend):
         margins, text, wall = run_study(out, seeds=seeds, steps=steps, composite=composite,
-                                        n_jobs=backend.jobs, duration=duration, backend=backend)
+                                        n_jobs=backend.jobs, duration=duration, backend=backend, law=law, sets=sets)
     report = "# adaptive-mj breaking points\n\n" + text + "\n"
     (out / "report.md").write_text(report, encoding="utf-8")
     html = write_html(out / "report.md")  # report.html: the same text, for a browser

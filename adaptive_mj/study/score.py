@@ -1,0 +1,556 @@
+"""`adaptive-mj score`: a law ranked against the baselines on every plant kind it serves (the suite:
+adaptive_mj.study.score_suite), written as scorecard.json, scorecard.md and scorecard.html with a figure per
+criterion group, and every run's log.
+
+The law under test runs as `law=NAME` (the scenario's [law] table swapped for the law's, adaptive_mj.setup.
+scenario.law_swap) plus its gains for the plant (`--gains FILE.toml`: a table per plant kind) and `--set law.*`.
+The baselines are the breaking-point study's laws on that plant (adaptive_mj.study.stress.laws): on the 1-DOF
+plants the lecture's law, its dead-zone, σ-, e-modification and projection, the fixed-parameter and robust
+sliding baselines; on the UR5e Slotine–Li, its modifications, computed torque and PD + gravity. Those given the
+true parameters (the fixed ones) are marked oracles: a reference, not a competitor.
+"""
+from __future__ import annotations
+
+import json
+import math
+import platform
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from adaptive_mj.errors import ScenarioError
+from adaptive_mj.plants import kinds
+from adaptive_mj.setup import scenario as sc
+from adaptive_mj.study import score_suite as suite
+from adaptive_mj.study import stress
+from adaptive_mj.study.breaking_point import TAIL_BOUND, Search, search_all
+from adaptive_mj.study.job import REFUSE_UNSTABLE, Job
+from adaptive_mj.study.stats import Estimate, cvar, estimate, ranks
+from adaptive_mj.trajectory import Status
+
+CARD_FORMAT = "adaptive-mj scorecard"
+MARGIN_LOG_RATE_HZ = 1.0  # the margin runs' logs: the summary and a row per second (full_logs: the scenario's own)
+COST_SECONDS = 1.0  # s simulated per compute-cost timing (the best of COST_REPS)
+COST_REPS = 3
+ORACLE_KINDS = ("fixed_nominal", "robust_sliding", "computed_torque", "pd_gravity")
+
+
+@dataclass(frozen=True)
+class Entry:
+    """A law on a plant: its label on the card, its overrides, whether it is the law under test, and whether it
+    is given the true parameters (an oracle baseline)."""
+
+    label: str
+    overrides: tuple[str, ...]
+    tested: bool = False
+    oracle: bool = False
+
+
+def toml_value(v: Any) -> str:
+    """A parsed TOML value written back as TOML (for a --set expression)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{json.dumps(k)} = {toml_value(x)}" for k, x in v.items()) + "}"
+    raise ScenarioError(f"cannot write {v!r} as a TOML value")
+
+
+def read_gains(path: Path | None) -> dict[str, list[str]]:
+    """--gains FILE.toml: a table per plant kind ([heave], [arm], [manipulator]) of law keys -> the --set
+    expressions per plant kind. Anything else is refused in one line naming the file and the key."""
+    if path is None:
+        return {}
+    import tomllib
+
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(f"{path}: --gains file not found")
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    scored = {kinds.built_in()[k].name for k in stress.STRESS_PLANT_KIND.values()}
+    out = {}
+    for key, table in doc.items():
+        if key not in scored:
+            raise ScenarioError(f"{path}: key {key!r}: expected a table named after a scored plant kind "
+                                f"({', '.join(sorted(scored))}), got {key!r}")
+        if not isinstance(table, dict):
+            raise ScenarioError(f"{path}: key {key!r}: expected a table of law keys, got {type(table).__name__}")
+        out[key] = [f"law.{k}={toml_value(v)}" for k, v in table.items()]
+    return out
+
+
+def _truth_half(p: stress.Plant) -> str:
+    """Half the true θ (from the compiled model) as a law.initial_estimates table."""
+    _, s = stress._setup(p)
+    return "{" + ", ".join(f"{json.dumps(n)}={0.5 * float(v)!r}" for n, v in
+                           zip(s.law.names, s.plant.true_theta(), strict=True)) + "}"
+
+
+def task_overrides(p: stress.Plant, task: suite.Task, duration: float) -> tuple[str, ...]:
+    """The overrides of `task` on plant row p for a run of `duration` [s], its templates filled from the model."""
+    values: dict[str, str] = {"half": repr(0.5 * duration)}
+    text = " ".join(task.overrides)
+    if "{theta_half}" in text:
+        values["theta_half"] = _truth_half(p)
+    if "{payload_x4}" in text:
+        m0 = sc.load(sc.SCENARIOS_DIR / f"{task.scenario}.toml").plant.payload_mass
+        if m0 is None:
+            raise ScenarioError(f"{task.scenario}: the change task needs plant.payload_mass")
+        values["payload_x4"] = repr(4.0 * float(m0))
+    out = [f"simulation.duration={duration!r}"]
+    if task.noise_scale > 0:
+        y, y_dot = _kind(p).stress.noise_signals  # type: ignore[union-attr]
+        sig = task.noise_scale * stress.NOMINAL_NOISE[p.name]
+        out.append(f"noise.std={{{y}={sig!r}, {y_dot}={10 * sig!r}}}")
+    out += [o.format(**values) for o in task.overrides]
+    return tuple(out)
+
+
+def _kind(p: stress.Plant) -> kinds.PlantKind:
+    return kinds.built_in()[stress.STRESS_PLANT_KIND[p.name]]
+
+
+def serves(law: str, p: stress.Plant) -> bool:
+    """Whether law kind `law` serves a form plant row p's kind offers (adaptive_mj.laws.kinds.serving)."""
+    from adaptive_mj.laws.kinds import all_kinds, serving
+
+    k = _kind(p)
+    return law in serving(k.name, k.forms, {law: all_kinds()[law]})
+
+
+def law_kind_checked(law: str) -> None:
+    """One line when `law` is no law kind (built in or installed), naming the close ones."""
+    from adaptive_mj.laws.kinds import all_kinds
+
+    names = all_kinds()
+    if law not in names:
+        import difflib
+
+        close = difflib.get_close_matches(law, list(names), n=1)
+        raise ScenarioError(f"score: {law!r} is not a law kind (built in or installed: `adaptive-mj list --laws`)"
+                            + (f"; did you mean {close[0]!r}?" if close else ""))
+
+
+def entries(p: stress.Plant, law: str | None, label: str, gains: Sequence[str], sets: Sequence[str],
+            against: Sequence[str] | None) -> list[Entry]:
+    """The law under test (first, when `law`) and the baselines on plant row p (`against`: only those)."""
+    base = [Entry(name, tuple(over), oracle=any(f"law.kind='{k}'" in over for k in ORACLE_KINDS))
+            for name, over in stress.laws(p, composite=False)]
+    if against is not None:
+        base = [e for e in base if e.label in against]
+    out = []
+    if law is not None:
+        out.append(Entry(label, (sc.law_swap(law), *gains, *sets), tested=True))
+    return out + base
+
+
+def baseline_names(p: stress.Plant) -> list[str]:
+    return [name for name, _ in stress.laws(p, composite=False)]
+
+
+# ---------------------------------------------------------------- one seed's figures
+
+
+def _tail(summary: dict | None) -> float:
+    m = (summary or {}).get("metrics") or {}
+    v = m.get("rms_tracking_error_tail", m.get("rms_tracking_error_norm_tail"))
+    return math.nan if v is None else float(v)
+
+
+def _param_error(summary: dict | None) -> float:
+    final = (summary or {}).get("final") or {}
+    est, true = final.get("theta_hat") or {}, final.get("theta") or {}
+    if not true:
+        return math.nan
+    th = np.array([true[n] for n in true], dtype=float)
+    eh = np.array([est.get(n, math.nan) for n in true], dtype=float)
+    scale = np.abs(th)
+    scale = np.where(scale > 0, scale, np.max(scale))
+    return float(np.max(np.abs(eh - th) / scale))
+
+
+def _completed(r) -> bool:
+    return r is not None and r.status in (Status.OK, Status.FAILED) and r.summary is not None
+
+
+def seed_figures(runs: dict[str, Any], bound: float, limits: tuple[float, float], durations: dict[str, float]) -> dict:
+    """The criteria (score_suite.CRITERIA) of one law on one plant for one seed, from its task runs (task name ->
+    JobResult): a dict criterion -> value, plus "success" (0 or 1) and "performance"."""
+    tr, ch, hold = runs.get("tracking"), runs.get("change"), runs.get("hold")
+    ok = all(_completed(r) and _tail(r.summary) <= bound for r in (tr, ch, hold))
+    out: dict[str, float] = {c.name: math.nan for c in suite.CRITERIA}
+    if _completed(tr):
+        m = tr.summary["metrics"]
+        out["tail_error"] = _tail(tr.summary)
+        out["control_rms"] = float(m["control_rms"])
+        out["control_tv_rate"] = float(m["control_total_variation"]) / durations["tracking"]
+        out["param_error"] = _param_error(tr.summary)
+    if _completed(ch) and ch.extras.get("change_response"):
+        resp = ch.extras["change_response"]
+        out["peak_after_change"] = float(resp["peak_error_after"])
+        env = np.asarray(resp["envelope"], dtype=float)
+        above = np.nonzero(env >= bound)[0]
+        left = durations["change"] - resp["event_time"]
+        out["recovery_time"] = 0.0 if above.size == 0 else min(left, float(above[-1] + 1) * resp["window"])
+        if env.size and env[-1] >= bound:
+            out["recovery_time"] = left
+    if _completed(hold):
+        out["drift_rate"] = abs(float(hold.extras.get("drift_rate", math.nan)))
+    norm = normalisers(bound, limits, durations)
+    penalty = 0.0
+    for c in suite.CRITERIA:
+        v = out[c.name]
+        penalty += c.weight * (1.0 if not math.isfinite(v) else min(1.0, max(0.0, v / norm[c.name])))
+    out["success"] = 1.0 if ok else 0.0
+    out["performance"] = out["success"] * (1.0 - penalty)
+    return out
+
+
+def normalisers(bound: float, limits: tuple[float, float], durations: dict[str, float]) -> dict[str, float]:
+    """n_i of each criterion on a plant (score_suite.CRITERIA's rules): bound the failure bound [output unit],
+    limits (RMS, sum) of the actuators' limits [control unit], durations [s] per task."""
+    rms_limit, sum_limit = limits
+    return {"tail_error": bound, "peak_after_change": 10.0 * bound, "recovery_time": 0.5 * durations["change"],
+            "control_rms": rms_limit, "control_tv_rate": 100.0 * sum_limit, "param_error": 1.0, "drift_rate": 1.0}
+
+
+def actuator_limits(p: stress.Plant) -> tuple[float, float]:
+    """(RMS, sum) over the actuators of the larger |limit| of each [control unit], from the compiled model."""
+    _, s = stress._setup(p)
+    lo, hi = (np.atleast_1d(np.asarray(x, dtype=float)) for x in s.plant.ctrl_range)
+    lim = np.maximum(np.abs(lo), np.abs(hi))
+    return float(np.sqrt(np.mean(lim**2))), float(np.sum(lim))
+
+
+# ---------------------------------------------------------------- compute cost
+
+
+def compute_ratio(p: stress.Plant, entry: Entry, task: suite.Task, *, seconds: float = COST_SECONDS) -> float:
+    """The law's closed loop per physics step against bare mj_step on the same model, on the tracking task
+    (the best of COST_REPS timings of `seconds` simulated each, after one run that compiles)."""
+    import mujoco
+
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.sim.loop import run
+
+    path = sc.SCENARIOS_DIR / f"{task.scenario}.toml"
+    over = [*task_overrides(p, task, seconds), *entry.overrides]
+
+    def timed(sec: float) -> tuple[float, float]:
+        scn = sc.load(path, overrides=[*over, f"simulation.duration={sec!r}"])
+        s = build(scn)
+        steps = max(1, round(sec / s.plant.dt))
+        t0 = time.perf_counter()
+        run(s.plant, s.law, s.reference, duration=sec, theta_hat0=s.theta_hat0)
+        loop = (time.perf_counter() - t0) / steps
+        s2 = build(scn)
+        m, d = s2.plant.model, s2.plant.data
+        t0 = time.perf_counter()
+        mujoco.mj_step(m, d, nstep=steps)
+        return loop, (time.perf_counter() - t0) / steps
+
+    timed(0.01)  # compiles (or loads the cache)
+    best = [timed(seconds) for _ in range(COST_REPS)]
+    return float(min(b[0] for b in best) / min(b[1] for b in best))
+
+
+# ---------------------------------------------------------------- the card
+
+
+@dataclass
+class Scorecard:
+    """A scorecard (scorecard.json's content as `data`), its folder, and the text printed."""
+
+    data: dict
+    out: Path | None
+    text: str = ""
+    exit_code: int = 0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def plants(self) -> list[str]:
+        return list(self.data["plants"])
+
+    def laws(self, plant: str) -> list[str]:
+        return list(self.data["plants"][plant]["laws"])
+
+    def figure(self, plant: str, law: str, name: str) -> Estimate:
+        """A criterion ("tail_error", ...), "performance", "robustness" or "success" of `law` on `plant`."""
+        return Estimate.from_dict(self.data["plants"][plant]["laws"][law]["figures"][name])
+
+    def rank(self, plant: str, law: str, score: str = "performance") -> int:
+        return int(self.data["plants"][plant]["laws"][law]["rank"][score])
+
+    def margin(self, plant: str, law: str, stressor: str) -> Estimate:
+        return Estimate.from_dict(self.data["plants"][plant]["laws"][law]["stressors"][stressor]["margin"])
+
+
+def _versions(law: str | None) -> dict:
+    import mujoco
+
+    from adaptive_mj import __version__
+
+    out: dict[str, Any] = {"adaptive_mj": __version__, "mujoco": mujoco.__version__,
+                           "python": platform.python_version()}
+    if law is not None:
+        from adaptive_mj.laws.plugin import installed
+
+        inst = installed().get(law)
+        if inst is not None:
+            out["law_plugin"] = {"name": law, "distribution": inst.distribution, "version": inst.version,
+                                 "source_sha256": inst.source_sha256}
+    return out
+
+
+def stressor_text(p: stress.Plant, duration: float) -> list[dict]:
+    return [{"name": st.name, "unit": st.unit, "lo": st.lo, "hi": st.hi} for st in stress.stressors(p, duration)]
+
+
+def card_hash(stressors: dict[str, list[dict]]) -> str:
+    """The suite's definitions hash and the stressors' names and ranges, hashed together."""
+    import hashlib
+
+    text = suite.definitions_hash() + json.dumps(stressors, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def rank_laws(plant: dict) -> None:
+    """Each law's ranks on the plant's performance and robustness (adaptive_mj.study.stats.ranks), in place."""
+    labels = list(plant["laws"])
+    for score in ("performance", "robustness"):
+        ests = [Estimate.from_dict(plant["laws"][lb]["figures"][score]) for lb in labels]
+        for lb, r in zip(labels, ranks(ests), strict=True):
+            plant["laws"][lb].setdefault("rank", {})[score] = r
+
+
+def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] = (), gains: Path | None = None,
+              against: Sequence[str] | None = None, suite_name: str = "quick", seeds: int | None = None,
+              plants: Sequence[str] | None = None, out: Path | None = None, backend=None, full_logs: bool = False,
+              cost: bool = True, on_progress: Callable[[str], None] | None = None) -> Scorecard:
+    """Run the suite for `law` (None: the baselines alone) and write the card into `out` (checked options: see
+    adaptive_mj.study.api.score)."""
+    import sys
+
+    from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.study.parallel import progress_printer, run_jobs, session
+
+    settings = suite.SUITES[suite_name]
+    n_seeds = settings.seeds if seeds is None else seeds
+    say = on_progress or (lambda text: print(text, file=sys.stderr))
+    if law is not None:
+        law_kind_checked(law)
+    label = label or law
+    gain_sets = read_gains(gains)
+    rows = stress.plants(settings.stress_duration)
+    if plants is not None:
+        unknown = [n for n in plants if n not in {p.name for p in rows}]
+        if unknown:
+            raise ScenarioError(f"--plants: {unknown[0]!r} is not a scored plant (expected one of "
+                                f"{', '.join(p.name for p in rows)})")
+        rows = [p for p in rows if p.name in plants]
+    if law is not None:
+        chosen = [p for p in rows if serves(law, p)]
+        if not chosen:
+            raise ScenarioError(f"score: law {law!r} serves none of the scored plants "
+                                f"({', '.join(p.name for p in rows)})")
+        rows = chosen
+    for kind in gain_sets:
+        if all(_kind(p).name != kind for p in rows):
+            raise ScenarioError(f"{gains}: key {kind!r}: the law does not run on that plant kind here "
+                                f"(scored: {', '.join(_kind(p).name for p in rows)})")
+    by_plant: dict[str, list[Entry]] = {}
+    for p in rows:
+        names = baseline_names(p)
+        if against is not None:
+            bad = [a for a in against if a not in names and all(a not in baseline_names(q) for q in rows)]
+            if bad:
+                raise ScenarioError(f"--against: {bad[0]!r} is no baseline (on {p.name}: {', '.join(names)})")
+        lab = label
+        if law is not None and lab in names:
+            lab = f"{law} (under test)"
+        by_plant[p.name] = entries(p, law, lab or "", gain_sets.get(_kind(p).name, []), sets, against)
+    if law is not None:  # the law builds on every plant before any run: a missing gain is one line now
+        from adaptive_mj.setup.build import build
+
+        for p in rows:
+            t = suite.TASKS[p.name][0]
+            e = by_plant[p.name][0]
+            try:
+                build(sc.load(sc.SCENARIOS_DIR / f"{t.scenario}.toml",
+                              overrides=[*task_overrides(p, t, 0.01), *e.overrides]))
+            except ScenarioError as exc:
+                raise ScenarioError(f"score: law {law!r} on plant {p.name} ({_kind(p).name}): {exc} "
+                                    f"(give its gains in a [{_kind(p).name}] table of --gains FILE.toml, "
+                                    "or --set law.KEY=V)") from None
+    out = new_output_dir(out, "score")
+    t0 = time.perf_counter()
+    durations = {name: settings.duration(name) for name, _ in settings.durations}
+    # 1. the tasks: every plant × law × task × seed
+    jobs, keys = [], []
+    for p in rows:
+        for e in by_plant[p.name]:
+            for task in suite.TASKS[p.name]:
+                over = task_overrides(p, task, durations[task.name])
+                for k in range(n_seeds):
+                    jobs.append(Job(sc.SCENARIOS_DIR / f"{task.scenario}.toml",
+                                    overrides=(REFUSE_UNSTABLE, *over, *e.overrides), seed=k,
+                                    log=out / "logs" / "tasks" / p.name / _safe(e.label) / f"{task.name}-seed{k}.mcap",
+                                    tag=f"{p.name}/{e.label} {task.name} seed {k}", extras=task.extras,
+                                    keep_trajectory=False))
+                    keys.append((p.name, e.label, task.name, k))
+    say(f"score: {len(jobs)} task runs ({len(rows)} plants, {n_seeds} seeds)")
+    with session(backend):
+        results = run_jobs(jobs, n_jobs=backend.jobs, backend=backend,
+                           on_done=progress_printer(len(jobs), label="task runs"))
+    task_runs: dict[tuple[str, str, int], dict[str, Any]] = {}
+    errors = [r for r in results if r.status == "error"]
+    for (pn, lb, tn, k), r in zip(keys, results, strict=True):
+        task_runs.setdefault((pn, lb, k), {})[tn] = r
+    # 2. the margins: every plant × law × stressor, one bisection per seed
+    searches = []
+    log_rate = () if full_logs else (f"log.rate_hz={MARGIN_LOG_RATE_HZ!r}",)
+    for p in rows:
+        path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
+        for e in by_plant[p.name]:
+            for st in stress.stressors(p, settings.stress_duration):
+                for k in range(n_seeds):
+                    searches.append(Search(path, f"{p.name}/{e.label}", (*p.base, *log_rate, *e.overrides), st,
+                                           TAIL_BOUND[p.name], seed=k))
+    at_most = len(searches) * (2 + settings.steps)
+    say(f"score: {len(searches)} breaking-point searches (plant × law × stressor × seed), at most {at_most} runs")
+    with session(backend):
+        margins = search_all(searches, seeds=1, steps=settings.steps, logs=out / "logs" / "margins",
+                             n_jobs=backend.jobs, backend=backend,
+                             on_done=progress_printer(at_most, label="margin runs (at most)"), keep_trajectory=False)
+    # 3. per-step compute cost, in this process
+    cost_of: dict[tuple[str, str], float] = {}
+    if cost:
+        for p in rows:
+            for e in by_plant[p.name]:
+                try:
+                    cost_of[(p.name, e.label)] = compute_ratio(p, e, suite.TASKS[p.name][0])
+                except Exception as exc:  # noqa: BLE001 (a law that cannot run has its runs' errors on the card)
+                    say(f"score: {p.name}/{e.label}: no compute-cost timing: {type(exc).__name__}: {exc}")
+    # 4. the card
+    stressors = {p.name: stressor_text(p, settings.stress_duration) for p in rows}
+    data: dict[str, Any] = {
+        "format": CARD_FORMAT,
+        "suite": {"version": suite.SUITE_VERSION, "name": settings.name, "hash": card_hash(stressors),
+                  "seeds": n_seeds, "steps": settings.steps, "stress_duration": settings.stress_duration,
+                  "durations": durations, "confidence": 0.95},
+        "versions": _versions(law),
+        "law": None if law is None else {"name": law, "label": label, "sets": list(sets),
+                                         "gains": {k: v for k, v in gain_sets.items()}},
+        "plants": {}, "wall_seconds": 0.0, "errors": len(errors),
+    }
+    for p in rows:
+        k = _kind(p)
+        bound, limits = TAIL_BOUND[p.name], actuator_limits(p)
+        plant: dict[str, Any] = {"kind": k.name, "output_unit": k.output_unit, "control_unit": k.control_unit,
+                                 "tail_bound": bound, "normalisers": normalisers(bound, limits, durations),
+                                 "stressors": stressors[p.name], "laws": {}}
+        for e in by_plant[p.name]:
+            per_seed = [seed_figures(task_runs.get((p.name, e.label, s), {}), bound, limits, durations)
+                        for s in range(n_seeds)]
+            figures = {name: {**estimate([f[name] for f in per_seed]).as_dict(),
+                              "values": [f[name] for f in per_seed]}
+                       for name in [*(c.name for c in suite.CRITERIA), "success", "performance"]}
+            st_out, positions = {}, np.zeros((n_seeds, 0))
+            pos_cols = []
+            for st in stress.stressors(p, settings.stress_duration):
+                ms = [m for m in margins if m.search.label == f"{p.name}/{e.label}" and m.search.stressor.name
+                      == st.name]
+                ms.sort(key=lambda m: m.search.seed)
+                rows_ = [{"margin": m.margin, "first_fail": m.first_fail, "lo": st.lo, "hi": st.hi} for m in ms]
+                pos = [stress.margin_position(r) for r in rows_]
+                pos_cols.append(pos)
+                at_margin = [m.at(m.margin) for m in ms]
+                tails = [ev.raw[0] for ev in at_margin if ev is not None and ev.raw]
+                at_hi = [m.at(st.hi) for m in ms]
+                fails_hi = [not ev.passes for ev in at_hi if ev is not None]
+                margin_vals = [st.lo if m.margin is None else m.margin for m in ms]
+                st_out[st.name] = {
+                    "unit": st.unit, "margins": [m.margin for m in ms], "first_fails": [m.first_fail for m in ms],
+                    "margin": estimate(margin_vals).as_dict(), "position": estimate(pos).as_dict(),
+                    "tail_mean_at_margin": float(np.mean(tails)) if tails else None,
+                    "tail_cvar10_at_margin": cvar(tails) if tails else None,
+                    "failure_rate_at_hi": float(np.mean(fails_hi)) if fails_hi else None}
+            positions = np.asarray(pos_cols, dtype=float).T if pos_cols else positions
+            robust = positions.mean(axis=1) if positions.size else np.full(n_seeds, math.nan)
+            figures["robustness"] = {**estimate(robust.tolist()).as_dict(), "values": robust.tolist()}
+            plant["laws"][e.label] = {"tested": e.tested, "oracle": e.oracle, "overrides": list(e.overrides),
+                                      "figures": figures, "stressors": st_out,
+                                      "compute_ratio": cost_of.get((p.name, e.label))}
+        rank_laws(plant)
+        data["plants"][p.name] = plant
+    data["wall_seconds"] = time.perf_counter() - t0
+    card = Scorecard(data, out, exit_code=1 if errors else 0)
+    from adaptive_mj.study.score_card import write_card
+
+    write_card(card)
+    if errors:
+        card.notes.append(f"score: {len(errors)} task runs could not be set up (status 'error'), e.g. "
+                          f"{errors[0].job.tag}: {errors[0].error}")
+    return card
+
+
+def _safe(text: str) -> str:
+    import re
+
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "x"
+
+
+def merge(paths: Sequence[Path], out: Path | None) -> Scorecard:
+    """Cards of one suite version and hash joined into one leaderboard (a law in several cards: its first)."""
+    from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.study.score_card import write_card
+
+    if len(paths) < 2:
+        raise ScenarioError(f"--merge needs two or more scorecard.json files, got {len(paths)}")
+    cards = []
+    for path in paths:
+        path = Path(path)
+        if path.is_dir():
+            path = path / "scorecard.json"
+        if not path.is_file():
+            raise ScenarioError(f"{path}: no such scorecard file")
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise ScenarioError(f"{path}: not a scorecard (not JSON: {exc})") from None
+        if not isinstance(data, dict) or data.get("format") != CARD_FORMAT:
+            raise ScenarioError(f"{path}: key 'format': expected {CARD_FORMAT!r}, got {data.get('format')!r}"
+                                if isinstance(data, dict) else f"{path}: not a scorecard")
+        cards.append((path, data))
+    first_path, first = cards[0]
+    for path, data in cards[1:]:
+        for key in ("version", "hash", "name"):
+            if data["suite"].get(key) != first["suite"].get(key):
+                raise ScenarioError(f"{path}: key 'suite.{key}': expected {first['suite'].get(key)!r} (as in "
+                                    f"{first_path}), got {data['suite'].get(key)!r}; cards of another suite "
+                                    "cannot share a leaderboard")
+    merged = json.loads(json.dumps(first))
+    merged["law"] = [c[1]["law"] for c in cards if c[1]["law"] is not None]
+    merged["merged_from"] = [str(c[0]) for c in cards]
+    merged["versions"] = [c[1]["versions"] for c in cards]
+    for _, data in cards[1:]:
+        for pn, plant in data["plants"].items():
+            target = merged["plants"].setdefault(pn, json.loads(json.dumps(plant)))
+            for lb, entry in plant["laws"].items():
+                target["laws"].setdefault(lb, entry)
+    for plant in merged["plants"].values():
+        rank_laws(plant)
+    card = Scorecard(merged, new_output_dir(out, "score-merged"))
+    write_card(card)
+    return card

@@ -1,0 +1,196 @@
+"""A scorecard written out: scorecard.json (the data), scorecard.md and scorecard.html (the leaderboards, laws as
+rows and criteria as columns, the law under test in bold), and per plant a figure of the performance criteria and
+one of the margins, each a bar per law with its 95 % interval."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from adaptive_mj.study import score_suite as suite
+from adaptive_mj.study.stats import Estimate
+
+SCORE_COLUMNS = (("performance", "S"), ("robustness", "R"), ("success", "success"))
+
+
+def _unit(unit: str, plant: dict) -> str:
+    return {"output": plant["output_unit"], "control": plant["control_unit"],
+            "control/s": f"{plant['control_unit']}/s"}.get(unit, unit)
+
+
+def _order(plant: dict) -> list[str]:
+    """The plant's laws by performance rank, then by the mean S (best first)."""
+    def key(lb: str):
+        e = plant["laws"][lb]
+        mean = e["figures"]["performance"]["mean"]
+        return (e["rank"]["performance"], -(mean if mean is not None and math.isfinite(mean) else -1.0))
+
+    return sorted(plant["laws"], key=key)
+
+
+def _name(lb: str, e: dict) -> str:
+    text = lb + (" †" if e.get("oracle") else "")
+    return f"**{text}**" if e.get("tested") else text
+
+
+def leaderboard(plant: dict) -> str:
+    """Markdown: one row per law (ranked), the scores and every criterion with its interval."""
+    cols = ["rank S", "rank R", "law", *(c for _, c in SCORE_COLUMNS),
+            *(f"{c.metric} [{_unit(c.unit, plant)}]" for c in suite.CRITERIA), "cost × mj_step"]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for lb in _order(plant):
+        e = plant["laws"][lb]
+        f = e["figures"]
+        cells = [str(e["rank"]["performance"]), str(e["rank"]["robustness"]), _name(lb, e)]
+        cells += [Estimate.from_dict(f[name]).text() for name, _ in SCORE_COLUMNS]
+        cells += [Estimate.from_dict(f[c.name]).text() for c in suite.CRITERIA]
+        ratio = e.get("compute_ratio")
+        cells.append("n/a" if ratio is None else f"{ratio:.2f}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def margins_table(plant: dict) -> str:
+    """Markdown: one row per law, one column per stressor: the margin's mean [interval] over seeds, and the
+    failure rate at the range's high end."""
+    names = [s["name"] for s in plant["stressors"]]
+    units = {s["name"]: s["unit"] for s in plant["stressors"]}
+    cols = ["law", "R", *(f"{n} [{units[n]}]" if units[n] else n for n in names)]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for lb in _order(plant):
+        e = plant["laws"][lb]
+        cells = [_name(lb, e), Estimate.from_dict(e["figures"]["robustness"]).text()]
+        for n in names:
+            st = e["stressors"].get(n)
+            if st is None:
+                cells.append("n/a")
+                continue
+            text = Estimate.from_dict(st["margin"]).text()
+            if all(m is not None and ff is None for m, ff in zip(st["margins"], st["first_fails"], strict=True)):
+                text = f"≥ {text} (top)"
+            elif all(m is None for m in st["margins"]):
+                text = f"< {text} (bottom)"
+            fr = st.get("failure_rate_at_hi")
+            cells.append(text + ("" if fr is None else f"<br>fail@hi {100 * fr:.0f} %"))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _bars(ax, labels: list[str], ests: list[Estimate], tested: list[bool], title: str, *, log: bool = False) -> None:
+    import numpy as np
+
+    y = np.arange(len(labels))
+    means = np.array([e.mean if e.n else np.nan for e in ests], dtype=float)
+    lo = np.array([e.lo if e.n > 1 and math.isfinite(e.lo) else e.mean for e in ests], dtype=float)
+    hi = np.array([e.hi if e.n > 1 and math.isfinite(e.hi) else e.mean for e in ests], dtype=float)
+    err = np.vstack([np.clip(means - lo, 0, None), np.clip(hi - means, 0, None)])
+    colors = ["tab:red" if t else "tab:blue" for t in tested]
+    ax.barh(y, np.nan_to_num(means), xerr=np.nan_to_num(err), color=colors, alpha=0.8, capsize=3)
+    ax.set_yticks(y, labels, fontsize=7)
+    ax.invert_yaxis()
+    ax.set_title(title, fontsize=8)
+    ax.tick_params(axis="x", labelsize=7)
+    if log and np.all(np.nan_to_num(means) > 0):
+        ax.set_xscale("log")
+
+
+def figures(card_data: dict, out: Path) -> dict[str, list[Path]]:
+    """Per plant: <plant>-performance.png (S and each criterion) and <plant>-robustness.png (R and each
+    stressor's margin), bars with 95 % intervals; the law under test in red."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    made: dict[str, list[Path]] = {}
+    for pn, plant in card_data["plants"].items():
+        labels = _order(plant)
+        tested = [bool(plant["laws"][lb].get("tested")) for lb in labels]
+        panels = [("performance", "S (higher is better)", False)] + [
+            (c.name, f"{c.metric} [{_unit(c.unit, plant)}]", False) for c in suite.CRITERIA]
+        fig, axes = plt.subplots(2, 4, figsize=(15, 1.6 + 0.5 * len(labels)), constrained_layout=True)
+        for ax, (name, title, log) in zip(axes.flat, panels, strict=True):
+            _bars(ax, labels, [Estimate.from_dict(plant["laws"][lb]["figures"][name]) for lb in labels], tested,
+                  title, log=log)
+        fig.suptitle(f"{pn}: performance criteria, mean and 95 % interval over seeds (lower is better but S)",
+                     fontsize=10)
+        perf = out / f"{pn}-performance.png"
+        fig.savefig(perf, dpi=90)
+        plt.close(fig)
+        names = [s["name"] for s in plant["stressors"]]
+        units = {s["name"]: s["unit"] for s in plant["stressors"]}
+        n = 1 + len(names)
+        cols = min(4, n)
+        rows = math.ceil(n / cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(3.8 * cols, rows * (1.4 + 0.4 * len(labels))),
+                                 constrained_layout=True, squeeze=False)
+        _bars(axes.flat[0], labels, [Estimate.from_dict(plant["laws"][lb]["figures"]["robustness"]) for lb in labels],
+              tested, "R (higher is better)")
+        spans = {s["name"]: (s["lo"], s["hi"]) for s in plant["stressors"]}
+        for ax, name in zip(list(axes.flat)[1:], names, strict=False):
+            lo, hi = spans[name]
+            _bars(ax, labels, [Estimate.from_dict(plant["laws"][lb]["stressors"][name]["margin"]) for lb in labels],
+                  tested, f"margin: {name} [{units[name]}]", log=lo > 0 and hi / lo >= 10)
+        for ax in list(axes.flat)[n:]:
+            ax.axis("off")
+        fig.suptitle(f"{pn}: breaking points, mean margin and 95 % interval over seeds (higher is better)",
+                     fontsize=10)
+        rob = out / f"{pn}-robustness.png"
+        fig.savefig(rob, dpi=90)
+        plt.close(fig)
+        made[pn] = [perf, rob]
+    return made
+
+
+def formula_text(data: dict) -> str:
+    weights = ", ".join(f"{c.name} {c.weight:g} (n: {c.normaliser})" for c in suite.CRITERIA)
+    return ("Performance S = c_success · (1 − Σ wᵢ · min(1, cᵢ / nᵢ)) per seed, with the weights and normalisers "
+            f"{weights}; c_success = 1 when the tracking, change and hold runs all finished with their tail RMS "
+            "error within the plant's failure bound. Robustness R = the mean over the stressors of the margin's "
+            "place in the range searched (0: fails at the low end, 1: passes at the high end; geometric over a "
+            "decade or more), each margin found by its own bisection per seed "
+            f"({data['suite']['steps']} steps after the two ends). Every figure: the mean over "
+            f"{data['suite']['seeds']} seeds and its {100 * data['suite']['confidence']:g} % Student-t interval; "
+            "a rank is 1 + the number of laws whose interval lies wholly above the law's own, so laws that cannot "
+            "be told apart share a rank. † an oracle baseline, given the true parameters. cost × mj_step: the "
+            "closed loop's time per physics step over bare mj_step on the same model (this machine, the best of "
+            "3 timings; not in S). docs/METRICS.md, \"Scorecard\", defines each criterion.")
+
+
+def write_card(card) -> None:
+    """scorecard.json, the figures, scorecard.md and scorecard.html into card.out; card.text: the leaderboards."""
+    from adaptive_mj.report.html import write_html
+
+    data, out = card.data, Path(card.out)
+    (out / "scorecard.json").write_text(json.dumps(data, indent=1, allow_nan=True) + "\n", encoding="utf-8")
+    made = figures(data, out)
+    laws = data["law"] if isinstance(data["law"], list) else [data["law"]] if data["law"] else []
+    title = " and ".join(f"`{lw['label']}`" for lw in laws) or "the baselines"
+    s = data["suite"]
+    versions = data["versions"] if isinstance(data["versions"], list) else [data["versions"]]
+    head = [f"# adaptive-mj scorecard: {title} against the baselines", "",
+            f"Suite `{s['name']}` version {s['version']} (definitions hash `{s['hash']}`), {s['seeds']} seeds, "
+            f"margin runs of {s['stress_duration']:g} s, tasks of "
+            + ", ".join(f"{k} {v:g} s" for k, v in s["durations"].items()) + "; "
+            + "; ".join(", ".join(f"{k} {v}" for k, v in ver.items() if k != "law_plugin") +
+                        (f", law plugin {ver['law_plugin']['distribution']} {ver['law_plugin']['version']} "
+                         f"(source {ver['law_plugin']['source_sha256'][:12]})" if "law_plugin" in ver else "")
+                        for ver in versions)
+            + (f"; {data['wall_seconds']:.0f} s wall." if data.get("wall_seconds") else "."), ""]
+    body = []
+    text = []
+    for pn, plant in data["plants"].items():
+        body += [f"## {pn} (plant kind {plant['kind']}): leaderboard", "", leaderboard(plant), "",
+                 f"![{pn} performance]({made[pn][0].name})", "", f"### {pn}: breaking points", "",
+                 margins_table(plant), "", f"![{pn} robustness]({made[pn][1].name})", ""]
+        text.append(f"{pn}:")
+        for lb in _order(plant):
+            e = plant["laws"][lb]
+            mark = "*" if e.get("tested") else " "
+            text.append(f" {mark} {e['rank']['performance']:>2} {lb:26s} S "
+                        f"{Estimate.from_dict(e['figures']['performance']).text('.3f'):28s} R "
+                        f"{Estimate.from_dict(e['figures']['robustness']).text('.3f')}")
+    body += ["## How the card scores", "", formula_text(data), ""]
+    (out / "scorecard.md").write_text("\n".join(head + body), encoding="utf-8")
+    html = write_html(out / "scorecard.md")
+    card.text = "\n".join(text) + f"\n\nscorecard: {out / 'scorecard.md'}\nhtml: {html}\njson: {out / 'scorecard.json'}"

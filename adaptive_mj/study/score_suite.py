@@ -1,0 +1,132 @@
+"""The scorecard's suite: what `adaptive-mj score` runs on each plant kind, and how it scores, as data with a
+version. A card records SUITE_VERSION and the hash of these definitions (`definitions_hash`); `score --merge`
+joins only cards of one version and hash. Change anything here that changes a number and bump SUITE_VERSION.
+
+Plants: each plant kind that declares a stress-study row (PlantKind.stress: heave, the 1-DOF arm, the UR5e),
+with its nominal noise and failure bound (PlantKind.nominal_noise, .tail_bound).
+
+Tasks per plant (TASKS), every seed a different noise draw:
+  tracking  the plant's tracking scenario under nominal noise, the estimates from the scenario's own start (heave
+            and the UR5e from zero) or half the truth (the 1-DOF arm): tail RMS error, control RMS and total
+            variation, the final parameter error (the truth from the compiled model);
+  change    a parameter change at half the run (heave: the water's density ×2; the arms: the payload's mass ×4 or
+            the payload swapped), the estimates from the truth: the peak error after it and the recovery time;
+  hold      holding still under noise with the estimates at the truth (the lecture's drift scenario): the
+            estimates' drift rate.
+Stressors per plant: the breaking-point study's (adaptive_mj.study.stress.stressors: noise, disturbance, delay,
+control period, and each kind's own: thruster lag, payload ratio, on the UR5e encoder resolution, a differentiated
+velocity's filter, actuator lag and the torque limits), each searched per seed by bisection.
+
+Scores per plant (RealAIGym's form, docs/METRICS.md "Scorecard"):
+  performance  S = c_success · (1 − Σ_i w_i · min(1, c_i / n_i)), over CRITERIA (weights w_i sum to 1, the
+               normalisers n_i derived from the plant); c_success = 1 when every task's run finished with its
+               tail RMS error within the plant's bound, else 0;
+  robustness   R = the mean over the stressors of where the margin lies in the range searched (0: the low end
+               fails; 1: the high end passes; in between on the bisection's own scale, log over a decade or more).
+Both per seed, then the mean and its 95 % t interval over seeds (adaptive_mj.study.stats).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+
+SUITE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Task:
+    """One run per seed: a bundled scenario and its overrides, as templates over the plant's derived numbers
+    ({half}: half the run [s]; {theta_half}: half the true θ as a law.initial_estimates table; {payload_x4}: four
+    times the scenario's plant.payload_mass [kg]); noise_scale: the plant's nominal noise times this (0: the
+    scenario's own noise); extras: the analyses the task reads (adaptive_mj.study.job.EXTRAS)."""
+
+    name: str
+    scenario: str
+    overrides: tuple[str, ...]
+    noise_scale: float = 1.0
+    extras: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Criterion:
+    """A column of the card: `metric` of `task`, lower is better, normalised by `normaliser` (a rule in words,
+    evaluated by adaptive_mj.study.score.normaliser) with weight `weight` in S."""
+
+    name: str
+    task: str
+    metric: str
+    unit: str  # "output": the plant's output unit; "control": its control unit; else literal
+    normaliser: str
+    weight: float
+    doc: str
+
+
+TASKS: dict[str, tuple[Task, ...]] = {
+    "heave": (
+        Task("tracking", "heave_tracking", ()),
+        Task("change", "heave_tracking", ("simulation.initial_state='reference'", "law.initial_estimates='model'",
+                                          "events=[{{t={half}, kind='fluid_density_scale', value=2.0}}]"),
+             extras=("change_response",)),
+        Task("hold", "heave_drift", (), noise_scale=0.0, extras=("drift_rate",))),
+    "arm": (
+        Task("tracking", "arm_payload_swap", ("events=[]", "law.initial_estimates={theta_half}")),
+        Task("change", "arm_payload_swap", ("events=[{{t={half}, kind='payload_mass', value={payload_x4}}}]",),
+             extras=("change_response",)),
+        Task("hold", "arm_payload_swap", ("events=[]", "reference={{kind='constant', value=0.5}}"),
+             noise_scale=2.0, extras=("drift_rate",))),
+    "ur5e": (
+        Task("tracking", "ur5e_identification", ()),
+        Task("change", "ur5e_payload_swap", ("law.initial_estimates='model'",
+                                             "events=[{{t={half}, kind='payload_swap', payload='sphere'}}]"),
+             extras=("change_response",)),
+        Task("hold", "ur5e_drift", (), noise_scale=0.0, extras=("drift_rate",))),
+}
+
+CRITERIA: tuple[Criterion, ...] = (
+    Criterion("tail_error", "tracking", "tail RMS error", "output", "the plant's failure bound (tail_bound)", 0.30,
+              "RMS tracking error over the last 25 % of the tracking run"),
+    Criterion("peak_after_change", "change", "peak error after the change", "output", "10 × tail_bound", 0.10,
+              "largest |ỹ| (‖q̃‖ on joints) after the change"),
+    Criterion("recovery_time", "change", "recovery time", "s", "the time left after the change", 0.10,
+              "time after the change from which the error stays below tail_bound (never: the time left)"),
+    Criterion("control_rms", "tracking", "control RMS", "control", "the actuator's limit (RMS over joints)", 0.10,
+              "RMS of u over the tracking run"),
+    Criterion("control_tv_rate", "tracking", "control total variation per second", "control/s",
+              "100 × the actuator's limit per s (summed over joints)", 0.10,
+              "Σ|Δu| over the tracking run divided by its duration: chattering and noise in u"),
+    Criterion("param_error", "tracking", "final parameter error", "-", "1 (100 %)", 0.15,
+              "max_i |θ̂_i − θ_i| / |θ_i| at the end of the tracking run (θ_i = 0: over max |θ|)"),
+    Criterion("drift_rate", "hold", "estimate drift rate", "1/100 s", "1 (100 % per 100 s)", 0.15,
+              "|slope| of ‖(θ̂ − θ̂(t0)) / θ‖ while holding still, per 100 s"),
+)
+
+
+@dataclass(frozen=True)
+class Settings:
+    """A suite's size: seeds, bisection steps, the margin runs' duration [s] and each task's duration [s]."""
+
+    name: str
+    seeds: int
+    steps: int
+    stress_duration: float
+    durations: tuple[tuple[str, float], ...]  # (task name, duration [s])
+
+    def duration(self, task: str) -> float:
+        return dict(self.durations)[task]
+
+
+SUITES = {
+    "quick": Settings("quick", seeds=3, steps=6, stress_duration=5.0,
+                      durations=(("tracking", 10.0), ("change", 10.0), ("hold", 20.0))),
+    "full": Settings("full", seeds=5, steps=8, stress_duration=20.0,
+                     durations=(("tracking", 30.0), ("change", 30.0), ("hold", 100.0))),
+}
+
+
+def definitions_hash() -> str:
+    """sha256 (first 16 hex digits) of the suite's definitions: version, tasks, criteria, suites."""
+    text = json.dumps({"version": SUITE_VERSION, "tasks": {k: [asdict(t) for t in v] for k, v in TASKS.items()},
+                       "criteria": [asdict(c) for c in CRITERIA], "suites": {k: asdict(v) for k, v in SUITES.items()}},
+                      sort_keys=True, ensure_ascii=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
