@@ -10,4 +10,13 @@ try:
     __version__ = _version("adaptive-mj")
 except PackageNotFoundError:  # imported from a source tree that pip never installed (PYTHONPATH=...)
     __version__ = "0+unknown"
-__all__ = ["run", "Event", "Trajectory", "__version__"]
+__all__ = ["run", "run_scenario", "score", "Event", "Trajectory", "__version__"]
+
+
+def __getattr__(name: str):
+    """adaptive_mj.run_scenario and adaptive_mj.score (adaptive_mj.study.api), imported when first used."""
+    if name in ("run_scenario", "score"):
+        from adaptive_mj.study import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

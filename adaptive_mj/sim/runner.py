@@ -40,9 +40,21 @@ def default_logs_dir() -> Path:
 
 @dataclass(frozen=True)
 class RunResult:
+    """One run: its trajectory (every physics step), its summary (metrics, the verdict against the scenario's
+    [success] criteria, as `adaptive-mj run` prints it) and its log's path (None: no log)."""
+
     trajectory: Trajectory
     summary: dict
     log_path: Path | None
+
+    @property
+    def status(self) -> str:
+        """The verdict: "ok" only when the run completed and met its [success] criteria; "failed", "diverged"."""
+        return str(self.summary["status"])
+
+    @property
+    def ok(self) -> bool:
+        return self.status == Status.OK
 
 
 @functools.cache

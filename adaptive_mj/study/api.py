@@ -27,7 +27,7 @@ from adaptive_mj.errors import ScenarioError
 from adaptive_mj.study.job import Backend
 from adaptive_mj.study.result import Study, Table
 
-__all__ = ["Study", "Table", "bench", "breaking_point", "score", "stress", "sweep"]
+__all__ = ["Study", "Table", "bench", "breaking_point", "run_scenario", "score", "stress", "sweep"]
 
 GridSpec = Mapping[str, Any] | Sequence[str]
 
@@ -229,6 +229,31 @@ def bench(*, quick: bool = False, scenarios: Sequence[str | Path] = (), out: str
     backend_ = where(backend, jobs=jobs, address=address, ray_logs=ray_logs, retries=retries, engine=engine)
     paths = [scenario_path(p) for p in ([scenarios] if isinstance(scenarios, (str, Path)) else scenarios)]
     return run_bench(quick=bool(quick), scenarios=paths, out=None if out is None else Path(out), backend=backend_)
+
+
+def run_scenario(scenario: str | Path, *, set: Sequence[str] = (), seed: int | None = None,  # noqa: A002
+                 law: str | None = None, log: str | Path | bool = False, python_callback: bool = False):
+    """One scenario run as `adaptive-mj run` runs it, from Python: a scenario file or a bundled scenario's name,
+    `set` its --set overrides (KEY=VALUE), `seed` the noise seed, `law` a law kind swapped in (`run --law`),
+    `log` a log file to write (True: a new file under logs/, as `run` names it; False: none). Returns a
+    adaptive_mj.sim.runner.RunResult: .trajectory, .summary, .status (the same verdict as `run`, [success]
+    applied), .log_path. Bad input raises adaptive_mj.errors.ScenarioError (one line)."""
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.sim.runner import execute, reserve_log_path
+
+    sets = [set] if isinstance(set, str) else list(set)
+    if not all(isinstance(x, str) for x in sets):
+        raise ScenarioError(f"set must be KEY=VALUE strings, got {set!r}")
+    if seed is not None:
+        seed = count("seed", seed, 0)
+    overrides = [*with_law(law, sets), *(["simulation.python_callback=true"] if python_callback else [])]
+    scn = sc.load(scenario_path(scenario), overrides=overrides, seed=seed)
+    path = None
+    if log is True:
+        path = reserve_log_path(scn)
+    elif log:
+        path = reserve_log_path(scn, out=Path(log), force=True)
+    return execute(scn, log_path=path)
 
 
 def _names(option: str, value: Any) -> list[str] | None:

@@ -28,7 +28,7 @@ from adaptive_mj.study import score_suite as suite
 from adaptive_mj.study import stress
 from adaptive_mj.study.breaking_point import TAIL_BOUND, Search, search_all
 from adaptive_mj.study.job import REFUSE_UNSTABLE, Job
-from adaptive_mj.study.stats import Estimate, cvar, estimate, ranks
+from adaptive_mj.study.stats import CONFIDENCE, Estimate, cvar, estimate, ranks
 from adaptive_mj.trajectory import Status
 
 CARD_FORMAT = "adaptive-mj scorecard"
@@ -188,7 +188,7 @@ def seed_figures(runs: dict[str, Any], bound: float, limits: tuple[float, float]
     """The criteria (score_suite.CRITERIA) of one law on one plant for one seed, from its task runs (task name ->
     JobResult): a dict criterion -> value, plus "success" (0 or 1) and "performance"."""
     tr, ch, hold = runs.get("tracking"), runs.get("change"), runs.get("hold")
-    ok = all(_completed(r) and _tail(r.summary) <= bound for r in (tr, ch, hold))
+    ok = _completed(ch) and all(_completed(r) and _tail(r.summary) <= bound for r in (tr, hold))
     out: dict[str, float] = {c.name: math.nan for c in suite.CRITERIA}
     if _completed(tr):
         m = tr.summary["metrics"]
@@ -334,25 +334,21 @@ def rank_laws(plant: dict) -> None:
             plant["laws"][lb].setdefault("rank", {})[score] = r
 
 
-def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] = (), gains: Path | None = None,
-              against: Sequence[str] | None = None, suite_name: str = "quick", seeds: int | None = None,
-              plants: Sequence[str] | None = None, out: Path | None = None, backend=None, full_logs: bool = False,
-              cost: bool = True, on_progress: Callable[[str], None] | None = None) -> Scorecard:
-    """Run the suite for `law` (None: the baselines alone) and write the card into `out` (checked options: see
-    adaptive_mj.study.api.score)."""
-    import sys
+@dataclass
+class Plan:
+    """What a score runs: the suite's settings, seeds, the plant rows and each one's entries (law under test
+    first)."""
 
-    from adaptive_mj.sim.runner import new_output_dir
-    from adaptive_mj.study.parallel import progress_printer, run_jobs, session
+    settings: suite.Settings
+    seeds: int
+    rows: list[stress.Plant]
+    entries: dict[str, list[Entry]]
+    gains: dict[str, list[str]]
 
-    settings = suite.SUITES[suite_name]
-    n_seeds = settings.seeds if seeds is None else seeds
-    say = on_progress or (lambda text: print(text, file=sys.stderr))
-    if law is not None:
-        law_kind_checked(law)
-    label = label or law
-    gain_sets = read_gains(gains)
-    rows = stress.plants(settings.stress_duration)
+
+def _rows(law: str | None, plants: Sequence[str] | None, duration: float) -> list[stress.Plant]:
+    """The scored plant rows: those named in `plants` (all when None) that `law` serves."""
+    rows = stress.plants(duration)
     if plants is not None:
         unknown = [n for n in plants if n not in {p.name for p in rows}]
         if unknown:
@@ -365,139 +361,183 @@ def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] 
             raise ScenarioError(f"score: law {law!r} serves none of the scored plants "
                                 f"({', '.join(p.name for p in rows)})")
         rows = chosen
+    return rows
+
+
+def plan(law: str | None, *, label: str | None, sets: Sequence[str], gains: Path | None,
+         against: Sequence[str] | None, suite_name: str, seeds: int | None, plants: Sequence[str] | None) -> Plan:
+    """The runs' plan, every option checked, and the law built once on each plant (a missing gain: one line)."""
+    settings = suite.SUITES[suite_name]
+    if law is not None:
+        law_kind_checked(law)
+    gain_sets = read_gains(gains)
+    rows = _rows(law, plants, settings.stress_duration)
     for kind in gain_sets:
         if all(_kind(p).name != kind for p in rows):
             raise ScenarioError(f"{gains}: key {kind!r}: the law does not run on that plant kind here "
                                 f"(scored: {', '.join(_kind(p).name for p in rows)})")
+    if against is not None:
+        known = {n for p in rows for n in baseline_names(p)}
+        bad = [a for a in against if a not in known]
+        if bad:
+            raise ScenarioError(f"--against: {bad[0]!r} is no baseline (the baselines: {', '.join(sorted(known))})")
     by_plant: dict[str, list[Entry]] = {}
     for p in rows:
-        names = baseline_names(p)
-        if against is not None:
-            bad = [a for a in against if a not in names and all(a not in baseline_names(q) for q in rows)]
-            if bad:
-                raise ScenarioError(f"--against: {bad[0]!r} is no baseline (on {p.name}: {', '.join(names)})")
-        lab = label
-        if law is not None and lab in names:
+        lab = label or law or ""
+        if law is not None and lab in baseline_names(p):
             lab = f"{law} (under test)"
-        by_plant[p.name] = entries(p, law, lab or "", gain_sets.get(_kind(p).name, []), sets, against)
-    if law is not None:  # the law builds on every plant before any run: a missing gain is one line now
-        from adaptive_mj.setup.build import build
+        by_plant[p.name] = entries(p, law, lab, gain_sets.get(_kind(p).name, []), sets, against)
+        if law is not None:
+            _check_builds(p, law, by_plant[p.name][0])
+    return Plan(settings, settings.seeds if seeds is None else seeds, rows, by_plant, gain_sets)
 
-        for p in rows:
-            t = suite.TASKS[p.name][0]
-            e = by_plant[p.name][0]
-            try:
-                build(sc.load(sc.SCENARIOS_DIR / f"{t.scenario}.toml",
-                              overrides=[*task_overrides(p, t, 0.01), *e.overrides]))
-            except ScenarioError as exc:
-                raise ScenarioError(f"score: law {law!r} on plant {p.name} ({_kind(p).name}): {exc} "
-                                    f"(give its gains in a [{_kind(p).name}] table of --gains FILE.toml, "
-                                    "or --set law.KEY=V)") from None
-    out = new_output_dir(out, "score")
-    t0 = time.perf_counter()
-    durations = {name: settings.duration(name) for name, _ in settings.durations}
-    # 1. the tasks: every plant × law × task × seed
+
+def _check_builds(p: stress.Plant, law: str, e: Entry) -> None:
+    """The law under test built on p's tracking task, or one line naming the plant and the --gains table."""
+    from adaptive_mj.setup.build import build
+
+    t = suite.TASKS[p.name][0]
+    try:
+        build(sc.load(sc.SCENARIOS_DIR / f"{t.scenario}.toml", overrides=[*task_overrides(p, t, 0.01), *e.overrides]))
+    except ScenarioError as exc:
+        raise ScenarioError(f"score: law {law!r} on plant {p.name} ({_kind(p).name}): {exc} (give its gains in a "
+                            f"[{_kind(p).name}] table of --gains FILE.toml, or --set law.KEY=V)") from None
+
+
+def task_jobs(pl: Plan, out: Path) -> tuple[list[Job], list[tuple[str, str, str, int]]]:
+    """Every plant × law × task × seed as a Job, and its (plant, label, task, seed)."""
     jobs, keys = [], []
-    for p in rows:
-        for e in by_plant[p.name]:
+    for p in pl.rows:
+        for e in pl.entries[p.name]:
             for task in suite.TASKS[p.name]:
-                over = task_overrides(p, task, durations[task.name])
-                for k in range(n_seeds):
+                over = task_overrides(p, task, pl.settings.duration(task.name))
+                for k in range(pl.seeds):
                     jobs.append(Job(sc.SCENARIOS_DIR / f"{task.scenario}.toml",
                                     overrides=(REFUSE_UNSTABLE, *over, *e.overrides), seed=k,
                                     log=out / "logs" / "tasks" / p.name / _safe(e.label) / f"{task.name}-seed{k}.mcap",
                                     tag=f"{p.name}/{e.label} {task.name} seed {k}", extras=task.extras,
                                     keep_trajectory=False))
                     keys.append((p.name, e.label, task.name, k))
-    say(f"score: {len(jobs)} task runs ({len(rows)} plants, {n_seeds} seeds)")
+    return jobs, keys
+
+
+def searches(pl: Plan, *, full_logs: bool) -> list[Search]:
+    """Every plant × law × stressor × seed as a breaking-point search of its own (one seed each)."""
+    out = []
+    log_rate = () if full_logs else (f"log.rate_hz={MARGIN_LOG_RATE_HZ!r}",)
+    for p in pl.rows:
+        path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
+        for e in pl.entries[p.name]:
+            for st in stress.stressors(p, pl.settings.stress_duration):
+                for k in range(pl.seeds):
+                    out.append(Search(path, f"{p.name}/{e.label}", (*p.base, *log_rate, *e.overrides), st,
+                                      TAIL_BOUND[p.name], seed=k))
+    return out
+
+
+def stressor_figures(ms: list, st) -> tuple[dict, list[float]]:
+    """One law's margins on one stressor (a Margin per seed, in seed order): the card's entry and each seed's
+    margin position (stress.margin_position)."""
+    pos = [stress.margin_position({"margin": m.margin, "first_fail": m.first_fail, "lo": st.lo, "hi": st.hi})
+           for m in ms]
+    at_margin = [m.at(m.margin) for m in ms]
+    tails = [ev.raw[0] for ev in at_margin if ev is not None and ev.raw]
+    at_hi = [m.at(st.hi) for m in ms]
+    fails_hi = [not ev.passes for ev in at_hi if ev is not None]
+    return {"unit": st.unit, "margins": [m.margin for m in ms], "first_fails": [m.first_fail for m in ms],
+            "margin": estimate([st.lo if m.margin is None else m.margin for m in ms]).as_dict(),
+            "position": estimate(pos).as_dict(),
+            "tail_mean_at_margin": float(np.mean(tails)) if tails else None,
+            "tail_cvar10_at_margin": cvar(tails) if tails else None,
+            "failure_rate_at_hi": float(np.mean(fails_hi)) if fails_hi else None}, pos
+
+
+def plant_card(pl: Plan, p: stress.Plant, task_runs: dict, margins: list, cost_of: dict) -> dict:
+    """The card's entry for plant row p: its units, bound, normalisers, stressors, and every law's figures."""
+    k = _kind(p)
+    durations = dict(pl.settings.durations)
+    bound, limits = TAIL_BOUND[p.name], actuator_limits(p)
+    plant: dict[str, Any] = {"kind": k.name, "output_unit": k.output_unit, "control_unit": k.control_unit,
+                             "tail_bound": bound, "normalisers": normalisers(bound, limits, durations),
+                             "stressors": stressor_text(p, pl.settings.stress_duration), "laws": {}}
+    by_search: dict[tuple[str, str], list] = {}
+    for m in margins:
+        by_search.setdefault((m.search.label, m.search.stressor.name), []).append(m)
+    for e in pl.entries[p.name]:
+        per_seed = [seed_figures(task_runs.get((p.name, e.label, s), {}), bound, limits, durations)
+                    for s in range(pl.seeds)]
+        figures = {name: {**estimate([f[name] for f in per_seed]).as_dict(), "values": [f[name] for f in per_seed]}
+                   for name in [*(c.name for c in suite.CRITERIA), "success", "performance"]}
+        st_out, cols = {}, []
+        for st in stress.stressors(p, pl.settings.stress_duration):
+            ms = sorted(by_search.get((f"{p.name}/{e.label}", st.name), []), key=lambda m: m.search.seed)
+            st_out[st.name], pos = stressor_figures(ms, st)
+            cols.append(pos)
+        robust = np.asarray(cols, dtype=float).mean(axis=0) if cols else np.full(pl.seeds, math.nan)
+        figures["robustness"] = {**estimate(robust.tolist()).as_dict(), "values": robust.tolist()}
+        plant["laws"][e.label] = {"tested": e.tested, "oracle": e.oracle, "overrides": list(e.overrides),
+                                  "figures": figures, "stressors": st_out, "compute_ratio": cost_of.get((p.name,
+                                                                                                        e.label))}
+    rank_laws(plant)
+    return plant
+
+
+def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] = (), gains: Path | None = None,
+              against: Sequence[str] | None = None, suite_name: str = "quick", seeds: int | None = None,
+              plants: Sequence[str] | None = None, out: Path | None = None, backend=None, full_logs: bool = False,
+              cost: bool = True, on_progress: Callable[[str], None] | None = None) -> Scorecard:
+    """Run the suite for `law` (None: the baselines alone) and write the card into `out` (checked options: see
+    adaptive_mj.study.api.score)."""
+    import sys
+
+    from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.study.job import Backend
+    from adaptive_mj.study.parallel import progress_printer, run_jobs, session
+    from adaptive_mj.study.score_card import write_card
+
+    backend = backend or Backend()
+    say = on_progress or (lambda text: print(text, file=sys.stderr))
+    pl = plan(law, label=label, sets=sets, gains=gains, against=against, suite_name=suite_name, seeds=seeds,
+              plants=plants)
+    out = new_output_dir(out, "score")
+    t0 = time.perf_counter()
+    jobs, keys = task_jobs(pl, out)
+    found = searches(pl, full_logs=full_logs)
+    at_most = len(found) * (2 + pl.settings.steps)
+    say(f"score: {len(jobs)} task runs and {len(found)} breaking-point searches (plant × law × stressor × seed, "
+        f"at most {at_most} runs) on {', '.join(p.name for p in pl.rows)}, {pl.seeds} seeds")
     with session(backend):
         results = run_jobs(jobs, n_jobs=backend.jobs, backend=backend,
                            on_done=progress_printer(len(jobs), label="task runs"))
-    task_runs: dict[tuple[str, str, int], dict[str, Any]] = {}
-    errors = [r for r in results if r.status == "error"]
-    for (pn, lb, tn, k), r in zip(keys, results, strict=True):
-        task_runs.setdefault((pn, lb, k), {})[tn] = r
-    # 2. the margins: every plant × law × stressor, one bisection per seed
-    searches = []
-    log_rate = () if full_logs else (f"log.rate_hz={MARGIN_LOG_RATE_HZ!r}",)
-    for p in rows:
-        path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
-        for e in by_plant[p.name]:
-            for st in stress.stressors(p, settings.stress_duration):
-                for k in range(n_seeds):
-                    searches.append(Search(path, f"{p.name}/{e.label}", (*p.base, *log_rate, *e.overrides), st,
-                                           TAIL_BOUND[p.name], seed=k))
-    at_most = len(searches) * (2 + settings.steps)
-    say(f"score: {len(searches)} breaking-point searches (plant × law × stressor × seed), at most {at_most} runs")
-    with session(backend):
-        margins = search_all(searches, seeds=1, steps=settings.steps, logs=out / "logs" / "margins",
+        margins = search_all(found, seeds=1, steps=pl.settings.steps, logs=out / "logs" / "margins",
                              n_jobs=backend.jobs, backend=backend,
                              on_done=progress_printer(at_most, label="margin runs (at most)"), keep_trajectory=False)
-    # 3. per-step compute cost, in this process
+    task_runs: dict[tuple[str, str, int], dict[str, Any]] = {}
+    for (pn, lb, tn, k), r in zip(keys, results, strict=True):
+        task_runs.setdefault((pn, lb, k), {})[tn] = r
     cost_of: dict[tuple[str, str], float] = {}
-    if cost:
-        for p in rows:
-            for e in by_plant[p.name]:
-                try:
-                    cost_of[(p.name, e.label)] = compute_ratio(p, e, suite.TASKS[p.name][0])
-                except Exception as exc:  # noqa: BLE001 (a law that cannot run has its runs' errors on the card)
-                    say(f"score: {p.name}/{e.label}: no compute-cost timing: {type(exc).__name__}: {exc}")
-    # 4. the card
-    stressors = {p.name: stressor_text(p, settings.stress_duration) for p in rows}
+    for p in pl.rows if cost else ():  # per-step compute cost, in this process
+        for e in pl.entries[p.name]:
+            try:
+                cost_of[(p.name, e.label)] = compute_ratio(p, e, suite.TASKS[p.name][0])
+            except Exception as exc:  # noqa: BLE001 (a law that cannot run has its runs' errors on the card)
+                say(f"score: {p.name}/{e.label}: no compute-cost timing: {type(exc).__name__}: {exc}")
+    stressors = {p.name: stressor_text(p, pl.settings.stress_duration) for p in pl.rows}
+    errors = [r for r in results if r.status == "error"]
+    s = pl.settings
     data: dict[str, Any] = {
         "format": CARD_FORMAT,
-        "suite": {"version": suite.SUITE_VERSION, "name": settings.name, "hash": card_hash(stressors),
-                  "seeds": n_seeds, "steps": settings.steps, "stress_duration": settings.stress_duration,
-                  "durations": durations, "confidence": 0.95},
+        "suite": {"version": suite.SUITE_VERSION, "name": s.name, "hash": card_hash(stressors), "seeds": pl.seeds,
+                  "steps": s.steps, "stress_duration": s.stress_duration, "durations": dict(s.durations),
+                  "confidence": CONFIDENCE},
         "versions": _versions(law),
-        "law": None if law is None else {"name": law, "label": label, "sets": list(sets),
-                                         "gains": {k: v for k, v in gain_sets.items()}},
-        "plants": {}, "wall_seconds": 0.0, "errors": len(errors),
+        "law": None if law is None else {"name": law, "label": pl.entries[pl.rows[0].name][0].label,
+                                         "sets": list(sets), "gains": pl.gains},
+        "plants": {p.name: plant_card(pl, p, task_runs, margins, cost_of) for p in pl.rows},
+        "errors": len(errors),
     }
-    for p in rows:
-        k = _kind(p)
-        bound, limits = TAIL_BOUND[p.name], actuator_limits(p)
-        plant: dict[str, Any] = {"kind": k.name, "output_unit": k.output_unit, "control_unit": k.control_unit,
-                                 "tail_bound": bound, "normalisers": normalisers(bound, limits, durations),
-                                 "stressors": stressors[p.name], "laws": {}}
-        for e in by_plant[p.name]:
-            per_seed = [seed_figures(task_runs.get((p.name, e.label, s), {}), bound, limits, durations)
-                        for s in range(n_seeds)]
-            figures = {name: {**estimate([f[name] for f in per_seed]).as_dict(),
-                              "values": [f[name] for f in per_seed]}
-                       for name in [*(c.name for c in suite.CRITERIA), "success", "performance"]}
-            st_out, positions = {}, np.zeros((n_seeds, 0))
-            pos_cols = []
-            for st in stress.stressors(p, settings.stress_duration):
-                ms = [m for m in margins if m.search.label == f"{p.name}/{e.label}" and m.search.stressor.name
-                      == st.name]
-                ms.sort(key=lambda m: m.search.seed)
-                rows_ = [{"margin": m.margin, "first_fail": m.first_fail, "lo": st.lo, "hi": st.hi} for m in ms]
-                pos = [stress.margin_position(r) for r in rows_]
-                pos_cols.append(pos)
-                at_margin = [m.at(m.margin) for m in ms]
-                tails = [ev.raw[0] for ev in at_margin if ev is not None and ev.raw]
-                at_hi = [m.at(st.hi) for m in ms]
-                fails_hi = [not ev.passes for ev in at_hi if ev is not None]
-                margin_vals = [st.lo if m.margin is None else m.margin for m in ms]
-                st_out[st.name] = {
-                    "unit": st.unit, "margins": [m.margin for m in ms], "first_fails": [m.first_fail for m in ms],
-                    "margin": estimate(margin_vals).as_dict(), "position": estimate(pos).as_dict(),
-                    "tail_mean_at_margin": float(np.mean(tails)) if tails else None,
-                    "tail_cvar10_at_margin": cvar(tails) if tails else None,
-                    "failure_rate_at_hi": float(np.mean(fails_hi)) if fails_hi else None}
-            positions = np.asarray(pos_cols, dtype=float).T if pos_cols else positions
-            robust = positions.mean(axis=1) if positions.size else np.full(n_seeds, math.nan)
-            figures["robustness"] = {**estimate(robust.tolist()).as_dict(), "values": robust.tolist()}
-            plant["laws"][e.label] = {"tested": e.tested, "oracle": e.oracle, "overrides": list(e.overrides),
-                                      "figures": figures, "stressors": st_out,
-                                      "compute_ratio": cost_of.get((p.name, e.label))}
-        rank_laws(plant)
-        data["plants"][p.name] = plant
     data["wall_seconds"] = time.perf_counter() - t0
     card = Scorecard(data, out, exit_code=1 if errors else 0)
-    from adaptive_mj.study.score_card import write_card
-
     write_card(card)
     if errors:
         card.notes.append(f"score: {len(errors)} task runs could not be set up (status 'error'), e.g. "

@@ -145,8 +145,9 @@ def figures(card_data: dict, out: Path) -> dict[str, list[Path]]:
 def formula_text(data: dict) -> str:
     weights = ", ".join(f"{c.name} {c.weight:g} (n: {c.normaliser})" for c in suite.CRITERIA)
     return ("Performance S = c_success · (1 − Σ wᵢ · min(1, cᵢ / nᵢ)) per seed, with the weights and normalisers "
-            f"{weights}; c_success = 1 when the tracking, change and hold runs all finished with their tail RMS "
-            "error within the plant's failure bound. Robustness R = the mean over the stressors of the margin's "
+            f"{weights}; c_success = 1 when the tracking, change and hold runs all finished (no divergence) and "
+            "the tracking and hold runs kept their tail RMS error within the plant's failure bound. "
+            "Robustness R = the mean over the stressors of the margin's "
             "place in the range searched (0: fails at the low end, 1: passes at the high end; geometric over a "
             "decade or more), each margin found by its own bisection per seed "
             f"({data['suite']['steps']} steps after the two ends). Every figure: the mean over "

@@ -1,0 +1,160 @@
+"""adaptive-mj score: a law ranked against the baselines (adaptive_mj.study.score), its statistics
+(adaptive_mj.study.stats), the card's files and --merge, and its one-line refusals."""
+import importlib.util
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from adaptive_mj.errors import ScenarioError
+from adaptive_mj.study import api
+from adaptive_mj.study.stats import Estimate, estimate, ranks, separable
+
+REPO = Path(__file__).resolve().parents[1]
+EMOD = REPO / "examples" / "emod_law" / "emod_law.py"
+EMOD_GAINS = "[heave]\nlambda = 5.0\nk = 200.0\ngamma_d = 0.0025\ngamma_p = 0.002\nnu = 0.0\n"
+
+
+# ---------------------------------------------------------------- statistics
+
+
+def test_an_interval_is_the_t_interval_and_identical_values_have_none():
+    e = estimate([1.0, 2.0, 3.0])
+    assert e.mean == 2.0 and e.n == 3
+    assert math.isclose(e.hi - e.mean, 4.302652729911275 * 1.0 / math.sqrt(3), rel_tol=1e-9)  # t_{0.975, 2} s/√n
+    assert estimate([0.5, 0.5, 0.5]) == Estimate(0.5, 0.5, 0.5, 3)
+    assert estimate([1.0]).lo == -math.inf  # one seed says nothing of the spread
+    assert estimate([math.nan, math.inf]).n == 0
+
+
+def test_ranks_share_a_place_when_intervals_overlap():
+    a, b, c = Estimate(0.9, 0.88, 0.92, 3), Estimate(0.89, 0.85, 0.91, 3), Estimate(0.5, 0.45, 0.55, 3)
+    assert not separable(a, b) and separable(a, c)
+    assert ranks([a, b, c]) == [1, 1, 3]
+    assert ranks([a, b, c], higher_is_better=False) == [2, 2, 1]
+
+
+# ---------------------------------------------------------------- bad input, one line
+
+
+def test_bad_options_are_one_line_naming_what_is_wrong(tmp_path):
+    with pytest.raises(ScenarioError, match="'sliding_adaptiv' is not a law kind.*did you mean 'sliding_adaptive'"):
+        api.score("sliding_adaptiv", out=tmp_path / "a")
+    gains = tmp_path / "g.toml"
+    gains.write_text("[hove]\nlambda = 5.0\n")
+    with pytest.raises(ScenarioError, match=r"g\.toml: key 'hove': expected a table named after a scored plant kind"):
+        api.score("sliding_adaptive", gains=gains, out=tmp_path / "b")
+    with pytest.raises(ScenarioError, match="--against: 'lecture' is no baseline"):
+        api.score("sliding_adaptive", against="lecture", out=tmp_path / "c")
+    with pytest.raises(ScenarioError, match="--plants: 'ship' is not a scored plant"):
+        api.score("sliding_adaptive", plants="ship", out=tmp_path / "d")
+    with pytest.raises(ScenarioError, match="--suite must be one of quick, full"):
+        api.score("sliding_adaptive", suite="huge")
+    with pytest.raises(ScenarioError, match="--seeds must be an integer >= 2"):
+        api.score("sliding_adaptive", seeds=1)
+    assert not any((tmp_path / n).exists() for n in "abcd")  # refused before any folder is made
+
+
+# ---------------------------------------------------------------- scoring
+
+
+@pytest.fixture(scope="module")
+def emod_installed():
+    """The example plugin's law registered as if pip had installed it (entry points read in this process; the
+    forked workers inherit it)."""
+    from adaptive_mj.laws import plugin
+    from adaptive_mj.plugins import Installed
+
+    spec = importlib.util.spec_from_file_location("emod_law", EMOD)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    sys.modules["emod_law"] = module
+    real = plugin.installed
+    entry = Installed("emod", module.LAW, "adaptive-mj-emod-law", "0.1.0", "0" * 64)
+    plugin.installed = lambda: {**real(), "emod": entry}
+    yield
+    plugin.installed = real
+
+
+@pytest.fixture(scope="module")
+def cards(tmp_path_factory, emod_installed):
+    """Two quick cards on the heave vehicle against the lecture's law and its dead-zone: the emod plugin, and the
+    built-in sliding law itself under another name."""
+    root = tmp_path_factory.mktemp("score")
+    gains = root / "gains.toml"
+    gains.write_text(EMOD_GAINS)
+    plugin_card = api.score("emod", gains=gains, against="adaptive,dead_zone", plants="heave", seeds=3,
+                            out=root / "emod", cost=False, jobs=2)
+    twin_card = api.score("sliding_adaptive", label="twin", against=["adaptive", "dead_zone"], plants=["heave"],
+                          seeds=3, out=root / "twin", cost=False, jobs=2)
+    return plugin_card, twin_card
+
+
+def test_a_law_without_its_required_gains_is_refused_before_any_run_naming_the_plant_and_the_table(emod_installed,
+                                                                                                   tmp_path):
+    with pytest.raises(ScenarioError) as err:
+        api.score("emod", plants="heave", out=tmp_path / "x")
+    text = str(err.value)
+    assert "\n" not in text and "on plant heave (heave)" in text and "law.lambda" in text
+    assert "[heave] table of --gains FILE.toml" in text
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_plugin_law_is_scored_against_the_baselines_with_its_files(cards):
+    card = cards[0]
+    assert card.exit_code == 0 and card.plants == ["heave"]
+    assert card.laws("heave") == ["emod", "adaptive", "dead_zone"]
+    for law in card.laws("heave"):
+        for name in ("performance", "robustness", "tail_error", "drift_rate"):
+            assert card.figure("heave", law, name).n == 3
+        assert 0.0 <= card.figure("heave", law, "robustness").mean <= 1.0
+    data = json.loads((card.out / "scorecard.json").read_text())
+    assert data["suite"]["version"] == 1 and len(data["suite"]["hash"]) == 16
+    assert data["versions"]["law_plugin"]["distribution"] == "adaptive-mj-emod-law"
+    md = (card.out / "scorecard.md").read_text()
+    assert "| **emod** |" in md and "![heave performance](heave-performance.png)" in md
+    assert (card.out / "scorecard.html").stat().st_size > 10_000  # the figures embedded
+    logs = sorted((card.out / "logs" / "tasks" / "heave" / "emod").glob("*.mcap"))
+    assert [p.name for p in logs][:3] == ["change-seed0.mcap", "change-seed1.mcap", "change-seed2.mcap"]
+    from adaptive_mj.log.replay import read_log
+
+    assert read_log(logs[0]).header["law_plugin"]["name"] == "emod"
+    margins = list((card.out / "logs" / "margins").rglob("*.mcap"))
+    assert len(margins) >= 3 * 3 * 5 * 2  # every margin run's log: laws × seeds × stressors × (both ends at least)
+
+
+def test_the_lecture_law_and_its_dead_zone_rank_apart_and_two_copies_of_one_law_do_not(cards):
+    card = cards[1]
+    drift = {law: card.figure("heave", law, "drift_rate") for law in ("adaptive", "dead_zone")}
+    assert separable(drift["adaptive"], drift["dead_zone"])  # the dead-zone stops the drift under noise
+    assert drift["dead_zone"].hi < drift["adaptive"].lo
+    perf = {law: card.figure("heave", law, "performance") for law in card.laws("heave")}
+    assert separable(perf["adaptive"], perf["dead_zone"])
+    assert card.rank("heave", "dead_zone") < card.rank("heave", "adaptive")
+    # the same law under another name: the same numbers, the same ranks, never separable
+    for name in ("performance", "robustness", "tail_error", "drift_rate"):
+        assert card.figure("heave", "twin", name) == card.figure("heave", "adaptive", name)
+    for score in ("performance", "robustness"):
+        assert card.rank("heave", "twin", score) == card.rank("heave", "adaptive", score)
+    # the margins are resolved finely enough to differ between seeds (6 bisection steps on a log scale)
+    m = card.margin("heave", "adaptive", "noise σ_y")
+    assert m.n == 3 and 1e-4 < m.mean < 0.1
+
+
+def test_merge_joins_cards_of_one_suite_and_refuses_another_version(cards, tmp_path):
+    a, b = (c.out / "scorecard.json" for c in cards)
+    merged = api.score(merge=[a, b], out=tmp_path / "m")
+    assert set(merged.laws("heave")) == {"emod", "twin", "adaptive", "dead_zone"}
+    assert merged.rank("heave", "twin") == merged.rank("heave", "adaptive")
+    assert "| **twin** |" in (merged.out / "scorecard.md").read_text()
+    other = json.loads(b.read_text())
+    other["suite"]["version"] = 0
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps(other))
+    r = subprocess.run([sys.executable, "-m", "adaptive_mj", "score", "--merge", str(a), str(old), "-o",
+                        str(tmp_path / "n")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "old.json: key 'suite.version': expected 1" in r.stderr and "got 0" in r.stderr
