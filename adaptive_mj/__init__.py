@@ -16,7 +16,8 @@ __all__ = ["run", "run_scenario", "score", "Event", "Trajectory", "__version__"]
 def __getattr__(name: str):
     """adaptive_mj.run_scenario and adaptive_mj.score (adaptive_mj.study.api), imported when first used."""
     if name in ("run_scenario", "score"):
-        from adaptive_mj.study import api
+        import importlib
 
-        return getattr(api, name)
+        # by name, when called: the study layer sits above everything this package's modules import
+        return getattr(importlib.import_module("adaptive_mj.study.api"), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -207,13 +207,15 @@ def _law_sets(law: str | None, sets: Sequence[str] | str) -> list[str]:
         if items:
             raise ScenarioError("--set needs --law (the built-in laws keep their own keys)")
         return []
-    if not isinstance(law, str) or not law:
+    name: object = law  # any value a Python caller passed
+    if not isinstance(name, str) or not name:
         raise ScenarioError(f"--law must be a law kind's name (adaptive-mj list --laws), got {law!r}")
     from adaptive_mj.study.score import law_kind_checked
 
     law_kind_checked(law)
     for expr in items:
-        if not isinstance(expr, str) or not expr.startswith("law.") or "=" not in expr:
+        text: object = expr
+        if not isinstance(text, str) or not expr.startswith("law.") or "=" not in expr:
             raise ScenarioError(f"--set: only the law's own keys, law.KEY=VALUE, got {expr!r}")
     return items
 

@@ -17,7 +17,7 @@ import platform
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Sequence, TypeGuard
 
 import numpy as np
 
@@ -27,7 +27,7 @@ from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import score_suite as suite
 from adaptive_mj.study import stress
 from adaptive_mj.study.breaking_point import TAIL_BOUND, Search, search_all
-from adaptive_mj.study.job import REFUSE_UNSTABLE, Job
+from adaptive_mj.study.job import REFUSE_UNSTABLE, Job, JobResult
 from adaptive_mj.study.stats import CONFIDENCE, Estimate, cvar, estimate, ranks
 from adaptive_mj.trajectory import Status
 
@@ -180,18 +180,20 @@ def _param_error(summary: dict | None) -> float:
     return float(np.max(np.abs(eh - th) / scale))
 
 
-def _completed(r) -> bool:
+def _completed(r: JobResult | None) -> TypeGuard[JobResult]:
+    """Whether a run finished (ok or failed by its criteria, not diverged, refused or in error)."""
     return r is not None and r.status in (Status.OK, Status.FAILED) and r.summary is not None
 
 
-def seed_figures(runs: dict[str, Any], bound: float, limits: tuple[float, float], durations: dict[str, float]) -> dict:
+def seed_figures(runs: dict[str, JobResult], bound: float, limits: tuple[float, float],
+                 durations: dict[str, float]) -> dict:
     """The criteria (score_suite.CRITERIA) of one law on one plant for one seed, from its task runs (task name ->
     JobResult): a dict criterion -> value, plus "success" (0 or 1) and "performance"."""
     tr, ch, hold = runs.get("tracking"), runs.get("change"), runs.get("hold")
     ok = _completed(ch) and all(_completed(r) and _tail(r.summary) <= bound for r in (tr, hold))
     out: dict[str, float] = {c.name: math.nan for c in suite.CRITERIA}
     if _completed(tr):
-        m = tr.summary["metrics"]
+        m = (tr.summary or {})["metrics"]
         out["tail_error"] = _tail(tr.summary)
         out["control_rms"] = float(m["control_rms"])
         out["control_tv_rate"] = float(m["control_total_variation"]) / durations["tracking"]
@@ -254,8 +256,8 @@ def compute_ratio(p: stress.Plant, entry: Entry, task: suite.Task, *, seconds: f
         t0 = time.perf_counter()
         run(s.plant, s.law, s.reference, duration=sec, theta_hat0=s.theta_hat0)
         loop = (time.perf_counter() - t0) / steps
-        s2 = build(scn)
-        m, d = s2.plant.model, s2.plant.data
+        bare: Any = build(scn).plant  # a MuJoCo plant: its model and data
+        m, d = bare.model, bare.data
         t0 = time.perf_counter()
         mujoco.mj_step(m, d, nstep=steps)
         return loop, (time.perf_counter() - t0) / steps
@@ -512,7 +514,7 @@ def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] 
         margins = search_all(found, seeds=1, steps=pl.settings.steps, logs=out / "logs" / "margins",
                              n_jobs=backend.jobs, backend=backend,
                              on_done=progress_printer(at_most, label="margin runs (at most)"), keep_trajectory=False)
-    task_runs: dict[tuple[str, str, int], dict[str, Any]] = {}
+    task_runs: dict[tuple[str, str, int], dict[str, JobResult]] = {}
     for (pn, lb, tn, k), r in zip(keys, results, strict=True):
         task_runs.setdefault((pn, lb, k), {})[tn] = r
     cost_of: dict[tuple[str, str], float] = {}

@@ -7,8 +7,8 @@ with its nominal noise and failure bound (PlantKind.nominal_noise, .tail_bound).
 
 Tasks per plant (TASKS), every seed a different noise draw:
   tracking  the plant's tracking scenario under nominal noise, the estimates from half the truth (the 1-DOF plants:
-            inside every baseline's projection box) or from the scenario's own start (the UR5e: zero): tail RMS error, control RMS and total
-            variation, the final parameter error (the truth from the compiled model);
+            inside every baseline's projection box) or from the scenario's own start (the UR5e: zero): tail RMS
+            error, control RMS and total variation, the final parameter error (the truth from the compiled model);
   change    a parameter change at half the run (heave: the water's density ×1.1; the arms: the payload's mass ×4 or
             the payload swapped), the estimates from the truth: the peak error after it and the recovery time;
   hold      holding still under noise with the estimates at the truth (the lecture's drift scenario): the

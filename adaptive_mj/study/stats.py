@@ -50,9 +50,9 @@ def t_quantile(p: float, dof: int) -> float:
     return float(t.ppf(p, dof))
 
 
-def estimate(values: Sequence[float]) -> Estimate:
+def estimate(values: Sequence[float]) -> Estimate:  # NaN and ±inf: no value
     """The mean of the finite values and its t interval at CONFIDENCE (see the module docstring)."""
-    x = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+    x = np.array([float(v) for v in values if math.isfinite(v)], dtype=np.float64)
     if x.size == 0:
         return Estimate(math.nan, math.nan, math.nan, 0)
     mean = float(np.mean(x))
