@@ -81,6 +81,11 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help=JOBS_HELP)
     b.add_argument("--scenario", action="append", default=[], metavar="FILE",
                    help="also run your own scenario in a section of its own (repeatable; any law, a plugin too)")
+    b.add_argument("--law", metavar="NAME", help="also score this law kind (built in or an installed plugin) against "
+                   "the baselines in a section of its own, and add it to the breaking-point study")
+    b.add_argument("--gains", type=Path, metavar="FILE.toml", help="with --law: its keys per plant kind (as score)")
+    b.add_argument("--set", dest="overrides", action="append", default=[], metavar="law.KEY=VALUE",
+                   help="with --law: a key of that law (repeatable)")
     _backend_arguments(b)
 
     sw = add_parser("sweep", help="run a scenario over a grid of keys and seeds, in parallel")
@@ -387,8 +392,10 @@ def _study(args):
     where = dict(backend=args.backend, jobs=args.jobs, address=args.address, ray_logs=args.ray_logs,
                  retries=args.retries, engine=args.engine)
     if args.command == "bench":
+        if args.gains is not None and args.law is None:
+            raise ScenarioError("--gains needs --law")
         return api.bench(quick=args.quick, scenarios=[_scenario_path(p) for p in args.scenario], out=args.output,
-                         **where)
+                         law=args.law, gains=args.gains, set=args.overrides, **where)
     if args.command == "stress":
         return api.stress(seeds=args.seeds, steps=args.steps, duration=args.duration, composite=args.composite,
                           out=args.output, law=args.law, set=args.overrides, **where)

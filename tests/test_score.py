@@ -158,3 +158,45 @@ def test_merge_joins_cards_of_one_suite_and_refuses_another_version(cards, tmp_p
                         str(tmp_path / "n")], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
     assert "old.json: key 'suite.version': expected 1" in r.stderr and "got 0" in r.stderr
+
+
+# ---------------------------------------------------------------- stress --law, bench --law
+
+
+def test_stress_law_adds_the_law_beside_the_built_in_ones_on_the_plants_it_serves():
+    from adaptive_mj.study import stress
+
+    labels = {s.label for s in stress.study(composite=False, duration=1.0, law="sliding_adaptive")}
+    assert {"heave/sliding_adaptive", "arm/sliding_adaptive", "heave/adaptive"} <= labels
+    assert not any(lb.startswith("ur5e/sliding_adaptive") for lb in labels)  # a 1-DOF law: not on the 6-joint arm
+    joint = {s.label for s in stress.study(composite=False, duration=1.0, law="slotine_li", arm_laws=("adaptive",))}
+    assert "ur5e/slotine_li" in joint and "ur5e/sigma" not in joint and "heave/slotine_li" not in joint
+    searches = [s for s in stress.study(composite=False, duration=1.0, law="sliding_adaptive",
+                                        sets=("law.k=150.0",)) if s.label == "heave/sliding_adaptive"]
+    assert searches and all(s.overrides[-2:] == ("law=sliding_adaptive", "law.k=150.0") for s in searches)
+
+
+def test_stress_and_bench_refuse_law_options_in_one_line(tmp_path):
+    for argv in (["stress", "--set", "law.k=3", "-o", str(tmp_path / "a")],
+                 ["bench", "--quick", "--law", "sliding_adaptiv", "-o", str(tmp_path / "b")],
+                 ["bench", "--quick", "--gains", "g.toml", "-o", str(tmp_path / "c")]):
+        r = subprocess.run([sys.executable, "-m", "adaptive_mj", *argv], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, (argv, r.stderr)
+    assert not any((tmp_path / n).exists() for n in "abc")
+
+
+def test_bench_law_section_is_the_law_s_scorecard(tmp_path, monkeypatch):
+    """bench --law's section: the score's leaderboards (here a reduced card: heave, one baseline, 2 seeds) with
+    their figures under score/."""
+    from adaptive_mj.study import bench, score
+    from adaptive_mj.study.job import Backend
+
+    real = score.run_score
+    monkeypatch.setattr(score, "run_score", lambda law, **kw: real(law, plants=["heave"], against=["dead_zone"],
+                                                                     seeds=2, cost=False, **kw))
+    text, runs = bench._law_section(tmp_path, Backend(jobs=2), "sliding_adaptive", None, ())
+    assert text.startswith("## Your law: sliding_adaptive against the baselines")
+    assert "### heave (plant kind heave): leaderboard" in text and "](score/heave-performance.png)" in text
+    assert "| **sliding_adaptive** |" in text and "| dead_zone |" in text
+    assert (tmp_path / "score" / "heave-performance.png").is_file()
+    assert runs >= 2 * 3 * 2 + 2 * 5 * 2 * 2  # tasks, and both ends of every margin search

@@ -30,14 +30,16 @@ def metrics(traj: Trajectory) -> dict:
     """The metrics of one run (see docs/METRICS.md)."""
     e = traj.y_tilde
     tail = tail_mask(traj)
-    dV = np.diff(traj.V)
+    with np.errstate(invalid="ignore", over="ignore"):  # a diverged run's inf rows: NaN figures, said by its status
+        dV = np.diff(traj.V)
+        du = np.abs(np.diff(traj.u, axis=0))
     final_err = traj.theta_hat[-1] - traj.theta[-1] if len(traj) else np.full(len(traj.names), math.nan)
     out = {
         "rms_tracking_error": _rms(e),
         "rms_tracking_error_tail": _rms(e[tail]),
         "max_abs_tracking_error_tail": float(np.max(np.abs(e[tail]))) if tail.any() else math.nan,
         "control_rms": _rms(traj.u),
-        "control_total_variation": float(np.sum(np.abs(np.diff(traj.u, axis=0)))),
+        "control_total_variation": float(np.sum(du)),
         "rms_s_tail": _rms(traj.s[tail]),
         "param_error_final": {n: float(v) for n, v in zip(traj.names, final_err, strict=True)},
         "lyapunov_initial": float(traj.V[0]) if len(traj) else math.nan,

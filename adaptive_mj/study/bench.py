@@ -51,12 +51,23 @@ def main_table_markdown(rows: list[dict]) -> str:
                      for r in rows]).to_markdown()
 
 
-def run_bench(*, quick: bool, scenarios: list, out, backend: Backend) -> Study:
+def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str | None = None,
+              gains: Path | None = None, sets: tuple[str, ...] = ()) -> Study:
     """The bench with options adaptive_mj.study.api.bench has checked: the catalogue (quick: shorter runs,
-    no breaking-point study) and a section for the user's scenario files, written to `out`."""
+    no breaking-point study) and a section for the user's scenario files, written to `out`. law: a law kind
+    (built in or a plugin) with its `gains` file and --set keys, scored against the baselines in a section of
+    its own (adaptive-mj score's quick suite, in `out/score`) and, in the full bench, added to the
+    breaking-point study's laws on the plants it serves."""
     from adaptive_mj.study.bench_catalogue import catalogue
 
     from adaptive_mj.sim.runner import new_output_dir
+
+    scoring = None
+    if law is not None:  # every option and the law's gains checked before any run (adaptive_mj.study.score.plan)
+        from adaptive_mj.study.score import plan
+
+        scoring = dict(law=law, gains=gains, sets=sets)
+        plan(law, label=None, sets=sets, gains=gains, against=None, suite_name="quick", seeds=None, plants=None)
 
     if scenarios:  # a scenario of yours that cannot run fails now: checked and built, not after the catalogue
         from adaptive_mj.setup.build import check
@@ -72,7 +83,7 @@ def run_bench(*, quick: bool, scenarios: list, out, backend: Backend) -> Study:
         sections.append(user_section(list(scenarios), out / "logs"))
     jobs = [job for s in sections for job in s.jobs]
     with session(backend):
-        return _bench(quick, out, sections, jobs, backend)
+        return _bench(quick, out, sections, jobs, backend, scoring)
 
 
 def _number(title: str) -> float:
@@ -81,7 +92,22 @@ def _number(title: str) -> float:
     return float(head) if head.isdigit() else float("inf")
 
 
-def _bench(quick: bool, out, sections, jobs, backend) -> Study:
+def _law_section(out: Path, backend: Backend, law: str, gains: Path | None, sets: tuple[str, ...]) -> tuple[str, int]:
+    """`bench --law`: the law scored against the baselines (score's quick suite, into out/score) as a report
+    section (its leaderboards, figures and how it scores), and the number of runs it took."""
+    from adaptive_mj.study.score import run_score
+
+    card = run_score(law, sets=sets, gains=gains, out=out / "score", backend=backend)
+    text = (out / "score" / "scorecard.md").read_text(encoding="utf-8")
+    body = text.split("\n", 1)[1].replace("](", "](score/").replace("\n## ", "\n### ")
+    runs = card.data["runs"]["tasks"] + card.data["runs"]["margins"]
+    return (f"## Your law: {law} against the baselines\n\n**The lecture:** an adaptive law is judged by how it "
+            "tracks, re-adapts after a change and holds still under noise, and by how far it goes before it fails; "
+            f"`adaptive-mj score {law}` ranks it on every plant it serves (the whole card: `score/scorecard.md`)."
+            f"\n{body}\n"), runs
+
+
+def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = None) -> Study:
     t0 = time.perf_counter()
     results = run_jobs(jobs, backend=backend, on_done=progress_printer(len(jobs)))
     run_seconds = time.perf_counter() - t0
@@ -95,14 +121,19 @@ def _bench(quick: bool, out, sections, jobs, backend) -> Study:
     if not quick:  # the breaking-point study: its own batches (bisection), a reduced `adaptive-mj stress`
         from adaptive_mj.study.stress import BENCH_SETTINGS, run_study
 
+        extra = {} if scoring is None else {"law": scoring["law"], "sets": tuple(scoring["sets"])}
         margins, text, _ = run_study(out / "stress", n_jobs=backend.jobs, composite=False, backend=backend,
-                                     **BENCH_SETTINGS)
+                                     **BENCH_SETTINGS, **extra)
         n_runs += sum(len(e.tails) for m in margins for e in m.evaluations)
         before = sum(1 for section in sections if _number(section.title) < 14)  # in order: before 15, 16, ...
         parts.insert(before, "## 14. Breaking points: law × stressor margins\n\n**The lecture:** the modifications "
                      "make adaptation robust to noise, disturbances and unmodelled dynamics; here is how far each law "
                      f"goes before it fails.\n\n{text}\n\n(Logs in `stress/logs/`. `adaptive-mj stress` runs the "
                      "study at full size: 20 s runs, 4 bisection steps, optionally composite adaptation.)\n")
+    if scoring is not None:
+        section, runs = _law_section(out, backend, **scoring)
+        parts.append(section)
+        n_runs += runs
     elapsed = time.perf_counter() - t0
     failed = [r for r in results if r.status == Status.ERROR]  # diverged runs are results, not failures
     header = (f"# adaptive-mj benchmark report{' (quick)' if quick else ''}\n\n"

@@ -537,6 +537,7 @@ def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] 
                                          "sets": list(sets), "gains": pl.gains},
         "plants": {p.name: plant_card(pl, p, task_runs, margins, cost_of) for p in pl.rows},
         "errors": len(errors),
+        "runs": {"tasks": len(jobs), "margins": sum(len(ev.tails) for m in margins for ev in m.evaluations)},
     }
     data["wall_seconds"] = time.perf_counter() - t0
     card = Scorecard(data, out, exit_code=1 if errors else 0)
