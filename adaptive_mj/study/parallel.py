@@ -39,8 +39,21 @@ from adaptive_mj.trajectory import Status
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 
+def _quiet(message: str) -> None:
+    """MuJoCo's warning handler in a study's worker: nothing printed (a run MuJoCo finds unstable ends diverged,
+    its reason naming MuJoCo's warning: plants.mujoco_plant.new_warnings)."""
+
+
 def _init_worker() -> None:
+    import warnings
+
+    import mujoco
+
     os.environ.setdefault("MUJOCO_GL", "egl")
+    # a study's diverging runs are results, each with its status and reason in the table and its log: numpy's
+    # overflow warnings and MuJoCo's "simulation is unstable" lines on the terminal would only bury the progress
+    warnings.simplefilter("ignore", RuntimeWarning)
+    mujoco.set_mju_user_warning(_quiet)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     interrupt.install([signal.SIGTERM])  # raised only inside a run (interrupt.armed)
     if hasattr(signal, "pthread_sigmask"):
