@@ -351,6 +351,8 @@ REVIEWED = {
         "wanted comes from the module's fixed table of headless GL backends",
     ("adaptive_mj/study/__init__.py", 'importlib.import_module("adaptive_mj.study.api")'):
         "a fixed name: a study command module's call goes to the API module",
+    ("adaptive_mj/__init__.py", 'importlib.import_module("adaptive_mj.study.api")'):
+        "a fixed name: adaptive_mj.run_scenario and adaptive_mj.score are the API module's",
     ("adaptive_mj/study/__init__.py", 'importlib.import_module(f"adaptive_mj.study.{name}")'):
         "name is one of the fixed tuple COMMANDS (checked on the line before)",
     ("adaptive_mj/plugins.py", "importlib.import_module(package)"):
