@@ -55,6 +55,50 @@ def geometric(p: np.ndarray, v: np.ndarray, R: np.ndarray, W: np.ndarray, ref: n
     J (3, 3) [kg m²]; gravity g [m/s²]."""
     e_x, e_v = p - ref[0], v - ref[1]
     F = -gains.kx * e_x - gains.kv * e_v + m * g * E3 + m * ref[2]
+    return attitude(F, R, W, b1d, gains, J)._replace(e_x=e_x)
+
+
+class MassGains(NamedTuple):
+    """The translational adaptive law's gains: c [1/s] the surface slope, k [N s/m] the gain on s, gamma_m
+    [kg² s/m² ... as m̂' = −γ_m sᵀw is in kg/s] the mass estimate's rate gain and gamma_d [N s/m ... Δ̂' = γ_Δ s in
+    N/s] the disturbance force estimate's."""
+
+    c: float
+    k: float
+    gamma_m: float
+    gamma_d: float
+
+
+class AdaptiveForce(NamedTuple):
+    """F (3,) [N] the desired force, s (3,) [m/s] the surface, m_rate [kg/s] and d_rate (3,) [N/s] the estimates'
+    rates."""
+
+    F: np.ndarray
+    s: np.ndarray
+    m_rate: float
+    d_rate: np.ndarray
+
+
+def adaptive_force(p: np.ndarray, v: np.ndarray, ref: np.ndarray, m_hat: float, d_hat: np.ndarray,
+                   gains: MassGains, g: float) -> AdaptiveForce:
+    """The lecture's sliding adaptive law on the translational dynamics m p̈ = f R e₃ − m g e₃ + Δ, linear in the
+    unknown mass m and disturbance force Δ: with e_x = p − p_d, e_v = v − v_d and s = e_v + c e_x (the lecture's
+    s = ỹ' + λỹ with ỹ = −e_x), w = a_d − c e_v + g e₃ (ÿ_r plus gravity),
+
+        F = m̂ w − Δ̂ − k s,    m̂' = −γ_m sᵀw,    Δ̂' = γ_Δ s,
+
+    so that with V = ½ m sᵀs + ½ m̃²/γ_m + ½ ‖Δ̃‖²/γ_Δ and the thrust along F, V' = −k sᵀs (module docstring: the
+    attitude follows F through the geometric controller's R_d). ref (3, 3) rows [p_d, v_d, a_d]."""
+    e_x, e_v = p - ref[0], v - ref[1]
+    s = e_v + gains.c * e_x
+    w = ref[2] - gains.c * e_v + g * E3
+    F = m_hat * w - d_hat - gains.k * s
+    return AdaptiveForce(F, s, float(-gains.gamma_m * (s @ w)), gains.gamma_d * s)
+
+
+def attitude(F: np.ndarray, R: np.ndarray, W: np.ndarray, b1d: np.ndarray, gains: Gains, J: np.ndarray) -> Command:
+    """The geometric controller's attitude loop around a desired force F (3,) [N]: f = F·Re₃, R_d from F and b1d,
+    M = −k_R e_R − k_Ω Ω + Ω × JΩ (geometric's, with Ω_d = 0); e_x is zero here (the force law owns it)."""
     f = float(F @ R[:, 2])
     b3 = F / np.linalg.norm(F)
     b2 = np.cross(b3, b1d)
@@ -62,4 +106,4 @@ def geometric(p: np.ndarray, v: np.ndarray, R: np.ndarray, W: np.ndarray, ref: n
     Rd = np.column_stack([np.cross(b2, b3), b2, b3])
     e_R = 0.5 * vee(Rd.T @ R - R.T @ Rd)
     M = -gains.kR * e_R - gains.kW * W + np.cross(W, J @ W)
-    return Command(f, M, e_x, e_R)
+    return Command(f, M, np.zeros(3), e_R)
