@@ -7,9 +7,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from adaptive_mj.errors import ScenarioError
+from adaptive_mj.study import score_suite
 from adaptive_mj.study import api
 from adaptive_mj.study.stats import Estimate, estimate, ranks, separable
 
@@ -35,6 +37,78 @@ def test_ranks_share_a_place_when_intervals_overlap():
     assert not separable(a, b) and separable(a, c)
     assert ranks([a, b, c]) == [1, 1, 3]
     assert ranks([a, b, c], higher_is_better=False) == [2, 2, 1]
+    # not a grouping (stats' docstring): wide overlaps both, which are separable from each other
+    wide, top, low = Estimate(0.8, 0.7, 0.95, 3), Estimate(0.9, 0.88, 0.92, 3), Estimate(0.75, 0.74, 0.76, 3)
+    assert ranks([top, wide, low]) == [1, 1, 2]
+
+
+def test_an_interval_stays_in_its_figure_s_domain_and_reads_back_from_strict_json():
+    e = estimate([0.0, 0.0, 0.3], lowest=0.0)
+    assert e.lo == 0.0 and e.hi > 0.3
+    assert estimate([0.99, 1.0, 0.9], lowest=0.0, highest=1.0).hi == 1.0
+    one = estimate([0.4], lowest=0.0, highest=1.0)
+    assert (one.lo, one.hi) == (0.0, 1.0)
+    back = Estimate.from_dict(json.loads(json.dumps(estimate([1.0]).as_dict(), allow_nan=False)))
+    assert back.lo == -math.inf and back.hi == math.inf and back.mean == 1.0
+    assert math.isnan(Estimate.from_dict(json.loads(json.dumps(estimate([]).as_dict(), allow_nan=False))).mean)
+
+
+# ---------------------------------------------------------------- one seed's figures
+
+
+class _Run:
+    def __init__(self, status="ok", tail=0.001, extras=None, final=None):
+        self.status, self.extras = status, extras or {}
+        self.summary = {"metrics": {"rms_tracking_error_tail": tail, "control_rms": 10.0,
+                                    "control_total_variation": 500.0},
+                        "final": final or {"theta_hat": {"a": 1.5, "b": 0.0}, "theta": {"a": 1.0, "b": 2.0}}}
+
+
+def _change(env, t_e=5.0):
+    return {"change_response": {"event_time": t_e, "peak_error_after": max(env), "window": 0.01, "envelope": env}}
+
+
+def test_seed_figures_read_each_criterion_from_its_run():
+    from adaptive_mj.study.score import normalisers, seed_figures
+
+    bound, limits, durations = 0.01, (100.0, 100.0), {"tracking": 10.0, "change": 10.0, "hold": 20.0}
+    env = [0.05, 0.03, 0.02] + [0.001] * 10  # above the bound for the first three 10 ms windows
+    runs = {"tracking": _Run(tail=0.004), "change": _Run(extras=_change(env)), "hold": _Run(extras={"drift_rate": -0.2})}
+    f = seed_figures(runs, bound, limits, durations)
+    assert f["tail_error"] == 0.004 and f["control_rms"] == 10.0 and f["control_tv_rate"] == 50.0
+    assert f["param_error"] == 1.0  # max(|1.5 − 1| / 1, |0 − 2| / 2)
+    assert f["recovery_time"] == pytest.approx(0.03) and f["peak_after_change"] == 0.05
+    assert f["drift_rate"] == 0.2 and f["success"] == 1.0
+    n = normalisers(bound, limits, durations)
+    penalty = sum(c.weight * min(1.0, f[c.name] / n[c.name]) for c in score_suite.CRITERIA)
+    assert f["performance"] == pytest.approx(1.0 - penalty, rel=1e-12)
+    # never recovered: the time left; a tracking run past the bound: no success, S = 0
+    f = seed_figures({**runs, "change": _Run(extras=_change([0.05] * 13))}, bound, limits, durations)
+    assert f["recovery_time"] == 5.0
+    f = seed_figures({**runs, "tracking": _Run(tail=0.02)}, bound, limits, durations)
+    assert f["success"] == 0.0 and f["performance"] == 0.0
+    # a run that diverged gives no figure: NaN, counted at its worst in S
+    f = seed_figures({**runs, "hold": _Run(status="diverged")}, bound, limits, durations)
+    assert math.isnan(f["drift_rate"]) and f["success"] == 0.0
+
+
+def test_change_response_is_on_the_tail_error_s_scale_on_joints():
+    """On m joints the envelope is ‖q̃‖/√m (the RMS over the joints), the scale of the tail error and its bound."""
+    from types import SimpleNamespace
+
+    from adaptive_mj.study.analysis import change_response
+    from adaptive_mj.trajectory import Trajectory
+
+    n, m = 200, 6
+    t = np.arange(n) * 0.001
+    ref = np.zeros((n, 3, m))
+    x = np.zeros((n, 2, m))
+    x[:, 0, :] = -0.002  # q̃ = 0.002 rad on every joint
+    traj = Trajectory(t=t, x=x, u=np.zeros((n, m)), s=np.zeros((n, m)), ref=ref, theta_hat=np.zeros((n, 1)),
+                      theta=np.zeros((n, 1)), V=np.zeros(n), names=("p",), status="ok", reason="",
+                      meta={"dt": 0.001}, joint_names=tuple(f"j{i}" for i in range(m)))
+    r = change_response(traj, SimpleNamespace(events=[SimpleNamespace(t=0.1)]))
+    assert r["peak_error_after"] == pytest.approx(0.002, rel=1e-12)
 
 
 # ---------------------------------------------------------------- bad input, one line
@@ -55,7 +129,27 @@ def test_bad_options_are_one_line_naming_what_is_wrong(tmp_path):
         api.score("sliding_adaptive", suite="huge")
     with pytest.raises(ScenarioError, match="--seeds must be an integer >= 2"):
         api.score("sliding_adaptive", seeds=1)
-    assert not any((tmp_path / n).exists() for n in "abcd")  # refused before any folder is made
+    gains.write_text("[heave]\ninitial_estimates = 'model'\n")
+    with pytest.raises(ScenarioError, match=r"key heave.initial_estimates: the suite sets law.initial_estimates"):
+        api.score("sliding_adaptive", gains=gains, out=tmp_path / "e")
+    with pytest.raises(ScenarioError, match=r"--set: law.kind is the study's"):
+        api.score("sliding_adaptive", set=["law.kind='fixed_nominal'"], out=tmp_path / "e")
+    gains.write_text("[manipulator]\ngamma = 0.2\n")
+    with pytest.raises(ScenarioError, match=r"key 'manipulator': law 'sliding_adaptive' does not run on that plant"):
+        api.score("sliding_adaptive", gains=gains, out=tmp_path / "e")
+    assert not any((tmp_path / n).exists() for n in "abcde")  # refused before any folder is made
+
+
+def test_gains_for_a_plant_left_out_by_plants_are_kept_not_refused(tmp_path):
+    from adaptive_mj.study.score import plan
+
+    gains = tmp_path / "g.toml"
+    gains.write_text("[heave]\nk = 150.0\n[arm]\nk = 4.0\n")
+    pl = plan("sliding_adaptive", label=None, sets=(), gains=gains, against=["dead_zone"], suite_name="quick",
+              seeds=None, plants=["heave"])
+    assert [p.name for p in pl.rows] == ["heave"] and pl.entries["heave"][0].overrides[-1] == "law.k=150.0"
+    assert [e.label for e in pl.entries["heave"]] == ["sliding_adaptive", "dead_zone"]
+    assert pl.entries["heave"][0].tested and not pl.entries["heave"][1].oracle
 
 
 # ---------------------------------------------------------------- scoring
@@ -141,13 +235,16 @@ def test_the_lecture_law_and_its_dead_zone_rank_apart_and_two_copies_of_one_law_
         assert card.rank("heave", "twin", score) == card.rank("heave", "adaptive", score)
     # the margins are resolved finely enough to differ between seeds (6 bisection steps on a log scale)
     m = card.margin("heave", "adaptive", "noise σ_y")
-    assert m.n == 3 and 1e-4 < m.mean < 0.1
+    assert m.n == 3 and 1e-4 < m.mean < 0.1 and m.lo < m.hi  # the seeds' margins differ
 
 
 def test_merge_joins_cards_of_one_suite_and_refuses_another_version(cards, tmp_path):
+    from adaptive_mj.study import score
+
     a, b = (c.out / "scorecard.json" for c in cards)
+    assert json.loads(a.read_text())["suite"]["hash"] == score.card_hash(5.0)  # whichever plants a card covers
     merged = api.score(merge=[a, b], out=tmp_path / "m")
-    assert set(merged.laws("heave")) == {"emod", "twin", "adaptive", "dead_zone"}
+    assert set(merged.laws("heave")) == {"emod", "twin", "adaptive", "dead_zone"}  # the baselines kept once
     assert merged.rank("heave", "twin") == merged.rank("heave", "adaptive")
     assert "| **twin** |" in (merged.out / "scorecard.md").read_text()
     other = json.loads(b.read_text())
@@ -158,6 +255,20 @@ def test_merge_joins_cards_of_one_suite_and_refuses_another_version(cards, tmp_p
                         str(tmp_path / "n")], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
     assert "old.json: key 'suite.version': expected 1" in r.stderr and "got 0" in r.stderr
+    other = json.loads(b.read_text())
+    other["suite"]["seeds"] = 8
+    old.write_text(json.dumps(other))
+    with pytest.raises(ScenarioError, match=r"old.json: key 'suite.seeds': expected 3"):
+        api.score(merge=[a, old], out=tmp_path / "p")
+    old.write_text(json.dumps({"format": "adaptive-mj scorecard"}))
+    with pytest.raises(ScenarioError, match=r"old.json: key 'suite': expected a JSON object, got NoneType"):
+        api.score(merge=[a, old], out=tmp_path / "q")
+    # a law in two cards with other figures is not dropped: each copy named after its card
+    other = json.loads(b.read_text())
+    other["plants"]["heave"]["laws"]["dead_zone"]["figures"]["performance"]["mean"] = 0.0
+    old.write_text(json.dumps(other))
+    both = api.score(merge=[a, old], out=tmp_path / "r")
+    assert {"dead_zone", "dead_zone [card 2]"} <= set(both.laws("heave"))
 
 
 # ---------------------------------------------------------------- stress --law, bench --law
@@ -174,6 +285,18 @@ def test_stress_law_adds_the_law_beside_the_built_in_ones_on_the_plants_it_serve
     searches = [s for s in stress.study(composite=False, duration=1.0, law="sliding_adaptive",
                                         sets=("law.k=150.0",)) if s.label == "heave/sliding_adaptive"]
     assert searches and all(s.overrides[-2:] == ("law=sliding_adaptive", "law.k=150.0") for s in searches)
+
+
+def test_stress_law_passes_the_law_s_gains_per_plant_kind_and_refuses_a_law_that_serves_no_plant():
+    from adaptive_mj.study import stress
+
+    searches = [s for s in stress.study(composite=False, duration=1.0, law="sliding_adaptive",
+                                        gains={"heave": ["law.k=150.0"], "arm": ["law.k=4.0"]})
+                if s.label in ("heave/sliding_adaptive", "arm/sliding_adaptive")]
+    assert {s.label: s.overrides[-1] for s in searches} == {"heave/sliding_adaptive": "law.k=150.0",
+                                                            "arm/sliding_adaptive": "law.k=4.0"}
+    with pytest.raises(ScenarioError, match="--law: 'first_order_adaptive' serves none of the study's plants"):
+        stress.study(composite=False, duration=1.0, law="first_order_adaptive")
 
 
 def test_stress_and_bench_refuse_law_options_in_one_line(tmp_path):

@@ -138,13 +138,16 @@ CHANGE_WINDOW = 0.01  # s: the envelope's window in change_response
 
 
 def change_response(traj: Trajectory, setup) -> dict:
-    """After the first event (a parameter change): the peak of the tracking error's norm (|ỹ| [m or rad], or
-    ‖q̃‖ on m joints) and its envelope, the maximum over each CHANGE_WINDOW after the event, for a caller to
-    read a recovery time against its own bound (adaptive_mj.study.score). Empty without an event."""
+    """After the first event (a parameter change): the peak of the tracking error (|ỹ| [m or rad], or ‖q̃‖/√m on
+    m joints: the RMS over the joints, the tail error's scale) and its envelope, the maximum over each
+    CHANGE_WINDOW after the event, for a caller to read a recovery time against its own bound
+    (adaptive_mj.study.score). Empty without an event."""
     t_e = first_event_time(setup)
     if t_e is None:
         return {}
-    e = np.abs(traj.y_tilde) if traj.y_tilde.ndim == 1 else np.linalg.norm(traj.y_tilde, axis=1)
+    y = traj.y_tilde
+    # on m joints ‖q̃‖/√m: the scale of the tail RMS error (its RMS over the joints), so one bound judges both
+    e = np.abs(y) if y.ndim == 1 else np.linalg.norm(y, axis=1) / math.sqrt(y.shape[1])
     after = traj.t >= t_e
     if not after.any():
         return {}

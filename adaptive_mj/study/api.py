@@ -213,10 +213,16 @@ def _law_sets(law: str | None, sets: Sequence[str] | str) -> list[str]:
     from adaptive_mj.study.score import law_kind_checked
 
     law_kind_checked(law)
+    from adaptive_mj.study.score import TASK_KEYS
+
     for expr in items:
         text: object = expr
         if not isinstance(text, str) or not expr.startswith("law.") or "=" not in expr:
             raise ScenarioError(f"--set: only the law's own keys, law.KEY=VALUE, got {expr!r}")
+        key = expr.split("=", 1)[0].strip()[len("law."):]
+        if key in TASK_KEYS:
+            raise ScenarioError(f"--set: law.{key} is the study's, set alike for every law (the task, not the law); "
+                                f"expected one of the law's own keys, got {expr!r}")
     return items
 
 

@@ -101,6 +101,8 @@ def _law_section(out: Path, backend: Backend, law: str, gains: Path | None, sets
     text = (out / "score" / "scorecard.md").read_text(encoding="utf-8")
     body = text.split("\n", 1)[1].replace("](", "](score/").replace("\n## ", "\n### ")
     runs = card.data["runs"]["tasks"] + card.data["runs"]["margins"]
+    notes = "".join(f"\n- {note}" for note in card.notes)
+    body += f"\n**Runs that could not be set up:**{notes}\n" if notes else ""
     return (f"## Your law: {law} against the baselines\n\n**The lecture:** an adaptive law is judged by how it "
             "tracks, re-adapts after a change and holds still under noise, and by how far it goes before it fails; "
             f"`adaptive-mj score {law}` ranks it on every plant it serves (the whole card: `score/scorecard.md`)."
@@ -121,7 +123,11 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
     if not quick:  # the breaking-point study: its own batches (bisection), a reduced `adaptive-mj stress`
         from adaptive_mj.study.stress import BENCH_SETTINGS, run_study
 
-        extra = {} if scoring is None else {"law": scoring["law"], "sets": tuple(scoring["sets"])}
+        extra = {}
+        if scoring is not None:
+            from adaptive_mj.study.score import read_gains
+
+            extra = {"law": scoring["law"], "sets": tuple(scoring["sets"]), "gains": read_gains(scoring["gains"])}
         margins, text, _ = run_study(out / "stress", n_jobs=backend.jobs, composite=False, backend=backend,
                                      **BENCH_SETTINGS, **extra)
         n_runs += sum(len(e.tails) for m in margins for e in m.evaluations)

@@ -36,6 +36,8 @@ MARGIN_LOG_RATE_HZ = 1.0  # the margin runs' logs: the summary and a row per sec
 COST_SECONDS = 1.0  # s simulated per compute-cost timing (the best of COST_REPS)
 COST_REPS = 3
 ORACLE_KINDS = ("fixed_nominal", "robust_sliding", "computed_torque", "pd_gravity")
+# keys of the law under test that would change a task, not the law: refused in --gains and --set
+TASK_KEYS = ("kind", "initial_estimates", "nominal", "order")
 
 
 @dataclass(frozen=True)
@@ -86,6 +88,10 @@ def read_gains(path: Path | None) -> dict[str, list[str]]:
                                 f"({', '.join(sorted(scored))}), got {key!r}")
         if not isinstance(table, dict):
             raise ScenarioError(f"{path}: key {key!r}: expected a table of law keys, got {type(table).__name__}")
+        for k in table:
+            if k in TASK_KEYS:
+                raise ScenarioError(f"{path}: key {key}.{k}: the suite sets law.{k} for every law alike (the task, "
+                                    "not the law); expected the law's own gains, got it set")
         out[key] = [f"law.{k}={toml_value(v)}" for k, v in table.items()]
     return out
 
@@ -145,7 +151,8 @@ def law_kind_checked(law: str) -> None:
 def entries(p: stress.Plant, law: str | None, label: str, gains: Sequence[str], sets: Sequence[str],
             against: Sequence[str] | None) -> list[Entry]:
     """The law under test (first, when `law`) and the baselines on plant row p (`against`: only those)."""
-    base = [Entry(name, tuple(over), oracle=any(f"law.kind='{k}'" in over for k in ORACLE_KINDS))
+    base = [Entry(name, tuple(over), oracle=any(f"law.kind='{k}'" in over for k in ORACLE_KINDS)
+                  or any(o.startswith("law.theta0=") for o in over))
             for name, over in stress.laws(p, composite=False)]
     if against is not None:
         base = [e for e in base if e.label in against]
@@ -239,23 +246,30 @@ def actuator_limits(p: stress.Plant) -> tuple[float, float]:
 
 
 def compute_ratio(p: stress.Plant, entry: Entry, task: suite.Task, *, seconds: float = COST_SECONDS) -> float:
-    """The law's closed loop per physics step against bare mj_step on the same model, on the tracking task
-    (the best of COST_REPS timings of `seconds` simulated each, after one run that compiles)."""
+    """The law's closed loop per physics step against bare mj_step on the same model, on the tracking task as it
+    runs (its noise, sensors, control timing; no log), the best of COST_REPS timings of `seconds` simulated each,
+    after one run that compiles."""
+    import contextlib
+    import io
+
     import mujoco
 
     from adaptive_mj.setup.build import build
     from adaptive_mj.sim.loop import run
+    from adaptive_mj.sim.runner import start
 
     path = sc.SCENARIOS_DIR / f"{task.scenario}.toml"
     over = [*task_overrides(p, task, seconds), *entry.overrides]
 
     def timed(sec: float) -> tuple[float, float]:
         scn = sc.load(path, overrides=[*over, f"simulation.duration={sec!r}"])
-        s = build(scn)
-        steps = max(1, round(sec / s.plant.dt))
+        with contextlib.redirect_stderr(io.StringIO()):  # its notes and pre-flight lines: the task runs said them
+            st = start(scn)
+        steps = max(1, round(sec / st.setup.plant.dt))
         t0 = time.perf_counter()
-        run(s.plant, s.law, s.reference, duration=sec, theta_hat0=s.theta_hat0)
+        run(st.setup.plant, st.setup.law, st.setup.reference, **st.kwargs)
         loop = (time.perf_counter() - t0) / steps
+        st.setup.plant.release()
         bare: Any = build(scn).plant  # a MuJoCo plant: its model and data
         m, d = bare.model, bare.data
         t0 = time.perf_counter()
@@ -319,11 +333,14 @@ def stressor_text(p: stress.Plant, duration: float) -> list[dict]:
     return [{"name": st.name, "unit": st.unit, "lo": st.lo, "hi": st.hi} for st in stress.stressors(p, duration)]
 
 
-def card_hash(stressors: dict[str, list[dict]]) -> str:
-    """The suite's definitions hash and the stressors' names and ranges, hashed together."""
+def card_hash(duration: float) -> str:
+    """The suite's definitions hash with every scored plant's stressors (names, units, ranges), failure bound and
+    nominal noise, whichever plants a card covers (so cards of different plants merge), hashed together."""
     import hashlib
 
-    text = suite.definitions_hash() + json.dumps(stressors, sort_keys=True)
+    rows = {p.name: {"stressors": stressor_text(p, duration), "tail_bound": TAIL_BOUND[p.name],
+                     "nominal_noise": stress.NOMINAL_NOISE[p.name]} for p in stress.plants(duration)}
+    text = suite.definitions_hash() + json.dumps(rows, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -374,10 +391,11 @@ def plan(law: str | None, *, label: str | None, sets: Sequence[str], gains: Path
         law_kind_checked(law)
     gain_sets = read_gains(gains)
     rows = _rows(law, plants, settings.stress_duration)
+    served = {_kind(p).name for p in _rows(law, None, settings.stress_duration)} if law is not None else set()
     for kind in gain_sets:
-        if all(_kind(p).name != kind for p in rows):
-            raise ScenarioError(f"{gains}: key {kind!r}: the law does not run on that plant kind here "
-                                f"(scored: {', '.join(_kind(p).name for p in rows)})")
+        if kind not in served:
+            raise ScenarioError(f"{gains}: key {kind!r}: law {law!r} does not run on that plant kind (it serves "
+                                f"{', '.join(sorted(served)) or 'none'}); expected only tables of those")
     if against is not None:
         known = {n for p in rows for n in baseline_names(p)}
         bad = [a for a in against if a not in known]
@@ -447,8 +465,9 @@ def stressor_figures(ms: list, st) -> tuple[dict, list[float]]:
     at_hi = [m.at(st.hi) for m in ms]
     fails_hi = [not ev.passes for ev in at_hi if ev is not None]
     return {"unit": st.unit, "margins": [m.margin for m in ms], "first_fails": [m.first_fail for m in ms],
-            "margin": estimate([st.lo if m.margin is None else m.margin for m in ms]).as_dict(),
-            "position": estimate(pos).as_dict(),
+            "margin": estimate([st.lo if m.margin is None else m.margin for m in ms], lowest=st.lo,
+                               highest=st.hi).as_dict(),
+            "position": estimate(pos, lowest=0.0, highest=1.0).as_dict(),
             "tail_mean_at_margin": float(np.mean(tails)) if tails else None,
             "tail_cvar10_at_margin": cvar(tails) if tails else None,
             "failure_rate_at_hi": float(np.mean(fails_hi)) if fails_hi else None}, pos
@@ -468,7 +487,9 @@ def plant_card(pl: Plan, p: stress.Plant, task_runs: dict, margins: list, cost_o
     for e in pl.entries[p.name]:
         per_seed = [seed_figures(task_runs.get((p.name, e.label, s), {}), bound, limits, durations)
                     for s in range(pl.seeds)]
-        figures = {name: {**estimate([f[name] for f in per_seed]).as_dict(), "values": [f[name] for f in per_seed]}
+        figures = {name: {**estimate([f[name] for f in per_seed], lowest=0.0,
+                                     highest=1.0 if name in ("success", "performance") else math.inf).as_dict(),
+                          "values": [f[name] for f in per_seed]}
                    for name in [*(c.name for c in suite.CRITERIA), "success", "performance"]}
         st_out, cols = {}, []
         for st in stress.stressors(p, pl.settings.stress_duration):
@@ -476,7 +497,8 @@ def plant_card(pl: Plan, p: stress.Plant, task_runs: dict, margins: list, cost_o
             st_out[st.name], pos = stressor_figures(ms, st)
             cols.append(pos)
         robust = np.asarray(cols, dtype=float).mean(axis=0) if cols else np.full(pl.seeds, math.nan)
-        figures["robustness"] = {**estimate(robust.tolist()).as_dict(), "values": robust.tolist()}
+        figures["robustness"] = {**estimate(robust.tolist(), lowest=0.0, highest=1.0).as_dict(),
+                                 "values": robust.tolist()}
         plant["laws"][e.label] = {"tested": e.tested, "oracle": e.oracle, "overrides": list(e.overrides),
                                   "figures": figures, "stressors": st_out, "compute_ratio": cost_of.get((p.name,
                                                                                                         e.label))}
@@ -524,14 +546,13 @@ def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] 
                 cost_of[(p.name, e.label)] = compute_ratio(p, e, suite.TASKS[p.name][0])
             except Exception as exc:  # noqa: BLE001 (a law that cannot run has its runs' errors on the card)
                 say(f"score: {p.name}/{e.label}: no compute-cost timing: {type(exc).__name__}: {exc}")
-    stressors = {p.name: stressor_text(p, pl.settings.stress_duration) for p in pl.rows}
     errors = [r for r in results if r.status == "error"]
     s = pl.settings
     data: dict[str, Any] = {
         "format": CARD_FORMAT,
-        "suite": {"version": suite.SUITE_VERSION, "name": s.name, "hash": card_hash(stressors), "seeds": pl.seeds,
-                  "steps": s.steps, "stress_duration": s.stress_duration, "durations": dict(s.durations),
-                  "confidence": CONFIDENCE},
+        "suite": {"version": suite.SUITE_VERSION, "name": s.name, "hash": card_hash(s.stress_duration),
+                  "seeds": pl.seeds, "steps": s.steps, "stress_duration": s.stress_duration,
+                  "durations": dict(s.durations), "confidence": CONFIDENCE},
         "versions": _versions(law),
         "law": None if law is None else {"name": law, "label": pl.entries[pl.rows[0].name][0].label,
                                          "sets": list(sets), "gains": pl.gains},
@@ -554,44 +575,66 @@ def _safe(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "x"
 
 
+CARD_KEYS: dict[str, type | tuple[type, ...]] = {"suite": dict, "versions": (dict, list), "plants": dict}
+
+
+def read_card(path: Path) -> dict:
+    """A scorecard.json (or the folder holding one), its format and top-level keys checked in one line each."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "scorecard.json"
+    if not path.is_file():
+        raise ScenarioError(f"{path}: no such scorecard file")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"{path}: not a scorecard (not JSON: {exc})") from None
+    if not isinstance(data, dict):
+        raise ScenarioError(f"{path}: expected a scorecard (a JSON object), got {type(data).__name__}")
+    if data.get("format") != CARD_FORMAT:
+        raise ScenarioError(f"{path}: key 'format': expected {CARD_FORMAT!r}, got {data.get('format')!r}")
+    for key, kind in CARD_KEYS.items():
+        if not isinstance(data.get(key), kind):
+            raise ScenarioError(f"{path}: key {key!r}: expected a JSON {'object' if kind is dict else 'value'}, "
+                                f"got {type(data.get(key)).__name__}")
+    for key in ("version", "hash", "name", "seeds"):
+        if key not in data["suite"]:
+            raise ScenarioError(f"{path}: key 'suite.{key}': missing")
+    data["path"] = str(path)
+    return data
+
+
 def merge(paths: Sequence[Path], out: Path | None) -> Scorecard:
-    """Cards of one suite version and hash joined into one leaderboard (a law in several cards: its first)."""
+    """Cards of one suite (version, hash, name and seeds) joined plant by plant into one leaderboard. A law in
+    several cards with the same figures (a baseline) is kept once; with other figures, each copy is named after its
+    card ("dead_zone [card 2]")."""
     from adaptive_mj.sim.runner import new_output_dir
     from adaptive_mj.study.score_card import write_card
 
     if len(paths) < 2:
         raise ScenarioError(f"--merge needs two or more scorecard.json files, got {len(paths)}")
-    cards = []
-    for path in paths:
-        path = Path(path)
-        if path.is_dir():
-            path = path / "scorecard.json"
-        if not path.is_file():
-            raise ScenarioError(f"{path}: no such scorecard file")
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise ScenarioError(f"{path}: not a scorecard (not JSON: {exc})") from None
-        if not isinstance(data, dict) or data.get("format") != CARD_FORMAT:
-            raise ScenarioError(f"{path}: key 'format': expected {CARD_FORMAT!r}, got {data.get('format')!r}"
-                                if isinstance(data, dict) else f"{path}: not a scorecard")
-        cards.append((path, data))
-    first_path, first = cards[0]
-    for path, data in cards[1:]:
-        for key in ("version", "hash", "name"):
+    cards = [read_card(Path(p)) for p in paths]
+    first = cards[0]
+    for data in cards[1:]:
+        for key in ("version", "hash", "name", "seeds"):
             if data["suite"].get(key) != first["suite"].get(key):
-                raise ScenarioError(f"{path}: key 'suite.{key}': expected {first['suite'].get(key)!r} (as in "
-                                    f"{first_path}), got {data['suite'].get(key)!r}; cards of another suite "
+                raise ScenarioError(f"{data['path']}: key 'suite.{key}': expected {first['suite'].get(key)!r} (as in "
+                                    f"{first['path']}), got {data['suite'].get(key)!r}; cards of another suite "
                                     "cannot share a leaderboard")
-    merged = json.loads(json.dumps(first))
-    merged["law"] = [c[1]["law"] for c in cards if c[1]["law"] is not None]
-    merged["merged_from"] = [str(c[0]) for c in cards]
-    merged["versions"] = [c[1]["versions"] for c in cards]
-    for _, data in cards[1:]:
+    merged = json.loads(json.dumps({k: v for k, v in first.items() if k != "path"}))
+    merged["law"] = [c["law"] for c in cards if c.get("law") is not None]
+    merged["merged_from"] = [c["path"] for c in cards]
+    merged["versions"] = [c["versions"] for c in cards]
+    merged["wall_seconds"] = None
+    for n, data in enumerate(cards[1:], start=2):
         for pn, plant in data["plants"].items():
-            target = merged["plants"].setdefault(pn, json.loads(json.dumps(plant)))
+            target = merged["plants"].setdefault(pn, {**json.loads(json.dumps(plant)), "laws": {}})
             for lb, entry in plant["laws"].items():
-                target["laws"].setdefault(lb, entry)
+                have = target["laws"].get(lb)
+                if have is None:
+                    target["laws"][lb] = entry
+                elif have["figures"] != entry["figures"]:
+                    target["laws"][f"{lb} [card {n}]"] = entry
     for plant in merged["plants"].values():
         rank_laws(plant)
     card = Scorecard(merged, new_output_dir(out, "score-merged"))

@@ -33,6 +33,11 @@ def _name(lb: str, e: dict) -> str:
     return f"**{text}**" if e.get("tested") else text
 
 
+def _with_n(est: Estimate, seeds: int) -> str:
+    """est's text, with "(n of N seeds)" when runs that diverged or failed to give it left seeds out."""
+    return est.text() + (f" ({est.n} of {seeds} seeds)" if est.n < seeds else "")
+
+
 def leaderboard(plant: dict) -> str:
     """Markdown: one row per law (ranked), the scores and every criterion with its interval."""
     cols = ["rank S", "rank R", "law", *(c for _, c in SCORE_COLUMNS),
@@ -42,8 +47,11 @@ def leaderboard(plant: dict) -> str:
         e = plant["laws"][lb]
         f = e["figures"]
         cells = [str(e["rank"]["performance"]), str(e["rank"]["robustness"]), _name(lb, e)]
-        cells += [Estimate.from_dict(f[name]).text() for name, _ in SCORE_COLUMNS]
-        cells += [Estimate.from_dict(f[c.name]).text() for c in suite.CRITERIA]
+        seeds = len(f["performance"]["values"])
+        for name, _ in SCORE_COLUMNS:
+            est = Estimate.from_dict(f[name])
+            cells.append(f"{round(est.mean * est.n)}/{seeds}" if name == "success" else est.text())
+        cells += [_with_n(Estimate.from_dict(f[c.name]), seeds) for c in suite.CRITERIA]
         ratio = e.get("compute_ratio")
         cells.append("n/a" if ratio is None else f"{ratio:.2f}")
         lines.append("| " + " | ".join(cells) + " |")
@@ -152,10 +160,23 @@ def formula_text(data: dict) -> str:
             "decade or more), each margin found by its own bisection per seed "
             f"({data['suite']['steps']} steps after the two ends). Every figure: the mean over "
             f"{data['suite']['seeds']} seeds and its {100 * data['suite']['confidence']:g} % Student-t interval; "
-            "a rank is 1 + the number of laws whose interval lies wholly above the law's own, so laws that cannot "
-            "be told apart share a rank. † an oracle baseline, given the true parameters. cost × mj_step: the "
+            "a rank is 1 + the number of laws whose interval lies wholly above the law's own: a law ranks below "
+            "another only when the two are separable, and two copies of one law share a rank (not a grouping: A may "
+            "overlap B and C while B and C differ). † a baseline given the true parameters (the fixed and robust "
+            "baselines' nominal θ, σ- and e-modification's leakage target θ₀). cost × mj_step: the "
             "closed loop's time per physics step over bare mj_step on the same model (this machine, the best of "
             "3 timings; not in S). docs/METRICS.md, \"Scorecard\", defines each criterion.")
+
+
+def jsonable(obj):
+    """obj with every float that is not finite (a run that gave no value) as null: strict JSON for any tool."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    return obj
 
 
 def write_card(card) -> None:
@@ -163,7 +184,8 @@ def write_card(card) -> None:
     from adaptive_mj.report.html import write_html
 
     data, out = card.data, Path(card.out)
-    (out / "scorecard.json").write_text(json.dumps(data, indent=1, allow_nan=True) + "\n", encoding="utf-8")
+    (out / "scorecard.json").write_text(json.dumps(jsonable(data), indent=1, allow_nan=False) + "\n",
+                                        encoding="utf-8")
     made = figures(data, out)
     laws = data["law"] if isinstance(data["law"], list) else [data["law"]] if data["law"] else []
     title = " and ".join(f"`{lw['label']}`" for lw in laws) or "the baselines"

@@ -3,8 +3,9 @@ say when two laws cannot be told apart at that confidence.
 
 A figure measured on n seeds x_1..x_n is reported as mean ± t_{1-α/2, n-1} · s / √n (s the sample standard
 deviation, α = 1 − CONFIDENCE). Two laws are *separable* on a figure when their intervals do not overlap.
-A law's rank is 1 + the number of laws whose interval lies wholly on the better side of its own, so laws
-whose intervals overlap can share a rank ("=2"), and two copies of one law always do.
+A law's rank is 1 + the number of laws whose interval lies wholly on the better side of its own: two copies of one
+law always share a rank, and a law is ranked below another only when the two are separable. The rule is not a
+grouping: A may overlap B and C while B and C are separable, so A can share B's rank and still differ from C's.
 """
 from __future__ import annotations
 
@@ -28,11 +29,19 @@ class Estimate:
     n: int
 
     def as_dict(self) -> dict:
-        return {"mean": self.mean, "lo": self.lo, "hi": self.hi, "n": self.n}
+        """As JSON allows it: a value that is not finite as null (from_dict reads it back)."""
+        def num(v: float) -> float | None:
+            return v if math.isfinite(v) else None
+
+        return {"mean": num(self.mean), "lo": num(self.lo), "hi": num(self.hi), "n": self.n}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Estimate":
-        return cls(float(d["mean"]), float(d["lo"]), float(d["hi"]), int(d["n"]))
+        """The estimate of as_dict's dict (null: NaN for the mean, ∓inf for an open interval's ends)."""
+        def num(v, missing: float) -> float:
+            return missing if v is None else float(v)
+
+        return cls(num(d["mean"], math.nan), num(d["lo"], -math.inf), num(d["hi"], math.inf), int(d["n"]))
 
     def text(self, fmt: str = ".3g") -> str:
         """"mean [lo, hi]" (or "n/a" when no seed gave a value)."""
@@ -50,19 +59,21 @@ def t_quantile(p: float, dof: int) -> float:
     return float(t.ppf(p, dof))
 
 
-def estimate(values: Sequence[float]) -> Estimate:  # NaN and ±inf: no value
-    """The mean of the finite values and its t interval at CONFIDENCE (see the module docstring)."""
+def estimate(values: Sequence[float], *, lowest: float = -math.inf, highest: float = math.inf) -> Estimate:
+    """The mean of the finite values and its t interval at CONFIDENCE (see the module docstring), the interval
+    clipped to the figure's domain [lowest, highest] (a tail error is >= 0, a score within [0, 1]). NaN and ±inf
+    (a run that gave no value) are left out: n says how many seeds the figure rests on."""
     x = np.array([float(v) for v in values if math.isfinite(v)], dtype=np.float64)
     if x.size == 0:
         return Estimate(math.nan, math.nan, math.nan, 0)
     mean = float(np.mean(x))
     if x.size == 1:
-        return Estimate(mean, -math.inf, math.inf, 1)
+        return Estimate(mean, lowest, highest, 1)
     sd = float(np.std(x, ddof=1))
     if sd == 0.0:
         return Estimate(mean, mean, mean, int(x.size))
     half = t_quantile(0.5 + CONFIDENCE / 2, x.size - 1) * sd / math.sqrt(x.size)
-    return Estimate(mean, mean - half, mean + half, int(x.size))
+    return Estimate(mean, max(lowest, mean - half), min(highest, mean + half), int(x.size))
 
 
 def separable(a: Estimate, b: Estimate) -> bool:

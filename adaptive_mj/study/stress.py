@@ -247,10 +247,11 @@ def stressors(p: Plant, duration: float = DURATION) -> list[Stressor]:
     return out
 
 
-def with_law(p: Plant, entries: list[tuple[str, list[str]]], law: str | None,
-             sets: tuple[str, ...] = ()) -> list[tuple[str, list[str]]]:
+def with_law(p: Plant, entries: list[tuple[str, list[str]]], law: str | None, sets: tuple[str, ...] = (),
+             gains: dict[str, list[str]] | None = None) -> list[tuple[str, list[str]]]:
     """The plant's laws with law kind `law` (a built-in kind or an installed plugin) after them, swapped in
-    (setup.scenario.law_swap) with its --set keys, when it serves a form of the plant's kind; the label is the
+    (setup.scenario.law_swap) with its gains for the plant's kind (`gains`: plant kind -> --set expressions, as
+    score --gains reads them) and its --set keys, when it serves a form of the plant's kind; the label is the
     kind's name ("NAME (yours)" when a built-in label has it)."""
     if law is None:
         return entries
@@ -260,23 +261,30 @@ def with_law(p: Plant, entries: list[tuple[str, list[str]]], law: str | None,
     if law not in serving(k.name, k.forms, {law: all_kinds()[law]}):
         return entries
     label = f"{law} (yours)" if any(name == law for name, _ in entries) else law
-    return [*entries, (label, [sc.law_swap(law), *sets])]
+    return [*entries, (label, [sc.law_swap(law), *(gains or {}).get(k.name, []), *sets])]
 
 
 def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, ...] | None = None,
-          law: str | None = None, sets: tuple[str, ...] = ()) -> list[Search]:
+          law: str | None = None, sets: tuple[str, ...] = (),
+          gains: dict[str, list[str]] | None = None) -> list[Search]:
     """Every plant × law × stressor search; arm_laws: the 6-joint arm's built-in laws to include (None: all);
-    law: a law kind added on the plants it serves, with its --set keys `sets` (with_law)."""
+    law: a law kind added on the plants it serves, with its gains and --set keys `sets` (with_law); one line when
+    it serves none of them."""
     out = []
+    served = False
     for p in plants(duration):
         path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
-        for name, over in with_law(p, laws(p, composite=composite), law, sets):
+        entries = with_law(p, laws(p, composite=composite), law, sets, gains)
+        served = served or (law is not None and len(entries) > len(laws(p, composite=composite)))
+        for name, over in entries:
             if _on_joints(p) and arm_laws is not None and name not in arm_laws and not (law and name.startswith(law)):
                 continue
             for st in stressors(p, duration):
                 if name == "composite" and st.name == PERIOD:  # composite adaptation: continuous control only
                     continue
                 out.append(Search(path, f"{p.name}/{name}", (*p.base, *over), st, TAIL_BOUND[p.name]))
+    if law is not None and not served:
+        raise ScenarioError(f"--law: {law!r} serves none of the study's plants ({', '.join(STRESS_PLANT_KIND)})")
     return out
 
 
@@ -323,14 +331,14 @@ def _bounds_text() -> str:
 def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int,
               duration: float = DURATION, backend=None,
               arm_laws: tuple[str, ...] | None = None, law: str | None = None,
-              sets: tuple[str, ...] = ()) -> tuple[list[Margin], str, float]:
+              sets: tuple[str, ...] = (), gains: dict[str, list[str]] | None = None) -> tuple[list[Margin], str, float]:
     """Run the study (on `backend`: a parallel.Backend, default n_jobs local processes); returns the
     margins, the report text and the wall time [s]."""
     import sys
 
     from adaptive_mj.study.parallel import progress_printer
 
-    searches = study(composite=composite, duration=duration, arm_laws=arm_laws, law=law, sets=sets)
+    searches = study(composite=composite, duration=duration, arm_laws=arm_laws, law=law, sets=sets, gains=gains)
     t0 = time.perf_counter()
     at_most = len(searches) * seeds * (2 + steps)  # bisection stops early where a bracket closes
 
