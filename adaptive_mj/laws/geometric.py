@@ -100,10 +100,15 @@ def attitude(F: np.ndarray, R: np.ndarray, W: np.ndarray, b1d: np.ndarray, gains
     """The geometric controller's attitude loop around a desired force F (3,) [N]: f = F·Re₃, R_d from F and b1d,
     M = −k_R e_R − k_Ω Ω + Ω × JΩ (geometric's, with Ω_d = 0); e_x is zero here (the force law owns it)."""
     f = float(F @ R[:, 2])
-    b3 = F / np.linalg.norm(F)
-    b2 = np.cross(b3, b1d)
-    b2 /= np.linalg.norm(b2)
-    Rd = np.column_stack([np.cross(b2, b3), b2, b3])
+    Rd = desired_attitude(F, b1d)
     e_R = 0.5 * vee(Rd.T @ R - R.T @ Rd)
     M = -gains.kR * e_R - gains.kW * W + np.cross(W, J @ W)
     return Command(f, M, np.zeros(3), e_R)
+
+
+def desired_attitude(F: np.ndarray, b1d: np.ndarray) -> np.ndarray:
+    """(3, 3) R_d whose third axis is along F (3,) and whose first axis points as near b1d (3,) as it can."""
+    b3 = F / np.linalg.norm(F)
+    b2 = np.cross(b3, b1d)
+    b2 /= np.linalg.norm(b2)
+    return np.column_stack([np.cross(b2, b3), b2, b3])
