@@ -73,7 +73,8 @@ def test_seed_figures_read_each_criterion_from_its_run():
 
     bound, limits, durations = 0.01, (100.0, 100.0), {"tracking": 10.0, "change": 10.0, "hold": 20.0}
     env = [0.05, 0.03, 0.02] + [0.001] * 10  # above the bound for the first three 10 ms windows
-    runs = {"tracking": _Run(tail=0.004), "change": _Run(extras=_change(env)), "hold": _Run(extras={"drift_rate": -0.2})}
+    runs = {"tracking": _Run(tail=0.004), "change": _Run(extras=_change(env)),
+            "hold": _Run(extras={"drift_rate": -0.2})}
     f = seed_figures(runs, bound, limits, durations)
     assert f["tail_error"] == 0.004 and f["control_rms"] == 10.0 and f["control_tv_rate"] == 50.0
     assert f["param_error"] == 1.0  # max(|1.5 − 1| / 1, |0 − 2| / 2)
