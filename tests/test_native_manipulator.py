@@ -312,3 +312,26 @@ def test_v_before_a_payload_swap_mid_second_has_the_inertia_of_its_own_step(nati
     M_after = setup.plant.mass_matrices(traj.x[150:, 0])  # the plant's model now has the new payload
     np.testing.assert_array_equal(traj.V[150:], setup.law.lyapunov(traj.s[150:], traj.theta_hat[150:],
                                                                    traj.theta[150:], M=M_after))
+
+
+def test_a_state_mujoco_finds_bad_mid_chunk_ends_diverged_with_the_python_path_s_rows(tmp_path):
+    """On the 6-joint arm a sinusoidal torque of 1000 N m (the stress study's top) drives the state to a huge
+    acceleration 9.12 s in: MuJoCo warns, resets the data and steps on, and the callback stops in mid-step. The
+    run ends `diverged` (not a RuntimeError), its log closed, with the rows of the Python path bit for bit."""
+    from adaptive_mj import run_scenario
+    from adaptive_mj.study import stress
+
+    plant = next(p for p in stress.plants(20.0) if p.name == "ur5e")
+    overrides = [*plant.base, *dict(stress.laws(plant, composite=False))["sigma"],
+                 "disturbance={kind='sine', magnitude=1000.0, omega=2.0}"]
+    a = run_scenario("ur5e_identification", set=overrides, seed=0, log=tmp_path / "native.mcap")
+    b = run_scenario("ur5e_identification", set=[*overrides, "simulation.python_callback=true"], seed=0)
+    assert a.trajectory.meta["native"] and not b.trajectory.meta["native"]
+    assert a.status == b.status == "diverged" and "mjWARN_BADQACC" in a.summary["reason"]
+    assert "in the step from t=" in a.summary["reason"]  # 9.121 s here (the model's numbers are the CPU's)
+    assert len(a.trajectory.t) == len(b.trajectory.t) > 1000
+    for f in ("t", "x", "u", "s", "theta_hat"):
+        np.testing.assert_array_equal(getattr(a.trajectory, f), getattr(b.trajectory, f), err_msg=f)
+    from adaptive_mj.log.replay import read_log
+
+    assert read_log(a.log_path).status == "diverged"

@@ -442,6 +442,13 @@ def native_steps(plant: Plant, nc: ContextOwner, rows: Rows, queue: EventQueue, 
         theta_now = plant.true_theta()
         nc.prepare(n, noise.draw_block(n))
         yield n
+        done = nc.rows_recorded()
+        warning = plant.instability()
+        if done < n and warning is not None:  # MuJoCo found the state bad mid-chunk, reset it and stepped on
+            block = nc.finish(done, partial=True)  # the rows to the step that diverged, as the Python path keeps
+            rows.put_block(block, theta_now, done, mass=nc.mass_rows(done))
+            t_bad = block[0][-1] if done else t_k
+            return Status.DIVERGED, f"{warning} in the step from t={t_bad:.6g} s (MuJoCo reset the state)"
         block = nc.finish(n)
         bad, reason = first_divergence(plant, block[1], block[2], block[5], nc.theta, state_bound)
         rows.put_block(block, theta_now, n if bad is None else bad, mass=nc.mass_rows(n))

@@ -319,10 +319,11 @@ class NativeController(ContextOwner):
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
         self.bind()
 
-    def finish(self, rows: int) -> tuple[np.ndarray, ...]:
-        """The rows the callback recorded over the `rows` steps just taken: (t, x, u, s, ref, theta_hat)."""
+    def finish(self, rows: int, *, partial: bool = False) -> tuple[np.ndarray, ...]:
+        """The rows the callback recorded over the `rows` steps just taken: (t, x, u, s, ref, theta_hat)
+        (partial: the first `rows` of a chunk MuJoCo cut short, ContextOwner.rows_recorded)."""
         c, n = self.context[0], self.n
-        if int(c["row"]) != rows or int(c["stage"]) != 0:
+        if not partial and (int(c["row"]) != rows or int(c["stage"]) != 0):
             raise RuntimeError(f"native callback ran {int(c['row'])} steps (stage {int(c['stage'])}), "
                                f"expected {rows}")
         rec, col = self.buffers["rec"][: rows * self.ncol].reshape(rows, self.ncol), self.columns

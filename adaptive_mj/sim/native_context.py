@@ -227,9 +227,17 @@ class ContextOwner:
         """chunk()'s first half: the buffers and the context set up for the next `rows` steps."""
         raise NotImplementedError
 
-    def finish(self, rows: int) -> tuple[np.ndarray, ...]:
-        """chunk()'s second half, after the plant stepped: the rows the callback recorded."""
+    def finish(self, rows: int, *, partial: bool = False) -> tuple[np.ndarray, ...]:
+        """chunk()'s second half, after the plant stepped: the rows the callback recorded. partial: the first
+        `rows` of a chunk MuJoCo cut short (rows_recorded), without the check that the whole chunk ran."""
         raise NotImplementedError
+
+    def rows_recorded(self) -> int:
+        """Rows the callback recorded in this chunk: the whole steps it completed, and the row of a step it began
+        (stage 0 records the step's row) that MuJoCo then cut short: a NaN or huge acceleration makes MuJoCo warn,
+        reset the data and step on without the callback finishing that step."""
+        c = self.context[0]
+        return int(c["row"]) + (1 if int(c["stage"]) != 0 else 0)
 
     def mass_rows(self, rows: int) -> np.ndarray | None:
         """(rows, m, m) the joint-space inertia at each step just taken, where the callback recorded it

@@ -709,11 +709,12 @@ class NativeManipulatorController(ContextOwner):
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
         self.bind()
 
-    def finish(self, rows: int) -> tuple[np.ndarray, ...]:
-        """The rows the callback recorded over the `rows` steps just taken (see chunk)."""
+    def finish(self, rows: int, *, partial: bool = False) -> tuple[np.ndarray, ...]:
+        """The rows the callback recorded over the `rows` steps just taken (see chunk; partial: the first `rows`
+        of a chunk MuJoCo cut short, ContextOwner.rows_recorded)."""
         c, b = self.context[0], self.buffers
         done = int(c["row"])
-        if done != rows or c["stage"] != 0:
+        if not partial and (done != rows or c["stage"] != 0):
             raise RuntimeError(f"native callback ran {done} steps (stage {int(c['stage'])}), expected {rows}")
         return (b["rec_t"][:rows].copy(), b["rec_x"][:rows].copy(), b["rec_u"][:rows].copy(),
                 b["rec_s"][:rows].copy(), b["rec_ref"][:rows].copy(), b["rec_theta"][:rows].copy())
