@@ -770,3 +770,15 @@ def test_a_plant_plugins_bad_model_file_exits_2_with_one_line(cart_plugin, tmp_p
     assert main(["sweep", str(cart_plugin), "--grid", "plant.model='cart.xml','other.xml'", "-o", str(out)]) == 2
     assert error_line(capsys).startswith(f"grid point plant.model=cart.xml: {model}: ")
     assert not out.exists() and not (tmp_path / "run.mcap").exists()
+
+
+def test_a_control_delay_in_seconds_is_refused_with_its_unit_and_the_steps_it_would_be(capsys):
+    """simulation.control_delay counts physics steps: 0.02 (seconds, by mistake) is refused in one line that says
+    the unit and what 0.02 s is at the scenario's timestep."""
+    from adaptive_mj.cli import main
+
+    assert main(["run", "heave_tracking", "--set", "simulation.control_delay=0.02"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert ("simulation.control_delay must be a whole number of physics steps (not seconds); 0.02 s is 20 steps "
+            "of 0.001 s, got 0.02") in err

@@ -382,6 +382,10 @@ def _simulation(t: _Table, plant: PlantSpec, order: int) -> SimulationSpec:
     else:
         x0 = t.numbers("initial_state", None, length=order)
     bound = t.number("state_bound", math.inf, gt=0, allow_inf=True)
+    raw_delay = t.data.get("control_delay")
+    if isinstance(raw_delay, float):  # a delay in seconds: say the unit, and the steps it would be
+        steps = f"; {raw_delay:g} s is {raw_delay / timestep:.6g} steps of {timestep:g} s" if timestep else ""
+        raise t.fail("control_delay", f"a whole number of physics steps (not seconds){steps}", raw_delay)
     delay = t.integer("control_delay", 0, ge=0)
     python_callback = t.boolean("python_callback", False)
     t.finish()
