@@ -51,6 +51,13 @@ def fly(m_model: mujoco.MjModel, reference, seconds: float, *, nominal_mass: flo
     return t, p_log, pd_log
 
 
+def lemniscate(t: float, A: float = 0.5, w: float = 1.0) -> np.ndarray:
+    """(3, 3) rows [p_d, v_d, a_d] of the figure-eight p_d = (A sin ωt, (A/2) sin 2ωt, 1 m) [m, m/s, m/s²]."""
+    s, c, s2, c2 = np.sin(w * t), np.cos(w * t), np.sin(2 * w * t), np.cos(2 * w * t)
+    return np.array([[A * s, 0.5 * A * s2, 1.0], [A * w * c, A * w * c2, 0.0],
+                     [-A * w * w * s, -2 * A * w * w * s2, 0.0]])
+
+
 def hold(z: float):
     return lambda t: np.array([[0.0, 0.0, z], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
 
@@ -102,13 +109,6 @@ def test_an_unknown_payload_leaves_the_steady_error_that_adaptation_removes():
 def test_a_lemniscate_is_tracked_with_the_true_model_and_lost_with_an_unknown_payload(payload_kg):
     """p_d = (A sin ωt, (A/2) sin 2ωt, 1 m), A = 0.5 m, ω = 1 rad/s, from its start. The true model: within 3 cm
     (1.9 cm measured; Ω_d = 0 costs the rest); a 10 g payload the law was not told of: 0.51 m off."""
-    A, w = 0.5, 1.0
-
-    def lemniscate(t):
-        s, c, s2, c2 = np.sin(w * t), np.cos(w * t), np.sin(2 * w * t), np.cos(2 * w * t)
-        return np.array([[A * s, 0.5 * A * s2, 1.0], [A * w * c, A * w * c2, 0.0],
-                         [-A * w * w * s, -2 * A * w * w * s2, 0.0]])
-
     m = model(payload_kg)
     frame = Airframe.of_model(m)
     m.body_pos[frame.body] = lemniscate(0.0)[0]  # start on the curve
@@ -154,13 +154,6 @@ def test_the_adaptive_law_identifies_an_unknown_payload_at_hover():
 
 
 def test_the_adaptive_law_tracks_the_lemniscate_the_fixed_law_loses():
-    A, w = 0.5, 1.0
-
-    def lemniscate(t):
-        s, c, s2, c2 = np.sin(w * t), np.cos(w * t), np.sin(2 * w * t), np.cos(2 * w * t)
-        return np.array([[A * s, 0.5 * A * s2, 1.0], [A * w * c, A * w * c2, 0.0],
-                         [-A * w * w * s, -2 * A * w * w * s2, 0.0]])
-
     m = model(payload_kg=0.01)
     frame = Airframe.of_model(m)
     m.body_pos[frame.body] = lemniscate(0.0)[0]
@@ -215,13 +208,6 @@ def test_l1_augmentation_holds_hover_with_an_unknown_payload_and_estimates_its_a
 
 
 def test_l1_augmentation_tracks_the_lemniscate_with_an_unknown_payload():
-    A, w = 0.5, 1.0
-
-    def lemniscate(t):
-        s, c, s2, c2 = np.sin(w * t), np.cos(w * t), np.sin(2 * w * t), np.cos(2 * w * t)
-        return np.array([[A * s, 0.5 * A * s2, 1.0], [A * w * c, A * w * c2, 0.0],
-                         [-A * w * w * s, -2 * A * w * w * s2, 0.0]])
-
     m = model(payload_kg=0.01)
     frame = Airframe.of_model(m)
     m.body_pos[frame.body] = lemniscate(0.0)[0]

@@ -26,8 +26,9 @@ from adaptive_mj.plants import kinds
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import score_suite as suite
 from adaptive_mj.study import stress
-from adaptive_mj.study.breaking_point import TAIL_BOUND, Search, search_all
+from adaptive_mj.study.breaking_point import TAIL_BOUND, Search, _file_name, search_all
 from adaptive_mj.study.job import REFUSE_UNSTABLE, Job, JobResult
+from adaptive_mj.study.sweep import to_toml
 from adaptive_mj.study.stats import CONFIDENCE, Estimate, cvar, estimate, ranks
 from adaptive_mj.trajectory import Status
 
@@ -49,21 +50,6 @@ class Entry:
     overrides: tuple[str, ...]
     tested: bool = False
     oracle: bool = False
-
-
-def toml_value(v: Any) -> str:
-    """A parsed TOML value written back as TOML (for a --set expression)."""
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, list):
-        return "[" + ", ".join(toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{" + ", ".join(f"{json.dumps(k)} = {toml_value(x)}" for k, x in v.items()) + "}"
-    raise ScenarioError(f"cannot write {v!r} as a TOML value")
 
 
 def read_gains(path: Path | None) -> dict[str, list[str]]:
@@ -92,7 +78,7 @@ def read_gains(path: Path | None) -> dict[str, list[str]]:
             if k in TASK_KEYS:
                 raise ScenarioError(f"{path}: key {key}.{k}: the suite sets law.{k} for every law alike (the task, "
                                     "not the law); expected the law's own gains, got it set")
-        out[key] = [f"law.{k}={toml_value(v)}" for k, v in table.items()]
+        out[key] = [f"law.{k}={to_toml(v)}" for k, v in table.items()]
     return out
 
 
@@ -434,7 +420,8 @@ def task_jobs(pl: Plan, out: Path) -> tuple[list[Job], list[tuple[str, str, str,
                 for k in range(pl.seeds):
                     jobs.append(Job(sc.SCENARIOS_DIR / f"{task.scenario}.toml",
                                     overrides=(REFUSE_UNSTABLE, *over, *e.overrides), seed=k,
-                                    log=out / "logs" / "tasks" / p.name / _safe(e.label) / f"{task.name}-seed{k}.mcap",
+                                    log=out / "logs" / "tasks" / p.name / _file_name(e.label)
+                                    / f"{task.name}-seed{k}.mcap",
                                     tag=f"{p.name}/{e.label} {task.name} seed {k}", extras=task.extras,
                                     keep_trajectory=False))
                     keys.append((p.name, e.label, task.name, k))
@@ -567,12 +554,6 @@ def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] 
         card.notes.append(f"score: {len(errors)} task runs could not be set up (status 'error'), e.g. "
                           f"{errors[0].job.tag}: {errors[0].error}")
     return card
-
-
-def _safe(text: str) -> str:
-    import re
-
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "x"
 
 
 CARD_KEYS: dict[str, type | tuple[type, ...]] = {"suite": dict, "versions": (dict, list), "plants": dict}

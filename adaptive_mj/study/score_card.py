@@ -168,23 +168,13 @@ def formula_text(data: dict) -> str:
             "3 timings; not in S). docs/METRICS.md, \"Scorecard\", defines each criterion.")
 
 
-def jsonable(obj):
-    """obj with every float that is not finite (a run that gave no value) as null: strict JSON for any tool."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
-    return obj
-
-
 def write_card(card) -> None:
     """scorecard.json, the figures, scorecard.md and scorecard.html into card.out; card.text: the leaderboards."""
     from adaptive_mj.report.html import write_html
+    from adaptive_mj.report.metrics import clean_json  # non-finite floats as null: strict JSON
 
     data, out = card.data, Path(card.out)
-    (out / "scorecard.json").write_text(json.dumps(jsonable(data), indent=1, allow_nan=False) + "\n",
+    (out / "scorecard.json").write_text(json.dumps(clean_json(data), indent=1, allow_nan=False) + "\n",
                                         encoding="utf-8")
     made = figures(data, out)
     laws = data["law"] if isinstance(data["law"], list) else [data["law"]] if data["law"] else []
