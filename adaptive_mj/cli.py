@@ -208,7 +208,9 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
               f"tail max {f(m['max_abs_tracking_error_tail'], yu)}")
         print(f"  control rms {f(m['control_rms'], uu)}, total variation {f(m['control_total_variation'], uu)}")
         if "rms_tracking_error_tail_per_joint" in m:
-            print("  tail rms per joint [rad]: " + ", ".join(
+            own = units.lookup(kind)  # a kind of named state rows (a quadrotor) has position axes, not joints
+            word = "axis" if own is not None and own.noise_signals else "joint"
+            print(f"  tail rms per {word} [{yu or 'rad'}]: " + ", ".join(
                 f"{j} {f(v)}" for j, v in m["rms_tracking_error_tail_per_joint"].items()))
         if m.get("saturation_fraction"):
             per = m.get("saturation_fraction_per_joint") or {}

@@ -416,3 +416,43 @@ class Waypoints:
     def __call__(self, t, order: int) -> np.ndarray:
         assert self.joint is not None  # set in __post_init__
         return self.joint(t, order)[..., 0]
+
+
+@dataclass(frozen=True)
+class Flight:
+    """A flying body's position reference p_d(t) (3,) [m]: a climb from `start` to `center` (a C⁴ SmoothStep
+    from t = 0 over rise_time [s]; none when start is None), plus a figure-eight (lemniscate of Gerono) about
+    `center` in the horizontal plane, x = A sin(ω t), y = (A/2) sin(2 ω t), from t0 [s] on (A = amplitude [m],
+    ω = omega [rad/s]; A = 0: hover). Called as ref(t, order) -> (order+1, 3) for scalar t, (order+1, N, 3) for
+    an array of N times: [p_d, p_d', ..., p_d^(order)] per axis x, y, z; every derivative exact.
+
+    The figure-eight starts at its centre moving at (A ω, A ω, 0): a run that starts on the reference at t0 = 0
+    starts with that velocity (simulation.initial_state = "reference")."""
+
+    center: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    amplitude: float = 0.0
+    omega: float = 1.0
+    start: tuple[float, float, float] | None = None
+    rise_time: float = 2.0
+    t0: float = 0.0
+
+    def __post_init__(self):
+        if len(tuple(self.center)) != 3 or (self.start is not None and len(tuple(self.start)) != 3):
+            raise ValueError("center and start are positions (x, y, z) [m]")
+        if not self.omega > 0 or not self.rise_time > 0 or self.amplitude < 0:
+            raise ValueError("omega and rise_time must be > 0, amplitude >= 0")
+
+    def __call__(self, t, order: int) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        out = np.zeros((order + 1,) + t.shape + (3,))
+        for i in range(3):
+            if self.start is None:
+                out[0, ..., i] = self.center[i]
+            else:
+                out[..., i] = SmoothStep(self.start[i], self.center[i], 0.0, self.rise_time)(t, order)
+        if self.amplitude > 0:
+            moving = (t >= self.t0).astype(float)
+            tau = t - self.t0
+            out[..., 0] += moving * _harmonic(tau, self.amplitude, self.omega, 0.0, order, np.sin)
+            out[..., 1] += moving * _harmonic(tau, 0.5 * self.amplitude, 2.0 * self.omega, 0.0, order, np.sin)
+        return out

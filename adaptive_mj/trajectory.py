@@ -40,6 +40,8 @@ class Trajectory:
     V: (N,) the law's Lyapunov function
     names: parameter names, len n_theta
     joint_names: () for a 1-DOF plant (scalar y and u), else the m joint names
+    control_names: the k actuators' names where they are not one per joint (a quadrotor's 4 rotors on its 3
+       position axes: u is then (N, k)); () when u has one entry per joint (`actuators`)
     status: a Status: OK, DIVERGED, INTERRUPTED, FAILED or TRUNCATED
     """
 
@@ -56,6 +58,7 @@ class Trajectory:
     reason: str = ""
     joint_names: tuple[str, ...] = ()
     meta: dict = field(default_factory=dict)
+    control_names: tuple[str, ...] = ()
 
     def __post_init__(self):
         object.__setattr__(self, "status", Status(self.status))  # a log's text "ok" becomes Status.OK
@@ -64,6 +67,11 @@ class Trajectory:
     def m(self) -> int:
         """Number of joints (1 for the 1-DOF plants)."""
         return max(1, len(self.joint_names))
+
+    @property
+    def actuators(self) -> tuple[str, ...]:
+        """The names of u's entries: control_names, else the joint names (() on a 1-DOF plant)."""
+        return self.control_names or self.joint_names
 
     @property
     def q(self) -> np.ndarray:

@@ -84,14 +84,26 @@ def test_format4_logs_read_and_verify(name, joints, capsys):
     assert "verify: bit-identical" in _verify(DATA / name, capsys)
 
 
-def test_format5_header_records_control_limits_and_the_embedded_hash(tmp_path):
+@pytest.mark.parametrize("name, joints", [("heave_drift_format5.mcap", 0), ("ur5e_payload_swap_format5.mcap", 6)])
+def test_format5_logs_read_and_verify(name, joints, capsys):
+    """Written before format 6 (no control_names or state_names: u one entry per joint, x the output's
+    derivatives): read with u shaped as before, its hash checked, re-simulated bit for bit."""
+    run = read_log(DATA / name)
+    assert run.header["log_format_version"] == 5 < record.LOG_FORMAT_VERSION
+    assert "control_names" not in run.header and run.trajectory.control_names == ()
+    assert run.trajectory.u.shape == (len(run.trajectory),) + ((joints,) if joints else ())
+    assert run.status == "ok" and len(run.trajectory.joint_names) == joints
+    assert "verify: bit-identical" in _verify(DATA / name, capsys)
+
+
+def test_format5_and_later_headers_record_control_limits_and_the_embedded_hash(tmp_path):
     scn = scenario.load(scenario.SCENARIOS_DIR / "ur5e_payload_swap.toml",
                         overrides=["simulation.duration=0.1", "control.period=0.005", "events=[]", "log.rate_hz=1000"])
     path = tmp_path / "sampled.mcap"
     result = execute(scn, log_path=path)
     run = read_log(path)
     assert (run.header["log_format_version"], run.header["control_mode"], run.header["control_period"]) == \
-        (5, "sampled", 0.005)
+        (record.LOG_FORMAT_VERSION, "sampled", 0.005)
     assert run.header["ctrl_range"] == [[-150.0] * 3 + [-28.0] * 3, [150.0] * 3 + [28.0] * 3]
     assert run.header["embedded_sha256"] == record.embedded_digest(run.model_xml, run.model_source, run.model_assets)
     # the saturation metric of a log summarised from its rows (every step logged) equals the run's own
@@ -156,7 +168,7 @@ def test_multi_joint_log_round_trips(tmp_path):
     path = tmp_path / "arm.mcap"
     live = execute(scn, log_path=path).trajectory
     run = read_log(path)
-    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 5
+    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 6
     assert run.header["joint_names"] == list(live.joint_names) and len(live.joint_names) == 6
     tr = run.trajectory
     every = run.header["log_every"]

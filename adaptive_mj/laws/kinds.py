@@ -10,6 +10,9 @@ A plant offers one or more *forms* (how a law sees it), a law kind serves one or
                    with M(q) for V (adaptive_mj.plants.manipulator)
   Form.MRAC_STATE  the state form of model-reference adaptive control: x, the reference model's state and the
                    matched nonlinear terms (adaptive_mj.laws.mrac): the linear plants and wing rock
+  Form.AIRFRAME    a free rigid body flown by rotor thrusts along its z axis: x = [p; v; φ; Ω] (4, 3), the
+                   rotors' allocation [f, M] = A thrusts and their limits, gravity (adaptive_mj.plants.quadrotor;
+                   the laws of adaptive_mj.laws.geometric and laws.l1)
 
 A plant kind declares the forms it offers in its own module (adaptive_mj.plants.kinds). A law offered to a
 plant none of whose forms it serves is refused in one line that names the forms on both sides and the laws
@@ -49,6 +52,7 @@ class Form(enum.Enum):
     MODEL = "model"
     RIGID_BODY = "rigid_body"
     MRAC_STATE = "mrac_state"
+    AIRFRAME = "airframe"
 
     @property
     def text(self) -> str:
@@ -60,6 +64,7 @@ FORM_TEXT = {
     Form.MODEL: "the 1-DOF model form d y^(n) = f + phi'p + h u",
     Form.RIGID_BODY: "the multi-joint rigid-body form (regressor Y, M(q))",
     Form.MRAC_STATE: "the MRAC state form (x, the reference model's state)",
+    Form.AIRFRAME: "the airframe form (a free body's p, v, attitude, rate; rotor allocation)",
 }
 
 
@@ -126,6 +131,18 @@ class MracState:
     names: tuple[str, ...]
 
 
+@dataclass(frozen=True)
+class AirframeView:
+    """A flying body as a law of Form.AIRFRAME sees it: allocation (4, 4), [f, M_x, M_y, M_z] = allocation @
+    thrusts [N, N m] (the rotors' layout and yaw coefficients from the compiled model); thrust_max (4,) [N];
+    gravity g [m/s²] (along −z); names (n_theta,) the plant's parameters in θ order (m, J, d)."""
+
+    allocation: Any
+    thrust_max: Any
+    gravity: float
+    names: tuple[str, ...]
+
+
 class BuildContext(Protocol):
     """What a law kind's builder sees (adaptive_mj.setup.build implements it): the scenario, its LawSpec, the
     shared modifications built from the shared keys, and the plant through the form the law serves (ask only
@@ -152,6 +169,10 @@ class BuildContext(Protocol):
 
     def mrac_state(self) -> MracState:
         """Form.MRAC_STATE: the plant's order, control gain and matched nonlinear terms."""
+        ...
+
+    def airframe(self) -> AirframeView:
+        """Form.AIRFRAME: the flying body's rotor allocation, thrust limits and gravity."""
         ...
 
     def gamma(self, names: tuple[str, ...]) -> np.ndarray | float | None:

@@ -42,9 +42,11 @@ from adaptive_mj.log.fast_mcap import add_messages as _add_messages, add_rows as
 from adaptive_mj.sim.interrupt import deferred
 from adaptive_mj.trajectory import Status
 
+# 6: control_names and state_names in the header (a plant whose controls are not one per joint and whose state
+#    rows are not the output's derivatives: the quadrotor's 4 rotor thrusts on its 3 position axes, x = [p; v; φ; Ω]);
 # 5: ctrl_range, joint_limits and embedded_sha256 (checked on every read) in the header;
 # 4: control_mode, control_period in the header; 3: law_plugin, plant_plugin;
-LOG_FORMAT_VERSION = 5  # 2: joint_names/notes, per-joint fields (1: 1-DOF only)
+LOG_FORMAT_VERSION = 6  # 2: joint_names/notes, per-joint fields (1: 1-DOF only)
 
 def embedded_digest(model_xml: str | None, model_source: str | None, assets: dict[str, bytes]) -> str:
     """SHA-256 (hex) of what a log embeds to re-simulate its run: the compiled model's XML, the exact
@@ -108,21 +110,26 @@ CONTROL_FIELDS = ("u", "s", "y_tilde")
 LYAPUNOV_FIELDS = ("V",)
 
 
-def row_fields(order: int, names: tuple[str, ...], joint_names: tuple[str, ...] = ()) -> dict[str, tuple[str, ...]]:
+def row_fields(order: int, names: tuple[str, ...], joint_names: tuple[str, ...] = (),
+               control_names: tuple[str, ...] = (), state_names: tuple[str, ...] = ()) -> dict[str, tuple[str, ...]]:
     """Field names of each row topic. A 1-DOF run (no joint names) uses y, y_dot, ..., u, s,
     y_tilde (format 1 and 2 alike); a run of m joints names one field per joint:
     q_<joint>, q_dot_<joint> (/state, derivative-major, as x (n, m) flattened),
     q_d_<joint>, q_d_dot_<joint>, q_d_ddot_<joint> (/reference), tau_<joint>, s_<joint>,
-    q_tilde_<joint> (/control)."""
+    q_tilde_<joint> (/control). Format 6: a run with state_names (one per row of x, e.g. p, v, phi, omega) names
+    /state <row>_<joint> and its output <first>; with control_names (k actuators) /control starts with
+    u_<actuator> (k fields) instead of tau_<joint>."""
     if not joint_names:
         state, ref, control = state_fields(order), reference_fields(order), CONTROL_FIELDS
     else:
         def per(bases):
             return tuple(f"{b}_{j}" for b in bases for j in joint_names)
 
-        state = per(derivative_name("q", k) for k in range(order))
-        ref = per(derivative_name("q_d", k) for k in range(order + 1))
-        control = per(("tau", "s", "q_tilde"))
+        out = state_names[0] if state_names else "q"
+        state = per(state_names) if state_names else per(derivative_name("q", k) for k in range(order))
+        ref = per(derivative_name(f"{out}_d", k) for k in range(order + 1))
+        u = tuple(f"u_{a}" for a in control_names) if control_names else per(("tau",))
+        control = u + per(("s", f"{out}_tilde"))
     return {"/state": state, "/reference": ref, "/control": control, "/estimates": tuple(names),
             "/true_params": tuple(names), "/lyapunov": LYAPUNOV_FIELDS}
 
@@ -165,6 +172,8 @@ class LogHeader:
     control_period: float = 0.0  # format 4: [s] the law's sampling period (continuous: dt)
     ctrl_range: list | None = None  # format 5: [lo, hi] actuator limits [control units], lists per joint
     joint_limits: list | None = None  # format 5: (m, 2) joint ranges [rad or m], null entries unlimited
+    control_names: tuple[str, ...] = ()  # format 6: the k actuators where u is not one per joint (else ())
+    state_names: tuple[str, ...] = ()  # format 6: a name per row of x where they are not y's derivatives (else ())
 
     @property
     def log_every(self) -> int:
@@ -207,9 +216,12 @@ def _check_header(header: LogHeader) -> None:
     if not all(_name(j) for j in joints):
         raise ValueError(f"LogHeader.joint_names must be non-empty strings, got {joints!r}")
     if joints:
-        fields = [f for topic_fields in row_fields(header.order, (), joints).values() for f in topic_fields]
+        fields = [f for topic_fields in row_fields(header.order, (), joints, tuple(header.control_names),
+                                                   tuple(header.state_names)).values() for f in topic_fields]
         if len(set(fields)) != len(fields) or len(set(joints)) != len(joints):
             raise ValueError(f"LogHeader.joint_names {joints!r} make clashing field names")
+    if header.state_names and len(header.state_names) != header.order:
+        raise ValueError(f"LogHeader.state_names must name the {header.order} rows of x, got {header.state_names!r}")
     versions: Iterable[tuple[object, object]] = header.versions.items()
     for key, value in versions:
         if not isinstance(key, str) or not isinstance(value, str):
@@ -243,7 +255,8 @@ def _row_schema(title: str, description: str, fields: Mapping[str, str]) -> dict
     }
 
 
-def _schemas(order: int, names: tuple[str, ...], joint_names: tuple[str, ...] = ()) -> dict[str, tuple[str, dict]]:
+def _schemas(order: int, names: tuple[str, ...], joint_names: tuple[str, ...] = (),
+             control_names: tuple[str, ...] = (), state_names: tuple[str, ...] = ()) -> dict[str, tuple[str, dict]]:
     """topic -> (schema name, JSON Schema)."""
     state = {n: f"output derivative {j} (y in m or rad)" for j, n in enumerate(state_fields(order))}
     ref = {n: f"reference derivative {j}" for j, n in enumerate(reference_fields(order))}
@@ -251,14 +264,18 @@ def _schemas(order: int, names: tuple[str, ...], joint_names: tuple[str, ...] = 
                "s": "sliding variable (first order: the tracking error)",
                "y_tilde": "tracking error y_d - y"}
     if joint_names:
-        f = row_fields(order, names, joint_names)
+        f = row_fields(order, names, joint_names, control_names, state_names)
         m = len(joint_names)
-        state = {n: f"joint {joint_names[i % m]}: position derivative {i // m} [rad or m, per s^k]"
+        state = {n: (f"axis {joint_names[i % m]}: state row {state_names[i // m]}" if state_names else
+                     f"joint {joint_names[i % m]}: position derivative {i // m} [rad or m, per s^k]")
                  for i, n in enumerate(f["/state"])}
         ref = {n: f"joint {joint_names[i % m]}: reference derivative {i // m}" for i, n in enumerate(f["/reference"])}
         what = ("joint torque applied after saturation [N m or N]", "sliding variable s = q_tilde' + lambda q_tilde",
                 "tracking error q_d - q [rad or m]")
-        control = {n: f"joint {joint_names[i % m]}: {what[i // m]}" for i, n in enumerate(f["/control"])}
+        k = len(control_names)
+        control = {n: (f"actuator {control_names[i]}: control applied after saturation" if i < k else
+                       f"joint {joint_names[(i - k) % m]}: {what[1 + (i - k) // m]}") if control_names else
+                   f"joint {joint_names[i % m]}: {what[i // m]}" for i, n in enumerate(f["/control"])}
     return {
         "/state": ("adaptive_mj.State", _row_schema(
             "State", "true plant state [y, y', ..., y^(n-1)] at the start of the step", state)),
@@ -398,6 +415,8 @@ class Recorder:
         self.names = tuple(header.param_names)
         self.joint_names = tuple(header.joint_names)
         self.joint_shape = (len(self.joint_names),) if self.joint_names else ()
+        self.control_names, self.state_names = tuple(header.control_names), tuple(header.state_names)
+        self.control_shape = (len(self.control_names),) if self.control_names else self.joint_shape
         self._flush_every = flush_every_rows
         self._next_k = 0          # first global step index not yet seen
         self._rows = 0            # logged rows written
@@ -420,11 +439,12 @@ class Recorder:
     def _write_header(self) -> None:
         h = self.header
         self._channels: dict[str, int] = {}
-        for topic, (name, schema) in _schemas(self.order, self.names, self.joint_names).items():
+        for topic, (name, schema) in _schemas(self.order, self.names, self.joint_names, self.control_names,
+                                              self.state_names).items():
             schema_id = self._writer.register_schema(
                 name, "jsonschema", json.dumps(schema, separators=(",", ":")).encode())
             self._channels[topic] = self._writer.register_channel(topic, "json", schema_id)
-        fields = row_fields(self.order, self.names, self.joint_names)
+        fields = row_fields(self.order, self.names, self.joint_names, self.control_names, self.state_names)
         self._row_fields = [(self._channels[topic], fields[topic]) for topic in ROW_TOPICS]
         self._templates = [_template(fields) for _, fields in self._row_fields]
         self._row_template: str | None = None  # the templates joined (_write_finite_block)
@@ -441,6 +461,8 @@ class Recorder:
             "param_names": json.dumps(list(self.names)),
             "overrides": json.dumps(list(h.overrides)),
             "joint_names": json.dumps(list(self.joint_names)),
+            "control_names": json.dumps(list(self.control_names)),
+            "state_names": json.dumps(list(self.state_names)),
             "notes": json.dumps(list(h.notes)),
             "law_plugin": json.dumps(h.law_plugin),
             "plant_plugin": json.dumps(h.plant_plugin),
@@ -484,7 +506,7 @@ class Recorder:
             raise ValueError(f"write_rows: t has shape {t.shape}, expected (N,)")
         n = t.shape[0]
         js = self.joint_shape
-        cols = {"x": (x, (n, self.order) + js), "u": (u, (n,) + js), "s": (s, (n,) + js),
+        cols = {"x": (x, (n, self.order) + js), "u": (u, (n,) + self.control_shape), "s": (s, (n,) + js),
                 "ref": (ref, (n, self.order + 1) + js), "theta_hat": (theta_hat, (n, len(self.names))),
                 "theta": (theta, (n, len(self.names))), "V": (V, (n,))}
         arrays = {}

@@ -145,8 +145,10 @@ def _read(name: str, data: bytes) -> LoggedRun:
     order, log_every, dt = header["order"], header["log_every"], header["dt"]
     names = tuple(header["param_names"])
     joints = tuple(header.get("joint_names", ()))  # format 1: always a 1-DOF run
+    controls = tuple(header.get("control_names", ()))  # format 6: () before (u one per joint)
+    states = tuple(header.get("state_names", ()))  # format 6
 
-    times, cols, events, summary = _rows(name, scan.messages, order, names, joints)
+    times, cols, events, summary = _rows(name, scan.messages, order, names, joints, controls, states)
     n_rows = len(times)
     status, reason, note = _final_status(name, scan, summary, n_rows, span=n_rows * log_every * dt)
 
@@ -154,11 +156,12 @@ def _read(name: str, data: bytes) -> LoggedRun:
                   for e in events]
     control = cols["/control"]
     n, m = len(times), len(joints)
+    k = len(controls) or m  # the controls' columns come first in /control
     trajectory = Trajectory(
         t=np.array(times, dtype=float),
         x=cols["/state"].reshape(n, order, m) if joints else cols["/state"],
-        u=control[:, :m].copy() if joints else control[:, 0].copy(),
-        s=control[:, m:2 * m].copy() if joints else control[:, 1].copy(),
+        u=control[:, :k].copy() if joints else control[:, 0].copy(),
+        s=control[:, k:k + m].copy() if joints else control[:, 1].copy(),
         ref=cols["/reference"].reshape(n, order + 1, m) if joints else cols["/reference"],
         theta_hat=cols["/estimates"],
         theta=cols["/true_params"],
@@ -167,6 +170,7 @@ def _read(name: str, data: bytes) -> LoggedRun:
         status=status,
         reason=reason,
         joint_names=joints,
+        control_names=controls,
         meta={"dt": dt, "order": order, "events": event_list, "log_every": log_every,
               **_limits_meta(header)},
     )
@@ -219,7 +223,7 @@ def _check_embedded(name: str, header: dict, model_xml, model_source, assets) ->
 
 
 def _rows(name: str, messages: list[tuple[str, bytes]], order: int, names: tuple[str, ...],
-          joints: tuple[str, ...] = ()):
+          joints: tuple[str, ...] = (), controls: tuple[str, ...] = (), states: tuple[str, ...] = ()):
     """Decode the messages: (times, {row topic: (N, fields) array}, events, summary).
     A row is kept only if every row topic has a message at its t (a cut log may end mid-row)."""
     by_t: dict[str, dict[float, dict]] = {topic: {} for topic in ROW_TOPICS}
@@ -241,7 +245,7 @@ def _rows(name: str, messages: list[tuple[str, bytes]], order: int, names: tuple
         elif topic == SUMMARY_TOPIC:
             summary = payload
     times = [t for t in state_times if all(t in by_t[topic] for topic in ROW_TOPICS)]
-    fields = row_fields(order, names, joints)
+    fields = row_fields(order, names, joints, controls, states)
     cols = {topic: np.array([_values(by_t[topic][t], fields[topic], name, topic) for t in times],
                             dtype=float).reshape(len(times), len(fields[topic]))
             for topic in ROW_TOPICS}
@@ -416,6 +420,7 @@ def _decode_header(name: str, scan: _Scan) -> dict:
         "log_format_version": int, "seed": int, "log_every": int, "order": int,
         "log_rate_hz": float, "dt": float, "created_unix": float,
         "param_names": str_list, "overrides": str_list, "joint_names": str_list, "notes": str_list,
+        "control_names": str_list, "state_names": str_list,  # format 6
         "law_plugin": json.loads,  # format 3: {name, distribution, version, source_sha256} or null
         "plant_plugin": json.loads,  # format 3: the same, or null
         "control_period": float,  # format 4: [s]

@@ -140,6 +140,11 @@ def _payload_on_build(scn: Scenario, e: EventSpec, plant: Any, source: ModelSour
         payload_inertial(scn, e, source)
 
 
+#: the check of an event on a payload body when the run is built (the body exists; a payload is attached), for a
+#: plant kind's own payload event (the quadrotor's payload_release)
+payload_body_check = _payload_on_build
+
+
 def _payload_mass(e: EventSpec, scn: Scenario, source: ModelSource | None) -> Event:
     return Event(e.t, f"payload_mass {e.body} = {e.value} kg", lambda plant: plant.set_body_mass(e.body, e.value))
 

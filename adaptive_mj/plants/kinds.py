@@ -118,6 +118,13 @@ class PlantKind:
     mrac_state: Callable[[Scenario, Any], MracState] | None = None
     # the unit of a run's Lyapunov function V on its axes (the plant's energy, J; "-" on a dimensionless plant)
     lyapunov_unit: str = "J"
+    # a kind whose state rows are named (a quadrotor's p, v, phi, omega: the plant's state_names): its measured
+    # signals for noise.std (each a number [its row's unit], the same on every axis), its own [reference] reader
+    # (the [reference] table -> a ReferenceSpec; None: the shared 1-DOF or joint kinds) and builder (the spec
+    # -> reference(t, order))
+    noise_signals: tuple[str, ...] = ()
+    reference_reader: Callable[[Table], Any] | None = None
+    reference_builder: Callable[[Any], Any] | None = None
 
     @property
     def rigid_body(self) -> bool:

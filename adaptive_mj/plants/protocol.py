@@ -33,6 +33,13 @@ Optional (a plant that names Plant as its base inherits the default in brackets)
                it knows of (the Lyapunov analysis: adaptive_mj.study.analysis) [None]
   release()    the run is over: hand back what the plant holds for the next run's plant (a MujocoPlant's
                MjData: MujocoPlant.release) [nothing]
+Optional, read where present (getattr: control_shape, termination below; a plant without them is as in brackets):
+  control_names  the k actuators' names where u is not one entry per joint (a quadrotor: 4 rotor thrusts on
+               3 position axes; u is then (k,)) [(): u is shaped like joint_shape]
+  state_names  a name per row of x where the rows are not the output's derivatives (a quadrotor's x is
+               [p; v; φ; Ω]: the log names its fields by them) [(): y, y', ...]
+  termination()  text of why the run must end now as failed (a quadrotor's crash), or None; asked after
+               every physics step [None]
 
 `FormPlant`, a 1-DOF plant or twin (joint_shape ()):
   form         the ModelForm d y^(n) = f(x) + φ(x)ᵀp + h(x) u the 1-DOF laws are built on
@@ -162,6 +169,18 @@ class NativePlant(Plant, Protocol):
     def native_poststep(self) -> None:
         """What step_native does after mj_step."""
         ...
+
+
+def control_shape(plant: Plant) -> tuple[int, ...]:
+    """The shape of the plant's control u: (k,) for k named actuators (control_names), else joint_shape."""
+    names = getattr(plant, "control_names", ())
+    return (len(names),) if names else tuple(plant.joint_shape)
+
+
+def termination(plant: Plant) -> str | None:
+    """The plant's termination() (a crash), None where it declares none."""
+    ask = getattr(plant, "termination", None)
+    return ask() if ask is not None else None
 
 
 def has_joints(plant: Plant) -> TypeGuard[JointPlant]:

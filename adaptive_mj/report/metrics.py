@@ -110,7 +110,7 @@ def saturation_metrics(traj: Trajectory) -> dict:
         return {}
     out: dict = {"saturation_fraction": float(frac.max())}
     if traj.joint_names:
-        out["saturation_fraction_per_joint"] = {j: float(f) for j, f in zip(traj.joint_names, frac, strict=True)}
+        out["saturation_fraction_per_joint"] = {j: float(f) for j, f in zip(traj.actuators, frac, strict=True)}
     return out
 
 
@@ -120,17 +120,17 @@ def joint_metrics(traj: Trajectory) -> dict:
     e = traj.joint_errors
     tail = tail_mask(traj)
     norm = np.linalg.norm(e, axis=1)
-    u = np.asarray(traj.u).reshape(len(traj.t), max(1, len(traj.joint_names)))
+    u = np.asarray(traj.u).reshape(len(traj.t), max(1, len(traj.actuators)))
 
-    def per(f):
-        return {j: f(i) for i, j in enumerate(traj.joint_names)}
+    def per(f, names=traj.joint_names):
+        return {j: f(i) for i, j in enumerate(names)}
 
     return {
         "rms_tracking_error_tail_per_joint": per(lambda i: _rms(e[tail, i])),
         "max_abs_tracking_error_tail_per_joint": per(
             lambda i: float(np.max(np.abs(e[tail, i]))) if tail.any() else math.nan),
         "rms_tracking_error_norm_tail": _rms(norm[tail]),
-        "control_rms_per_joint": per(lambda i: _rms(u[:, i])),
+        "control_rms_per_joint": per(lambda i: _rms(u[:, i]), traj.actuators),
     }
 
 

@@ -103,11 +103,11 @@ def plot_joints(traj: Trajectory, path: str | Path, *, title: str = "") -> Path:
         ax.legend(fontsize=8)
     fig.axes[0].set_title(title or "tracking error per joint")
     ax = fig.add_subplot(grid[err_rows, :])
-    u = np.asarray(traj.u).reshape(len(t), len(traj.joint_names))
-    for i, name in enumerate(traj.joint_names):
+    u = np.asarray(traj.u).reshape(len(t), len(traj.actuators))
+    for i, name in enumerate(traj.actuators):
         ax.plot(t, u[:, i], lw=0.7, label=name)
-    ax.set_ylabel(r"joint torque $\tau$ [N m]")
-    ax.legend(fontsize=7, ncol=min(m, 6), loc="upper right")
+    ax.set_ylabel(r"joint torque $\tau$ [N m]" if not traj.control_names else "control u")
+    ax.legend(fontsize=7, ncol=min(len(traj.actuators), 6), loc="upper right")
     for g, (label, idx) in enumerate(groups):
         ax = fig.add_subplot(grid[err_rows + 1 + g // 2, g % 2])
         for k, i in enumerate(idx):

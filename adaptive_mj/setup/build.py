@@ -85,13 +85,17 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
         _check_event(scn, e, plant, source)  # a missing body or payload fails now, not mid-run
     reference = _reference(scn, plant)
     order = plant_order(plant)
-    plant.set_state(_initial_state(scn, reference, order))
+    plant.set_state(_initial_state(scn, reference, order, plant))
     names = tuple(plant.names)
     theta_hat0 = _estimates(scn, names, plant)
     law = _law(scn, plant, _modification(scn, names, theta_hat0))
     std = None
     sensors = None
-    if has_joints(plant):
+    state_names = tuple(getattr(plant, "state_names", ()))
+    if state_names:  # named state rows (a quadrotor's p, v, phi, omega): one σ per row, the same on every axis
+        if scn.noise.std:
+            std = np.array([[float(scn.noise.std.get(sig, 0.0))] * len(plant.joint_names) for sig in state_names])
+    elif has_joints(plant):
         joints = tuple(plant.joint_names)
         if scn.noise.std:
             std = np.array([_per_joint(scn, f"noise.std.{sig}", scn.noise.std.get(sig, 0.0), joints)
@@ -124,11 +128,13 @@ def check(scn: Scenario, sources: dict | None = None) -> None:
     build(scn, source=sources[key])
 
 
-def _initial_state(scn: Scenario, reference, order: int) -> np.ndarray:
+def _initial_state(scn: Scenario, reference, order: int, plant: Plant | None = None) -> np.ndarray:
     """x0: (n,) or (n, m); on the reference [y_d(0), ..., y_d^(n-1)(0)], given, or zeros."""
     x0 = scn.simulation.initial_state
     if x0 == "reference":
-        return np.asarray(reference(0.0, order)[:order], dtype=float)
+        ref0 = np.asarray(reference(0.0, order), dtype=float)
+        on = getattr(plant, "state_on_reference", None)  # a plant whose state rows are not y's derivatives
+        return np.asarray(on(ref0) if on is not None else ref0[:order], dtype=float)
     return np.asarray(x0 if x0 is not None else (0.0,) * order, dtype=float)
 
 
@@ -230,6 +236,12 @@ class LawContext:
 
     def mrac_state(self) -> law_kinds.MracState:
         return _mrac_state(self.scenario, self.plant)
+
+    def airframe(self) -> law_kinds.AirframeView:
+        af = getattr(self.plant, "airframe", None)  # a plant offering Form.AIRFRAME (plants.quadrotor) has one
+        assert af is not None, "a law of the airframe form on a plant without an airframe"
+        g = float(-cast("NativePlant", self.plant).model.opt.gravity[2])
+        return law_kinds.AirframeView(af.allocation.copy(), af.thrust_max.copy(), g, tuple(self.plant.names))
 
     def gamma(self, names: tuple[str, ...]) -> np.ndarray | float | None:
         return _gamma(self.scenario, names)
@@ -411,11 +423,18 @@ def _estimates(scn: Scenario, names: tuple[str, ...], plant: Plant) -> np.ndarra
         values = getattr(L, key)
         if values is not None:
             return _named(scn, f"law.{key}", values, names, plant)
-    return np.zeros(len(names))
+    nominal = getattr(plant, "nominal_theta", None)  # what a law knows of the plant untold (a quadrotor: no payload)
+    return np.array(nominal(), dtype=float) if nominal is not None else np.zeros(len(names))
 
 
 def _reference(scn: Scenario, plant: Plant) -> Callable[[float | np.ndarray, int], np.ndarray]:
     r = scn.reference
+    own = plant_kinds_registry.lookup(scn.plant.kind)
+    if own is not None and own.reference_builder is not None:  # the kind's own references
+        try:
+            return own.reference_builder(r)
+        except ValueError as exc:
+            raise ScenarioError(f"{scn.source}: reference: {exc}") from None
     if r.kind in JOINT_REFERENCE_KINDS:
         # joint references are for plant.kind = 'manipulator' (scenario._reference), a MuJoCo plant
         return _joint_reference(scn, cast("NativePlant", plant).model, plant.joint_names)

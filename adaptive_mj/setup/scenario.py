@@ -261,8 +261,12 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
         raise ScenarioError(f"{where}: reference.kind = 'reference_model' needs law.kind = 'mrac' (its model is "
                             f"law.model), got law.kind = {law.kind!r}")
     arm = _rigid_body(plant)  # a multi-joint plant: joint-space noise, disturbance and sensors
-    noise = _noise(top.table("noise", {}), order, arm=arm)
+    own = _kinds.lookup(plant.kind)
+    noise = _noise(top.table("noise", {}), order, arm=arm, signals=own.noise_signals if own is not None else ())
     disturbance = _disturbance(top.table("disturbance", {}), arm=arm)
+    if own is not None and own.noise_signals and disturbance.kind != "none":
+        raise ScenarioError(f"{where}: [disturbance] is for the 1-DOF plants and the arms; plant.kind = {plant.kind!r} "
+                            "takes its disturbances as [[events]] (kind = 'external_force', 'wind')")
     sensors = _sensors(top.table("sensors", {}), arm=arm)
     if sensors.velocity == "differentiated" and "q_dot" in noise.std:
         raise ScenarioError(f"{where}: noise.std.q_dot is for sensors.velocity = 'measured'; a differentiated "
@@ -481,6 +485,9 @@ def _rigid_body_kinds() -> str:
 
 
 def _reference(t: _Table, plant: PlantSpec) -> ReferenceSpec:
+    own = _kinds.lookup(plant.kind)
+    if own is not None and own.reference_reader is not None:  # the kind's own references (a quadrotor's flight)
+        return own.reference_reader(t)
     if _rigid_body(plant):  # joint references
         kind = t.string("kind", choices=JOINT_REFERENCE_KINDS)
         return _joint_reference(t, kind)
@@ -589,8 +596,8 @@ def _plugin_law(t: _Table, kind: str, inst: Installed[LawPlugin], plant: PlantSp
                    robust=robust)
 
 
-def _noise(t: _Table, order: int, *, arm: bool = False) -> NoiseSpec:
-    signals = JOINT_SIGNALS if arm else STATE_SIGNALS[:order]
+def _noise(t: _Table, order: int, *, arm: bool = False, signals: tuple[str, ...] = ()) -> NoiseSpec:
+    signals = signals or (JOINT_SIGNALS if arm else STATE_SIGNALS[:order])
     raw = t.get("std", None)
     std: dict[str, Any] = {}
     if raw is not None:

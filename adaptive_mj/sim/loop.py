@@ -39,7 +39,7 @@ from adaptive_mj.errors import Interrupted
 from adaptive_mj.laws.common import LawStep
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.plants import Event, plant_order
-from adaptive_mj.plants.protocol import CtrlRange, Plant, has_joints
+from adaptive_mj.plants.protocol import CtrlRange, Plant, control_shape, has_joints, termination
 from adaptive_mj.sim import stage as st
 from adaptive_mj.sim.interrupt import deferred
 from adaptive_mj.sim.stage import TABLEAU, ControlTiming
@@ -87,7 +87,7 @@ class Controller:
 
     def __init__(self, law: Law, reference, theta_hat0, ctrl_range: CtrlRange | None, order: int, stages: int,
                  dt: float, joint_shape: tuple = (), timing: ControlTiming | None = None,
-                 sensors: st.Sensors | None = None):
+                 sensors: st.Sensors | None = None, controls: tuple | None = None):
         from adaptive_mj.numba_util import with_globals
 
         self.law, self.reference, self.order = law, reference, order
@@ -111,8 +111,9 @@ class Controller:
         self.h = dt
         box = law.bounds
         lower, upper = box if box is not None else (np.full(n_theta, -np.inf), np.full(n_theta, np.inf))
+        k = (controls or joint_shape or (1,))[0]  # the number of controls (one per joint unless named apart)
         self.ctx = StepContext(theta_hat, np.asarray(lower, dtype=float), np.asarray(upper, dtype=float),
-                               joint_shape[0] if self.joints else 1, stages, dt, self.timing)
+                               k, stages, dt, self.timing)
         self.theta_hat = self.ctx.theta  # the same array, advanced in place
         self.th = np.zeros(n_theta)  # the stage estimate the law sees
         self.held_out: LawStep | None = None  # the LawStep of the law's last evaluation (held with u_hold)
@@ -337,7 +338,7 @@ def drive(r: PreparedRun, law: Law, reference) -> Trajectory:
             status, reason = _run_native(r.nc.plant, r.nc, r.rows, r.queue, r.noise, r.state_bound)
         else:
             ctrl = Controller(law, reference, r.theta_hat0, plant.ctrl_range, r.order, plant.stages, plant.dt,
-                              plant.joint_shape, r.timing, r.sensors)
+                              plant.joint_shape, r.timing, r.sensors, control_shape(plant))
             step = ControlStep(plant, ctrl, r.queue, state_bound=r.state_bound, noise=r.noise.draw,
                                sink=r.rows.sink)
             status, reason = _run_python(plant, step, r.rows)
@@ -409,6 +410,9 @@ def _run_python(plant: Plant, step: ControlStep, rows: Rows) -> tuple[Status, st
             rows.put(row)
             if row.reason:
                 return Status.DIVERGED, row.reason
+            ended = termination(plant)
+            if ended:
+                return Status.FAILED, ended
     return Status.OK, ""
 
 
@@ -511,10 +515,11 @@ class Rows:
 
     def __init__(self, plant: Plant, law: Law, n: int, sink, every: int, *, lyapunov: bool = True):
         order, js, nth = plant_order(plant), plant.joint_shape, len(law.names)
+        cs = control_shape(plant)
         self.plant, self.law, self.n, self.sink, self.every, self.nth = plant, law, n, sink, every, nth
         self.lyapunov = lyapunov
         self.t, self.x = np.empty(n), np.empty((n, order) + js)
-        self.u, self.s = np.empty((n,) + js), np.empty((n,) + js)
+        self.u, self.s = np.empty((n,) + cs), np.empty((n,) + js)
         self.ref, self.theta_hat = np.empty((n, order + 1) + js), np.empty((n, nth))
         self.V = np.empty(n)  # filled block by block (no full-length temporaries at the end)
         self.segments: list[tuple[int, np.ndarray]] = []
@@ -613,7 +618,8 @@ class Rows:
         return Trajectory(t=self.t[keep], x=self.x[keep], u=self.u[keep], s=self.s[keep], ref=self.ref[keep],
                           theta_hat=self.theta_hat[keep], theta=self.theta_rows(0, n), V=self.V[keep],
                           names=tuple(self.law.names), status=status, reason=reason,
-                          joint_names=tuple(self.plant.joint_names), meta=meta)
+                          joint_names=tuple(self.plant.joint_names), meta=meta,
+                          control_names=tuple(getattr(self.plant, "control_names", ())))
 
     def stopped(self, reason: str) -> Trajectory:
         """Rows 0..k-1 (and all flushed) are whole when an interruption comes."""

@@ -133,6 +133,7 @@ def log_header(scn: Scenario, setup: Setup):
         scenario_name=scn.name, scenario_text=scn.text, scenario_source=scn.source, overrides=scn.overrides,
         seed=scn.noise.seed, log_rate_hz=scn.log_rate_hz, dt=plant.dt, order=plant_order(plant),
         joint_names=tuple(plant.joint_names), notes=tuple(setup.notes),
+        control_names=tuple(getattr(plant, "control_names", ())), state_names=tuple(getattr(plant, "state_names", ())),
         param_names=tuple(setup.law.names), model_xml=setup.model_xml,
         model_source=setup.source.xml if setup.source else None,
         model_assets=dict(setup.source.assets) if setup.source else {},

@@ -1,0 +1,515 @@
+"""The quadrotor (models/quadrotor.xml): a free rigid body in MuJoCo's air, four rotor thrusts along its z axis,
+an unknown payload (rigid, or on a cable) and the flight laws of adaptive_mj.laws.geometric and laws.l1.
+
+How the loop sees it (the plant protocol, adaptive_mj.plants.protocol):
+  axes        x, y, z: the output is the position p (3,) [m] in the world frame (z up)
+  order 4     p is the flat output of a quadrotor: of relative degree 4 to the body moments (Mellinger & Kumar
+              2011). The state x (4, 3) is the full rigid-body state in the form a flight law reads it:
+              x[0] = p [m], x[1] = v = p' [m/s] (world), x[2] = φ [rad] the attitude as a rotation vector
+              (R = exp(φ^), body to world), x[3] = Ω [rad/s] the body rate in the body frame (MuJoCo's free joint
+              keeps its angular velocity in the local frame). Rows 2 and 3 are not p'' and p''' (state_names says
+              which they are); the reference is [p_d, p_d', p_d'', p_d''', p_d''''] (4 + 1 rows).
+  controls    the four rotor thrusts [N] (control_names: the actuators' names), limited to [0, T_max] each
+  θ (10,)     m [kg], the vehicle's mass with its payload; J [kg m²] its inertia about their common centre of
+              mass in the body frame (Jxx, Jyy, Jzz, Jxy, Jxz, Jyz; a cable payload counted hanging straight
+              down); d [N] a constant external force in the world frame (dx, dy, dz; an external_force event's)
+              Every number comes from the compiled model (`truth`), none is typed.
+
+A crash ends the run failed (`termination`, asked after every physics step): the vehicle (or its payload)
+touching the ground after it has been airborne (AIRBORNE_RISE above where it started), its centre below the
+ground plane, or a tilt past plant.crash_tilt. Its events (wind, a rotor's efficiency, an external force, a
+payload released) are below.
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterator
+
+import mujoco
+import numpy as np
+
+from adaptive_mj.data import MODELS
+from adaptive_mj.errors import ModelError
+from adaptive_mj.keys import Key
+from adaptive_mj.laws.kinds import Form
+from adaptive_mj.plants import BuiltPlant, ModelSource
+from adaptive_mj.plants import events as ev
+from adaptive_mj.plants import plant_keys
+from adaptive_mj.plants.airframe import Airframe
+from adaptive_mj.plants.kinds import PlantKind, register
+from adaptive_mj.plants.mujoco_plant import (control_callback, new_warnings, release_data,
+                                             run_data, scale_body_mass, scratch_data)
+
+MODEL_PATH = MODELS / "quadrotor.xml"
+BODY = "quad"  # the flying body's name in the model
+AXES = ("x", "y", "z")
+STATE_NAMES = ("p", "v", "phi", "omega")
+INERTIA_NAMES = ("Jxx", "Jyy", "Jzz", "Jxy", "Jxz", "Jyz")
+PARAM_NAMES = ("m",) + INERTIA_NAMES + ("dx", "dy", "dz")
+PARAM_UNITS = {"m": "kg", **{n: "kg m²" for n in INERTIA_NAMES}, "dx": "N", "dy": "N", "dz": "N"}
+CRASH_TILT_DEG = 80.0  # plant.crash_tilt's default [deg]
+AIRBORNE_RISE = 0.05  # [m] above its start the vehicle counts as airborne: touching the ground after is a crash
+
+
+def rotation_vector(quat: np.ndarray) -> np.ndarray:
+    """(3,) φ = angle · axis of the unit quaternion (w, x, y, z), angle in [0, π] [rad] (MuJoCo's mju_quat2Vel at
+    dt = 1, which takes the shorter way round)."""
+    out = np.zeros(3)
+    mujoco.mju_quat2Vel(out, np.asarray(quat, dtype=float), 1.0)
+    return out
+
+
+def quaternion(phi: np.ndarray) -> np.ndarray:
+    """(4,) the unit quaternion (w, x, y, z) of rotation vector φ (3,) [rad]."""
+    phi = np.asarray(phi, dtype=float)
+    angle = float(np.linalg.norm(phi))
+    q = np.array([1.0, 0.0, 0.0, 0.0])
+    if angle > 0:
+        mujoco.mju_axisAngle2Quat(q, phi / angle, angle)
+    return q
+
+
+def subtree_bodies(model: mujoco.MjModel, root: int) -> list[int]:
+    """The ids of `root` and every body below it."""
+    out = [root]
+    for b in range(root + 1, model.nbody):
+        parent = b
+        while parent > root:
+            parent = int(model.body_parentid[parent])
+        if parent == root:
+            out.append(b)
+    return out
+
+
+def rigid_inertia(model: mujoco.MjModel, root: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """(mass [kg], J (3, 3) [kg m²], c (3,) [m]): the subtree of `root` as one rigid body at the model's qpos0
+    (a cable payload hanging straight down), its inertia about its centre of mass in root's frame and that
+    centre's offset c from root's origin in root's frame. Parallel-axis sums of MuJoCo's own body inertias at
+    their principal frames (mj_kinematics on a scratch MjData)."""
+    data = scratch_data(model)
+    mujoco.mj_resetData(model, data)
+    mujoco.mj_kinematics(model, data)
+    bodies = subtree_bodies(model, root)
+    mass = float(sum(model.body_mass[b] for b in bodies))
+    if not mass > 0:
+        raise ModelError(f"body {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, root)!r} has no mass")
+    com = sum(model.body_mass[b] * data.xipos[b] for b in bodies) / mass
+    J = np.zeros((3, 3))
+    for b in bodies:
+        Ri = data.ximat[b].reshape(3, 3)
+        r = data.xipos[b] - com
+        J += Ri @ np.diag(model.body_inertia[b]) @ Ri.T + model.body_mass[b] * (r @ r * np.eye(3) - np.outer(r, r))
+    Rb = data.xmat[root].reshape(3, 3)
+    return mass, Rb.T @ J @ Rb, Rb.T @ (com - data.xpos[root])
+
+
+@dataclass(frozen=True)
+class QuadrotorSpec:
+    """plant.* keys of kind "quadrotor" beyond the shared ones: crash_tilt [deg], the tilt past which the run ends
+    failed; rotor_time_constant τ [s] of a first-order lag on every rotor's thrust that the laws do not model
+    (None: none); wind (3,) [m/s] the air's velocity from t = 0 (None: the model's)."""
+
+    crash_tilt: float = CRASH_TILT_DEG
+    rotor_time_constant: float | None = None
+    wind: tuple[float, float, float] | None = None
+
+
+class QuadrotorPlant:
+    """The MuJoCo quadrotor (see the module docstring): a Plant (adaptive_mj.plants.protocol) with the position
+    axes as its joint axis, four named controls and a crash check."""
+
+    order = 4
+    names = PARAM_NAMES
+    joint_names = AXES
+    joint_shape = (3,)
+    state_names = STATE_NAMES
+    joint_limits: np.ndarray | None = None
+    first_contact: tuple[float, str] | None = None
+    native_owner: object | None = None
+    disturbance: Callable[[float], float] | None = None  # the protocol's; a quadrotor's are events
+
+    def __init__(self, model: mujoco.MjModel, *, where: str = "quadrotor model", crash_tilt: float = CRASH_TILT_DEG):
+        self.model, self.where = model, where
+        try:
+            self.airframe = Airframe.of_model(model, BODY)
+        except ValueError as exc:
+            raise ModelError(f"{where}: {exc}") from None
+        self.data = run_data(model)
+        self.body = self.airframe.body
+        self.subtree = frozenset(subtree_bodies(model, self.body))
+        acts = self.airframe.actuators
+        self.control_names = tuple(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, int(a)) or f"rotor{i + 1}"
+                                   for i, a in enumerate(acts))
+        self.ctrl_range = (np.array(model.actuator_ctrlrange[acts, 0], dtype=float),
+                           np.array(model.actuator_ctrlrange[acts, 1], dtype=float))
+        self.crash_tilt = float(crash_tilt)
+        self.force_offset = 0.0  # the protocol's scalar offset: unused (external_force is this plant's)
+        self.external_force = np.zeros(3)  # [N] world frame, held over every step
+        self.external_torque = np.zeros(3)  # [N m] world frame
+        self._theta: np.ndarray | None = None
+        self._crash: str | None = None
+        self._airborne = False
+        self._warnings0 = self.data.warning.number.copy()
+        self._warning_total0 = int(self._warnings0.sum())
+        ground = [g for g in range(model.ngeom) if model.geom_bodyid[g] == 0]
+        self._ground = frozenset(ground)
+
+    # --- the protocol's members --------------------------------------------------------
+    @property
+    def dt(self) -> float:
+        return float(self.model.opt.timestep)
+
+    @property
+    def stages(self) -> int:
+        return 4 if self.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 else 1
+
+    @property
+    def time(self) -> float:
+        return float(self.data.time)
+
+    def set_state(self, x0) -> None:
+        """x0 (4, 3): p, v, φ, Ω (see the module docstring); the time restarts at 0."""
+        x0 = np.asarray(x0, dtype=float).reshape(4, 3)
+        m, d, af = self.model, self.data, self.airframe
+        mujoco.mj_resetData(m, d)
+        self._warnings0 = d.warning.number.copy()
+        self._warning_total0 = int(self._warnings0.sum())
+        d.qpos[af.qpos:af.qpos + 3] = x0[0]
+        d.qpos[af.qpos + 3:af.qpos + 7] = quaternion(x0[2])
+        d.qvel[af.qvel:af.qvel + 3] = x0[1]
+        d.qvel[af.qvel + 3:af.qvel + 6] = x0[3]
+        with control_callback(None):
+            mujoco.mj_forward(m, d)
+        self._crash = None
+        self._z0 = float(x0[0, 2])
+        self._airborne = False
+
+    def measure(self, d: mujoco.MjData, x: np.ndarray) -> None:
+        """Fill x (4, 3) from MjData (inside the control callback)."""
+        af = self.airframe
+        q, v = d.qpos, d.qvel
+        x[0] = q[af.qpos:af.qpos + 3]
+        x[1] = v[af.qvel:af.qvel + 3]
+        mujoco.mju_quat2Vel(x[2], q[af.qpos + 3:af.qpos + 7], 1.0)
+        x[3] = v[af.qvel + 3:af.qvel + 6]
+
+    def observe(self) -> np.ndarray:
+        x = np.empty((4, 3))
+        self.measure(self.data, x)
+        return x
+
+    def true_theta(self) -> np.ndarray:
+        """(10,) [m, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz, dx, dy, dz] from the compiled model as it is now."""
+        if self._theta is None:
+            mass, J, _ = rigid_inertia(self.model, self.body)
+            inertia = [J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2]]
+            self._theta = np.array([mass, *inertia, *self.external_force], dtype=float)
+        return self._theta
+
+    def model_changed(self) -> None:
+        self._theta = None
+
+    @contextlib.contextmanager
+    def controlled_by(self, policy) -> Iterator[None]:
+        """policy(t, x (4, 3)) -> the four thrusts (4,) [N], inside MuJoCo's control callback (each RK4 stage)."""
+        acts, measure = self.airframe.actuators, self.measure
+        x = np.empty((4, 3))
+
+        def callback(m, d):
+            measure(d, x)
+            d.ctrl[acts] = policy(d.time, x)
+
+        with control_callback(callback):
+            yield
+
+    def step(self) -> None:
+        """One mj_step with the external force and torque held; then the crash check."""
+        d = self.data
+        d.xfrc_applied[self.body, :3] = self.external_force
+        d.xfrc_applied[self.body, 3:] = self.external_torque
+        mujoco.mj_step(self.model, d)
+        self._check_crash()
+
+    def instability(self) -> str | None:
+        return new_warnings(self.data, self._warning_total0, self._warnings0)
+
+    def termination(self) -> str | None:
+        """The crash that ends the run as failed ("crashed at t = … s: …"), or None."""
+        return self._crash
+
+    def unmodelled_drag(self) -> float | None:
+        return None
+
+    def release(self) -> None:
+        data = self.__dict__.pop("data", None)
+        if data is not None:
+            release_data(self.model, data)
+
+    def nominal_theta(self) -> np.ndarray:
+        """(10,) what a law knows of the vehicle untold (its estimates' default): the bare airframe's own mass and
+        inertia (the body "quad" without its payload), no external force."""
+        m, b, J = self.model, self.body, self.airframe.inertia
+        return np.array([m.body_mass[b], J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2], 0.0, 0.0, 0.0])
+
+    def state_on_reference(self, ref0: np.ndarray) -> np.ndarray:
+        """(4, 3) the state a run starting on the reference starts in: at p_d(0) with velocity p_d'(0), level (φ =
+        0) and not turning (Ω = 0). ref0 (5, 3): the reference at t = 0."""
+        return np.vstack([ref0[0], ref0[1], np.zeros(3), np.zeros(3)])
+
+    def mass_matrices(self, q: np.ndarray) -> np.ndarray:
+        """(N, 3, 3) m I [kg]: the translational inertia the position laws' V = ½ m sᵀs weighs s by."""
+        n = np.asarray(q).shape[0]
+        return np.broadcast_to(self.true_theta()[0] * np.eye(3), (n, 3, 3)).copy()
+
+    # --- crashes -----------------------------------------------------------------------
+    def _touching(self) -> str | None:
+        """The first contact between the ground and the vehicle or its payload, as text, or None."""
+        d, m = self.data, self.model
+        for i in range(d.ncon):
+            c = d.contact[i]
+            g1, g2 = int(c.geom1), int(c.geom2)
+            other = g2 if g1 in self._ground else g1 if g2 in self._ground else None
+            if other is not None and int(m.geom_bodyid[other]) in self.subtree:
+                return mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, other) or f"geom {other}"
+        return None
+
+    def _check_crash(self) -> None:
+        if self._crash is not None:
+            return
+        d, af = self.data, self.airframe
+        t = float(d.time)
+        R = d.xmat[self.body].reshape(3, 3)
+        tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(R[2, 2])))))
+        z = float(d.qpos[af.qpos + 2])
+        touching = self._touching()
+        if tilt > self.crash_tilt:
+            self._crash = (f"crashed at t = {t:.4g} s: tilted {tilt:.1f} deg, past plant.crash_tilt = "
+                           f"{self.crash_tilt:g} deg")
+        elif z < 0.0:
+            self._crash = f"crashed at t = {t:.4g} s: the body's centre is {-z:.3g} m below the ground plane"
+        elif touching is not None and self._airborne:
+            speed = float(np.linalg.norm(d.qvel[af.qvel:af.qvel + 3]))
+            self._crash = f"crashed at t = {t:.4g} s: {touching} hit the ground at {speed:.3g} m/s"
+        elif z > self._z0 + AIRBORNE_RISE:
+            self._airborne = True
+
+    # --- what events change ------------------------------------------------------------
+    def body_id(self, name: str) -> int:
+        idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if idx < 0:
+            raise ModelError(f"{self.where}: no body named {name!r}")
+        return idx
+
+    def set_body_mass(self, name: str, mass: float) -> None:
+        """A body's mass [kg], its inertia scaled with it (mujoco_plant.scale_body_mass)."""
+        scale_body_mass(self.model, self.body_id(name), mass)
+        self.model_changed()
+
+    def release_payload(self, name: str) -> None:
+        """The payload body `name` (and its subtree) let go: their mass and inertia removed, their geoms no longer
+        colliding nor drawn. The bodies stay in the model as massless frames: MuJoCo cannot remove a body from a
+        compiled model mid-run, and a massless frame exerts no force."""
+        m = self.model
+        for b in subtree_bodies(m, self.body_id(name)):
+            m.body_mass[b] = 0.0
+            m.body_inertia[b] = 0.0
+            for g in range(m.ngeom):
+                if m.geom_bodyid[g] == b:
+                    m.geom_contype[g] = m.geom_conaffinity[g] = 0
+                    m.geom_rgba[g, 3] = 0.0
+        mujoco.mj_setConst(m, scratch_data(m))
+        self.model_changed()
+
+    def scale_rotor(self, rotor: int, factor: float) -> None:
+        """Rotor `rotor` (1 to 4) gives `factor` times the thrust commanded (a damaged propeller, a weak motor)."""
+        a = int(self.airframe.actuators[rotor - 1])
+        self.model.actuator_gainprm[a, 0] *= factor
+
+    def set_wind(self, velocity) -> None:
+        """The air's velocity [m/s] (3,) in the world frame (MuJoCo's opt.wind)."""
+        self.model.opt.wind[:] = velocity
+
+    def add_force(self, force, torque) -> None:
+        """Adds a constant external force [N] and torque [N m] (world frame) on the body from now on."""
+        self.external_force = self.external_force + np.asarray(force, dtype=float)
+        self.external_torque = self.external_torque + np.asarray(torque, dtype=float)
+        self.model_changed()
+
+
+def load(path: str | Path = MODEL_PATH, **kwargs) -> QuadrotorPlant:
+    """The bundled quadrotor (or a user's MJCF with a free body named "quad" and four site rotors)."""
+    from adaptive_mj.plants.mujoco_plant import compile_xml_path
+
+    return QuadrotorPlant(compile_xml_path(path), where=str(path), **kwargs)
+
+
+# --- built from a scenario ------------------------------------------------------
+def model_source(scn) -> ModelSource | None:
+    """plant.model with plant.payload attached at plant.site (the arms' composition, adaptive_mj.plants.attach)."""
+    from adaptive_mj.plants.attach import compose
+
+    p = scn.plant
+    xml, assets = compose(p.model, None if p.payload is None else _payload_path(p), payload_mass=p.payload_mass,
+                          site=p.site)
+    return ModelSource(xml, dict(assets))
+
+
+def _payload_path(p) -> Path:
+    from adaptive_mj.plants import payload as pl
+
+    return pl.locate(p.payload, p.payload_paths, where=str(p.model), key="plant.payload")
+
+
+def _edit(spec: QuadrotorSpec):
+    """The MjSpec edit of plant.rotor_time_constant: every rotor a first-order filter of τ (MuJoCo's actuator
+    dynamics: act' = (ctrl − act)/τ, thrust = act)."""
+    tau = spec.rotor_time_constant
+
+    def edit(s: mujoco.MjSpec) -> tuple[str, ...]:
+        for a in s.actuators:
+            a.dyntype = mujoco.mjtDyn.mjDYN_FILTER
+            a.dynprm[0] = tau
+        return (f"every rotor given a first-order lag of {tau:g} s (plant.rotor_time_constant)",)
+
+    return edit if tau is not None else None
+
+
+def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
+    """plant.kind = "quadrotor": the quadrotor of plant.model with plant.payload, its rotors lagged by
+    plant.rotor_time_constant, in the wind plant.wind."""
+    from adaptive_mj.plants.mujoco_plant import compile_for_scenario_with
+
+    spec = scn.plant.kind_spec or QuadrotorSpec()
+    edit = _edit(spec)
+    key = None if edit is None else ("rotor lag", spec.rotor_time_constant)
+    model, xml, notes = compile_for_scenario_with(scn, source, edit=edit, edit_key=key)
+    if spec.wind is not None:
+        model.opt.wind[:] = spec.wind
+    plant = QuadrotorPlant(model, where=str(scn.plant.model), crash_tilt=spec.crash_tilt)
+    return BuiltPlant(plant, xml, tuple(notes or ()))
+
+
+def _own_keys(t, fields) -> dict:
+    """plant.crash_tilt, plant.rotor_time_constant, plant.wind."""
+    wind = t.numbers("wind", None)
+    if wind is not None and len(wind) != 3:
+        raise t.fail("wind", "3 numbers [m/s] (x, y, z)", list(wind))
+    spec = QuadrotorSpec(crash_tilt=t.number("crash_tilt", CRASH_TILT_DEG, gt=0),
+                         rotor_time_constant=t.number("rotor_time_constant", None, gt=0),
+                         wind=None if wind is None else (float(wind[0]), float(wind[1]), float(wind[2])))
+    if not spec.crash_tilt <= 180:
+        raise t.fail("crash_tilt", "an angle in (0, 180] deg", spec.crash_tilt)
+    return {"kind_spec": spec}
+
+
+CRASH_TILT = Key("crash_tilt", "number", "deg", CRASH_TILT_DEG, "(0, 180]",
+                 "the tilt past which the run ends failed (a crash)")
+ROTOR_TIME_CONSTANT = Key("rotor_time_constant", "number", "s", None, "> 0",
+                          "a first-order lag on every rotor's thrust, unknown to the laws (default: none)")
+WIND = Key("wind", "array [x, y, z]", "m/s", None, "3 numbers", "the air's velocity from t = 0 (default: the model's)")
+
+
+# --- its references -------------------------------------------------------------------
+REFERENCE_KINDS = ("hover", "lemniscate")
+
+
+def read_reference(t):
+    """[reference] of a quadrotor: kind "hover" (center [m]; from start [m] over rise_time [s] when start is given:
+    a take-off) or "lemniscate" (the same, plus amplitude A [m], omega [rad/s], t0 [s]: the figure-eight x = A
+    sin(ω(t − t0)), y = (A/2) sin(2ω(t − t0)) about center from t0 on); adaptive_mj.reference.Flight."""
+    from adaptive_mj.specs import ReferenceSpec
+
+    kind = t.string("kind", choices=REFERENCE_KINDS)
+    params = {"center": t.numbers("center", (0.0, 0.0, 1.0), length=3), "start": t.numbers("start", None, length=3),
+              "rise_time": t.number("rise_time", 2.0, gt=0)}
+    if kind == "lemniscate":
+        params.update(amplitude=t.number("amplitude", 0.5, gt=0), omega=t.number("omega", 1.0, gt=0),
+                      t0=t.number("t0", 0.0, ge=0))
+    t.finish()
+    return ReferenceSpec(kind=kind, params=params)
+
+
+def build_reference(spec):
+    """The Flight reference of a [reference] read by read_reference."""
+    from adaptive_mj.reference import Flight
+
+    p = spec.params
+    return Flight(center=tuple(p["center"]), amplitude=p.get("amplitude", 0.0), omega=p.get("omega", 1.0),
+                  start=None if p["start"] is None else tuple(p["start"]), rise_time=p["rise_time"],
+                  t0=p.get("t0", 0.0))
+
+
+# --- its events -----------------------------------------------------------------------
+def _vector(name: str):
+    def read(t):
+        v = t.numbers(name, None)
+        if v is None:
+            return (0.0, 0.0, 0.0)
+        if len(v) != 3:
+            raise t.fail(name, "3 numbers (x, y, z)", list(v))
+        return tuple(float(a) for a in v)
+
+    return read
+
+
+def _wind(e, scn, source) -> ev.Event:
+    w = e.params["velocity"]
+    return ev.Event(e.t, f"wind {list(w)} m/s", lambda plant: plant.set_wind(w))
+
+
+def _rotor(e, scn, source) -> ev.Event:
+    r = e.params["rotor"]
+    return ev.Event(e.t, f"rotor {r} thrust x {e.value:g}", lambda plant: plant.scale_rotor(r, e.value))
+
+
+def _force(e, scn, source) -> ev.Event:
+    f, tq = e.params["force"], e.params["torque"]
+    return ev.Event(e.t, f"external force {list(f)} N, torque {list(tq)} N m", lambda plant: plant.add_force(f, tq))
+
+
+def _release(e, scn, source) -> ev.Event:
+    return ev.Event(e.t, f"payload released: {e.body}", lambda plant: plant.release_payload(e.body))
+
+
+def _rotor_number(t) -> int:
+    r = t.integer("rotor", 1, ge=1)
+    if r > 4:
+        raise t.fail("rotor", "a rotor number 1 to 4", r)
+    return r
+
+
+def _rotor_on_load(t, plant, fields) -> None:
+    """A rotor's efficiency is a factor in (0, 1] (a weakened rotor; the value rule has checked > 0)."""
+    v = t.data.get("value")
+    if isinstance(v, (int, float)) and v > 1:
+        raise t.fail("value", "a thrust factor in (0, 1] (a weakened rotor)", v)
+
+
+WIND_EVENT = ev.EventKind("wind", _wind, value="none",
+                          fields=(ev.EventField("velocity", _vector("velocity"), "the air's velocity [m/s]"),),
+                          doc="sets the wind (MuJoCo's opt.wind) to velocity [m/s] from t on: a gust is two events")
+ROTOR_EFFICIENCY = ev.EventKind("rotor_efficiency", _rotor, fields=(
+    ev.EventField("rotor", _rotor_number, "the rotor (1 to 4)"),), on_load=_rotor_on_load,
+    doc="rotor's thrust becomes value (0 < value <= 1) times what is commanded, from t on")
+EXTERNAL_FORCE = ev.EventKind("external_force", _force, value="none", fields=(
+    ev.EventField("force", _vector("force"), "[N] (x, y, z), world frame"),
+    ev.EventField("torque", _vector("torque"), "[N m] (x, y, z), world frame")),
+    doc="adds a constant force [N] and torque [N m] (world frame) on the vehicle from t on")
+PAYLOAD_RELEASE = ev.EventKind("payload_release", _release, value="none", on_build=ev.payload_body_check,
+                               doc="lets the payload body go at t (its mass and inertia removed)")
+
+
+#: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "quadrotor"
+KIND = register(PlantKind(
+    "quadrotor", __name__, frozenset({Form.AIRFRAME}), output_unit="m", control_unit="N", params=PARAM_UNITS,
+    default_model="quadrotor", default_law="geometric_adaptive",
+    doc="a Crazyflie-size quadrotor (RotorPy's parameters) with an unknown payload, in MuJoCo's air",
+    keys=plant_keys.keys(CRASH_TILT, ROTOR_TIME_CONSTANT, WIND, payload=True, default_payload=None),
+    reader=plant_keys.SharedReader(backend=("mujoco", "a free body flown in MuJoCo's air"), body=_own_keys),
+    events={ev.PAYLOAD_MASS: "mujoco", PAYLOAD_RELEASE: "mujoco", ROTOR_EFFICIENCY: "mujoco", WIND_EVENT: "mujoco",
+            EXTERNAL_FORCE: "mujoco"},
+    order=lambda plant, law_order: 4, starts_on_reference=True, sections=("quadrotor",),
+    noise_signals=STATE_NAMES, reference_reader=read_reference, reference_builder=build_reference))
