@@ -445,14 +445,28 @@ class Flight:
     def __call__(self, t, order: int) -> np.ndarray:
         t = np.asarray(t, dtype=float)
         out = np.zeros((order + 1,) + t.shape + (3,))
-        for i in range(3):
-            if self.start is None:
-                out[0, ..., i] = self.center[i]
-            else:
-                out[..., i] = SmoothStep(self.start[i], self.center[i], 0.0, self.rise_time)(t, order)
+        out[0] = self.center
+        if self.start is not None:  # the climb: one blend S(τ), τ = t/rise_time, for the three axes
+            span = np.asarray(self.center, dtype=float) - np.asarray(self.start, dtype=float)
+            x = np.clip(t / self.rise_time, 0.0, 1.0)
+            inside = (t > 0.0) & (t < self.rise_time)
+            derivs = _smoothstep_derivatives(order)
+            out[0] = np.asarray(self.start, dtype=float) + np.multiply.outer(derivs[0](x), span)
+            for k in range(1, order + 1):
+                out[k] = np.multiply.outer(np.where(inside, derivs[k](x) / self.rise_time**k, 0.0), span)
         if self.amplitude > 0:
             moving = (t >= self.t0).astype(float)
             tau = t - self.t0
             out[..., 0] += moving * _harmonic(tau, self.amplitude, self.omega, 0.0, order, np.sin)
             out[..., 1] += moving * _harmonic(tau, 0.5 * self.amplitude, 2.0 * self.omega, 0.0, order, np.sin)
         return out
+
+
+_DERIVATIVES: list = []
+
+
+def _smoothstep_derivatives(order: int) -> list:
+    """[S, S', ..., S^(order)] of the C⁴ blend (computed once)."""
+    while len(_DERIVATIVES) <= order:
+        _DERIVATIVES.append(_SMOOTHSTEP if not _DERIVATIVES else _DERIVATIVES[-1].deriv())
+    return _DERIVATIVES

@@ -20,9 +20,9 @@ import numpy as np
 
 from adaptive_mj.keys import Key
 from adaptive_mj.laws import law_keys as shared
+from adaptive_mj.laws import flight_kernel as fk
 from adaptive_mj.laws import geometric as geo
-from adaptive_mj.laws import l1
-from adaptive_mj.laws.common import DeadZone, LawStep, Modification, dead_zone_open, modify_rate
+from adaptive_mj.laws.common import NO_MODIFICATION, DeadZone, LawStep, Modification
 from adaptive_mj.laws.kinds import AirframeView, BuildContext, Form, LawKind, register
 from adaptive_mj.specs import LawSpec
 
@@ -51,10 +51,32 @@ def thrusts(airframe: AirframeView, f: float, M: np.ndarray) -> np.ndarray:
     return np.linalg.solve(airframe.allocation, np.concatenate([[f], M]))
 
 
+_KERNELS: dict[str, object] = {}
+
+
+def kernel(name: str):
+    """flight_kernel's `flight_law` or `l1_update` compiled by numba (with the plain functions it calls; cached on
+    disk), or the plain Python function where numba is missing: the same arithmetic either way (the native
+    callback compiles the same source)."""
+    if name not in _KERNELS:
+        fn = getattr(fk, name)
+        try:
+            import functools
+
+            import numba
+
+            from adaptive_mj.numba_util import jit_tree
+
+            _KERNELS[name] = jit_tree(fn, functools.partial(numba.njit, cache=True), tag="_flight")
+        except ImportError:  # pragma: no cover - numba is a dependency; a bare checkout still runs, slowly
+            _KERNELS[name] = fn
+    return _KERNELS[name]
+
+
 @dataclass
 class FlightLaw:
-    """What the three flight laws share: the airframe, the attitude gains, the surface's slope c and the Lyapunov
-    function. order 4; names: the plant's θ names."""
+    """What the three flight laws share (see the module docstring): the airframe, the law's numbers P and arrays G
+    (adaptive_mj.laws.flight_kernel), evaluated by flight_kernel.flight_law. order 4; names: the plant's θ names."""
 
     airframe: AirframeView
     gains: geo.Gains
@@ -63,13 +85,45 @@ class FlightLaw:
     order: int = 4
     has_filters: bool = False
     installed = None
-    native: bool = False
+    native: bool = True
     adapt: bool = False
     bounds: tuple[np.ndarray, np.ndarray] | None = None
     gamma: np.ndarray = field(default_factory=lambda: np.ones(10))
+    mode: float = fk.MODE_GEOMETRIC
+    k: float = 0.0
+    dead_zone: DeadZone | None = None
+    modification: Modification | None = None
+    l1: bool = False
 
     def __post_init__(self):
         self.names = tuple(self.airframe.names)
+        n = len(self.names)
+        P = np.zeros(fk.P_SIZE)
+        P[fk.P_MODE], P[fk.P_C], P[fk.P_K], P[fk.P_G] = self.mode, self.c, self.k, self.airframe.gravity
+        P[fk.P_KX], P[fk.P_KV], P[fk.P_KR], P[fk.P_KW] = self.gains
+        dz = self.dead_zone
+        P[fk.P_DZ_WIDTH] = dz.width if dz is not None else 0.0
+        P[fk.P_DZ_ON_S] = 1.0 if dz is None or dz.on.value == "s" else 0.0
+        P[fk.P_ADAPT], P[fk.P_L1] = float(self.adapt), float(self.l1)
+        G = np.zeros((4, n))
+        G[0] = self.gamma
+        mod = self.modification
+        sigma, e_mod, G[1], G[2], G[3] = (mod if mod is not None else NO_MODIFICATION).arrays(n)
+        P[fk.P_SIGMA], P[fk.P_EMOD] = sigma, e_mod
+        if mod is not None:
+            self.bounds = mod.box(n)
+        self.P, self.G = P, G
+        self.Ainv = np.ascontiguousarray(np.linalg.inv(self.airframe.allocation))
+        self.aug = np.zeros(6)
+        self._scratch = (np.zeros((3, 3)), np.zeros(3), np.zeros(12))
+
+    def __call__(self, t, x, ref, theta_hat) -> LawStep:
+        u, s, rate = np.empty(4), np.empty(3), np.empty(len(self.names))
+        R, F, tmp = self._scratch
+        kernel("flight_law")(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(ref, dtype=float),
+                             np.ascontiguousarray(theta_hat, dtype=float), self.P, self.G, self.Ainv, self.aug,
+                             R, F, tmp, u, s, rate)
+        return LawStep(u, rate, s, np.array(ref[2]))
 
     def lyapunov(self, s, theta_hat, theta, *, M=None) -> np.ndarray:
         """(N,) V = ½ sᵀ M s (M = m I from the plant) + ½ Σ θ̃ᵢ²/γᵢ over the estimates that move."""
@@ -91,27 +145,18 @@ class FlightLaw:
     def step_ends(self, xs, us, weights, h) -> None:
         return None
 
-    def native_params(self):
-        raise TypeError(f"{type(self).__name__} has no compiled form")
+    def native_params(self) -> dict:
+        """What the compiled callback takes: P, G, the allocation's inverse (adaptive_mj.sim.native_flight)."""
+        return {"P": self.P, "G": self.G, "Ainv": self.Ainv}
 
     def feedback(self):
         return None
 
-    def _command(self, F: np.ndarray, R: np.ndarray, W: np.ndarray, J: np.ndarray) -> geo.Command:
-        return geo.attitude(F, R, W, E1, self.gains, J)
-
 
 @dataclass
 class GeometricLaw(FlightLaw):
-    """Lee, Leok & McClamroch (2010) at the nominal θ̂ (adaptive_mj.laws.geometric.geometric)."""
-
-    def __call__(self, t, x, ref, theta_hat) -> LawStep:
-        R = rotation(x[2])
-        m = float(theta_hat[M_INDEX])
-        cmd = geo.geometric(x[0], x[1], R, x[3], ref[:3], E1, self.gains, m, inertia_matrix(theta_hat),
-                            self.airframe.gravity)
-        s = (x[1] - ref[1]) + self.c * (x[0] - ref[0])
-        return LawStep(thrusts(self.airframe, cmd.f, cmd.M), np.zeros(len(self.names)), s, ref[2])
+    """Lee, Leok & McClamroch (2010) at the nominal θ̂ (adaptive_mj.laws.geometric.geometric, written out in
+    flight_kernel.flight_law)."""
 
 
 @dataclass
@@ -120,82 +165,51 @@ class GeometricAdaptiveLaw(FlightLaw):
     geometric attitude loop: m̂' = −sᵀw/γ_m, d̂' = s/γ_d (the project's γ is a stiffness: rate = regressor · s / γ),
     through the dead-zone and the robust modifications (σ, e-modification on ‖s‖, projection)."""
 
-    k: float = 0.1
-    dead_zone: DeadZone | None = None
-    modification: Modification | None = None
+    mode: float = fk.MODE_ADAPTIVE
     adapt: bool = True
-
-    def __post_init__(self):
-        super().__post_init__()
-        mod = self.modification
-        self._mod = mod.arrays(len(self.names)) if mod is not None else None
-        self.bounds = mod.box(len(self.names)) if mod is not None else None
-
-    def __call__(self, t, x, ref, theta_hat) -> LawStep:
-        g = self.airframe.gravity
-        m_hat, d_hat = float(theta_hat[M_INDEX]), theta_hat[D_SLICE]
-        e_x, e_v = x[0] - ref[0], x[1] - ref[1]
-        s = e_v + self.c * e_x
-        w = ref[2] - self.c * e_v + g * geo.E3
-        F = m_hat * w - d_hat - self.k * s
-        cmd = self._command(F, rotation(x[2]), x[3], inertia_matrix(theta_hat))
-        rate = np.zeros(len(self.names))
-        dz = self.dead_zone
-        if dz is None or dead_zone_open(float(np.linalg.norm(s) if dz.on.value == "s" else np.linalg.norm(e_x)),
-                                        dz.width):
-            rate[M_INDEX] = -float(s @ w) / self.gamma[M_INDEX]
-            rate[D_SLICE] = s / self.gamma[D_SLICE]
-        if self._mod is not None:
-            sigma, e_mod, theta0, lower, upper = self._mod
-            modify_rate(rate, theta_hat, float(np.linalg.norm(s)), sigma, e_mod, theta0, self.gamma, lower, upper)
-        return LawStep(thrusts(self.airframe, cmd.f, cmd.M), rate, s, ref[2])
 
 
 @dataclass
 class L1GeometricLaw(FlightLaw):
-    """The geometric controller plus L1 augmentation (adaptive_mj.laws.l1): the predictor, the piecewise-constant
-    adaptation and the low-pass filter advance once per physics step (step_ends, from the state measured at the
-    step's start and the thrusts applied over it: T_s = the physics step), so the augmentation is held over each
-    step's stages. Continuous control only (its filters integrate per step)."""
+    """The geometric controller plus L1 augmentation (adaptive_mj.laws.l1; flight_kernel.l1_update): the predictor,
+    the piecewise-constant adaptation and the low-pass filter advance once per physics step (step_ends, from the
+    state measured at the step's start and the thrusts applied over it: T_s = the physics step), so the
+    augmentation is held over each step's stages. Continuous control only (its filters integrate per step); the
+    Python callback only (its filters run between steps)."""
 
     a_s: float = -5.0
     w_c: float = 5.0
     has_filters: bool = True
+    native: bool = False
+    l1: bool = True
 
     def __post_init__(self):
         super().__post_init__()
-        self.state: l1.L1State | None = None
+        self.z_hat: np.ndarray | None = None
+        self.sigma = np.zeros(6)
         self._theta: np.ndarray | None = None
+        self._l1_scratch = (np.zeros((3, 3)), np.zeros(12))
 
     def reset(self) -> None:
-        self.state = None
+        self.z_hat = None
+        self.sigma[:] = 0.0
+        self.aug[:] = 0.0
 
     def step_begins(self, x) -> None:
-        if self.state is None:
-            self.state = l1.L1State.start(np.array(x[1]), np.array(x[3]))
-        self._x0 = np.array(x)
+        if self.z_hat is None:
+            self.z_hat = np.concatenate([x[1], x[3]]).astype(float)
 
     def __call__(self, t, x, ref, theta_hat) -> LawStep:
-        R = rotation(x[2])
-        m, J = float(theta_hat[M_INDEX]), inertia_matrix(theta_hat)
-        self._theta = theta_hat
-        cmd = geo.geometric(x[0], x[1], R, x[3], ref[:3], E1, self.gains, m, J, self.airframe.gravity)
-        f, M = cmd.f, cmd.M
-        if self.state is not None:
-            f_ad, M_ad = l1.augmentation(self.state, R, m, J)
-            f, M = f + f_ad, M + M_ad
-        s = (x[1] - ref[1]) + self.c * (x[0] - ref[0])
-        return LawStep(thrusts(self.airframe, f, M), np.zeros(len(self.names)), s, ref[2])
+        self._theta = np.array(theta_hat, dtype=float)
+        return super().__call__(t, x, ref, theta_hat)
 
     def step_ends(self, xs, us, weights, h) -> None:
         """One L1 update over the step: the predictor from the step's first measured state and applied thrusts."""
-        assert self.state is not None and self._theta is not None
-        x0 = xs[0]
-        fm = self.airframe.allocation @ np.asarray(us[0], dtype=float)
-        th = self._theta
-        gains = l1.L1Gains(self.a_s, h, self.w_c)
-        self.state = l1.step(self.state, x0[1], x0[3], rotation(x0[2]), float(fm[0]), fm[1:], float(th[M_INDEX]),
-                             inertia_matrix(th), self.airframe.gravity, gains, h)
+        assert self.z_hat is not None and self._theta is not None
+        R, tmp = self._l1_scratch
+        kernel("l1_update")(np.ascontiguousarray(xs[0], dtype=float), np.ascontiguousarray(us[0], dtype=float),
+                            self._theta, self.P, self.airframe.allocation, self.a_s, self.w_c, h, self.z_hat,
+                            self.sigma, self.aug, R, tmp)
 
 
 # --- the law kinds: keys, readers, builders -----------------------------------------------
@@ -219,8 +233,10 @@ def _read(own: tuple[Key, ...], *, adaptive: bool):
     def read(t, kind: str, plant, order: int) -> LawSpec:
         params = {}
         for key in own:
-            if key.name == "a_s":
-                params[key.name] = t.number(key.name, key.default, lt=0)
+            if key.name == "a_s":  # the predictor's pole: < 0
+                params[key.name] = t.number(key.name, key.default)
+                if not params[key.name] < 0:
+                    raise t.fail(key.name, "< 0 (a stable predictor)", params[key.name])
             else:
                 params[key.name] = t.number(key.name, key.default, gt=0)
         dead_zone = shared.read_dead_zone(t) if adaptive else None

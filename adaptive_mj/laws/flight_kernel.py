@@ -1,0 +1,159 @@
+"""The flight laws' arithmetic as plain scalar code over arrays (loops, math.*; no numpy call inside): what the
+Python path runs (compiled by numba when it can be, else as it is) and the native callback compiles, so both give
+the same bits. adaptive_mj.laws.geometric and laws.l1 write the same laws with numpy for reading;
+tests/test_flight_laws.py checks the two agree to 1e-12.
+
+flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
+  x (4, 3)   [p; v; φ; Ω] measured (adaptive_mj.plants.quadrotor)
+  r (5, 3)   [p_d; p_d'; p_d''; ...] (rows 0 to 2 used)
+  th (10,)   θ̂ = [m, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz, dx, dy, dz]
+  P          the law's numbers by index (the P_* constants below)
+  G (4, 10)  rows γ (the adaptation stiffnesses: θ̂' = regressor·s/γ), θ₀, the projection's lower and upper bounds
+             (laws.common.modify_rate: σ- and e-modification, the box's tangent cone)
+  Ainv (4, 4)  the inverse of the airframe's allocation: thrusts = Ainv @ [f, M]
+  aug (6,)   the L1 filtered estimate C σ̂ = [acceleration (3) m/s², angular acceleration (3) rad/s²] (zeros: none)
+  u (4,)     out: the rotor thrusts [N], unclipped
+  s (3,)     out: s = e_v + c e_x [m/s]
+  rate (10,) out: θ̂' (zero but for m and d under the adaptive law)
+"""
+from __future__ import annotations
+
+import math
+
+from adaptive_mj.laws.common import modify_rate
+
+# P's layout: the law's numbers, one float64 array (the native callback reads it by address)
+P_MODE, P_KX, P_KV, P_KR, P_KW, P_C, P_K, P_G = range(8)
+P_DZ_WIDTH, P_DZ_ON_S, P_SIGMA, P_EMOD, P_ADAPT, P_L1 = range(8, 14)
+P_SIZE = 14
+MODE_GEOMETRIC, MODE_ADAPTIVE = 0.0, 1.0
+
+
+def rodrigues(phi, R):
+    """R (3, 3) = exp(φ^) of the rotation vector φ (3,) [rad], in place."""
+    a2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
+    angle = math.sqrt(a2)
+    if angle < 1e-12:
+        R[0, 0], R[0, 1], R[0, 2] = 1.0, -phi[2], phi[1]
+        R[1, 0], R[1, 1], R[1, 2] = phi[2], 1.0, -phi[0]
+        R[2, 0], R[2, 1], R[2, 2] = -phi[1], phi[0], 1.0
+        return
+    kx, ky, kz = phi[0] / angle, phi[1] / angle, phi[2] / angle
+    sn, cs = math.sin(angle), 1.0 - math.cos(angle)
+    R[0, 0] = 1.0 + cs * (kx * kx - 1.0)
+    R[0, 1] = -sn * kz + cs * kx * ky
+    R[0, 2] = sn * ky + cs * kx * kz
+    R[1, 0] = sn * kz + cs * kx * ky
+    R[1, 1] = 1.0 + cs * (ky * ky - 1.0)
+    R[1, 2] = -sn * kx + cs * ky * kz
+    R[2, 0] = -sn * ky + cs * kx * kz
+    R[2, 1] = sn * kx + cs * ky * kz
+    R[2, 2] = 1.0 + cs * (kz * kz - 1.0)
+
+
+def inertia_times(th, w, out):
+    """out (3,) = J w, J from θ̂'s [Jxx, Jyy, Jzz, Jxy, Jxz, Jyz] (th[1:7])."""
+    xx, yy, zz, xy, xz, yz = th[1], th[2], th[3], th[4], th[5], th[6]
+    out[0] = xx * w[0] + xy * w[1] + xz * w[2]
+    out[1] = xy * w[0] + yy * w[1] + yz * w[2]
+    out[2] = xz * w[0] + yz * w[1] + zz * w[2]
+
+
+def flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
+    """One evaluation (module docstring); R (3, 3), F (3,) and tmp (12,) are scratch."""
+    rodrigues(x[2], R)
+    g, c = P[P_G], P[P_C]
+    m = th[0]
+    adaptive = P[P_MODE] == MODE_ADAPTIVE
+    for i in range(3):
+        ex = x[0, i] - r[0, i]
+        ev = x[1, i] - r[1, i]
+        s[i] = ev + c * ex
+        if adaptive:  # F = m̂ w − d̂ − k s, w = a_d − c e_v + g e₃
+            w = r[2, i] - c * ev + (g if i == 2 else 0.0)
+            tmp[i] = w
+            F[i] = m * w - th[7 + i] - P[P_K] * s[i]
+        else:  # F = −k_x e_x − k_v e_v + m g e₃ + m a_d
+            F[i] = -P[P_KX] * ex - P[P_KV] * ev + (m * g if i == 2 else 0.0) + m * r[2, i]
+    for j in range(rate.shape[0]):
+        rate[j] = 0.0
+    if adaptive and P[P_ADAPT] != 0.0:
+        s_abs = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
+        if P[P_DZ_ON_S] != 0.0:
+            signal = s_abs
+        else:
+            e0, e1, e2 = x[0, 0] - r[0, 0], x[0, 1] - r[0, 1], x[0, 2] - r[0, 2]
+            signal = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        if signal >= P[P_DZ_WIDTH]:
+            sw = s[0] * tmp[0] + s[1] * tmp[1] + s[2] * tmp[2]
+            rate[0] = -sw / G[0, 0]
+            for i in range(3):
+                rate[7 + i] = s[i] / G[0, 7 + i]
+        modify_rate(rate, th, s_abs, P[P_SIGMA], P[P_EMOD], G[1], G[0], G[2], G[3])
+    # the attitude loop: f = F·Re₃, R_d from F and b₁d = e₁, e_R = ½ vee(R_dᵀR − RᵀR_d), M = −k_R e_R − k_Ω Ω + Ω×JΩ
+    f = F[0] * R[0, 2] + F[1] * R[1, 2] + F[2] * R[2, 2]
+    nF = math.sqrt(F[0] * F[0] + F[1] * F[1] + F[2] * F[2])
+    b30, b31, b32 = F[0] / nF, F[1] / nF, F[2] / nF
+    # b₂d = b₃d × e₁ / ‖·‖ = (0, b32, −b31)/‖·‖
+    n2 = math.sqrt(b32 * b32 + b31 * b31)
+    b20, b21, b22 = 0.0, b32 / n2, -b31 / n2
+    b10, b11, b12 = b21 * b32 - b22 * b31, b22 * b30 - b20 * b32, b20 * b31 - b21 * b30
+    # Rd columns b1, b2, b3; E = RdᵀR (3, 3) into tmp[3:12] row-major
+    for a in range(3):
+        da0 = b10 if a == 0 else (b20 if a == 1 else b30)
+        da1 = b11 if a == 0 else (b21 if a == 1 else b31)
+        da2 = b12 if a == 0 else (b22 if a == 1 else b32)
+        for b in range(3):
+            tmp[3 + 3 * a + b] = da0 * R[0, b] + da1 * R[1, b] + da2 * R[2, b]
+    # e_R = ½ vee(E − Eᵀ): (E[2,1] − E[1,2], E[0,2] − E[2,0], E[1,0] − E[0,1]) / 2
+    eR0 = 0.5 * (tmp[3 + 7] - tmp[3 + 5])
+    eR1 = 0.5 * (tmp[3 + 2] - tmp[3 + 6])
+    eR2 = 0.5 * (tmp[3 + 3] - tmp[3 + 1])
+    W = x[3]
+    inertia_times(th, W, F)  # F now holds J Ω (F is no longer needed)
+    M0 = -P[P_KR] * eR0 - P[P_KW] * W[0] + (W[1] * F[2] - W[2] * F[1])
+    M1 = -P[P_KR] * eR1 - P[P_KW] * W[1] + (W[2] * F[0] - W[0] * F[2])
+    M2 = -P[P_KR] * eR2 - P[P_KW] * W[2] + (W[0] * F[1] - W[1] * F[0])
+    if P[P_L1] != 0.0:  # L1: f_ad = −m (Cσ̂_v · Re₃), M_ad = −J Cσ̂_Ω
+        f -= m * (aug[0] * R[0, 2] + aug[1] * R[1, 2] + aug[2] * R[2, 2])
+        tmp[0], tmp[1], tmp[2] = aug[3], aug[4], aug[5]
+        inertia_times(th, tmp, F)
+        M0, M1, M2 = M0 - F[0], M1 - F[1], M2 - F[2]
+    for i in range(4):
+        u[i] = Ainv[i, 0] * f + Ainv[i, 1] * M0 + Ainv[i, 2] * M1 + Ainv[i, 3] * M2
+
+
+def l1_update(x, u, th, P, A, a_s, w_c, h, z_hat, sigma, filt, R, tmp):
+    """One L1 step (laws.l1.step, written out): from the state x (4, 3) measured at a step's start and the thrusts
+    u (4,) applied over it, advance the predictor ẑ (6,), the piecewise-constant estimate σ̂ (6,) and the filtered
+    C σ̂ (6,) in place by h [s] (T_s = h). A (4, 4) the allocation ([f, M] = A u); tmp (12,) scratch."""
+    rodrigues(x[2], R)
+    g, m = P[P_G], th[0]
+    f = A[0, 0] * u[0] + A[0, 1] * u[1] + A[0, 2] * u[2] + A[0, 3] * u[3]
+    for i in range(3):
+        tmp[3 + i] = A[1 + i, 0] * u[0] + A[1 + i, 1] * u[1] + A[1 + i, 2] * u[2] + A[1 + i, 3] * u[3]
+    W = x[3]
+    # known angular acceleration J⁻¹(M − Ω×JΩ): J Ω into tmp[6:9], then solve J a = b by Cramer's rule
+    inertia_times(th, W, tmp[6:9])
+    b0 = tmp[3] - (W[1] * tmp[8] - W[2] * tmp[7])
+    b1 = tmp[4] - (W[2] * tmp[6] - W[0] * tmp[8])
+    b2 = tmp[5] - (W[0] * tmp[7] - W[1] * tmp[6])
+    xx, yy, zz, xy, xz, yz = th[1], th[2], th[3], th[4], th[5], th[6]
+    det = xx * (yy * zz - yz * yz) - xy * (xy * zz - yz * xz) + xz * (xy * yz - yy * xz)
+    k3 = ((yy * zz - yz * yz) * b0 - (xy * zz - xz * yz) * b1 + (xy * yz - xz * yy) * b2) / det
+    k4 = (-(xy * zz - yz * xz) * b0 + (xx * zz - xz * xz) * b1 - (xx * yz - xz * xy) * b2) / det
+    k5 = ((xy * yz - yy * xz) * b0 - (xx * yz - xy * xz) * b1 + (xx * yy - xy * xy) * b2) / det
+    e = math.exp(a_s * h)
+    gain = -(a_s / (e - 1.0)) * e
+    alpha = 1.0 - math.exp(-w_c * h)
+    for i in range(6):
+        z = x[1, i] if i < 3 else W[i - 3]
+        err = z_hat[i] - z
+        sg = gain * err
+        if i < 3:
+            known = (f / m) * R[i, 2] - (g if i == 2 else 0.0)
+        else:
+            known = k3 if i == 3 else (k4 if i == 4 else k5)
+        z_hat[i] = z_hat[i] + h * (known + sg + a_s * err)
+        sigma[i] = sg
+        filt[i] = filt[i] + alpha * (sg - filt[i])
