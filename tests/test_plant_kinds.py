@@ -90,7 +90,7 @@ def test_each_kind_accepts_exactly_its_declared_keys():
 
 def test_event_kinds_come_from_the_plant_kinds():
     assert set(sc.EVENT_KINDS) == {e.name for k in kinds.built_in().values() for e in k.events}
-    assert kinds.accepting("payload_mass") == (("arm", "manipulator"), "mujoco")
+    assert kinds.accepting("payload_mass") == (("arm", "manipulator", "quadrotor"), "mujoco")
     assert kinds.accepting("constant_force")[1] is None
 
 

@@ -313,4 +313,6 @@ def docs_table() -> str:
 
 
 if __name__ == "__main__":  # `python -m adaptive_mj.plants.kinds`: the law-kinds block of docs/SCENARIOS.md
-    print(docs_table())
+    from adaptive_mj.plants.kinds import docs_table as table  # the registry the plant modules fill, not __main__'s
+
+    print(table())

@@ -185,7 +185,8 @@ class QuadrotorPlant:
             mujoco.mj_forward(m, d)
         self._crash = None
         self._z0 = float(x0[0, 2])
-        self._airborne = False
+        # in the air from the start (clear of the ground and AIRBORNE_RISE up), or once it has risen that much
+        self._airborne = self._touching() is None and self._z0 > AIRBORNE_RISE
 
     def measure(self, d: mujoco.MjData, x: np.ndarray) -> None:
         """Fill x (4, 3) from MjData (inside the control callback)."""
