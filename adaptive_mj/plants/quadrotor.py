@@ -15,9 +15,11 @@ How the loop sees it (the plant protocol, adaptive_mj.plants.protocol):
               down); d [N] a constant external force in the world frame (dx, dy, dz; an external_force event's)
               Every number comes from the compiled model (`truth`), none is typed.
 
-A crash ends the run failed (`termination`, asked after every physics step): the vehicle (or its payload)
-touching the ground after it has been airborne (AIRBORNE_RISE above where it started), its centre below the
-ground plane, or a tilt past plant.crash_tilt. Its events (wind, a rotor's efficiency, an external force, a
+A crash ends the run failed (`termination`, asked after every physics step; `crash_check`): the vehicle down to
+its ground clearance (the height at which it would rest level on the ground with its payload) after it has been
+airborne (AIRBORNE_RISE above where it started), its centre below the ground plane, or a tilt past
+plant.crash_tilt. The check reads the body's height and attitude only (no contact list), so the compiled
+callback makes the same one. Its events (wind, a rotor's efficiency, an external force, a
 payload released) are below.
 """
 from __future__ import annotations
@@ -51,14 +53,42 @@ INERTIA_NAMES = ("Jxx", "Jyy", "Jzz", "Jxy", "Jxz", "Jyz")
 PARAM_NAMES = ("m",) + INERTIA_NAMES + ("dx", "dy", "dz")
 PARAM_UNITS = {"m": "kg", **{n: "kg m²" for n in INERTIA_NAMES}, "dx": "N", "dy": "N", "dz": "N"}
 CRASH_TILT_DEG = 80.0  # plant.crash_tilt's default [deg]
-AIRBORNE_RISE = 0.05  # [m] above its start the vehicle counts as airborne: touching the ground after is a crash
+AIRBORNE_RISE = 0.05  # [m] above its start the vehicle counts as airborne: down to the ground after is a crash
+
+
+def rotvec_into(qw, qx, qy, qz, out):
+    """out (3,) = φ = angle · axis of the unit quaternion (w, x, y, z), the angle taken the shorter way round
+    (in [−π, π], as MuJoCo's mju_quat2Vel): plain scalar code, so the Python step and the compiled callback
+    measure the same bits."""
+    n = math.sqrt(qx * qx + qy * qy + qz * qz)
+    if n < 1e-15:
+        out[0] = 0.0
+        out[1] = 0.0
+        out[2] = 0.0
+        return
+    angle = 2.0 * math.atan2(n, qw)
+    if angle > math.pi:
+        angle -= 2.0 * math.pi
+    k = angle / n
+    out[0] = qx * k
+    out[1] = qy * k
+    out[2] = qz * k
+
+
+def measure_into(qpos, qvel, qadr, dadr, x):
+    """x (4, 3) = [p; v; φ; Ω] of the free joint at qpos[qadr:qadr + 7], qvel[dadr:dadr + 6] (plain code: the
+    compiled callback runs it too)."""
+    for i in range(3):
+        x[0, i] = qpos[qadr + i]
+        x[1, i] = qvel[dadr + i]
+        x[3, i] = qvel[dadr + 3 + i]
+    rotvec_into(qpos[qadr + 3], qpos[qadr + 4], qpos[qadr + 5], qpos[qadr + 6], x[2])
 
 
 def rotation_vector(quat: np.ndarray) -> np.ndarray:
-    """(3,) φ = angle · axis of the unit quaternion (w, x, y, z), angle in [0, π] [rad] (MuJoCo's mju_quat2Vel at
-    dt = 1, which takes the shorter way round)."""
+    """(3,) φ of the unit quaternion (w, x, y, z) [rad] (rotvec_into)."""
     out = np.zeros(3)
-    mujoco.mju_quat2Vel(out, np.asarray(quat, dtype=float), 1.0)
+    rotvec_into(float(quat[0]), float(quat[1]), float(quat[2]), float(quat[3]), out)
     return out
 
 
@@ -70,6 +100,66 @@ def quaternion(phi: np.ndarray) -> np.ndarray:
     if angle > 0:
         mujoco.mju_axisAngle2Quat(q, phi / angle, angle)
     return q
+
+
+NO_CRASH, CRASH_TILT_CODE, CRASH_BELOW, CRASH_GROUND = 0, 1, 2, 3
+
+
+def crash_check(z, qw, qx, qy, qz, airborne, z0, clearance, cos_tilt):
+    """(code, value, airborne) after a physics step, from the body's height z [m] and attitude quaternion: a tilt
+    past the bound (cos of the tilt = R[2, 2] = w² − x² − y² + z² as mju_quat2Mat writes it, below cos_tilt; value:
+    that cosine), the centre below the ground plane (value: z), or, once airborne, the vehicle down to its ground
+    clearance (value: z); NO_CRASH otherwise. airborne: risen AIRBORNE_RISE above its start. Plain scalar code: the
+    Python step and the compiled callback both run it."""
+    r22 = qw * qw - qx * qx - qy * qy + qz * qz
+    if r22 < cos_tilt:
+        return CRASH_TILT_CODE, r22, airborne
+    if z < 0.0:
+        return CRASH_BELOW, z, airborne
+    if airborne and z <= clearance:
+        return CRASH_GROUND, z, airborne
+    return NO_CRASH, 0.0, airborne or z > z0 + AIRBORNE_RISE
+
+
+def crash_text(code: int, value: float, t: float, crash_tilt: float, speed: float) -> str:
+    """The reason a crash gives (crash_check's code and value at time t [s]; speed [m/s] the body's)."""
+    if code == CRASH_TILT_CODE:
+        tilt = math.degrees(math.acos(max(-1.0, min(1.0, value))))
+        return f"crashed at t = {t:.4g} s: tilted {tilt:.1f} deg, past plant.crash_tilt = {crash_tilt:g} deg"
+    if code == CRASH_BELOW:
+        return f"crashed at t = {t:.4g} s: the body's centre is {-value:.3g} m below the ground plane"
+    return f"crashed at t = {t:.4g} s: hit the ground at {speed:.3g} m/s (its centre {value:.3g} m up)"
+
+
+def ground_clearance(model: mujoco.MjModel, root: int) -> float:
+    """[m] how high the body's origin sits when the vehicle rests level on the ground plane (z = 0): the deepest
+    point below it of the colliding geoms of its subtree at the model's qpos0 (a cable payload hanging straight
+    down). Spheres, capsules, ellipsoids, boxes and cylinders by their extent along −z."""
+    data = scratch_data(model)
+    mujoco.mj_resetData(model, data)
+    mujoco.mj_kinematics(model, data)
+    bodies = set(subtree_bodies(model, root))
+    z0, deepest = float(data.xpos[root][2]), 0.0
+    for g in range(model.ngeom):
+        if int(model.geom_bodyid[g]) not in bodies or not (model.geom_contype[g] or model.geom_conaffinity[g]):
+            continue
+        Rz = data.geom_xmat[g].reshape(3, 3)[2]  # the world z row: each local axis' z component
+        size, kind = model.geom_size[g], model.geom_type[g]
+        T = mujoco.mjtGeom
+        if kind == T.mjGEOM_SPHERE:
+            ext = size[0]
+        elif kind == T.mjGEOM_CAPSULE:
+            ext = size[0] + abs(Rz[2]) * size[1]
+        elif kind == T.mjGEOM_ELLIPSOID:
+            ext = math.sqrt(sum((Rz[i] * size[i]) ** 2 for i in range(3)))
+        elif kind == T.mjGEOM_BOX:
+            ext = sum(abs(Rz[i]) * size[i] for i in range(3))
+        elif kind == T.mjGEOM_CYLINDER:
+            ext = abs(Rz[2]) * size[1] + size[0] * math.sqrt(max(0.0, 1.0 - Rz[2] ** 2))
+        else:
+            ext = float(model.geom_rbound[g])
+        deepest = max(deepest, z0 - (float(data.geom_xpos[g][2]) - ext))
+    return deepest
 
 
 def subtree_bodies(model: mujoco.MjModel, root: int) -> list[int]:
@@ -154,8 +244,8 @@ class QuadrotorPlant:
         self._airborne = False
         self._warnings0 = self.data.warning.number.copy()
         self._warning_total0 = int(self._warnings0.sum())
-        ground = [g for g in range(model.ngeom) if model.geom_bodyid[g] == 0]
-        self._ground = frozenset(ground)
+        self.clearance = ground_clearance(model, self.body)
+        self.cos_tilt = math.cos(math.radians(self.crash_tilt))
 
     # --- the protocol's members --------------------------------------------------------
     @property
@@ -185,17 +275,12 @@ class QuadrotorPlant:
             mujoco.mj_forward(m, d)
         self._crash = None
         self._z0 = float(x0[0, 2])
-        # in the air from the start (clear of the ground and AIRBORNE_RISE up), or once it has risen that much
-        self._airborne = self._touching() is None and self._z0 > AIRBORNE_RISE
+        # in the air from the start (AIRBORNE_RISE above where it would rest), or once it has risen that much
+        self._airborne = self._z0 > self.clearance + AIRBORNE_RISE
 
     def measure(self, d: mujoco.MjData, x: np.ndarray) -> None:
         """Fill x (4, 3) from MjData (inside the control callback)."""
-        af = self.airframe
-        q, v = d.qpos, d.qvel
-        x[0] = q[af.qpos:af.qpos + 3]
-        x[1] = v[af.qvel:af.qvel + 3]
-        mujoco.mju_quat2Vel(x[2], q[af.qpos + 3:af.qpos + 7], 1.0)
-        x[3] = v[af.qvel + 3:af.qvel + 6]
+        measure_into(d.qpos, d.qvel, self.airframe.qpos, self.airframe.qvel, x)
 
     def observe(self) -> np.ndarray:
         x = np.empty((4, 3))
@@ -237,6 +322,28 @@ class QuadrotorPlant:
     def instability(self) -> str | None:
         return new_warnings(self.data, self._warning_total0, self._warnings0)
 
+    def crashed(self, text: str, *, airborne: bool) -> None:
+        """The compiled callback found a crash (adaptive_mj.sim.native_flight): termination() says so from now on."""
+        self._crash, self._airborne = text, airborne
+
+    # --- the native path's (adaptive_mj.sim.native_flight) ------------------------------
+    @contextlib.contextmanager
+    def controlled_natively(self, cfunc) -> Iterator[None]:
+        with control_callback(cfunc.ctypes):
+            yield
+
+    def native_prestep(self) -> None:
+        """The external force and torque held in xfrc_applied (events change them between chunks only)."""
+        self.data.xfrc_applied[self.body, :3] = self.external_force
+        self.data.xfrc_applied[self.body, 3:] = self.external_torque
+
+    def native_poststep(self) -> None:
+        return None
+
+    def step_native(self, nstep: int) -> None:
+        self.native_prestep()
+        mujoco.mj_step(self.model, self.data, nstep=nstep)
+
     def termination(self) -> str | None:
         """The crash that ends the run as failed ("crashed at t = … s: …"), or None."""
         return self._crash
@@ -266,36 +373,19 @@ class QuadrotorPlant:
         return np.broadcast_to(self.true_theta()[0] * np.eye(3), (n, 3, 3)).copy()
 
     # --- crashes -----------------------------------------------------------------------
-    def _touching(self) -> str | None:
-        """The first contact between the ground and the vehicle or its payload, as text, or None."""
-        d, m = self.data, self.model
-        for i in range(d.ncon):
-            c = d.contact[i]
-            g1, g2 = int(c.geom1), int(c.geom2)
-            other = g2 if g1 in self._ground else g1 if g2 in self._ground else None
-            if other is not None and int(m.geom_bodyid[other]) in self.subtree:
-                return mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, other) or f"geom {other}"
-        return None
-
     def _check_crash(self) -> None:
         if self._crash is not None:
             return
         d, af = self.data, self.airframe
-        t = float(d.time)
-        R = d.xmat[self.body].reshape(3, 3)
-        tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(R[2, 2])))))
-        z = float(d.qpos[af.qpos + 2])
-        touching = self._touching()
-        if tilt > self.crash_tilt:
-            self._crash = (f"crashed at t = {t:.4g} s: tilted {tilt:.1f} deg, past plant.crash_tilt = "
-                           f"{self.crash_tilt:g} deg")
-        elif z < 0.0:
-            self._crash = f"crashed at t = {t:.4g} s: the body's centre is {-z:.3g} m below the ground plane"
-        elif touching is not None and self._airborne:
-            speed = float(np.linalg.norm(d.qvel[af.qvel:af.qvel + 3]))
-            self._crash = f"crashed at t = {t:.4g} s: {touching} hit the ground at {speed:.3g} m/s"
-        elif z > self._z0 + AIRBORNE_RISE:
-            self._airborne = True
+        q = d.qpos
+        code, value, self._airborne = crash_check(q[af.qpos + 2], q[af.qpos + 3], q[af.qpos + 4], q[af.qpos + 5],
+                                                  q[af.qpos + 6], self._airborne, self._z0, self.clearance,
+                                                  self.cos_tilt)
+        if code != NO_CRASH:
+            v = d.qvel
+            vx, vy, vz = v[af.qvel], v[af.qvel + 1], v[af.qvel + 2]
+            speed = (vx * vx + vy * vy + vz * vz) ** 0.5
+            self._crash = crash_text(code, value, float(d.time), self.crash_tilt, speed)
 
     # --- what events change ------------------------------------------------------------
     def body_id(self, name: str) -> int:

@@ -438,6 +438,8 @@ def native_steps(plant: Plant, nc: ContextOwner, rows: Rows, queue: EventQueue, 
     (status, reason). The callback must be installed and the run's context bound by the driver."""
     while rows.k < rows.n:
         k, t_k = rows.k, plant.time
+        if has_joints(plant) and nc.mass_rows(0) is None and queue.is_due(t_k):
+            rows.flush(k)  # V of the rows so far with the inertia they had (the Python path's order), M not recorded
         queue.due(t_k, plant, rows.sink)
         n = min(nc.max_rows, rows.n - k, rows.every - k % rows.every)
         to_event = queue.steps_to_next(t_k)
@@ -453,11 +455,20 @@ def native_steps(plant: Plant, nc: ContextOwner, rows: Rows, queue: EventQueue, 
             rows.put_block(block, theta_now, done, mass=nc.mass_rows(done))
             t_bad = block[0][-1] if done else t_k
             return Status.DIVERGED, f"{warning} in the step from t={t_bad:.6g} s (MuJoCo reset the state)"
+        crash = nc.crash()  # a plant that crashes (a quadrotor): the rows up to the step that crashed
+        if crash is not None:
+            keep, reason = crash
+            rows.put_block(nc.finish(keep, partial=True), theta_now, keep)
+            return Status.FAILED, reason
         block = nc.finish(n)
         bad, reason = first_divergence(plant, block[1], block[2], block[5], nc.theta, state_bound)
         rows.put_block(block, theta_now, n if bad is None else bad, mass=nc.mass_rows(n))
         if bad is not None:
             return Status.DIVERGED, reason
+        nc.end_of_chunk()
+        ended = termination(plant)
+        if ended:
+            return Status.FAILED, ended
     return Status.OK, ""
 
 
@@ -467,7 +478,9 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
     """The native controller for this run, or None for the Python path (native False, or not supported;
     a law plugin numba cannot compile falls back with one line on stderr)."""
     make: Callable[..., ContextOwner]
-    if plant.joint_shape:  # a manipulator: its own compiled callback (regressor inside)
+    if getattr(plant, "state_names", ()):  # a quadrotor: its own compiled callback (the flight kernel inside)
+        from adaptive_mj.sim.native_flight import NativeFlightController as make, supported
+    elif plant.joint_shape:  # a manipulator: its own compiled callback (regressor inside)
         from adaptive_mj.sim.native_manipulator import NativeManipulatorController as make, supported
     else:
         from adaptive_mj.sim.native import NativeController as make, supported

@@ -239,6 +239,14 @@ class ContextOwner:
         c = self.context[0]
         return int(c["row"]) + (1 if int(c["stage"]) != 0 else 0)
 
+    def crash(self) -> tuple[int, str] | None:
+        """(rows to keep, reason) where the plant crashed in the chunk just stepped (native_flight), else None."""
+        return None
+
+    def end_of_chunk(self) -> None:
+        """After a whole chunk, before the loop asks the plant's termination(): what the plant must know of it."""
+        return None
+
     def mass_rows(self, rows: int) -> np.ndarray | None:
         """(rows, m, m) the joint-space inertia at each step just taken, where the callback recorded it
         (the manipulator's, for V); None otherwise (1-DOF plants: V needs no M)."""
