@@ -1,6 +1,7 @@
 """The quadrotor's compiled callback (adaptive_mj.sim.native_flight) against the Python callback: the same rows,
-bit for bit, through noise, a control delay, sampled-data control, events that change forces, wind and mass, the
-robust modifications, and crashes (mid-chunk and at a chunk's end)."""
+bit for bit, for the three flight laws (L1's filters included), through noise, a control delay, sampled-data
+control, events that change forces, wind and mass, the robust modifications, and crashes (mid-chunk and at a
+chunk's end)."""
 from __future__ import annotations
 
 import numpy as np
@@ -19,12 +20,16 @@ CASES = {
     "noise, delay, events": ("quadrotor_lemniscate", [NOISE, "simulation.control_delay=7", FORCES,
                                                       "simulation.duration=4"]),
     "sampled at 10 ms": ("quadrotor_wind_gust", ["control.period=0.01", "simulation.duration=3", "events=[]"]),
-    "geometric, rotor loss": ("quadrotor_rotor_loss", ["law=geometric", "simulation.duration=3",
-                                                       "events=[{t=1.0, kind='rotor_efficiency', rotor=2, value=0.6}]"]),
+    "geometric, rotor loss": ("quadrotor_rotor_loss", [
+        "law=geometric", "simulation.duration=3", "events=[{t=1.0, kind='rotor_efficiency', rotor=2, value=0.6}]"]),
     "leakage, projection, dead-zone": ("quadrotor_hover_payload", [
         "law.sigma=0.01", "law.e_modification=0.1", "law.projection={m=[0.02, 0.035]}",
         "law.dead_zone={width=0.001}", "simulation.duration=4"]),
     "cable payload": ("quadrotor_cable_payload", ["simulation.duration=3"]),
+    "l1, noise, delay, events": ("quadrotor_lemniscate", ["law=l1_geometric", NOISE, "simulation.control_delay=5",
+                                                          FORCES, "simulation.duration=4"]),
+    "l1, rotor loss": ("quadrotor_rotor_loss", ["law=l1_geometric", "simulation.duration=3",
+                                                "events=[{t=1.0, kind='rotor_efficiency', rotor=3, value=0.7}]"]),
     "crash mid-chunk": ("quadrotor_lemniscate", ["plant.payload_mass=0.05", "simulation.duration=5"]),
     "tilt crash": ("quadrotor_rotor_loss", ["plant.crash_tilt=2", "simulation.duration=3",
                                             "events=[{t=0.5, kind='rotor_efficiency', rotor=1, value=0.7}]"]),

@@ -150,8 +150,8 @@ def test_the_scalar_kernel_is_the_geometric_and_adaptive_laws_written_with_numpy
                 cmd = geo.geometric(x[0], x[1], R, x[3], ref[:3], np.array([1.0, 0, 0]), gains, th[0], J, G)
             else:
                 c = P[fk.P_C]
-                force = geo.adaptive_force(x[0], x[1], ref[:3], th[0], th[7:], geo.MassGains(c, P[fk.P_K], 1 / law.G[0, 0],
-                                                                                             1 / law.G[0, 7]), G)
+                mass_gains = geo.MassGains(c, P[fk.P_K], 1 / law.G[0, 0], 1 / law.G[0, 7])
+                force = geo.adaptive_force(x[0], x[1], ref[:3], th[0], th[7:], mass_gains, G)
                 cmd = geo.attitude(force.F, R, x[3], np.array([1.0, 0, 0]), gains, J)
                 np.testing.assert_allclose(rate[[0, 7, 8, 9]], [force.m_rate, *force.d_rate], rtol=1e-12, atol=1e-18)
             np.testing.assert_allclose(A @ u, [cmd.f, *cmd.M], rtol=1e-10, atol=1e-15)
@@ -176,7 +176,8 @@ def test_the_scalar_l1_update_is_laws_l1_step():
 
 
 @pytest.mark.parametrize("override, words", [
-    ("events=[{t=1, kind='rotor_efficiency', rotor=1, value=1.5}]", "events[0].value must be a thrust factor in (0, 1]"),
+    ("events=[{t=1, kind='rotor_efficiency', rotor=1, value=1.5}]",
+     "events[0].value must be a thrust factor in (0, 1]"),
     ("events=[{t=1, kind='rotor_efficiency', rotor=5, value=0.5}]", "events[0].rotor must be a rotor number 1 to 4"),
     ("plant.wind=[1.0, 2.0]", "plant.wind must be"),
     ("reference.kind='cosine'", "reference.kind must be one of 'hover', 'lemniscate'"),

@@ -146,8 +146,8 @@ class FlightLaw:
         return None
 
     def native_params(self) -> dict:
-        """What the compiled callback takes: P, G, the allocation's inverse (adaptive_mj.sim.native_flight)."""
-        return {"P": self.P, "G": self.G, "Ainv": self.Ainv}
+        """What the compiled callback takes: P, G, the allocation and its inverse (adaptive_mj.sim.native_flight)."""
+        return {"P": self.P, "G": self.G, "Ainv": self.Ainv, "A": self.airframe.allocation}
 
     def feedback(self):
         return None
@@ -174,17 +174,18 @@ class L1GeometricLaw(FlightLaw):
     """The geometric controller plus L1 augmentation (adaptive_mj.laws.l1; flight_kernel.l1_update): the predictor,
     the piecewise-constant adaptation and the low-pass filter advance once per physics step (step_ends, from the
     state measured at the step's start and the thrusts applied over it: T_s = the physics step), so the
-    augmentation is held over each step's stages. Continuous control only (its filters integrate per step); the
-    Python callback only (its filters run between steps)."""
+    augmentation is held over each step's stages. Continuous control only (its filters integrate per step). The
+    compiled callback makes the same update at the next step's first stage, before the law runs
+    (adaptive_mj.sim.native_flight)."""
 
     a_s: float = -5.0
     w_c: float = 5.0
     has_filters: bool = True
-    native: bool = False
     l1: bool = True
 
     def __post_init__(self):
         super().__post_init__()
+        self.P[fk.P_AS], self.P[fk.P_WC] = self.a_s, self.w_c
         self.z_hat: np.ndarray | None = None
         self.sigma = np.zeros(6)
         self._theta: np.ndarray | None = None
@@ -208,8 +209,8 @@ class L1GeometricLaw(FlightLaw):
         assert self.z_hat is not None and self._theta is not None
         R, tmp = self._l1_scratch
         kernel("l1_update")(np.ascontiguousarray(xs[0], dtype=float), np.ascontiguousarray(us[0], dtype=float),
-                            self._theta, self.P, self.airframe.allocation, self.a_s, self.w_c, h, self.z_hat,
-                            self.sigma, self.aug, R, tmp)
+                            self._theta, self.P, np.ascontiguousarray(self.airframe.allocation), self.a_s, self.w_c, h,
+                            self.z_hat, self.sigma, self.aug, R, tmp)
 
 
 # --- the law kinds: keys, readers, builders -----------------------------------------------

@@ -24,8 +24,8 @@ from adaptive_mj.laws.common import modify_rate
 
 # P's layout: the law's numbers, one float64 array (the native callback reads it by address)
 P_MODE, P_KX, P_KV, P_KR, P_KW, P_C, P_K, P_G = range(8)
-P_DZ_WIDTH, P_DZ_ON_S, P_SIGMA, P_EMOD, P_ADAPT, P_L1 = range(8, 14)
-P_SIZE = 14
+P_DZ_WIDTH, P_DZ_ON_S, P_SIGMA, P_EMOD, P_ADAPT, P_L1, P_AS, P_WC = range(8, 16)
+P_SIZE = 16
 MODE_GEOMETRIC, MODE_ADAPTIVE = 0.0, 1.0
 
 

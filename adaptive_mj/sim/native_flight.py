@@ -10,7 +10,8 @@ adaptive_mj.sim.stage.control_stage with this shape's pieces:
     _apply_control  ctrl of the four rotors
     _record_row     t, the true x (4, 3), the thrusts (4,), s (3,), the reference (5, 3), θ̂
 The external force and torque of the events are held in xfrc_applied by the plant between chunks (events apply
-only there). L1 augmentation keeps filters between steps and runs on the Python callback.
+only there). L1 augmentation's filters advance at each step's first stage from the last step's measured state and
+thrusts (the Python path's step_ends, one step later and before anything reads them).
 tests/test_native_flight.py shows the two paths give the same rows bit for bit.
 """
 from __future__ import annotations
@@ -39,6 +40,7 @@ if TYPE_CHECKING:
     flight_law: Any
     measure_into: Any
     crash_check: Any
+    l1_update: Any
 
 _i8, _f8 = np.int64, np.float64
 CONTEXT = np.dtype([
@@ -58,6 +60,8 @@ CONTEXT = np.dtype([
     ("rec_t", _i8), ("rec_x", _i8), ("rec_u", _i8), ("rec_s", _i8), ("rec_ref", _i8), ("rec_theta", _i8),
     ("x", _i8), ("act", _i8), ("lo", _i8), ("hi", _i8), ("P", _i8), ("G", _i8), ("Ainv", _i8), ("aug", _i8),
     ("R", _i8), ("F", _i8), ("tmp", _i8), ("u", _i8), ("s", _i8),
+    # L1 augmentation's filters (P[P_L1] != 0): the predictor, the estimate, the last step's measured x and thrusts
+    ("A", _i8), ("z_hat", _i8), ("sigma", _i8), ("x_prev", _i8), ("u_prev", _i8),
 ])
 _compiled: dict = {}
 
@@ -86,6 +90,20 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
     nth = ctx.nth
     th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
     stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
+    P = carray(fptr(ctx.P), flight_kernel.P_SIZE)  # noqa: F821 (injected)
+    if P[flight_kernel.P_L1] != 0.0 and stage == 0:  # L1: the last step's update (the Python path's step_ends)
+        z_hat, x_prev = carray(fptr(ctx.z_hat), 6), carray(fptr(ctx.x_prev), (4, 3))  # noqa: F821 (injected)
+        if ctx.step == 0:
+            for i in range(3):
+                z_hat[i] = x[1, i]
+                z_hat[3 + i] = x[3, i]
+        else:
+            l1_update(x_prev, carray(fptr(ctx.u_prev), 4), th, P, carray(fptr(ctx.A), (4, 4)),  # noqa: F821
+                      P[flight_kernel.P_AS], P[flight_kernel.P_WC], ctx.h, z_hat, carray(fptr(ctx.sigma), 6),  # noqa: F821
+                      carray(fptr(ctx.aug), 6), carray(fptr(ctx.R), (3, 3)), carray(fptr(ctx.tmp), 12))  # noqa: F821
+        for i in range(4):
+            for j in range(3):
+                x_prev[i, j] = x[i, j]
     r = carray(fptr(ctx.ref), (ctx.maxrows * ctx.nstages, 5, 3))[row * ctx.nstages + stage]  # noqa: F821
     u, s = carray(fptr(ctx.u), 4), carray(fptr(ctx.s), 3)  # noqa: F821 (injected)
     flight_law(x, r, th, carray(fptr(ctx.P), flight_kernel.P_SIZE), carray(fptr(ctx.G), (4, nth)),  # noqa: F821
@@ -104,8 +122,11 @@ def _apply_control(ctx, io, row, u):
     base, mbase, off = io
     ctrl = carray(fptr(pointer_at(base, off.ctrl)), ctx.nu)  # noqa: F821 (injected)
     act = carray(iptr(ctx.act), 4)  # noqa: F821 (injected)
+    u_prev = carray(fptr(ctx.u_prev), 4)  # noqa: F821 (injected)
     for i in range(4):
         ctrl[act[i]] = u[i]
+        if ctx.stage == 0:  # the step's applied thrusts, for L1's update at the next step
+            u_prev[i] = u[i]
 
 
 def _record_row(ctx, io, row, u, theta):
@@ -143,14 +164,15 @@ def compiled():
 
     off = offsets()
     key = source_key(native_step.callback_factory, stage_code.control_stage, _law_stage, _apply_control, _record_row,
-                     flight_kernel.flight_law, quad.measure_into, quad.crash_check, stage_code.stage_estimate,
-                     stage_code.end_stage, context_address, extra=(off, numba.__version__, "flight"))
+                     flight_kernel.flight_law, flight_kernel.l1_update, quad.measure_into, quad.crash_check,
+                     stage_code.stage_estimate, stage_code.end_stage, context_address, extra=(off, numba.__version__, "flight"))
 
     def pieces(common: dict[str, Any], tag: str) -> dict[str, Any]:
         inline = inlined(numba)
-        shape = {"flight_law": jit_tree(flight_kernel.flight_law, numba.njit, tag=tag, inner=inline),
-                 "measure_into": jit_tree(quad.measure_into, inline, tag=tag),
-                 "crash_check": jit_tree(quad.crash_check, inline, tag=tag)}
+        shape: dict[str, Any] = {"flight_law": jit_tree(flight_kernel.flight_law, numba.njit, tag=tag, inner=inline),
+                                 "l1_update": jit_tree(flight_kernel.l1_update, numba.njit, tag=tag, inner=inline),
+                                 "measure_into": jit_tree(quad.measure_into, inline, tag=tag),
+                                 "crash_check": jit_tree(quad.crash_check, inline, tag=tag)}
         return {"law_stage": jit_tree(_law_stage, numba.njit, tag=tag, **common, **shape),
                 "apply_control": jit_tree(_apply_control, inline, tag=tag, **common),
                 "record_row": jit_tree(_record_row, inline, tag=tag, **common, **shape)}
@@ -161,8 +183,7 @@ def compiled():
 
 def supported(plant: Plant, law: Law) -> bool:
     """Native path for the quadrotor: a QuadrotorPlant compiled with a userdata slot, a flight law the kernel
-    computes (law.native: geometric, geometric_adaptive; not L1, whose filters run between steps), RK4 or a
-    one-stage integrator."""
+    computes (law.native: geometric, geometric_adaptive, l1_geometric), RK4 or a one-stage integrator."""
     from adaptive_mj.laws.flight import FlightLaw
     from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS
     from adaptive_mj.plants.quadrotor import QuadrotorPlant
@@ -208,6 +229,8 @@ class NativeFlightController(ContextOwner):
             "act": np.ascontiguousarray(plant.airframe.actuators, dtype=np.int64), "lo": f64(lo), "hi": f64(hi),
             "P": f64(p["P"]), "G": f64(p["G"]), "Ainv": f64(p["Ainv"]), "aug": np.zeros(6), "R": np.zeros((3, 3)),
             "F": np.zeros(3), "tmp": np.zeros(12), "u": np.zeros(4), "s": np.zeros(3),
+            "A": f64(p["A"]), "z_hat": np.zeros(6), "sigma": np.zeros(6), "x_prev": np.zeros((4, 3)),
+            "u_prev": np.zeros(4),
         }
         ctx = np.zeros(1, dtype=CONTEXT)
         c = ctx[0]
