@@ -165,7 +165,8 @@ def compiled():
     off = offsets()
     key = source_key(native_step.callback_factory, stage_code.control_stage, _law_stage, _apply_control, _record_row,
                      flight_kernel.flight_law, flight_kernel.l1_update, quad.measure_into, quad.crash_check,
-                     stage_code.stage_estimate, stage_code.end_stage, context_address, extra=(off, numba.__version__, "flight"))
+                     stage_code.stage_estimate, stage_code.end_stage, context_address,
+                     extra=(off, numba.__version__, "flight"))
 
     def pieces(common: dict[str, Any], tag: str) -> dict[str, Any]:
         inline = inlined(numba)
