@@ -34,6 +34,7 @@ import time
 from pathlib import Path
 
 import mujoco
+import numpy as np
 
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
@@ -41,12 +42,18 @@ from adaptive_mj.sim.loop import run
 from adaptive_mj.study.parallel import Job, run_jobs
 
 REPO = Path(__file__).resolve().parents[1]
-CASES = {"heave": "heave_tracking", "arm": "arm_payload_swap", "ur5e": "ur5e_payload_swap"}
+CASES = {"heave": "heave_tracking", "arm": "arm_payload_swap", "ur5e": "ur5e_payload_swap",
+         "quadrotor": "quadrotor_lemniscate"}
+
+
+def timestep(name: str) -> float:
+    """The scenario's physics step [s] (1 ms but on the quadrotor: 2 ms)."""
+    return float(sc.load(REPO / "scenarios" / f"{name}.toml").simulation.timestep or 0.001)
 
 
 def _scenario(name: str, steps: int, extra=()):
     return sc.load(REPO / "scenarios" / f"{name}.toml",
-                   overrides=[f"simulation.duration={steps * 0.001!r}", "events=[]", *extra])
+                   overrides=[f"simulation.duration={steps * timestep(name)!r}", "events=[]", *extra])
 
 
 # the 6-joint arm as a real robot sees it (row g)
@@ -58,13 +65,40 @@ REAL_CONDITIONS = ("noise.std={q=1e-4}", "sensors={encoder_counts=131072, veloci
 def bare(name: str, steps: int, extra=()) -> float:
     setup = build(_scenario(name, steps, extra))
     m, d = setup.plant.model, setup.plant.data
+    airframe = getattr(setup.plant, "airframe", None)
+    if airframe is not None:
+        return _bare_hover(setup, steps)
     t0 = time.perf_counter()
     mujoco.mj_step(m, d, nstep=steps)
     return (time.perf_counter() - t0) / steps * 1e6
 
 
-def loop(name: str, steps: int, native: bool, *, period: float | None = None) -> float:
-    scn = _scenario(name, steps)
+HOVER_CHUNK = 250  # [steps] of open-loop hover before the quadrotor's state is put back (0.5 s: it stays aloft)
+
+
+def _bare_hover(setup, steps: int) -> float:
+    """µs per mj_step of the quadrotor on its hover thrusts (m g / 4 each, the true m) from the run's initial state,
+    contacts and air on as in the closed loop: in chunks of HOVER_CHUNK steps, the state put back between them
+    (open loop the vehicle tips over and falls within seconds, and its ground contacts would cost more than
+    flight); only the mj_step calls are timed."""
+    m, d, plant = setup.plant.model, setup.plant.data, setup.plant
+    d.ctrl[plant.airframe.actuators] = plant.true_theta()[0] * -m.opt.gravity[2] / 4
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    x0 = np.empty(mujoco.mj_stateSize(m, spec))
+    mujoco.mj_getState(m, d, x0, spec)
+    elapsed, done = 0.0, 0
+    while done < steps:
+        n = min(HOVER_CHUNK, steps - done)
+        mujoco.mj_setState(m, d, x0, spec)
+        t0 = time.perf_counter()
+        mujoco.mj_step(m, d, nstep=n)
+        elapsed += time.perf_counter() - t0
+        done += n
+    return elapsed / steps * 1e6
+
+
+def loop(name: str, steps: int, native: bool, *, period: float | None = None, extra=()) -> float:
+    scn = _scenario(name, steps, extra)
     setup = build(scn)
     t0 = time.perf_counter()
     run(setup.plant, setup.law, setup.reference, duration=scn.simulation.duration, theta_hat0=setup.theta_hat0,
@@ -206,9 +240,12 @@ def main() -> None:
             rows["b_py_python_callback"].append(loop(name, max(2000, args.steps // 5), False))
             c, size = logged(name, args.steps, None)
             rows["c_logged_100Hz"].append(c)
-            sizes.append(size / (args.steps * 0.001))
+            sizes.append(size / (args.steps * timestep(name)))
             rows["d_logged_every_step"].append(logged(name, args.steps, 1000.0)[0])
             rows["f_sampled_250Hz"].append(loop(name, args.steps, True, period=0.004))
+            if plant == "quadrotor":  # the other two flight laws, compiled (the row b law is geometric_adaptive)
+                rows.setdefault("b_geometric", []).append(loop(name, args.steps, True, extra=("law=geometric",)))
+                rows.setdefault("b_l1_geometric", []).append(loop(name, args.steps, True, extra=("law=l1_geometric",)))
             if plant == "ur5e":
                 rows.setdefault("a_friction", []).append(bare(name, args.steps, ("plant.frictionloss=0.5",)))
                 rows.setdefault("g_real_conditions_logged_100Hz", []).append(
@@ -222,12 +259,14 @@ def main() -> None:
         stats = {k: med(v) for k, v in rows.items()}
         a = stats["a_bare"]["median"]
         out["models"][plant] = {
-            "integrator": "RK4", "us_per_step": stats,
+            "integrator": "RK4", "timestep": timestep(name), "us_per_step": stats,
             "ratios": {"b/a": stats["b_closed_loop"]["median"] / a,
                        "b_py/a": stats["b_py_python_callback"]["median"] / a,
                        "c/a": stats["c_logged_100Hz"]["median"] / a,
                        "d/a": stats["d_logged_every_step"]["median"] / a,
                        "f/a": stats["f_sampled_250Hz"]["median"] / a,
+                       **({"b_geometric/a": stats["b_geometric"]["median"] / a,
+                           "b_l1/a": stats["b_l1_geometric"]["median"] / a} if "b_geometric" in stats else {}),
                        **({"g/a": stats["g_real_conditions_logged_100Hz"]["median"] / a,
                            "g/a_friction": stats["g_real_conditions_logged_100Hz"]["median"]
                            / stats["a_friction"]["median"]} if "a_friction" in stats else {}),
@@ -268,7 +307,7 @@ def main() -> None:
 def _print_models(out: dict) -> None:
     print(f"cores: {out['cores']}; {out['steps']} steps per figure; median [min, max] of {out['reps']} reps")
     for plant, res in out["models"].items():
-        print(f"\n{plant} (RK4, 1 ms):")
+        print(f"\n{plant} (RK4, {res['timestep'] * 1000:g} ms):")
         for key, v in res["us_per_step"].items():
             print(f"  {key:24s} {v['median']:8.2f} µs/step  [{v['min']:.2f}, {v['max']:.2f}]")
         print("  ratios: " + ", ".join(f"{k} = {v:.2f}" for k, v in res["ratios"].items()))
