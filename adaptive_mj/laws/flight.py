@@ -220,9 +220,9 @@ KR = Key("kR", "number", "N m/rad", 7.8e-3, "> 0", "attitude gain k_R")
 KW = Key("kW", "number", "N m s/rad", 6.7e-4, "> 0", "body-rate gain k_Omega")
 LAMBDA = Key("lambda", "number", "1/s", 1.625, "> 0", "the surface's slope c: s = e_v + c e_x")
 K = Key("k", "number", "N s/m", 0.12, "> 0", "the gain on s in the force law F = m_hat w - d_hat - k s")
-GAMMA_M = Key("gamma_m", "number", "m² kg⁻¹ s⁻²", 800.0, "> 0",
+GAMMA_M = Key("gamma_m", "number", "m² kg⁻¹ s⁻²", 100.0, "> 0",
               "the mass estimate's adaptation stiffness (rate = -s.w / gamma_m)")
-GAMMA_D = Key("gamma_d", "number", "m/N", 1000.0, "> 0",
+GAMMA_D = Key("gamma_d", "number", "m/N", 20.0, "> 0",
               "the disturbance force estimate's adaptation stiffness (rate = s / gamma_d)")
 A_S = Key("a_s", "number", "1/s", -5.0, "< 0", "the L1 state predictor's pole")
 W_C = Key("w_c", "number", "rad/s", 5.0, "> 0", "the L1 low-pass filter's cut-off")

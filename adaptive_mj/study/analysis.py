@@ -364,3 +364,27 @@ def chattering(traj: Trajectory, setup=None) -> dict:
     return {"cutoff_hz": CHATTER_CUTOFF_HZ, "tv_high_frequency": tv_fast, "tv_high_frequency_per_s": tv_fast / T,
             "tv_total": float(np.sum(np.abs(np.diff(u)))), "tv_low_frequency": float(np.sum(np.abs(np.diff(slow)))),
             "window_t": traj.t[window].tolist(), "window_u": u[window].tolist()}
+
+
+def flight_metrics(traj: Trajectory, setup) -> dict:
+    """A quadrotor run's figures (adaptive_mj.plants.quadrotor; AdaptiveQuadBench's): the largest position error
+    ‖p_d − p‖ over the whole run [m] (its success criterion), its RMS over the run and over the tail [m], the largest
+    heading error |ψ| [deg] (the references hold ψ_d = 0; ψ = atan2(R₂₁, R₁₁)), and the fraction of steps with some
+    rotor at a thrust limit."""
+    from adaptive_mj.laws.flight import rotation
+    from adaptive_mj.report.metrics import tail_mask
+
+    e = np.linalg.norm(traj.y_tilde, axis=1)
+    if not len(e):
+        return {}
+    heading = max(abs(math.degrees(math.atan2(R[1, 0], R[0, 0]))) for R in (rotation(phi) for phi in traj.x[::10, 2]))
+    rng = traj.meta.get("ctrl_range")
+    sat = None
+    if rng is not None:
+        lo, hi = (np.asarray(b, dtype=float) for b in rng)
+        u = np.asarray(traj.u, dtype=float)
+        sat = float(np.mean(np.any((u <= lo + 1e-12) | (u >= hi - 1e-9 * np.maximum(1.0, np.abs(hi))), axis=1)))
+    tail = tail_mask(traj)
+    return {"max_error": float(e.max()), "rms_error": float(np.sqrt(np.mean(e**2))),
+            "tail_rms_error": float(np.sqrt(np.mean(e[tail] ** 2))) if tail.any() else math.nan,
+            "max_heading_deg": float(heading), "saturation_any": sat}

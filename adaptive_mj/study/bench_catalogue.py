@@ -25,6 +25,7 @@ from adaptive_mj.study.sections import (  # noqa: F401 (imported to register the
     ship_steering,
     mrac_delay_rohrs,
     wing_rock,
+    quadrotor_flight,
 )
 from adaptive_mj.study.sections.common import Section, SectionReport, _job, _recovery, _row, entries
 from adaptive_mj.study.sections.control_rate import CONTROL_RATES_HZ, SampledLoop, sampled_loop
@@ -34,13 +35,14 @@ from adaptive_mj.study.sections.user_scenarios import user_section
 
 __all__ = ["ARM_CONDITIONS", "CONTROL_RATES_HZ", "SHIP_SCENARIOS", "SampledLoop", "Section", "SectionReport",
            "catalogue", "sampled_loop", "user_section", "_arm_conditions", "_arm_drift", "_control_rate", "_job",
-           "_recovery", "_row", "_ship"]
+           "_recovery", "_row", "_ship", "_quadrotor"]
 
 # the section builders tests call with their options (quick, logs, duration=...)
 _control_rate = control_rate.section
 _arm_drift = manipulator_drift.section
 _arm_conditions = manipulator_conditions.section
 _ship = ship_steering.section
+_quadrotor = quadrotor_flight.section
 
 
 def catalogue(*, quick: bool, logs: Path) -> list[Section]:

@@ -1,0 +1,231 @@
+"""The quadrotor's measurements (issue 33): each flight law on each task, and how much of each disturbance and of
+a control delay it takes before the vehicle fails, as AdaptiveQuadBench (arXiv 2510.03471) measures its
+controllers: a run *fails* when it crashes, diverges, or its position error ‖p_d − p‖ exceeds MAX_ERROR at any
+time (their "unstable if the maximum error exceeds 1 m"); a disturbance's *when2fail* is the smallest intensity at
+which every seed fails (their success rate reaching 0 %), its *margin* the largest at which every seed succeeds;
+the *delay margin* is the margin of a control delay (theirs: a sweep from 0 to 0.5 s in 0.01 s steps).
+
+The runs: the bundled lemniscate (A = 0.5 m, ω = 1 rad/s at 1 m) without its payload, RUN_SECONDS long (their
+5 s), with small measurement noise (NOISE, a seed per run), the disturbance from t = 0 (a rotor's loss from 1 s).
+Two searches per (law, disturbance): by bisection (`margins`: lo and hi, then `steps` rounds, every search's runs
+in one parallel batch per round) or on a fixed grid (`grid_margins`: one batch; the bench's section). Every run
+is logged (MCAP) under the folder given.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from adaptive_mj.setup import scenario as sc
+from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
+from adaptive_mj.trajectory import Status
+
+LAWS = ("geometric", "geometric_adaptive", "l1_geometric")
+LAW_LABEL = {"geometric": "geometric (Lee 2010)", "geometric_adaptive": "geometric adaptive (m̂, d̂)",
+             "l1_geometric": "L1 geometric"}
+MAX_ERROR = 1.0  # [m] AdaptiveQuadBench's failure bound on the position error
+RUN_SECONDS = 5.0  # [s] AdaptiveQuadBench's run length
+TASK = "quadrotor_lemniscate"
+DT = 0.002  # [s] the scenario's physics step: a delay is a whole number of them
+NOISE = "noise={std={p=0.001, v=0.01, phi=0.001, omega=0.01}}"
+BASE = ("plant.payload='none'", f"simulation.duration={RUN_SECONDS!r}", "log.rate_hz=20", NOISE)
+
+
+@dataclass(frozen=True)
+class Disturbance:
+    """A disturbance raised to failure: name, unit, overrides(v) the scenario keys that apply intensity v, the range
+    [lo, hi] searched, step > 0: intensities are whole multiples of step (the delay: physics steps)."""
+
+    name: str
+    unit: str
+    overrides: Callable[[float], list[str]]
+    lo: float
+    hi: float
+    step: float = 0.0
+    doc: str = ""
+
+    def text(self, v: float | None) -> str:
+        if v is None:
+            return "n/a"
+        if self.unit == "%":
+            return f"{100 * v:.3g} %"
+        return f"{v:.3g} {self.unit}".strip()
+
+
+def _event(text: str) -> list[str]:
+    return [f"events=[{text}]"]
+
+
+DISTURBANCES = (
+    Disturbance("wind", "m/s", lambda v: [f"plant.wind=[{v!r}, 0.0, 0.0]"], 0.5, 40.0,
+                doc="a steady wind along x (MuJoCo's fluid drag on the fuselage)"),
+    Disturbance("force", "N", lambda v: _event(f"{{t=0.0, kind='external_force', force=[{v!r}, 0.0, 0.0]}}"),
+                0.003, 1.0, doc="a constant force along x on the body (the vehicle weighs 0.29 N)"),
+    Disturbance("torque", "N m", lambda v: _event(f"{{t=0.0, kind='external_force', torque=[{v!r}, 0.0, 0.0]}}"),
+                1e-5, 1e-2, doc="a constant torque about x (a rotor's thrust gives at most 4.4e-3 N m about x)"),
+    Disturbance("payload", "kg", lambda v: ["plant.payload='quad_box'", f"plant.payload_mass={v!r}"], 0.002, 0.06,
+                doc="a rigid payload under the body, unknown to the laws (the rotors lift 58.6 g in all)"),
+    Disturbance("rotor loss", "%",
+                lambda v: _event(f"{{t=1.0, kind='rotor_efficiency', rotor=1, value={1.0 - v!r}}}"), 0.02, 0.95,
+                doc="rotor 1 loses this fraction of its thrust at t = 1 s"),
+)
+DELAY = Disturbance("delay", "s", lambda v: [f"simulation.control_delay={int(round(v / DT))}"], 0.0, 0.5, step=DT,
+                    doc="a control delay (whole physics steps of 2 ms)")
+
+
+def succeeded(r: JobResult) -> bool:
+    """AdaptiveQuadBench's success: the run completed without a crash and its position error stayed within
+    MAX_ERROR (a run its scenario's own [success] tail bound calls failed still succeeds here)."""
+    if r.status not in (Status.OK, Status.FAILED) or r.summary is None:
+        return False
+    if str(r.summary.get("reason", "")).startswith("crashed"):
+        return False
+    fm = r.extras.get("flight_metrics") or {}
+    return float(fm.get("max_error", math.inf)) <= MAX_ERROR
+
+
+@dataclass
+class Search:
+    """One (law, disturbance) search: its evaluations {intensity: [success per seed]}."""
+
+    law: str
+    disturbance: Disturbance
+    evaluations: dict[float, list[bool]] = field(default_factory=dict)
+
+    def margin(self) -> tuple[float | None, float | None]:
+        """(largest intensity with every seed succeeding, the smallest above it where some failed) (None: none)."""
+        ok = [v for v, s in self.evaluations.items() if all(s)]
+        lo = max(ok) if ok else None
+        above = [v for v, s in self.evaluations.items() if not all(s) and (lo is None or v > lo)]
+        return lo, (min(above) if above else None)
+
+    def when2fail(self) -> tuple[float | None, float | None]:
+        """(the largest intensity below it where some seed succeeded, the smallest with every seed failing)."""
+        dead = [v for v, s in self.evaluations.items() if not any(s)]
+        hi = min(dead) if dead else None
+        below = [v for v, s in self.evaluations.items() if any(s) and (hi is None or v < hi)]
+        return (max(below) if below else None), hi
+
+    def success_rate(self, v: float) -> float:
+        return float(np.mean(self.evaluations[v]))
+
+
+def _mid(lo: float, hi: float, d: Disturbance) -> float | None:
+    """The next intensity between lo and hi (geometric over a decade or more), on the step grid; None when lo and
+    hi are neighbours there."""
+    if d.step > 0:
+        a, b = round(lo / d.step), round(hi / d.step)
+        return None if b - a <= 1 else round((a + b) / 2) * d.step
+    return math.sqrt(lo * hi) if lo > 0 and hi / lo >= 10.0 else 0.5 * (lo + hi)
+
+
+def _jobs(s: Search, v: float, seeds: int, logs: Path, extra: Sequence[str]) -> list[Job]:
+    d = s.disturbance
+    name = f"{s.law}-{d.name.replace(' ', '_')}={v:.6g}"
+    return [Job(sc.SCENARIOS_DIR / f"{TASK}.toml", overrides=(*BASE, *extra, f"law={s.law}", *d.overrides(v)),
+                seed=k, log=logs / f"{name}-seed{k}.mcap", tag=f"{name} seed {k}", extras=("flight_metrics",),
+                keep_trajectory=False)
+            for k in range(seeds)]
+
+
+def _evaluate(wanted: list[tuple[Search, float]], *, seeds: int, logs: Path, n_jobs: int, backend: Backend | None,
+              extra: Sequence[str]) -> None:
+    jobs = [j for s, v in wanted for j in _jobs(s, v, seeds, logs, extra)]
+    results = run_jobs(jobs, n_jobs=n_jobs, backend=backend) if jobs else []
+    for n, (s, v) in enumerate(wanted):
+        s.evaluations[v] = [succeeded(r) for r in results[n * seeds:(n + 1) * seeds]]
+
+
+def searches(laws: Sequence[str] = LAWS, disturbances: Sequence[Disturbance] = (*DISTURBANCES, DELAY)) -> list[Search]:
+    return [Search(law, d) for d in disturbances for law in laws]
+
+
+def margins(found: list[Search], *, seeds: int, steps: int, logs: Path, n_jobs: int = 1,
+            backend: Backend | None = None, extra: Sequence[str] = ()) -> list[Search]:
+    """Bisect every search's margin and when2fail (module docstring): the range's ends, then `steps` rounds."""
+    _evaluate([(s, v) for s in found for v in (s.disturbance.lo, s.disturbance.hi)], seeds=seeds, logs=logs,
+              n_jobs=n_jobs, backend=backend, extra=extra)
+    for _ in range(steps):
+        wanted: list[tuple[Search, float]] = []
+        for s in found:
+            for lo, hi in (s.margin(), s.when2fail()):
+                if lo is None or hi is None:
+                    continue
+                v = _mid(lo, hi, s.disturbance)
+                if v is not None and v not in s.evaluations and (s, v) not in wanted:
+                    wanted.append((s, v))
+        if not wanted:
+            break
+        _evaluate(wanted, seeds=seeds, logs=logs, n_jobs=n_jobs, backend=backend, extra=extra)
+    return found
+
+
+def grid(d: Disturbance, levels: int) -> list[float]:
+    """`levels` intensities over [lo, hi]: geometric where the range spans a decade and starts above 0, else even
+    (the delay: on its step)."""
+    if d.step > 0:
+        return sorted({round(v / d.step) * d.step for v in np.linspace(d.lo, d.hi, levels)})
+    if d.lo > 0 and d.hi / d.lo >= 10:
+        return [float(v) for v in np.geomspace(d.lo, d.hi, levels)]
+    return [float(v) for v in np.linspace(d.lo, d.hi, levels)]
+
+
+def grid_jobs(found: list[Search], levels: int, seeds: int, logs: Path, extra: Sequence[str] = ()) -> list[Job]:
+    """Every search's runs on its grid (one batch: the bench's section)."""
+    return [j for s in found for v in grid(s.disturbance, levels) for j in _jobs(s, v, seeds, logs, extra)]
+
+
+def grid_results(found: list[Search], levels: int, seeds: int, results: dict[str, JobResult]) -> list[Search]:
+    """Fill every search's evaluations from its grid runs' results (by tag)."""
+    for s in found:
+        for v in grid(s.disturbance, levels):
+            name = f"{s.law}-{s.disturbance.name.replace(' ', '_')}={v:.6g}"
+            s.evaluations[v] = [succeeded(results[f"{name} seed {k}"]) if f"{name} seed {k}" in results else False
+                                for k in range(seeds)]
+    return found
+
+
+def bracket_text(d: Disturbance, lo: float | None, hi: float | None, *, upper: bool) -> str:
+    """A margin (upper False: the largest passing value, its bracket up to the first failure) or a when2fail (upper
+    True: the smallest all-failing value, down to the last success) as a table cell with its resolution."""
+    if upper:
+        if hi is None:
+            return f"> {d.text(d.hi)}"
+        return f"{d.text(hi)} (≥ {d.text(lo)})" if lo is not None else f"≤ {d.text(hi)}"
+    if lo is None:
+        return f"< {d.text(d.lo)}"
+    return f"{d.text(lo)} (< {d.text(hi)})" if hi is not None else f"≥ {d.text(lo)}"
+
+
+def table(found: list[Search], laws: Sequence[str] = LAWS) -> str:
+    """Markdown: per disturbance, each law's margin (every seed succeeds) and when2fail (every seed fails), each
+    with the nearest evaluated value on its other side (the resolution)."""
+    dists = list(dict.fromkeys(s.disturbance.name for s in found))
+    by = {(s.law, s.disturbance.name): s for s in found}
+    head = "| disturbance | " + " | ".join(LAW_LABEL.get(law, law) for law in laws) + " |"
+    lines = [head, "|---|" + "---|" * len(laws)]
+    for name in dists:
+        cells = []
+        for law in laws:
+            s = by[(law, name)]
+            d = s.disturbance
+            m = bracket_text(d, *s.margin(), upper=False)
+            w = bracket_text(d, *s.when2fail(), upper=True)
+            cells.append(f"margin {m}; when2fail {w}")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def as_rows(found: list[Search]) -> list[dict]:
+    """JSON-ready rows: law, disturbance, unit, margin and when2fail brackets, every evaluation's success rate."""
+    out = []
+    for s in found:
+        (m_lo, m_hi), (w_lo, w_hi) = s.margin(), s.when2fail()
+        out.append({"law": s.law, "disturbance": s.disturbance.name, "unit": s.disturbance.unit,
+                    "margin": m_lo, "margin_first_fail": m_hi, "when2fail": w_hi, "when2fail_last_success": w_lo,
+                    "success_rate": {repr(v): s.success_rate(v) for v in sorted(s.evaluations)}})
+    return out
