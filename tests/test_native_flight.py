@@ -14,7 +14,7 @@ from adaptive_mj.sim.runner import execute
 NOISE = "noise={std={p=0.001, v=0.01, phi=0.001, omega=0.01}, seed=3}"
 FORCES = ("events=[{t=1.0, kind='external_force', force=[0.01, 0, 0], torque=[0, 0, 1e-5]}, "
           "{t=2.0, kind='wind', velocity=[1.0, 0, 0]}, {t=2.5, kind='payload_mass', value=0.015}, "
-          "{t=3.0, kind='payload_release'}]")
+          "{t=2.8, kind='payload_swap', payload='quad_cable'}, {t=3.0, kind='payload_release'}]")
 CASES = {
     "lemniscate": ("quadrotor_lemniscate", ["simulation.duration=3"]),
     "noise, delay, events": ("quadrotor_lemniscate", [NOISE, "simulation.control_delay=7", FORCES,

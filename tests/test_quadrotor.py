@@ -77,6 +77,22 @@ def test_a_vehicle_too_heavy_to_fly_crashes_and_the_run_ends_failed():
     assert res.trajectory.t[-1] < 1.5  # it ended at the crash, not at 5 s
 
 
+def test_the_pre_flight_check_says_what_cannot_fly_before_the_first_step(capsys):
+    """Too heavy to hover, and an attitude rate gain the 2 ms RK4 step cannot integrate: one line each on stderr,
+    with the figures and the fix; the run's summary carries them."""
+    res = run_scenario("quadrotor_lemniscate", set=["plant.payload_mass=0.05", "simulation.duration=0.5"])
+    err = capsys.readouterr().err
+    assert "weighs 80 g and its rotors lift 58.61 g in all: it cannot hover" in err
+    assert "a payload below 0.0286 kg could" in err
+    assert res.summary["preflight"]["plant"] and res.summary["preflight"]["ok"]
+    res = run_scenario("quadrotor_lemniscate", set=["law.kW=5", "simulation.duration=0.2"])
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "pre-flight: attitude (principal axis" in line and "past the RK4" in line and "law.kW <= 0.0244" in line
+    assert not res.summary["preflight"]["ok"]
+    quiet = run_scenario("quadrotor_lemniscate", set=["simulation.duration=0.2"])
+    assert "pre-flight" not in capsys.readouterr().err and quiet.summary["preflight"]["checked"]
+
+
 def test_a_tilt_past_the_bound_is_a_crash():
     res = run_scenario("quadrotor_rotor_loss", set=["plant.crash_tilt=2", "simulation.duration=3",
                                                     "events=[{t=0.5, kind='rotor_efficiency', rotor=1, value=0.7}]"])

@@ -24,6 +24,7 @@ from adaptive_mj.laws import flight_kernel as fk
 from adaptive_mj.laws import geometric as geo
 from adaptive_mj.laws.common import NO_MODIFICATION, DeadZone, LawStep, Modification
 from adaptive_mj.laws.kinds import AirframeView, BuildContext, Form, LawKind, register
+from adaptive_mj.laws.protocol import AirframeFeedback
 from adaptive_mj.specs import LawSpec
 
 E1 = np.array([1.0, 0.0, 0.0])  # the desired heading b₁d: yaw held at 0 (the references carry no yaw)
@@ -149,8 +150,9 @@ class FlightLaw:
         """What the compiled callback takes: P, G, the allocation and its inverse (adaptive_mj.sim.native_flight)."""
         return {"P": self.P, "G": self.G, "Ainv": self.Ainv, "A": self.airframe.allocation}
 
-    def feedback(self):
-        return None
+    def feedback(self) -> AirframeFeedback:
+        """The attitude loop's gains, for the pre-flight check (adaptive_mj.sim.preflight)."""
+        return AirframeFeedback(self.gains.kR, self.gains.kW)
 
 
 @dataclass

@@ -77,7 +77,17 @@ class JointFeedback:
     lam: np.ndarray
 
 
-Feedback = SurfaceFeedback | JointFeedback
+@dataclass(frozen=True)
+class AirframeFeedback:
+    """A flight law's attitude feedback M = −k_R e_R − k_Ω Ω (+ Ω × ĴΩ): kR [N m/rad], kW [N m s/rad]; the
+    pre-flight check reads the attitude loop's fastest mode J ë + k_Ω ė + k_R e = 0 on each principal axis of the
+    plant's true inertia."""
+
+    kR: float
+    kW: float
+
+
+Feedback = SurfaceFeedback | JointFeedback | AirframeFeedback
 
 
 class Law(Protocol):

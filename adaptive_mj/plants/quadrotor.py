@@ -356,6 +356,21 @@ class QuadrotorPlant:
         if data is not None:
             release_data(self.model, data)
 
+    def preflight_lines(self) -> list[str]:
+        """What the pre-flight check says before the first step (adaptive_mj.sim.preflight): a vehicle whose weight
+        with its payload is more than its rotors lift in all cannot hover, whatever the law."""
+        m, g = float(self.true_theta()[0]), float(-self.model.opt.gravity[2])
+        lift = float(np.sum(self.airframe.thrust_max * self.model.actuator_gainprm[self.airframe.actuators, 0]))
+        if m * g < lift:
+            return []
+        return [f"pre-flight: the vehicle with its payload weighs {1000 * m:.4g} g and its rotors lift "
+                f"{1000 * lift / g:.4g} g in all: it cannot hover, whatever the law (a payload below "
+                f"{max(0.0, lift / g - (m - self._payload_mass())):.3g} kg could: plant.payload_mass)"]
+
+    def _payload_mass(self) -> float:
+        """[kg] the mass below the airframe's own body (its payload's)."""
+        return float(self.true_theta()[0] - self.model.body_mass[self.body])
+
     def nominal_theta(self) -> np.ndarray:
         """(10,) what a law knows of the vehicle untold (its estimates' default): the bare airframe's own mass and
         inertia (the body "quad" without its payload), no external force."""
@@ -397,6 +412,14 @@ class QuadrotorPlant:
     def set_body_mass(self, name: str, mass: float) -> None:
         """A body's mass [kg], its inertia scaled with it (mujoco_plant.scale_body_mass)."""
         scale_body_mass(self.model, self.body_id(name), mass)
+        self.model_changed()
+
+    def set_body_inertial(self, name: str, *, mass: float, ipos, iquat, inertia) -> None:
+        """A body's mass [kg], centre of mass (3,) [m], inertia frame (4,) and principal inertia (3,) [kg m²] replaced
+        together (a payload_swap: another payload file's body; its geoms stay)."""
+        m, b = self.model, self.body_id(name)
+        m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b] = mass, ipos, iquat, inertia
+        mujoco.mj_setConst(m, scratch_data(m))
         self.model_changed()
 
     def release_payload(self, name: str) -> None:
@@ -600,7 +623,7 @@ KIND = register(PlantKind(
     doc="a Crazyflie-size quadrotor (RotorPy's parameters) with an unknown payload, in MuJoCo's air",
     keys=plant_keys.keys(CRASH_TILT, ROTOR_TIME_CONSTANT, WIND, payload=True, default_payload=None),
     reader=plant_keys.SharedReader(backend=("mujoco", "a free body flown in MuJoCo's air"), body=_own_keys),
-    events={ev.PAYLOAD_MASS: "mujoco", PAYLOAD_RELEASE: "mujoco", ROTOR_EFFICIENCY: "mujoco", WIND_EVENT: "mujoco",
+    events={ev.PAYLOAD_MASS: "mujoco", ev.PAYLOAD_SWAP: "mujoco", PAYLOAD_RELEASE: "mujoco", ROTOR_EFFICIENCY: "mujoco", WIND_EVENT: "mujoco",
             EXTERNAL_FORCE: "mujoco"},
     order=lambda plant, law_order: 4, starts_on_reference=True, sections=("quadrotor",),
     noise_signals=STATE_NAMES, reference_reader=read_reference, reference_builder=build_reference))

@@ -4,6 +4,7 @@ A law's velocity feedback puts a mode at rate μ [1/s] in the closed loop:
   m joints (Slotine–Li and its baselines):  μ(q) = λ_max(M(q)⁻¹ K_D) + max_j Λ_j,
   1-DOF sliding law of order n:             μ = h k_eff / d + (n - 1) λ   (k_eff = k + K/Φ when robust),
   first-order law:                          μ = k,
+  a flight law's attitude loop:             μ = max over the principal axes of |roots of J s² + k_Ω s + k_R|,
 with M(q) the joint-space inertia (armature included) along the reference and d the plant's true
 leading coefficient, both read from the compiled model. One step of length h maps that mode to
   RK4 at the timestep (the law at every stage):     R(-μh), stable while μh < 2.785;
@@ -22,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from adaptive_mj.laws.protocol import JointFeedback, Law, SurfaceFeedback
+from adaptive_mj.laws.protocol import AirframeFeedback, JointFeedback, Law, SurfaceFeedback
 from adaptive_mj.plants.protocol import FormPlant, JointPlant, Plant, has_form, has_joints
 from adaptive_mj.setup.success import sampled_positions
 from adaptive_mj.sim.stage import ControlTiming
@@ -48,6 +49,7 @@ class Preflight:
     fixes: tuple[str, ...] = ()
     outside: tuple[str, ...] = ()
     note: str = ""
+    plant_lines: tuple[str, ...] = ()  # what the plant itself says cannot work (a quadrotor too heavy to hover)
 
     @property
     def ok(self) -> bool:
@@ -57,7 +59,8 @@ class Preflight:
         """The one-line warning (empty when ok)."""
         if self.ok:
             return ""
-        where = f"joint {self.joint}: " if self.joint else ""
+        where = "" if not self.joint else (f"{self.joint}: " if self.joint.startswith("attitude")
+                                             else f"joint {self.joint}: ")
         return (f"pre-flight: {where}the loop's fastest mode μ = {self.rate:.4g} 1/s gives μh = {self.figure:.3g} "
                 f"at h = {self.step:.3g} s, past the {self.scheme} stability limit {self.limit:.3g}; the loop "
                 f"cannot be stable. Fixes: " + "; or ".join(self.fixes))
@@ -66,7 +69,8 @@ class Preflight:
         """JSON-ready (the summary's "preflight")."""
         return {"checked": self.checked, "ok": self.ok, "figure": self.figure, "limit": self.limit,
                 "rate": self.rate, "step": self.step, "scheme": self.scheme, "joint": self.joint,
-                "fixes": list(self.fixes), "reference_outside_range": list(self.outside), "note": self.note}
+                "fixes": list(self.fixes), "reference_outside_range": list(self.outside), "note": self.note,
+                "plant": list(self.plant_lines)}
 
 
 def step_limit(timing: ControlTiming, stages: int) -> tuple[float, float, str]:
@@ -173,11 +177,30 @@ def check(plant: Plant, law: Law, reference, *, duration: float, timing: Control
         found = _arm_check(plant, feedback, _reference_positions(reference, duration, order), h, limit)
     elif isinstance(feedback, SurfaceFeedback) and has_form(plant):
         found = _one_dof_check(plant, feedback, h, limit)
+    elif isinstance(feedback, AirframeFeedback) and hasattr(plant, "airframe"):
+        found = _attitude_check(plant, feedback, h, limit)
+    lines = getattr(plant, "preflight_lines", None)
+    plant_lines = tuple(lines()) if lines is not None else ()
     if found is None:
-        return Preflight(checked=False, outside=outside,
+        return Preflight(checked=False, outside=outside, plant_lines=plant_lines,
                          note=f"not checked: the law {type(law).__name__} declares no velocity feedback gain")
     return Preflight(checked=True, figure=found["rate"] * h, limit=limit, rate=found["rate"], step=h,
-                     scheme=scheme, joint=found["joint"], fixes=found["fixes"], outside=outside)
+                     scheme=scheme, joint=found["joint"], fixes=found["fixes"], outside=outside,
+                     plant_lines=plant_lines)
+
+
+def _attitude_check(plant: Plant, feedback: AirframeFeedback, h: float, limit: float) -> dict:
+    """The attitude loop J ë + k_Ω ė + k_R e = 0 about each principal axis of the true inertia (the plant's θ: m,
+    then Jxx, Jyy, Jzz, Jxy, Jxz, Jyz): its fastest root's modulus is μ."""
+    th = np.asarray(plant.true_theta(), dtype=float)
+    xx, yy, zz, xy, xz, yz = th[1:7]
+    J = np.linalg.eigvalsh(np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]))
+    roots = [np.roots([j, feedback.kW, feedback.kR]) for j in J]
+    rate = float(max(np.abs(r).max() for r in roots))
+    axis = "xyz"[int(np.argmax([np.abs(r).max() for r in roots]))]
+    fixes = (f"law.kW <= {0.9 * limit / h * float(J.min()):.3g} (now {feedback.kW:.3g}) with law.kR as it is",
+             f"a timestep or control.period <= {0.9 * limit / rate:.3g} s")
+    return {"rate": rate, "joint": f"attitude (principal axis {axis})", "fixes": fixes if rate * h >= limit else ()}
 
 
 def _outside_range(plant: Plant, reference, duration: float, order: int) -> tuple[str, ...]:

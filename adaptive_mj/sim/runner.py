@@ -314,7 +314,7 @@ def preflight_of(scn: Scenario, setup: Setup, timing: ControlTiming) -> prefligh
     """The run's pre-flight check, its lines said on stderr; a PreflightRefused when it fails and
     success.preflight = "refuse"."""
     pre = preflight.check(setup.plant, setup.law, setup.reference, duration=scn.simulation.duration, timing=timing)
-    for line in pre.outside:
+    for line in pre.outside + pre.plant_lines:
         print(f"{scn.source}: warning: {line}", file=sys.stderr)
     if not pre.ok:
         if scn.success.preflight == "refuse":
