@@ -623,7 +623,7 @@ KIND = register(PlantKind(
     doc="a Crazyflie-size quadrotor (RotorPy's parameters) with an unknown payload, in MuJoCo's air",
     keys=plant_keys.keys(CRASH_TILT, ROTOR_TIME_CONSTANT, WIND, payload=True, default_payload=None),
     reader=plant_keys.SharedReader(backend=("mujoco", "a free body flown in MuJoCo's air"), body=_own_keys),
-    events={ev.PAYLOAD_MASS: "mujoco", ev.PAYLOAD_SWAP: "mujoco", PAYLOAD_RELEASE: "mujoco", ROTOR_EFFICIENCY: "mujoco", WIND_EVENT: "mujoco",
-            EXTERNAL_FORCE: "mujoco"},
+    events={ev.PAYLOAD_MASS: "mujoco", ev.PAYLOAD_SWAP: "mujoco", PAYLOAD_RELEASE: "mujoco",
+            ROTOR_EFFICIENCY: "mujoco", WIND_EVENT: "mujoco", EXTERNAL_FORCE: "mujoco"},
     order=lambda plant, law_order: 4, starts_on_reference=True, sections=("quadrotor",),
     noise_signals=STATE_NAMES, reference_reader=read_reference, reference_builder=build_reference))
