@@ -141,13 +141,13 @@ def _random_case(rng):
     x = np.vstack([rng.normal(0, 0.3, 3) + [0, 0, 1], rng.normal(0, 0.5, 3), rng.normal(0, 0.3, 3),
                    rng.normal(0, 2.0, 3)])
     ref = np.vstack([rng.normal(0, 0.3, 3) + [0, 0, 1], rng.normal(0, 0.5, 3), rng.normal(0, 1.0, 3),
-                     np.zeros(3), np.zeros(3)])
-    th = np.array([0.03, 1.43e-5, 1.43e-5, 2.86e-5, 1e-7, -2e-7, 3e-7, 0.001, -0.002, 0.003])
+                     rng.normal(0, 2.0, 3), np.zeros(3)])
+    th = np.array([0.03, 1.43e-5, 1.43e-5, 2.86e-5, 1e-7, -2e-7, 3e-7, 0.001, -0.002, 0.003, 1e-4, -2e-4, 5e-5])
     return x, ref, th
 
 
 def _kernel(x, ref, th, P, G, Ainv, aug):
-    u, s, rate = np.empty(4), np.empty(3), np.empty(10)
+    u, s, rate = np.empty(4), np.empty(3), np.empty(13)
     fk.flight_law(x, ref, th, P, G, Ainv, aug, np.zeros((3, 3)), np.zeros(3), np.zeros(12), u, s, rate)
     return u, s, rate
 
@@ -165,14 +165,17 @@ def test_the_scalar_kernel_is_the_geometric_and_adaptive_laws_written_with_numpy
             P = law.P.copy()
             P[fk.P_MODE], P[fk.P_KX], P[fk.P_KV], P[fk.P_KR], P[fk.P_KW] = mode, *gains
             u, s, rate = _kernel(x, ref, th, P, law.G, law.Ainv, np.zeros(6))
+            e1 = np.array([1.0, 0, 0])
             if mode == fk.MODE_GEOMETRIC:
-                cmd = geo.geometric(x[0], x[1], R, x[3], ref[:3], np.array([1.0, 0, 0]), gains, th[0], J, G)
+                cmd = geo.geometric(x[0], x[1], R, x[3], ref[:4], e1, gains, th[0], J, G, th[10:13])
             else:
                 c = P[fk.P_C]
                 mass_gains = geo.MassGains(c, P[fk.P_K], 1 / law.G[0, 0], 1 / law.G[0, 7])
-                force = geo.adaptive_force(x[0], x[1], ref[:3], th[0], th[7:], mass_gains, G)
-                cmd = geo.attitude(force.F, R, x[3], np.array([1.0, 0, 0]), gains, J)
+                force = geo.adaptive_force(x[0], x[1], ref[:3], th[0], th[7:10], mass_gains, G)
+                cmd = geo.attitude(force.F, R, x[3], e1, gains, J, th[0] * ref[3], th[10:13])
                 np.testing.assert_allclose(rate[[0, 7, 8, 9]], [force.m_rate, *force.d_rate], rtol=1e-12, atol=1e-18)
+                e_W = x[3] - R.T @ geo.desired_attitude(force.F, e1) @ geo.desired_rate(force.F, th[0] * ref[3], e1)
+                np.testing.assert_allclose(rate[10:13], (e_W + P[fk.P_CR] * cmd.e_R) / law.G[0, 10:13], rtol=1e-9)
             np.testing.assert_allclose(A @ u, [cmd.f, *cmd.M], rtol=1e-10, atol=1e-15)
 
 

@@ -4,8 +4,10 @@ and L1 adaptive augmentation, each evaluated on the loop's state x (4, 3) = [p; 
 [p_d, p_d', p_d'', p_d''', p_d''''] (adaptive_mj.plants.quadrotor), returning the four rotor thrusts [N] through
 the airframe's allocation, unclipped (the loop clamps them into [0, T_max]: the applied thrusts are logged).
 
-θ (10,) = [m, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz, dx, dy, dz] as the plant names it: a law's nominal model is θ̂; the
-adaptive law moves m̂ and d̂ (the inertia stays at its estimate), the others hold it.
+θ (13,) = [m, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz, dx, dy, dz, tx, ty, tz] as the plant names it: a law's nominal model is
+θ̂; the adaptive law moves m̂, d̂ and the moment τ̂ (Goodarzi, Lee & Lee 2015's Δ̂_R; the inertia stays at its
+estimate), the others hold it. Every law feeds the desired body rate Ω_d forward from the reference's jerk
+(Lee 2010's e_Ω = Ω − RᵀR_dΩ_d, with Ω̇_d = 0).
 
 The sliding variable logged as s (3,) [m/s] is the translational surface s = e_v + c e_x (c = k_x/k_v for the
 geometric baseline and L1, law.lambda for the adaptive law), with V = ½ m sᵀs (+ ½ m̃²/γ_m + ½ ‖d̃‖²/γ_d when
@@ -28,7 +30,7 @@ from adaptive_mj.laws.protocol import AirframeFeedback
 from adaptive_mj.specs import LawSpec
 
 E1 = np.array([1.0, 0.0, 0.0])  # the desired heading b₁d: yaw held at 0 (the references carry no yaw)
-M_INDEX, J_SLICE, D_SLICE = 0, slice(1, 7), slice(7, 10)
+M_INDEX, J_SLICE, D_SLICE, T_SLICE = 0, slice(1, 7), slice(7, 10), slice(10, 13)
 
 
 def rotation(phi: np.ndarray) -> np.ndarray:
@@ -89,7 +91,8 @@ class FlightLaw:
     native: bool = True
     adapt: bool = False
     bounds: tuple[np.ndarray, np.ndarray] | None = None
-    gamma: np.ndarray = field(default_factory=lambda: np.ones(10))
+    gamma: np.ndarray = field(default_factory=lambda: np.ones(13))
+    c_R: float = 0.0
     mode: float = fk.MODE_GEOMETRIC
     k: float = 0.0
     dead_zone: DeadZone | None = None
@@ -105,7 +108,7 @@ class FlightLaw:
         dz = self.dead_zone
         P[fk.P_DZ_WIDTH] = dz.width if dz is not None else 0.0
         P[fk.P_DZ_ON_S] = 1.0 if dz is None or dz.on.value == "s" else 0.0
-        P[fk.P_ADAPT], P[fk.P_L1] = float(self.adapt), float(self.l1)
+        P[fk.P_ADAPT], P[fk.P_L1], P[fk.P_CR] = float(self.adapt), float(self.l1), self.c_R
         G = np.zeros((4, n))
         G[0] = self.gamma
         mod = self.modification
@@ -127,7 +130,8 @@ class FlightLaw:
         return LawStep(u, rate, s, np.array(ref[2]))
 
     def lyapunov(self, s, theta_hat, theta, *, M=None) -> np.ndarray:
-        """(N,) V = ½ sᵀ M s (M = m I from the plant) + ½ Σ θ̃ᵢ²/γᵢ over the estimates that move."""
+        """(N,) V = ½ sᵀ M s (M = m I from the plant) + ½ Σ γᵢ θ̃ᵢ² over the mass and force estimates (γ: the
+        stiffnesses, θ̂' = regressor·s/γ); the moment estimate's attitude terms are not in it (docs/THEORY.md)."""
         s = np.asarray(s, dtype=float)
         kinetic = 0.5 * np.einsum("ni,nij,nj->n", s, M, s) if M is not None else 0.5 * np.einsum("ni,ni->n", s, s)
         if not self.adapt:
@@ -135,7 +139,7 @@ class FlightLaw:
         err = np.asarray(theta_hat, dtype=float) - np.asarray(theta, dtype=float)
         moving = np.zeros(len(self.names), dtype=bool)
         moving[M_INDEX] = moving[D_SLICE] = True
-        return kinetic + 0.5 * np.sum(np.where(moving, err**2 / self.gamma, 0.0), axis=1)
+        return kinetic + 0.5 * np.sum(np.where(moving, self.gamma * err**2, 0.0), axis=1)
 
     def reset(self) -> None:
         return None
@@ -226,6 +230,9 @@ GAMMA_M = Key("gamma_m", "number", "m² kg⁻¹ s⁻²", 100.0, "> 0",
               "the mass estimate's adaptation stiffness (rate = -s.w / gamma_m)")
 GAMMA_D = Key("gamma_d", "number", "m/N", 20.0, "> 0",
               "the disturbance force estimate's adaptation stiffness (rate = s / gamma_d)")
+GAMMA_T = Key("gamma_t", "number", "rad/(N m)", 200.0, "> 0",
+              "the moment estimate's adaptation stiffness (rate = (Omega + c_r e_R) / gamma_t)")
+C_R = Key("c_r", "number", "1/s", 5.0, "> 0", "the attitude surface's slope: s_R = Omega + c_r e_R")
 A_S = Key("a_s", "number", "1/s", -5.0, "< 0", "the L1 state predictor's pole")
 W_C = Key("w_c", "number", "rad/s", 5.0, "> 0", "the L1 low-pass filter's cut-off")
 
@@ -267,9 +274,9 @@ def _build_adaptive(ctx: BuildContext):
     p = ctx.law.params or {}
     af = ctx.airframe()
     gamma = np.ones(len(af.names))
-    gamma[M_INDEX], gamma[D_SLICE] = p["gamma_m"], p["gamma_d"]
+    gamma[M_INDEX], gamma[D_SLICE], gamma[T_SLICE] = p["gamma_m"], p["gamma_d"], p["gamma_t"]
     return GeometricAdaptiveLaw(af, _gains(p), p["lambda"], gamma=gamma, k=p["k"], dead_zone=ctx.dead_zone(),
-                                modification=ctx.modification)
+                                modification=ctx.modification, c_R=p["c_r"])
 
 
 def _build_l1(ctx: BuildContext):
@@ -283,7 +290,7 @@ def _keys(own: tuple[Key, ...], adaptive: bool) -> tuple[Key, ...]:
 
 
 GEOMETRIC_OWN = (KX, KV, KR, KW)
-ADAPTIVE_OWN = (LAMBDA, K, GAMMA_M, GAMMA_D, KR, KW)
+ADAPTIVE_OWN = (LAMBDA, K, GAMMA_M, GAMMA_D, GAMMA_T, C_R, KR, KW)
 L1_OWN = (KX, KV, KR, KW, A_S, W_C)
 
 #: these law kinds, registered (adaptive_mj.laws.kinds): law.kind = "geometric", "geometric_adaptive", "l1_geometric"

@@ -6,7 +6,7 @@ tests/test_flight_laws.py checks the two agree to 1e-12.
 flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
   x (4, 3)   [p; v; φ; Ω] measured (adaptive_mj.plants.quadrotor)
   r (5, 3)   [p_d; p_d'; p_d''; ...] (rows 0 to 2 used)
-  th (10,)   θ̂ = [m, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz, dx, dy, dz]
+  th (13,)   θ̂ = [m, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz, dx, dy, dz, tx, ty, tz]
   P          the law's numbers by index (the P_* constants below)
   G (4, 10)  rows γ (the adaptation stiffnesses: θ̂' = regressor·s/γ), θ₀, the projection's lower and upper bounds
              (laws.common.modify_rate: σ- and e-modification, the box's tangent cone)
@@ -14,7 +14,7 @@ flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
   aug (6,)   the L1 filtered estimate C σ̂ = [acceleration (3) m/s², angular acceleration (3) rad/s²] (zeros: none)
   u (4,)     out: the rotor thrusts [N], unclipped
   s (3,)     out: s = e_v + c e_x [m/s]
-  rate (10,) out: θ̂' (zero but for m and d under the adaptive law)
+  rate (13,) out: θ̂' (zero but for m, d and τ under the adaptive law)
 """
 from __future__ import annotations
 
@@ -24,8 +24,8 @@ from adaptive_mj.laws.common import modify_rate
 
 # P's layout: the law's numbers, one float64 array (the native callback reads it by address)
 P_MODE, P_KX, P_KV, P_KR, P_KW, P_C, P_K, P_G = range(8)
-P_DZ_WIDTH, P_DZ_ON_S, P_SIGMA, P_EMOD, P_ADAPT, P_L1, P_AS, P_WC = range(8, 16)
-P_SIZE = 16
+P_DZ_WIDTH, P_DZ_ON_S, P_SIGMA, P_EMOD, P_ADAPT, P_L1, P_AS, P_WC, P_CR = range(8, 17)
+P_SIZE = 17
 MODE_GEOMETRIC, MODE_ADAPTIVE = 0.0, 1.0
 
 
@@ -77,19 +77,20 @@ def flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
             F[i] = -P[P_KX] * ex - P[P_KV] * ev + (m * g if i == 2 else 0.0) + m * r[2, i]
     for j in range(rate.shape[0]):
         rate[j] = 0.0
+    s_abs = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
+    adapting = False
     if adaptive and P[P_ADAPT] != 0.0:
-        s_abs = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
         if P[P_DZ_ON_S] != 0.0:
             signal = s_abs
         else:
             e0, e1, e2 = x[0, 0] - r[0, 0], x[0, 1] - r[0, 1], x[0, 2] - r[0, 2]
             signal = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-        if signal >= P[P_DZ_WIDTH]:
+        adapting = signal >= P[P_DZ_WIDTH]  # the dead-zone open
+        if adapting:
             sw = s[0] * tmp[0] + s[1] * tmp[1] + s[2] * tmp[2]
             rate[0] = -sw / G[0, 0]
             for i in range(3):
                 rate[7 + i] = s[i] / G[0, 7 + i]
-        modify_rate(rate, th, s_abs, P[P_SIGMA], P[P_EMOD], G[1], G[0], G[2], G[3])
     # the attitude loop: f = F·Re₃, R_d from F and b₁d = e₁, e_R = ½ vee(R_dᵀR − RᵀR_d), M = −k_R e_R − k_Ω Ω + Ω×JΩ
     f = F[0] * R[0, 2] + F[1] * R[1, 2] + F[2] * R[2, 2]
     nF = math.sqrt(F[0] * F[0] + F[1] * F[1] + F[2] * F[2])
@@ -109,11 +110,43 @@ def flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
     eR0 = 0.5 * (tmp[3 + 7] - tmp[3 + 5])
     eR1 = 0.5 * (tmp[3 + 2] - tmp[3 + 6])
     eR2 = 0.5 * (tmp[3 + 3] - tmp[3 + 1])
+    # Ω_d = vee(R_dᵀṘ_d) with Ṙ_d from Ḟ ≈ m̂ p⃛_d (the reference's jerk; the feedback's own rate left out), Ω̇_d ≈ 0:
+    # ḃ₃ = (Ḟ − (b₃·Ḟ) b₃)/‖F‖, ḃ₂ = (ċ − (b₂·ċ) b₂)/‖c‖ for c = b₃ × e₁, ḃ₁ = ḃ₂ × b₃ + b₂ × ḃ₃
+    Fd0, Fd1, Fd2 = m * r[3, 0], m * r[3, 1], m * r[3, 2]
+    bF = b30 * Fd0 + b31 * Fd1 + b32 * Fd2
+    d30, d31, d32 = (Fd0 - bF * b30) / nF, (Fd1 - bF * b31) / nF, (Fd2 - bF * b32) / nF
+    c1, c2 = d32, -d31  # ċ = ḃ₃ × e₁ = (0, ḃ₃z, −ḃ₃y)
+    bc = b21 * c1 + b22 * c2
+    d20, d21, d22 = 0.0, (c1 - bc * b21) / n2, (c2 - bc * b22) / n2
+    d10 = (d21 * b32 - d22 * b31) + (b21 * d32 - b22 * d31)
+    d11 = (d22 * b30 - d20 * b32) + (b22 * d30 - b20 * d32)
+    d12 = (d20 * b31 - d21 * b30) + (b20 * d31 - b21 * d30)
+    wd0 = b30 * d20 + b31 * d21 + b32 * d22  # b₃·ḃ₂
+    wd1 = b10 * d30 + b11 * d31 + b12 * d32  # b₁·ḃ₃
+    wd2 = b20 * d10 + b21 * d11 + b22 * d12  # b₂·ḃ₁
+    o0 = b10 * wd0 + b20 * wd1 + b30 * wd2  # R_d Ω_d, world frame
+    o1 = b11 * wd0 + b21 * wd1 + b31 * wd2
+    o2 = b12 * wd0 + b22 * wd1 + b32 * wd2
+    v0 = R[0, 0] * o0 + R[1, 0] * o1 + R[2, 0] * o2  # Rᵀ R_d Ω_d, body frame
+    v1 = R[0, 1] * o0 + R[1, 1] * o1 + R[2, 1] * o2
+    v2 = R[0, 2] * o0 + R[1, 2] * o1 + R[2, 2] * o2
     W = x[3]
-    inertia_times(th, W, F)  # F now holds J Ω (F is no longer needed)
-    M0 = -P[P_KR] * eR0 - P[P_KW] * W[0] + (W[1] * F[2] - W[2] * F[1])
-    M1 = -P[P_KR] * eR1 - P[P_KW] * W[1] + (W[2] * F[0] - W[0] * F[2])
-    M2 = -P[P_KR] * eR2 - P[P_KW] * W[2] + (W[0] * F[1] - W[1] * F[0])
+    eW0, eW1, eW2 = W[0] - v0, W[1] - v1, W[2] - v2
+    # M = −k_R e_R − k_Ω e_Ω + Ω × ĴΩ − Ĵ(Ω × RᵀR_dΩ_d) − τ̂ (Lee 2010 with Ω̇_d ≈ 0; τ̂ the law's constant moment:
+    # Goodarzi, Lee & Lee 2015's Δ̂_R, adapted by the adaptive law, held by the baselines)
+    inertia_times(th, W, F)  # F now holds Ĵ Ω (F is no longer needed)
+    M0 = -P[P_KR] * eR0 - P[P_KW] * eW0 + (W[1] * F[2] - W[2] * F[1]) - th[10]
+    M1 = -P[P_KR] * eR1 - P[P_KW] * eW1 + (W[2] * F[0] - W[0] * F[2]) - th[11]
+    M2 = -P[P_KR] * eR2 - P[P_KW] * eW2 + (W[0] * F[1] - W[1] * F[0]) - th[12]
+    tmp[0], tmp[1], tmp[2] = W[1] * v2 - W[2] * v1, W[2] * v0 - W[0] * v2, W[0] * v1 - W[1] * v0
+    inertia_times(th, tmp, F)  # Ĵ(Ω × RᵀR_dΩ_d)
+    M0, M1, M2 = M0 - F[0], M1 - F[1], M2 - F[2]
+    if adaptive and P[P_ADAPT] != 0.0:
+        if adapting:  # τ̂' = (e_Ω + c_R e_R)/γ_τ
+            rate[10] = (eW0 + P[P_CR] * eR0) / G[0, 10]
+            rate[11] = (eW1 + P[P_CR] * eR1) / G[0, 11]
+            rate[12] = (eW2 + P[P_CR] * eR2) / G[0, 12]
+        modify_rate(rate, th, s_abs, P[P_SIGMA], P[P_EMOD], G[1], G[0], G[2], G[3])
     if P[P_L1] != 0.0:  # L1: f_ad = −m (Cσ̂_v · Re₃), M_ad = −J Cσ̂_Ω
         f -= m * (aug[0] * R[0, 2] + aug[1] * R[1, 2] + aug[2] * R[2, 2])
         tmp[0], tmp[1], tmp[2] = aug[3], aug[4], aug[5]

@@ -10,9 +10,11 @@ How the loop sees it (the plant protocol, adaptive_mj.plants.protocol):
               keeps its angular velocity in the local frame). Rows 2 and 3 are not p'' and p''' (state_names says
               which they are); the reference is [p_d, p_d', p_d'', p_d''', p_d''''] (4 + 1 rows).
   controls    the four rotor thrusts [N] (control_names: the actuators' names), limited to [0, T_max] each
-  θ (10,)     m [kg], the vehicle's mass with its payload; J [kg m²] its inertia about their common centre of
+  θ (13,)     m [kg], the vehicle's mass with its payload; J [kg m²] its inertia about their common centre of
               mass in the body frame (Jxx, Jyy, Jzz, Jxy, Jxz, Jyz; a cable payload counted hanging straight
-              down); d [N] a constant external force in the world frame (dx, dy, dz; an external_force event's)
+              down); d [N] a constant external force in the world frame (dx, dy, dz; an external_force event's);
+              τ [N m] a constant external torque (tx, ty, tz; world frame, the law's estimate is in the body
+              frame: the same at level flight)
               Every number comes from the compiled model (`truth`), none is typed.
 
 A crash ends the run failed (`termination`, asked after every physics step; `crash_check`): the vehicle down to
@@ -50,8 +52,9 @@ BODY = "quad"  # the flying body's name in the model
 AXES = ("x", "y", "z")
 STATE_NAMES = ("p", "v", "phi", "omega")
 INERTIA_NAMES = ("Jxx", "Jyy", "Jzz", "Jxy", "Jxz", "Jyz")
-PARAM_NAMES = ("m",) + INERTIA_NAMES + ("dx", "dy", "dz")
-PARAM_UNITS = {"m": "kg", **{n: "kg m²" for n in INERTIA_NAMES}, "dx": "N", "dy": "N", "dz": "N"}
+PARAM_NAMES = ("m",) + INERTIA_NAMES + ("dx", "dy", "dz", "tx", "ty", "tz")
+PARAM_UNITS = {"m": "kg", **{n: "kg m²" for n in INERTIA_NAMES}, "dx": "N", "dy": "N", "dz": "N", "tx": "N m",
+               "ty": "N m", "tz": "N m"}
 CRASH_TILT_DEG = 80.0  # plant.crash_tilt's default [deg]
 AIRBORNE_RISE = 0.05  # [m] above its start the vehicle counts as airborne: down to the ground after is a crash
 
@@ -288,11 +291,12 @@ class QuadrotorPlant:
         return x
 
     def true_theta(self) -> np.ndarray:
-        """(10,) [m, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz, dx, dy, dz] from the compiled model as it is now."""
+        """(13,) [m, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz, dx, dy, dz, tx, ty, tz] from the compiled model and the external
+        force and torque as they are now."""
         if self._theta is None:
             mass, J, _ = rigid_inertia(self.model, self.body)
             inertia = [J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2]]
-            self._theta = np.array([mass, *inertia, *self.external_force], dtype=float)
+            self._theta = np.array([mass, *inertia, *self.external_force, *self.external_torque], dtype=float)
         return self._theta
 
     def model_changed(self) -> None:
@@ -372,10 +376,11 @@ class QuadrotorPlant:
         return float(self.true_theta()[0] - self.model.body_mass[self.body])
 
     def nominal_theta(self) -> np.ndarray:
-        """(10,) what a law knows of the vehicle untold (its estimates' default): the bare airframe's own mass and
-        inertia (the body "quad" without its payload), no external force."""
+        """(13,) what a law knows of the vehicle untold (its estimates' default): the bare airframe's own mass and
+        inertia (the body "quad" without its payload), no external force or torque."""
         m, b, J = self.model, self.body, self.airframe.inertia
-        return np.array([m.body_mass[b], J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2], 0.0, 0.0, 0.0])
+        return np.array([m.body_mass[b], J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2], 0.0, 0.0, 0.0, 0.0, 0.0,
+                         0.0])
 
     def state_on_reference(self, ref0: np.ndarray) -> np.ndarray:
         """(4, 3) the state a run starting on the reference starts in: at p_d(0) with velocity p_d'(0), level (φ =
