@@ -130,6 +130,9 @@ def load(scenario, *, law: Law | str | None = None, log: str | os.PathLike | Non
     """
     scn = _scenario(scenario, overrides=tuple(overrides), seed=seed)
     setup = build(scn)
+    if getattr(setup.plant, "state_names", ()):  # a quadrotor: its 4 rotors on 3 axes, x (4, 3): not yet an env
+        raise ScenarioError(f"{scn.source}: adaptive_mj.env does not drive plant.kind = {scn.plant.kind!r} yet (its "
+                            "controls are not one per joint); run it with adaptive-mj run or adaptive_mj.run_scenario")
     if not isinstance(setup.plant, (MujocoPlant, ManipulatorPlant)):
         raise ScenarioError(f"{scn.source}: adaptive_mj.env needs a MuJoCo plant, got plant.kind = "
                             f"{scn.plant.kind!r} with plant.backend = {scn.plant.backend!r}")

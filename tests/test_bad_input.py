@@ -487,8 +487,9 @@ def test_a_missing_payload_names_every_place_it_was_looked_for(tmp_path, capsys,
                                   f"to the scenario ({scn.parent / 'loads/gone.xml'}) nor in the current directory "
                                   f"({tmp_path / 'loads/gone.xml'})")
     assert main(["run", "ur5e_identification", "--set", "plant.payload=nosuch"]) == 2
-    assert error_line(capsys).endswith("plant.payload 'nosuch' is not a bundled payload (box_offset, sphere, "
-                                       "tool_offset); give one of those or a path to an MJCF file ending in .xml")
+    assert error_line(capsys).endswith("plant.payload 'nosuch' is not a bundled payload (box_offset, quad_box, "
+                                       "quad_cable, sphere, tool_offset); give one of those or a path to an MJCF "
+                                       "file ending in .xml")
 
 
 def test_an_event_payload_resolves_next_to_the_scenario_and_the_log_verifies_from_anywhere(tmp_path, monkeypatch,

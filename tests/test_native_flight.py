@@ -31,6 +31,10 @@ CASES = {
     "l1, rotor loss": ("quadrotor_rotor_loss", ["law=l1_geometric", "simulation.duration=3",
                                                 "events=[{t=1.0, kind='rotor_efficiency', rotor=3, value=0.7}]"]),
     "crash mid-chunk": ("quadrotor_lemniscate", ["plant.payload_mass=0.05", "simulation.duration=5"]),
+    "crash under sampled control": ("quadrotor_lemniscate", ["plant.payload_mass=0.05", "simulation.duration=5",
+                                                             "control.period=0.01"]),
+    "divergence before a crash": ("quadrotor_lemniscate", ["plant.payload_mass=0.05", "simulation.duration=5",
+                                                           "simulation.state_bound=1.3"]),
     "tilt crash": ("quadrotor_rotor_loss", ["plant.crash_tilt=2", "simulation.duration=3",
                                             "events=[{t=0.5, kind='rotor_efficiency', rotor=1, value=0.7}]"]),
 }
@@ -54,8 +58,10 @@ def test_the_compiled_callback_gives_the_python_path_s_rows_bit_for_bit(case):
     for field in ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V"):
         a, b = getattr(py.trajectory, field), getattr(nat.trajectory, field)
         assert a.shape == b.shape and np.array_equal(a, b), field
-    if "crash" in case:
+    if case in ("crash mid-chunk", "crash under sampled control", "tilt crash"):
         assert nat.summary["status"] == "failed" and nat.summary["reason"].startswith("crashed at t = ")
+    if case == "divergence before a crash":  # the state bound is passed on the way down, before the ground
+        assert nat.summary["status"] == "diverged" and "beyond the bound 1.3" in nat.summary["reason"]
 
 
 def test_a_crash_at_a_chunk_s_last_step_ends_the_run_there(monkeypatch):

@@ -87,10 +87,22 @@ def test_the_pre_flight_check_says_what_cannot_fly_before_the_first_step(capsys)
     assert res.summary["preflight"]["plant"] and res.summary["preflight"]["ok"]
     res = run_scenario("quadrotor_lemniscate", set=["law.kW=5", "simulation.duration=0.2"])
     line = capsys.readouterr().err.strip().splitlines()[-1]
-    assert "pre-flight: attitude (principal axis" in line and "past the RK4" in line and "law.kW <= 0.0244" in line
+    assert "pre-flight: attitude (about the principal axis of inertia 1.95e-05 kg m²)" in line  # with the payload
+    assert "past the RK4" in line and "law.kW <= 0.0244" in line
     assert not res.summary["preflight"]["ok"]
     quiet = run_scenario("quadrotor_lemniscate", set=["simulation.duration=0.2"])
     assert "pre-flight" not in capsys.readouterr().err and quiet.summary["preflight"]["checked"]
+
+
+def test_a_payload_on_a_cable_cannot_be_released_and_other_front_ends_say_what_they_do_not_do():
+    with pytest.raises(ScenarioError) as exc:
+        build(sc.load(sc.SCENARIOS_DIR / "quadrotor_cable_payload.toml",
+                      overrides=["events=[{t=1.0, kind='payload_release'}]"]))
+    assert "payload_release lets go of a rigid payload, and 'payload/body' hangs on a joint" in str(exc.value)
+    from adaptive_mj import env
+
+    with pytest.raises(ScenarioError, match="adaptive_mj.env does not drive plant.kind = 'quadrotor' yet"):
+        env.load(sc.SCENARIOS_DIR / "quadrotor_lemniscate.toml")
 
 
 def test_a_tilt_past_the_bound_is_a_crash():
@@ -205,20 +217,26 @@ def test_the_scalar_l1_update_is_laws_l1_step():
     ("reference.kind='cosine'", "reference.kind must be one of 'hover', 'lemniscate'"),
     ("disturbance={kind='constant', magnitude=0.1}", "takes its disturbances as [[events]]"),
     ("law.a_s=5.0", "law.a_s must be < 0"),
+    ("law.initial_estimates={m=0.0, Jxx=1.43e-5, Jyy=1.43e-5, Jzz=2.86e-5, Jxy=0.0, Jxz=0.0, Jyz=0.0, dx=0.0, "
+     "dy=0.0, dz=0.0, tx=0.0, ty=0.0, tz=0.0}", "law.initial_estimates: m must be > 0 [kg]"),
+    ("control.period=0.01", "law.kind = 'l1_geometric' (its predictor and filter) runs under control.mode = "
+                            "'continuous' only"),
 ])
 def test_bad_quadrotor_input_is_one_line_naming_the_key(override, words):
-    over = [override] + (["law=l1_geometric"] if "a_s" in override else [])
+    over = [override] + (["law=l1_geometric"] if "a_s" in override or "period" in override else [])
+    from adaptive_mj.sim.runner import execute
+
     with pytest.raises(ScenarioError) as exc:
-        scn = sc.load(sc.SCENARIOS_DIR / "quadrotor_lemniscate.toml", overrides=over)
-        build(scn)
+        execute(sc.load(sc.SCENARIOS_DIR / "quadrotor_lemniscate.toml", overrides=over))
     msg = str(exc.value)
     assert "\n" not in msg and "quadrotor_lemniscate.toml" in msg and words in msg, msg
 
 
 def test_the_margins_bracket_the_payload_each_law_can_carry(tmp_path):
-    """The bisection (adaptive_mj.study.flight) on the payload: the geometric law at the bare mass fails once its
-    sag Δm g / k_x passes AdaptiveQuadBench's 1 m (Δm = k_x / g = 19.9 g), the adaptive law carries more; every
-    bracket has its margin below its when2fail, and the seeds' verdicts are what the searches read."""
+    """The bisection (adaptive_mj.study.flight) on the payload: the geometric law at the bare mass fails as its
+    sag Δm g / k_x nears AdaptiveQuadBench's 1 m (Δm = k_x / g = 19.9 g; the figure-eight's own error adds to it,
+    so a little before), the adaptive law carries more; every bracket has its margin below its when2fail, and the
+    seeds' verdicts are what the searches read."""
     from adaptive_mj.study import flight
 
     payload = next(d for d in flight.DISTURBANCES if d.name == "payload")
@@ -226,7 +244,7 @@ def test_the_margins_bracket_the_payload_each_law_can_carry(tmp_path):
                            logs=tmp_path, n_jobs=2)
     geo, ada = found
     g_margin, g_fail = geo.margin()
-    assert g_margin is not None and g_fail is not None and g_margin < 0.195 / G < g_fail
+    assert g_margin is not None and g_fail is not None and 0.8 * 0.195 / G < g_margin < g_fail <= 0.195 / G
     a_margin, _ = ada.margin()
     assert a_margin is not None and a_margin >= g_fail  # it survives where the geometric law failed
     for s in found:

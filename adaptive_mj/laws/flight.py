@@ -308,4 +308,5 @@ L1_GEOMETRIC = register(LawKind(
     "l1_geometric", frozenset({Form.AIRFRAME}), True,
     "L1 adaptive augmentation of the geometric controller (predictor, piecewise-constant adaptation, low-pass; L1Quad)",
     keys=_keys(L1_OWN, False), read=_read(L1_OWN, adaptive=False), build=_build_l1,
-    module=__name__, example=("quadrotor_hover_payload", ("law.kind='l1_geometric'",))))
+    module=__name__, example=("quadrotor_hover_payload", ("law.kind='l1_geometric'",)),
+    filters_key="law.kind = 'l1_geometric' (its predictor and filter)"))

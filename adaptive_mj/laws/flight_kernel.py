@@ -94,10 +94,15 @@ def flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
     # the attitude loop: f = F·Re₃, R_d from F and b₁d = e₁, e_R = ½ vee(R_dᵀR − RᵀR_d), M = −k_R e_R − k_Ω Ω + Ω×JΩ
     f = F[0] * R[0, 2] + F[1] * R[1, 2] + F[2] * R[2, 2]
     nF = math.sqrt(F[0] * F[0] + F[1] * F[1] + F[2] * F[2])
+    if not nF > 1e-12:  # no force asked (or a non-finite one): level, and let the run's own checks end it
+        F[0], F[1], F[2], nF = 0.0, 0.0, 1.0, 1.0
     b30, b31, b32 = F[0] / nF, F[1] / nF, F[2] / nF
-    # b₂d = b₃d × e₁ / ‖·‖ = (0, b32, −b31)/‖·‖
+    # b₂d = b₃d × e₁ / ‖·‖ = (0, b32, −b31)/‖·‖ (b₃d along e₁ leaves the heading undefined: b₂d = e₂ then)
     n2 = math.sqrt(b32 * b32 + b31 * b31)
-    b20, b21, b22 = 0.0, b32 / n2, -b31 / n2
+    if n2 > 1e-12:
+        b20, b21, b22 = 0.0, b32 / n2, -b31 / n2
+    else:
+        b20, b21, b22, n2 = 0.0, 1.0, 0.0, 1.0
     b10, b11, b12 = b21 * b32 - b22 * b31, b22 * b30 - b20 * b32, b20 * b31 - b21 * b30
     # Rd columns b1, b2, b3; E = RdᵀR (3, 3) into tmp[3:12] row-major
     for a in range(3):
@@ -173,6 +178,8 @@ def l1_update(x, u, th, P, A, a_s, w_c, h, z_hat, sigma, filt, R, tmp):
     b2 = tmp[5] - (W[0] * tmp[7] - W[1] * tmp[6])
     xx, yy, zz, xy, xz, yz = th[1], th[2], th[3], th[4], th[5], th[6]
     det = xx * (yy * zz - yz * yz) - xy * (xy * zz - yz * xz) + xz * (xy * yz - yy * xz)
+    if det == 0.0 or m == 0.0:  # the builder refuses such estimates (plants.quadrotor.estimate_problem)
+        det, m = 1.0, 1.0
     k3 = ((yy * zz - yz * yz) * b0 - (xy * zz - xz * yz) * b1 + (xy * yz - xz * yy) * b2) / det
     k4 = (-(xy * zz - yz * xz) * b0 + (xx * zz - xz * xz) * b1 - (xx * yz - xz * xy) * b2) / det
     k5 = ((xy * yz - yy * xz) * b0 - (xx * yz - xy * xz) * b1 + (xx * yy - xy * xy) * b2) / det

@@ -382,6 +382,18 @@ class QuadrotorPlant:
         return np.array([m.body_mass[b], J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2], 0.0, 0.0, 0.0, 0.0, 0.0,
                          0.0])
 
+    def estimate_problem(self, theta: np.ndarray) -> str | None:
+        """Why a law cannot start from estimates `theta` (13,) (the flight laws divide by m̂ and solve with Ĵ), or
+        None: m̂ > 0 and Ĵ positive definite."""
+        if not theta[0] > 0:
+            return f"m must be > 0 [kg] (the flight laws divide by it), got {theta[0]:g}"
+        xx, yy, zz, xy, xz, yz = theta[1:7]
+        J = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+        if not np.all(np.isfinite(J)) or np.linalg.eigvalsh(J).min() <= 0:
+            return (f"Jxx .. Jyz must make a positive definite inertia [kg m²] (the attitude loop solves with it), got "
+                    f"eigenvalues {', '.join(f'{v:.3g}' for v in np.linalg.eigvalsh(np.nan_to_num(J)))}")
+        return None
+
     def state_on_reference(self, ref0: np.ndarray) -> np.ndarray:
         """(4, 3) the state a run starting on the reference starts in: at p_d(0) with velocity p_d'(0), level (φ =
         0) and not turning (Ω = 0). ref0 (5, 3): the reference at t = 0."""
@@ -440,7 +452,13 @@ class QuadrotorPlant:
                     m.geom_contype[g] = m.geom_conaffinity[g] = 0
                     m.geom_rgba[g, 3] = 0.0
         mujoco.mj_setConst(m, scratch_data(m))
+        self.clearance = ground_clearance(m, self.body)  # the bare vehicle's (the released geoms collide no more)
         self.model_changed()
+
+    def jointed(self, name: str) -> bool:
+        """Whether body `name` or a body below it moves on a joint of its own (a cable payload)."""
+        m = self.model
+        return any(int(m.body_jntnum[b]) > 0 for b in subtree_bodies(m, self.body_id(name)))
 
     def scale_rotor(self, rotor: int, factor: float) -> None:
         """Rotor `rotor` (1 to 4) gives `factor` times the thrust commanded (a damaged propeller, a weak motor)."""
@@ -617,7 +635,19 @@ EXTERNAL_FORCE = ev.EventKind("external_force", _force, value="none", fields=(
     ev.EventField("force", _vector("force"), "[N] (x, y, z), world frame"),
     ev.EventField("torque", _vector("torque"), "[N m] (x, y, z), world frame")),
     doc="adds a constant force [N] and torque [N m] (world frame) on the vehicle from t on")
-PAYLOAD_RELEASE = ev.EventKind("payload_release", _release, value="none", on_build=ev.payload_body_check,
+def _release_check(scn, e, plant, source) -> None:
+    """The payload exists, and is rigid: MuJoCo cannot take the mass of a body on a joint away mid-run (its joint's
+    inertia would vanish)."""
+    from adaptive_mj.errors import ScenarioError
+
+    ev.payload_body_check(scn, e, plant, source)
+    if plant.jointed(e.body):
+        raise ScenarioError(f"{scn.source}: events: payload_release lets go of a rigid payload, and {e.body!r} hangs "
+                            f"on a joint (plant.payload = {scn.plant.payload!r}): MuJoCo cannot take a jointed body's "
+                            "mass away mid-run; release a rigid payload (quad_box), or set its mass (payload_mass)")
+
+
+PAYLOAD_RELEASE = ev.EventKind("payload_release", _release, value="none", on_build=_release_check,
                                doc="lets the payload body go at t (its mass and inertia removed)")
 
 

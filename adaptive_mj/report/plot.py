@@ -20,7 +20,7 @@ def plot_run(traj: Trajectory, path: str | Path, *, title: str = "", kind: str |
     from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 
     if traj.joint_names:
-        return plot_joints(traj, path, title=title)
+        return plot_joints(traj, path, title=title, unit=units.output_unit(kind or "") or "rad")
 
     yu = units.output_unit(kind or "")
     uu = units.control_unit(kind or "")
@@ -77,10 +77,10 @@ def plot_run(traj: Trajectory, path: str | Path, *, title: str = "", kind: str |
     return path
 
 
-def plot_joints(traj: Trajectory, path: str | Path, *, title: str = "") -> Path:
-    """A run of m joints: tracking error per joint (one panel each up to 6 joints, else
-    the norm |q̃| and the worst joint), joint torques, the estimates against truth
-    (masses, first moments m·c, inertias, joint terms: one panel per group), and V."""
+def plot_joints(traj: Trajectory, path: str | Path, *, title: str = "", unit: str = "rad") -> Path:
+    """A run of m joints (or axes: a quadrotor's x, y, z): tracking error per joint (one panel each up to 6
+    joints, else the norm |q̃| and the worst joint) [unit], joint torques (or the named controls), the
+    estimates against truth (masses, first moments m·c, inertias, joint terms: one panel per group), and V."""
     t = traj.t
     m = traj.m
     e = traj.joint_errors
@@ -94,12 +94,12 @@ def plot_joints(traj: Trajectory, path: str | Path, *, title: str = "") -> Path:
         for i, name in enumerate(traj.joint_names):
             ax = fig.add_subplot(grid[i // 2, i % 2])
             ax.plot(t, e[:, i], lw=0.8)
-            ax.set_ylabel(f"{name}: " + r"$\tilde q$ [rad]", fontsize=8)
+            ax.set_ylabel(f"{name}: " + r"$\tilde q$" + f" [{unit}]", fontsize=8)
     else:
         ax = fig.add_subplot(grid[0, :])
         ax.semilogy(t, np.linalg.norm(e, axis=1), lw=0.8, label=r"$|\tilde q|$")
         ax.semilogy(t, np.abs(e).max(axis=1), lw=0.8, label="worst joint")
-        ax.set_ylabel("tracking error [rad]")
+        ax.set_ylabel(f"tracking error [{unit}]")
         ax.legend(fontsize=8)
     fig.axes[0].set_title(title or "tracking error per joint")
     ax = fig.add_subplot(grid[err_rows, :])

@@ -146,6 +146,9 @@ def _model(logged: LoggedRun, where: str) -> mujoco.MjModel:
     except ValueError as exc:
         raise LogFormatError(f"{where}: the log's model does not compile: {str(exc).strip()}") from None
     joints = logged.trajectory.joint_names
+    if logged.trajectory.control_names or logged.header.get("state_names"):
+        raise LogFormatError(f"{where}: replay --video draws 1-DOF plants and arms; a run of named state rows (a "
+                             "quadrotor) has no video yet: use --plot, or open the log in Foxglove")
     if joints and model.nv == len(joints):
         return model  # a manipulator run: the whole arm, q (m,) per row
     if model.njnt != 1 or model.nv != 1:

@@ -88,6 +88,11 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     plant.set_state(_initial_state(scn, reference, order, plant))
     names = tuple(plant.names)
     theta_hat0 = _estimates(scn, names, plant)
+    problem = getattr(plant, "estimate_problem", None)  # a plant whose laws need estimates of some sign (a quadrotor)
+    if problem is not None and (why := problem(theta_hat0)) is not None:
+        key = "law.nominal" if scn.law.nominal is not None and scn.law.initial_estimates is None else \
+            "law.initial_estimates"
+        raise ScenarioError(f"{scn.source}: {key}: {why}")
     law = _law(scn, plant, _modification(scn, names, theta_hat0))
     std = None
     sensors = None

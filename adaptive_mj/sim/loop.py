@@ -455,11 +455,14 @@ def native_steps(plant: Plant, nc: ContextOwner, rows: Rows, queue: EventQueue, 
             rows.put_block(block, theta_now, done, mass=nc.mass_rows(done))
             t_bad = block[0][-1] if done else t_k
             return Status.DIVERGED, f"{warning} in the step from t={t_bad:.6g} s (MuJoCo reset the state)"
-        crash = nc.crash()  # a plant that crashes (a quadrotor): the rows up to the step that crashed
-        if crash is not None:
+        crash = nc.crash()  # a plant that crashes (a quadrotor): the rows up to the step that crashed, unless
+        if crash is not None:  # one of them diverged first (the Python path checks that before the crash)
             keep, reason = crash
-            rows.put_block(nc.finish(keep, partial=True), theta_now, keep)
-            return Status.FAILED, reason
+            block = nc.finish(keep + 1, partial=True)  # row `keep`: the state the crashing step left
+            t, x, u, s, ref, th = block
+            bad, why = _first_bad(x[1:keep + 1], u[:keep], th[1:keep + 1], state_bound)
+            rows.put_block(tuple(a[:keep] for a in block), theta_now, keep if bad is None else bad)
+            return (Status.FAILED, reason) if bad is None else (Status.DIVERGED, why)
         block = nc.finish(n)
         bad, reason = first_divergence(plant, block[1], block[2], block[5], nc.theta, state_bound)
         rows.put_block(block, theta_now, n if bad is None else bad, mass=nc.mass_rows(n))
@@ -678,6 +681,21 @@ def first_divergence(plant: Plant, x, u, theta_hat, theta_next, bound):
     if warning:
         return len(u), f"{warning} (within the {len(u)} steps before t={plant.time:.6g} s)"
     return None, ""
+
+
+def _first_bad(x_next, u, theta_next, bound) -> tuple[int | None, str]:
+    """(rows to keep, reason) at the first step whose next state, control or estimate is non-finite or out of the
+    bound (`divergence`'s test, row by row: x_next[j] and theta_next[j] are what step j left), or (None, '')."""
+    n = len(u)
+    if n == 0:
+        return None, ""
+    xs, us, ts = np.asarray(x_next).reshape(n, -1), np.asarray(u).reshape(n, -1), np.asarray(theta_next).reshape(n, -1)
+    bad = (~np.all(np.isfinite(xs), axis=1) | ~np.all(np.isfinite(us), axis=1) | ~np.all(np.isfinite(ts), axis=1)
+           | np.any(np.abs(xs) > bound, axis=1))
+    if not bad.any():
+        return None, ""
+    j = int(np.argmax(bad))
+    return j + 1, _what_diverged(x_next[j], u[j], theta_next[j], bound)
 
 
 def _block_within(a: np.ndarray, bound: float) -> bool:

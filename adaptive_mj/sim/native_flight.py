@@ -72,15 +72,6 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
     qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)  # noqa: F821 (injected)
     qvel = carray(fptr(pointer_at(base, off.qvel)), ctx.nv)  # noqa: F821 (injected)
     qa, da = ctx.qadr, ctx.dadr
-    if stage == 0 and ctx.crash_code == 0:  # the state the last step left: a crash ends the rows here
-        code, value, airborne = crash_check(qpos[qa + 2], qpos[qa + 3], qpos[qa + 4], qpos[qa + 5],  # noqa: F821
-                                            qpos[qa + 6], ctx.airborne != 0, ctx.z0, ctx.clearance, ctx.cos_tilt)
-        ctx.airborne = 1 if airborne else 0
-        if code != 0 and ctx.step > 0:
-            ctx.crash_code, ctx.crash_row, ctx.crash_value, ctx.crash_t = code, row, value, ctx.t
-            vx, vy, vz = qvel[da], qvel[da + 1], qvel[da + 2]
-            ctx.crash_speed = (vx * vx + vy * vy + vz * vz) ** 0.5
-            ctx.rows = row + 1  # this step's stages still run; every later call is left alone
     x = carray(fptr(ctx.x), (4, 3))  # noqa: F821 (injected)
     measure_into(qpos, qvel, qa, da, x)  # noqa: F821 (injected)
     noise = carray(fptr(ctx.noise), (ctx.maxrows, 4, 3))  # noqa: F821 (injected)
@@ -130,11 +121,24 @@ def _apply_control(ctx, io, row, u):
 
 
 def _record_row(ctx, io, row, u, theta):
-    """This shape's row: t, the true x (4, 3), the applied thrusts (4,), s (3,), the reference (5, 3), θ̂."""
+    """This shape's row: t, the true x (4, 3), the applied thrusts (4,), s (3,), the reference (5, 3), θ̂; first, at
+    every step (sampled control too), the crash check on the state the last step left: a crash is noted with its
+    row, and every later call is left alone (the loop keeps the rows before it, and checks them for divergence
+    with this row's state)."""
     base, mbase, off = io
     maxrows, nth = ctx.maxrows, ctx.nth
     qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)  # noqa: F821 (injected)
     qvel = carray(fptr(pointer_at(base, off.qvel)), ctx.nv)  # noqa: F821 (injected)
+    qa, da = ctx.qadr, ctx.dadr
+    if ctx.crash_code == 0:
+        code, value, airborne = crash_check(qpos[qa + 2], qpos[qa + 3], qpos[qa + 4], qpos[qa + 5],  # noqa: F821
+                                            qpos[qa + 6], ctx.airborne != 0, ctx.z0, ctx.clearance, ctx.cos_tilt)
+        ctx.airborne = 1 if airborne else 0
+        if code != 0 and ctx.step > 0:
+            ctx.crash_code, ctx.crash_row, ctx.crash_value, ctx.crash_t = code, row, value, ctx.t
+            vx, vy, vz = qvel[da], qvel[da + 1], qvel[da + 2]
+            ctx.crash_speed = (vx * vx + vy * vy + vz * vz) ** 0.5
+            ctx.rows = row + 1  # this step's stages still run; every later call is left alone
     carray(fptr(ctx.rec_t), maxrows)[row] = ctx.t  # noqa: F821 (injected)
     rx = carray(fptr(ctx.rec_x), (maxrows, 4, 3))  # noqa: F821 (injected)
     measure_into(qpos, qvel, ctx.qadr, ctx.dadr, rx[row])  # noqa: F821 (injected)
@@ -266,6 +270,7 @@ class NativeFlightController(ContextOwner):
         b["noise"][:rows] = 0.0 if noise is None else np.asarray(noise, dtype=float).reshape(rows, 4, 3)
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
+        c["clearance"] = plant.clearance  # an event may have changed it (a payload released)
         self.bind()
 
     def finish(self, rows: int, *, partial: bool = False) -> tuple[np.ndarray, ...]:
@@ -279,7 +284,8 @@ class NativeFlightController(ContextOwner):
 
     def crash(self) -> tuple[int, str] | None:
         """(rows to keep, reason) of a crash the callback found in the chunk just stepped (the state a step left,
-        checked at the next step's start), else None; the plant's termination() says the same from then on."""
+        checked at the next step's start; that step's row is recorded too, finish(keep + 1)), else None; the plant's
+        termination() says the same from then on."""
         c = self.context[0]
         if int(c["crash_code"]) == 0:
             return None

@@ -196,11 +196,13 @@ def _attitude_check(plant: Plant, feedback: AirframeFeedback, h: float, limit: f
     xx, yy, zz, xy, xz, yz = th[1:7]
     J = np.linalg.eigvalsh(np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]))
     roots = [np.roots([j, feedback.kW, feedback.kR]) for j in J]
-    rate = float(max(np.abs(r).max() for r in roots))
-    axis = "xyz"[int(np.argmax([np.abs(r).max() for r in roots]))]
+    fastest = int(np.argmax([np.abs(r).max() for r in roots]))
+    rate = float(np.abs(roots[fastest]).max())
+    axis = f"{J[fastest]:.3g} kg m²"
     fixes = (f"law.kW <= {0.9 * limit / h * float(J.min()):.3g} (now {feedback.kW:.3g}) with law.kR as it is",
              f"a timestep or control.period <= {0.9 * limit / rate:.3g} s")
-    return {"rate": rate, "joint": f"attitude (principal axis {axis})", "fixes": fixes if rate * h >= limit else ()}
+    return {"rate": rate, "joint": f"attitude (about the principal axis of inertia {axis})",
+            "fixes": fixes if rate * h >= limit else ()}
 
 
 def _outside_range(plant: Plant, reference, duration: float, order: int) -> tuple[str, ...]:

@@ -25,7 +25,7 @@ from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
 from adaptive_mj.trajectory import Status
 
 LAWS = ("geometric", "geometric_adaptive", "l1_geometric")
-LAW_LABEL = {"geometric": "geometric (Lee 2010)", "geometric_adaptive": "geometric adaptive (m̂, d̂)",
+LAW_LABEL = {"geometric": "geometric (Lee 2010)", "geometric_adaptive": "geometric adaptive (m̂, d̂, τ̂)",
              "l1_geometric": "L1 geometric"}
 MAX_ERROR = 1.0  # [m] AdaptiveQuadBench's failure bound on the position error
 RUN_SECONDS = 5.0  # [s] AdaptiveQuadBench's run length
@@ -67,8 +67,9 @@ DISTURBANCES = (
                 0.003, 1.0, doc="a constant force along x on the body (the vehicle weighs 0.29 N)"),
     Disturbance("torque", "N m", lambda v: _event(f"{{t=0.0, kind='external_force', torque=[{v!r}, 0.0, 0.0]}}"),
                 1e-5, 1e-2, doc="a constant torque about x (a rotor's thrust gives at most 4.4e-3 N m about x)"),
-    Disturbance("payload", "kg", lambda v: ["plant.payload='quad_box'", f"plant.payload_mass={v!r}"], 0.002, 0.06,
-                doc="a rigid payload under the body, unknown to the laws (the rotors lift 58.6 g in all)"),
+    Disturbance("payload", "kg", lambda v: ["plant.payload='quad_box'", f"plant.payload_mass={v!r}"], 0.002, 0.028,
+                doc="a rigid payload under the body, unknown to the laws (the rotors lift 58.6 g in all: the range "
+                    "stops below the 28.6 g that leave the 30 g vehicle no thrust to spare)"),
     Disturbance("rotor loss", "%",
                 lambda v: _event(f"{{t=1.0, kind='rotor_efficiency', rotor=1, value={1.0 - v!r}}}"), 0.02, 0.95,
                 doc="rotor 1 loses this fraction of its thrust at t = 1 s"),
