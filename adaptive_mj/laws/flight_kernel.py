@@ -59,6 +59,23 @@ def inertia_times(th, w, out):
     out[2] = xz * w[0] + yz * w[1] + zz * w[2]
 
 
+def translation_rates(x, r, s, s_abs, w, P, G, rate) -> bool:
+    """The adaptive law's m̂' = −sᵀw/γ_m and d̂' = s/γ_d into rate, when the dead-zone is open (on ‖s‖, or on
+    ‖e_x‖); w (3,) the regressor p̈_d − λ e_v + g e₃. Returns whether it is open (the moment adapts with them)."""
+    if P[P_DZ_ON_S] != 0.0:
+        signal = s_abs
+    else:
+        e0, e1, e2 = x[0, 0] - r[0, 0], x[0, 1] - r[0, 1], x[0, 2] - r[0, 2]
+        signal = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    if signal < P[P_DZ_WIDTH]:
+        return False
+    sw = s[0] * w[0] + s[1] * w[1] + s[2] * w[2]
+    rate[0] = -sw / G[0, 0]
+    for i in range(3):
+        rate[7 + i] = s[i] / G[0, 7 + i]
+    return True
+
+
 def flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
     """One evaluation (module docstring); R (3, 3), F (3,) and tmp (12,) are scratch."""
     rodrigues(x[2], R)
@@ -78,19 +95,7 @@ def flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
     for j in range(rate.shape[0]):
         rate[j] = 0.0
     s_abs = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
-    adapting = False
-    if adaptive and P[P_ADAPT] != 0.0:
-        if P[P_DZ_ON_S] != 0.0:
-            signal = s_abs
-        else:
-            e0, e1, e2 = x[0, 0] - r[0, 0], x[0, 1] - r[0, 1], x[0, 2] - r[0, 2]
-            signal = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-        adapting = signal >= P[P_DZ_WIDTH]  # the dead-zone open
-        if adapting:
-            sw = s[0] * tmp[0] + s[1] * tmp[1] + s[2] * tmp[2]
-            rate[0] = -sw / G[0, 0]
-            for i in range(3):
-                rate[7 + i] = s[i] / G[0, 7 + i]
+    adapting = adaptive and P[P_ADAPT] != 0.0 and translation_rates(x, r, s, s_abs, tmp, P, G, rate)
     # the attitude loop: f = F·Re₃, R_d from F and b₁d = e₁, e_R = ½ vee(R_dᵀR − RᵀR_d), M = −k_R e_R − k_Ω Ω + Ω×JΩ
     f = F[0] * R[0, 2] + F[1] * R[1, 2] + F[2] * R[2, 2]
     nF = math.sqrt(F[0] * F[0] + F[1] * F[1] + F[2] * F[2])
