@@ -2,7 +2,7 @@
 bisection: per flight law and disturbance, the largest intensity at which every seed succeeds (the margin) and
 the smallest at which every seed fails (when2fail), each with the nearest value tried on its other side.
 
-    python benchmarks/flight_margins.py [--seeds 3] [--steps 7] [--jobs 2] [--json] [-o logs/flight_margins]
+    python benchmarks/flight_margins.py [--seeds 3] [--steps 8] [--jobs 2] [--json] [-o logs/flight_margins]
 
 Prints the table, the runs and the wall time. Every run is logged (MCAP, 20 Hz) under the output folder.
 """
@@ -19,7 +19,7 @@ from adaptive_mj.study import flight
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--steps", type=int, default=7, help="bisection rounds after the range's ends")
+    ap.add_argument("--steps", type=int, default=8, help="bisection rounds after the range's ends")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--json", action="store_true")
     ap.add_argument("-o", "--output", type=Path, default=Path("logs") / "flight_margins")
