@@ -35,13 +35,13 @@ CLAIM = ("aircraft are among the systems whose dynamics change with configuratio
 
 @register(18, "quadrotor", TITLE, CLAIM)
 def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
-    """The tasks (every law on each), and the margins on a grid (quick: 10 levels, 1 seed; full: 16, 3 seeds);
+    """The tasks (every law on each), and the margins on a grid (quick: 8 levels, 1 seed; full: 12, 2 seeds);
     duration: cut every task run to this many seconds (for tests)."""
     dur = [f"simulation.duration={duration}"] if duration is not None else []
     task_jobs = tuple(_job("quadrotor", f"{name.removeprefix('quadrotor_')}-{law}", name, logs,
                            [f"law={law}", *dur], extras=("flight_metrics",))
                       for name, _ in TASKS for law in flight.LAWS)
-    levels, seeds = (10, 1) if quick else (16, 3)
+    levels, seeds = (8, 1) if quick else (12, 2)
     found = flight.searches()
     extra = [f"simulation.duration={min(duration, flight.RUN_SECONDS)}"] if duration is not None else []
     margin_jobs = tuple(flight.grid_jobs(found, levels, seeds, logs / "quadrotor-margins", extra))
