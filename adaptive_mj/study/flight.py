@@ -7,7 +7,9 @@ the *delay margin* is the margin of a control delay (theirs: a sweep from 0 to 0
 
 The runs: the bundled lemniscate (A = 0.5 m, ω = 1 rad/s at 1 m) without its payload, RUN_SECONDS long (their
 5 s), with small measurement noise (NOISE, a seed per run), the disturbance from t = 0 (a rotor's loss from 1 s).
-Two searches per (law, disturbance): by bisection (`margins`: lo and hi, then `steps` rounds, every search's runs
+A run the pre-flight check finds unstable by construction (adaptive_mj.sim.preflight: the attitude loop with a
+control delay past its linearised limit, 61 ms for these gains) is refused, as in the breaking-point study, and
+counts as a failure; every measured margin lies below that limit. Two searches per (law, disturbance): by bisection (`margins`: lo and hi, then `steps` rounds, every search's runs
 in one parallel batch per round) or on a fixed grid (`grid_margins`: one batch; the bench's section). Every run
 is logged (MCAP) under the folder given.
 """
@@ -21,6 +23,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from adaptive_mj.setup import scenario as sc
+from adaptive_mj.study.job import REFUSE_UNSTABLE
 from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
 from adaptive_mj.trajectory import Status
 
@@ -127,7 +130,8 @@ def _mid(lo: float, hi: float, d: Disturbance) -> float | None:
 def _jobs(s: Search, v: float, seeds: int, logs: Path, extra: Sequence[str]) -> list[Job]:
     d = s.disturbance
     name = f"{s.law}-{d.name.replace(' ', '_')}={v:.6g}"
-    return [Job(sc.SCENARIOS_DIR / f"{TASK}.toml", overrides=(*BASE, *extra, f"law={s.law}", *d.overrides(v)),
+    return [Job(sc.SCENARIOS_DIR / f"{TASK}.toml",
+                overrides=(REFUSE_UNSTABLE, *BASE, *extra, f"law={s.law}", *d.overrides(v)),
                 seed=k, log=logs / f"{name}-seed{k}.mcap", tag=f"{name} seed {k}", extras=("flight_metrics",),
                 keep_trajectory=False)
             for k in range(seeds)]
