@@ -9,9 +9,10 @@ The runs: the bundled lemniscate (A = 0.5 m, ω = 1 rad/s at 1 m) without its pa
 5 s), with small measurement noise (NOISE, a seed per run), the disturbance from t = 0 (a rotor's loss from 1 s).
 A run the pre-flight check finds unstable by construction (adaptive_mj.sim.preflight: the attitude loop with a
 control delay past its linearised limit, 61 ms for these gains) is refused, as in the breaking-point study, and
-counts as a failure; every measured margin lies below that limit. Two searches per (law, disturbance): by bisection (`margins`: lo and hi, then `steps` rounds, every search's runs
-in one parallel batch per round) or on a fixed grid (`grid_margins`: one batch; the bench's section). Every run
-is logged (MCAP) under the folder given.
+counts as a failure; every measured margin lies below that limit. Two searches per (law, disturbance): by
+bisection (`margins`: lo and hi, then `steps` rounds, every search's runs in one parallel batch per round) or on
+a fixed grid (`grid_jobs`, `grid_results`: one batch; the bench's section). Every run is logged (MCAP) under the
+folder given.
 """
 from __future__ import annotations
 
