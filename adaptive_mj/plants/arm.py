@@ -29,8 +29,8 @@ from adaptive_mj.errors import ModelError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.attach import compose
-from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path, with_userdata,
-                                             find_joint_and_actuator, scale_body_mass, scratch_data, spec_from_text)
+from adaptive_mj.plants.mujoco_plant import (BodyEdits, MujocoPlant, compile_for_scenario, compile_xml_path,
+                                             find_joint_and_actuator, scratch_data, spec_from_text, with_userdata)
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, StressPlant, register
 from adaptive_mj.plants import plant_keys
@@ -118,7 +118,7 @@ def compile_arm(**kwargs) -> mujoco.MjModel:
                          f"{str(exc).strip()}") from None
 
 
-class ArmPlant(MujocoPlant):
+class ArmPlant(BodyEdits, MujocoPlant):
     """The MuJoCo arm. Body masses may change mid-run (payload swap)."""
 
     def __init__(self, model: mujoco.MjModel, *, joint: str | None = None,
@@ -128,21 +128,6 @@ class ArmPlant(MujocoPlant):
         super().__init__(model, joint_id=j, actuator_id=a,
                          form=arm_form(float(model.actuator_gear[a, 0])),
                          theta_fn=lambda m: true_theta(m, j), where=where)
-
-    def body_id(self, name: str) -> int:
-        idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
-        if idx < 0:
-            raise ModelError(f"{self.where}: no body named {name!r}")
-        return idx
-
-    def set_body_mass(self, name: str, mass: float) -> None:
-        """Set a body's mass [kg], scaling its inertia with it (same shape, denser).
-
-        mj_setConst runs on a scratch MjData afterwards, so "simple" bodies
-        (whose inertia is otherwise a compile-time constant) update too.
-        """
-        scale_body_mass(self.model, self.body_id(name), mass)
-        self.model_changed()
 
 
 def load(path: str | Path = MODEL_PATH, *, payload: str | Path | None = "sphere",

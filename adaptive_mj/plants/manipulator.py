@@ -42,8 +42,8 @@ from adaptive_mj.errors import ModelError
 from adaptive_mj.numba_util import with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
 from adaptive_mj.plants import BuiltPlant, ModelSource
-from adaptive_mj.plants.mujoco_plant import (compile_for_scenario_with, control_callback, new_warnings, scale_body_mass,
-                                             scratch_data)
+from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compile_for_scenario_with, control_callback,
+                                             new_warnings, scratch_data)
 from adaptive_mj.plants.protocol import Policy
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, StressPlant, body_param_unit, register
@@ -471,7 +471,7 @@ def plant_dofs(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return qadr, act, gear
 
 
-class ManipulatorPlant:
+class ManipulatorPlant(ModelClock, BodyEdits):
     """A MuJoCo arm of m = nv joints under joint torques (see the module docstring).
 
     model: compiled, checked by check_supported. unknown: "payload", "all" or body
@@ -524,18 +524,6 @@ class ManipulatorPlant:
         self._full_index: np.ndarray | None = None  # full_mass's map from mjData.M to the dense M
 
     # --- state -------------------------------------------------------------
-    @property
-    def dt(self) -> float:
-        return float(self.model.opt.timestep)
-
-    @property
-    def stages(self) -> int:
-        return 4 if self.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 else 1
-
-    @property
-    def time(self) -> float:
-        return float(self.data.time)
-
     def set_state(self, x0) -> None:
         """x0: (2, m) [q; q̇] initial joint positions [rad or m] and velocities."""
         x0 = np.asarray(x0, dtype=float).reshape(2, self.m)
@@ -671,27 +659,6 @@ class ManipulatorPlant:
         return None
 
     # --- events ------------------------------------------------------------
-    def body_id(self, name: str) -> int:
-        idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
-        if idx < 0:
-            raise ModelError(f"{self.where}: no body named {name!r}")
-        return idx
-
-    def set_body_mass(self, name: str, mass: float) -> None:
-        """Set a body's mass [kg], its inertia scaled with it (same shape, denser)."""
-        scale_body_mass(self.model, self.body_id(name), mass)
-        self.model_changed()
-
-    def set_body_inertial(self, name: str, *, mass: float, ipos, iquat, inertia) -> None:
-        """Replace a body's mass [kg], centre of mass (3,) [m], inertia frame quaternion (4,)
-        and principal inertia (3,) [kg m²] together (a payload swap)."""
-        b = self.body_id(name)
-        self.model.body_mass[b] = mass
-        self.model.body_ipos[b] = ipos
-        self.model.body_iquat[b] = iquat
-        self.model.body_inertia[b] = inertia
-        mujoco.mj_setConst(self.model, scratch_data(self.model))
-        self.model_changed()
 
 
 # --- built from a scenario ------------------------------------------------------

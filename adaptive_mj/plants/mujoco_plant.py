@@ -111,7 +111,61 @@ def find_joint_and_actuator(model, *, joint: str | None, actuator: str | None,
     return j, a
 
 
-class MujocoPlant:
+class ModelClock:
+    """What every MuJoCo plant class reads of its compiled model and its run's MjData (`model`, `data`): the
+    physics step, the integrator's stages, the time."""
+
+    model: mujoco.MjModel
+    data: mujoco.MjData
+
+    @property
+    def dt(self) -> float:
+        """Physics step [s], read from the model (it may be edited after the plant is made)."""
+        return float(self.model.opt.timestep)
+
+    @property
+    def stages(self) -> int:
+        """Control-callback calls per mj_step: 4 under RK4, else 1."""
+        return 4 if self.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 else 1
+
+    @property
+    def time(self) -> float:
+        return float(self.data.time)
+
+
+class BodyEdits:
+    """What the MuJoCo plants whose events change a body share (`model`, `where` for messages, and their own
+    `model_changed()`): a body by name, a payload's mass, or its whole inertial at once."""
+
+    model: mujoco.MjModel
+    where: str
+
+    # the plant's own: call after editing MjModel fields at run time (what it derived from them is recomputed);
+    # annotated only, so that a plant class's own (MujocoPlant.model_changed) is the one found whatever the order
+    model_changed: Callable[[], None]
+
+    def body_id(self, name: str) -> int:
+        idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if idx < 0:
+            raise ModelError(f"{self.where}: no body named {name!r}")
+        return idx
+
+    def set_body_mass(self, name: str, mass: float) -> None:
+        """Set a body's mass [kg], scaling its inertia with it (same shape, denser; scale_body_mass, which runs
+        mj_setConst so that "simple" bodies update too)."""
+        scale_body_mass(self.model, self.body_id(name), mass)
+        self.model_changed()
+
+    def set_body_inertial(self, name: str, *, mass: float, ipos, iquat, inertia) -> None:
+        """Replace a body's mass [kg], centre of mass (3,) [m], inertia frame quaternion (4,) and principal inertia
+        (3,) [kg m²] together (a payload swap; the geoms stay)."""
+        m, b = self.model, self.body_id(name)
+        m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b] = mass, ipos, iquat, inertia
+        mujoco.mj_setConst(m, scratch_data(m))
+        self.model_changed()
+
+
+class MujocoPlant(ModelClock):
     """A 1-DOF MuJoCo model driven through one actuator: a FormPlant and a NativePlant
     (adaptive_mj.plants.protocol).
 
@@ -157,20 +211,6 @@ class MujocoPlant:
     def names(self) -> tuple[str, ...]:
         """Names of θ, as the form orders them."""
         return self.form.names
-
-    @property
-    def dt(self) -> float:
-        """Physics step [s], read from the model (it may be edited after the plant is made)."""
-        return float(self.model.opt.timestep)
-
-    @property
-    def stages(self) -> int:
-        """Control-callback calls per mj_step: 4 under RK4, else 1."""
-        return 4 if self.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 else 1
-
-    @property
-    def time(self) -> float:
-        return float(self.data.time)
 
     def set_state(self, x0) -> None:
         """x0: (2,) [q, q'] initial joint position [m or rad] and velocity."""

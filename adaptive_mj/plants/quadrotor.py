@@ -44,8 +44,8 @@ from adaptive_mj.plants import events as ev
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants.airframe import Airframe
 from adaptive_mj.plants.kinds import PlantKind, register
-from adaptive_mj.plants.mujoco_plant import (control_callback, new_warnings, release_data,
-                                             run_data, scale_body_mass, scratch_data)
+from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, control_callback, new_warnings, release_data,
+                                             run_data, scratch_data)
 
 MODEL_PATH = MODELS / "quadrotor.xml"
 BODY = "quad"  # the flying body's name in the model
@@ -210,7 +210,7 @@ class QuadrotorSpec:
     wind: tuple[float, float, float] | None = None
 
 
-class QuadrotorPlant:
+class QuadrotorPlant(ModelClock, BodyEdits):
     """The MuJoCo quadrotor (see the module docstring): a Plant (adaptive_mj.plants.protocol) with the position
     axes as its joint axis, four named controls and a crash check."""
 
@@ -251,18 +251,6 @@ class QuadrotorPlant:
         self.cos_tilt = math.cos(math.radians(self.crash_tilt))
 
     # --- the protocol's members --------------------------------------------------------
-    @property
-    def dt(self) -> float:
-        return float(self.model.opt.timestep)
-
-    @property
-    def stages(self) -> int:
-        return 4 if self.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4 else 1
-
-    @property
-    def time(self) -> float:
-        return float(self.data.time)
-
     def set_state(self, x0) -> None:
         """x0 (4, 3): p, v, φ, Ω (see the module docstring); the time restarts at 0."""
         x0 = np.asarray(x0, dtype=float).reshape(4, 3)
@@ -420,25 +408,6 @@ class QuadrotorPlant:
             self._crash = crash_text(code, value, float(d.time), self.crash_tilt, speed)
 
     # --- what events change ------------------------------------------------------------
-    def body_id(self, name: str) -> int:
-        idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
-        if idx < 0:
-            raise ModelError(f"{self.where}: no body named {name!r}")
-        return idx
-
-    def set_body_mass(self, name: str, mass: float) -> None:
-        """A body's mass [kg], its inertia scaled with it (mujoco_plant.scale_body_mass)."""
-        scale_body_mass(self.model, self.body_id(name), mass)
-        self.model_changed()
-
-    def set_body_inertial(self, name: str, *, mass: float, ipos, iquat, inertia) -> None:
-        """A body's mass [kg], centre of mass (3,) [m], inertia frame (4,) and principal inertia (3,) [kg m²] replaced
-        together (a payload_swap: another payload file's body; its geoms stay)."""
-        m, b = self.model, self.body_id(name)
-        m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b] = mass, ipos, iquat, inertia
-        mujoco.mj_setConst(m, scratch_data(m))
-        self.model_changed()
-
     def release_payload(self, name: str) -> None:
         """The payload body `name` (and its subtree) let go: their mass and inertia removed, their geoms no longer
         colliding nor drawn. The bodies stay in the model as massless frames: MuJoCo cannot remove a body from a

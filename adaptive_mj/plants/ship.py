@@ -24,8 +24,8 @@ import numpy as np
 from adaptive_mj.data import MODELS
 from adaptive_mj.errors import ModelError
 from adaptive_mj.plants import BuiltPlant, ModelSource
-from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path, control_callback,
-                                             read_model_file, scale_body_mass)
+from adaptive_mj.plants.mujoco_plant import (BodyEdits, MujocoPlant, compile_for_scenario, compile_xml_path,
+                                             control_callback, read_model_file, scale_body_mass)
 from adaptive_mj.plants.nomoto import NomotoFit, fit, nomoto_form
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, register
@@ -162,7 +162,7 @@ def _ids(model: mujoco.MjModel, where: str) -> dict[str, int]:
             "propeller": _id(model, A, PROPELLER, "actuator", where), "hull": _id(model, B, HULL, "body", where)}
 
 
-class ShipPlant(MujocoPlant):
+class ShipPlant(BodyEdits, MujocoPlant):
     """The MuJoCo ship: psi and psi' of the yaw hinge are the law's state, the steering gear's set-point
     its control. It starts every run on a straight course at the cruise speed (set_state); its loading
     (hull mass and inertia) and the propeller's thrust may change mid-run, and a constant yaw moment
@@ -202,12 +202,6 @@ class ShipPlant(MujocoPlant):
         u = self.speed()
         self.data.qvel[self.ids["surge"]] = u * np.cos(float(x0[0]))
         self.data.qvel[self.ids["sway"]] = u * np.sin(float(x0[0]))
-
-    def body_id(self, name: str) -> int:
-        idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
-        if idx < 0:
-            raise ModelError(f"{self.where}: no body named {name!r}")
-        return idx
 
     def set_loading(self, factor: float) -> None:
         """Loading: the hull's mass and inertia times factor (cargo spread like the hull's own mass; the
