@@ -61,22 +61,15 @@ if TYPE_CHECKING:
     SAMPLED: int
 
 _i8, _f8 = np.int64, np.float64
-CONTEXT = np.dtype([
-    # run state
-    ("stage", _i8), ("row", _i8), ("rows", _i8), ("step", _i8), ("t", _f8),
+CONTEXT = native_step.context_dtype([  # after stage.control_stage's fields (native_step.STAGE_CONTEXT)
     # settings
-    ("nstages", _i8), ("n", _i8), ("m", _i8), ("nth", _i8), ("qadr", _i8), ("dadr", _i8), ("act", _i8),
-    ("delay", _i8), ("has_dist", _i8),
-    ("mode", _i8), ("period_steps", _i8), ("h", _f8), ("period", _f8), ("lo", _f8), ("hi", _f8),
-    ("inc", _f8, 4), ("weights", _f8, 4),
+    ("n", _i8), ("qadr", _i8), ("dadr", _i8), ("act", _i8), ("has_dist", _i8), ("lo", _f8), ("hi", _f8),
     # the law's scalar gains: the address of its record (laws.sliding.SLIDING_GAINS, or laws.plugin.PLUGIN_GAINS
     # for a plugin law), read by name
     ("gains", _i8),
     # buffers (addresses)
-    ("ref", _i8), ("noise", _i8), ("rec", _i8), ("theta", _i8), ("rsum", _i8), ("prev", _i8), ("th", _i8),
-    ("rate", _i8), ("coeffs", _i8), ("gamma", _i8), ("theta0", _i8), ("lower", _i8), ("upper", _i8),
-    ("ring", _i8), ("params", _i8), ("xbuf", _i8), ("u_hold", _i8), ("s_hold", _i8), ("delayed", _i8),
-    ("dist", _i8),
+    ("ref", _i8), ("noise", _i8), ("rec", _i8), ("th", _i8), ("coeffs", _i8), ("gamma", _i8), ("theta0", _i8),
+    ("params", _i8), ("xbuf", _i8), ("s_hold", _i8), ("dist", _i8),
 ])
 _compiled: dict = {}
 
@@ -304,10 +297,8 @@ class NativeController(ContextOwner):
     def prepare(self, rows: int, noise: np.ndarray | None) -> None:
         """Set the buffers and the context up for the next `rows` physics steps (then the plant steps)."""
         plant, n, h = self.plant, self.n, self.plant.dt
-        t = stage_code.step_times(plant.time, h, rows)
-        times, which = stage_code.distinct_times((t[:, None] + h * self.stage_offsets[None, :]).ravel())
-        refs = self.reference(times, n)  # (n+1, len(times))
-        self.buffers["ref"][: rows * self.nst * (n + 1)] = refs.T[which].ravel()
+        t, refs = stage_code.stage_references(self.reference, plant.time, h, rows, self.stage_offsets, n)
+        self.buffers["ref"][: rows * self.nst * (n + 1)] = refs.ravel()
         self.buffers["noise"][: rows * n] = 0.0 if noise is None else noise.ravel()
         if plant.disturbance is not None:  # the Python path's force per step (MujocoPlant.step), the same arithmetic
             dist = self.buffers["dist"]

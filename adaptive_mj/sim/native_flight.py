@@ -43,20 +43,15 @@ if TYPE_CHECKING:
     l1_update: Any
 
 _i8, _f8 = np.int64, np.float64
-CONTEXT = np.dtype([
-    # run state
-    ("stage", _i8), ("row", _i8), ("rows", _i8), ("step", _i8), ("t", _f8),
+CONTEXT = native_step.context_dtype([  # after stage.control_stage's fields (native_step.STAGE_CONTEXT)
     # settings
-    ("nstages", _i8), ("nth", _i8), ("m", _i8), ("maxrows", _i8), ("qadr", _i8), ("dadr", _i8), ("nq", _i8),
-    ("nv", _i8), ("nu", _i8), ("delay", _i8), ("mode", _i8), ("period_steps", _i8), ("h", _f8), ("period", _f8),
-    ("inc", _f8, 4), ("weights", _f8, 4),
+    ("maxrows", _i8), ("qadr", _i8), ("dadr", _i8), ("nq", _i8), ("nv", _i8), ("nu", _i8),
     # the crash check (plants.quadrotor.crash_check): its settings, the airborne flag, and a crash found (code > 0
     # at row crash_row, with its value, time and speed)
     ("cos_tilt", _f8), ("clearance", _f8), ("z0", _f8), ("airborne", _i8), ("crash_code", _i8), ("crash_row", _i8),
     ("crash_value", _f8), ("crash_t", _f8), ("crash_speed", _f8),
     # buffers (addresses)
-    ("theta", _i8), ("rsum", _i8), ("prev", _i8), ("th", _i8), ("rate", _i8), ("lower", _i8), ("upper", _i8),
-    ("ring", _i8), ("u_hold", _i8), ("s_hold", _i8), ("delayed", _i8), ("ref", _i8), ("noise", _i8),
+    ("th", _i8), ("s_hold", _i8), ("ref", _i8), ("noise", _i8),
     ("rec_t", _i8), ("rec_x", _i8), ("rec_u", _i8), ("rec_s", _i8), ("rec_ref", _i8), ("rec_theta", _i8),
     ("x", _i8), ("act", _i8), ("lo", _i8), ("hi", _i8), ("P", _i8), ("G", _i8), ("Ainv", _i8), ("aug", _i8),
     ("R", _i8), ("F", _i8), ("tmp", _i8), ("u", _i8), ("s", _i8),
@@ -262,11 +257,9 @@ class NativeFlightController(ContextOwner):
         if not 0 < rows <= self.max_rows:
             raise ValueError(f"rows must be in 1..{self.max_rows}, got {rows}")
         plant, nst, h = self.plant, self.nst, self.plant.dt
-        t = stage_code.step_times(plant.time, h, rows)
-        times, which = stage_code.distinct_times((t[:, None] + h * self.stage_offsets[None, :]).ravel())
-        refs = self.reference(times, 4)  # (5, len(times), 3)
+        t, refs = stage_code.stage_references(self.reference, plant.time, h, rows, self.stage_offsets, 4)
         b = self.buffers
-        b["ref"][: rows * nst] = np.moveaxis(refs, 1, 0)[which]
+        b["ref"][: rows * nst] = refs
         b["noise"][:rows] = 0.0 if noise is None else np.asarray(noise, dtype=float).reshape(rows, 4, 3)
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]

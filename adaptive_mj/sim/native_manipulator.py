@@ -89,29 +89,22 @@ if TYPE_CHECKING:
 _i8, _f8 = np.int64, np.float64
 # The context block a run's MjData points at (userdata[0], see adaptive_mj.sim.native_context):
 # run state, settings, and the addresses of the run's buffers and of the regressor's static arrays.
-CONTEXT = np.dtype([
-    # run state
-    ("stage", _i8), ("row", _i8), ("rows", _i8), ("step", _i8), ("t", _f8),
+CONTEXT = native_step.context_dtype([  # after stage.control_stage's fields (native_step.STAGE_CONTEXT)
     # settings
-    ("nstages", _i8), ("nv", _i8), ("m", _i8), ("nbody", _i8), ("nth", _i8), ("nstd", _i8), ("nq", _i8), ("nu", _i8),
-    ("maxrows", _i8), ("has_base", _i8), ("mode", _i8), ("period_steps", _i8), ("delay", _i8),
-    ("h", _f8), ("period", _f8),
+    ("nv", _i8), ("nbody", _i8), ("nstd", _i8), ("nq", _i8), ("nu", _i8), ("maxrows", _i8), ("has_base", _i8),
     # the law's scalar gains: the address of its record (laws.slotine_li.SLOTINE_LI_GAINS, or
     # laws.plugin.PLUGIN_GAINS for a multi-joint plugin), read by name
     ("gains", _i8),
-    ("inc", _f8, 4), ("weights", _f8, 4),
     # the regressor's static arrays
     ("parent", _i8), ("dofadr", _i8), ("dofnum", _i8), ("rootid", _i8), ("body_col", _i8), ("body_known", _i8),
     ("col_arm", _i8), ("col_damp", _i8), ("need", _i8), ("bptr", _i8), ("bidx", _i8), ("bval", _i8),
     ("col_coul", _i8), ("coulomb_eps", _f8),  # the Coulomb friction columns tanh(q̇ / ε) (plant.friction_params)
     # plant and law constants
     ("qadr", _i8), ("act", _i8), ("gear", _i8), ("lo", _i8), ("hi", _i8), ("lam", _i8), ("kd", _i8),
-    ("gamma", _i8), ("theta0", _i8), ("lower", _i8), ("upper", _i8),
-    # run state and work buffers
-    ("theta", _i8), ("rsum", _i8), ("prev", _i8), ("th", _i8), ("x", _i8), ("s", _i8), ("qd_r", _i8),
-    ("qdd_r", _i8), ("zero", _i8), ("u", _i8), ("u_hold", _i8), ("s_hold", _i8), ("delayed", _i8),
-    ("ring", _i8), ("rate", _i8), ("y_std", _i8), ("y", _i8), ("tau_known", _i8), ("ref", _i8), ("noise", _i8),
-    ("scratch", _i8),
+    ("gamma", _i8), ("theta0", _i8),
+    # work buffers
+    ("th", _i8), ("x", _i8), ("s", _i8), ("qd_r", _i8), ("qdd_r", _i8), ("zero", _i8), ("u", _i8), ("s_hold", _i8),
+    ("y_std", _i8), ("y", _i8), ("tau_known", _i8), ("ref", _i8), ("noise", _i8), ("scratch", _i8),
     # sensors (stage.sense), disturbance torques and saturation-aware adaptation
     ("diff", _i8), ("has_dist", _i8), ("alpha", _f8), ("sense_period", _f8),
     ("quantum", _i8), ("q_prev", _i8), ("v_est", _i8), ("q_true", _i8), ("dist", _i8), ("sat_lo", _i8),
@@ -697,11 +690,9 @@ class NativeManipulatorController(ContextOwner):
         if not 0 < rows <= self.max_rows:
             raise ValueError(f"rows must be in 1..{self.max_rows}, got {rows}")
         plant, m, nst, h = self.plant, self.m, self.nst, self.plant.dt
-        t = stage_code.step_times(plant.time, h, rows)
-        times, which = stage_code.distinct_times((t[:, None] + h * self.stage_offsets[None, :]).ravel())
-        refs = self.reference(times, 2)  # (3, len(times), m)
+        t, refs = stage_code.stage_references(self.reference, plant.time, h, rows, self.stage_offsets, 2)
         b = self.buffers
-        b["ref"][: rows * nst] = np.moveaxis(refs, 1, 0)[which]
+        b["ref"][: rows * nst] = refs
         b["noise"][:rows] = 0.0 if noise is None else np.asarray(noise, dtype=float).reshape(rows, 2, m)
         if plant.joint_disturbance is not None:
             b["dist"][:rows] = plant.joint_disturbance.rows(t)

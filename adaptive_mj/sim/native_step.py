@@ -21,6 +21,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Callable
 
+import numpy as np
+
 from adaptive_mj.sim import stage as stage_code
 from adaptive_mj.sim.native_context import context_functions, inlined, unique_factory
 
@@ -34,6 +36,27 @@ if TYPE_CHECKING:
     fptr: Any
     context_address: Any
     control_stage: Any
+
+_i8, _f8 = np.int64, np.float64
+#: the context fields every shape's record holds because stage.control_stage and end_stage read them (its
+#: docstring lists them): the run's state, when the law runs, and the estimate and delay-line buffers (addresses)
+STAGE_CONTEXT = [
+    ("stage", _i8), ("row", _i8), ("rows", _i8), ("step", _i8), ("t", _f8),
+    ("nstages", _i8), ("nth", _i8), ("m", _i8), ("mode", _i8), ("period_steps", _i8), ("delay", _i8), ("h", _f8),
+    ("period", _f8), ("inc", _f8, 4), ("weights", _f8, 4),
+    ("theta", _i8), ("rsum", _i8), ("prev", _i8), ("rate", _i8), ("lower", _i8), ("upper", _i8), ("u_hold", _i8),
+    ("delayed", _i8), ("ring", _i8),
+]
+
+
+def context_dtype(own: list) -> np.dtype:
+    """A shape's context record: STAGE_CONTEXT, then its own fields (none of which may repeat one of them)."""
+    shared = {f[0] for f in STAGE_CONTEXT}
+    clash = [f[0] for f in own if f[0] in shared]
+    if clash:
+        raise ValueError(f"context fields {clash} are STAGE_CONTEXT's already")
+    return np.dtype(STAGE_CONTEXT + list(own))
+
 
 #: the stage functions (adaptive_mj.sim.stage) compiled into every callback and its pieces
 STAGE_FUNCTIONS = ("stage_estimate", "accumulate_rate", "advance_estimates", "is_sample_step", "period_ends",

@@ -214,6 +214,16 @@ def step_times(t0: float, h: float, rows: int) -> np.ndarray:
     return np.cumsum(terms)
 
 
+def stage_references(reference, t0: float, h: float, rows: int, offsets: np.ndarray, order: int):
+    """(t (rows,), refs (rows · stages, order+1, ...)): the start times of `rows` physics steps of h [s] from t0 (as
+    MuJoCo accumulates them, step_times) and the reference [y_d, ..., y_d^(order)] at every stage time t + c_i h
+    (offsets (stages,): c_i), evaluated once per distinct time in one vectorised call (distinct_times), row-major
+    by step then stage: what a compiled callback reads at (row, stage)."""
+    t = step_times(t0, h, rows)
+    times, which = distinct_times((t[:, None] + h * offsets[None, :]).ravel())
+    return t, np.moveaxis(np.asarray(reference(times, order)), 1, 0)[which]
+
+
 def distinct_times(stage_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(times, which): each distinct value of the stage times stage_t (N,) [s] once, and for every stage
     time the index of its value in `times` (stage_t == times[which]). Under RK4 stages 2 and 3 share
