@@ -15,7 +15,6 @@ adapting): the translational Lyapunov function the adaptive law's proof uses (do
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,24 +33,16 @@ M_INDEX, J_SLICE, D_SLICE, T_SLICE = 0, slice(1, 7), slice(7, 10), slice(10, 13)
 
 
 def rotation(phi: np.ndarray) -> np.ndarray:
-    """(3, 3) R = exp(φ^) (Rodrigues) of the rotation vector φ (3,) [rad]."""
-    angle = math.sqrt(float(phi @ phi))
-    if angle < 1e-12:
-        return np.eye(3) + geo.hat(phi)
-    K = geo.hat(phi / angle)
-    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
+    """(3, 3) R = exp(φ^) of the rotation vector φ (3,) [rad]: flight_kernel.rodrigues, the kernel's own."""
+    R = np.empty((3, 3))
+    fk.rodrigues(np.asarray(phi, dtype=float), R)
+    return R
 
 
 def inertia_matrix(theta: np.ndarray) -> np.ndarray:
     """(3, 3) J [kg m²] of θ's [Jxx, Jyy, Jzz, Jxy, Jxz, Jyz]."""
     xx, yy, zz, xy, xz, yz = theta[J_SLICE]
     return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
-
-
-def thrusts(airframe: AirframeView, f: float, M: np.ndarray) -> np.ndarray:
-    """(4,) rotor thrusts [N] giving collective thrust f [N] and moments M (3,) [N m] (the allocation's inverse,
-    unclipped)."""
-    return np.linalg.solve(airframe.allocation, np.concatenate([[f], M]))
 
 
 _KERNELS: dict[str, object] = {}

@@ -344,8 +344,10 @@ class QuadrotorPlant(ModelClock, BodyEdits):
         return None
 
     def release(self) -> None:
+        """The run is over: its MjData to the spare ones (as MujocoPlant.release; not while a native run's context
+        still points at it)."""
         data = self.__dict__.pop("data", None)
-        if data is not None:
+        if data is not None and self.native_owner is None:
             release_data(self.model, data)
 
     def preflight_lines(self) -> list[str]:
@@ -454,19 +456,10 @@ def load(path: str | Path = MODEL_PATH, **kwargs) -> QuadrotorPlant:
 
 # --- built from a scenario ------------------------------------------------------
 def model_source(scn) -> ModelSource | None:
-    """plant.model with plant.payload attached at plant.site (the arms' composition, adaptive_mj.plants.attach)."""
-    from adaptive_mj.plants.attach import compose
+    """plant.model with plant.payload attached at plant.site: the arms' composition (arm.model_source)."""
+    from adaptive_mj.plants import arm
 
-    p = scn.plant
-    xml, assets = compose(p.model, None if p.payload is None else _payload_path(p), payload_mass=p.payload_mass,
-                          site=p.site)
-    return ModelSource(xml, dict(assets))
-
-
-def _payload_path(p) -> Path:
-    from adaptive_mj.plants import payload as pl
-
-    return pl.locate(p.payload, p.payload_paths, where=str(p.model), key="plant.payload")
+    return arm.model_source(scn)
 
 
 def _edit(spec: QuadrotorSpec):
