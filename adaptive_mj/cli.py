@@ -121,6 +121,7 @@ def _parser() -> argparse.ArgumentParser:
     st.add_argument("--duration", type=float, default=20.0, help="seconds per run (default 20)")
     st.add_argument("--composite", action="store_true",
                     help="also composite adaptation (runs on the Python callback path: several times slower)")
+    st.add_argument("--plants", metavar="P,Q,...", help="only these plants (heave, arm, ur5e, quadrotor)")
     st.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help=JOBS_HELP)
     st.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
     st.add_argument("--law", metavar="NAME", help="also this law kind (built in or an installed plugin), beside the "
@@ -141,7 +142,7 @@ def _parser() -> argparse.ArgumentParser:
     sc_.add_argument("--suite", choices=("quick", "full"), default="quick",
                      help="quick: 3 seeds, 6 bisection steps, 5 s margin runs (default); full: 5 seeds, 8 steps, 20 s")
     sc_.add_argument("--seeds", type=int, help="seeds per figure (default: the suite's)")
-    sc_.add_argument("--plants", metavar="P,Q,...", help="only these plants (heave, arm, ur5e)")
+    sc_.add_argument("--plants", metavar="P,Q,...", help="only these plants (heave, arm, ur5e, quadrotor)")
     sc_.add_argument("--label", metavar="NAME", help="the law's name on the card (default LAW)")
     sc_.add_argument("--full-logs", action="store_true",
                      help="the margin runs' logs at the scenario's rate (default: their summary and a row per second)")
@@ -400,7 +401,7 @@ def _study(args):
                          law=args.law, gains=args.gains, set=args.overrides, **where)
     if args.command == "stress":
         return api.stress(seeds=args.seeds, steps=args.steps, duration=args.duration, composite=args.composite,
-                          out=args.output, law=args.law, set=args.overrides, **where)
+                          out=args.output, law=args.law, set=args.overrides, plants=args.plants, **where)
     if args.command == "score":
         if args.merge and args.law:
             raise ScenarioError("score: give LAW or --merge, not both")

@@ -207,7 +207,7 @@ def test_a_plugin_law_is_scored_against_the_baselines_with_its_files(cards):
             assert card.figure("heave", law, name).n == 3
         assert 0.0 <= card.figure("heave", law, "robustness").mean <= 1.0
     data = json.loads((card.out / "scorecard.json").read_text())
-    assert data["suite"]["version"] == 1 and len(data["suite"]["hash"]) == 16
+    assert data["suite"]["version"] == score_suite.SUITE_VERSION and len(data["suite"]["hash"]) == 16
     assert data["versions"]["law_plugin"]["distribution"] == "adaptive-mj-emod-law"
     md = (card.out / "scorecard.md").read_text()
     assert "| **emod** |" in md and "![heave performance](heave-performance.png)" in md

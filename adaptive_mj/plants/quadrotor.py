@@ -43,7 +43,7 @@ from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants import events as ev
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants.airframe import Airframe
-from adaptive_mj.plants.kinds import PlantKind, register
+from adaptive_mj.plants.kinds import PlantKind, StressPlant, register
 from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, control_callback, new_warnings, release_data,
                                              run_data, scratch_data)
 
@@ -623,4 +623,11 @@ KIND = register(PlantKind(
     events={ev.PAYLOAD_MASS: "mujoco", ev.PAYLOAD_SWAP: "mujoco", PAYLOAD_RELEASE: "mujoco",
             ROTOR_EFFICIENCY: "mujoco", WIND_EVENT: "mujoco", EXTERNAL_FORCE: "mujoco"},
     order=lambda plant, law_order: 4, starts_on_reference=True, sections=("quadrotor",),
+    # the breaking-point study and the scorecard: the bundled lemniscate with its 10 g payload, its scenario's own
+    # bound on the tail RMS (2 cm: ‖p̃‖'s RMS / √3; the geometric law at the true parameters flies it with 2.2 mm
+    # under σ_p = 1 mm, σ_v = 1 cm/s); a crash fails the run whatever its tail
+    tail_bound=0.02, nominal_noise=1e-3,
+    stress=StressPlant("quadrotor", "quadrotor_lemniscate", (), noise_signals=("p", "v"),
+                       label="the quadrotor: the RMS over x, y and z, ‖p̃‖'s RMS / √3",
+                       stressors=("wind", "force", "torque", "payload", "rotor loss")),
     noise_signals=STATE_NAMES, reference_reader=read_reference, reference_builder=build_reference))

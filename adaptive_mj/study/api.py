@@ -184,20 +184,30 @@ def breaking_point(scenario: str | Path, *, key: str, lo: float | None = None, h
 def stress(*, seeds: int = 5, steps: int = 4, duration: float = 20.0, composite: bool = False,
            out: str | Path | None = None, backend: str | Backend = "local", jobs: int | None = None,
            address: str | None = None, ray_logs: str = "bytes", retries: int = 3,
-           engine: str = "process", law: str | None = None, set: Sequence[str] = ()) -> Study:  # noqa: A002
+           engine: str = "process", law: str | None = None, set: Sequence[str] = (),  # noqa: A002
+           plants: str | Sequence[str] | None = None) -> Study:
     """The breaking-point study, every plant × law × stressor (`adaptive-mj stress`): `seeds` per value,
     `steps` bisection steps, runs of `duration` s; composite: also composite adaptation; law: also this law
-    kind (built in or a plugin) on every plant it serves, with its `set` keys (law.KEY=V). Returns the Study:
-    one row per plant/law × stressor (margin, first_fail, resolution, tail statistics), as margins.csv."""
+    kind (built in or a plugin) on every plant it serves, with its `set` keys (law.KEY=V); plants: only these
+    ("heave,quadrotor" or a list; None: all). Returns the Study: one row per plant/law × stressor (margin,
+    first_fail, resolution, tail statistics), as margins.csv."""
+    from adaptive_mj.study.breaking_point import STRESS_PLANT_KIND
     from adaptive_mj.study.stress import run_stress
 
     sets = _law_sets(law, set)
+    names = _names("--plants", plants)
+    if names is not None:
+        unknown = [n for n in names if n not in STRESS_PLANT_KIND]
+        if unknown:
+            raise ScenarioError(f"--plants: {unknown[0]!r} is not a plant of the study (expected one of "
+                                f"{', '.join(STRESS_PLANT_KIND)})")
 
     seeds, steps = count("--seeds", seeds, 1), count("--steps", steps, 0)
     duration = positive("--duration", duration, "s")
     backend_ = where(backend, jobs=jobs, address=address, ray_logs=ray_logs, retries=retries, engine=engine)
     return run_stress(seeds=seeds, steps=steps, duration=duration, composite=bool(composite),
-                      out=None if out is None else Path(out), backend=backend_, law=law, sets=tuple(sets))
+                      out=None if out is None else Path(out), backend=backend_, law=law, sets=tuple(sets),
+                      plant_names=None if names is None else tuple(names))
 
 
 def _law_sets(law: str | None, sets: Sequence[str] | str) -> list[str]:

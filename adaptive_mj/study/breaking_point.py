@@ -34,7 +34,7 @@ import numpy as np
 from adaptive_mj.plants import kinds
 from adaptive_mj.study import callable_module
 from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
-from adaptive_mj.study.job import REFUSE_UNSTABLE
+from adaptive_mj.study.job import REFUSE_UNSTABLE, crashed
 from adaptive_mj.trajectory import Status
 
 CVAR_LEVEL = 0.10  # the worst 10 % of seeds
@@ -159,7 +159,7 @@ COMPLETED = (Status.OK, Status.FAILED)
 
 
 def _tail(result: JobResult, bound: float) -> float:
-    if result.status not in COMPLETED or result.summary is None:
+    if result.status not in COMPLETED or result.summary is None or crashed(result.summary):
         return math.inf
     tail = (result.summary.get("metrics") or {}).get("rms_tracking_error_tail")
     if tail is None:
@@ -177,7 +177,7 @@ def passes(result: JobResult, bound: float) -> bool:
 def _raw_tail(result: JobResult) -> float:
     m = (result.summary or {}).get("metrics") or {}
     v = m.get("rms_tracking_error_tail", m.get("rms_tracking_error_norm_tail"))
-    return math.inf if v is None or result.status not in COMPLETED else float(v)
+    return math.inf if v is None or result.status not in COMPLETED or crashed(result.summary) else float(v)
 
 
 def _file_name(text: str) -> str:

@@ -24,7 +24,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from adaptive_mj.setup import scenario as sc
-from adaptive_mj.study.job import REFUSE_UNSTABLE
+from adaptive_mj.study.job import REFUSE_UNSTABLE, crashed
 from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
 from adaptive_mj.trajectory import Status
 
@@ -87,7 +87,7 @@ def succeeded(r: JobResult) -> bool:
     MAX_ERROR (a run its scenario's own [success] tail bound calls failed still succeeds here)."""
     if r.status not in (Status.OK, Status.FAILED) or r.summary is None:
         return False
-    if str(r.summary.get("reason", "")).startswith("crashed"):
+    if crashed(r.summary):
         return False
     fm = r.extras.get("flight_metrics") or {}
     return float(fm.get("max_error", math.inf)) <= MAX_ERROR

@@ -54,6 +54,12 @@ class JobResult:
     error: str = ""
 
 
+def crashed(summary: dict | None) -> bool:
+    """Whether a run ended because its vehicle crashed (a quadrotor: plants.quadrotor.crash_text, "crashed at t =
+    ..."): a failure whatever its tail error, since the tail of a run cut short is not the tail of the run."""
+    return str((summary or {}).get("reason") or "").startswith("crashed at")
+
+
 def decimate(traj: Trajectory, every: int) -> Trajectory:
     """Every `every`-th row of a trajectory (the logging rate), and its last row: a report's "final"
     values read from the decimated rows are then the full-rate run's own (docs/METRICS.md)."""

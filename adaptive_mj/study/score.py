@@ -27,7 +27,7 @@ from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import score_suite as suite
 from adaptive_mj.study import stress
 from adaptive_mj.study.breaking_point import TAIL_BOUND, Search, _file_name, search_all
-from adaptive_mj.study.job import REFUSE_UNSTABLE, Job, JobResult
+from adaptive_mj.study.job import REFUSE_UNSTABLE, Job, JobResult, crashed
 from adaptive_mj.study.sweep import to_toml
 from adaptive_mj.study.stats import CONFIDENCE, Estimate, cvar, estimate, ranks
 from adaptive_mj.trajectory import Status
@@ -36,7 +36,7 @@ CARD_FORMAT = "adaptive-mj scorecard"
 MARGIN_LOG_RATE_HZ = 1.0  # the margin runs' logs: the summary and a row per second (full_logs: the scenario's own)
 COST_SECONDS = 1.0  # s simulated per compute-cost timing (the best of COST_REPS)
 COST_REPS = 3
-ORACLE_KINDS = ("fixed_nominal", "robust_sliding", "computed_torque", "pd_gravity")
+ORACLE_KINDS = ("fixed_nominal", "robust_sliding", "computed_torque", "pd_gravity", "geometric")
 # keys of the law under test that would change a task, not the law: refused in --gains and --set
 TASK_KEYS = ("kind", "initial_estimates", "nominal", "order")
 
@@ -174,8 +174,9 @@ def _param_error(summary: dict | None) -> float:
 
 
 def _completed(r: JobResult | None) -> TypeGuard[JobResult]:
-    """Whether a run finished (ok or failed by its criteria, not diverged, refused or in error)."""
-    return r is not None and r.status in (Status.OK, Status.FAILED) and r.summary is not None
+    """Whether a run finished (ok or failed by its criteria; not diverged, crashed, refused or in error)."""
+    return r is not None and r.status in (Status.OK, Status.FAILED) and r.summary is not None \
+        and not crashed(r.summary)
 
 
 def seed_figures(runs: dict[str, JobResult], bound: float, limits: tuple[float, float],
@@ -436,6 +437,8 @@ def searches(pl: Plan, *, full_logs: bool) -> list[Search]:
         path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
         for e in pl.entries[p.name]:
             for st in stress.stressors(p, pl.settings.stress_duration):
+                if st.name == stress.PERIOD and stress.continuous_only(p, e.overrides):
+                    continue  # n/a: a law with filters runs under continuous control only
                 for k in range(pl.seeds):
                     out.append(Search(path, f"{p.name}/{e.label}", (*p.base, *log_rate, *e.overrides), st,
                                       TAIL_BOUND[p.name], seed=k))
@@ -481,6 +484,8 @@ def plant_card(pl: Plan, p: stress.Plant, task_runs: dict, margins: list, cost_o
         st_out, cols = {}, []
         for st in stress.stressors(p, pl.settings.stress_duration):
             ms = sorted(by_search.get((f"{p.name}/{e.label}", st.name), []), key=lambda m: m.search.seed)
+            if not ms:  # the stressor does not apply to this law (searches): n/a, and not in its R
+                continue
             st_out[st.name], pos = stressor_figures(ms, st)
             cols.append(pos)
         robust = np.asarray(cols, dtype=float).mean(axis=0) if cols else np.full(pl.seeds, math.nan)

@@ -84,6 +84,9 @@ def margins_table(plant: dict) -> str:
     return "\n".join(lines)
 
 
+NOT_APPLIED = Estimate(math.nan, math.nan, math.nan, 0)  # a stressor that does not apply to a law: no bar
+
+
 def _bars(ax, labels: list[str], ests: list[Estimate], tested: list[bool], title: str, *, log: bool = False) -> None:
     import numpy as np
 
@@ -137,7 +140,8 @@ def figures(card_data: dict, out: Path) -> dict[str, list[Path]]:
         spans = {s["name"]: (s["lo"], s["hi"]) for s in plant["stressors"]}
         for ax, name in zip(list(axes.flat)[1:], names, strict=False):
             lo, hi = spans[name]
-            _bars(ax, labels, [Estimate.from_dict(plant["laws"][lb]["stressors"][name]["margin"]) for lb in labels],
+            _bars(ax, labels, [Estimate.from_dict(plant["laws"][lb]["stressors"][name]["margin"])
+                               if name in plant["laws"][lb]["stressors"] else NOT_APPLIED for lb in labels],
                   tested, f"margin: {name} [{units[name]}]", log=lo > 0 and hi / lo >= 10)
         for ax in list(axes.flat)[n:]:
             ax.axis("off")

@@ -2,27 +2,33 @@
 version. A card records SUITE_VERSION and the hash of these definitions (`definitions_hash`); `score --merge`
 joins only cards of one version and hash. Change anything here that changes a number and bump SUITE_VERSION.
 
-Plants: each plant kind that declares a stress-study row (PlantKind.stress: heave, the 1-DOF arm, the UR5e),
-with its nominal noise and failure bound (PlantKind.nominal_noise, .tail_bound).
+Plants: each plant kind that declares a stress-study row (PlantKind.stress: heave, the 1-DOF arm, the UR5e, the
+quadrotor), with its nominal noise and failure bound (PlantKind.nominal_noise, .tail_bound).
 
 Tasks per plant (TASKS), every seed a different noise draw:
   tracking  the plant's tracking scenario under nominal noise, the estimates from half the truth (the 1-DOF plants:
             inside every baseline's projection box) or from the scenario's own start (the UR5e: zero): tail RMS
             error, control RMS and total variation, the final parameter error (the truth from the compiled model);
+            the quadrotor: the lemniscate with its 10 g payload unknown, from the bare airframe's parameters;
   change    a parameter change at half the run (heave: the water's density ×1.1; the arms: the payload's mass ×4 or
-            the payload swapped), the estimates from the truth: the peak error after it and the recovery time;
-  hold      holding still under noise with the estimates at the truth (the lecture's drift scenario): the
-            estimates' drift rate.
+            the payload swapped; the quadrotor: its payload released), the estimates from the truth: the peak error
+            after it and the recovery time;
+  hold      holding still under noise with the estimates at the truth (the lecture's drift scenario; the
+            quadrotor: a take-off and hover with its payload): the estimates' drift rate.
+A crashed run (the quadrotor) has not finished: it fails c_success, whatever its figures.
 Stressors per plant: the breaking-point study's (adaptive_mj.study.stress.stressors: noise, disturbance, delay,
 control period, and each kind's own: thruster lag, payload ratio, on the UR5e encoder resolution, a differentiated
-velocity's filter, actuator lag and the torque limits), each searched per seed by bisection.
+velocity's filter, actuator lag and the torque limits; on the quadrotor wind, force, torque, mass added to its
+payload at 1 s and a rotor's thrust loss), each searched per seed by bisection.
 
 Scores per plant (RealAIGym's form, docs/METRICS.md "Scorecard"):
   performance  S = c_success · (1 − Σ_i w_i · min(1, c_i / n_i)), over CRITERIA (weights w_i sum to 1, the
                normalisers n_i derived from the plant); c_success = 1 when every task's run finished (no divergence) and
                the tracking and hold runs kept their tail RMS error within the plant's bound, else 0;
   robustness   R = the mean over the stressors of where the margin lies in the range searched (0: the low end
-               fails; 1: the high end passes; in between on the bisection's own scale, log over a decade or more).
+               fails; 1: the high end passes; in between on the bisection's own scale, log over a decade or more),
+               over those that apply to the law (the control period does not apply to a law with filters
+               integrated in its stage states, composite adaptation or L1: n/a on the card).
 Both per seed, then the mean and its 95 % t interval over seeds (adaptive_mj.study.stats).
 """
 from __future__ import annotations
@@ -31,7 +37,7 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass
 
-SUITE_VERSION = 1
+SUITE_VERSION = 2  # 2: the quadrotor's row; R over the stressors that apply to a law
 
 
 @dataclass(frozen=True)
@@ -81,6 +87,12 @@ TASKS: dict[str, tuple[Task, ...]] = {
                                              "events=[{{t={half}, kind='payload_swap', payload='sphere'}}]"),
              extras=("change_response",)),
         Task("hold", "ur5e_drift", (), noise_scale=0.0, extras=("drift_rate",))),
+    "quadrotor": (
+        Task("tracking", "quadrotor_lemniscate", ()),
+        Task("change", "quadrotor_lemniscate", ("law.initial_estimates='model'",
+                                                "events=[{{t={half}, kind='payload_release'}}]"),
+             extras=("change_response",)),
+        Task("hold", "quadrotor_hover_payload", ("law.initial_estimates='model'",), extras=("drift_rate",))),
 }
 
 CRITERIA: tuple[Criterion, ...] = (

@@ -9,7 +9,8 @@ that seeds differ):
   arm:   arm_payload_swap without its swap (a sum of sines), σ_y = 0.5 mrad, σ_y' = 5 mrad/s.
   ur5e:  ur5e_identification (the 6-joint arm on its exciting sum of sines), σ_q = 0.1 mrad,
          σ_q' = 1 mrad/s on every joint.
-Failure: divergence, or tail RMS ỹ above the plant's bound (TAIL_BOUND).
+  quadrotor: quadrotor_lemniscate (the figure-eight with its 10 g payload), σ_p = 1 mm, σ_v = 1 cm/s.
+Failure: divergence, a crash, or tail RMS ỹ above the plant's bound (TAIL_BOUND).
 
 Laws: the lecture's adaptive law with no modification; the dead-zone (ε = 3σ_s at the
 nominal noise); σ-modification and e-modification (leakage time constant 5 s on the first
@@ -23,6 +24,11 @@ the computed-torque and PD + gravity baselines with the true parameters; its str
 encoder resolution Δ (counts = 2π/Δ), a differentiated velocity's filter time constant
 τ = 1/(2π f_c), a sinusoidal torque on every joint, actuator lag, the motors' torque limits divided
 by a factor (plant.torque_limit), payload ratio, delay and the control period.
+On the quadrotor the laws are the geometric adaptive law with the dead-zone, σ- and e-modification (the same leak
+rule, on the mass) and the box [θ/2, 2θ], L1 augmentation (continuous control only: n/a for the control period),
+and the geometric baseline with the true parameters; its stressors are noise, AdaptiveQuadBench's disturbances
+(wind, force, torque, mass added to the payload at 1 s, a rotor's thrust loss; adaptive_mj.study.flight), delay and the
+control period.
 Stressors: noise σ (y', 10× y), a sinusoidal disturbance force (ω = 2 rad/s), an unmodelled
 thruster lag τ (heave), a payload ratio (arm), a
 control delay of whole physics steps (arm: the payload's mass × ratio at half the run), and
@@ -36,7 +42,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TypedDict
+from typing import Callable, TypedDict
 
 import numpy as np
 
@@ -65,11 +71,14 @@ class BenchSettings(TypedDict):
     steps: int
     duration: float
     arm_laws: tuple[str, ...]
+    plant_names: tuple[str, ...]
 
 
-# the full bench's reduced study: 5 s runs, and on the 6-joint arm four laws (the full study: eight)
+# the full bench's reduced study: 5 s runs, and on the 6-joint arm four laws (the full study: eight); not the
+# quadrotor, whose margins the bench measures in its own section (adaptive_mj.study.sections.quadrotor_flight)
 BENCH_SETTINGS: BenchSettings = {"seeds": 5, "steps": 2, "duration": 5.0,
-                                 "arm_laws": ("adaptive", "dead_zone", "sigma", "computed_torque")}
+                                 "arm_laws": ("adaptive", "dead_zone", "sigma", "computed_torque"),
+                                 "plant_names": ("heave", "arm", "ur5e")}
 ROBUST_K_FRACTION = 0.1  # robust sliding: K = 10 % of the actuator's limit, boundary layer Φ = 0.05
 PERIOD_MAX = 1.0  # s: the control period stressor's high end (heave: 2d/k = 0.37 s; the 1-DOF arm: 2J/k = 0.085 s)
 PERIOD = "control period"  # the control period stressor's name
@@ -116,6 +125,21 @@ def plants(duration: float = DURATION) -> list[Plant]:
     return out
 
 
+def continuous_only(p: Plant, overrides: tuple[str, ...]) -> bool:
+    """Whether the law of these overrides on p has filters integrated in the stage states (composite adaptation,
+    L1's predictor and filter): sampled-data control does not apply to it, so neither does the control period."""
+    from adaptive_mj.setup.build import build
+
+    if overrides not in _FILTERS:
+        scn = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml", overrides=[*p.base, *overrides])
+        law = build(scn).law
+        _FILTERS[overrides] = bool(getattr(law, "has_filters", False))
+    return _FILTERS[overrides]
+
+
+_FILTERS: dict[tuple[str, ...], bool] = {}
+
+
 def _setup(p: Plant):
     from adaptive_mj.setup.build import build
 
@@ -123,10 +147,17 @@ def _setup(p: Plant):
     return scn, build(scn)
 
 
+def _on_airframe(p: Plant) -> bool:
+    """Whether p is a flying plant (the airframe form: the flight laws and the flight disturbances)."""
+    return Form.AIRFRAME in _kind(p).forms
+
+
 def laws(p: Plant, *, composite: bool) -> list[tuple[str, list[str]]]:
     """(law name, overrides) for plant p; every number derived from the scenario and its model."""
     if _on_joints(p):
         return _arm_laws(p)
+    if _on_airframe(p):
+        return _airframe_laws(p)
     scn, s = _setup(p)
     names, theta = s.law.names, s.plant.true_theta()
     gamma1 = float(s.law.gamma[0])
@@ -168,6 +199,58 @@ def _arm_laws(p: Plant) -> list[tuple[str, list[str]]]:
             ("saturation_freeze", ["law.saturation='freeze'"]),
             ("computed_torque", ["law.kind='computed_torque'", "law.nominal='model'"]),
             ("pd_gravity", ["law.kind='pd_gravity'", "law.nominal='model'"])]
+
+
+def _airframe_laws(p: Plant) -> list[tuple[str, list[str]]]:
+    """The quadrotor: the geometric adaptive law with each modification (the dead-zone at 3 σ of ‖s‖ under the
+    nominal noise, σ- and e-modification leaking toward the true θ in LEAK_TIME on the mass, the box [θ/2, 2θ] on
+    the mass and the inertia's diagonal), L1 augmentation, and the geometric baseline holding the true parameters
+    (law.nominal = 'model')."""
+    scn, s = _setup(p)
+    names, theta = s.law.names, s.plant.true_theta()
+    gamma1 = float(s.law.gamma[0])  # the mass estimate's stiffness
+    sig = NOMINAL_NOISE[p.name]
+    lam = float(scn.law.lam)
+    sig_s = float(np.sqrt(3 * ((10 * sig) ** 2 + lam**2 * sig**2)))  # the noise in ‖s‖, s = e_v + λ e_x (3 axes)
+    theta0 = "{" + ", ".join(f"'{n}'={float(v)!r}" for n, v in zip(names, theta, strict=True)) + "}"
+    box = "{" + ", ".join(f"'{n}'=[{0.5 * float(v)!r}, {2.0 * float(v)!r}]"
+                          for n, v in zip(names, theta, strict=True) if v > 0) + "}"
+    return [("adaptive", []),
+            ("dead_zone", [f"law.dead_zone={{width={3.0 * sig_s!r}}}"]),
+            ("sigma", [f"law.sigma={gamma1 / LEAK_TIME!r}", f"law.theta0={theta0}"]),
+            ("e_modification", [f"law.e_modification={gamma1 / (LEAK_TIME * sig_s)!r}", f"law.theta0={theta0}"]),
+            ("projection", [f"law.projection={box}"]),
+            ("l1_geometric", ["law.kind='l1_geometric'"]),
+            ("geometric", ["law.kind='geometric'", "law.nominal='model'"])]
+
+
+def _airframe_stressors(p: Plant, duration: float) -> list[Stressor]:
+    """The quadrotor's conditions: noise σ_p (σ_v = 10 σ_p per second), and AdaptiveQuadBench's disturbances as
+    adaptive_mj.study.flight declares them (a steady wind, a constant force and torque, mass v added to the payload
+    at PAYLOAD_AT up to the most the rotors lift, one rotor's thrust loss), the delay and the control period (added
+    by `stressors`)."""
+    from adaptive_mj.study import flight
+
+    out = [Stressor("noise σ_y", lambda v: [f"noise.std={{p={v!r}, v={10 * v!r}}}"], 1e-4, 0.1,
+                    unit=_kind(p).output_unit)]
+    own = {d.name: d for d in flight.DISTURBANCES}
+    for name in _row(p).stressors:
+        d = own[name]
+        if name == "payload":  # mass added to the payload at 1 s (the estimates are the truth at the start)
+            plant = _setup(p)[1].plant
+            m0 = float(plant.true_theta()[0] - plant.nominal_theta()[0])  # the payload's mass [kg], from the model
+            out.append(Stressor("payload added", _payload_added(m0), 0.001, d.hi - m0, unit=d.unit))
+        else:
+            out.append(Stressor(d.name, d.overrides, d.lo, d.hi, unit="fraction" if d.unit == "%" else d.unit))
+    return out
+
+
+def _payload_added(m0: float) -> Callable[[float], list[str]]:
+    """The payload's mass m0 + v [kg] from PAYLOAD_AT on (a payload_mass event)."""
+    return lambda v: [f"events=[{{t={PAYLOAD_AT!r}, kind='payload_mass', value={m0 + v!r}}}]"]
+
+
+PAYLOAD_AT = 1.0  # [s] when the quadrotor's payload stressor adds its mass (as the rotor loss starts)
 
 
 def _arm_stressors(p: Plant, duration: float) -> list[Stressor]:
@@ -234,10 +317,13 @@ def stressors(p: Plant, duration: float = DURATION) -> list[Stressor]:
                             unit="steps"))
         out.append(Stressor.control_period(0.001, min(PERIOD_MAX, duration), 0.001, name=PERIOD))
         return out
-    out = [Stressor("noise σ_y", lambda v: [f"noise.std={{y={v!r}, y_dot={10 * v!r}}}"], 1e-4, 0.1,
-                    unit=_kind(p).output_unit),
-           _disturbance(p)]
-    out += [OWN_STRESSORS[name](p, duration) for name in _row(p).stressors]
+    if _on_airframe(p):
+        out = _airframe_stressors(p, duration)
+    else:
+        out = [Stressor("noise σ_y", lambda v: [f"noise.std={{y={v!r}, y_dot={10 * v!r}}}"], 1e-4, 0.1,
+                        unit=_kind(p).output_unit),
+               _disturbance(p)]
+        out += [OWN_STRESSORS[name](p, duration) for name in _row(p).stressors]
     out.append(Stressor("delay", lambda v: [f"simulation.control_delay={int(v)}"], 0, 200, integer=True,
                         unit="steps"))
     dt = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml", overrides=list(p.base)).simulation.timestep
@@ -266,13 +352,16 @@ def with_law(p: Plant, entries: list[tuple[str, list[str]]], law: str | None, se
 
 def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, ...] | None = None,
           law: str | None = None, sets: tuple[str, ...] = (),
-          gains: dict[str, list[str]] | None = None) -> list[Search]:
-    """Every plant × law × stressor search; arm_laws: the 6-joint arm's built-in laws to include (None: all);
+          gains: dict[str, list[str]] | None = None, plant_names: tuple[str, ...] | None = None) -> list[Search]:
+    """Every plant × law × stressor search; plant_names: the plants to include (None: all); arm_laws: the 6-joint
+    arm's built-in laws to include (None: all);
     law: a law kind added on the plants it serves, with its gains and --set keys `sets` (with_law); one line when
     it serves none of them."""
     out = []
     served = False
     for p in plants(duration):
+        if plant_names is not None and p.name not in plant_names:
+            continue
         path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
         entries = with_law(p, laws(p, composite=composite), law, sets, gains)
         served = served or (law is not None and len(entries) > len(laws(p, composite=composite)))
@@ -280,7 +369,7 @@ def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, .
             if _on_joints(p) and arm_laws is not None and name not in arm_laws and not (law and name.startswith(law)):
                 continue
             for st in stressors(p, duration):
-                if name == "composite" and st.name == PERIOD:  # composite adaptation: continuous control only
+                if st.name == PERIOD and continuous_only(p, tuple(over)):  # n/a: its filters integrate per step
                     continue
                 out.append(Search(path, f"{p.name}/{name}", (*p.base, *over), st, TAIL_BOUND[p.name]))
     if law is not None and not served:
@@ -317,11 +406,14 @@ def table(margins: list[Margin], *, seeds: int) -> str:
     return "\n".join(lines)
 
 
-def _bounds_text() -> str:
+def _bounds_text(searches: list[Search] | None = None) -> str:
     """Each plant's failure bound in words: "0.01 m (heave), 0.05 rad (arm) or ..." (PlantKind.tail_bound, its
-    output unit and StressPlant.label)."""
+    output unit and StressPlant.label), of the plants among `searches` (None: all)."""
     parts = []
+    shown = None if searches is None else {s.label.split("/")[0] for s in searches}
     for name, kind in STRESS_PLANT_KIND.items():
+        if shown is not None and name not in shown:
+            continue
         k = kinds.built_in()[kind]
         assert k.stress is not None  # STRESS_PLANT_KIND holds the kinds that declare one
         parts.append(f"{TAIL_BOUND[name]:g} {k.output_unit} ({k.stress.label or name})")
@@ -331,14 +423,16 @@ def _bounds_text() -> str:
 def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int,
               duration: float = DURATION, backend=None,
               arm_laws: tuple[str, ...] | None = None, law: str | None = None,
-              sets: tuple[str, ...] = (), gains: dict[str, list[str]] | None = None) -> tuple[list[Margin], str, float]:
+              sets: tuple[str, ...] = (), gains: dict[str, list[str]] | None = None,
+              plant_names: tuple[str, ...] | None = None) -> tuple[list[Margin], str, float]:
     """Run the study (on `backend`: a parallel.Backend, default n_jobs local processes); returns the
     margins, the report text and the wall time [s]."""
     import sys
 
     from adaptive_mj.study.parallel import progress_printer
 
-    searches = study(composite=composite, duration=duration, arm_laws=arm_laws, law=law, sets=sets, gains=gains)
+    searches = study(composite=composite, duration=duration, arm_laws=arm_laws, law=law, sets=sets, gains=gains,
+                     plant_names=plant_names)
     t0 = time.perf_counter()
     at_most = len(searches) * seeds * (2 + steps)  # bisection stops early where a bracket closes
 
@@ -351,7 +445,8 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
     runs = sum(len(e.tails) for m in margins for e in m.evaluations)
     text = (f"{len(searches)} breaking-point searches (plant × law × stressor), {seeds} seeds per value, "
             f"the two ends and {steps} bisection steps: {runs} runs of {duration:g} s in {wall:.0f} s. "
-            f"A run fails when it diverges or its tail RMS ỹ exceeds {_bounds_text()}; the tail is the last "
+            f"A run fails when it diverges, crashes or its tail RMS ỹ exceeds {_bounds_text(searches)}; the tail "
+            "is the last "
             f"{100 * TAIL_FRACTION:g} % of a run; "
             "a value passes when every seed passes. Each cell: the margin (the "
             "largest value that passed) and, in brackets, the smallest that failed: their gap is the resolution; "
@@ -362,7 +457,8 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
 
 
 def run_stress(*, seeds: int, steps: int, duration: float, composite: bool, out: Path | None, backend,
-               law: str | None = None, sets: tuple[str, ...] = ()) -> Study:
+               law: str | None = None, sets: tuple[str, ...] = (),
+               plant_names: tuple[str, ...] | None = None) -> Study:
     """The study with options adaptive_mj.study.api.stress has checked: report.md, report.html and
     margins.csv in `out` (default a new logs/stress-...)."""
     from adaptive_mj.report.html import write_html
@@ -372,7 +468,8 @@ def run_stress(*, seeds: int, steps: int, duration: float, composite: bool, out:
     out = new_output_dir(out, "stress")
     with session(backend):
         margins, text, wall = run_study(out, seeds=seeds, steps=steps, composite=composite,
-                                        n_jobs=backend.jobs, duration=duration, backend=backend, law=law, sets=sets)
+                                        n_jobs=backend.jobs, duration=duration, backend=backend, law=law, sets=sets,
+                                        plant_names=plant_names)
     report = "# adaptive-mj breaking points\n\n" + text + "\n"
     (out / "report.md").write_text(report, encoding="utf-8")
     html = write_html(out / "report.md")  # report.html: the same text, for a browser
