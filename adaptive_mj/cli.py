@@ -86,6 +86,8 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--gains", type=Path, metavar="FILE.toml", help="with --law: its keys per plant kind (as score)")
     b.add_argument("--set", dest="overrides", action="append", default=[], metavar="law.KEY=VALUE",
                    help="with --law: a key of that law (repeatable)")
+    b.add_argument("--full-logs", action="store_true",
+                   help="the breaking-point study's runs log every row (default: their summary and a row per second)")
     _backend_arguments(b)
 
     sw = add_parser("sweep", help="run a scenario over a grid of keys and seeds, in parallel")
@@ -398,7 +400,7 @@ def _study(args):
         if args.gains is not None and args.law is None:
             raise ScenarioError("--gains needs --law")
         return api.bench(quick=args.quick, scenarios=[_scenario_path(p) for p in args.scenario], out=args.output,
-                         law=args.law, gains=args.gains, set=args.overrides, **where)
+                         law=args.law, gains=args.gains, set=args.overrides, full_logs=args.full_logs, **where)
     if args.command == "stress":
         return api.stress(seeds=args.seeds, steps=args.steps, duration=args.duration, composite=args.composite,
                           out=args.output, law=args.law, set=args.overrides, plants=args.plants, **where)

@@ -56,6 +56,9 @@ def test_quick_bench_on_a_reduced_catalogue(tmp_path, small_catalogue, capsys):
     assert summary["payload_swap/adaptive"]["extras"]["swap_response"]["event_time"] == 1.0
     logs = sorted(p.name for p in (out / "logs").glob("*.mcap"))
     assert len(logs) == len(summary)
+    # the disk the logs take, stated from the files written (10⁶ bytes per MB)
+    mb = sum(p.stat().st_size for p in (out / "logs").rglob("*") if p.is_file()) / 1e6
+    assert f"The logs take {mb:.0f} MB." in report
     printed = capsys.readouterr().out
     assert "section" in printed and "report:" in printed
 
@@ -75,3 +78,19 @@ def test_bench_from_python_returns_its_main_table(tmp_path, small_catalogue):
     assert {r["status"] for r in s.rows} >= {"ok", "diverged"}
     png = s.plot()
     assert png == tmp_path / "b" / "figures" / "tails.png" and png.stat().st_size > 10_000
+
+
+def test_the_bench_s_breaking_point_runs_log_their_summary_and_a_row_per_second(tmp_path):
+    """The study's margins come from the full-rate rows; its logs keep the summary and a row per second
+    (stress.SUMMARY_LOG_RATE_HZ) unless `bench --full-logs`."""
+    from adaptive_mj.log.replay import read_log
+    from adaptive_mj.study.stress import SUMMARY_LOG_RATE_HZ, run_study
+
+    kw = dict(seeds=1, steps=0, composite=False, n_jobs=2, duration=3.0, plant_names=("heave",))
+    slim, text, _ = run_study(tmp_path / "slim", log_rate_hz=SUMMARY_LOG_RATE_HZ, **kw)
+    full, _, _ = run_study(tmp_path / "full", **kw)
+    assert "a row every 1 s" in text
+    assert [[ev.tails for ev in m.evaluations] for m in slim] == [[ev.tails for ev in m.evaluations] for m in full]
+    one = sorted((tmp_path / "slim" / "logs").rglob("*.mcap"))[0]
+    same = tmp_path / "full" / one.relative_to(tmp_path / "slim")
+    assert len(read_log(one).trajectory.t) <= 5 < len(read_log(same).trajectory.t)  # 3 s: rows at 0, 1, 2 s (+ last)

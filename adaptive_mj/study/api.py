@@ -239,8 +239,10 @@ def _law_sets(law: str | None, sets: Sequence[str] | str) -> list[str]:
 def bench(*, quick: bool = False, scenarios: Sequence[str | Path] = (), out: str | Path | None = None,
           backend: str | Backend = "local", jobs: int | None = None, address: str | None = None,
           ray_logs: str = "bytes", retries: int = 3, engine: str = "process", law: str | None = None,
-          gains: str | Path | None = None, set: Sequence[str] = ()) -> Study:  # noqa: A002
-    """The benchmark catalogue (`adaptive-mj bench`): quick: shorter runs, no breaking-point study;
+          gains: str | Path | None = None, set: Sequence[str] = (),  # noqa: A002
+          full_logs: bool = False) -> Study:
+    """The benchmark catalogue (`adaptive-mj bench`): quick: shorter runs, no breaking-point study; full_logs: the
+    breaking-point study's runs log every row (default: their summary and a row per second);
     scenarios: your own scenario files (or bundled names), each in a section of its own; law: a law kind
     (built in or a plugin, its keys per plant kind in `gains` and `set`) scored against the baselines in a
     section of its own (score's quick suite) and added to the breaking-point study. Returns the Study: one
@@ -252,7 +254,8 @@ def bench(*, quick: bool = False, scenarios: Sequence[str | Path] = (), out: str
     backend_ = where(backend, jobs=jobs, address=address, ray_logs=ray_logs, retries=retries, engine=engine)
     paths = [scenario_path(p) for p in ([scenarios] if isinstance(scenarios, (str, Path)) else scenarios)]
     return run_bench(quick=bool(quick), scenarios=paths, out=None if out is None else Path(out), backend=backend_,
-                     law=law, gains=None if gains is None else Path(gains), sets=tuple(sets))
+                     law=law, gains=None if gains is None else Path(gains), sets=tuple(sets),
+                     full_logs=bool(full_logs))
 
 
 def run_scenario(scenario: str | Path, *, set: Sequence[str] = (), seed: int | None = None,  # noqa: A002

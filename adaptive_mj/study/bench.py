@@ -52,12 +52,13 @@ def main_table_markdown(rows: list[dict]) -> str:
 
 
 def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str | None = None,
-              gains: Path | None = None, sets: tuple[str, ...] = ()) -> Study:
+              gains: Path | None = None, sets: tuple[str, ...] = (), full_logs: bool = False) -> Study:
     """The bench with options adaptive_mj.study.api.bench has checked: the catalogue (quick: shorter runs,
     no breaking-point study) and a section for the user's scenario files, written to `out`. law: a law kind
     (built in or a plugin) with its `gains` file and --set keys, scored against the baselines in a section of
     its own (adaptive-mj score's quick suite, in `out/score`) and, in the full bench, added to the
-    breaking-point study's laws on the plants it serves."""
+    breaking-point study's laws on the plants it serves. full_logs: the breaking-point study's runs log every row
+    (default: their summary and a row per second, stress.SUMMARY_LOG_RATE_HZ; the catalogue's runs log in full)."""
     from adaptive_mj.study.bench_catalogue import catalogue
 
     from adaptive_mj.sim.runner import new_output_dir
@@ -83,7 +84,7 @@ def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str |
         sections.append(user_section(list(scenarios), out / "logs"))
     jobs = [job for s in sections for job in s.jobs]
     with session(backend):
-        return _bench(quick, out, sections, jobs, backend, scoring)
+        return _bench(quick, out, sections, jobs, backend, scoring, full_logs)
 
 
 def _number(title: str) -> float:
@@ -109,7 +110,12 @@ def _law_section(out: Path, backend: Backend, law: str, gains: Path | None, sets
             f"\n{body}\n"), runs
 
 
-def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = None) -> Study:
+def _disk_mb(folder: Path) -> float:
+    """[MB] what the files under `folder` take (10⁶ bytes)."""
+    return sum(f.stat().st_size for f in folder.rglob("*") if f.is_file()) / 1e6 if folder.exists() else 0.0
+
+
+def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = None, full_logs: bool = False) -> Study:
     t0 = time.perf_counter()
     results = run_jobs(jobs, backend=backend, on_done=progress_printer(len(jobs)))
     run_seconds = time.perf_counter() - t0
@@ -121,7 +127,7 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
         rows.extend(rep.rows)
     n_runs = len(results)
     if not quick:  # the breaking-point study: its own batches (bisection), a reduced `adaptive-mj stress`
-        from adaptive_mj.study.stress import BENCH_SETTINGS, run_study
+        from adaptive_mj.study.stress import BENCH_SETTINGS, SUMMARY_LOG_RATE_HZ, run_study
 
         extra = {}
         if scoring is not None:
@@ -129,7 +135,8 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
 
             extra = {"law": scoring["law"], "sets": tuple(scoring["sets"]), "gains": read_gains(scoring["gains"])}
         margins, text, _ = run_study(out / "stress", n_jobs=backend.jobs, composite=False, backend=backend,
-                                     **BENCH_SETTINGS, **extra)
+                                     log_rate_hz=None if full_logs else SUMMARY_LOG_RATE_HZ, **BENCH_SETTINGS,
+                                     **extra)
         n_runs += sum(len(e.tails) for m in margins for e in m.evaluations)
         before = sum(1 for section in sections if _number(section.title) < 14)  # in order: before 15, 16, ...
         parts.insert(before, "## 14. Breaking points: law × stressor margins\n\n**The lecture:** the modifications "
@@ -149,8 +156,12 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
               + ("" if quick else f", the breaking-point study {elapsed - run_seconds:.1f} s")
               + f", the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
               f"every catalogue run's MCAP log is in `logs/`"
-              + ("" if quick else ", the breaking-point study's in `stress/logs/`")
-              + " (replay with `adaptive-mj replay logs/<run>.mcap --verify`).\n\n"
+              + ("" if quick else ", the breaking-point study's in `stress/logs/`"
+                 + ("" if full_logs else " (each its summary and a row per second: `bench --full-logs` keeps every "
+                    "row)"))
+              + " (replay with `adaptive-mj replay logs/<run>.mcap --verify`). "
+              + f"The logs take {_disk_mb(out / 'logs'):.0f} MB"
+              + ("" if quick else f", the breaking-point study's {_disk_mb(out / 'stress'):.0f} MB") + ".\n\n"
               f"**Tail**, wherever a table or figure says it: the last {100 * TAIL_FRACTION:g} % of a run "
               "(docs/METRICS.md). On an arm of m joints a tail RMS error is the RMS over the joints and the tail's "
               "rows, i.e. the RMS of ‖q̃‖ divided by √m.\n\n"

@@ -82,6 +82,7 @@ BENCH_SETTINGS: BenchSettings = {"seeds": 5, "steps": 2, "duration": 5.0,
 ROBUST_K_FRACTION = 0.1  # robust sliding: K = 10 % of the actuator's limit, boundary layer Φ = 0.05
 PERIOD_MAX = 1.0  # s: the control period stressor's high end (heave: 2d/k = 0.37 s; the 1-DOF arm: 2J/k = 0.085 s)
 PERIOD = "control period"  # the control period stressor's name
+SUMMARY_LOG_RATE_HZ = 1.0  # the bench's breaking-point runs log their summary and a row per second (--full-logs: all)
 
 
 @dataclass(frozen=True)
@@ -352,9 +353,11 @@ def with_law(p: Plant, entries: list[tuple[str, list[str]]], law: str | None, se
 
 def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, ...] | None = None,
           law: str | None = None, sets: tuple[str, ...] = (),
-          gains: dict[str, list[str]] | None = None, plant_names: tuple[str, ...] | None = None) -> list[Search]:
-    """Every plant × law × stressor search; plant_names: the plants to include (None: all); arm_laws: the 6-joint
-    arm's built-in laws to include (None: all);
+          gains: dict[str, list[str]] | None = None, plant_names: tuple[str, ...] | None = None,
+          extra: tuple[str, ...] = ()) -> list[Search]:
+    """Every plant × law × stressor search; plant_names: the plants to include (None: all); extra: overrides of
+    every run after the plant's (e.g. the log's rate); arm_laws: the 6-joint arm's built-in laws to include (None:
+    all);
     law: a law kind added on the plants it serves, with its gains and --set keys `sets` (with_law); one line when
     it serves none of them."""
     out = []
@@ -371,7 +374,7 @@ def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, .
             for st in stressors(p, duration):
                 if st.name == PERIOD and continuous_only(p, tuple(over)):  # n/a: its filters integrate per step
                     continue
-                out.append(Search(path, f"{p.name}/{name}", (*p.base, *over), st, TAIL_BOUND[p.name]))
+                out.append(Search(path, f"{p.name}/{name}", (*p.base, *extra, *over), st, TAIL_BOUND[p.name]))
     if law is not None and not served:
         raise ScenarioError(f"--law: {law!r} serves none of the study's plants ({', '.join(STRESS_PLANT_KIND)})")
     return out
@@ -424,15 +427,17 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
               duration: float = DURATION, backend=None,
               arm_laws: tuple[str, ...] | None = None, law: str | None = None,
               sets: tuple[str, ...] = (), gains: dict[str, list[str]] | None = None,
-              plant_names: tuple[str, ...] | None = None) -> tuple[list[Margin], str, float]:
+              plant_names: tuple[str, ...] | None = None,
+              log_rate_hz: float | None = None) -> tuple[list[Margin], str, float]:
     """Run the study (on `backend`: a parallel.Backend, default n_jobs local processes); returns the
     margins, the report text and the wall time [s]."""
     import sys
 
     from adaptive_mj.study.parallel import progress_printer
 
+    extra = () if log_rate_hz is None else (f"log.rate_hz={log_rate_hz!r}",)
     searches = study(composite=composite, duration=duration, arm_laws=arm_laws, law=law, sets=sets, gains=gains,
-                     plant_names=plant_names)
+                     plant_names=plant_names, extra=extra)
     t0 = time.perf_counter()
     at_most = len(searches) * seeds * (2 + steps)  # bisection stops early where a bracket closes
 
@@ -452,7 +457,9 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
             "largest value that passed) and, in brackets, the smallest that failed: their gap is the resolution; "
             "then, over the seeds at the margin, the mean / CVaR at 10 % (the worst seed of "
             f"{seeds}) of the tail error, and the failure rate at the failing value. n/a: the stressor does not "
-            "apply to that plant. Every run's log is in `logs/`.\n\n" + table(margins, seeds=seeds))
+            "apply to that plant. Every run's log is in `logs/`"
+            + ("" if log_rate_hz is None else f" (its summary and a row every {1 / log_rate_hz:g} s; the margins "
+               "come from the full-rate rows)") + ".\n\n" + table(margins, seeds=seeds))
     return margins, text, wall
 
 
