@@ -6,8 +6,9 @@ the airframe's allocation, unclipped (the loop clamps them into [0, T_max]: the 
 
 θ (13,) = [m, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz, dx, dy, dz, tx, ty, tz] as the plant names it: a law's nominal model is
 θ̂; the adaptive law moves m̂, d̂ and the moment τ̂ (Goodarzi, Lee & Lee 2015's Δ̂_R; the inertia stays at its
-estimate), the others hold it. Every law feeds the desired body rate Ω_d forward from the reference's jerk
-(Lee 2010's e_Ω = Ω − RᵀR_dΩ_d, with Ω̇_d = 0).
+estimate unless law.adapt_inertia: then Ĵ too, by the Slotine–Li law on SO(3)), the others hold it. Every law
+feeds the desired body rate Ω_d forward from the reference's jerk (Lee 2010's e_Ω = Ω − RᵀR_dΩ_d, with Ω̇_d = 0;
+with law.adapt_inertia Ω̇_d from its snap).
 
 The sliding variable logged as s (3,) [m/s] is the translational surface s = e_v + c e_x (c = k_x/k_v for the
 geometric baseline and L1, law.lambda for the adaptive law), with V = ½ m sᵀs (+ ½ m̃²/γ_m + ½ ‖d̃‖²/γ_d when
