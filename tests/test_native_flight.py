@@ -26,6 +26,9 @@ CASES = {
         "law.sigma=0.01", "law.e_modification=0.1", "law.projection={m=[0.02, 0.035]}",
         "law.dead_zone={width=0.001}", "simulation.duration=4"]),
     "cable payload": ("quadrotor_cable_payload", ["simulation.duration=3"]),
+    "inertia adapted, noise, delay, events": ("quadrotor_lemniscate", [
+        "law.adapt_inertia=true", "law.gamma_j=1e3", "law.sigma=0.01", NOISE, "simulation.control_delay=3", FORCES,
+        "simulation.duration=4"]),
     "l1, noise, delay, events": ("quadrotor_lemniscate", ["law=l1_geometric", NOISE, "simulation.control_delay=5",
                                                           FORCES, "simulation.duration=4"]),
     "l1, rotor loss": ("quadrotor_rotor_loss", ["law=l1_geometric", "simulation.duration=3",

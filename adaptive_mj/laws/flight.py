@@ -6,8 +6,9 @@ the airframe's allocation, unclipped (the loop clamps them into [0, T_max]: the 
 
 θ (13,) = [m, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz, dx, dy, dz, tx, ty, tz] as the plant names it: a law's nominal model is
 θ̂; the adaptive law moves m̂, d̂ and the moment τ̂ (Goodarzi, Lee & Lee 2015's Δ̂_R; the inertia stays at its
-estimate), the others hold it. Every law feeds the desired body rate Ω_d forward from the reference's jerk
-(Lee 2010's e_Ω = Ω − RᵀR_dΩ_d, with Ω̇_d = 0).
+estimate unless law.adapt_inertia: then Ĵ too, by the Slotine–Li law on SO(3)), the others hold it. Every law
+feeds the desired body rate Ω_d forward from the reference's jerk (Lee 2010's e_Ω = Ω − RᵀR_dΩ_d, with Ω̇_d = 0;
+with law.adapt_inertia Ω̇_d from its snap).
 
 The sliding variable logged as s (3,) [m/s] is the translational surface s = e_v + c e_x (c = k_x/k_v for the
 geometric baseline and L1, law.lambda for the adaptive law), with V = ½ m sᵀs (+ ½ m̃²/γ_m + ½ ‖d̃‖²/γ_d when
@@ -86,6 +87,7 @@ class FlightLaw:
     c_R: float = 0.0
     mode: float = fk.MODE_GEOMETRIC
     k: float = 0.0
+    adapt_inertia: bool = False
     dead_zone: DeadZone | None = None
     modification: Modification | None = None
     l1: bool = False
@@ -100,6 +102,7 @@ class FlightLaw:
         P[fk.P_DZ_WIDTH] = dz.width if dz is not None else 0.0
         P[fk.P_DZ_ON_S] = 1.0 if dz is None or dz.on.value == "s" else 0.0
         P[fk.P_ADAPT], P[fk.P_L1], P[fk.P_CR] = float(self.adapt), float(self.l1), self.c_R
+        P[fk.P_ADAPT_J] = float(self.adapt_inertia)
         G = np.zeros((4, n))
         G[0] = self.gamma
         mod = self.modification
@@ -110,7 +113,7 @@ class FlightLaw:
         self.P, self.G = P, G
         self.Ainv = np.ascontiguousarray(np.linalg.inv(self.airframe.allocation))
         self.aug = np.zeros(6)
-        self._scratch = (np.zeros((3, 3)), np.zeros(3), np.zeros(12))
+        self._scratch = (np.zeros((3, 3)), np.zeros(3), np.zeros(fk.TMP_SIZE))
 
     def __call__(self, t, x, ref, theta_hat) -> LawStep:
         u, s, rate = np.empty(4), np.empty(3), np.empty(len(self.names))
@@ -121,8 +124,9 @@ class FlightLaw:
         return LawStep(u, rate, s, np.array(ref[2]))
 
     def lyapunov(self, s, theta_hat, theta, *, M=None) -> np.ndarray:
-        """(N,) V = ½ sᵀ M s (M = m I from the plant) + ½ Σ γᵢ θ̃ᵢ² over the mass and force estimates (γ: the
-        stiffnesses, θ̂' = regressor·s/γ); the moment estimate's attitude terms are not in it (docs/THEORY.md)."""
+        """(N,) V = ½ sᵀ M s (M = m I from the plant) + ½ Σ γᵢ θ̃ᵢ² over the mass and force estimates, and the
+        inertia's with law.adapt_inertia (γ: the stiffnesses, θ̂' = regressor·s/γ); the attitude's own terms
+        (½ s_RᵀJs_R, k_R Ψ) and the moment estimate's are not in it (docs/THEORY.md)."""
         s = np.asarray(s, dtype=float)
         kinetic = 0.5 * np.einsum("ni,nij,nj->n", s, M, s) if M is not None else 0.5 * np.einsum("ni,ni->n", s, s)
         if not self.adapt:
@@ -130,6 +134,8 @@ class FlightLaw:
         err = np.asarray(theta_hat, dtype=float) - np.asarray(theta, dtype=float)
         moving = np.zeros(len(self.names), dtype=bool)
         moving[M_INDEX] = moving[D_SLICE] = True
+        if self.adapt_inertia:
+            moving[J_SLICE] = True
         return kinetic + 0.5 * np.sum(np.where(moving, self.gamma * err**2, 0.0), axis=1)
 
     def reset(self) -> None:
@@ -160,7 +166,9 @@ class GeometricLaw(FlightLaw):
 class GeometricAdaptiveLaw(FlightLaw):
     """The sliding adaptive law on the translational dynamics (adaptive_mj.laws.geometric.adaptive_force) with the
     geometric attitude loop: m̂' = −sᵀw/γ_m, d̂' = s/γ_d (the project's γ is a stiffness: rate = regressor · s / γ),
-    through the dead-zone and the robust modifications (σ, e-modification on ‖s‖, projection)."""
+    through the dead-zone and the robust modifications (σ, e-modification on ‖s‖, projection). With adapt_inertia
+    the attitude loop is the Slotine–Li law on SO(3) instead: M = Y ĵ − k_Ω s_R − k_R e_R − τ̂, ĵ' = −Yᵀs_R/γ_j
+    (flight_kernel.inertia_regressor, inertia_rate; docs/THEORY.md, "The inertia")."""
 
     mode: float = fk.MODE_ADAPTIVE
     adapt: bool = True
@@ -186,7 +194,7 @@ class L1GeometricLaw(FlightLaw):
         self.z_hat: np.ndarray | None = None
         self.sigma = np.zeros(6)
         self._theta: np.ndarray | None = None
-        self._l1_scratch = (np.zeros((3, 3)), np.zeros(12))
+        self._l1_scratch = (np.zeros((3, 3)), np.zeros(fk.TMP_SIZE))
 
     def reset(self) -> None:
         self.z_hat = None
@@ -211,6 +219,7 @@ class L1GeometricLaw(FlightLaw):
 
 
 # --- the law kinds: keys, readers, builders -----------------------------------------------
+GAMMA_J_DEFAULT = 1e4  # measured on the lemniscate: docs/THEORY.md, "The inertia"
 KX = Key("kx", "number", "N/m", 0.195, "> 0", "position gain k_x (geometric, l1_geometric)")
 KV = Key("kv", "number", "N s/m", 0.12, "> 0", "velocity gain k_v (geometric, l1_geometric)")
 KR = Key("kR", "number", "N m/rad", 7.8e-3, "> 0", "attitude gain k_R")
@@ -223,6 +232,10 @@ GAMMA_D = Key("gamma_d", "number", "m/N", 20.0, "> 0",
               "the disturbance force estimate's adaptation stiffness (rate = s / gamma_d)")
 GAMMA_T = Key("gamma_t", "number", "rad/(N m)", 200.0, "> 0",
               "the moment estimate's adaptation stiffness (rate = (Omega + c_r e_R) / gamma_t)")
+ADAPT_INERTIA = Key("adapt_inertia", "boolean", "", False, "",
+                    "geometric_adaptive: adapt the inertia J_hat too (the Slotine-Li attitude law on SO(3))")
+GAMMA_J = Key("gamma_j", "number", "rad² kg⁻¹ m⁻² s⁻²", GAMMA_J_DEFAULT, "> 0",
+              "the inertia estimate's adaptation stiffness (rate = -Y^T s_R / gamma_j), with adapt_inertia")
 C_R = Key("c_r", "number", "1/s", 5.0, "> 0", "the attitude surface's slope: s_R = Omega + c_r e_R")
 A_S = Key("a_s", "number", "1/s", -5.0, "< 0", "the L1 state predictor's pole")
 W_C = Key("w_c", "number", "rad/s", 5.0, "> 0", "the L1 low-pass filter's cut-off")
@@ -234,7 +247,9 @@ def _read(own: tuple[Key, ...], *, adaptive: bool):
     def read(t, kind: str, plant, order: int) -> LawSpec:
         params = {}
         for key in own:
-            if key.name == "a_s":  # the predictor's pole: < 0
+            if key.type == "boolean":
+                params[key.name] = t.boolean(key.name, key.default)
+            elif key.name == "a_s":  # the predictor's pole: < 0
                 params[key.name] = t.number(key.name, key.default)
                 if not params[key.name] < 0:
                     raise t.fail(key.name, "< 0 (a stable predictor)", params[key.name])
@@ -266,8 +281,11 @@ def _build_adaptive(ctx: BuildContext):
     af = ctx.airframe()
     gamma = np.ones(len(af.names))
     gamma[M_INDEX], gamma[D_SLICE], gamma[T_SLICE] = p["gamma_m"], p["gamma_d"], p["gamma_t"]
+    inertia = bool(p["adapt_inertia"])
+    if inertia:  # (only then: the leakage's 1/γ on a held Ĵ stays as it was without)
+        gamma[J_SLICE] = p["gamma_j"]
     return GeometricAdaptiveLaw(af, _gains(p), p["lambda"], gamma=gamma, k=p["k"], dead_zone=ctx.dead_zone(),
-                                modification=ctx.modification, c_R=p["c_r"])
+                                modification=ctx.modification, c_R=p["c_r"], adapt_inertia=inertia)
 
 
 def _build_l1(ctx: BuildContext):
@@ -281,7 +299,7 @@ def _keys(own: tuple[Key, ...], adaptive: bool) -> tuple[Key, ...]:
 
 
 GEOMETRIC_OWN = (KX, KV, KR, KW)
-ADAPTIVE_OWN = (LAMBDA, K, GAMMA_M, GAMMA_D, GAMMA_T, C_R, KR, KW)
+ADAPTIVE_OWN = (LAMBDA, K, GAMMA_M, GAMMA_D, GAMMA_T, C_R, KR, KW, ADAPT_INERTIA, GAMMA_J)
 L1_OWN = (KX, KV, KR, KW, A_S, W_C)
 
 #: these law kinds, registered (adaptive_mj.laws.kinds): law.kind = "geometric", "geometric_adaptive", "l1_geometric"

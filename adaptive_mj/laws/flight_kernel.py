@@ -5,7 +5,7 @@ tests/test_flight_laws.py checks the two agree to 1e-12.
 
 flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
   x (4, 3)   [p; v; φ; Ω] measured (adaptive_mj.plants.quadrotor)
-  r (5, 3)   [p_d; p_d'; p_d''; ...] (rows 0 to 2 used)
+  r (5, 3)   [p_d; p_d'; p_d''; p_d'''; p_d''''] (rows 0 to 3 used; row 4 too with the inertia adapted)
   th (13,)   θ̂ = [m, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz, dx, dy, dz, tx, ty, tz]
   P          the law's numbers by index (the P_* constants below)
   G (4, 10)  rows γ (the adaptation stiffnesses: θ̂' = regressor·s/γ), θ₀, the projection's lower and upper bounds
@@ -14,7 +14,7 @@ flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
   aug (6,)   the L1 filtered estimate C σ̂ = [acceleration (3) m/s², angular acceleration (3) rad/s²] (zeros: none)
   u (4,)     out: the rotor thrusts [N], unclipped
   s (3,)     out: s = e_v + c e_x [m/s]
-  rate (13,) out: θ̂' (zero but for m, d and τ under the adaptive law)
+  rate (13,) out: θ̂' (zero but for m, d and τ under the adaptive law, and Ĵ's six entries with law.adapt_inertia)
 """
 from __future__ import annotations
 
@@ -25,7 +25,9 @@ from adaptive_mj.laws.common import modify_rate
 # P's layout: the law's numbers, one float64 array (the native callback reads it by address)
 P_MODE, P_KX, P_KV, P_KR, P_KW, P_C, P_K, P_G = range(8)
 P_DZ_WIDTH, P_DZ_ON_S, P_SIGMA, P_EMOD, P_ADAPT, P_L1, P_AS, P_WC, P_CR = range(8, 17)
-P_SIZE = 17
+P_ADAPT_J = 17  # the adaptive law adapts the inertia (law.adapt_inertia): the Slotine–Li attitude moment
+P_SIZE = 18
+TMP_SIZE = 24  # the scratch tmp's length (flight_law, l1_update; the native callback's buffer)
 MODE_GEOMETRIC, MODE_ADAPTIVE = 0.0, 1.0
 
 
@@ -59,6 +61,31 @@ def inertia_times(th, w, out):
     out[2] = xz * w[0] + yz * w[1] + zz * w[2]
 
 
+def inertia_regressor(th, a, Wr, W, jw, out):
+    """out (3,) = Y(Ω, Ω_r, Ω̇_r) ĵ = Ĵ Ω̇_r + Ω_r × ĴΩ (linear in Ĵ's six entries th[1:7]); a = Ω̇_r, Wr = Ω_r,
+    W = Ω (3,) each, jw (3,) scratch (left holding ĴΩ)."""
+    inertia_times(th, W, jw)
+    inertia_times(th, a, out)
+    out[0] = out[0] + (Wr[1] * jw[2] - Wr[2] * jw[1])
+    out[1] = out[1] + (Wr[2] * jw[0] - Wr[0] * jw[2])
+    out[2] = out[2] + (Wr[0] * jw[1] - Wr[1] * jw[0])
+
+
+def inertia_rate(s, a, Wr, W, gamma, rate):
+    """Ĵ's rates ĵ' = −Yᵀ s/γ_j into rate[1:7] (gamma (13,): the stiffnesses, gamma[1:7] Ĵ's): with q = s × Ω_r
+    (s·(Ω_r × v) = v·(s × Ω_r)), sᵀY e_k = sᵀE_k Ω̇_r + qᵀE_k Ω for E_k the symmetric basis matrix of entry k:
+    (i, i) s_i a_i + q_i W_i, (i, j) s_i a_j + s_j a_i + q_i W_j + q_j W_i."""
+    q0 = s[1] * Wr[2] - s[2] * Wr[1]
+    q1 = s[2] * Wr[0] - s[0] * Wr[2]
+    q2 = s[0] * Wr[1] - s[1] * Wr[0]
+    rate[1] = -(s[0] * a[0] + q0 * W[0]) / gamma[1]
+    rate[2] = -(s[1] * a[1] + q1 * W[1]) / gamma[2]
+    rate[3] = -(s[2] * a[2] + q2 * W[2]) / gamma[3]
+    rate[4] = -(s[0] * a[1] + s[1] * a[0] + q0 * W[1] + q1 * W[0]) / gamma[4]
+    rate[5] = -(s[0] * a[2] + s[2] * a[0] + q0 * W[2] + q2 * W[0]) / gamma[5]
+    rate[6] = -(s[1] * a[2] + s[2] * a[1] + q1 * W[2] + q2 * W[1]) / gamma[6]
+
+
 def translation_rates(x, r, s, s_abs, w, P, G, rate) -> bool:
     """The adaptive law's m̂' = −sᵀw/γ_m and d̂' = s/γ_d into rate, when the dead-zone is open (on ‖s‖, or on
     ‖e_x‖); w (3,) the regressor p̈_d − λ e_v + g e₃. Returns whether it is open (the moment adapts with them)."""
@@ -77,7 +104,7 @@ def translation_rates(x, r, s, s_abs, w, P, G, rate) -> bool:
 
 
 def flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
-    """One evaluation (module docstring); R (3, 3), F (3,) and tmp (12,) are scratch."""
+    """One evaluation (module docstring); R (3, 3), F (3,) and tmp (TMP_SIZE,) are scratch."""
     rodrigues(x[2], R)
     g, c = P[P_G], P[P_C]
     m = th[0]
@@ -143,14 +170,55 @@ def flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
     W = x[3]
     eW0, eW1, eW2 = W[0] - v0, W[1] - v1, W[2] - v2
     # M = −k_R e_R − k_Ω e_Ω + Ω × ĴΩ − Ĵ(Ω × RᵀR_dΩ_d) − τ̂ (Lee 2010 with Ω̇_d ≈ 0; τ̂ the law's constant moment:
-    # Goodarzi, Lee & Lee 2015's Δ̂_R, adapted by the adaptive law, held by the baselines)
-    inertia_times(th, W, F)  # F now holds Ĵ Ω (F is no longer needed)
-    M0 = -P[P_KR] * eR0 - P[P_KW] * eW0 + (W[1] * F[2] - W[2] * F[1]) - th[10]
-    M1 = -P[P_KR] * eR1 - P[P_KW] * eW1 + (W[2] * F[0] - W[0] * F[2]) - th[11]
-    M2 = -P[P_KR] * eR2 - P[P_KW] * eW2 + (W[0] * F[1] - W[1] * F[0]) - th[12]
-    tmp[0], tmp[1], tmp[2] = W[1] * v2 - W[2] * v1, W[2] * v0 - W[0] * v2, W[0] * v1 - W[1] * v0
-    inertia_times(th, tmp, F)  # Ĵ(Ω × RᵀR_dΩ_d)
-    M0, M1, M2 = M0 - F[0], M1 - F[1], M2 - F[2]
+    # Goodarzi, Lee & Lee 2015's Δ̂_R, adapted by the adaptive law, held by the baselines), unless the adaptive law
+    # adapts the inertia (P_ADAPT_J)
+    if not (adaptive and P[P_ADAPT_J] != 0.0):
+        inertia_times(th, W, F)  # F now holds Ĵ Ω (F is no longer needed)
+        M0 = -P[P_KR] * eR0 - P[P_KW] * eW0 + (W[1] * F[2] - W[2] * F[1]) - th[10]
+        M1 = -P[P_KR] * eR1 - P[P_KW] * eW1 + (W[2] * F[0] - W[0] * F[2]) - th[11]
+        M2 = -P[P_KR] * eR2 - P[P_KW] * eW2 + (W[0] * F[1] - W[1] * F[0]) - th[12]
+        tmp[0], tmp[1], tmp[2] = W[1] * v2 - W[2] * v1, W[2] * v0 - W[0] * v2, W[0] * v1 - W[1] * v0
+        inertia_times(th, tmp, F)  # Ĵ(Ω × RᵀR_dΩ_d)
+        M0, M1, M2 = M0 - F[0], M1 - F[1], M2 - F[2]
+    else:  # the Slotine–Li moment on SO(3) (docs/THEORY.md, "The inertia"): s_R = e_Ω + c_R e_R, Ω_r = Ω − s_R,
+        # Ω̇_r = −Ω × RᵀR_dΩ_d + RᵀR_dΩ̇_d − c_R E e_Ω (E = ½(tr(RᵀR_d) I − RᵀR_d)), M = Y ĵ − k_Ω s_R − k_R e_R − τ̂
+        # Ω̇_d from F̈ ≈ m̂ p⁽⁴⁾_d (the reference's snap) as Ω_d from Ḟ: b̈ = (c̈ − (ḃ·ċ + b·c̈) b − 2 (b·ċ) ḃ)/‖c‖
+        # for b = c/‖c‖ (b₃ of F, b₂ of b₃ × e₁), b̈₁ = b̈₂ × b₃ + 2 ḃ₂ × ḃ₃ + b₂ × b̈₃,
+        # Ω̇_d = (ḃ₃·ḃ₂ + b₃·b̈₂, ḃ₁·ḃ₃ + b₁·b̈₃, ḃ₂·ḃ₁ + b₂·b̈₁)
+        Fs0, Fs1, Fs2 = m * r[4, 0], m * r[4, 1], m * r[4, 2]
+        nn = (d30 * Fd0 + d31 * Fd1 + d32 * Fd2) + (b30 * Fs0 + b31 * Fs1 + b32 * Fs2)
+        f30 = (Fs0 - nn * b30 - 2.0 * bF * d30) / nF
+        f31 = (Fs1 - nn * b31 - 2.0 * bF * d31) / nF
+        f32 = (Fs2 - nn * b32 - 2.0 * bF * d32) / nF
+        g1, g2 = f32, -f31  # c̈ = b̈₃ × e₁
+        nn = (d21 * c1 + d22 * c2) + (b21 * g1 + b22 * g2)
+        f20, f21, f22 = 0.0, (g1 - nn * b21 - 2.0 * bc * d21) / n2, (g2 - nn * b22 - 2.0 * bc * d22) / n2
+        f10 = (f21 * b32 - f22 * b31) + 2.0 * (d21 * d32 - d22 * d31) + (b21 * f32 - b22 * f31)
+        f11 = (f22 * b30 - f20 * b32) + 2.0 * (d22 * d30 - d20 * d32) + (b22 * f30 - b20 * f32)
+        f12 = (f20 * b31 - f21 * b30) + 2.0 * (d20 * d31 - d21 * d30) + (b20 * f31 - b21 * f30)
+        a0 = (d30 * d20 + d31 * d21 + d32 * d22) + (b30 * f20 + b31 * f21 + b32 * f22)
+        a1 = (d10 * d30 + d11 * d31 + d12 * d32) + (b10 * f30 + b11 * f31 + b12 * f32)
+        a2 = (d20 * d10 + d21 * d11 + d22 * d12) + (b20 * f10 + b21 * f11 + b22 * f12)
+        o0 = b10 * a0 + b20 * a1 + b30 * a2  # R_d Ω̇_d, world frame
+        o1 = b11 * a0 + b21 * a1 + b31 * a2
+        o2 = b12 * a0 + b22 * a1 + b32 * a2
+        cR = P[P_CR]
+        sR, Wr, ar, jw = tmp[12:15], tmp[15:18], tmp[18:21], tmp[21:24]
+        sR[0], sR[1], sR[2] = eW0 + cR * eR0, eW1 + cR * eR1, eW2 + cR * eR2
+        Wr[0], Wr[1], Wr[2] = W[0] - sR[0], W[1] - sR[1], W[2] - sR[2]
+        tr = tmp[3] + tmp[7] + tmp[11]  # tr(R_dᵀR); (RᵀR_d)[i, j] = tmp[3 + 3 j + i]
+        ar[0] = (-(W[1] * v2 - W[2] * v1) + (R[0, 0] * o0 + R[1, 0] * o1 + R[2, 0] * o2)
+                 - cR * 0.5 * (tr * eW0 - (tmp[3] * eW0 + tmp[6] * eW1 + tmp[9] * eW2)))
+        ar[1] = (-(W[2] * v0 - W[0] * v2) + (R[0, 1] * o0 + R[1, 1] * o1 + R[2, 1] * o2)
+                 - cR * 0.5 * (tr * eW1 - (tmp[4] * eW0 + tmp[7] * eW1 + tmp[10] * eW2)))
+        ar[2] = (-(W[0] * v1 - W[1] * v0) + (R[0, 2] * o0 + R[1, 2] * o1 + R[2, 2] * o2)
+                 - cR * 0.5 * (tr * eW2 - (tmp[5] * eW0 + tmp[8] * eW1 + tmp[11] * eW2)))
+        inertia_regressor(th, ar, Wr, W, jw, F)  # F now holds Y ĵ (F is no longer needed)
+        M0 = F[0] - P[P_KW] * sR[0] - P[P_KR] * eR0 - th[10]
+        M1 = F[1] - P[P_KW] * sR[1] - P[P_KR] * eR1 - th[11]
+        M2 = F[2] - P[P_KW] * sR[2] - P[P_KR] * eR2 - th[12]
+        if adapting:  # ĵ' = −Yᵀ s_R/γ_j
+            inertia_rate(sR, ar, Wr, W, G[0], rate)
     if adaptive and P[P_ADAPT] != 0.0:
         if adapting:  # τ̂' = (e_Ω + c_R e_R)/γ_τ
             rate[10] = (eW0 + P[P_CR] * eR0) / G[0, 10]
@@ -169,7 +237,7 @@ def flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
 def l1_update(x, u, th, P, A, a_s, w_c, h, z_hat, sigma, filt, R, tmp):
     """One L1 step (laws.l1.step, written out): from the state x (4, 3) measured at a step's start and the thrusts
     u (4,) applied over it, advance the predictor ẑ (6,), the piecewise-constant estimate σ̂ (6,) and the filtered
-    C σ̂ (6,) in place by h [s] (T_s = h). A (4, 4) the allocation ([f, M] = A u); tmp (12,) scratch."""
+    C σ̂ (6,) in place by h [s] (T_s = h). A (4, 4) the allocation ([f, M] = A u); tmp (TMP_SIZE,) scratch."""
     rodrigues(x[2], R)
     g, m = P[P_G], th[0]
     f = A[0, 0] * u[0] + A[0, 1] * u[1] + A[0, 2] * u[2] + A[0, 3] * u[3]

@@ -77,6 +77,7 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
     th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
     stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
     P = carray(fptr(ctx.P), flight_kernel.P_SIZE)  # noqa: F821 (injected)
+    tmp = carray(fptr(ctx.tmp), flight_kernel.TMP_SIZE)  # noqa: F821 (injected)
     if P[flight_kernel.P_L1] != 0.0 and stage == 0:  # L1: the last step's update (the Python path's step_ends)
         z_hat, x_prev = carray(fptr(ctx.z_hat), 6), carray(fptr(ctx.x_prev), (4, 3))  # noqa: F821 (injected)
         if ctx.step == 0:
@@ -86,7 +87,7 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
         else:
             l1_update(x_prev, carray(fptr(ctx.u_prev), 4), th, P, carray(fptr(ctx.A), (4, 4)),  # noqa: F821
                       P[flight_kernel.P_AS], P[flight_kernel.P_WC], ctx.h, z_hat, carray(fptr(ctx.sigma), 6),  # noqa: F821
-                      carray(fptr(ctx.aug), 6), carray(fptr(ctx.R), (3, 3)), carray(fptr(ctx.tmp), 12))  # noqa: F821
+                      carray(fptr(ctx.aug), 6), carray(fptr(ctx.R), (3, 3)), tmp)  # noqa: F821
         for i in range(4):
             for j in range(3):
                 x_prev[i, j] = x[i, j]
@@ -94,7 +95,7 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
     u, s = carray(fptr(ctx.u), 4), carray(fptr(ctx.s), 3)  # noqa: F821 (injected)
     flight_law(x, r, th, carray(fptr(ctx.P), flight_kernel.P_SIZE), carray(fptr(ctx.G), (4, nth)),  # noqa: F821
                carray(fptr(ctx.Ainv), (4, 4)), carray(fptr(ctx.aug), 6), carray(fptr(ctx.R), (3, 3)),  # noqa: F821
-               carray(fptr(ctx.F), 3), carray(fptr(ctx.tmp), 12), u, s, rate)  # noqa: F821 (injected)
+               carray(fptr(ctx.F), 3), tmp, u, s, rate)  # noqa: F821 (injected)
     lo, hi = carray(fptr(ctx.lo), 4), carray(fptr(ctx.hi), 4)  # noqa: F821 (injected)
     u_hold, s_hold = carray(fptr(ctx.u_hold), 4), carray(fptr(ctx.s_hold), 3)  # noqa: F821 (injected)
     for i in range(4):
@@ -228,7 +229,7 @@ class NativeFlightController(ContextOwner):
             "rec_ref": np.zeros((rows, 5, 3)), "rec_theta": np.zeros((rows, nth)), "x": np.zeros((4, 3)),
             "act": np.ascontiguousarray(plant.airframe.actuators, dtype=np.int64), "lo": f64(lo), "hi": f64(hi),
             "P": f64(p["P"]), "G": f64(p["G"]), "Ainv": f64(p["Ainv"]), "aug": np.zeros(6), "R": np.zeros((3, 3)),
-            "F": np.zeros(3), "tmp": np.zeros(12), "u": np.zeros(4), "s": np.zeros(3),
+            "F": np.zeros(3), "tmp": np.zeros(flight_kernel.TMP_SIZE), "u": np.zeros(4), "s": np.zeros(3),
             "A": f64(p["A"]), "z_hat": np.zeros(6), "sigma": np.zeros(6), "x_prev": np.zeros((4, 3)),
             "u_prev": np.zeros(4),
         }
