@@ -136,7 +136,7 @@ class FlightLaw:
         moving[M_INDEX] = moving[D_SLICE] = True
         if self.adapt_inertia:
             moving[J_SLICE] = True
-        return kinetic + 0.5 * np.sum(np.where(moving, self.gamma * err**2, 0.0), axis=1)
+        return kinetic + 0.5 * np.sum(np.where(moving, self.gamma, 0.0) * np.where(moving, err, 0.0) ** 2, axis=1)
 
     def reset(self) -> None:
         return None
@@ -279,10 +279,12 @@ def _build_geometric(ctx: BuildContext):
 def _build_adaptive(ctx: BuildContext):
     p = ctx.law.params or {}
     af = ctx.airframe()
-    gamma = np.ones(len(af.names))
+    # a held estimate is infinitely stiff: no rate, and the σ- and e-modification's leak (θ̂ − θ₀)/γ leaves it
+    # alone (with γ = 1 it pulled a held Ĵ toward θ₀, zeros unless law.theta0 was given)
+    gamma = np.full(len(af.names), np.inf)
     gamma[M_INDEX], gamma[D_SLICE], gamma[T_SLICE] = p["gamma_m"], p["gamma_d"], p["gamma_t"]
     inertia = bool(p["adapt_inertia"])
-    if inertia:  # (only then: the leakage's 1/γ on a held Ĵ stays as it was without)
+    if inertia:
         gamma[J_SLICE] = p["gamma_j"]
     return GeometricAdaptiveLaw(af, _gains(p), p["lambda"], gamma=gamma, k=p["k"], dead_zone=ctx.dead_zone(),
                                 modification=ctx.modification, c_R=p["c_r"], adapt_inertia=inertia)
