@@ -22,8 +22,8 @@ def _row() -> stress.Plant:
 def test_the_quadrotor_row_has_the_flight_laws_and_disturbances_derived_from_its_model():
     p = _row()
     laws = dict(stress.laws(p, composite=False))
-    assert list(laws) == ["adaptive", "dead_zone", "sigma", "e_modification", "projection", "l1_geometric",
-                          "geometric"]
+    assert list(laws) == ["adaptive", "adaptive_inertia", "dead_zone", "sigma", "e_modification", "projection",
+                          "l1_geometric", "geometric"]
     assert laws["geometric"] == ["law.kind='geometric'", "law.nominal='model'"]  # the oracle baseline
     by = {st.name: st for st in stress.stressors(p, 5.0)}
     assert list(by) == ["noise σ_y", "wind", "force", "torque", "payload added", "rotor loss", "delay",
@@ -36,7 +36,7 @@ def test_the_quadrotor_row_has_the_flight_laws_and_disturbances_derived_from_its
     labels = {(s.label, s.stressor.name) for s in stress.study(composite=False, duration=5.0,
                                                               plant_names=("quadrotor",))}
     assert ("quadrotor/l1_geometric", "control period") not in labels  # L1's filters: continuous control only
-    assert ("quadrotor/adaptive", "control period") in labels and len(labels) == 7 * 8 - 1
+    assert ("quadrotor/adaptive", "control period") in labels and len(labels) == 8 * 8 - 1
     assert stress.BENCH_SETTINGS["plant_names"] == ("heave", "arm", "ur5e")  # the bench has its own section
 
 

@@ -203,10 +203,10 @@ def _arm_laws(p: Plant) -> list[tuple[str, list[str]]]:
 
 
 def _airframe_laws(p: Plant) -> list[tuple[str, list[str]]]:
-    """The quadrotor: the geometric adaptive law with each modification (the dead-zone at 3 σ of ‖s‖ under the
-    nominal noise, σ- and e-modification leaking toward the true θ in LEAK_TIME on the mass, the box [θ/2, 2θ] on
-    the mass and the inertia's diagonal), L1 augmentation, and the geometric baseline holding the true parameters
-    (law.nominal = 'model')."""
+    """The quadrotor: the geometric adaptive law, with its inertia adapted too (law.adapt_inertia), with each
+    modification (the dead-zone at 3 σ of ‖s‖ under the nominal noise, σ- and e-modification leaking toward the
+    true θ in LEAK_TIME on the mass, the box [θ/2, 2θ] on the mass and the inertia's diagonal), L1 augmentation,
+    and the geometric baseline holding the true parameters (law.nominal = 'model')."""
     scn, s = _setup(p)
     names, theta = s.law.names, s.plant.true_theta()
     gamma1 = float(s.law.gamma[0])  # the mass estimate's stiffness
@@ -217,6 +217,7 @@ def _airframe_laws(p: Plant) -> list[tuple[str, list[str]]]:
     box = "{" + ", ".join(f"'{n}'=[{0.5 * float(v)!r}, {2.0 * float(v)!r}]"
                           for n, v in zip(names, theta, strict=True) if v > 0) + "}"
     return [("adaptive", []),
+            ("adaptive_inertia", ["law.adapt_inertia=true"]),
             ("dead_zone", [f"law.dead_zone={{width={3.0 * sig_s!r}}}"]),
             ("sigma", [f"law.sigma={gamma1 / LEAK_TIME!r}", f"law.theta0={theta0}"]),
             ("e_modification", [f"law.e_modification={gamma1 / (LEAK_TIME * sig_s)!r}", f"law.theta0={theta0}"]),
