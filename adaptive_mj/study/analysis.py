@@ -388,3 +388,66 @@ def flight_metrics(traj: Trajectory, setup) -> dict:
     return {"max_error": float(e.max()), "rms_error": float(np.sqrt(np.mean(e**2))),
             "tail_rms_error": float(np.sqrt(np.mean(e[tail] ** 2))) if tail.any() else math.nan,
             "max_heading_deg": float(heading), "saturation_any": sat}
+
+
+ONSET_MULTIPLES = (5.0, 25.0)  # the precursors: max_j |q̃_j| past these multiples of its baseline
+SUDDEN_WINDOW = 5.0  # [s] a failure is "sudden" only when its precursors come within this long before the bound
+
+
+def failure_onset(traj: Trajectory, bound: float, baseline_until: float) -> dict:
+    """When a failing run's precursors came (docs/METRICS.md, "Failure onsets"): e(t) = max_j |q̃_j(t)| (|ỹ| on
+    one axis); baseline = its median over t ≤ baseline_until [s]; the first time any actuator sat at its limit
+    (traj.meta["ctrl_range"]), the first crossings of each ONSET_MULTIPLES × baseline, and of `bound` (the
+    failure); sudden: every precursor within SUDDEN_WINDOW s before the bound's crossing (None: no failure)."""
+    e = np.abs(np.asarray(traj.y_tilde, dtype=float).reshape(len(traj.t), -1)).max(axis=1)
+    early = traj.t <= baseline_until
+    baseline = float(np.median(e[early])) if early.any() else math.nan
+
+    def first(mask: np.ndarray) -> float | None:
+        idx = np.nonzero(mask)[0]
+        return float(traj.t[idx[0]]) if len(idx) else None
+
+    saturation = None
+    rng = traj.meta.get("ctrl_range")
+    if rng is not None:
+        lo, hi = (np.atleast_1d(np.asarray(b, dtype=float)) for b in rng)
+        u = np.asarray(traj.u, dtype=float).reshape(len(traj.t), -1)
+        at = (u <= lo + 1e-9 * np.maximum(1.0, np.abs(lo))) | (u >= hi - 1e-9 * np.maximum(1.0, np.abs(hi)))
+        saturation = first(at.any(axis=1))
+    crossings = {f"x{k:g}": first(e > k * baseline) for k in ONSET_MULTIPLES}
+    failed = first(e > bound)
+    sudden = None
+    if failed is not None:
+        marks = [v for v in (saturation, *crossings.values()) if v is not None]
+        sudden = all(failed - v <= SUDDEN_WINDOW for v in marks)
+    return {"baseline": baseline, "baseline_until": baseline_until, "saturation": saturation, **crossings,
+            "bound": bound, "failure": failed, "sudden": sudden, "window": SUDDEN_WINDOW}
+
+
+def pseudo_inertia_eigenvalues(theta: np.ndarray) -> np.ndarray:
+    """(N, bodies, 4) the eigenvalues, ascending, of each body's pseudo-inertia J = [[½tr(I)·1 − I, h], [hᵀ, m]]
+    (Wensing, Kim & Slotine 2017: the body is physically possible exactly when J ⪰ 0), from rows of θ (N, 10 ×
+    bodies) in the rigid-body order [m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] (I about the body frame's
+    origin, h = m c)."""
+    th = np.atleast_2d(np.asarray(theta, dtype=float))
+    n, k = th.shape[0], th.shape[1] // 10
+    p = th[:, : 10 * k].reshape(n, k, 10)
+    m, h = p[..., 0], p[..., 1:4]
+    ixx, ixy, iyy, ixz, iyz, izz = (p[..., i] for i in range(4, 10))
+    inertia = np.stack([np.stack([ixx, ixy, ixz], -1), np.stack([ixy, iyy, iyz], -1),
+                        np.stack([ixz, iyz, izz], -1)], -2)
+    J = np.zeros((n, k, 4, 4))
+    J[..., :3, :3] = 0.5 * np.trace(inertia, axis1=-2, axis2=-1)[..., None, None] * np.eye(3) - inertia
+    J[..., :3, 3] = J[..., 3, :3] = h
+    J[..., 3, 3] = m
+    return np.linalg.eigvalsh(J)
+
+
+def window_spread(t: np.ndarray, values: np.ndarray, window: float) -> dict:
+    """A figure over the last `window` s of a run instead of its last sample: mean, min and max of `values` (N,)
+    over rows with t ≥ t_end − window, and the last value."""
+    v = np.asarray(values, dtype=float)
+    rows = np.asarray(t) >= t[-1] - window
+    w = v[rows]
+    return {"window": window, "mean": float(np.mean(w)), "min": float(np.min(w)), "max": float(np.max(w)),
+            "last": float(v[-1])}

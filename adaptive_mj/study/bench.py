@@ -164,7 +164,9 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
               + ("" if quick else f", the breaking-point study's {_disk_mb(out / 'stress'):.0f} MB") + ".\n\n"
               f"**Tail**, wherever a table or figure says it: the last {100 * TAIL_FRACTION:g} % of a run "
               "(docs/METRICS.md). On an arm of m joints a tail RMS error is the RMS over the joints and the tail's "
-              "rows, i.e. the RMS of ‖q̃‖ divided by √m.\n\n"
+              "rows, i.e. the RMS of ‖q̃‖ divided by √m. **u TV** (total variation Σ|Δu|), wherever a table gives "
+              "it: over every physics step of the run, not the log's 100 Hz rows (which would give a lower bound "
+              "where u chatters faster).\n\n"
               + ("**Quick mode:** runs are shorter (15–60 s instead of 20–200 s), so estimates that need "
                  "time to converge (first-order example, payload swap, drift) have not; run `adaptive-mj bench` "
                  "for the full catalogue.\n\n" if quick else "")

@@ -1,5 +1,5 @@
-"""Section 12: drift and sudden failure on the 6-joint arm at rest with noisy encoders (ur5e_drift.toml),
-and the dead-zone, σ-modification and physical projection.
+"""Section 12: drift and failure on the 6-joint arm at rest with noisy encoders (ur5e_drift.toml), the
+failure's onset and precursors, and what the dead-zone, σ-modification and the `physical` box did.
 """
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 
 from adaptive_mj.setup import scenario as sc
+from adaptive_mj.study.analysis import SUDDEN_WINDOW, failure_onset, pseudo_inertia_eigenvalues
 
 if TYPE_CHECKING:
     from adaptive_mj.laws.slotine_li import SlotineLiLaw
@@ -22,10 +23,70 @@ ARM_DRIFT_VARIANTS: tuple[tuple[str, list[str]], ...] = (
 ARM_DRIFT_ONSET = 100.0  # a failure: max_j |q̃_j| above this many encoder noise σ_q
 
 
-TITLE = "Drift and sudden failure on the 6-joint arm"
+TITLE = "Drift and failure on the 6-joint arm"
 CLAIM = ("the lecture's second half where researchers use Slotine–Li: realistic encoder noise and a "
-         "differentiated velocity make the unexcited estimates drift until the loop fails; the dead-zone "
-         "sized from the noise and σ-modification prevent it.")
+         "differentiated velocity make the unexcited estimates drift until the loop fails (\"parameter drift does "
+         "not affect tracking accuracy until instability occurs\": the onsets below say how true that is here); "
+         "the dead-zone sized from the noise and σ-modification are the lecture's fixes.")
+
+
+def _t(v: float | None) -> str:
+    return "never" if v is None else f"{v:.1f}"
+
+
+def _facts(tr, err: np.ndarray) -> dict:
+    """What the section's words rest on, from one run's rows: how far θ̂ moved, ‖θ̃‖/‖θ‖ at 20 s and its median
+    after, and the pseudo-inertia's smallest eigenvalue per row (the payload physically possible when ≥ 0)."""
+    eig = pseudo_inertia_eigenvalues(tr.theta_hat)[:, 0, :]
+    late = tr.t >= 20.0
+    return {"moved": float(np.max(np.abs(tr.theta_hat - tr.theta_hat[0]))),
+            "err_20": float(np.interp(20.0, tr.t, err)) if tr.t[-1] >= 20.0 else float("nan"),
+            "err_after_20": float(np.median(err[late])) if late.any() else float("nan"),
+            "not_psd": int(np.sum(eig[:, 0] < 0)), "rows": len(tr.t), "m_min": float(np.min(tr.theta_hat[:, 0])),
+            "m_at_zero": int(np.sum(tr.theta_hat[:, 0] <= 0.0)), "final_eig": eig[-1].tolist(),
+            "first_not_psd": float(tr.t[np.argmax(eig[:, 0] < 0)]) if (eig[:, 0] < 0).any() else None}
+
+
+def _failure_words(f: dict | None, quiet: float | None) -> str:
+    """The unmodified law's failure, worded from its onsets: "suddenly" only when the precursors were short."""
+    if f is None or "onset" not in f:
+        return "Without a modification the estimates drift. "
+    fo = f["onset"]
+    if fo["failure"] is None:
+        return "Without a modification the estimates drift; no failure occurred within the run. "
+    head = (f"Without a modification the estimates drift while max_j |q̃_j| stays near {_g(quiet)} rad (median over "
+            f"the first 60 s), and at t = {fo['failure']:.1f} s it crosses the failure bound. ")
+    if fo["sudden"]:
+        return head + f"Every precursor comes within {fo['window']:g} s before it: the failure is sudden. "
+    marks = [(name, fo[key]) for name, key in (("torques first saturate", "saturation"),
+                                               ("the error passes 5× its baseline", "x5"),
+                                               ("25×", "x25")) if fo[key] is not None]
+    return head + ("It is not sudden: " + ", ".join(f"{name} at {v:.1f} s" for name, v in marks)
+                   + f" (the lecture's \"no effect on tracking until instability\" does not hold here: the decline "
+                   f"is in the log {fo['failure'] - min(v for _, v in marks):.0f} s before the failure). ")
+
+
+def _modification_words(facts: dict) -> str:
+    """What each modification did, from its rows (not what it is meant to do)."""
+    out = []
+    dz = facts.get("dead_zone_3sigma")
+    if dz is not None:
+        out.append("It " + ("never opened: θ̂ never moved (max |θ̂ − θ̂(0)| = 0), so adaptation was "
+                                            "off, not bounded. " if dz["moved"] == 0.0 else
+                                            f"moved θ̂ by at most {_g(dz['moved'])}. "))
+    sg = facts.get("sigma")
+    if sg is not None:
+        out.append(f"σ-modification (σ = 0.02) keeps θ̂ bounded, not at the truth: ‖θ̃‖/‖θ‖ is "
+                   f"{sg['err_20']:.3g} at 20 s and {sg['err_after_20']:.3g} (median) after. ")
+    ph = facts.get("projection")
+    if ph is not None:
+        eig = ", ".join(f"{e:.3g}" for e in ph["final_eig"])
+        out.append("`physical` is a box (a relaxation, docs/THEORY.md): it clips m̂ at 0 "
+                   f"({ph['m_at_zero']} of {ph['rows']} rows at 0) but not the inertia, and the payload's "
+                   f"pseudo-inertia is not positive semidefinite in {ph['not_psd']} of the {ph['rows']} rows"
+                   + (f" (first at {ph['first_not_psd']:.1f} s)" if ph["first_not_psd"] is not None else "")
+                   + f"; its final eigenvalues {eig}. ")
+    return "".join(out)
 
 
 @register(12, "arm_drift", TITLE, CLAIM)
@@ -49,7 +110,10 @@ def section(quick: bool, logs: Path) -> Built:
         lines = ["| law | drift of ‖θ̃‖/‖θ‖ over the first 60 s [per 100 s] | failure onset (max_j abs(q̃_j) > "
                  f"{_g(bound)} rad) | final m̂ (true {_g(float(setup.plant.true_theta()[0]))} kg) | "
                  "final ‖θ̃‖/‖θ‖ | tail RMS q̃ (over the joints) [rad] | verdict |", "|---|---|---|---|---|---|---|"]
-        rows, onsets, quiet = [], {}, None
+        rows, onsets, quiet, facts = [], {}, None, {}
+        onset_lines = ["| law | baseline max_j abs(q̃_j) [rad] (median, first 60 s) | first torque at a limit [s] | "
+                       "first above 5× baseline [s] | first above 25× [s] | failure (the bound) [s] | sudden? |",
+                       "|---|---|---|---|---|---|---|"]
         for job, (v, _) in zip(jobs, ARM_DRIFT_VARIANTS, strict=True):
             r = res[job.tag]
             if not _ok(r):
@@ -66,6 +130,15 @@ def section(quick: bool, logs: Path) -> Built:
             onsets[v] = onset
             if v == "adaptive":
                 quiet = float(np.median(e[early]))
+            fo = failure_onset(tr, bound, 60.0)
+            if fo["failure"] is not None or fo["saturation"] is not None or fo["x5"] is not None:
+                onset_lines.append(
+                    f"| {v} | {_g(fo['baseline'])} | {_t(fo['saturation'])} | {_t(fo['x5'])} | {_t(fo['x25'])} | "
+                    f"{_t(fo['failure'])} | "
+                    + ("-" if fo["sudden"] is None else ("yes" if fo["sudden"] else "no")) + " |")
+            facts[v] = _facts(tr, err)
+            if v == "adaptive":
+                facts[v]["onset"] = fo
             tail = (r.summary or {}).get("metrics", {}).get("rms_tracking_error_tail")
             when = f"none in {_g(float(tr.t[-1]))} s" if onset is None else f"{onset:.1f} s"
             lines.append(f"| {v} | {slope:.3g} | {when} | {_g(float(tr.theta_hat[-1, 0]))} kg | {err[-1]:.3g} | "
@@ -82,23 +155,19 @@ def section(quick: bool, logs: Path) -> Built:
         for a in ax:
             a.grid(alpha=0.3)
             a.legend(fontsize=8)
-        fig.suptitle("6-joint arm at rest, noisy encoders, differentiated velocity: drift, then sudden failure")
+        fig.suptitle("6-joint arm at rest, noisy encoders, differentiated velocity: drift, then failure")
         img = _save(fig, out, "arm_drift")
-        onset = onsets.get("adaptive")
-        if onset is not None and quiet is not None:
-            sudden = (f"Without a modification the estimates drift while max_j |q̃_j| stays near {_g(quiet)} rad "
-                      f"(median over the first 60 s), and at t = {onset:.1f} s the loop fails suddenly. ")
-        else:
-            sudden = "Without a modification the estimates drift; no failure occurred within the run. "
+        sudden = _failure_words(facts.get("adaptive"), quiet)
         text = (f"`{name}`: the UR5e holds `home` (no excitation), the payload's 10 estimates start at the truth, the "
                 f"encoders have σ_q = {sigma_q:g} rad of noise and the law gets q̇ differentiated from them through a "
                 f"{scn.sensors.velocity_cutoff_hz:g} Hz low-pass (docs/THEORY.md, \"Sensors, disturbances and "
                 "saturation on the arms\"). " + sudden +
                 f"The dead-zone on ‖s‖ has width ε = 3 σ_s = {_g(width)} rad/s, σ_s from the encoder noise through the "
-                "velocity filter (adaptive_mj.sensors.surface_noise_std); σ-modification pulls θ̂ to the truth with "
-                "σ = 0.02; `physical` projects the payload's mass and inertia to physically possible values. "
+                "velocity filter (adaptive_mj.sensors.surface_noise_std). " + _modification_words(facts) +
                 "Drift: least-squares slope of ‖θ̃‖/‖θ‖ over the first 60 s.\n\n"
-                + "\n".join(lines) + "\n\n" + img + _status_note(res))
+                + "\n".join(lines) + "\n\n**Failure onsets and their precursors** (docs/METRICS.md, \"Failure "
+                f"onsets\"; at the log's 100 Hz; a failure is \"sudden\" only when every precursor comes within "
+                f"{SUDDEN_WINDOW:g} s before it):\n\n" + "\n".join(onset_lines) + "\n\n" + img + _status_note(res))
         return SectionReport(text, rows)
 
     return jobs, analyze

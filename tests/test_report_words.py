@@ -1,0 +1,97 @@
+"""The report's words follow its logs (issue 36): a failure is called sudden only when its precursors are close,
+identification figures are spreads over a window, a physically impossible payload estimate is counted from the
+pseudo-inertia, a control-rate row tests the prediction only near its bound, and re-adaptation is claimed only
+when the error came back."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from adaptive_mj.study.analysis import SUDDEN_WINDOW, failure_onset, pseudo_inertia_eigenvalues, window_spread
+from adaptive_mj.study.sections import control_rate, manipulator_drift, wing_rock
+
+
+def _run(t, e, u, limit=1.0):
+    return SimpleNamespace(t=t, y_tilde=np.column_stack([e, 0.5 * e]), u=u,
+                           meta={"ctrl_range": ([-limit, -limit], [limit, limit])})
+
+
+def test_a_failure_with_early_precursors_is_not_sudden_and_one_without_them_is():
+    t = np.arange(0.0, 100.0, 0.01)
+    base = 1e-4
+    slow = base * np.exp(np.clip(t - 60.0, 0.0, None) / 8.0)  # 5× at 72.9 s, 25× at 85.8 s, the bound (100×) at 96.8
+    u = np.zeros((len(t), 2))
+    u[t >= 65.0, 1] = 1.0  # a torque at its limit from 65 s
+    fo = failure_onset(_run(t, slow, u), bound=100 * base, baseline_until=60.0)
+    assert fo["baseline"] == pytest.approx(base)
+    assert fo["saturation"] == pytest.approx(65.0)
+    assert fo["x5"] == pytest.approx(60 + 8 * np.log(5), abs=0.011)
+    assert fo["x25"] == pytest.approx(60 + 8 * np.log(25), abs=0.011)
+    assert fo["failure"] == pytest.approx(60 + 8 * np.log(100), abs=0.011) and fo["sudden"] is False
+    words = manipulator_drift._failure_words({"onset": fo}, base)
+    assert "It is not sudden: torques first saturate at 65.0 s" in words and "suddenly" not in words
+    burst = np.where(t < 90.0, base, base * 1e3)  # every precursor and the failure in one step
+    fo = failure_onset(_run(t, burst, np.zeros((len(t), 2))), bound=100 * base, baseline_until=60.0)
+    assert fo["saturation"] is None and fo["x5"] == fo["failure"] == pytest.approx(90.0) and fo["sudden"] is True
+    assert f"within {SUDDEN_WINDOW:g} s before it: the failure is sudden" in manipulator_drift._failure_words(
+        {"onset": fo}, base)
+    calm = failure_onset(_run(t, np.full(len(t), base), np.zeros((len(t), 2))), bound=100 * base, baseline_until=60.0)
+    assert calm["failure"] is None and calm["sudden"] is None
+
+
+def test_the_pseudo_inertia_tells_a_possible_body_from_an_impossible_one():
+    m, c, half = 1.5, np.array([0.04, 0.03, 0.07]), np.array([0.05, 0.04, 0.03])  # a solid box of half-sides `half`
+    Ic = m / 3 * np.diag([half[1] ** 2 + half[2] ** 2, half[0] ** 2 + half[2] ** 2, half[0] ** 2 + half[1] ** 2])
+    I0 = Ic + m * (c @ c * np.eye(3) - np.outer(c, c))  # about the body's origin
+    theta = np.array([m, *(m * c), I0[0, 0], I0[0, 1], I0[1, 1], I0[0, 2], I0[1, 2], I0[2, 2]])
+    eig = pseudo_inertia_eigenvalues(theta)
+    assert eig.shape == (1, 1, 4) and eig.min() > 0
+    bad = theta.copy()
+    bad[9] = bad[4] + bad[6] + 1e-3  # Izz > Ixx + Iyy: the triangle inequality broken
+    assert pseudo_inertia_eigenvalues(bad).min() < 0
+    negative = theta.copy()
+    negative[0] = -0.1  # a negative mass
+    assert pseudo_inertia_eigenvalues(np.stack([theta, negative]))[:, 0, 0].tolist()[0] > 0 > \
+        pseudo_inertia_eigenvalues(negative).min()
+
+
+def test_a_swinging_estimate_reports_its_spread_not_its_last_sample():
+    t = np.arange(0.0, 10.0, 0.01)
+    v = 1.0 + 30.0 * np.sin(7.0 * t) ** 2  # swings between 1 and 31 in the last 2 s
+    sp = window_spread(t, v, 2.0)
+    assert sp["min"] == pytest.approx(1.0, abs=0.05) and sp["max"] == pytest.approx(31.0, abs=0.05)
+    assert sp["last"] == v[-1] and sp["min"] < sp["mean"] < sp["max"]
+
+
+def test_control_rate_rows_far_below_the_bound_are_not_said_to_test_it():
+    rows = [{"plant": "heave", "rate_hz": 100.0, "figure": 0.05, "holds": True},
+            {"plant": "arm", "rate_hz": 250.0, "figure": 1.86, "holds": True},
+            {"plant": "arm", "rate_hz": 100.0, "figure": 4.65, "holds": False}]
+    text = control_rate._verdict(rows, [])
+    assert "agree on every row. Only the rows with a figure within a factor 4 of 2 test it: arm at 250 Hz" in text
+    assert "the other 1 rows' figures are at most 0.05" in text and "heave at 100 Hz" not in text
+    assert "none of them tests the prediction" in control_rate._verdict(rows[:1], [])
+
+
+def test_re_adaptation_is_claimed_only_when_the_error_came_back():
+    slow = wing_rock._readapt_words("sliding", {"pre": 1e-4, "post": 4e-3, "err_change": 0.53, "err_end": 0.47})
+    assert "40× its value" in slow and "re-adaptation is not shown within the run" in slow
+    back = wing_rock._readapt_words("mrac", {"pre": 1e-3, "post": 1.5e-3, "err_change": 0.5, "err_end": 0.05})
+    assert "re-adapted within the run" in back
+
+
+def test_the_6_joint_drift_run_s_onset_lists_its_precursors_well_before_the_failure():
+    """ur5e_drift without a modification (150 s): measured torques at a limit from 65.6 s, 5× the baseline error at
+    73.5 s, 25× at 86.8 s, the 0.01 rad bound at 95.0 s: not sudden."""
+    from adaptive_mj.study.api import run_scenario
+
+    res = run_scenario("ur5e_drift")
+    fo = failure_onset(res.trajectory, bound=0.01, baseline_until=60.0)
+    assert fo["saturation"] < fo["x5"] < fo["x25"] < fo["failure"]
+    assert fo["failure"] - fo["saturation"] > 10.0 and fo["sudden"] is False
+    facts = manipulator_drift._facts(res.trajectory, np.linalg.norm(res.trajectory.theta_hat - res.trajectory.theta,
+                                                                    axis=1) / np.linalg.norm(res.trajectory.theta,
+                                                                                             axis=1))
+    assert facts["not_psd"] > 0 and facts["moved"] > 0  # the plain law's estimate leaves the physical set
