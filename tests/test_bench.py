@@ -23,7 +23,8 @@ def small_catalogue(monkeypatch):
                                  log=j.log, tag=j.tag, extras=j.extras) for j in s.jobs)
             out.append(bench_catalogue.Section(s.key, s.title, s.claim, jobs, s.analyze))
         # one run that diverges on purpose: the bench must go on
-        div = bench_catalogue._job("diverge", "lecture_heave", "lecture_heave", logs, ["simulation.state_bound=0.5"])
+        div = bench_catalogue._job("diverge", "lecture_heave", "lecture_heave", logs, ["simulation.state_bound=0.5"],
+                                   expect="fail")
         out.append(bench_catalogue.Section("diverge", "Divergence", "none", (div,),
                                            lambda res, out_dir: bench_catalogue.SectionReport(
                                                "diverged run: " + res[div.tag].status,
@@ -59,6 +60,14 @@ def test_quick_bench_on_a_reduced_catalogue(tmp_path, small_catalogue, capsys):
     # the disk the logs take, stated from the files written (10⁶ bytes per MB)
     mb = sum(p.stat().st_size for p in (out / "logs").rglob("*") if p.is_file()) / 1e6
     assert f"The logs take {mb:.0f} MB." in report
+    # each run against what it was declared for: the divergence is a demonstration meant to fail; the lecture's
+    # first-order run is meant to pass, and cut to 1 s it fails: counted, and named, as unexpected
+    assert summary["diverge/lecture_heave"]["expected"] == "fail" and summary["diverge/lecture_heave"]["as_expected"]
+    assert summary["first_order/lecture"]["expected"] == "ok" and summary["first_order/lecture"]["as_expected"] is False
+    unexpected = sorted(tag for tag, v in summary.items() if v["as_expected"] is False)
+    assert "first_order/lecture" in unexpected
+    assert f"**{len(unexpected)} unexpected** (" in report and "`first_order/lecture`" in report.split("\n\n")[1]
+    assert "1 failing as meant" in report and "| failed (unexpected) |" in report and "diverged (as meant)" in report
     printed = capsys.readouterr().out
     assert "section" in printed and "report:" in printed
 

@@ -12,6 +12,7 @@ from pathlib import Path
 from adaptive_mj.study import callable_module
 from adaptive_mj.report.html import write_html
 from adaptive_mj.report.metrics import TAIL_FRACTION
+from adaptive_mj.study.job import JobResult, as_expected
 from adaptive_mj.study.parallel import Backend, progress_printer, run_jobs, session
 from adaptive_mj.study.result import Study, Table
 from adaptive_mj.trajectory import Status
@@ -25,14 +26,27 @@ def _fmt(v, spec=".3g") -> str:
     return format(v, spec)
 
 
+def status_text(r: dict) -> str:
+    """A row's status as the tables show it: "(unexpected)" after a run that did not end as declared
+    (Job.expect), "(as meant)" after a demonstration that failed as it was meant to."""
+    if r.get("as_expected") is False:
+        return f"{r['status']} (unexpected)"
+    if r.get("as_expected") and r["status"] != Status.OK:
+        return f"{r['status']} (as meant)"
+    return str(r["status"])
+
+
 def main_table(rows: list[dict]) -> str:
     """The terminal table: one line per run (units: the run's output and control units)."""
-    head = (f"{'section':14s} {'run':30s} {'status':9s} {'rms err tail':>16s} {'u rms':>12s} {'u TV':>14s}"
+    ws, wr = (max([len(k), *(len(str(r[k])) for r in rows)]) for k in ("section", "run"))
+    wt = max([len("status"), *(len(status_text(r)) for r in rows)])
+    head = (f"{'section':{ws}s} {'run':{wr}s} {'status':{wt}s} {'rms err tail':>16s} {'u rms':>12s} {'u TV':>14s}"
             "  key result")
     lines = [head, "-" * len(head)]
-    for r in rows:
+    for r in rows:  # the columns as wide as their longest entry: a long run label does not break them
         yu, uu = r.get("y_unit", ""), r.get("u_unit", "")
-        lines.append(f"{r['section']:14s} {r['run']:30s} {r['status']:9s} {_fmt(r.get('tail')) + ' ' + yu:>16s} "
+        lines.append(f"{r['section']:{ws}s} {r['run']:{wr}s} {status_text(r):{wt}s} "
+                     f"{_fmt(r.get('tail')) + ' ' + yu:>16s} "
                      f"{_fmt(r.get('u_rms')) + ' ' + uu:>12s} {_fmt(r.get('u_tv')) + ' ' + uu:>14s}  "
                      f"{r.get('key', '')}")
     return "\n".join(lines)
@@ -44,7 +58,7 @@ def main_table_markdown(rows: list[dict]) -> str:
     def with_unit(v, unit: str) -> str:
         return _fmt(v) + (f" {unit}" if v is not None and unit and unit != "-" else "")
 
-    return Table.of([{"section": r["section"], "run": r["run"], "status": r["status"],
+    return Table.of([{"section": r["section"], "run": r["run"], "status": status_text(r),
                       "rms err tail": with_unit(r.get("tail"), r.get("y_unit", "")),
                       "u rms": with_unit(r.get("u_rms"), r.get("u_unit", "")),
                       "u TV": with_unit(r.get("u_tv"), r.get("u_unit", "")), "key result": r.get("key", "")}
@@ -110,6 +124,22 @@ def _law_section(out: Path, backend: Backend, law: str, gains: Path | None, sets
             f"\n{body}\n"), runs
 
 
+def expectation_text(results: list[JobResult]) -> str:
+    """The catalogue's runs against what each was declared for (Job.expect): "N as expected (K ok, M failing as
+    meant: demonstrations), U unexpected: tags; X measured (baselines, sweeps, margin probes: Y of them ok)"."""
+    ok_ok = sum(1 for r in results if r.job.expect == "ok" and r.status == Status.OK)
+    meant = sum(1 for r in results if r.job.expect == "fail" and as_expected(r))
+    unexpected = [r.job.tag for r in results if as_expected(r) is False]
+    measured = [r for r in results if r.job.expect == "measured"]
+    text = (f"Of the {len(results)} catalogue runs, {ok_ok + meant} ended as expected ({ok_ok} ok, {meant} failing "
+            f"as meant: demonstrations of a failure mode), **{len(unexpected)} unexpected**")
+    if unexpected:
+        shown = ", ".join(f"`{t}`" for t in unexpected[:20]) + (" ..." if len(unexpected) > 20 else "")
+        text += f" ({shown})"
+    return text + (f"; {len(measured)} are measurements whose verdict is the result (baselines, sweep points and "
+                   f"margin probes: {sum(r.status == Status.OK for r in measured)} of them ok).")
+
+
 def _disk_mb(folder: Path) -> float:
     """[MB] what the files under `folder` take (10⁶ bytes)."""
     return sum(f.stat().st_size for f in folder.rglob("*") if f.is_file()) / 1e6 if folder.exists() else 0.0
@@ -150,9 +180,9 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
     elapsed = time.perf_counter() - t0
     failed = [r for r in results if r.status == Status.ERROR]  # diverged runs are results, not failures
     header = (f"# adaptive-mj benchmark report{' (quick)' if quick else ''}\n\n"
-              f"{n_runs} runs ({sum(r.status == 'ok' for r in results)} of the {len(results)} catalogue runs ok) "
-              f"on MuJoCo physics and "
-              f"the analytic twin, {_where(backend)}: the {len(results)} catalogue runs took {run_seconds:.1f} s"
+              f"{n_runs} runs on MuJoCo physics and "
+              f"the analytic twin, {_where(backend)}. {expectation_text(results)} The {len(results)} catalogue runs "
+              f"took {run_seconds:.1f} s"
               + ("" if quick else f", the breaking-point study {elapsed - run_seconds:.1f} s")
               + f", the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
               f"every catalogue run's MCAP log is in `logs/`"
@@ -175,7 +205,8 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
     write_html(out / "report.md")  # report.html: the same text, figures embedded, for a browser
     summary = {r.job.tag: {"scenario": str(r.job.scenario.name), "overrides": list(r.job.overrides),
                            "log": str(r.job.log.relative_to(out)) if r.job.log else None,
-                           "status": r.status, "error": r.error, "summary": r.summary, "extras": r.extras}
+                           "status": r.status, "expected": r.job.expect, "as_expected": as_expected(r),
+                           "error": r.error, "summary": r.summary, "extras": r.extras}
                for r in results}
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=_json_default), encoding="utf-8")
     text = (main_table(rows) + f"\n\nreport: {out / 'report.md'}  ({n_runs} runs, {elapsed:.1f} s)\n"

@@ -134,7 +134,7 @@ def _jobs(s: Search, v: float, seeds: int, logs: Path, extra: Sequence[str]) -> 
     return [Job(sc.SCENARIOS_DIR / f"{TASK}.toml",
                 overrides=(REFUSE_UNSTABLE, *BASE, *extra, f"law={s.law}", *d.overrides(v)),
                 seed=k, log=logs / f"{name}-seed{k}.mcap", tag=f"{name} seed {k}", extras=("flight_metrics",),
-                keep_trajectory=False)
+                keep_trajectory=False, expect="measured")  # a probe of a margin: its verdict is the measurement
             for k in range(seeds)]
 
 

@@ -24,7 +24,10 @@ class Job:
     """scenario: a scenario file; overrides: --set expressions; seed: noise seed or None;
     log: the MCAP path to write (None: no log); tag: caller's label;
     extras: names of functions in adaptive_mj.study.analysis run on the full-rate trajectory (from EXTRAS);
-    keep_trajectory: send the decimated trajectory back (False: the summary only, as a sweep needs)."""
+    keep_trajectory: send the decimated trajectory back (False: the summary only, as a sweep needs);
+    expect: what the run is for (EXPECTATIONS): "ok", meant to meet its [success] criteria (a failure is a
+    regression); "fail", a demonstration meant to fail or diverge (the lecture's failure modes); "measured", a
+    baseline, a sweep point or a breaking-point probe whose verdict is the measurement itself."""
 
     scenario: Path
     overrides: tuple[str, ...] = ()
@@ -33,6 +36,20 @@ class Job:
     tag: str = ""
     extras: tuple[str, ...] = ()
     keep_trajectory: bool = True
+    expect: str = "ok"
+
+
+EXPECTATIONS = ("ok", "fail", "measured")
+
+
+def as_expected(r: "JobResult") -> bool | None:
+    """Whether a run ended as its job expected (None: a measured run, which expects nothing): an "ok" run ok, a
+    "fail" run failed or diverged."""
+    if r.job.expect == "measured":
+        return None
+    if r.job.expect == "fail":
+        return r.status in ("failed", "diverged")
+    return r.status == "ok"
 
 
 #: The analyses a Job may name (a closed set, so no text from a scenario or log picks a function).

@@ -15,6 +15,7 @@ import matplotlib
 from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import analysis
+from adaptive_mj.study.job import as_expected
 from adaptive_mj.study.parallel import Job, JobResult
 from adaptive_mj.trajectory import Status
 
@@ -85,9 +86,11 @@ def entries() -> list[CatalogueEntry]:
 
 
 # ---------------------------------------------------------------- helpers
-def _job(section: str, variant: str, scenario: str, logs: Path, overrides=(), extras=()) -> Job:
+def _job(section: str, variant: str, scenario: str, logs: Path, overrides=(), extras=(), expect: str = "ok") -> Job:
+    """A catalogue run; expect (study.job.Job.expect): "ok", "fail" (a demonstration meant to fail) or "measured"
+    (a baseline or a sweep point: its verdict is the measurement)."""
     return Job(scenario=SCN / f"{scenario}.toml", overrides=tuple(overrides), log=logs / f"{section}-{variant}.mcap",
-               tag=f"{section}/{variant}", extras=tuple(extras))
+               tag=f"{section}/{variant}", extras=tuple(extras), expect=expect)
 
 
 def _ok(r: JobResult) -> bool:
@@ -100,11 +103,15 @@ def _ok(r: JobResult) -> bool:
 SECTION_PLANT = {section: kind.name for kind in units.built_in().values() for section in kind.sections}
 
 
-def _row(section: str, variant: str, r: JobResult, key: str = "") -> dict:
+def _row(section: str, variant: str, r: JobResult, key: str = "", kind: str | None = None) -> dict:
+    """A row of the main table: section (its plant kind's section name, optionally followed by " §N" where one
+    kind has several sections), the run, its status, what it was declared for (Job.expect) and whether it ended so, its
+    figures in the plant's units (kind: the plant kind, default the section's)."""
     m = (r.summary or {}).get("metrics", {})
     status = r.status if r.status != Status.ERROR else Status.ERROR
-    kind = SECTION_PLANT.get(section, "")
-    return {"section": section, "run": variant, "status": status, "tail": m.get("rms_tracking_error_tail"),
+    kind = SECTION_PLANT.get(section.split(" §")[0], "") if kind is None else kind
+    return {"section": section, "run": variant, "status": status, "expect": r.job.expect,
+            "as_expected": as_expected(r), "tail": m.get("rms_tracking_error_tail"),
             "u_rms": m.get("control_rms"), "u_tv": m.get("control_total_variation"), "key": key,
             "y_unit": units.output_unit(kind), "u_unit": units.control_unit(kind)}
 

@@ -164,8 +164,8 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
         for rate in CONTROL_RATES_HZ:
             n = max(1, round(1.0 / (rate * dt)))
             T = n * dt
-            job = _job("control_rate", f"{name}_{rate:g}Hz", name, logs,
-                       [*dur, "control.mode='sampled'", f"control.period={T!r}"])
+            job = _job("control_rate", f"{name}_{rate:g}Hz", name, logs,  # each verdict tests the prediction
+                       [*dur, "control.mode='sampled'", f"control.period={T!r}"], expect="measured")
             plan.append((label, name, scn.plant.kind, rate, T, n, job))
     jobs = tuple(p[-1] for p in plan)
 

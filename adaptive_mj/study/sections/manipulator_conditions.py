@@ -65,7 +65,9 @@ def section(quick: bool, logs: Path) -> Built:
     full and the quick bench alike (11 runs, ~10 s on 2 cores)."""
     name = "ur5e_identification"
     dur = ["simulation.duration=10.0"]
-    jobs = tuple(_job("arm_conditions", v, name, logs, [*dur, *over]) for v, _, over in ARM_CONDITIONS)
+    jobs = tuple(_job("arm_conditions", v, name, logs, [*dur, *over],
+                      expect="measured" if v == "torque_limits" else "ok")  # the limits without the freeze: measured
+                 for v, _, over in ARM_CONDITIONS)
 
     def analyze(res, out):
         lines = ["| condition | what the law faces | tail RMS q̃ [rad] | payload mass error [%], mean [min, max] over "
@@ -76,7 +78,7 @@ def section(quick: bool, logs: Path) -> Built:
         for job, (v, what, _) in zip(jobs, ARM_CONDITIONS, strict=True):
             r = res[job.tag]
             if not _ok(r):
-                rows.append(_row("manipulator", v, r))
+                rows.append(_row("manipulator §13", v, r))
                 lines.append(f"| {v} | {what} | {r.status} |||||")
                 continue
             m = r.summary["metrics"]
@@ -87,7 +89,7 @@ def section(quick: bool, logs: Path) -> Built:
                          f"{_spread_text(spread.get('mass_error_percent'))} | "
                          f"{_spread_text(spread.get('com_error_mm'))} | "
                          f"{'n/a' if sat is None else _g(100 * sat)} | {r.status} |")
-            row = _row("manipulator", v, r, what)
+            row = _row("manipulator §13", v, r, what)
             row.update({"mass_error_percent": ident.get("mass_error_percent"),
                         "com_error_mm": ident.get("com_error_mm"), "saturation_fraction": sat,
                         "identification_window": spread})

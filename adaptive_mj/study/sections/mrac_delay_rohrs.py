@@ -45,11 +45,13 @@ def section(quick: bool, logs: Path) -> Built:
     from adaptive_mj.study.mrac_breaks import frozen_gain_limit, phase_lag_deg, rohrs_onset
 
     gammas = _nguyen_gammas(quick)
-    jobs = [_job("mrac", f"nguyen_gamma_{g:g}", "mrac_time_delay", logs, [f"law.gamma={g}"]) for g in gammas]
+    jobs = [_job("mrac", f"nguyen_gamma_{g:g}", "mrac_time_delay", logs, [f"law.gamma={g}"], expect="measured")
+            for g in gammas]  # a sweep across Nguyen's threshold: each verdict is the measurement
     jobs.append(_job("mrac", "nguyen_projection", "mrac_time_delay", logs,
                      ["law.gamma=2.9", "law.projection={k_y=[-2, 0], k_r=[0, 4]}"]))
     variants = ROHRS_VARIANTS[:3] if quick else ROHRS_VARIANTS  # quick: the published pair and the mechanism
-    jobs += [_job("mrac", f"rohrs_{key}", "rohrs_counterexample", logs, ov) for key, _, ov in variants]
+    jobs += [_job("mrac", f"rohrs_{key}", "rohrs_counterexample", logs, ov,
+                  expect="fail" if key == "published" else "measured") for key, _, ov in variants]
     rohrs = sc.load(SCN / "rohrs_counterexample.toml")
     lin = rohrs.plant.linear
     assert lin is not None

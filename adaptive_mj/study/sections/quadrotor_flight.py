@@ -42,7 +42,8 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
     duration: cut every task run to this many seconds (for tests)."""
     dur = [f"simulation.duration={duration}"] if duration is not None else []
     task_jobs = tuple(_job("quadrotor", f"{name.removeprefix('quadrotor_')}-{law}", name, logs,
-                           [f"law={law}", *dur], extras=("flight_metrics",))
+                           [f"law={law}", *dur], extras=("flight_metrics",),
+                           expect="measured" if law == "geometric" else "ok")  # the baseline: the comparison
                       for name, _ in TASKS for law in flight.LAWS) + (
         _job("quadrotor", f"lemniscate-{INERTIA}", "quadrotor_lemniscate", logs,
              ["law=geometric_adaptive", "law.adapt_inertia=true", *dur], extras=("flight_metrics",)),)

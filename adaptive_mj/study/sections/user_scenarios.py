@@ -24,7 +24,7 @@ def user_section(paths: list[Path], logs: Path) -> Section:
             r = res[job.tag]
             scn = sc.load(job.scenario)
             kind = scn.plant.kind
-            rows.append(_row("user", job.tag.split("/")[1], r))
+            rows.append(_row("user", job.tag.split("/")[1], r, kind=kind))
             if not _ok(r):
                 lines.append(f"| `{job.scenario}` | {scn.law.kind} | {r.status} {r.error} |||")
                 continue
