@@ -95,3 +95,21 @@ def test_the_6_joint_drift_run_s_onset_lists_its_precursors_well_before_the_fail
                                                                     axis=1) / np.linalg.norm(res.trajectory.theta,
                                                                                              axis=1))
     assert facts["not_psd"] > 0 and facts["moved"] > 0  # the plain law's estimate leaves the physical set
+
+
+def test_a_study_s_pre_flight_warning_names_the_run_and_words_a_saturating_boundary_layer_as_linearised(capfd,
+                                                                                                     tmp_path):
+    """bench's robust_phi1e-5 run ended ok under a warning that said its loop "cannot be stable" and did not say
+    which run it was: the line now names the run and says the figure is the linearised loop's."""
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.study.job import Job, run_job
+
+    job = Job(sc.SCENARIOS_DIR / "heave_tracking.toml", tag="second_order/robust_phi1e-5",
+              overrides=("law.kind=robust_sliding", "law.nominal='model'", "law.K=29.6", "law.boundary_layer=1e-05",
+                         "simulation.duration=1.0"))
+    r = run_job(job)
+    err = capfd.readouterr().err
+    (line,) = [ln for ln in err.splitlines() if "pre-flight" in ln]
+    assert "heave_tracking.toml (second_order/robust_phi1e-5): warning: pre-flight:" in line
+    assert "the linearised loop cannot be stable (inside the boundary layer: K/Φ = 2.96e+06 saturates" in line
+    assert "the loop cannot be stable" not in line and r.status in ("ok", "failed")

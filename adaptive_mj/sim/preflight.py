@@ -50,6 +50,8 @@ class Preflight:
     outside: tuple[str, ...] = ()
     note: str = ""
     plant_lines: tuple[str, ...] = ()  # what the plant itself says cannot work (a quadrotor too heavy to hover)
+    # where the figure is the linearised loop's only (a boundary layer's K/Φ, which saturates): why, in words
+    linearised: str = ""
 
     @property
     def ok(self) -> bool:
@@ -62,8 +64,9 @@ class Preflight:
         where = "" if not self.joint else (f"{self.joint}: " if self.joint.startswith("attitude")
                                              else f"joint {self.joint}: ")
         return (f"pre-flight: {where}the loop's fastest mode μ = {self.rate:.4g} 1/s gives μh = {self.figure:.3g} "
-                f"at h = {self.step:.3g} s, past the {self.scheme} stability limit {self.limit:.3g}; the loop "
-                f"cannot be stable. Fixes: " + "; or ".join(self.fixes))
+                f"at h = {self.step:.3g} s, past the {self.scheme} stability limit {self.limit:.3g}; "
+                + (f"the linearised loop cannot be stable ({self.linearised}). " if self.linearised else
+                   "the loop cannot be stable. ") + "Fixes: " + "; or ".join(self.fixes))
 
     def describe(self) -> dict:
         """JSON-ready (the summary's "preflight")."""
@@ -162,7 +165,12 @@ def _one_dof_check(plant: FormPlant, feedback: SurfaceFeedback, h: float, limit:
     rate = hx * gain / d + lam_part
     fixes = [f"{what} <= {0.9 * (limit / h - lam_part) * d / hx:.3g} (now {gain:.3g})"] if limit / h > lam_part else []
     fixes.append(f"a timestep or control.period <= {0.9 * limit / rate:.3g} s")
-    return {"rate": rate, "joint": "", "fixes": tuple(fixes)}
+    linearised = ""
+    if gain > feedback.k:  # robust sliding: K/Φ is the slope inside the boundary layer only; |K sat(s/Φ)| ≤ K
+        linearised = (f"inside the boundary layer: K/Φ = {gain - feedback.k:.3g} saturates, the switching term is "
+                      f"bounded by K, so the run may still hold; with k alone μh = "
+                      f"{(hx * feedback.k / d + lam_part) * h:.3g}")
+    return {"rate": rate, "joint": "", "fixes": tuple(fixes), "linearised": linearised}
 
 
 def check(plant: Plant, law: Law, reference, *, duration: float, timing: ControlTiming) -> Preflight:
@@ -186,7 +194,7 @@ def check(plant: Plant, law: Law, reference, *, duration: float, timing: Control
                          note=f"not checked: the law {type(law).__name__} declares no velocity feedback gain")
     return Preflight(checked=True, figure=found["rate"] * h, limit=limit, rate=found["rate"], step=h,
                      scheme=scheme, joint=found["joint"], fixes=found["fixes"], outside=outside,
-                     plant_lines=plant_lines)
+                     plant_lines=plant_lines, linearised=found.get("linearised", ""))
 
 
 def _attitude_check(plant: Plant, feedback: AirframeFeedback, h: float, limit: float) -> dict:

@@ -188,14 +188,14 @@ QUICK_START_MAX_STEPS = 5000
 
 
 def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None,
-            single: bool = False) -> RunResult:
+            single: bool = False, label: str = "") -> RunResult:
     """Build and run one scenario; stream it to log_path (MCAP) when given. Before the first step,
     the pre-flight check (sim.preflight; a PreflightRefused under success.preflight = "refuse");
     after the last, the verdict against the scenario's [success] criteria (setup.success).
 
     single: the only run of this process (the CLI's `run`): a short 1-DOF run then takes the
     Python callback (QUICK_START_MAX_STEPS); studies leave it False and stay compiled."""
-    st = start(scn, log_path=log_path, source=source, single=single)
+    st = start(scn, log_path=log_path, source=source, single=single, label=label)
     try:
         traj = run(st.setup.plant, st.setup.law, st.setup.reference, sink=st.recorder, **st.kwargs)
     except BaseException as exc:
@@ -279,16 +279,18 @@ class Started:
 
 
 def start(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None,
-          single: bool = False) -> Started:
+          single: bool = False, label: str = "") -> Started:
     """Build `scn`, say its notes, check it before flight and open its log (see execute). The plant may
-    take the MjData of an ended run (mujoco_plant.reusing_run_data); Started hands it back at the end."""
+    take the MjData of an ended run (mujoco_plant.reusing_run_data); Started hands it back at the end.
+    label: the run's name in a study (its job's tag), said with every note and warning."""
     with reusing_run_data():
         setup = build(scn, source=source)
     plant = setup.plant
+    where = f"{scn.source} ({label})" if label else str(scn.source)
     for note in setup.notes:  # model edits the scenario asked for: said on the terminal and kept in the log
-        print(f"{scn.source}: note: {note}", file=sys.stderr)
+        print(f"{where}: note: {note}", file=sys.stderr)
     timing = control_timing(scn, setup)
-    pre = preflight_of(scn, setup, timing)
+    pre = preflight_of(scn, setup, timing, where=where)
     crit = criteria(scn, setup.reference, plant_order(plant), tuple(setup.law.names))
     short = single and not plant.joint_shape and scn.simulation.duration < QUICK_START_MAX_STEPS * plant.dt
     sink_every = max(1, round(1.0 / plant.dt))  # flush about once per simulated second
@@ -310,16 +312,17 @@ def start(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | 
     return Started(scn, setup, crit, pre, kwargs, recorder, log_path)
 
 
-def preflight_of(scn: Scenario, setup: Setup, timing: ControlTiming) -> preflight.Preflight:
-    """The run's pre-flight check, its lines said on stderr; a PreflightRefused when it fails and
-    success.preflight = "refuse"."""
+def preflight_of(scn: Scenario, setup: Setup, timing: ControlTiming, *, where: str = "") -> preflight.Preflight:
+    """The run's pre-flight check, its lines said on stderr (after `where`, default the scenario's source: a
+    study's run adds its name); a PreflightRefused when it fails and success.preflight = "refuse"."""
+    where = where or str(scn.source)
     pre = preflight.check(setup.plant, setup.law, setup.reference, duration=scn.simulation.duration, timing=timing)
     for line in pre.outside + pre.plant_lines:
-        print(f"{scn.source}: warning: {line}", file=sys.stderr)
+        print(f"{where}: warning: {line}", file=sys.stderr)
     if not pre.ok:
         if scn.success.preflight == "refuse":
-            raise PreflightRefused(f"{scn.source}: refused (success.preflight = 'refuse'): {pre.line()}")
-        print(f"{scn.source}: warning: {pre.line()}", file=sys.stderr)
+            raise PreflightRefused(f"{where}: refused (success.preflight = 'refuse'): {pre.line()}")
+        print(f"{where}: warning: {pre.line()}", file=sys.stderr)
     return pre
 
 

@@ -128,7 +128,7 @@ def run_job(job: Job) -> JobResult:
 
     try:
         scn = _job_scenario(job)
-        result = execute(scn, log_path=job.log)
+        result = execute(scn, log_path=job.log, label=job.tag)
         traj = result.trajectory
         setup = None
         extras = {}
@@ -159,7 +159,7 @@ def run_jobs_batched(jobs: Sequence[Job], *, nthread: int = 0) -> list[JobResult
     started = {}
     for i, job in enumerate(jobs):
         try:
-            started[i] = start(_job_scenario(job), log_path=job.log)
+            started[i] = start(_job_scenario(job), log_path=job.log, label=job.tag)
         except PreflightRefused as exc:
             out[i] = JobResult(job, Status.REFUSED, None, error=str(exc))
         except AdaptiveMJError as exc:

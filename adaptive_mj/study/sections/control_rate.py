@@ -209,11 +209,12 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
         arm, heave = (loops[name] for _, name in CONTROL_RATE_PLANTS)
         assert arm.coupled is not None  # sampled_loop sets it on the manipulator
         ax[0].set_ylabel("max_j |q̃_j| [rad]")
-        ax[0].set_title(f"6-joint arm, K_D = {_g(float(arm.gain.max()))} N m s/rad: predicted stable above "
-                        f"{arm.lowest_stable_rate():.0f} Hz")
+        ax[0].set_title(f"6-joint arm, K_D = {_g(float(arm.gain.max()))} N m s/rad: the ideal sampled loop needs "
+                        f"more than {arm.lowest_stable_rate():.0f} Hz (necessary, not sufficient)")
         ax[1].set_ylabel("|ỹ| [m]")
         ax[1].set_title(f"heave vehicle, k = {_g(float(heave.gain[0]))} N s/m, d = {float(heave.inertia[0]):.3g} kg: "
-                        f"predicted stable above {heave.lowest_stable_rate():.2g} Hz")
+                        f"the ideal sampled loop needs more than {heave.lowest_stable_rate():.2g} Hz (necessary, not "
+                        "sufficient)", fontsize=9)
         for a in ax:
             a.set_xlabel("time t [s]")
             a.grid(alpha=0.3)
