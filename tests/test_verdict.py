@@ -329,3 +329,30 @@ def test_the_gravity_line_names_the_joint_and_the_numbers():
     assert f"needs {need[i, j]:.4g} N m on joint {setup.plant.joint_names[j]}" in line, line
     assert f"past its actuator's limit [{lo[j]:.4g}, {hi[j]:.4g}] N m" in line
     assert f"and {int((ratio > 1).any(axis=0).sum()) - 1} other joint(s) short" in line
+
+
+@pytest.mark.parametrize("mass", [0.0, 9.4e-21, 1e-3 * 2.0, -0.5])
+def test_a_vanished_mass_estimate_has_an_undefined_centre_of_mass_not_a_huge_one(mass, capsys):
+    """unknown = "all" with projection = "physical" stops a body's m̂ at 0 (or 1e-20 kg): (m c)/m̂ is no centre of
+    mass (it printed 8.45e+20 mm); the error is NaN, com_undefined says why, and the summary line says
+    "undefined" with the estimate, never a number. Just above the floor (0.1 % of the true mass) it is a number."""
+    names = ("p.m", "p.mcx", "p.mcy", "p.mcz", "p.Ixx", "p.Ixy", "p.Iyy", "p.Ixz", "p.Iyz", "p.Izz")
+    truth = np.array([2.0, 0.2, 0.0, 0.0, 0.1, 0.0, 0.2, 0.0, 0.0, 0.3])
+    est = truth.copy()
+    est[0], est[1] = mass, 0.2
+    out = body_identification(names, est, truth)["p"]
+    assert math.isnan(out["com_error_mm"]) and out["com_undefined"] == f"undefined (estimated mass {mass:.3g} kg)"
+    est[0] = np.nextafter(1e-3 * 2.0, np.inf)
+    above = body_identification(names, est, truth)["p"]
+    assert math.isfinite(above["com_error_mm"]) and above["com_undefined"] == ""
+    from adaptive_mj.cli import _print_summary
+    from adaptive_mj.report.metrics import clean_json
+
+    summary = {"scenario": "s", "status": "ok", "reason": "", "duration": 1.0, "steps": 1,
+               "metrics": {"rms_tracking_error": 0.1, "rms_tracking_error_tail": 0.1,
+                           "max_abs_tracking_error_tail": 0.1, "control_rms": 1.0, "control_total_variation": 1.0,
+                           "identification": {"p": out}},
+               "final": {"theta_hat": {}, "theta": {}}}
+    _print_summary(clean_json(summary), as_json=False, kind="manipulator")
+    line = [x for x in capsys.readouterr().out.splitlines() if "identified p" in x][0]
+    assert f"centre of mass undefined (estimated mass {mass:.3g} kg)," in line and "mm" not in line, line
