@@ -221,8 +221,9 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
                   + (": " + ", ".join(f"{j} {100 * v:.3g} %" for j, v in per.items() if v) if per else ""))
         for body, e in (m.get("identification") or {}).items():
             rel = e["inertia_error_relative"]
+            com = e.get("com_undefined") or f(e["com_error_mm"], "mm")  # m̂ = 0: no centre of mass to compare
             print(f"  identified {body}: mass {f(e['mass_error_percent'])} %, centre of mass "
-                  f"{f(e['com_error_mm'], 'mm')}, inertia {f(e['inertia_error'], 'kg m²')} "
+                  f"{com}, inertia {f(e['inertia_error'], 'kg m²')} "
                   f"({f(None if rel is None else 100 * rel)} % of |I|)")
     final = summary["final"]
     unit = functools.partial(units.param_unit, kind)

@@ -354,3 +354,25 @@ def test_one_dof_saturation_key_is_for_the_adaptive_sliding_law():
                                             r"'sliding_adaptive'"):
         load(SCENARIOS_DIR / "heave_tracking.toml",
              overrides=["law.saturation='freeze'", "law.kind='fixed_nominal'", "law.nominal='model'"])
+
+
+def test_an_infinite_velocity_cutoff_means_no_filter_the_plain_difference(tmp_path):
+    """sensors.velocity_cutoff_hz = inf is documented as the plain difference (no low-pass): α = 0, so a run is
+    bit-identical to one whose cut-off is so high that α underflows to 0, differs from the 50 Hz default's, and
+    its log header says no cut-off (null); written in a scenario file as TOML's `inf` too."""
+    sensors = "sensors={{encoder_counts=65536, velocity='differentiated', velocity_cutoff_hz={}}}"
+    plain = _scenario(sensors.format("inf"), duration=0.1)
+    s = build(plain)
+    assert math.isinf(s.sensors.cutoff_hz) and s.sensors.alpha(1e-3) == 0.0
+    assert s.sensors.describe()["velocity_cutoff_hz"] is None
+    assert Sensors(quantum=np.zeros(1), differentiated=True, cutoff_hz=1e12).alpha(1e-3) == 0.0
+    inf_run, _ = _run(plain, False)
+    huge_run, _ = _run(_scenario(sensors.format("1e12"), duration=0.1), False)
+    filtered, _ = _run(_scenario(sensors.format("50.0"), duration=0.1), False)
+    for field in ("x", "u", "theta_hat"):
+        np.testing.assert_array_equal(getattr(inf_run, field), getattr(huge_run, field), err_msg=field)
+    assert np.max(np.abs(inf_run.u - filtered.u)) > 1e-6
+    text = (SCENARIOS_DIR / "ur5e_identification.toml").read_text()
+    path = tmp_path / "inf.toml"
+    path.write_text(text + "\n[sensors]\nvelocity = \"differentiated\"\nvelocity_cutoff_hz = inf\n")
+    assert math.isinf(build(load(path, overrides=["simulation.duration=0.1"])).sensors.cutoff_hz)

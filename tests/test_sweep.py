@@ -521,3 +521,49 @@ def test_a_worker_dying_while_the_caller_is_busy_loses_no_run(tmp_path, monkeypa
         results.append((i, result))
     assert sorted(i for i, _ in results) == list(range(20))
     assert all(r.status == "ok" for _, r in results)
+
+
+def test_a_sweep_whose_every_run_misses_its_criteria_shows_their_numbers_marked_failed(tmp_path, capsys,
+                                                                                       monkeypatch):
+    """Every run completes but misses success.tail_rms (1e-9): the table, report.md and the plot show each grid
+    point's numbers (those in sweep.csv), marked "(failed)", not n/a and an empty plot (issue 35). Diverged runs
+    stay out: their metrics are of a run cut short."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    figures = []
+    close = plt.close
+    monkeypatch.setattr(plt, "close", lambda fig=None: (figures.append(fig), close(fig)))
+    out = tmp_path / "sweep"
+    assert main(["sweep", "lecture_first_order", "--grid", "law.k=2,50", "--set", "simulation.duration=1",
+                 "--set", "success.tail_rms=1e-9", "--jobs", "1", "-o", str(out),
+                 "--metric", "rms_tracking_error_tail,control_rms"]) == 1
+    with open(out / "sweep.csv", newline="") as f:
+        table = list(csv.DictReader(f))
+    assert [r["status"] for r in table] == ["failed", "failed"]
+    text = capsys.readouterr().out
+    lines = text.splitlines()
+    for row, line in zip(table, lines[1:3], strict=True):
+        tail, control = float(row["rms_tracking_error_tail"]), float(row["control_rms"])
+        assert line.split() == [row["law.k"], f"{tail:.4g}", "(failed)", f"{control:.4g}", "(failed)", "0/1"], line
+    report = (out / "report.md").read_text()
+    assert f"| 50 | {float(table[1]['rms_tracking_error_tail']):.6g} (failed) |" in report and "n/a" not in report
+    fig = figures[-1]
+    for ax, metric in zip(fig.axes, ("rms_tracking_error_tail", "control_rms"), strict=True):
+        ys = sorted(float(y) for line in ax.lines for y in np.atleast_1d(line.get_ydata())
+                    if line.get_transform() == ax.transData and np.isfinite(float(y)))
+        assert {float(r[metric]) for r in table} <= set(ys), (metric, ys)
+
+
+def test_point_stats_fall_back_to_failed_runs_only_where_no_ok_run_has_a_value():
+    """ok runs first (the mean over them, as before); a point with no ok run takes its failed runs' values,
+    marked; diverged runs never count."""
+    rows = [(1, "ok", 1.0), (1, "failed", 9.0), (2, "failed", 3.0), (2, "failed", 5.0), (3, "diverged", 7.0)]
+    table = [{"law.k": k, "seed": i % 2, "status": status, "e": e} for i, (k, status, e) in enumerate(rows)]
+    one, two, three = sweep.point_stats(table, ["law.k"], "e")
+    assert (one.mean, one.basis, one.failed_only, one.shown()) == (1.0, "ok", False, "1")
+    assert (two.mean, two.lo, two.hi, two.failed_only, two.shown()) == (4.0, 3.0, 5.0, True, "4 (failed)")
+    assert math.isnan(three.mean) and three.shown() == "n/a"
+    text = sweep.summary_table(table, ["law.k"], ["e"])
+    assert [line.split() for line in text.splitlines()[1:]] == [["1", "1", "1/2"], ["2", "4", "(failed)", "0/2"],
+                                                                ["3", "n/a", "0/1"]]

@@ -264,3 +264,95 @@ def test_reference_leaving_a_joint_range_is_warned_before_the_run(tmp_path, caps
     assert "warning: the reference leaves wrist_3's range" in err
     summary = json.loads(out.splitlines()[0])
     assert any(w.startswith("wrist_3 reached its limit") for w in summary["warnings"]), summary["warnings"]
+
+
+# ---- the gravity check on arms (issue 35): g(q_d(t)) against the torque limits before the first step --------
+
+ARM_SHORT = ["simulation.duration=0.2", "events=[]"]
+
+
+@pytest.mark.parametrize("name", ["arm_payload_swap", "ur5e_payload_swap", "ur5e_identification", "ur5e_drift"])
+def test_the_bundled_arms_pass_the_gravity_check(name):
+    assert _check(_load(name, *ARM_SHORT)).gravity == ""
+
+
+def test_the_1dof_arms_holding_control_is_its_forms_gravity():
+    """ArmPlant.holding_controls(q) = (g_sin sin q + g_cos cos q) / gear: the arm form's gravity terms (true θ of the
+    compiled model), here with a 500 kg payload and the bundled gear."""
+    setup = build(_load("arm_payload_swap", "plant.payload_mass=500", *ARM_SHORT))
+    plant = setup.plant
+    theta = dict(zip(plant.names, plant.true_theta(), strict=True))
+    q = np.linspace(-2.5, 2.5, 11)
+    gear = float(plant.model.actuator_gear[plant.actuator_id, 0])
+    expected = (theta["g_sin"] * np.sin(q) + theta["g_cos"] * np.cos(q)) / gear
+    np.testing.assert_allclose(plant.holding_controls(q[:, None])[:, 0], expected, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["arm_payload_swap", "ur5e_payload_swap"])
+def test_a_payload_gravity_cannot_hold_is_warned_then_refused_with_strict(name, tmp_path, capsys):
+    """500 kg (grams typed as kilograms) on either arm: without --strict one warning line before the run (which
+    then fails, the verdict recalling the warning); with --strict exit 2, one line, before the first step, no log."""
+    sets = [a for o in ("plant.payload_mass=500", *ARM_SHORT) for a in ("--set", o)]
+    log = tmp_path / "run.mcap"
+    assert main(["run", name, "-o", str(log), *sets, "--strict"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.count("\n") == 1, err
+    assert "refused (success.preflight = 'refuse'): pre-flight: gravity alone at the reference needs" in err
+    assert "past its actuator's limit" in err and not log.exists()
+    assert main(["run", name, "-o", str(log), *sets]) == 1
+    err = capsys.readouterr().err
+    warnings = [line for line in err.splitlines() if "gravity alone" in line]
+    assert len(warnings) == 1 and ": warning: pre-flight: gravity alone at the reference needs" in warnings[0]
+    from adaptive_mj.log.replay import read_log
+
+    run = read_log(log)
+    assert run.status == "failed" and "gravity alone" in run.trajectory.reason
+    assert run.summary["preflight"]["gravity"] == warnings[0].split(": warning: ", 1)[1]
+    # the right mass passes
+    assert main(["run", name, "-o", str(tmp_path / "ok.mcap"), "--set", "simulation.duration=0.2",
+                 "--set", "events=[]", "--strict"]) == 0
+    assert "gravity" not in capsys.readouterr().err
+
+
+def test_the_gravity_line_names_the_joint_and_the_numbers():
+    """The UR5e with 500 kg: the joint short by the largest factor, the torque it needs at which reference sample,
+    and the limit; computed from holding_controls at the reference's samples."""
+    scn = _load("ur5e_payload_swap", "plant.payload_mass=500", *ARM_SHORT)
+    setup = build(scn)
+    line = preflight.gravity_line(setup.plant, setup.reference, scn.simulation.duration, setup.law.order)
+    q = preflight._reference_positions(setup.reference, scn.simulation.duration, setup.law.order)
+    need = setup.plant.holding_controls(q)
+    lo, hi = setup.plant.ctrl_range
+    ratio = np.maximum(need / hi, need / lo)
+    i, j = np.unravel_index(np.argmax(ratio), need.shape)
+    assert ratio[i, j] > 1
+    assert f"needs {need[i, j]:.4g} N m on joint {setup.plant.joint_names[j]}" in line, line
+    assert f"past its actuator's limit [{lo[j]:.4g}, {hi[j]:.4g}] N m" in line
+    assert f"and {int((ratio > 1).any(axis=0).sum()) - 1} other joint(s) short" in line
+
+
+@pytest.mark.parametrize("mass", [0.0, 9.4e-21, 1e-3 * 2.0, -0.5])
+def test_a_vanished_mass_estimate_has_an_undefined_centre_of_mass_not_a_huge_one(mass, capsys):
+    """unknown = "all" with projection = "physical" stops a body's m̂ at 0 (or 1e-20 kg): (m c)/m̂ is no centre of
+    mass (it printed 8.45e+20 mm); the error is NaN, com_undefined says why, and the summary line says
+    "undefined" with the estimate, never a number. Just above the floor (0.1 % of the true mass) it is a number."""
+    names = ("p.m", "p.mcx", "p.mcy", "p.mcz", "p.Ixx", "p.Ixy", "p.Iyy", "p.Ixz", "p.Iyz", "p.Izz")
+    truth = np.array([2.0, 0.2, 0.0, 0.0, 0.1, 0.0, 0.2, 0.0, 0.0, 0.3])
+    est = truth.copy()
+    est[0], est[1] = mass, 0.2
+    out = body_identification(names, est, truth)["p"]
+    assert math.isnan(out["com_error_mm"]) and out["com_undefined"] == f"undefined (estimated mass {mass:.3g} kg)"
+    est[0] = np.nextafter(1e-3 * 2.0, np.inf)
+    above = body_identification(names, est, truth)["p"]
+    assert math.isfinite(above["com_error_mm"]) and above["com_undefined"] == ""
+    from adaptive_mj.cli import _print_summary
+    from adaptive_mj.report.metrics import clean_json
+
+    summary = {"scenario": "s", "status": "ok", "reason": "", "duration": 1.0, "steps": 1,
+               "metrics": {"rms_tracking_error": 0.1, "rms_tracking_error_tail": 0.1,
+                           "max_abs_tracking_error_tail": 0.1, "control_rms": 1.0, "control_total_variation": 1.0,
+                           "identification": {"p": out}},
+               "final": {"theta_hat": {}, "theta": {}}}
+    _print_summary(clean_json(summary), as_json=False, kind="manipulator")
+    line = [x for x in capsys.readouterr().out.splitlines() if "identified p" in x][0]
+    assert f"centre of mass undefined (estimated mass {mass:.3g} kg)," in line and "mm" not in line, line

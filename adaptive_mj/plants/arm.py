@@ -129,6 +129,23 @@ class ArmPlant(BodyEdits, MujocoPlant):
                          form=arm_form(float(model.actuator_gear[a, 0])),
                          theta_fn=lambda m: true_theta(m, j), where=where)
 
+    def holding_controls(self, q: np.ndarray) -> np.ndarray:
+        """(N, 1) the control u (torque = gear·u, the units of ctrl_range) that holds the arm still at the joint
+        angles q (N, 1) [rad]: MuJoCo's qfrc_bias - qfrc_passive at zero velocity (gravity, less springs) over the
+        gear (the pre-flight's gravity check)."""
+        m = self.model
+        d = scratch_data(m)
+        gear = float(m.actuator_gear[self._act, 0])
+        q = np.asarray(q, dtype=float).reshape(-1)
+        out = np.empty((len(q), 1))
+        for i, qi in enumerate(q):
+            d.qpos[self._qadr] = qi
+            d.qvel[:] = 0.0
+            mujoco.mj_fwdPosition(m, d)
+            mujoco.mj_fwdVelocity(m, d)
+            out[i, 0] = (d.qfrc_bias[self._dadr] - d.qfrc_passive[self._dadr]) / gear
+        return out
+
 
 def load(path: str | Path = MODEL_PATH, *, payload: str | Path | None = "sphere",
          payload_mass: float | None = None, site: str = "tip", **kwargs) -> ArmPlant:

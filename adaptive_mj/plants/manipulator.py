@@ -604,6 +604,20 @@ class ManipulatorPlant(ModelClock, BodyEdits):
             mujoco.mj_fullM(self.model, d, out[i])
         return out
 
+    def holding_controls(self, q: np.ndarray) -> np.ndarray:
+        """(N, m) the joint torques [N·m, N on a slide] that hold the arm still at rows q (N, m): MuJoCo's
+        qfrc_bias - qfrc_passive at zero velocity (gravity, less springs and gravity compensation), in the
+        units of ctrl_range (the pre-flight's gravity check)."""
+        d = scratch_data(self.model)
+        out = np.empty((len(q), self.m))
+        for i, qi in enumerate(q):
+            d.qpos[self._qadr] = qi
+            d.qvel[:] = 0.0
+            mujoco.mj_fwdPosition(self.model, d)
+            mujoco.mj_fwdVelocity(self.model, d)
+            out[i] = d.qfrc_bias - d.qfrc_passive
+        return out
+
     # --- stepping ----------------------------------------------------------
     @contextlib.contextmanager
     def controlled_by(self, policy: Policy) -> Iterator[None]:

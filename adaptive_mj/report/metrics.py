@@ -56,12 +56,18 @@ def metrics(traj: Trajectory) -> dict:
 
 
 _INERTIA = ("Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+#: an estimated mass at most this fraction of the true one (the mass error reads -99.9 % or -100 %; <= 0 where
+#: law.projection = "physical" stops it at 0) has no centre of mass: c = (m c) / m divides by (nearly) nothing,
+#: which printed 8.45e+20 mm (m̂ = 1e-20 kg) or 1.8 km (m̂ = 1 g of 8.4 kg)
+COM_MASS_FLOOR = 1e-3
 
 
 def body_identification(names, estimate, truth) -> dict:
     """For every body whose ten standard parameters ("<body>.m", ".mcx/.mcy/.mcz", ".Ixx" ... ".Izz",
     inertia about the body's origin) are estimated: the final mass error [%], centre-of-mass error
-    |ĉ - c| with c = (m c) / m [mm], and inertia error ||Î - I||_F [kg m²], also relative to ||I||_F."""
+    |ĉ - c| with c = (m c) / m [mm], and inertia error ||Î - I||_F [kg m²], also relative to ||I||_F.
+    Where the estimated mass m̂ is <= COM_MASS_FLOOR |m| (0 under a physical projection), ĉ is undefined:
+    com_error_mm is NaN and com_undefined says why (otherwise "")."""
     index = {n: i for i, n in enumerate(names)}
     out = {}
     for name in names:
@@ -78,12 +84,14 @@ def body_identification(names, estimate, truth) -> dict:
             xx, xy, yy, xz, yz, zz = v[4:]
             return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
 
-        com_err = (np.linalg.norm(est[1:4] / est[0] - true[1:4] / true[0]) * 1e3
-                   if est[0] != 0 and true[0] != 0 else math.nan)
+        defined = true[0] != 0 and est[0] > COM_MASS_FLOOR * abs(true[0])
+        com_err = np.linalg.norm(est[1:4] / est[0] - true[1:4] / true[0]) * 1e3 if defined else math.nan
+        undefined = "" if defined else (f"undefined (estimated mass {est[0]:.3g} kg)" if true[0] != 0
+                                        else "undefined (true mass 0 kg)")
         i_err = float(np.linalg.norm(inertia(est) - inertia(true)))
         i_norm = float(np.linalg.norm(inertia(true)))
         out[body] = {"mass_error_percent": float(100 * (est[0] - true[0]) / true[0]) if true[0] else math.nan,
-                     "com_error_mm": float(com_err), "inertia_error": i_err,
+                     "com_error_mm": float(com_err), "com_undefined": undefined, "inertia_error": i_err,
                      "inertia_error_relative": i_err / i_norm if i_norm else math.nan}
     return out
 

@@ -15,6 +15,13 @@ leading coefficient, both read from the compiled model. One step of length h map
 The check evaluates the worst μ along the reference (64 samples over the run) against that limit.
 Past it, no tuning of the adaptation can help: every step overshoots, torques saturate and the
 estimates wind up. Derivation: docs/THEORY.md, "Pre-flight check".
+
+On an arm (a plant with `holding_controls`: the 1-DOF arm, the manipulator) it also checks the
+torque: the control that holds the arm still at the reference, g(q_d(t)) (MuJoCo's bias forces at
+zero velocity, less the passive ones), at the same 64 samples against the actuators' limits. Past
+them no law can follow the reference (a payload typed in grams as kilograms): `gravity` is that
+line, a warning, or a refusal under success.preflight = "refuse" (`run --strict`). The model is the
+one at t = 0: a later event that changes a mass is not foreseen.
 """
 from __future__ import annotations
 
@@ -52,6 +59,7 @@ class Preflight:
     plant_lines: tuple[str, ...] = ()  # what the plant itself says cannot work (a quadrotor too heavy to hover)
     # where the figure is the linearised loop's only (a boundary layer's K/Φ, which saturates): why, in words
     linearised: str = ""
+    gravity: str = ""  # an arm: the line saying gravity alone at the reference needs more than the motors have
 
     @property
     def ok(self) -> bool:
@@ -73,7 +81,7 @@ class Preflight:
         return {"checked": self.checked, "ok": self.ok, "figure": self.figure, "limit": self.limit,
                 "rate": self.rate, "step": self.step, "scheme": self.scheme, "joint": self.joint,
                 "fixes": list(self.fixes), "reference_outside_range": list(self.outside), "note": self.note,
-                "plant": list(self.plant_lines)}
+                "plant": list(self.plant_lines), "gravity": self.gravity}
 
 
 def step_limit(timing: ControlTiming, stages: int) -> tuple[float, float, str]:
@@ -189,12 +197,46 @@ def check(plant: Plant, law: Law, reference, *, duration: float, timing: Control
         found = _attitude_check(plant, feedback, h, limit)
     lines = getattr(plant, "preflight_lines", None)
     plant_lines = tuple(lines()) if lines is not None else ()
+    gravity = gravity_line(plant, reference, duration, order)
     if found is None:
-        return Preflight(checked=False, outside=outside, plant_lines=plant_lines,
+        return Preflight(checked=False, outside=outside, plant_lines=plant_lines, gravity=gravity,
                          note=f"not checked: the law {type(law).__name__} declares no velocity feedback gain")
     return Preflight(checked=True, figure=found["rate"] * h, limit=limit, rate=found["rate"], step=h,
                      scheme=scheme, joint=found["joint"], fixes=found["fixes"], outside=outside,
-                     plant_lines=plant_lines, linearised=found.get("linearised", ""))
+                     plant_lines=plant_lines, linearised=found.get("linearised", ""), gravity=gravity)
+
+
+def gravity_line(plant: Plant, reference, duration: float, order: int) -> str:
+    """One line when holding the arm still at the reference (gravity alone: `holding_controls`, sampled at
+    SAMPLES times over the run) needs more than an actuator's limit (ctrl_range), naming the joint that
+    needs the most (relative to its limit), when, how much, and how many joints are short; "" when every
+    joint's motor can hold it, or the plant has no such method or no limit."""
+    holding = getattr(plant, "holding_controls", None)
+    limits = plant.ctrl_range
+    if holding is None or limits is None:
+        return ""
+    q = _reference_positions(reference, duration, order)
+    need = np.asarray(holding(q), dtype=float).reshape(len(q), -1)
+    m = need.shape[1]
+    lo = np.broadcast_to(np.asarray(limits[0], dtype=float), (m,))
+    hi = np.broadcast_to(np.asarray(limits[1], dtype=float), (m,))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        over = np.where(need > hi, need / np.where(hi > 0, hi, np.nan), 0.0)  # past the limit, by this factor
+        under = np.where(need < lo, need / np.where(lo < 0, lo, np.nan), 0.0)
+    ratio = np.nan_to_num(np.maximum(over, under), nan=np.inf)
+    short = (need > hi) | (need < lo)
+    if not short.any():
+        return ""
+    i, j = np.unravel_index(int(np.argmax(np.where(short, ratio, -1.0))), need.shape)
+    unit = " N m"  # the torque (the 1-DOF arm: over its gear); a slide joint's force in N
+    name = f"joint {plant.joint_names[j]}" if plant.joint_names else "the joint"
+    others = int(short.any(axis=0).sum()) - 1
+    t = float(np.linspace(0.0, duration, SAMPLES)[i])
+    return (f"pre-flight: gravity alone at the reference needs {need[i, j]:.4g}{unit} on {name} at t = {t:.3g} s "
+            f"(q_d = {q[i, j]:.4g}), past its actuator's limit [{lo[j]:.4g}, {hi[j]:.4g}]{unit}"
+            + (" (N on a slide joint)" if plant.joint_names else "")
+            + (f", and {others} other joint(s) short" if others > 0 else "")
+            + ": no law can follow this reference (is a mass too large, e.g. plant.payload_mass in grams as kg?)")
 
 
 def _attitude_check(plant: Plant, feedback: AirframeFeedback, h: float, limit: float) -> dict:

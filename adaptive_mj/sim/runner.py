@@ -319,10 +319,10 @@ def preflight_of(scn: Scenario, setup: Setup, timing: ControlTiming, *, where: s
     pre = preflight.check(setup.plant, setup.law, setup.reference, duration=scn.simulation.duration, timing=timing)
     for line in pre.outside + pre.plant_lines:
         print(f"{where}: warning: {line}", file=sys.stderr)
-    if not pre.ok:
+    for failed in ([pre.line()] if not pre.ok else []) + ([pre.gravity] if pre.gravity else []):
         if scn.success.preflight == "refuse":
-            raise PreflightRefused(f"{where}: refused (success.preflight = 'refuse'): {pre.line()}")
-        print(f"{where}: warning: {pre.line()}", file=sys.stderr)
+            raise PreflightRefused(f"{where}: refused (success.preflight = 'refuse'): {failed}")
+        print(f"{where}: warning: {failed}", file=sys.stderr)
     return pre
 
 
@@ -339,6 +339,9 @@ def verdict(scn: Scenario, traj: Trajectory, crit: Criteria, pre: preflight.Pref
             if not pre.ok:
                 missed.append(f"the pre-flight check had warned: μh = {pre.figure:.3g} > {pre.limit:.3g}"
                               + (f" on {pre.joint}" if pre.joint else ""))
+            if pre.gravity:
+                missed.append("the pre-flight check had warned: gravity alone at the reference needs more than the "
+                              "actuator's limit")
             traj = dataclasses.replace(traj, status=Status.FAILED, reason="; ".join(missed))
             result["status"], result["reason"] = traj.status, traj.reason
     result["success"] = clean_json(crit.describe())

@@ -286,7 +286,10 @@ def rows(results: Sequence[tuple[dict[str, Any], JobResult]], *, root: Path) -> 
 
 @dataclass(frozen=True)
 class PointStats:
-    """One grid point's metric over its seeds (ok runs only): mean, min, max, and n_ok of n runs."""
+    """One grid point's metric over its seeds: mean, min, max, and n_ok of n runs. basis: the runs the numbers
+    are of: "ok" (the seeds whose run is ok), or "failed" where no ok seed has a value and some run that
+    completed but missed its [success] criteria does (status failed: its metrics are whole; a diverged run's
+    are not); n_basis: how many runs that is (0: NaN, no run has a value)."""
 
     point: dict[str, Any]
     mean: float
@@ -294,20 +297,43 @@ class PointStats:
     hi: float
     n_ok: int
     n: int
+    basis: str = "ok"
+    n_basis: int = 0
+
+    @property
+    def failed_only(self) -> bool:
+        """The numbers are those of runs that failed their [success] criteria (no ok run has one)."""
+        return self.basis == Status.FAILED and self.n_basis > 0
+
+    def shown(self, fmt: str = ".4g") -> str:
+        """The mean as a table shows it: "n/a" without a value, "(failed)" after one from failed runs only."""
+        if math.isnan(self.mean):
+            return "n/a"
+        return f"{self.mean:{fmt}}" + (" (failed)" if self.failed_only else "")
+
+
+def _values(rows: Sequence[dict[str, Any]], metric: str) -> np.ndarray:
+    vals = np.array([r.get(metric) for r in rows if _is_number(r.get(metric))], dtype=float)
+    return vals[np.isfinite(vals)]
 
 
 def point_stats(table: Sequence[dict[str, Any]], keys: Sequence[str], metric: str) -> list[PointStats]:
-    """The metric per grid point, over the seeds whose run is ok (NaN where none has a value)."""
+    """The metric per grid point, over the seeds whose run is ok; where none of those has a value, over the
+    runs that failed their [success] criteria (basis "failed": they ran to the end, so their metrics are
+    what sweep.csv holds); NaN where neither has one."""
     groups: dict[str, list[dict[str, Any]]] = {}
     for row in table:
         groups.setdefault(to_toml([row[k] for k in keys]), []).append(row)
     out = []
     for group in groups.values():
         ok = [r for r in group if r["status"] == Status.OK]
-        vals = np.array([r.get(metric) for r in ok if isinstance(r.get(metric), (int, float))], dtype=float)
-        vals = vals[np.isfinite(vals)]
+        basis, vals = "ok", _values(ok, metric)
+        if not vals.size:
+            failed = _values([r for r in group if r["status"] == Status.FAILED], metric)
+            if failed.size:
+                basis, vals = str(Status.FAILED.value), failed
         mean, lo, hi = (float(vals.mean()), float(vals.min()), float(vals.max())) if vals.size else (math.nan,) * 3
-        out.append(PointStats({k: group[0][k] for k in keys}, mean, lo, hi, len(ok), len(group)))
+        out.append(PointStats({k: group[0][k] for k in keys}, mean, lo, hi, len(ok), len(group), basis, int(vals.size)))
     return out
 
 
@@ -384,6 +410,9 @@ def plot_sweep(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Se
             lo, hi = np.array([st.lo for st in sts]), np.array([st.hi for st in sts])
             color = f"C{i % 10}"
             ax.plot(xs, mean, "o-", color=color, lw=1.5, ms=4, label=name or "mean")
+            failed = [(x, st.mean) for x, st in zip(xs, sts, strict=True) if st.failed_only]
+            if failed:  # no ok run there: the failed runs' numbers, drawn hollow
+                ax.plot(*zip(*failed, strict=True), "o", color=color, ms=9, mfc="white", mew=1.5, zorder=3)
             if seeds > 1:
                 ax.fill_between(xs, lo, hi, color=color, alpha=0.2, lw=0)
             bad = [x_of(st) for st in sts if st.n_ok < st.n]
@@ -393,6 +422,9 @@ def plot_sweep(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Se
         bad = [st for st in stats if st.n_ok < st.n]
         if bad:
             ax.plot([], [], "x", color="grey", ms=9, mew=2.5, label="some run not ok")
+        if any(st.failed_only for st in stats):
+            ax.plot([], [], "o", color="grey", ms=9, mfc="white", mew=1.5,
+                    label="no run ok: the runs that failed their [success] criteria")
         plotted = [v for st in stats for v in (st.mean, st.lo, st.hi)]
         if _spans_decades(plotted):
             ax.set_yscale("log")
@@ -410,7 +442,10 @@ def plot_sweep(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Se
     ax.set_xlabel(key_label(x_key, plant_kind))
     n_ok = sum(r["status"] == Status.OK for r in table)
     spread = f"mean over {seeds} seeds, band min–max" if seeds > 1 else "1 seed"
-    text = f"{spread}; {n_ok}/{len(table)} runs ok" + (" (the others left out)" if n_ok < len(table) else "")
+    failed_shown = any(st.failed_only for m in metrics for st in point_stats(table, keys, m))
+    text = f"{spread}; {n_ok}/{len(table)} runs ok" + (
+        (" (failed runs drawn hollow where no run is ok)" if failed_shown else " (the others left out)")
+        if n_ok < len(table) else "")
     axes[0, 0].set_title(f"{title}: {text}" if title else text, fontsize=10)
     path = Path(path)
     fig.savefig(path, dpi=100)
@@ -419,14 +454,15 @@ def plot_sweep(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Se
 
 
 def summary_table(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Sequence[str]) -> str:
-    """Text: one line per grid point with its values, each metric's mean over ok seeds, and ok/total."""
+    """Text: one line per grid point with its values, each metric's mean over ok seeds (over the runs that failed
+    their [success] criteria where no ok seed has one, marked "(failed)"), and ok/total."""
     names = short_names(keys)
     stats = {m: point_stats(table, keys, m) for m in metrics}
     head = [names[k] for k in keys] + [f"mean {m}" for m in metrics] + ["ok/total"]
     lines = []
     for i, st in enumerate(stats[metrics[0]]):
         cells = [label(st.point[k]) for k in keys]
-        cells += ["n/a" if math.isnan(stats[m][i].mean) else f"{stats[m][i].mean:.4g}" for m in metrics]
+        cells += [stats[m][i].shown() for m in metrics]
         lines.append(cells + [f"{st.n_ok}/{st.n}"])
     widths = [max(len(r[c]) for r in [head, *lines]) for c in range(len(head))]
     return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(r, widths, strict=True)) for r in [head, *lines])
@@ -892,7 +928,8 @@ def sweep_report(inputs: dict[str, Any], table: Sequence[dict[str, Any]], keys: 
     grid = "; ".join(f"`{g['key']}` = " + ", ".join(label(v) for v in g["values"]) for g in inputs["grid"])
     stats = {m: point_stats(table, keys, m) for m in metrics}
     points = [{**{key_label(k, plant_kind): label(st.point[k]) for k in keys},
-               **{f"mean {metric_label(m, plant_kind)}": stats[m][i].mean for m in metrics},
+               **{f"mean {metric_label(m, plant_kind)}": (stats[m][i].shown(".6g") if stats[m][i].failed_only
+                                                          else stats[m][i].mean) for m in metrics},
                "ok/total": f"{st.n_ok}/{st.n}"} for i, st in enumerate(stats[metrics[0]])]
     not_ok = [r for r in table if r["status"] != Status.OK]
     text = (f"# Sweep of {inputs['scenario_name']}\n\n"
@@ -900,7 +937,8 @@ def sweep_report(inputs: dict[str, Any], table: Sequence[dict[str, Any]], keys: 
             f"{grid} × {inputs['seeds']} seed(s) (0..{inputs['seeds'] - 1})"
             + (f", with {', '.join(f'`{o}`' for o in inputs['overrides'])}" if inputs["overrides"] else "")
             + f". {n_ok} of {total} runs ok. Each metric is the mean over the seeds whose run is ok"
-            f" (tail: the last {100 * TAIL_FRACTION:g} % of the run).\n\n"
+            f" (tail: the last {100 * TAIL_FRACTION:g} % of the run); where no seed's run is ok, over the runs that"
+            " ran to the end but failed their [success] criteria, marked (failed).\n\n"
             + Table.of(points).to_markdown() + "\n\n![sweep](sweep.png)\n\n")
     if not_ok:
         text += "Runs that were not ok:\n\n" + "\n".join(
