@@ -783,3 +783,36 @@ def test_a_control_delay_in_seconds_is_refused_with_its_unit_and_the_steps_it_wo
     assert len(err.splitlines()) == 1
     assert ("simulation.control_delay must be a whole number of physics steps (not seconds); 0.02 s is 20 steps "
             "of 0.001 s, got 0.02") in err
+
+
+# ---- a run that asks for more steps than memory can hold (issue 35) -----------------------------------------
+
+@pytest.mark.parametrize("override", ["simulation.timestep=1e-12", "simulation.duration=1e9",
+                                      "simulation.duration=1e300"])
+def test_a_billion_step_scenario_is_refused_before_the_run_in_one_line(override, tmp_path, capsys):
+    log = tmp_path / "run.mcap"
+    assert main(["run", "heave_tracking", "--set", override, "-o", str(log)]) == 2
+    line = error_line(capsys)
+    assert "simulation.duration / simulation.timestep must ask for at most" in line, line
+    assert re.search(r"= (\d(\.\d+)?e\+\d+|more than 1e308) steps, which would need [\d.e+]+ [KMGTPE]iB", line), line
+    assert "bytes held per step" in line and not log.exists()
+
+
+def test_the_step_memory_check_sits_on_its_bound_and_counts_the_rows_the_loop_holds():
+    """check_run_memory: a run needing exactly the limit passes, one byte less refuses; row_bytes is what
+    sim.loop.Rows allocates per step (the heave vehicle and the 6-joint arm)."""
+    from adaptive_mj.setup.build import build, check_run_memory, row_bytes
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
+    from adaptive_mj.sim.loop import Rows
+
+    for name, sets in (("heave_tracking", []), ("ur5e_payload_swap", ["events=[]"])):
+        scn = load(SCENARIOS_DIR / f"{name}.toml", overrides=["simulation.duration=1.0", *sets])
+        s = build(scn)
+        rows = Rows(s.plant, s.law, 1000, None, 1000)
+        held = sum(getattr(rows, f).nbytes for f in ("t", "x", "u", "s", "ref", "theta_hat", "V"))
+        assert row_bytes(s.plant, s.law) * 1000 == held, name
+        steps = round(1.0 / s.plant.dt)
+        need = steps * row_bytes(s.plant, s.law)
+        check_run_memory(scn, s.plant, s.law, memory=need)
+        with pytest.raises(ScenarioError, match=rf"at most {steps - 1:.3g} physics steps"):
+            check_run_memory(scn, s.plant, s.law, memory=need - 1)

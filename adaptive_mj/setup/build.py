@@ -10,6 +10,9 @@ model without the repo that made it.
 """
 from __future__ import annotations
 
+import math
+import os
+
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable, cast
 
@@ -22,7 +25,7 @@ from adaptive_mj.laws import DeadZone, DeadZoneOn, Law, Modification
 from adaptive_mj.laws import kinds as law_kinds
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.plants import ModelSource
-from adaptive_mj.plants.protocol import CtrlRange, JointPlant, Plant, has_form, has_joints
+from adaptive_mj.plants.protocol import CtrlRange, JointPlant, Plant, control_shape, has_form, has_joints
 from adaptive_mj.setup.scenario import (JOINT_REFERENCE_KINDS, JOINT_SIGNALS, STATE_SIGNALS, EventSpec, LawSpec,
                                        Scenario)
 from adaptive_mj.sensors import Sensors
@@ -94,6 +97,7 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
             "law.initial_estimates"
         raise ScenarioError(f"{scn.source}: {key}: {why}")
     law = _law(scn, plant, _modification(scn, names, theta_hat0))
+    check_run_memory(scn, plant, law)
     std = None
     sensors = None
     state_names = tuple(getattr(plant, "state_names", ()))
@@ -115,6 +119,51 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     return Setup(plant=plant, law=law, reference=reference, theta_hat0=theta_hat0, noise_std=std,
                  rng=rng, events=[_event(e, scn, source) for e in scn.events], source=source,
                  model_xml=built.model_xml, notes=built.notes, sensors=sensors)
+
+
+def row_bytes(plant: Plant, law: Law) -> int:
+    """Bytes a run holds in memory for each physics step (adaptive_mj.sim.loop.Rows: t, x, u, s, ref, θ̂, V as
+    float64; the true θ is kept per event, not per step)."""
+    order, js, nth = plant_order(plant), int(np.prod(plant.joint_shape)), len(law.names)
+    return 8 * (1 + order * js + int(np.prod(control_shape(plant))) + js + (order + 1) * js + nth + 1)
+
+
+def machine_memory() -> int | None:
+    """This machine's physical memory [bytes] (None where the OS does not say)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _size(n: float) -> str:
+    for unit, scale in (("EiB", 2.0**60), ("PiB", 2.0**50), ("TiB", 2.0**40), ("GiB", 2.0**30), ("MiB", 2.0**20)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{n / 2.0**10:.3g} KiB"
+
+
+def check_run_memory(scn: Scenario, plant: Plant, law: Law, *, memory: int | None = None) -> None:
+    """A ScenarioError, before anything runs, when simulation.duration / timestep asks for more physics steps
+    than this machine's memory can hold rows for (a run keeps one row a step, row_bytes, until it ends; numpy
+    would stop it with an allocation traceback). memory: the limit [bytes] (default machine_memory(); without
+    one, only numpy's own limit on an array's size, 2^63 bytes)."""
+    dt, duration = float(plant.dt), float(scn.simulation.duration)
+    steps = duration / dt
+    row = row_bytes(plant, law)
+    limit = memory if memory is not None else machine_memory()
+    limit_bytes = float(limit) if limit is not None else 2.0**63
+    need = steps * row
+    if need <= limit_bytes:
+        return
+    shown = f"{steps:.3g}" if math.isfinite(steps) else "more than 1e308"
+    where = f"this machine's memory, {_size(limit_bytes)}" if limit is not None else "numpy's largest array"
+    raise ScenarioError(
+        f"{scn.source}: simulation.duration / simulation.timestep must ask for at most "
+        f"{math.floor(limit_bytes / row):.3g} physics steps ({where}, at {row} bytes held per step), got "
+        f"{duration:g} s / {dt:g} s = {shown} steps, which would need "
+        f"{_size(need) if math.isfinite(need) else 'more than 1e308 bytes'}: shorten simulation.duration or "
+        "lengthen simulation.timestep")
 
 
 def check(scn: Scenario, sources: dict | None = None) -> None:
