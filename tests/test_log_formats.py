@@ -168,7 +168,7 @@ def test_multi_joint_log_round_trips(tmp_path):
     path = tmp_path / "arm.mcap"
     live = execute(scn, log_path=path).trajectory
     run = read_log(path)
-    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 6
+    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 7
     assert run.header["joint_names"] == list(live.joint_names) and len(live.joint_names) == 6
     tr = run.trajectory
     every = run.header["log_every"]
