@@ -162,32 +162,36 @@ def add_rows_fast(writer: Writer, channel_ids: list[int], log_ns: np.ndarray, bl
     _count(writer, chunk, stats, lo, hi, count)
 
 
-def message_rows(payload_dtypes: list[np.dtype], rows: int) -> np.ndarray:
-    """An empty packed record array of `rows` rows, each row one Message record per channel: field h<j> the
-    record's head (_HEAD), field p<j> its payload (payload_dtypes[j], fixed size). The caller fills the payloads,
-    add_packed_rows the heads; the array's bytes are then the records as they go into the chunk."""
+def message_rows(channel_ids: list[int], payload_dtypes: list[np.dtype]) -> np.ndarray:
+    """A template row (a packed record array of one row) of one Message record per channel: field h<j> the
+    record's head (_HEAD: opcode, record length, channel_ids[j], sequence 0; times 0), field p<j> its payload
+    (payload_dtypes[j], fixed size, zeros). A block of rows is np.repeat(template, rows) with its payloads filled
+    by the caller and its times by add_packed_rows; the array's bytes are then the records as they go into the
+    chunk."""
     fields: list[tuple[str, Any]] = []
     for j, payload in enumerate(payload_dtypes):
         fields += [(f"h{j}", _HEAD), (f"p{j}", payload)]
-    return np.empty(rows, dtype=np.dtype(fields))  # packed (align=False): no byte between two records
-
-
-def _fill_heads(channel_ids: list[int], log_ns: np.ndarray, records: np.ndarray) -> None:
-    """Set every message head of `records` (message_rows): opcode, record length, channel, sequence 0, times."""
-    ns = np.asarray(log_ns, dtype=np.uint64)
+    template = np.zeros(1, dtype=np.dtype(fields))  # packed (align=False): no byte between two records
     for j, channel_id in enumerate(channel_ids):
-        head = records[f"h{j}"]
+        head = template[f"h{j}"]
         head["opcode"] = _OPCODE_MESSAGE
-        head["length"] = 22 + records.dtype.fields[f"p{j}"][0].itemsize
+        head["length"] = 22 + payload_dtypes[j].itemsize
         head["channel"] = channel_id
-        head["sequence"] = 0
+    return template
+
+
+def _set_times(channel_ids: list[int], log_ns: np.ndarray, records: np.ndarray) -> None:
+    """Every message head of `records` (message_rows) stamped with its row's log_ns [ns] (log and publish time)."""
+    ns = np.asarray(log_ns, dtype=np.uint64)
+    for j in range(len(channel_ids)):
+        head = records[f"h{j}"]
         head["log_time"] = ns
         head["publish_time"] = ns
 
 
 def add_packed_rows_public(writer: Writer, channel_ids: list[int], log_ns: np.ndarray, records: np.ndarray) -> None:
-    """A block of rows of fixed-size payloads (message_rows, payloads filled), row i channel j at log_ns[i] [ns],
-    through Writer.add_message (any mcap)."""
+    """A block of rows of fixed-size payloads (rows of message_rows' template, payloads filled), row i channel j at
+    log_ns[i] [ns], through Writer.add_message (any mcap)."""
     batch: Batch = []
     payloads = [records[f"p{j}"] for j in range(len(channel_ids))]
     for i, ns in enumerate(np.asarray(log_ns, dtype=np.int64).tolist()):
@@ -197,8 +201,8 @@ def add_packed_rows_public(writer: Writer, channel_ids: list[int], log_ns: np.nd
 
 def add_packed_rows_fast(writer: Writer, channel_ids: list[int], log_ns: np.ndarray, records: np.ndarray) -> None:
     """What add_packed_rows_public writes, straight into mcap 1.6.0's open chunk (as add_rows_fast: the same bytes
-    while the block fits in the chunk): the heads filled by numpy, the whole block written as the array's bytes, the
-    message index entries from the fixed record stride."""
+    while the block fits in the chunk): the heads' times set by numpy, the whole block written as the array's bytes,
+    the message index entries from the fixed record stride."""
     rows = len(log_ns)
     if rows == 0:
         return
@@ -209,7 +213,7 @@ def add_packed_rows_fast(writer: Writer, channel_ids: list[int], log_ns: np.ndar
         return
     stats = internals._Writer__statistics
     buf = chunk.record_writer._buffer
-    _fill_heads(channel_ids, log_ns, records)
+    _set_times(channel_ids, log_ns, records)
     base = buf.tell()
     buf.write(records.tobytes())
     stride = records.dtype.itemsize

@@ -503,8 +503,10 @@ class Recorder:
         self._row_template: str | None = None  # the templates joined (_write_finite_block)
         # CDR (format 7): a message is the 4-byte encapsulation header, then t and its fields as little-endian
         # float64 (8-aligned counted from after the header: no padding between float64s)
-        self._payload_dtypes = [np.dtype([("cdr", "u1", (4,)), ("values", "<f8", (1 + len(f),))])
-                                for _, f in self._row_fields]
+        payload_dtypes = [np.dtype([("cdr", "u1", (4,)), ("values", "<f8", (1 + len(f),))]) for _, f in self._row_fields]
+        self._row_records = _message_rows([channel_id for channel_id, _ in self._row_fields], payload_dtypes)
+        for j in range(len(payload_dtypes)):  # a row's messages as written but for t, its values and times
+            self._row_records[f"p{j}"]["cdr"] = np.frombuffer(CDR_HEADER, dtype=np.uint8)
 
         meta = {
             "log_format_version": str(self.format_version),
@@ -649,15 +651,12 @@ class Recorder:
         flush_every_rows, the block is cut where the count of rows written reaches a multiple of it."""
         m, start = len(tk), 0
         channel_ids = [channel_id for channel_id, _ in self._row_fields]
-        header = np.frombuffer(CDR_HEADER, dtype=np.uint8)
         while start < m:
             every = self._flush_every
             end = m if every is None else min(m, start + every - self._rows % every)
-            records = _message_rows(self._payload_dtypes, end - start)
+            records = np.repeat(self._row_records, end - start)  # the heads and CDR headers, as written
             for j, b in enumerate(blocks):
-                payload = records[f"p{j}"]
-                payload["cdr"] = header
-                values = payload["values"]
+                values = records[f"p{j}"]["values"]
                 values[:, 0] = tk[start:end]
                 values[:, 1:] = b[start:end]
             _add_packed_rows(self._writer, channel_ids, log_ns[start:end], records)
