@@ -10,6 +10,10 @@
   size      a real heave_tracking run at 100 Hz (scenarios/heave_tracking.toml) of 2 s and 12 s with each
             encoding: log bytes per simulated second (the difference over 10 s, without the header), and the
             message index's share (16 bytes a message, uncompressed, needed by @mcap/core and Foxglove)
+  steps     per physics step of heave_tracking (20 000 steps, RK4, 1 ms), interleaved in each repetition: bare
+            mj_step (speed.py's a), the closed loop without a log (its b: the law's own cost), the closed loop
+            logged at 100 Hz with log.encoding json (speed.py's c as it was before format 7: the JSON writer's
+            code is unchanged) and with cdr; the ratios to a
 
 Every timing is the median of --reps repetitions, with [min, max].
 Usage: python benchmarks/log_encoding.py [--reps 7] [--blocks 20]
@@ -108,7 +112,8 @@ def bench_pack(reps: int) -> dict:
         raw = sum(map(len, parts))
         # the payloads of one row interleaved, as they lie in a chunk (heads left out)
         width = [len(p) // len(tk) for p in parts]
-        rows = b"".join(b"".join(p[i * w:(i + 1) * w] for p, w in zip(parts, width)) for i in range(len(tk)))
+        rows = b"".join(b"".join(p[i * w:(i + 1) * w] for p, w in zip(parts, width, strict=True))
+                        for i in range(len(tk)))
         out[name] = {"us_per_message": med(times), "bytes_per_row": raw / len(tk),
                      "zstd_bytes_per_row": len(zstd.compress(rows)) / len(tk)}
     return out
@@ -164,10 +169,37 @@ def bench_size() -> dict:
     return out
 
 
+def bench_steps(reps: int, steps: int) -> dict:
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("speed", Path(__file__).with_name("speed.py"))
+    assert spec is not None and spec.loader is not None
+    speed = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(speed)
+    name = "heave_tracking"
+    speed.loop(name, 500, True)  # compile the native callback once (numba), outside the timing
+    rows: dict[str, list[float]] = {"a_bare": [], "b_no_log": [], "c_json": [], "c_cdr": []}
+    for _ in range(reps):
+        rows["a_bare"].append(speed.bare(name, steps))
+        rows["b_no_log"].append(speed.loop(name, steps, True))
+        rows["c_json"].append(speed.logged(name, steps, None, ("log.encoding='json'",))[0])
+        rows["c_cdr"].append(speed.logged(name, steps, None, ("log.encoding='cdr'",))[0])
+    out = {k: med(v) for k, v in rows.items()}
+    a = out["a_bare"]["median"]
+    # the ratio of each repetition's own figures, too: the load on a shared machine moves them together
+    out["ratios"] = {"b/a": out["b_no_log"]["median"] / a,
+                     "c_json/a": out["c_json"]["median"] / a, "c_cdr/a": out["c_cdr"]["median"] / a,
+                     "c_json/a per rep": med([c / b for c, b in zip(rows["c_json"], rows["a_bare"], strict=True)]),
+                     "c_cdr/a per rep": med([c / b for c, b in zip(rows["c_cdr"], rows["a_bare"], strict=True)])}
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--reps", type=int, default=7)
     ap.add_argument("--blocks", type=int, default=20, help="1000-step blocks per write timing")
+    ap.add_argument("--steps", type=int, default=20000, help="physics steps per figure of the steps section")
+    ap.add_argument("--no-steps", action="store_true", help="skip the per-step section")
     args = ap.parse_args()
     pack = bench_pack(args.reps)
     print(f"pack (a block of {BLOCK * 20 // EVERY} heave rows, 6 topics; median [min, max] of {args.reps}):")
@@ -188,6 +220,19 @@ def main() -> None:
         print(f"  {name:5s} {r['bytes_per_sim_second'] / 1000:5.1f} kB/s, of it the message index "
               f"{r['message_index_bytes_per_sim_second'] / 1000:.1f} kB/s; 12 s file {r['file_bytes_12s']} B")
     print(f"  cdr/json: {size['cdr']['bytes_per_sim_second'] / size['json']['bytes_per_sim_second']:.2f}")
+    if args.no_steps:
+        return
+    steps = bench_steps(args.reps, args.steps)
+    print(f"steps (heave_tracking, {args.steps} steps, logged at 100 Hz; median [min, max] of {args.reps}, "
+          "interleaved):")
+    for key in ("a_bare", "b_no_log", "c_json", "c_cdr"):
+        m = steps[key]
+        print(f"  {key:8s} {m['median']:7.2f} µs/step [{m['min']:.2f}, {m['max']:.2f}]")
+    r = steps["ratios"]
+    rj, rc = r["c_json/a per rep"], r["c_cdr/a per rep"]
+    print(f"  b/a {r['b/a']:.2f} (no log); c/a: json {r['c_json/a']:.2f}, cdr {r['c_cdr/a']:.2f}; per repetition: json "
+          f"{rj['median']:.2f} [{rj['min']:.2f}, {rj['max']:.2f}], cdr {rc['median']:.2f} [{rc['min']:.2f}, "
+          f"{rc['max']:.2f}]")
 
 
 if __name__ == "__main__":

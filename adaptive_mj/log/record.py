@@ -503,7 +503,8 @@ class Recorder:
         self._row_template: str | None = None  # the templates joined (_write_finite_block)
         # CDR (format 7): a message is the 4-byte encapsulation header, then t and its fields as little-endian
         # float64 (8-aligned counted from after the header: no padding between float64s)
-        payload_dtypes = [np.dtype([("cdr", "u1", (4,)), ("values", "<f8", (1 + len(f),))]) for _, f in self._row_fields]
+        payload_dtypes = [np.dtype([("cdr", "u1", (4,)), ("values", "<f8", (1 + len(f),))])
+                          for _, f in self._row_fields]
         self._row_records = _message_rows([channel_id for channel_id, _ in self._row_fields], payload_dtypes)
         for j in range(len(payload_dtypes)):  # a row's messages as written but for t, its values and times
             self._row_records[f"p{j}"]["cdr"] = np.frombuffer(CDR_HEADER, dtype=np.uint8)
