@@ -219,11 +219,12 @@ def add_packed_rows_fast(writer: Writer, channel_ids: list[int], log_ns: np.ndar
     stride = records.dtype.itemsize
     ns = np.asarray(log_ns, dtype=np.int64).tolist()
     indices, counts = chunk.message_indices, stats.channel_message_counts
+    fields: Any = records.dtype.fields  # a structured dtype's fields: name -> (dtype, byte offset)
     for j, channel_id in enumerate(channel_ids):
         index = indices.get(channel_id)
         if index is None:
             index = indices[channel_id] = _PackedMessageIndex(channel_id=channel_id, records=[])
-        first = base + records.dtype.fields[f"h{j}"][1]
+        first = base + fields[f"h{j}"][1]
         index.records.extend(zip(ns, range(first, first + stride * rows, stride), strict=True))
         counts[channel_id] += rows
     _count(writer, chunk, stats, min(ns), max(ns), rows * len(channel_ids))
