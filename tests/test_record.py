@@ -810,3 +810,35 @@ def test_a_block_of_finite_rows_formatted_at_once_gives_the_bytes_of_one_message
         assert rec.rows_written == 250
     assert paths["block"].read_bytes() == paths["per_message"].read_bytes()
     np.testing.assert_array_equal(read_log(paths["block"]).trajectory.x[:130], rows["x"][0:1300:LOG_EVERY])
+
+
+@pytest.mark.parametrize("change, match", [(lambda d: d[:-1], "is 27 bytes"),
+                                           (lambda d: b"\x00\x00" + d[2:], "expected 28 bytes of CDR")])
+def test_a_cdr_message_of_another_size_or_header_is_refused(tmp_path, change, match):
+    """Format 7: read_log decodes a topic's CDR messages by their fixed layout; a message cut short or in
+    another encapsulation (big-endian CDR) is a LogFormatError naming the topic, never a misread row."""
+    from mcap.writer import Writer
+
+    src = tmp_path / "good.mcap"
+    write_log(src, synthetic(500), events=())
+    with open(src, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        messages = list(reader.iter_messages())
+        metadata = list(reader.iter_metadata())
+        library = reader.get_header().library
+    bad = tmp_path / "bad.mcap"
+    with open(bad, "wb") as f:
+        w = Writer(f)
+        w.start(library=library)
+        schemas = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
+        channels = {cid: w.register_channel(c.topic, c.message_encoding, schemas[c.schema_id])
+                    for cid, c in summary.channels.items()}
+        for m in metadata:
+            w.add_metadata(m.name, dict(m.metadata))
+        for i, (_schema, channel, msg) in enumerate(messages):
+            data = change(msg.data) if channel.topic == "/state" and i == 60 else msg.data
+            w.add_message(channels[channel.id], msg.log_time, data, msg.publish_time)
+        w.finish()
+    with pytest.raises(LogFormatError, match=rf"bad\.mcap: a /state message .*{match}"):
+        read_log(bad)
