@@ -226,8 +226,12 @@ def main() -> None:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--models", default=",".join(CASES), help="which of " + ", ".join(CASES) + " (comma-separated)")
     ap.add_argument("--no-sweep", action="store_true", help="skip the sweep throughput and peak RSS figures")
+    ap.add_argument("--log-encoding", choices=("cdr", "json"), default="cdr",
+                    help="log.encoding of the logged rows (c, d, g): cdr (format 7, the default) or json (format 6)")
     args = ap.parse_args()
-    out = {"cores": os.cpu_count(), "steps": args.steps, "reps": args.reps, "models": {}}
+    out = {"cores": os.cpu_count(), "steps": args.steps, "reps": args.reps, "log_encoding": args.log_encoding,
+           "models": {}}
+    encoding = (f"log.encoding={args.log_encoding!r}",)
     for plant in args.models.split(","):
         name = CASES[plant]
         loop(name, 500, True)  # compile the native callback once (numba), outside the timing
@@ -238,10 +242,10 @@ def main() -> None:
             rows["a_bare"].append(bare(name, args.steps))
             rows["b_closed_loop"].append(loop(name, args.steps, True))
             rows["b_py_python_callback"].append(loop(name, max(2000, args.steps // 5), False))
-            c, size = logged(name, args.steps, None)
+            c, size = logged(name, args.steps, None, encoding)
             rows["c_logged_100Hz"].append(c)
             sizes.append(size / (args.steps * timestep(name)))
-            rows["d_logged_every_step"].append(logged(name, args.steps, 1000.0)[0])
+            rows["d_logged_every_step"].append(logged(name, args.steps, 1000.0, encoding)[0])
             rows["f_sampled_250Hz"].append(loop(name, args.steps, True, period=0.004))
             if plant == "quadrotor":  # the other two flight laws, compiled (the row b law is geometric_adaptive)
                 rows.setdefault("b_geometric", []).append(loop(name, args.steps, True, extra=("law=geometric",)))
@@ -249,7 +253,7 @@ def main() -> None:
             if plant == "ur5e":
                 rows.setdefault("a_friction", []).append(bare(name, args.steps, ("plant.frictionloss=0.5",)))
                 rows.setdefault("g_real_conditions_logged_100Hz", []).append(
-                    logged(name, args.steps, None, REAL_CONDITIONS)[0])
+                    logged(name, args.steps, None, (*REAL_CONDITIONS, *encoding))[0])
         if plant in PLUGIN_LAW and plugin_installed(plant):
             plugin_loop(plant, 500, True)  # compile once, outside the timing
             rows["e_plugin_native"], rows["e_plugin_python"] = [], []
@@ -305,7 +309,8 @@ def main() -> None:
 
 
 def _print_models(out: dict) -> None:
-    print(f"cores: {out['cores']}; {out['steps']} steps per figure; median [min, max] of {out['reps']} reps")
+    print(f"cores: {out['cores']}; {out['steps']} steps per figure; median [min, max] of {out['reps']} reps; "
+          f"log.encoding = {out['log_encoding']}")
     for plant, res in out["models"].items():
         print(f"\n{plant} (RK4, {res['timestep'] * 1000:g} ms):")
         for key, v in res["us_per_step"].items():

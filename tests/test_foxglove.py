@@ -1,7 +1,8 @@
 """Foxglove: docs/foxglove_layout.json is a Foxglove layout whose every message path names
-a real topic and field of a real log (heave and arm), every channel carries the JSON
-Schema Foxglove needs, and an independent MCAP reader (TypeScript @mcap/core, run with
-Node: tools/mcap_count.mjs) counts the same messages per topic as the Python reader."""
+a real topic and field of a real log (heave and arm), every channel carries the schema Foxglove needs
+(format 7: the row topics CDR with a ros2msg schema, /events and /summary JSON with a JSON Schema), and an
+independent MCAP reader (TypeScript @mcap/core, run with Node: tools/mcap_count.mjs) counts the same messages
+per topic as the Python reader and decodes every message (JSON, or CDR by its ros2msg schema)."""
 import json
 import re
 import shutil
@@ -55,14 +56,30 @@ def _plot_paths(layout):
             for p in cfg["paths"]]
 
 
+def _ros2msg_fields(text: str) -> dict:
+    """{field: {"type": ...}} of a ros2msg schema of float64 fields (what Foxglove parses), in order."""
+    fields = {}
+    for line in text.splitlines():
+        words = line.split("#")[0].split()
+        if words:
+            assert len(words) == 2 and words[0] == "float64" and re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", words[1]), line
+            fields[words[1]] = {"type": "number"}
+    return fields
+
+
 def _schemas(log):
-    """topic -> (schema encoding, message encoding, JSON Schema) of the log's channels."""
+    """topic -> (schema encoding, message encoding, schema as a JSON Schema) of the log's channels; a ros2msg
+    schema is given as {"type": "object", "properties": {field: {"type": "number"}}}."""
     with open(log, "rb") as f:
         summary = make_reader(f).get_summary()
     out = {}
     for channel in summary.channels.values():
         schema = summary.schemas[channel.schema_id]
-        out[channel.topic] = (schema.encoding, channel.message_encoding, json.loads(schema.data))
+        if schema.encoding == "ros2msg":
+            body = {"type": "object", "properties": _ros2msg_fields(schema.data.decode())}
+        else:
+            body = json.loads(schema.data)
+        out[channel.topic] = (schema.encoding, channel.message_encoding, body)
     return out
 
 
@@ -112,7 +129,7 @@ def test_every_layout_path_names_a_real_topic_and_field(layout, logs):
         assert {"/summary", "/events"} <= set(s), plant
 
 
-def test_every_channel_has_a_json_schema_with_the_plotted_fields(layout, logs):
+def test_every_channel_has_a_schema_with_the_plotted_fields(layout, logs):
     plotted = {}
     for value in _plot_paths(layout):
         topic, field = PATH_RE.match(value).groups()
@@ -120,7 +137,9 @@ def test_every_channel_has_a_json_schema_with_the_plotted_fields(layout, logs):
     for plant, log in logs.items():
         names = HEAVE_PARAMS if plant == "heave" else ARM_PARAMS
         for topic, (schema_encoding, message_encoding, schema) in _schemas(log).items():
-            assert schema_encoding == "jsonschema" and message_encoding == "json", topic
+            row_topic = topic not in ("/events", "/summary")  # format 7: the row topics CDR, the others JSON
+            assert (schema_encoding, message_encoding) == (("ros2msg", "cdr") if row_topic else
+                                                           ("jsonschema", "json")), topic
             assert schema["type"] == "object" and "properties" in schema, topic
             for prop in schema["properties"].values():   # what Foxglove's parser accepts
                 assert isinstance(prop.get("type"), str), (topic, prop)
@@ -164,14 +183,19 @@ def test_typescript_mcap_reader_counts_the_same_messages(logs, plant):
     assert ts["counts"] == read
     assert ts["statistics"] == stats
     assert {k: v for k, v in read.items() if v} == stats
-    assert ts["json_errors"] == 0
+    assert ts["json_errors"] == 0 and ts["cdr_errors"] == 0
+    assert ts["cdr_decoded"] == 6 * read["/state"]  # every row message decoded by its ros2msg schema
     assert ts["library"].startswith("adaptive_mj log format")
     rows = read["/state"]
     assert rows == 30 and all(read[t] == rows for t in ("/reference", "/control", "/estimates",
                                                          "/true_params", "/lyapunov"))
     assert read["/summary"] == 1 and read["/events"] == (1 if plant == "arm" else 0)
     for topic, (schema_name, schema_encoding, message_encoding) in ts["schemas"].items():
-        assert schema_name.startswith("adaptive_mj.") and schema_encoding == "jsonschema", topic
-        assert message_encoding == "json", topic
+        if topic in ("/events", "/summary"):
+            assert schema_name.startswith("adaptive_mj.") and schema_encoding == "jsonschema", topic
+            assert message_encoding == "json", topic
+        else:
+            assert schema_name.startswith("adaptive_mj/msg/") and schema_encoding == "ros2msg", topic
+            assert message_encoding == "cdr", topic
     assert {"adaptive_mj", "scenario", "status"} <= set(ts["metadata"])
     assert "model_source.xml" in ts["attachments"]

@@ -1,6 +1,7 @@
 """Formats are promises: logs written in format 1 (by adaptive-mj before multi-joint runs), format 2
-(before law plugins), format 3 (before sampled-data control) and format 4 (before the verdict's limits
-and the embedded model's hash) still read and replay bit for bit; a multi-joint run round-trips; an
+(before law plugins), format 3 (before sampled-data control), format 4 (before the verdict's limits
+and the embedded model's hash), format 5 and format 6 (JSON rows, before CDR) still read and replay bit for bit;
+the CDR and JSON encodings of one run read back the same; a multi-joint run round-trips; an
 altered embedded model is refused on read."""
 from __future__ import annotations
 
@@ -96,6 +97,40 @@ def test_format5_logs_read_and_verify(name, joints, capsys):
     assert "verify: bit-identical" in _verify(DATA / name, capsys)
 
 
+def test_format6_log_reads_and_verifies(capsys):
+    """Written by adaptive-mj before format 7 (JSON rows): read through its JSON channels, re-simulated bit for bit."""
+    name = "heave_drift_format6.mcap"
+    run = read_log(DATA / name)
+    assert run.header["log_format_version"] == 6 < record.LOG_FORMAT_VERSION
+    assert "encoding" not in run.header
+    assert run.status == "ok" and run.trajectory.joint_names == () and len(run.trajectory) == 50
+    assert "verify: bit-identical" in _verify(DATA / name, capsys)
+
+
+@pytest.mark.parametrize("name, extra", [
+    ("heave_drift", ()),
+    ("ur5e_payload_swap", ("simulation.duration=0.3", "events=[{t=0.15, kind='payload_swap', payload='sphere'}]"))])
+def test_cdr_and_json_encodings_of_one_run_give_the_same_trajectory(tmp_path, name, extra, capsys):
+    """log.encoding = "cdr" (format 7) and "json" (format 6) of the same run: every array read back is the same,
+    bit for bit, and both verify."""
+    runs = {}
+    for encoding in ("cdr", "json"):
+        scn = scenario.load(scenario.SCENARIOS_DIR / f"{name}.toml",
+                            overrides=["simulation.duration=1", *extra, f"log.encoding={encoding!r}"])
+        path = tmp_path / f"{encoding}.mcap"
+        execute(scn, log_path=path)
+        runs[encoding] = read_log(path)
+        assert "verify: bit-identical" in _verify(path, capsys)
+    cdr, js = runs["cdr"], runs["json"]
+    assert (cdr.header["log_format_version"], js.header["log_format_version"]) == (7, 6)
+    assert cdr.header["encoding"] == "cdr" and "encoding" not in js.header
+    for field in ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V"):
+        a, b = getattr(cdr.trajectory, field), getattr(js.trajectory, field)
+        assert a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes(), field
+    assert cdr.trajectory.meta == js.trajectory.meta and cdr.events == js.events
+    assert cdr.summary == js.summary and cdr.status == js.status
+
+
 def test_format5_and_later_headers_record_control_limits_and_the_embedded_hash(tmp_path):
     scn = scenario.load(scenario.SCENARIOS_DIR / "ur5e_payload_swap.toml",
                         overrides=["simulation.duration=0.1", "control.period=0.005", "events=[]", "log.rate_hz=1000"])
@@ -168,7 +203,7 @@ def test_multi_joint_log_round_trips(tmp_path):
     path = tmp_path / "arm.mcap"
     live = execute(scn, log_path=path).trajectory
     run = read_log(path)
-    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 6
+    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 7
     assert run.header["joint_names"] == list(live.joint_names) and len(live.joint_names) == 6
     tr = run.trajectory
     every = run.header["log_every"]

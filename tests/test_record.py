@@ -176,13 +176,14 @@ def test_first_order_log(tmp_path):
     assert_rows_equal(run.trajectory, rows, slice(0, None, LOG_EVERY))
 
 
-def test_non_finite_values_round_trip(tmp_path):
+@pytest.mark.parametrize("encoding", ["cdr", "json"])
+def test_non_finite_values_round_trip(tmp_path, encoding):
     rows = synthetic(100)
     rows["u"][50] = math.inf
     rows["V"][50] = math.nan
     rows["theta_hat"][60, 1] = -math.inf
     path = tmp_path / "diverged.mcap"
-    rec = Recorder(path, make_header())
+    rec = Recorder(path, make_header(encoding=encoding))
     write_block(rec, rows, 0, 100)
     rec.close("diverged", "non-finite control inf", {"rmse_y": float("nan")})
     run = read_log(path)
@@ -193,10 +194,15 @@ def test_non_finite_values_round_trip(tmp_path):
     assert np.array_equal(traj.V, rows["V"][::LOG_EVERY], equal_nan=True)
     assert run.summary["rmse_y"] is None      # non-finite summary values become null
     with open(path, "rb") as f:
-        control = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages("/control")]
+        control = [m.data for _, _, m in make_reader(f).iter_messages("/control")]
     y_tilde = rows["ref"][50, 0] - rows["x"][50, 0]
-    assert control[5] == {"t": 0.05, "s": rows["s"][50], "y_tilde": y_tilde,
-                          "nonfinite": {"u": "inf"}}
+    if encoding == "json":
+        assert json.loads(control[5]) == {"t": 0.05, "s": rows["s"][50], "y_tilde": y_tilde,
+                                          "nonfinite": {"u": "inf"}}
+    else:  # CDR: the float64 themselves, inf and NaN included
+        assert control[5] == record.CDR_HEADER + np.array([0.05, math.inf, rows["s"][50], y_tilde], "<f8").tobytes()
+        lyapunov = np.frombuffer(list(make_reader(open(path, "rb")).iter_messages("/lyapunov"))[5][2].data[4:], "<f8")
+        assert lyapunov[0] == 0.05 and math.isnan(lyapunov[1])
 
 
 @settings(max_examples=40, deadline=None,
@@ -240,8 +246,11 @@ def assert_foxglove_can_parse(schema: dict, where: str) -> None:
 
 # -- what standard MCAP tools see ---------------------------------------------------------------
 
-def test_channels_have_json_schemas(full_log):
-    path, _ = full_log
+def test_json_channels_have_json_schemas(tmp_path):
+    """log.encoding = "json": every channel JSON with a JSON Schema, written as format 6."""
+    path = tmp_path / "json.mcap"
+    write_log(path, synthetic(5000), header=make_header(encoding="json"))
+    assert read_log(path).header["log_format_version"] == record.JSON_LOG_FORMAT_VERSION == 6
     with open(path, "rb") as f:
         reader = make_reader(f, decoder_factories=[JsonDecoderFactory()])
         summary = reader.get_summary()
@@ -269,6 +278,44 @@ def test_channels_have_json_schemas(full_log):
     assert set(first["/control"]) == {"t", "u", "s", "y_tilde"}
     assert set(first["/lyapunov"]) == {"t", "V"}
     assert summary.statistics.message_count == 500 * 6 + 2 + 1
+
+
+def test_cdr_channels_have_ros2msg_schemas(full_log):
+    """Format 7 (the default): the row topics are CDR with a ros2msg schema (float64 t, then a float64 per field,
+    as Foxglove decodes it); /events and /summary stay JSON; a payload is the header and the float64."""
+    path, rows = full_log
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        topics = {ch.topic: ch for ch in summary.channels.values()}
+        first = {}
+        for _schema, channel, message in reader.iter_messages():
+            first.setdefault(channel.topic, message)
+    assert set(topics) == {*ROW_TOPICS, "/events", "/summary"}
+    fields = record.row_fields(2, NAMES)
+    for topic in ROW_TOPICS:
+        channel = topics[topic]
+        schema = summary.schemas[channel.schema_id]
+        assert (channel.message_encoding, schema.encoding) == ("cdr", "ros2msg")
+        assert schema.name == "adaptive_mj/msg/" + {"/true_params": "TrueParams"}.get(topic, topic[1:].title())
+        lines = [line.split("#")[0].split() for line in schema.data.decode().splitlines()]
+        assert [f for f in lines if f] == [["float64", "t"]] + [["float64", name] for name in fields[topic]]
+        data = first[topic].data
+        assert len(data) == 4 + 8 * (1 + len(fields[topic])) and data[:4] == b"\x00\x01\x00\x00"
+        assert np.frombuffer(data[4:], "<f8")[0] == 0.0
+    assert np.frombuffer(first["/state"].data[4:], "<f8")[1:].tolist() == rows["x"][0].tolist()
+    for topic in ("/events", "/summary"):
+        assert topics[topic].message_encoding == "json"
+        assert summary.schemas[topics[topic].schema_id].encoding == "jsonschema"
+    assert summary.statistics.message_count == 500 * 6 + 2 + 1
+
+
+def test_ros2msg_field_names_are_identifiers():
+    assert record.ros2msg_field("payload/body.m") == "payload_body_m"
+    assert record.ros2msg_field("shoulder_pan.armature") == "shoulder_pan_armature"
+    assert record.ros2msg_field("Jxx") == "Jxx" and record.ros2msg_field("2nd") == "f_2nd"
+    schema = record._ros2msg(record._schemas(2, ("a.b", "a/b"))["/estimates"][1]).decode()
+    assert "float64 a_b  #" in schema and "float64 a_b_2  #" in schema and "(field a/b)" in schema
 
 
 def test_metadata_and_attachments_present(full_log):
@@ -380,10 +427,11 @@ def test_sigkilled_process_leaves_every_written_block(tmp_path):
                        f"(the file ends at byte {path.stat().st_size} without a footer)"
 
 
-def test_flush_every_rows_bounds_loss_inside_long_blocks(tmp_path):
+@pytest.mark.parametrize("encoding", ["cdr", "json"])
+def test_flush_every_rows_bounds_loss_inside_long_blocks(tmp_path, encoding):
     rows = synthetic(3000)
     path = tmp_path / "long.mcap"
-    rec = Recorder(path, make_header(), flush_every_rows=50)
+    rec = Recorder(path, make_header(encoding=encoding), flush_every_rows=50)
     # Die in the middle of one long write_rows call (at row 120): flushed chunks survive.
     class Killed(BaseException):
         pass
@@ -399,12 +447,20 @@ def test_flush_every_rows_bounds_loss_inside_long_blocks(tmp_path):
         written.append(len(batch) // 6)
         return original(writer, batch)
 
-    record_mod._add_messages = dying_add
+    original_packed = record_mod._add_packed_rows
+
+    def dying_add_packed(writer, channel_ids, log_ns, records):  # CDR: the same, a packed block at a time
+        if sum(written) + len(log_ns) > 120:
+            raise Killed
+        written.append(len(log_ns))
+        return original_packed(writer, channel_ids, log_ns, records)
+
+    record_mod._add_messages, record_mod._add_packed_rows = dying_add, dying_add_packed
     try:
         with pytest.raises(Killed):
             write_block(rec, rows, 0, 3000)
     finally:
-        record_mod._add_messages = original
+        record_mod._add_messages, record_mod._add_packed_rows = original, original_packed
     rec._file.close()
     run = read_log(path)
     assert run.status == "truncated" and run.recovered_rows == 100
@@ -654,19 +710,19 @@ def test_a_signal_during_write_rows_is_raised_after_the_whole_block(tmp_path):
         rec = Recorder(path, make_header())
         import adaptive_mj.log.record as record_mod
 
-        original = record_mod._add_rows  # a block of finite rows is written through it
+        original = record_mod._add_packed_rows  # a block of rows is written through it (CDR)
 
         def add_and_signal(writer, *block):  # a SIGTERM, then a second signal while the first waits
             os.kill(os.getpid(), signal.SIGTERM)
             os.kill(os.getpid(), signal.SIGINT)
             return original(writer, *block)
 
-        record_mod._add_rows = add_and_signal
+        record_mod._add_packed_rows = add_and_signal
         try:
             with pytest.raises(Interrupted, match="interrupted by SIGTERM") as stop:
                 write_block(rec, rows, 0, 1000)
         finally:
-            record_mod._add_rows = original
+            record_mod._add_packed_rows = original
         assert stop.value.exit_code == 143
         assert rec.rows_written == 100  # the block went in whole before the signal was raised
         write_block(rec, rows, 1000, 2000)  # the second signal changed nothing
@@ -676,19 +732,22 @@ def test_a_signal_during_write_rows_is_raised_after_the_whole_block(tmp_path):
     assert_rows_equal(run.trajectory, rows, slice(0, 2000, LOG_EVERY))
 
 
-def test_batched_message_writing_gives_the_same_bytes_as_mcap_add_message(tmp_path, monkeypatch):
+@pytest.mark.parametrize("encoding", ["cdr", "json"])
+def test_batched_message_writing_gives_the_same_bytes_as_mcap_add_message(tmp_path, monkeypatch, encoding):
     """The fast chunk writer (adaptive_mj/log/fast_mcap.py, for the mcap it was written for) and mcap's
     public Writer.add_message (any other mcap) write the same file, byte for byte, hence the same messages."""
     import adaptive_mj.log.record as record_mod
     from adaptive_mj.log import fast_mcap
 
     rows = synthetic(2500)
-    header = make_header()
+    header = make_header(encoding=encoding)
     paths = {}
-    for name, writer, rows_writer in (("fast", fast_mcap.add_messages_fast, fast_mcap.add_rows_fast),
-                                      ("public", fast_mcap.add_messages_public, fast_mcap.add_rows_public)):
+    for name, writer, rows_writer, packed_writer in (
+            ("fast", fast_mcap.add_messages_fast, fast_mcap.add_rows_fast, fast_mcap.add_packed_rows_fast),
+            ("public", fast_mcap.add_messages_public, fast_mcap.add_rows_public, fast_mcap.add_packed_rows_public)):
         monkeypatch.setattr(record_mod, "_add_messages", writer)
         monkeypatch.setattr(record_mod, "_add_rows", rows_writer)
+        monkeypatch.setattr(record_mod, "_add_packed_rows", packed_writer)
         paths[name] = tmp_path / f"{name}.mcap"
         rec = Recorder(paths[name], header)
         write_block(rec, rows, 0, 1300)
@@ -719,6 +778,10 @@ def test_the_fast_writer_is_taken_only_on_the_mcap_it_was_written_for():
     for other in ("1.5.0", "1.6.1", "2.0.0"):
         assert fast_mcap.rows_writer_for(other) is fast_mcap.add_rows_public
     assert record._add_rows is fast_mcap.add_rows_fast
+    assert fast_mcap.packed_rows_writer_for(fast_mcap.WRITTEN_FOR) is fast_mcap.add_packed_rows_fast
+    for other in ("1.5.0", "1.6.1", "2.0.0"):
+        assert fast_mcap.packed_rows_writer_for(other) is fast_mcap.add_packed_rows_public
+    assert record._add_packed_rows is fast_mcap.add_packed_rows_fast
 
 
 def test_only_the_fast_writer_touches_mcap_internals():
@@ -736,7 +799,7 @@ def test_a_block_of_finite_rows_formatted_at_once_gives_the_bytes_of_one_message
     value): the same file, byte for byte, also with a non-finite row in the other block."""
     rows = synthetic(2500, order=order, n_theta=n_theta)
     rows["x"][1710, 0] = np.nan  # the second block goes the per-message way in both files
-    header = make_header(order=order, names=NAMES[:n_theta])
+    header = make_header(order=order, names=NAMES[:n_theta], encoding="json")
     paths = {}
     for name, flush_every in (("block", None), ("per_message", 10**9)):
         paths[name] = tmp_path / f"{name}.mcap"
@@ -747,3 +810,35 @@ def test_a_block_of_finite_rows_formatted_at_once_gives_the_bytes_of_one_message
         assert rec.rows_written == 250
     assert paths["block"].read_bytes() == paths["per_message"].read_bytes()
     np.testing.assert_array_equal(read_log(paths["block"]).trajectory.x[:130], rows["x"][0:1300:LOG_EVERY])
+
+
+@pytest.mark.parametrize("change, match", [(lambda d: d[:-1], "is 27 bytes"),
+                                           (lambda d: b"\x00\x00" + d[2:], "expected 28 bytes of CDR")])
+def test_a_cdr_message_of_another_size_or_header_is_refused(tmp_path, change, match):
+    """Format 7: read_log decodes a topic's CDR messages by their fixed layout; a message cut short or in
+    another encapsulation (big-endian CDR) is a LogFormatError naming the topic, never a misread row."""
+    from mcap.writer import Writer
+
+    src = tmp_path / "good.mcap"
+    write_log(src, synthetic(500), events=())
+    with open(src, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        messages = list(reader.iter_messages())
+        metadata = list(reader.iter_metadata())
+        library = reader.get_header().library
+    bad = tmp_path / "bad.mcap"
+    with open(bad, "wb") as f:
+        w = Writer(f)
+        w.start(library=library)
+        schemas = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
+        channels = {cid: w.register_channel(c.topic, c.message_encoding, schemas[c.schema_id])
+                    for cid, c in summary.channels.items()}
+        for m in metadata:
+            w.add_metadata(m.name, dict(m.metadata))
+        for i, (_schema, channel, msg) in enumerate(messages):
+            data = change(msg.data) if channel.topic == "/state" and i == 60 else msg.data
+            w.add_message(channels[channel.id], msg.log_time, data, msg.publish_time)
+        w.finish()
+    with pytest.raises(LogFormatError, match=rf"bad\.mcap: a /state message .*{match}"):
+        read_log(bad)

@@ -2,7 +2,8 @@
 
 A `Recorder` is the loop's `Sink`. It keeps every `log_every`-th physics step
 (global step index k with k % log_every == 0) and writes each kept row as six
-JSON messages, one per topic, stamped with the simulation time:
+messages, one per topic, stamped with the simulation time (format 7, the default: CDR with ros2msg
+schemas, t then one float64 per field; `log.encoding = "json"`: JSON text, exactly format 6):
 
     /state        {t, y, y_dot[, y_ddot, ...]}            n entries
     /reference    {t, y_d, y_d_dot, y_d_ddot[, ...]}      n+1 entries
@@ -13,8 +14,8 @@ JSON messages, one per topic, stamped with the simulation time:
     /events       {t, label, ...detail}                   one per event
     /summary      {...summary, status, reason}            once, at close()
 
-Every payload carries the exact float `t` (JSON floats are written with
-repr, which round-trips), so replay rebuilds the arrays bit for bit. The
+Every payload carries the exact float `t` (CDR holds the float64 itself; JSON floats are written with
+repr, which round-trips), so replay rebuilds the arrays bit for bit. /events and /summary are JSON in both. The
 full layout is in docs/LOG_FORMAT.md; `adaptive_mj.log.replay.read_log` reads it.
 
 Bounded loss: each `write_rows` call ends by closing the chunk in progress
@@ -38,7 +39,12 @@ import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 # the batch writer: fast on the mcap it was written for, mcap's public Writer API on any other
-from adaptive_mj.log.fast_mcap import add_messages as _add_messages, add_rows as _add_rows
+from adaptive_mj.log.fast_mcap import (
+    add_messages as _add_messages,
+    add_packed_rows as _add_packed_rows,
+    add_rows as _add_rows,
+    message_rows as _message_rows,
+)
 from adaptive_mj.sim.interrupt import deferred
 from adaptive_mj.trajectory import Status
 
@@ -46,7 +52,17 @@ from adaptive_mj.trajectory import Status
 #    rows are not the output's derivatives: the quadrotor's 4 rotor thrusts on its 3 position axes, x = [p; v; φ; Ω]);
 # 5: ctrl_range, joint_limits and embedded_sha256 (checked on every read) in the header;
 # 4: control_mode, control_period in the header; 3: law_plugin, plant_plugin;
-LOG_FORMAT_VERSION = 6  # 2: joint_names/notes, per-joint fields (1: 1-DOF only)
+# 7: the row topics in CDR (ros2msg schemas: float64 t, then one float64 per field), packed by numpy a block at a
+#    time; /events and /summary JSON as before; `encoding = "cdr"` in the header. log.encoding = "json" writes 6.
+LOG_FORMAT_VERSION = 7  # 2: joint_names/notes, per-joint fields (1: 1-DOF only)
+
+#: The row encodings a Recorder writes (LogHeader.encoding, the scenario's log.encoding): "cdr" (format 7, the
+#: default) or "json" (JSON text, written exactly as format 6, which every reader of format 6 reads).
+ENCODINGS = ("cdr", "json")
+#: The format version log.encoding = "json" writes: its layout is format 6's, byte for byte in kind.
+JSON_LOG_FORMAT_VERSION = 6
+#: A CDR payload's encapsulation header: CDR_LE (plain CDR, little-endian), options 0.
+CDR_HEADER = b"\x00\x01\x00\x00"
 
 def embedded_digest(model_xml: str | None, model_source: str | None, assets: dict[str, bytes]) -> str:
     """SHA-256 (hex) of what a log embeds to re-simulate its run: the compiled model's XML, the exact
@@ -174,6 +190,7 @@ class LogHeader:
     joint_limits: list | None = None  # format 5: (m, 2) joint ranges [rad or m], null entries unlimited
     control_names: tuple[str, ...] = ()  # format 6: the k actuators where u is not one per joint (else ())
     state_names: tuple[str, ...] = ()  # format 6: a name per row of x where they are not y's derivatives (else ())
+    encoding: str = "cdr"  # the row topics' encoding (ENCODINGS): "cdr" writes format 7, "json" format 6
 
     @property
     def log_every(self) -> int:
@@ -220,6 +237,8 @@ def _check_header(header: LogHeader) -> None:
                                                    tuple(header.state_names)).values() for f in topic_fields]
         if len(set(fields)) != len(fields) or len(set(joints)) != len(joints):
             raise ValueError(f"LogHeader.joint_names {joints!r} make clashing field names")
+    if header.encoding not in ENCODINGS:
+        raise ValueError(f"LogHeader.encoding must be one of {ENCODINGS}, got {header.encoding!r}")
     if header.state_names and len(header.state_names) != header.order:
         raise ValueError(f"LogHeader.state_names must name the {header.order} rows of x, got {header.state_names!r}")
     versions: Iterable[tuple[object, object]] = header.versions.items()
@@ -310,6 +329,33 @@ def _schemas(order: int, names: tuple[str, ...], joint_names: tuple[str, ...] = 
             "additionalProperties": True,
         }),
     }
+
+
+def ros2msg_field(name: str) -> str:
+    """A field name as a ros2msg schema may spell it (a letter, then letters, digits and _): a character outside
+    those becomes _, and a name that does not start with a letter gets an f_ in front (payload/body.m ->
+    payload_body_m). Only the schema (what Foxglove shows) uses it; the reader decodes by position."""
+    out = "".join(c if (c.isascii() and (c.isalnum() or c == "_")) else "_" for c in name)
+    return out if out[:1].isascii() and out[:1].isalpha() else "f_" + out
+
+
+def _ros2msg(schema: dict) -> bytes:
+    """The ros2msg text of a row topic's JSON Schema (_row_schema): float64 t, then one float64 per field in the
+    payload's order, each with its description as a comment; names made distinct where ros2msg_field made two
+    alike (a _2, _3 suffix)."""
+    lines = [f"# {schema['title']}: {schema['description']}"]
+    seen: set[str] = set()
+    for name, prop in schema["properties"].items():
+        if name == NONFINITE_KEY:
+            continue
+        field_name, k = ros2msg_field(name), 2
+        while field_name in seen:
+            field_name, k = f"{ros2msg_field(name)}_{k}", k + 1
+        seen.add(field_name)
+        alias = "" if field_name == name else f" (field {name})"
+        description = prop["description"].split("; absent when")[0]
+        lines.append(f"float64 {field_name}  # {description}{alias}")
+    return ("\n".join(lines) + "\n").encode()
 
 
 def _template(fields: tuple[str, ...]) -> str:
@@ -423,10 +469,12 @@ class Recorder:
         self._t_last = 0.0        # latest simulation time written [s]
         self._closed = False
 
+        self.encoding = header.encoding
+        self.format_version = LOG_FORMAT_VERSION if header.encoding == "cdr" else JSON_LOG_FORMAT_VERSION
         self._file = open(self.path, "wb")
         try:
             self._writer = Writer(self._file, compression=CompressionType.ZSTD)
-            self._writer.start(library=f"adaptive_mj log format {LOG_FORMAT_VERSION}; "
+            self._writer.start(library=f"adaptive_mj log format {self.format_version}; "
                                        f"{LIBRARY_IDENTIFIER}")
             self._write_header()
             self._writer.flush()
@@ -439,8 +487,13 @@ class Recorder:
     def _write_header(self) -> None:
         h = self.header
         self._channels: dict[str, int] = {}
+        cdr = self.encoding == "cdr"
         for topic, (name, schema) in _schemas(self.order, self.names, self.joint_names, self.control_names,
                                               self.state_names).items():
+            if cdr and topic in ROW_TOPICS:  # ros2msg: the type's name as package/msg/Name
+                schema_id = self._writer.register_schema(name.replace(".", "/msg/"), "ros2msg", _ros2msg(schema))
+                self._channels[topic] = self._writer.register_channel(topic, "cdr", schema_id)
+                continue
             schema_id = self._writer.register_schema(
                 name, "jsonschema", json.dumps(schema, separators=(",", ":")).encode())
             self._channels[topic] = self._writer.register_channel(topic, "json", schema_id)
@@ -448,9 +501,16 @@ class Recorder:
         self._row_fields = [(self._channels[topic], fields[topic]) for topic in ROW_TOPICS]
         self._templates = [_template(fields) for _, fields in self._row_fields]
         self._row_template: str | None = None  # the templates joined (_write_finite_block)
+        # CDR (format 7): a message is the 4-byte encapsulation header, then t and its fields as little-endian
+        # float64 (8-aligned counted from after the header: no padding between float64s)
+        payload_dtypes = [np.dtype([("cdr", "u1", (4,)), ("values", "<f8", (1 + len(f),))])
+                          for _, f in self._row_fields]
+        self._row_records = _message_rows([channel_id for channel_id, _ in self._row_fields], payload_dtypes)
+        for j in range(len(payload_dtypes)):  # a row's messages as written but for t, its values and times
+            self._row_records[f"p{j}"]["cdr"] = np.frombuffer(CDR_HEADER, dtype=np.uint8)
 
         meta = {
-            "log_format_version": str(LOG_FORMAT_VERSION),
+            "log_format_version": str(self.format_version),
             "scenario_name": h.scenario_name,
             "scenario_source": h.scenario_source,
             "seed": str(int(h.seed)),
@@ -473,6 +533,8 @@ class Recorder:
             "embedded_sha256": embedded_digest(h.model_xml, h.model_source, h.model_assets),
             "created_unix": repr(float(h.created_unix)),
         }
+        if cdr:
+            meta["encoding"] = "cdr"  # format 7: the row topics' message encoding
         meta.update({VERSION_KEY_PREFIX + k: v for k, v in sorted(h.versions.items())})
         self._writer.add_metadata(HEADER_METADATA, meta)
         self._writer.add_metadata(SCENARIO_METADATA, {"text": h.scenario_text})
@@ -534,6 +596,9 @@ class Recorder:
 
     def _write_block(self, tk: np.ndarray, blocks: list[np.ndarray]) -> None:
         ns = np.rint(tk * _NS_PER_S).astype(np.int64)
+        if self.encoding == "cdr":
+            self._write_cdr_block(tk, ns, blocks)
+            return
         if self._flush_every is None and all(np.isfinite(b).all() for b in blocks):
             self._write_finite_block(tk, ns, blocks)
             return
@@ -578,6 +643,28 @@ class Recorder:
         text = "\0".join([self._row_template] * m) % tuple(values)
         _add_rows(self._writer, [channel_id for channel_id, _ in self._row_fields], log_ns, text.encode())
         self._rows += m
+        self._t_last = max(self._t_last, float(tk[-1]))
+
+    def _write_cdr_block(self, tk: np.ndarray, log_ns: np.ndarray, blocks: list[np.ndarray]) -> None:
+        """Format 7: the block's messages as one packed record array (fast_mcap.message_rows: each row's six
+        Message records, head and CDR payload), filled a topic at a time by numpy (the encapsulation header, t,
+        the topic's columns) and written in one go; non-finite values are float64 like any other. With
+        flush_every_rows, the block is cut where the count of rows written reaches a multiple of it."""
+        m, start = len(tk), 0
+        channel_ids = [channel_id for channel_id, _ in self._row_fields]
+        while start < m:
+            every = self._flush_every
+            end = m if every is None else min(m, start + every - self._rows % every)
+            records = np.repeat(self._row_records, end - start)  # the heads and CDR headers, as written
+            for j, b in enumerate(blocks):
+                values = records[f"p{j}"]["values"]
+                values[:, 0] = tk[start:end]
+                values[:, 1:] = b[start:end]
+            _add_packed_rows(self._writer, channel_ids, log_ns[start:end], records)
+            self._rows += end - start
+            if every is not None and self._rows % every == 0:
+                self._writer.flush()
+            start = end
         self._t_last = max(self._t_last, float(tk[-1]))
 
     @staticmethod

@@ -27,6 +27,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from adaptive_mj.errors import LogFormatError
 from adaptive_mj.log.record import (
     ASSET_ATTACHMENT_PREFIX,
+    CDR_HEADER,
     CLOSE_STATUSES,
     EVENT_TOPIC,
     HEADER_METADATA,
@@ -96,7 +97,8 @@ class _Scan:
 
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     attachments: dict[str, bytes] = field(default_factory=dict)
-    messages: list[tuple[str, bytes]] = field(default_factory=list)   # (topic, JSON payload)
+    messages: list[tuple[str, bytes]] = field(default_factory=list)   # (topic, payload)
+    encodings: dict[str, str] = field(default_factory=dict)  # topic -> its channel's message encoding
     library: str = ""
     complete: bool = False      # reached a footer with every record before it readable
     problem: str = ""           # where and why reading stopped short ("" when complete)
@@ -148,7 +150,8 @@ def _read(name: str, data: bytes) -> LoggedRun:
     controls = tuple(header.get("control_names", ()))  # format 6: () before (u one per joint)
     states = tuple(header.get("state_names", ()))  # format 6
 
-    times, cols, events, summary = _rows(name, scan.messages, order, names, joints, controls, states)
+    times, cols, events, summary = _rows(name, scan.messages, order, names, joints, controls, states,
+                                         encodings=scan.encodings)
     n_rows = len(times)
     status, reason, note = _final_status(name, scan, summary, n_rows, span=n_rows * log_every * dt)
 
@@ -223,33 +226,77 @@ def _check_embedded(name: str, header: dict, model_xml, model_source, assets) ->
 
 
 def _rows(name: str, messages: list[tuple[str, bytes]], order: int, names: tuple[str, ...],
-          joints: tuple[str, ...] = (), controls: tuple[str, ...] = (), states: tuple[str, ...] = ()):
-    """Decode the messages: (times, {row topic: (N, fields) array}, events, summary).
-    A row is kept only if every row topic has a message at its t (a cut log may end mid-row)."""
-    by_t: dict[str, dict[float, dict]] = {topic: {} for topic in ROW_TOPICS}
-    state_times: list[float] = []
+          joints: tuple[str, ...] = (), controls: tuple[str, ...] = (), states: tuple[str, ...] = (),
+          encodings: dict[str, str] | None = None):
+    """Decode the messages: (times, {row topic: (N, fields) array}, events, summary). A row topic's messages are
+    JSON objects (formats 1-6, and 7 with log.encoding = "json") or CDR (format 7), as its channel says
+    (`encodings`, topic -> message encoding; JSON where absent). A row is kept only if every row topic has a
+    message at its t (a cut log may end mid-row)."""
+    encodings = encodings or {}
+    fields = row_fields(order, names, joints, controls, states)
+    raw_rows: dict[str, list[bytes]] = {topic: [] for topic in ROW_TOPICS}
     events: list[dict] = []
     summary = None
     for topic, raw in messages:
-        payload = json.loads(raw)
-        if not isinstance(payload, dict):
-            raise LogFormatError(f"{name}: a {topic} message is {type(payload).__name__}, "
-                                 f"expected a JSON object")
-        if topic in by_t:
-            t = _number(payload.get("t"), name, topic, "t")
-            by_t[topic][t] = payload
-            if topic == "/state":
-                state_times.append(t)
-        elif topic == EVENT_TOPIC:
+        if topic in raw_rows:
+            raw_rows[topic].append(raw)
+            continue
+        payload = _json_object(raw, name, topic)
+        if topic == EVENT_TOPIC:
             events.append(payload)
         elif topic == SUMMARY_TOPIC:
             summary = payload
+    # per row topic: its messages' times in order, and t -> the row's values (the last message at a t wins)
+    by_t: dict[str, dict[float, Any]] = {}
+    state_times: list[float] = []
+    for topic in ROW_TOPICS:
+        encoding = encodings.get(topic, "json")
+        if encoding == "cdr":
+            values = _cdr_rows(raw_rows[topic], len(fields[topic]), name, topic)
+            topic_times = values[:, 0].tolist()
+            by_t[topic] = dict(zip(topic_times, values[:, 1:], strict=True))
+        elif encoding == "json":
+            payloads = [_json_object(raw, name, topic) for raw in raw_rows[topic]]
+            topic_times = [_number(p.get("t"), name, topic, "t") for p in payloads]
+            by_t[topic] = dict(zip(topic_times, payloads, strict=True))
+        else:
+            raise LogFormatError(f"{name}: the {topic} channel's message encoding is {encoding!r}, "
+                                 f"expected 'cdr' or 'json'")
+        if topic == "/state":
+            state_times = topic_times
     times = [t for t in state_times if all(t in by_t[topic] for topic in ROW_TOPICS)]
-    fields = row_fields(order, names, joints, controls, states)
-    cols = {topic: np.array([_values(by_t[topic][t], fields[topic], name, topic) for t in times],
-                            dtype=float).reshape(len(times), len(fields[topic]))
-            for topic in ROW_TOPICS}
+    cols = {}
+    for topic in ROW_TOPICS:
+        rows = [by_t[topic][t] for t in times]
+        if encodings.get(topic, "json") == "json":
+            rows = [_values(payload, fields[topic], name, topic) for payload in rows]
+        cols[topic] = np.array(rows, dtype=float).reshape(len(times), len(fields[topic]))
     return times, cols, events, summary
+
+
+def _json_object(raw: bytes, name: str, topic: str) -> dict:
+    payload = json.loads(raw)
+    if not isinstance(payload, dict):
+        raise LogFormatError(f"{name}: a {topic} message is {type(payload).__name__}, "
+                             f"expected a JSON object")
+    return payload
+
+
+def _cdr_rows(raws: list[bytes], width: int, name: str, topic: str) -> np.ndarray:
+    """Format 7: a row topic's CDR messages (the encapsulation header, then t and `width` little-endian float64)
+    as an (N, 1 + width) array, decoded in one go; any other size or header is a LogFormatError."""
+    size = len(CDR_HEADER) + 8 * (1 + width)
+    bad = next((raw for raw in raws if len(raw) != size or raw[:len(CDR_HEADER)] != CDR_HEADER), None)
+    if bad is not None:
+        raise LogFormatError(f"{name}: a {topic} message is {len(bad)} bytes starting {bytes(bad[:4])!r}, expected "
+                             f"{size} bytes of CDR (header {CDR_HEADER!r}, t and {width} float64)")
+    block = np.frombuffer(b"".join(raws), dtype=np.uint8).reshape(len(raws), size)
+    values = np.ascontiguousarray(block[:, len(CDR_HEADER):]).view("<f8")
+    t = values[:, 0]
+    if not (np.isfinite(t).all() and (t >= 0).all()):
+        raise LogFormatError(f"{name}: a {topic} message has t = {t[~(np.isfinite(t) & (t >= 0))][0]!r}, "
+                             f"expected a finite time >= 0 [s]")
+    return values.astype(float, copy=False)
 
 
 def _final_status(name: str, scan: _Scan, summary: dict | None, n_rows: int,
@@ -304,6 +351,9 @@ def _scan_indexed(data: bytes) -> _Scan:
         scan.metadata.setdefault(record.name, dict(record.metadata))
     for attachment in reader.iter_attachments():
         scan.attachments[attachment.name] = attachment.data
+    summary = reader.get_summary()
+    channels = summary.channels.values() if summary is not None else ()
+    scan.encodings = {channel.topic: channel.message_encoding for channel in channels}
     scan.messages = [(channel.topic, message.data)
                      for _, channel, message in reader.iter_messages(log_time_order=False)]
     return scan
@@ -343,10 +393,12 @@ def _scan_linear(data: bytes) -> _Scan:  # noqa: C901 (one branch per record kin
                 for r in inner:
                     if isinstance(r, Channel):
                         topics[r.id] = r.topic
+                        scan.encodings[r.topic] = r.message_encoding
                     elif isinstance(r, Message):
                         take(r)
             elif isinstance(record, Channel):
                 topics[record.id] = record.topic
+                scan.encodings[record.topic] = record.message_encoding
             elif isinstance(record, Message):
                 take(record)
             elif isinstance(record, Metadata):

@@ -276,10 +276,12 @@ def _validate(doc: dict, *, where: str, base_dir: Path, default_name: str, text:
     success = _success(top.table("success", {}))
     log = top.table("log", {})
     log_rate = log.number("rate_hz", 100.0, gt=0)
+    log_encoding = log.string("encoding", "cdr", choices=("cdr", "json"))  # record.ENCODINGS
     log.finish()
     top.finish()
     return Scenario(name=name, description=description, plant=plant, simulation=sim, reference=reference,
                     law=law, noise=noise, disturbance=disturbance, events=events, log_rate_hz=log_rate,
+                    log_encoding=log_encoding,
                     source=where, text=text, overrides=overrides, control=control, success=success,
                     sensors=sensors)
 

@@ -141,7 +141,7 @@ def log_header(scn: Scenario, setup: Setup):
         law_plugin=setup.law.installed.describe() if setup.law.installed is not None else None,
         plant_plugin=_plant_plugin(scn), control_mode=timing.describe()["control_mode"],
         control_period=timing.period, ctrl_range=_list(limits.get("ctrl_range")),
-        joint_limits=limits.get("joint_limits"))
+        joint_limits=limits.get("joint_limits"), encoding=scn.log_encoding)
 
 
 def _list(value) -> list | None:
