@@ -366,6 +366,9 @@ def cmd_replay(args) -> int:
     if args.verify:
         from adaptive_mj.log.verify import verify
 
+        if logged.model_missing:
+            raise LogFormatError(f"{args.log}: --verify needs the model the log embedded, and its attachments were "
+                                 "removed (replay without --verify shows its rows and summary)")
         ok, message = verify(logged)
         print(message, file=sys.stderr if args.json else sys.stdout)
         if not ok:

@@ -113,3 +113,52 @@ def test_a_study_s_pre_flight_warning_names_the_run_and_words_a_saturating_bound
     assert "heave_tracking.toml (second_order/robust_phi1e-5): warning: pre-flight:" in line
     assert "the linearised loop cannot be stable (inside the boundary layer: K/Φ = 2.96e+06 saturates" in line
     assert "the loop cannot be stable" not in line and r.status in ("ok", "failed")
+
+
+def _strip_attachments(src, dst):
+    """Rewrite an MCAP log without its attachments (as `mcap` tools can do to shrink a file): the same schemas,
+    channels, messages and metadata."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        reader = make_reader(f)
+        w = Writer(g)
+        w.start(profile="", library="strip-test")
+        schemas, channels = {}, {}
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if schema is not None and schema.id not in schemas:
+                schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding,
+                                                          schemas.get(channel.schema_id, 0), dict(channel.metadata))
+            w.add_message(channels[channel.id], message.log_time, message.data, message.publish_time,
+                          message.sequence)
+        for meta in reader.iter_metadata():
+            w.add_metadata(meta.name, dict(meta.metadata))
+        w.finish()
+
+
+def test_a_log_stripped_of_its_attachments_replays_its_rows_and_only_verify_refuses(tmp_path, capsys):
+    from adaptive_mj.cli import main
+    from adaptive_mj.log.replay import read_log
+    from adaptive_mj.study.api import run_scenario
+
+    log = tmp_path / "run.mcap"
+    run_scenario("heave_tracking", set=["simulation.duration=1.0"], log=log)
+    stripped = tmp_path / "stripped.mcap"
+    _strip_attachments(log, stripped)
+    whole, cut = read_log(log), read_log(stripped)
+    assert not whole.model_missing and cut.model_missing and cut.model_xml is None
+    np.testing.assert_array_equal(cut.trajectory.x, whole.trajectory.x)
+    assert cut.summary == whole.summary
+    verdict = main(["replay", str(log)])  # the run's own verdict (1 s: it misses its tail bound, exit 1)
+    capsys.readouterr()
+    assert main(["replay", str(stripped)]) == verdict
+    out = capsys.readouterr()
+    assert "embedded model is missing" in out.out + out.err
+    assert main(["replay", str(stripped), "--verify"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--verify needs the model the log embedded" in err[0]
+    assert main(["replay", str(log), "--verify"]) == verdict  # the whole log verifies (exit: its verdict)
+    assert "bit-identical" in capsys.readouterr().out

@@ -89,6 +89,9 @@ class LoggedRun:
     recovered_rows: int
     note: str = ""
     damaged: bool = False
+    # the model the log embedded was removed whole (a tool stripped its attachments): rows and summary intact,
+    # --verify impossible
+    model_missing: bool = False
 
 
 @dataclass
@@ -181,7 +184,10 @@ def _read(name: str, data: bytes) -> LoggedRun:
               if k.startswith(ASSET_ATTACHMENT_PREFIX)}
     model_xml = _text(scan.attachments.get(MODEL_XML_ATTACHMENT), name, MODEL_XML_ATTACHMENT)
     model_source = _text(scan.attachments.get(MODEL_SOURCE_ATTACHMENT), name, MODEL_SOURCE_ATTACHMENT)
-    _check_embedded(name, header, model_xml, model_source, assets)
+    missing = _check_embedded(name, header, model_xml, model_source, assets)
+    if missing:
+        note = (f"{note}; " if note else "") + ("warning: the log's embedded model is missing (its attachments were "
+                                                "removed): its rows and summary are intact; --verify needs the model")
     return LoggedRun(
         header=header,
         scenario_text=scenario_text,
@@ -196,6 +202,7 @@ def _read(name: str, data: bytes) -> LoggedRun:
         recovered_rows=n_rows,
         note=note,
         damaged=scan.damaged,
+        model_missing=missing,
     )
 
 
@@ -211,18 +218,22 @@ def _limits_meta(header: dict) -> dict:
     return out
 
 
-def _check_embedded(name: str, header: dict, model_xml, model_source, assets) -> None:
-    """Format 5: what the log embeds must hash to the header's embedded_sha256; an altered or removed
-    model is a LogFormatError, never a silent re-simulation on something else."""
+def _check_embedded(name: str, header: dict, model_xml, model_source, assets) -> bool:
+    """Format 5: what the log embeds must hash to the header's embedded_sha256; an altered model is a
+    LogFormatError, never a silent re-simulation on something else. Returns True when the model was removed whole
+    (no model, no source, no asset: a tool stripped the attachments), which leaves the rows readable."""
     want = header.get("embedded_sha256")
     if want is None:
-        return
+        return False
+    if model_xml is None and model_source is None and not assets:
+        return True
     got = embedded_digest(model_xml, model_source, assets)
     if got != want:
         present = [what for what, v in (("model.xml", model_xml), ("model_source.xml", model_source)) if v is not None]
         raise LogFormatError(f"{name}: the embedded model does not match the log's embedded_sha256 ({want[:12]}, "
                              f"found {got[:12]} over {', '.join(present) or 'no model'} and {len(assets)} asset(s)): "
                              "the log was altered after it was written")
+    return False
 
 
 def _rows(name: str, messages: list[tuple[str, bytes]], order: int, names: tuple[str, ...],
