@@ -225,9 +225,9 @@ def _check_embedded(name: str, header: dict, model_xml, model_source, assets) ->
     want = header.get("embedded_sha256")
     if want is None:
         return False
-    if model_xml is None and model_source is None and not assets:
-        return True
     got = embedded_digest(model_xml, model_source, assets)
+    if got != want and model_xml is None and model_source is None and not assets:
+        return True
     if got != want:
         present = [what for what, v in (("model.xml", model_xml), ("model_source.xml", model_source)) if v is not None]
         raise LogFormatError(f"{name}: the embedded model does not match the log's embedded_sha256 ({want[:12]}, "
