@@ -162,3 +162,28 @@ def test_a_log_stripped_of_its_attachments_replays_its_rows_and_only_verify_refu
     assert len(err) == 1 and "--verify needs the model the log embedded" in err[0]
     assert main(["replay", str(log), "--verify"]) == verdict  # the whole log verifies (exit: its verdict)
     assert "bit-identical" in capsys.readouterr().out
+
+
+def test_a_reference_no_arm_can_follow_is_caught_before_the_run(capfd):
+    """A frequency ×1e9 on the 6-joint arm made MuJoCo's step blow up at t = 0; the pre-flight check now sees it
+    from inverse dynamics along the reference (FOLLOW_FACTOR × a limit) and --strict refuses it in one line; the
+    bundled arm scenarios pass the same check."""
+    from adaptive_mj.cli import main
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.sim import preflight
+
+    for path in sorted(sc.SCENARIOS_DIR.glob("*.toml")):
+        scn = sc.load(path)
+        if scn.plant.kind != "manipulator":
+            continue
+        s = build(scn)
+        assert preflight.following_line(s.plant, s.reference, scn.simulation.duration) == "", path.name
+        s.plant.release()
+    fast = ("reference.omegas={shoulder_pan=[5e8, 1.7e9, 3.3e9], shoulder_lift=[0.6, 1.9, 3.7], elbow=[0.7, 2.3, "
+            "4.1], wrist_1=[0.8, 2.9, 4.7], wrist_2=[0.9, 3.1, 5.3], wrist_3=[1.1, 3.5, 5.9]}")
+    capfd.readouterr()
+    assert main(["run", "ur5e_identification", "--strict", "--set", fast, "--set", "simulation.duration=1"]) == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "following the reference asks" in err[0] and "of shoulder_pan" in err[0]
+    assert "its actuator's limit 150: no law can follow this reference" in err[0]

@@ -618,6 +618,18 @@ class ManipulatorPlant(ModelClock, BodyEdits):
             out[i] = d.qfrc_bias - d.qfrc_passive
         return out
 
+    def following_controls(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """(N, m) the joint torques [N·m, N on a slide] that make the arm follow rows (q, q̇, q̈) (N, m) exactly:
+        MuJoCo's inverse dynamics (mj_inverse's qfrc_inverse: M q̈ + bias − passive), in the units of ctrl_range
+        (the pre-flight's check that the reference asks what the motors can give)."""
+        d = scratch_data(self.model)
+        out = np.empty((len(q), self.m))
+        for i in range(len(q)):
+            d.qpos[self._qadr], d.qvel[:], d.qacc[:] = q[i], qd[i], qdd[i]  # m = nv joints, in dof order
+            mujoco.mj_inverse(self.model, d)
+            out[i] = d.qfrc_inverse
+        return out
+
     # --- stepping ----------------------------------------------------------
     @contextlib.contextmanager
     def controlled_by(self, policy: Policy) -> Iterator[None]:

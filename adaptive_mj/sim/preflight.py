@@ -60,6 +60,7 @@ class Preflight:
     # where the figure is the linearised loop's only (a boundary layer's K/Φ, which saturates): why, in words
     linearised: str = ""
     gravity: str = ""  # an arm: the line saying gravity alone at the reference needs more than the motors have
+    following: str = ""  # an arm: the line saying following the reference needs far more than the motors have
 
     @property
     def ok(self) -> bool:
@@ -198,12 +199,43 @@ def check(plant: Plant, law: Law, reference, *, duration: float, timing: Control
     lines = getattr(plant, "preflight_lines", None)
     plant_lines = tuple(lines()) if lines is not None else ()
     gravity = gravity_line(plant, reference, duration, order)
+    following = "" if gravity else following_line(plant, reference, duration)
     if found is None:
-        return Preflight(checked=False, outside=outside, plant_lines=plant_lines, gravity=gravity,
+        return Preflight(checked=False, outside=outside, plant_lines=plant_lines, gravity=gravity, following=following,
                          note=f"not checked: the law {type(law).__name__} declares no velocity feedback gain")
     return Preflight(checked=True, figure=found["rate"] * h, limit=limit, rate=found["rate"], step=h,
                      scheme=scheme, joint=found["joint"], fixes=found["fixes"], outside=outside,
-                     plant_lines=plant_lines, linearised=found.get("linearised", ""), gravity=gravity)
+                     plant_lines=plant_lines, linearised=found.get("linearised", ""), gravity=gravity,
+                     following=following)
+
+
+FOLLOW_FACTOR = 10.0  # a reference that asks this many times an actuator's limit is beyond any law
+
+
+def following_line(plant: Plant, reference, duration: float) -> str:
+    """One line when following the reference exactly (inverse dynamics along q_d, q̇_d, q̈_d at SAMPLES times:
+    `following_controls`) asks more than FOLLOW_FACTOR × an actuator's limit: an amplitude or frequency no arm
+    can follow (a moment's saturation is a matter for the run; this is not); "" otherwise, or on a plant
+    without that method or limits."""
+    follow = getattr(plant, "following_controls", None)
+    limits = plant.ctrl_range
+    if follow is None or limits is None:
+        return ""
+    ts = np.linspace(0.0, duration, SAMPLES)
+    rows = [reference(t, 2) for t in ts]
+    q, qd, qdd = (np.array([np.atleast_1d(np.asarray(r[k], dtype=float)) for r in rows]) for k in range(3))
+    if not (np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(qdd).all()):
+        return "pre-flight: the reference is not finite over the run: no law can follow it"
+    need = np.asarray(follow(q, qd, qdd), dtype=float)
+    lim = np.maximum(np.abs(np.asarray(limits[0], dtype=float)), np.abs(np.asarray(limits[1], dtype=float)))
+    ratio = np.abs(need) / np.broadcast_to(lim, need.shape)
+    i, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+    if not ratio[i, j] > FOLLOW_FACTOR:
+        return ""
+    name = plant.joint_names[j] if getattr(plant, "joint_names", ()) else "the joint"
+    return (f"pre-flight: following the reference asks {need[i, j]:.3g} N m of {name} at t = {ts[i]:.3g} s "
+            f"(inverse dynamics along q_d, q̇_d = {qd[i, j]:.3g}, q̈_d = {qdd[i, j]:.3g}), {ratio[i, j]:.3g}× its "
+            f"actuator's limit {lim[j]:.4g}: no law can follow this reference (check its amplitudes and frequencies)")
 
 
 def gravity_line(plant: Plant, reference, duration: float, order: int) -> str:

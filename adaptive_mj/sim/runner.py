@@ -319,7 +319,7 @@ def preflight_of(scn: Scenario, setup: Setup, timing: ControlTiming, *, where: s
     pre = preflight.check(setup.plant, setup.law, setup.reference, duration=scn.simulation.duration, timing=timing)
     for line in pre.outside + pre.plant_lines:
         print(f"{where}: warning: {line}", file=sys.stderr)
-    for failed in ([pre.line()] if not pre.ok else []) + ([pre.gravity] if pre.gravity else []):
+    for failed in ([pre.line()] if not pre.ok else []) + [line for line in (pre.gravity, pre.following) if line]:
         if scn.success.preflight == "refuse":
             raise PreflightRefused(f"{where}: refused (success.preflight = 'refuse'): {failed}")
         print(f"{where}: warning: {failed}", file=sys.stderr)
