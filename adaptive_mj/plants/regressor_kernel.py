@@ -270,3 +270,284 @@ def _project_col(parent, dofadr, dofnum, cdof, b, f, Y, col):
             Y[j, col] += (cdof[j, 0] * f[0] + cdof[j, 1] * f[1] + cdof[j, 2] * f[2]
                           + cdof[j, 3] * f[3] + cdof[j, 4] * f[4] + cdof[j, 5] * f[5])
         x = parent[x]
+
+
+# --- Slotine–Li in O(n): τ = Y π̂ + τ_known and Yᵀ s without forming Y ---------------------------------
+# Niemeyer & Slotine (IJRR 1991): Y π̂ is the recursive Newton–Euler of `regressor` with the bodies' cinert
+# built from the estimates, and Yᵀ s is, per body, the gradient of ⟨w_b, f_b(I)⟩ in the body's parameters,
+# with w_b = Σ_{dofs j on b's path to the world} cdof_j s_j. Both take one forward and one backward pass
+# (docs/THEORY.md, "Slotine–Li in O(n)"). The forward pass and the body forces are `regressor`'s, so the
+# numbers are Y π̂ and Yᵀ s up to the order of the sums (≤ 1e-10 relative, tests/test_slotine_li_rne.py).
+#: the scratch rne_torque and rne_rate share, per body: cv, cw, ca (the forward pass), F (the subtree
+#: forces), ws (the motion of s)
+RNE_SCRATCH = 30
+
+
+def rne_forward(parent, dofadr, dofnum, cdof, gravity, v, w, a, scratch):
+    """The forward pass of `regressor` (cv, cw, ca per body, the same operations in the same order) into
+    scratch (RNE_SCRATCH nbody,): cv at [0, 6 nbody), cw at [6 nbody, 12 nbody), ca at [12 nbody, 18 nbody)."""
+    nbody = parent.shape[0]
+    cv = scratch[0:6 * nbody].reshape((nbody, 6))
+    cw = scratch[6 * nbody:12 * nbody].reshape((nbody, 6))
+    ca = scratch[12 * nbody:18 * nbody].reshape((nbody, 6))
+    for k in range(6):
+        cv[0, k] = 0.0
+        cw[0, k] = 0.0
+        ca[0, k] = 0.0
+    ca[0, 3] = -gravity[0]
+    ca[0, 4] = -gravity[1]
+    ca[0, 5] = -gravity[2]
+    for b in range(1, nbody):
+        p = parent[b]
+        v0, v1, v2, v3, v4, v5 = cv[p, 0], cv[p, 1], cv[p, 2], cv[p, 3], cv[p, 4], cv[p, 5]
+        w0, w1, w2, w3, w4, w5 = cw[p, 0], cw[p, 1], cw[p, 2], cw[p, 3], cw[p, 4], cw[p, 5]
+        a0, a1, a2, a3, a4, a5 = ca[p, 0], ca[p, 1], ca[p, 2], ca[p, 3], ca[p, 4], ca[p, 5]
+        for j in range(dofadr[b], dofadr[b] + dofnum[b]):
+            c0, c1, c2, c3, c4, c5 = cdof[j, 0], cdof[j, 1], cdof[j, 2], cdof[j, 3], cdof[j, 4], cdof[j, 5]
+            s = 0.5 * w[j]  # ½ w_j (cv × cdof_j)
+            a0 += s * (v1 * c2 - v2 * c1)
+            a1 += s * (v2 * c0 - v0 * c2)
+            a2 += s * (v0 * c1 - v1 * c0)
+            a3 += s * (v1 * c5 - v2 * c4 + v4 * c2 - v5 * c1)
+            a4 += s * (v2 * c3 - v0 * c5 + v5 * c0 - v3 * c2)
+            a5 += s * (v0 * c4 - v1 * c3 + v3 * c1 - v4 * c0)
+            s = 0.5 * v[j]  # ½ v_j (cw × cdof_j)
+            a0 += s * (w1 * c2 - w2 * c1)
+            a1 += s * (w2 * c0 - w0 * c2)
+            a2 += s * (w0 * c1 - w1 * c0)
+            a3 += s * (w1 * c5 - w2 * c4 + w4 * c2 - w5 * c1)
+            a4 += s * (w2 * c3 - w0 * c5 + w5 * c0 - w3 * c2)
+            a5 += s * (w0 * c4 - w1 * c3 + w3 * c1 - w4 * c0)
+            aj, vj, wj = a[j], v[j], w[j]
+            a0 += c0 * aj
+            a1 += c1 * aj
+            a2 += c2 * aj
+            a3 += c3 * aj
+            a4 += c4 * aj
+            a5 += c5 * aj
+            v0 += c0 * vj
+            v1 += c1 * vj
+            v2 += c2 * vj
+            v3 += c3 * vj
+            v4 += c4 * vj
+            v5 += c5 * vj
+            w0 += c0 * wj
+            w1 += c1 * wj
+            w2 += c2 * wj
+            w3 += c3 * wj
+            w4 += c4 * wj
+            w5 += c5 * wj
+        cv[b, 0], cv[b, 1], cv[b, 2], cv[b, 3], cv[b, 4], cv[b, 5] = v0, v1, v2, v3, v4, v5
+        cw[b, 0], cw[b, 1], cw[b, 2], cw[b, 3], cw[b, 4], cw[b, 5] = w0, w1, w2, w3, w4, w5
+        ca[b, 0], ca[b, 1], ca[b, 2], ca[b, 3], ca[b, 4], ca[b, 5] = a0, a1, a2, a3, a4, a5
+
+
+def _force_add(ib, ca, cv, cw, F):
+    """F (6,) += I ca + ½ [cv ×* (I cw) + cw ×* (I cv)] for the cinert ib (10,) (_body_force on scalars)."""
+    I0, I1, I2, I3, I4, I5, h0, h1, h2, m = ib[0], ib[1], ib[2], ib[3], ib[4], ib[5], ib[6], ib[7], ib[8], ib[9]
+    x0, x1, x2, x3, x4, x5 = ca[0], ca[1], ca[2], ca[3], ca[4], ca[5]
+    f0 = I0 * x0 + I3 * x1 + I4 * x2 + (h1 * x5 - h2 * x4)
+    f1 = I3 * x0 + I1 * x1 + I5 * x2 + (h2 * x3 - h0 * x5)
+    f2 = I4 * x0 + I5 * x1 + I2 * x2 + (h0 * x4 - h1 * x3)
+    f3 = m * x3 - (h1 * x2 - h2 * x1)
+    f4 = m * x4 - (h2 * x0 - h0 * x2)
+    f5 = m * x5 - (h0 * x1 - h1 * x0)
+    for rep in range(2):
+        if rep == 0:
+            x, y = cw, cv
+        else:
+            x, y = cv, cw
+        x0, x1, x2, x3, x4, x5 = x[0], x[1], x[2], x[3], x[4], x[5]
+        t0 = I0 * x0 + I3 * x1 + I4 * x2 + (h1 * x5 - h2 * x4)
+        t1 = I3 * x0 + I1 * x1 + I5 * x2 + (h2 * x3 - h0 * x5)
+        t2 = I4 * x0 + I5 * x1 + I2 * x2 + (h0 * x4 - h1 * x3)
+        t3 = m * x3 - (h1 * x2 - h2 * x1)
+        t4 = m * x4 - (h2 * x0 - h0 * x2)
+        t5 = m * x5 - (h0 * x1 - h1 * x0)
+        w0, w1, w2, l0, l1, l2 = y[0], y[1], y[2], y[3], y[4], y[5]
+        f0 += 0.5 * (w1 * t2 - w2 * t1 + l1 * t5 - l2 * t4)
+        f1 += 0.5 * (w2 * t0 - w0 * t2 + l2 * t3 - l0 * t5)
+        f2 += 0.5 * (w0 * t1 - w1 * t0 + l0 * t4 - l1 * t3)
+        f3 += 0.5 * (w1 * t5 - w2 * t4)
+        f4 += 0.5 * (w2 * t3 - w0 * t5)
+        f5 += 0.5 * (w0 * t4 - w1 * t3)
+    F[0] += f0
+    F[1] += f1
+    F[2] += f2
+    F[3] += f3
+    F[4] += f4
+    F[5] += f5
+
+
+def rne_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp,  # noqa: C901 (compiled kernel)
+               dof_col_coul, arm_known, damp_known, coulomb_eps, cdof, xpos, xmat, subtree_com, cinert, gravity,
+               v, w, a, pi, tau, scratch):
+    """tau (nv,) = Y(q, v, w, a) π + τ_known of `regressor` (same arguments up to gravity, then v, w, a), in O(n):
+    the forward pass (rne_forward), each body's force f_b(I_b) with I_b its true cinert (a known body) or the
+    cinert of its estimates π[body_col[b]:+10] (cinert_of_params), summed from the leaves to the root
+    (F_b = f_b + Σ_children F_c) and projected on each dof, τ_j = cdof_j · F_b(j); then the joint terms.
+
+    pi (n_standard,): the standard parameters (a base-parameter law passes B θ̂); scratch (RNE_SCRATCH nbody,):
+    the forward pass stays there for rne_rate at the same state."""
+    nbody = parent.shape[0]
+    nv = v.shape[0]
+    rne_forward(parent, dofadr, dofnum, cdof, gravity, v, w, a, scratch)
+    cv = scratch[0:6 * nbody].reshape((nbody, 6))
+    cw = scratch[6 * nbody:12 * nbody].reshape((nbody, 6))
+    ca = scratch[12 * nbody:18 * nbody].reshape((nbody, 6))
+    F = scratch[18 * nbody:24 * nbody].reshape((nbody, 6))
+    cin = scratch[24 * nbody:24 * nbody + 10]
+    r = scratch[24 * nbody + 10:24 * nbody + 13]
+    for b in range(nbody):
+        for k in range(6):
+            F[b, k] = 0.0
+    for b in range(nbody - 1, 0, -1):
+        if body_known[b] != 0:
+            _force_add(cinert[b], ca[b], cv[b], cw[b], F[b])
+        col = body_col[b]
+        if col >= 0:
+            root = rootid[b]
+            for k in range(3):
+                r[k] = xpos[b, k] - subtree_com[root, k]
+            cinert_of_params(pi[col:col + 10], xmat[b], r, cin)
+            _force_add(cin, ca[b], cv[b], cw[b], F[b])
+        for j in range(dofadr[b], dofadr[b] + dofnum[b]):
+            tau[j] = (cdof[j, 0] * F[b, 0] + cdof[j, 1] * F[b, 1] + cdof[j, 2] * F[b, 2]
+                      + cdof[j, 3] * F[b, 3] + cdof[j, 4] * F[b, 4] + cdof[j, 5] * F[b, 5])
+        p = parent[b]
+        if p > 0:
+            for k in range(6):
+                F[p, k] += F[b, k]
+    for j in range(nv):
+        if dof_col_arm[j] >= 0:
+            tau[j] += pi[dof_col_arm[j]] * a[j]
+        else:
+            tau[j] += arm_known[j] * a[j]
+        if dof_col_damp[j] >= 0:
+            tau[j] += pi[dof_col_damp[j]] * v[j]
+        else:
+            tau[j] += damp_known[j] * v[j]
+        if dof_col_coul[j] >= 0:
+            tau[j] += pi[dof_col_coul[j]] * math.tanh(v[j] / coulomb_eps)
+
+
+def _sym_add(x0, x1, x2, y0, y1, y2, G):
+    """G[0:6] += the weights of xᵀ I y on (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) of a symmetric I: x_i y_i, x_i y_k + x_k y_i."""
+    G[0] += x0 * y0
+    G[1] += x1 * y1
+    G[2] += x2 * y2
+    G[3] += x0 * y1 + x1 * y0
+    G[4] += x0 * y2 + x2 * y0
+    G[5] += x1 * y2 + x2 * y1
+
+
+def _bilinear_grad_add(x, y, scale, G):
+    """G (10,) += scale × the gradient in the cinert numbers of xᵀ I y (I the spatial inertia of a cinert):
+    xᵀ I y = x_angᵀ I_rot y_ang + h · (y_lin × x_ang + x_lin × y_ang) + m x_lin · y_lin."""
+    x0, x1, x2, x3, x4, x5 = scale * x[0], scale * x[1], scale * x[2], scale * x[3], scale * x[4], scale * x[5]
+    y0, y1, y2, y3, y4, y5 = y[0], y[1], y[2], y[3], y[4], y[5]
+    _sym_add(x0, x1, x2, y0, y1, y2, G)
+    G[6] += (y4 * x2 - y5 * x1) + (x4 * y2 - x5 * y1)
+    G[7] += (y5 * x0 - y3 * x2) + (x5 * y0 - x3 * y2)
+    G[8] += (y3 * x1 - y4 * x0) + (x3 * y1 - x4 * y0)
+    G[9] += x3 * y3 + x4 * y4 + x5 * y5
+
+
+def _cross(v, u, out):
+    """out (6,) = v × u (spatial motion cross product: ang = ω × u_ang, lin = ω × u_lin + v_lin × u_ang)."""
+    w0, w1, w2, l0, l1, l2 = v[0], v[1], v[2], v[3], v[4], v[5]
+    out[0] = w1 * u[2] - w2 * u[1]
+    out[1] = w2 * u[0] - w0 * u[2]
+    out[2] = w0 * u[1] - w1 * u[0]
+    out[3] = w1 * u[5] - w2 * u[4] + l1 * u[2] - l2 * u[1]
+    out[4] = w2 * u[3] - w0 * u[5] + l2 * u[0] - l0 * u[2]
+    out[5] = w0 * u[4] - w1 * u[3] + l0 * u[1] - l1 * u[0]
+
+
+def rne_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp, dof_col_coul, coulomb_eps,  # noqa: C901 (compiled kernel)
+             cdof, xpos, xmat, subtree_com, v, a, s, rate, scratch):
+    """rate (n_standard,) = Y(q, v, w, a)ᵀ s in O(n), after rne_torque at the same state (its forward pass in
+    scratch). Forward: ws_b = ws_parent + Σ_{dofs j of b} cdof_j s_j, the motion the test velocities s give
+    body b. Per unknown body: ⟨ws, f(I)⟩ = wsᵀ I ca − ½ (cv × ws)ᵀ I cw − ½ (cw × ws)ᵀ I cv (v ×* = −(v ×)ᵀ),
+    its gradient G in the cinert numbers (_bilinear_grad_add), then in the body-frame parameters through
+    cinert_of_params' map L: rate = Lᵀ G (the m, m·c and inertia parts below). Then the joint terms
+    a_j s_j, v_j s_j, tanh(v_j / ε) s_j. Columns of known bodies and joints are not written."""
+    nbody = parent.shape[0]
+    nv = v.shape[0]
+    cv = scratch[0:6 * nbody].reshape((nbody, 6))
+    cw = scratch[6 * nbody:12 * nbody].reshape((nbody, 6))
+    ca = scratch[12 * nbody:18 * nbody].reshape((nbody, 6))
+    ws = scratch[18 * nbody:24 * nbody].reshape((nbody, 6))  # rne_torque's F, no longer needed
+    G = scratch[24 * nbody:24 * nbody + 10]
+    t = scratch[24 * nbody + 10:24 * nbody + 16]
+    for k in range(6):
+        ws[0, k] = 0.0
+    for b in range(1, nbody):
+        p = parent[b]
+        for k in range(6):
+            ws[b, k] = ws[p, k]
+        for j in range(dofadr[b], dofadr[b] + dofnum[b]):
+            sj = s[j]
+            for k in range(6):
+                ws[b, k] += cdof[j, k] * sj
+        col = body_col[b]
+        if col < 0:
+            continue
+        for i in range(10):
+            G[i] = 0.0
+        _bilinear_grad_add(ws[b], ca[b], 1.0, G)
+        _cross(cv[b], ws[b], t)
+        _bilinear_grad_add(t, cw[b], -0.5, G)
+        _cross(cw[b], ws[b], t)
+        _bilinear_grad_add(t, cv[b], -0.5, G)
+        # G on the cinert (I_w 6, h_w 3, m): J = Gs : I_w + g_h · h_w' + g_m m with Gs symmetric (Gs_ii = G_i,
+        # Gs_ik = G_(ik) / 2), I_w = R I_b Rᵀ + m (|r|² E − r rᵀ) + 2 (h·r) E − (h rᵀ + r hᵀ), h_w' = m r + h,
+        # h = R h_b (cinert_of_params)
+        root = rootid[b]
+        r0 = xpos[b, 0] - subtree_com[root, 0]
+        r1 = xpos[b, 1] - subtree_com[root, 1]
+        r2 = xpos[b, 2] - subtree_com[root, 2]
+        S00, S11, S22 = G[0], G[1], G[2]
+        S01, S02, S12 = 0.5 * G[3], 0.5 * G[4], 0.5 * G[5]
+        gh0, gh1, gh2, gm = G[6], G[7], G[8], G[9]
+        tr = S00 + S11 + S22
+        Sr0 = S00 * r0 + S01 * r1 + S02 * r2
+        Sr1 = S01 * r0 + S11 * r1 + S12 * r2
+        Sr2 = S02 * r0 + S12 * r1 + S22 * r2
+        rr = r0 * r0 + r1 * r1 + r2 * r2
+        rate[col] = rr * tr - (r0 * Sr0 + r1 * Sr1 + r2 * Sr2) + (gh0 * r0 + gh1 * r1 + gh2 * r2) + gm
+        # the gradient in h (world), then h_b = Rᵀ h
+        d0 = 2.0 * r0 * tr - 2.0 * Sr0 + gh0
+        d1 = 2.0 * r1 * tr - 2.0 * Sr1 + gh1
+        d2 = 2.0 * r2 * tr - 2.0 * Sr2 + gh2
+        X = xmat[b]
+        for c in range(3):
+            rate[col + 1 + c] = X[c] * d0 + X[3 + c] * d1 + X[6 + c] * d2
+        # Gs : R I_b Rᵀ = (Rᵀ Gs R) : I_b, an off-diagonal I_b entry counted twice
+        for u in range(6):
+            if u == 0:
+                pa, pb = 0, 0
+            elif u == 1:
+                pa, pb = 0, 1
+            elif u == 2:
+                pa, pb = 1, 1
+            elif u == 3:
+                pa, pb = 0, 2
+            elif u == 4:
+                pa, pb = 1, 2
+            else:
+                pa, pb = 2, 2
+            xa0, xa1, xa2 = X[pa], X[3 + pa], X[6 + pa]
+            xb0, xb1, xb2 = X[pb], X[3 + pb], X[6 + pb]
+            q0 = S00 * xb0 + S01 * xb1 + S02 * xb2
+            q1 = S01 * xb0 + S11 * xb1 + S12 * xb2
+            q2 = S02 * xb0 + S12 * xb1 + S22 * xb2
+            val = xa0 * q0 + xa1 * q1 + xa2 * q2
+            rate[col + 4 + u] = val if pa == pb else 2.0 * val
+    for j in range(nv):
+        if dof_col_arm[j] >= 0:
+            rate[dof_col_arm[j]] = a[j] * s[j]
+        if dof_col_damp[j] >= 0:
+            rate[dof_col_damp[j]] = v[j] * s[j]
+        if dof_col_coul[j] >= 0:
+            rate[dof_col_coul[j]] = math.tanh(v[j] / coulomb_eps) * s[j]
