@@ -174,6 +174,9 @@ class LogHeader:
     joint_limits: list | None = None  # format 5: (m, 2) joint ranges [rad or m], null entries unlimited
     control_names: tuple[str, ...] = ()  # format 6: the k actuators where u is not one per joint (else ())
     state_names: tuple[str, ...] = ()  # format 6: a name per row of x where they are not y's derivatives (else ())
+    # a Slotine–Li law's evaluation of Y π̂ and Yᵀ s, "recursive" (O(n)) or "regressor" (Y whole); "" for other
+    # laws. Written since the O(n) form; a log without it ran the regressor form (log.verify re-runs it so)
+    law_evaluation: str = ""
 
     @property
     def log_every(self) -> int:
@@ -472,6 +475,7 @@ class Recorder:
             "joint_limits": json.dumps(_finite_or_null(h.joint_limits)),
             "embedded_sha256": embedded_digest(h.model_xml, h.model_source, h.model_assets),
             "created_unix": repr(float(h.created_unix)),
+            "law_evaluation": h.law_evaluation,
         }
         meta.update({VERSION_KEY_PREFIX + k: v for k, v in sorted(h.versions.items())})
         self._writer.add_metadata(HEADER_METADATA, meta)

@@ -432,7 +432,8 @@ def rne_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm
 
 
 def _sym_add(x0, x1, x2, y0, y1, y2, G):
-    """G[0:6] += the weights of xᵀ I y on (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) of a symmetric I: x_i y_i, x_i y_k + x_k y_i."""
+    """G[0:6] += the weights of xᵀ I y on (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) of a symmetric I: x_i y_i and
+    x_i y_k + x_k y_i."""
     G[0] += x0 * y0
     G[1] += x1 * y1
     G[2] += x2 * y2
@@ -551,3 +552,41 @@ def rne_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp
             rate[dof_col_damp[j]] = v[j] * s[j]
         if dof_col_coul[j] >= 0:
             rate[dof_col_coul[j]] = math.tanh(v[j] / coulomb_eps) * s[j]
+
+
+def rne_law_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp, dof_col_coul,
+                   arm_known, damp_known, coulomb_eps, cdof, xpos, xmat, subtree_com, cinert, gravity, v, w, a, theta,
+                   has_base, bptr, bidx, bval, pi, tau, scratch):
+    """rne_torque for a law's estimates θ (n_params,): the standard parameters π = B θ first when has_base (B by
+    columns: column c's entries bval[p] in rows bidx[p], p in [bptr[c], bptr[c + 1])), else π = θ (pi unused).
+    tau (nv,) = Y θ + τ_known, Y the law's regressor (Y_standard B with a base map)."""
+    if has_base != 0:
+        for i in range(pi.shape[0]):
+            pi[i] = 0.0
+        for c in range(theta.shape[0]):
+            for p in range(bptr[c], bptr[c + 1]):
+                pi[bidx[p]] += bval[p] * theta[c]
+        rne_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp, dof_col_coul,
+                   arm_known, damp_known, coulomb_eps, cdof, xpos, xmat, subtree_com, cinert, gravity, v, w, a, pi,
+                   tau, scratch)
+    else:
+        rne_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp, dof_col_coul,
+                   arm_known, damp_known, coulomb_eps, cdof, xpos, xmat, subtree_com, cinert, gravity, v, w, a, theta,
+                   tau, scratch)
+
+
+def rne_law_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp, dof_col_coul, coulomb_eps,
+                 cdof, xpos, xmat, subtree_com, v, a, s, has_base, bptr, bidx, bval, rate_std, rate, scratch):
+    """rne_rate for a law: rate (n_params,) = Yᵀ s, Y the law's regressor (with a base map Bᵀ (Y_standardᵀ s),
+    through rate_std (n_standard,)); after rne_law_torque at the same state."""
+    if has_base != 0:
+        rne_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp, dof_col_coul, coulomb_eps,
+                 cdof, xpos, xmat, subtree_com, v, a, s, rate_std, scratch)
+        for c in range(rate.shape[0]):
+            acc = 0.0
+            for p in range(bptr[c], bptr[c + 1]):
+                acc += bval[p] * rate_std[bidx[p]]
+            rate[c] = acc
+    else:
+        rne_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp, dof_col_coul, coulomb_eps,
+                 cdof, xpos, xmat, subtree_com, v, a, s, rate, scratch)
