@@ -342,10 +342,45 @@ def rne_forward(parent, dofadr, dofnum, cdof, gravity, v, w, a, scratch):
         ca[b, 0], ca[b, 1], ca[b, 2], ca[b, 3], ca[b, 4], ca[b, 5] = a0, a1, a2, a3, a4, a5
 
 
-def _force_add(ib, ca, cv, cw, F):
-    """F (6,) += I ca + ½ [cv ×* (I cw) + cw ×* (I cv)] for the cinert ib (10,) (_body_force on scalars)."""
-    I0, I1, I2, I3, I4, I5, h0, h1, h2, m = ib[0], ib[1], ib[2], ib[3], ib[4], ib[5], ib[6], ib[7], ib[8], ib[9]
-    x0, x1, x2, x3, x4, x5 = ca[0], ca[1], ca[2], ca[3], ca[4], ca[5]
+def _cinert_scalars(p, col, xmat, b, r0, r1, r2):
+    """cinert_of_params(p[col:col + 10], xmat[b], r) as 10 scalars, without work arrays or views (the same
+    formula; r = xpos_b - subtree_com of the root)."""
+    X0, X1, X2, X3, X4 = xmat[b, 0], xmat[b, 1], xmat[b, 2], xmat[b, 3], xmat[b, 4]
+    X5, X6, X7, X8 = xmat[b, 5], xmat[b, 6], xmat[b, 7], xmat[b, 8]
+    m = p[col]
+    hb0, hb1, hb2 = p[col + 1], p[col + 2], p[col + 3]
+    B00, B01, B11, B02, B12, B22 = p[col + 4], p[col + 5], p[col + 6], p[col + 7], p[col + 8], p[col + 9]
+    # R I_b (row i) then (R I_b) Rᵀ
+    a00 = X0 * B00 + X1 * B01 + X2 * B02
+    a01 = X0 * B01 + X1 * B11 + X2 * B12
+    a02 = X0 * B02 + X1 * B12 + X2 * B22
+    a10 = X3 * B00 + X4 * B01 + X5 * B02
+    a11 = X3 * B01 + X4 * B11 + X5 * B12
+    a12 = X3 * B02 + X4 * B12 + X5 * B22
+    a20 = X6 * B00 + X7 * B01 + X8 * B02
+    a21 = X6 * B01 + X7 * B11 + X8 * B12
+    a22 = X6 * B02 + X7 * B12 + X8 * B22
+    i00 = a00 * X0 + a01 * X1 + a02 * X2
+    i11 = a10 * X3 + a11 * X4 + a12 * X5
+    i22 = a20 * X6 + a21 * X7 + a22 * X8
+    i01 = a00 * X3 + a01 * X4 + a02 * X5
+    i02 = a00 * X6 + a01 * X7 + a02 * X8
+    i12 = a10 * X6 + a11 * X7 + a12 * X8
+    h0 = X0 * hb0 + X1 * hb1 + X2 * hb2
+    h1 = X3 * hb0 + X4 * hb1 + X5 * hb2
+    h2 = X6 * hb0 + X7 * hb1 + X8 * hb2
+    rr = r0 * r0 + r1 * r1 + r2 * r2
+    d = m * rr + 2.0 * (h0 * r0 + h1 * r1 + h2 * r2)
+    return (i00 - m * r0 * r0 - 2.0 * h0 * r0 + d, i11 - m * r1 * r1 - 2.0 * h1 * r1 + d,
+            i22 - m * r2 * r2 - 2.0 * h2 * r2 + d, i01 - m * r0 * r1 - h0 * r1 - r0 * h1,
+            i02 - m * r0 * r2 - h0 * r2 - r0 * h2, i12 - m * r1 * r2 - h1 * r2 - r1 * h2,
+            m * r0 + h0, m * r1 + h1, m * r2 + h2, m)
+
+
+def _force_add(I0, I1, I2, I3, I4, I5, h0, h1, h2, m, S, oa, ov, ow, oF):
+    """S[oF:oF+6] += I ca + ½ [cv ×* (I cw) + cw ×* (I cv)] for the cinert I (10 scalars) (_body_force on
+    scalars), ca, cv, cw at S[oa:oa+6], S[ov:ov+6], S[ow:ow+6] (offsets into one flat buffer: no array views)."""
+    x0, x1, x2, x3, x4, x5 = S[oa], S[oa + 1], S[oa + 2], S[oa + 3], S[oa + 4], S[oa + 5]
     f0 = I0 * x0 + I3 * x1 + I4 * x2 + (h1 * x5 - h2 * x4)
     f1 = I3 * x0 + I1 * x1 + I5 * x2 + (h2 * x3 - h0 * x5)
     f2 = I4 * x0 + I5 * x1 + I2 * x2 + (h0 * x4 - h1 * x3)
@@ -354,29 +389,29 @@ def _force_add(ib, ca, cv, cw, F):
     f5 = m * x5 - (h0 * x1 - h1 * x0)
     for rep in range(2):
         if rep == 0:
-            x, y = cw, cv
+            ox, oy = ow, ov
         else:
-            x, y = cv, cw
-        x0, x1, x2, x3, x4, x5 = x[0], x[1], x[2], x[3], x[4], x[5]
+            ox, oy = ov, ow
+        x0, x1, x2, x3, x4, x5 = S[ox], S[ox + 1], S[ox + 2], S[ox + 3], S[ox + 4], S[ox + 5]
         t0 = I0 * x0 + I3 * x1 + I4 * x2 + (h1 * x5 - h2 * x4)
         t1 = I3 * x0 + I1 * x1 + I5 * x2 + (h2 * x3 - h0 * x5)
         t2 = I4 * x0 + I5 * x1 + I2 * x2 + (h0 * x4 - h1 * x3)
         t3 = m * x3 - (h1 * x2 - h2 * x1)
         t4 = m * x4 - (h2 * x0 - h0 * x2)
         t5 = m * x5 - (h0 * x1 - h1 * x0)
-        w0, w1, w2, l0, l1, l2 = y[0], y[1], y[2], y[3], y[4], y[5]
+        w0, w1, w2, l0, l1, l2 = S[oy], S[oy + 1], S[oy + 2], S[oy + 3], S[oy + 4], S[oy + 5]
         f0 += 0.5 * (w1 * t2 - w2 * t1 + l1 * t5 - l2 * t4)
         f1 += 0.5 * (w2 * t0 - w0 * t2 + l2 * t3 - l0 * t5)
         f2 += 0.5 * (w0 * t1 - w1 * t0 + l0 * t4 - l1 * t3)
         f3 += 0.5 * (w1 * t5 - w2 * t4)
         f4 += 0.5 * (w2 * t3 - w0 * t5)
         f5 += 0.5 * (w0 * t4 - w1 * t3)
-    F[0] += f0
-    F[1] += f1
-    F[2] += f2
-    F[3] += f3
-    F[4] += f4
-    F[5] += f5
+    S[oF] += f0
+    S[oF + 1] += f1
+    S[oF + 2] += f2
+    S[oF + 3] += f3
+    S[oF + 4] += f4
+    S[oF + 5] += f5
 
 
 def rne_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp,  # noqa: C901 (compiled kernel)
@@ -388,36 +423,41 @@ def rne_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm
     (F_b = f_b + Σ_children F_c) and projected on each dof, τ_j = cdof_j · F_b(j); then the joint terms.
 
     pi (n_standard,): the standard parameters (a base-parameter law passes B θ̂); scratch (RNE_SCRATCH nbody,):
-    the forward pass stays there for rne_rate at the same state."""
+    the forward pass stays there for rne_rate at the same state. Flat offsets into scratch, not array views
+    (a view per body costs more than its force here)."""
     nbody = parent.shape[0]
     nv = v.shape[0]
     rne_forward(parent, dofadr, dofnum, cdof, gravity, v, w, a, scratch)
-    cv = scratch[0:6 * nbody].reshape((nbody, 6))
-    cw = scratch[6 * nbody:12 * nbody].reshape((nbody, 6))
-    ca = scratch[12 * nbody:18 * nbody].reshape((nbody, 6))
-    F = scratch[18 * nbody:24 * nbody].reshape((nbody, 6))
-    cin = scratch[24 * nbody:24 * nbody + 10]
-    r = scratch[24 * nbody + 10:24 * nbody + 13]
-    for b in range(nbody):
-        for k in range(6):
-            F[b, k] = 0.0
+    S = scratch
+    OV, OW, OA, OF = 0, 6 * nbody, 12 * nbody, 18 * nbody
+    for k in range(6 * nbody):
+        S[OF + k] = 0.0
     for b in range(nbody - 1, 0, -1):
+        ob = 6 * b
         if body_known[b] != 0:
-            _force_add(cinert[b], ca[b], cv[b], cw[b], F[b])
+            _force_add(cinert[b, 0], cinert[b, 1], cinert[b, 2], cinert[b, 3], cinert[b, 4], cinert[b, 5],
+                       cinert[b, 6], cinert[b, 7], cinert[b, 8], cinert[b, 9], S, OA + ob, OV + ob, OW + ob, OF + ob)
         col = body_col[b]
         if col >= 0:
             root = rootid[b]
-            for k in range(3):
-                r[k] = xpos[b, k] - subtree_com[root, k]
-            cinert_of_params(pi[col:col + 10], xmat[b], r, cin)
-            _force_add(cin, ca[b], cv[b], cw[b], F[b])
+            I0, I1, I2, I3, I4, I5, h0, h1, h2, m = _cinert_scalars(
+                pi, col, xmat, b, xpos[b, 0] - subtree_com[root, 0], xpos[b, 1] - subtree_com[root, 1],
+                xpos[b, 2] - subtree_com[root, 2])
+            _force_add(I0, I1, I2, I3, I4, I5, h0, h1, h2, m, S, OA + ob, OV + ob, OW + ob, OF + ob)
+        F0, F1, F2 = S[OF + ob], S[OF + ob + 1], S[OF + ob + 2]
+        F3, F4, F5 = S[OF + ob + 3], S[OF + ob + 4], S[OF + ob + 5]
         for j in range(dofadr[b], dofadr[b] + dofnum[b]):
-            tau[j] = (cdof[j, 0] * F[b, 0] + cdof[j, 1] * F[b, 1] + cdof[j, 2] * F[b, 2]
-                      + cdof[j, 3] * F[b, 3] + cdof[j, 4] * F[b, 4] + cdof[j, 5] * F[b, 5])
+            tau[j] = (cdof[j, 0] * F0 + cdof[j, 1] * F1 + cdof[j, 2] * F2
+                      + cdof[j, 3] * F3 + cdof[j, 4] * F4 + cdof[j, 5] * F5)
         p = parent[b]
         if p > 0:
-            for k in range(6):
-                F[p, k] += F[b, k]
+            op = OF + 6 * p
+            S[op] += F0
+            S[op + 1] += F1
+            S[op + 2] += F2
+            S[op + 3] += F3
+            S[op + 4] += F4
+            S[op + 5] += F5
     for j in range(nv):
         if dof_col_arm[j] >= 0:
             tau[j] += pi[dof_col_arm[j]] * a[j]
@@ -431,38 +471,20 @@ def rne_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm
             tau[j] += pi[dof_col_coul[j]] * math.tanh(v[j] / coulomb_eps)
 
 
-def _sym_add(x0, x1, x2, y0, y1, y2, G):
-    """G[0:6] += the weights of xᵀ I y on (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) of a symmetric I: x_i y_i and
-    x_i y_k + x_k y_i."""
-    G[0] += x0 * y0
-    G[1] += x1 * y1
-    G[2] += x2 * y2
-    G[3] += x0 * y1 + x1 * y0
-    G[4] += x0 * y2 + x2 * y0
-    G[5] += x1 * y2 + x2 * y1
+def _bilinear_grad(x0, x1, x2, x3, x4, x5, y0, y1, y2, y3, y4, y5):
+    """The gradient (10 scalars) in the cinert numbers of xᵀ I y (I the spatial inertia of a cinert):
+    xᵀ I y = x_angᵀ I_rot y_ang + h · (y_lin × x_ang + x_lin × y_ang) + m x_lin · y_lin; on (Ixx, Iyy, Izz)
+    x_i y_i, on (Ixy, Ixz, Iyz) x_i y_k + x_k y_i."""
+    return (x0 * y0, x1 * y1, x2 * y2, x0 * y1 + x1 * y0, x0 * y2 + x2 * y0, x1 * y2 + x2 * y1,
+            (y4 * x2 - y5 * x1) + (x4 * y2 - x5 * y1), (y5 * x0 - y3 * x2) + (x5 * y0 - x3 * y2),
+            (y3 * x1 - y4 * x0) + (x3 * y1 - x4 * y0), x3 * y3 + x4 * y4 + x5 * y5)
 
 
-def _bilinear_grad_add(x, y, scale, G):
-    """G (10,) += scale × the gradient in the cinert numbers of xᵀ I y (I the spatial inertia of a cinert):
-    xᵀ I y = x_angᵀ I_rot y_ang + h · (y_lin × x_ang + x_lin × y_ang) + m x_lin · y_lin."""
-    x0, x1, x2, x3, x4, x5 = scale * x[0], scale * x[1], scale * x[2], scale * x[3], scale * x[4], scale * x[5]
-    y0, y1, y2, y3, y4, y5 = y[0], y[1], y[2], y[3], y[4], y[5]
-    _sym_add(x0, x1, x2, y0, y1, y2, G)
-    G[6] += (y4 * x2 - y5 * x1) + (x4 * y2 - x5 * y1)
-    G[7] += (y5 * x0 - y3 * x2) + (x5 * y0 - x3 * y2)
-    G[8] += (y3 * x1 - y4 * x0) + (x3 * y1 - x4 * y0)
-    G[9] += x3 * y3 + x4 * y4 + x5 * y5
-
-
-def _cross(v, u, out):
-    """out (6,) = v × u (spatial motion cross product: ang = ω × u_ang, lin = ω × u_lin + v_lin × u_ang)."""
-    w0, w1, w2, l0, l1, l2 = v[0], v[1], v[2], v[3], v[4], v[5]
-    out[0] = w1 * u[2] - w2 * u[1]
-    out[1] = w2 * u[0] - w0 * u[2]
-    out[2] = w0 * u[1] - w1 * u[0]
-    out[3] = w1 * u[5] - w2 * u[4] + l1 * u[2] - l2 * u[1]
-    out[4] = w2 * u[3] - w0 * u[5] + l2 * u[0] - l0 * u[2]
-    out[5] = w0 * u[4] - w1 * u[3] + l0 * u[1] - l1 * u[0]
+def _cross(w0, w1, w2, l0, l1, l2, u0, u1, u2, u3, u4, u5):
+    """v × u (spatial motion cross product: ang = ω × u_ang, lin = ω × u_lin + v_lin × u_ang), 6 scalars."""
+    return (w1 * u2 - w2 * u1, w2 * u0 - w0 * u2, w0 * u1 - w1 * u0,
+            w1 * u5 - w2 * u4 + l1 * u2 - l2 * u1, w2 * u3 - w0 * u5 + l2 * u0 - l0 * u2,
+            w0 * u4 - w1 * u3 + l0 * u1 - l1 * u0)
 
 
 def rne_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp, dof_col_coul, coulomb_eps,  # noqa: C901 (compiled kernel)
@@ -470,37 +492,45 @@ def rne_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp
     """rate (n_standard,) = Y(q, v, w, a)ᵀ s in O(n), after rne_torque at the same state (its forward pass in
     scratch). Forward: ws_b = ws_parent + Σ_{dofs j of b} cdof_j s_j, the motion the test velocities s give
     body b. Per unknown body: ⟨ws, f(I)⟩ = wsᵀ I ca − ½ (cv × ws)ᵀ I cw − ½ (cw × ws)ᵀ I cv (v ×* = −(v ×)ᵀ),
-    its gradient G in the cinert numbers (_bilinear_grad_add), then in the body-frame parameters through
+    its gradient G in the cinert numbers (_bilinear_grad), then in the body-frame parameters through
     cinert_of_params' map L: rate = Lᵀ G (the m, m·c and inertia parts below). Then the joint terms
     a_j s_j, v_j s_j, tanh(v_j / ε) s_j. Columns of known bodies and joints are not written."""
     nbody = parent.shape[0]
     nv = v.shape[0]
-    cv = scratch[0:6 * nbody].reshape((nbody, 6))
-    cw = scratch[6 * nbody:12 * nbody].reshape((nbody, 6))
-    ca = scratch[12 * nbody:18 * nbody].reshape((nbody, 6))
-    ws = scratch[18 * nbody:24 * nbody].reshape((nbody, 6))  # rne_torque's F, no longer needed
-    G = scratch[24 * nbody:24 * nbody + 10]
-    t = scratch[24 * nbody + 10:24 * nbody + 16]
+    S = scratch
+    OV, OW, OA, OS = 0, 6 * nbody, 12 * nbody, 18 * nbody  # ws where rne_torque's F was
     for k in range(6):
-        ws[0, k] = 0.0
+        S[OS + k] = 0.0
     for b in range(1, nbody):
-        p = parent[b]
-        for k in range(6):
-            ws[b, k] = ws[p, k]
+        ob, op = 6 * b, 6 * parent[b]
+        z0, z1, z2 = S[OS + op], S[OS + op + 1], S[OS + op + 2]
+        z3, z4, z5 = S[OS + op + 3], S[OS + op + 4], S[OS + op + 5]
         for j in range(dofadr[b], dofadr[b] + dofnum[b]):
             sj = s[j]
-            for k in range(6):
-                ws[b, k] += cdof[j, k] * sj
+            z0 += cdof[j, 0] * sj
+            z1 += cdof[j, 1] * sj
+            z2 += cdof[j, 2] * sj
+            z3 += cdof[j, 3] * sj
+            z4 += cdof[j, 4] * sj
+            z5 += cdof[j, 5] * sj
+        S[OS + ob], S[OS + ob + 1], S[OS + ob + 2] = z0, z1, z2
+        S[OS + ob + 3], S[OS + ob + 4], S[OS + ob + 5] = z3, z4, z5
         col = body_col[b]
         if col < 0:
             continue
-        for i in range(10):
-            G[i] = 0.0
-        _bilinear_grad_add(ws[b], ca[b], 1.0, G)
-        _cross(cv[b], ws[b], t)
-        _bilinear_grad_add(t, cw[b], -0.5, G)
-        _cross(cw[b], ws[b], t)
-        _bilinear_grad_add(t, cv[b], -0.5, G)
+        ov, ow, oa = OV + ob, OW + ob, OA + ob
+        v0, v1, v2, v3, v4, v5 = S[ov], S[ov + 1], S[ov + 2], S[ov + 3], S[ov + 4], S[ov + 5]
+        w0, w1, w2, w3, w4, w5 = S[ow], S[ow + 1], S[ow + 2], S[ow + 3], S[ow + 4], S[ow + 5]
+        a0, a1, a2, a3, a4, a5 = S[oa], S[oa + 1], S[oa + 2], S[oa + 3], S[oa + 4], S[oa + 5]
+        G0, G1, G2, G3, G4, G5, G6, G7, G8, G9 = _bilinear_grad(z0, z1, z2, z3, z4, z5, a0, a1, a2, a3, a4, a5)
+        t0, t1, t2, t3, t4, t5 = _cross(v0, v1, v2, v3, v4, v5, z0, z1, z2, z3, z4, z5)  # cv × ws
+        g0, g1, g2, g3, g4, g5, g6, g7, g8, g9 = _bilinear_grad(t0, t1, t2, t3, t4, t5, w0, w1, w2, w3, w4, w5)
+        G0, G1, G2, G3, G4 = G0 - 0.5 * g0, G1 - 0.5 * g1, G2 - 0.5 * g2, G3 - 0.5 * g3, G4 - 0.5 * g4
+        G5, G6, G7, G8, G9 = G5 - 0.5 * g5, G6 - 0.5 * g6, G7 - 0.5 * g7, G8 - 0.5 * g8, G9 - 0.5 * g9
+        t0, t1, t2, t3, t4, t5 = _cross(w0, w1, w2, w3, w4, w5, z0, z1, z2, z3, z4, z5)  # cw × ws
+        g0, g1, g2, g3, g4, g5, g6, g7, g8, g9 = _bilinear_grad(t0, t1, t2, t3, t4, t5, v0, v1, v2, v3, v4, v5)
+        G0, G1, G2, G3, G4 = G0 - 0.5 * g0, G1 - 0.5 * g1, G2 - 0.5 * g2, G3 - 0.5 * g3, G4 - 0.5 * g4
+        G5, G6, G7, G8, G9 = G5 - 0.5 * g5, G6 - 0.5 * g6, G7 - 0.5 * g7, G8 - 0.5 * g8, G9 - 0.5 * g9
         # G on the cinert (I_w 6, h_w 3, m): J = Gs : I_w + g_h · h_w' + g_m m with Gs symmetric (Gs_ii = G_i,
         # Gs_ik = G_(ik) / 2), I_w = R I_b Rᵀ + m (|r|² E − r rᵀ) + 2 (h·r) E − (h rᵀ + r hᵀ), h_w' = m r + h,
         # h = R h_b (cinert_of_params)
@@ -508,22 +538,20 @@ def rne_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp
         r0 = xpos[b, 0] - subtree_com[root, 0]
         r1 = xpos[b, 1] - subtree_com[root, 1]
         r2 = xpos[b, 2] - subtree_com[root, 2]
-        S00, S11, S22 = G[0], G[1], G[2]
-        S01, S02, S12 = 0.5 * G[3], 0.5 * G[4], 0.5 * G[5]
-        gh0, gh1, gh2, gm = G[6], G[7], G[8], G[9]
+        S00, S11, S22 = G0, G1, G2
+        S01, S02, S12 = 0.5 * G3, 0.5 * G4, 0.5 * G5
         tr = S00 + S11 + S22
         Sr0 = S00 * r0 + S01 * r1 + S02 * r2
         Sr1 = S01 * r0 + S11 * r1 + S12 * r2
         Sr2 = S02 * r0 + S12 * r1 + S22 * r2
         rr = r0 * r0 + r1 * r1 + r2 * r2
-        rate[col] = rr * tr - (r0 * Sr0 + r1 * Sr1 + r2 * Sr2) + (gh0 * r0 + gh1 * r1 + gh2 * r2) + gm
+        rate[col] = rr * tr - (r0 * Sr0 + r1 * Sr1 + r2 * Sr2) + (G6 * r0 + G7 * r1 + G8 * r2) + G9
         # the gradient in h (world), then h_b = Rᵀ h
-        d0 = 2.0 * r0 * tr - 2.0 * Sr0 + gh0
-        d1 = 2.0 * r1 * tr - 2.0 * Sr1 + gh1
-        d2 = 2.0 * r2 * tr - 2.0 * Sr2 + gh2
-        X = xmat[b]
+        d0 = 2.0 * r0 * tr - 2.0 * Sr0 + G6
+        d1 = 2.0 * r1 * tr - 2.0 * Sr1 + G7
+        d2 = 2.0 * r2 * tr - 2.0 * Sr2 + G8
         for c in range(3):
-            rate[col + 1 + c] = X[c] * d0 + X[3 + c] * d1 + X[6 + c] * d2
+            rate[col + 1 + c] = xmat[b, c] * d0 + xmat[b, 3 + c] * d1 + xmat[b, 6 + c] * d2
         # Gs : R I_b Rᵀ = (Rᵀ Gs R) : I_b, an off-diagonal I_b entry counted twice
         for u in range(6):
             if u == 0:
@@ -538,8 +566,8 @@ def rne_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp
                 pa, pb = 1, 2
             else:
                 pa, pb = 2, 2
-            xa0, xa1, xa2 = X[pa], X[3 + pa], X[6 + pa]
-            xb0, xb1, xb2 = X[pb], X[3 + pb], X[6 + pb]
+            xa0, xa1, xa2 = xmat[b, pa], xmat[b, 3 + pa], xmat[b, 6 + pa]
+            xb0, xb1, xb2 = xmat[b, pb], xmat[b, 3 + pb], xmat[b, 6 + pb]
             q0 = S00 * xb0 + S01 * xb1 + S02 * xb2
             q1 = S01 * xb0 + S11 * xb1 + S12 * xb2
             q2 = S02 * xb0 + S12 * xb1 + S22 * xb2

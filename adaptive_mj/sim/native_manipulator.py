@@ -597,8 +597,8 @@ def compiled(plugin=None):
                      _record_row, _regressor, reference_terms, slotine_li_output, _builtin_point, _builtin_output,
                      _regressor_output, _builtin_recursive_output, _builtin_recursive_rate, _no_recursive_output,
                      _no_recursive_rate, slotine_li_torque_output, slotine_li_rate_output, rk.rne_law_torque,
-                     rk.rne_law_rate, rk.rne_torque, rk.rne_rate, rk.rne_forward, rk._force_add, rk._bilinear_grad_add,
-                     rk._sym_add, rk._cross, rk.cinert_of_params, _plugin_point, _plugin_output, plugin_rate,
+                     rk.rne_law_rate, rk.rne_torque, rk.rne_rate, rk.rne_forward, rk._force_add, rk._bilinear_grad,
+                     rk._cinert_scalars, rk._cross, _plugin_point, _plugin_output, plugin_rate,
                      stage_code.stage_estimate, stage_code.end_stage, stage_code.sense, context_address,
                      extra=(off, numba.__version__, str(SLOTINE_LI_GAINS), str(PLUGIN_GAINS)))
 
