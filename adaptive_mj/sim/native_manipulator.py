@@ -7,10 +7,13 @@ At each stage the callback does what loop.Controller + SlotineLiLaw do in Python
 stage functions of adaptive_mj.sim.stage (the same source, compiled; sampled-data control
 evaluates the law once per control period and holds it, as there):
 measure x = [q; q̇] (+ noise), take the stage estimate θ̂_i = θ̂_k + h a_i k_{i-1},
-evaluate reference_terms, the regressor on the live MjData (cdof, xpos, xmat,
-subtree_com, cinert: MuJoCo has just computed them for this stage), the base map,
-slotine_li_output, clamp τ, write ctrl = τ / gear, accumulate the RK4-weighted
-rates, and after the last stage advance θ̂ once. The references at the stage times
+evaluate reference_terms, then τ = Y θ̂ + τ_known and Yᵀ s on the live MjData (cdof, xpos,
+xmat, subtree_com, cinert: MuJoCo has just computed them for this stage): by default by
+Slotine–Li's O(n) recursions (regressor_kernel.rne_law_torque / rne_law_rate with
+slotine_li_torque_output / slotine_li_rate_output, ctx.recursive; Y is never formed), else
+(law.evaluation = "regressor", a law plugin) the regressor formed whole, the base map and
+slotine_li_output (or the plugin's law); clamp τ, write ctrl = τ / gear, accumulate the
+RK4-weighted rates, and after the last stage advance θ̂ once. The references at the stage times
 are evaluated in Python, vectorised, before each chunk (MuJoCo's stage times are
 reproduced bit for bit, each distinct time evaluated once). tests/test_native_manipulator.py
 checks that the two paths give the same rows, bit for bit today, for the adaptive law,
