@@ -3,7 +3,7 @@ the specialised regressor kernel gives regressor_kernel's numbers, and chunks dr
 loop.run's native branch drives them give the rows of run(..., native=False) (here:
 bit for bit) for the adaptive law, both baselines, a base-parameter plant, saturation,
 a dead-zone, measurement noise, and joint friction with Coulomb columns and lagged motors,
-under RK4 and Euler."""
+under RK4 and Euler; with Slotine–Li's O(n) recursions (the default) and with Y formed whole."""
 from __future__ import annotations
 
 import dataclasses
@@ -51,7 +51,7 @@ def _ur5e_model(friction: bool = False, euler: bool = False) -> mujoco.MjModel:
 
 
 def _setup(mode=Mode.ADAPTIVE, unknown="payload", base=False, euler=False, limit=None, dead_zone=None,
-           waypoints=False, modification=None, friction=False):
+           waypoints=False, modification=None, friction=False, evaluation="recursive"):
     """A UR5e + tool_offset plant, its law, a joint reference and θ̂(0), built the same way each call
     (friction: joint friction, two lagged motors and the friction columns, see _ur5e_model)."""
     model = _ur5e_model(friction, euler)
@@ -70,7 +70,8 @@ def _setup(mode=Mode.ADAPTIVE, unknown="payload", base=False, euler=False, limit
         ref = JointSumOfSines(center=tuple(home), amplitudes=((0.3, 0.2),) * 6,
                               omegas=((0.9, 2.3), (1.1, 2.7), (0.7, 1.9), (1.3, 3.1), (1.7, 2.9), (0.8, 3.7)))
     law = SlotineLiLaw(plant.regressor, plant.names, plant.m, lam=10.0, kd=50.0, gamma=0.5, mode=mode,
-                       dead_zone=dead_zone, modification=modification(plant) if modification else None)
+                       dead_zone=dead_zone, modification=modification(plant) if modification else None,
+                       evaluation=evaluation)
     x0 = ref(0.0, 2)[:2].copy()
     x0[0] += 0.05  # start off the reference
     plant.set_state(x0)
@@ -123,6 +124,9 @@ CASES = {
     "base_all": dict(mode=Mode.ADAPTIVE, unknown="all", base=True),
     "friction_lag": dict(mode=Mode.ADAPTIVE, friction=True),
     "friction_base_all": dict(mode=Mode.ADAPTIVE, unknown="all", base=True, friction=True),
+    # Y formed whole (law.evaluation = "regressor"; the others run Slotine–Li's O(n) recursions)
+    "regressor_payload": dict(mode=Mode.ADAPTIVE, evaluation="regressor"),
+    "regressor_base_all": dict(mode=Mode.ADAPTIVE, unknown="all", base=True, friction=True, evaluation="regressor"),
 }
 
 
@@ -132,6 +136,7 @@ def test_native_chunks_reproduce_python_path(case, integrator):
     diffs, traj, rows, nc = _compare(dict(CASES[case], euler=integrator == "euler"), 1.0)
     assert max(diffs.values()) <= TOL, diffs
     assert traj.t.shape == (1000,) and rows["x"].shape == (1000, 2, 6)
+    assert nc.context[0]["recursive"] == int(CASES[case].get("evaluation", "recursive") == "recursive")
     if CASES[case]["mode"] is Mode.ADAPTIVE:  # the estimates moved, and the native ones kept moving
         assert np.abs(rows["theta_hat"][-1]).max() > 0
         assert not np.array_equal(nc.theta, rows["theta_hat"][-1])
@@ -314,22 +319,25 @@ def test_v_before_a_payload_swap_mid_second_has_the_inertia_of_its_own_step(nati
                                                                    traj.theta[150:], M=M_after))
 
 
-def test_a_state_mujoco_finds_bad_mid_chunk_ends_diverged_with_the_python_path_s_rows(tmp_path):
+@pytest.mark.parametrize("evaluation, min_rows", [("regressor", 1000), ("recursive", 100)])
+def test_a_state_mujoco_finds_bad_mid_chunk_ends_diverged_with_the_python_path_s_rows(tmp_path, evaluation, min_rows):
     """On the 6-joint arm a sinusoidal torque of 1000 N m (the stress study's top) drives the state to a huge
-    acceleration 9.12 s in: MuJoCo warns, resets the data and steps on, and the callback stops in mid-step. The
-    run ends `diverged` (not a RuntimeError), its log closed, with the rows of the Python path bit for bit."""
+    acceleration (9.12 s in with Y formed whole, 0.877 s in with the O(n) form: the run is chaotic, θ̂ grows
+    past 1e8 in both, and their rounding apart grows to the step where MuJoCo gives up): MuJoCo warns, resets
+    the data and steps on, and the callback stops in mid-step. The run ends `diverged` (not a RuntimeError),
+    its log closed, with the rows of the Python path bit for bit."""
     from adaptive_mj import run_scenario
     from adaptive_mj.study import stress
 
     plant = next(p for p in stress.plants(20.0) if p.name == "ur5e")
     overrides = [*plant.base, *dict(stress.laws(plant, composite=False))["sigma"],
-                 "disturbance={kind='sine', magnitude=1000.0, omega=2.0}"]
+                 "disturbance={kind='sine', magnitude=1000.0, omega=2.0}", f"law.evaluation='{evaluation}'"]
     a = run_scenario("ur5e_identification", set=overrides, seed=0, log=tmp_path / "native.mcap")
     b = run_scenario("ur5e_identification", set=[*overrides, "simulation.python_callback=true"], seed=0)
     assert a.trajectory.meta["native"] and not b.trajectory.meta["native"]
     assert a.status == b.status == "diverged" and "mjWARN_BADQACC" in a.summary["reason"]
     assert "in the step from t=" in a.summary["reason"]  # 9.121 s here (the model's numbers are the CPU's)
-    assert len(a.trajectory.t) == len(b.trajectory.t) > 1000
+    assert len(a.trajectory.t) == len(b.trajectory.t) > min_rows
     for f in ("t", "x", "u", "s", "theta_hat"):
         np.testing.assert_array_equal(getattr(a.trajectory, f), getattr(b.trajectory, f), err_msg=f)
     from adaptive_mj.log.replay import read_log

@@ -42,6 +42,10 @@ from adaptive_mj.laws.protocol import Box, JointFeedback, Law
 from adaptive_mj.specs import LawSpec, PlantSpec
 
 
+#: law.evaluation: how τ = Y π̂ and Yᵀ s are evaluated (SlotineLiLaw's evaluation)
+EVALUATIONS = ("recursive", "regressor")
+
+
 class Mode(enum.IntEnum):
     ADAPTIVE = 0
     COMPUTED_TORQUE = 1
@@ -130,6 +134,43 @@ def slotine_li_output(Y, tau_known, theta, s, e_norm, gains, arrays, u, rate):
         modify_rate(rate, theta, s_norm, gains.sigma, gains.e_mod, arrays.theta0, gamma, arrays.lower, arrays.upper)
 
 
+def slotine_li_torque_output(tau_model, s, e_norm, gains, arrays, u, s_rate):
+    """The O(n) form's first half (the regressor's tau_model = Y θ + τ_known computed by the plant's recursion,
+    regressor_kernel.rne_law_torque): u = tau_model + K_D s (unclamped) into u (m,), and s_rate (m,): the s the
+    rate takes, s_j, or 0 for a joint whose u_j lies outside [sat_lo_j, sat_hi_j] under gains.freeze (as
+    slotine_li_output leaves its Y_jᵀ s_j out). Returns (adapting, ‖s‖): adapting when gains.adapt and the
+    dead-zone is open (common.dead_zone_open on ‖s‖ or e_norm = ‖q̃‖); then the caller evaluates
+    rate = Yᵀ s_rate (regressor_kernel.rne_law_rate) and slotine_li_rate_output finishes it."""
+    m = s.shape[0]
+    kd, lo, hi = arrays.kd, arrays.sat_lo, arrays.sat_hi
+    s_norm = 0.0
+    for j in range(m):
+        u[j] = tau_model[j] + kd[j] * s[j]
+        s_norm += s[j] * s[j]
+    s_norm = math.sqrt(s_norm)
+    signal = s_norm if gains.dz_on_s else e_norm
+    adapting = gains.adapt and dead_zone_open(signal, gains.dz_width)
+    for j in range(m):
+        if gains.freeze and (u[j] < lo[j] or u[j] > hi[j]):
+            s_rate[j] = 0.0
+        else:
+            s_rate[j] = s[j]
+    return adapting, s_norm
+
+
+def slotine_li_rate_output(rate, theta, s_norm, adapting, gains, arrays):
+    """The O(n) form's second half: rate (n_params,) holds Yᵀ s_rate when adapting; θ' = Γ⁻¹ Yᵀ s_rate, or 0 when
+    not adapting, then the modifications (common.modify_rate) when gains.adapt, as slotine_li_output."""
+    gamma = arrays.gamma
+    for i in range(rate.shape[0]):
+        if adapting:
+            rate[i] = rate[i] / gamma[i]
+        else:
+            rate[i] = 0.0
+    if gains.adapt:
+        modify_rate(rate, theta, s_norm, gains.sigma, gains.e_mod, arrays.theta0, gamma, arrays.lower, arrays.upper)
+
+
 def _per_joint(value, m: int, what: str) -> np.ndarray:
     v = np.broadcast_to(np.asarray(value, dtype=float), (m,)).copy()
     if not np.all(np.isfinite(v)) or np.any(v < 0):
@@ -147,6 +188,11 @@ class SlotineLiLaw(Law):
     modification: σ/e-modification and projection (common.Modification), or None.
     saturation: (lo, hi) (m,) torque limits [N m or N] for saturation-aware adaptation (a saturated
     joint's s_j is left out of the rate, slotine_li_output's freeze), or None (the lecture's law).
+    evaluation: "recursive" (default): τ = Y π̂ + τ_known and Yᵀ s by the plant's O(n) recursions (the
+    regressor's torque(v, w, a, θ) and rate(v, a, s, out), regressor_kernel.rne_law_torque / rne_law_rate),
+    Y never formed; "regressor": Y formed whole (slotine_li_output), as before the O(n) form (a log that
+    does not record its law.evaluation re-simulates with it, log.verify). A regressor without torque/rate (a
+    plain callable) is evaluated whole.
     """
 
     order = 2
@@ -154,8 +200,13 @@ class SlotineLiLaw(Law):
 
     def __init__(self, regressor, names, m: int, *, lam, kd, gamma=1.0, dead_zone: DeadZone | None = None,
                  mode: Mode = Mode.ADAPTIVE, modification: Modification | None = None,
-                 saturation: tuple[np.ndarray, np.ndarray] | None = None):
+                 saturation: tuple[np.ndarray, np.ndarray] | None = None, evaluation: str = "recursive"):
+        if evaluation not in EVALUATIONS:
+            raise ValueError(f"evaluation must be one of {EVALUATIONS}, got {evaluation!r}")
         self.regressor = regressor
+        self.evaluation = evaluation
+        self.recursive = (evaluation == "recursive" and hasattr(regressor, "torque")
+                          and hasattr(regressor, "rate"))
         self.names = tuple(names)
         self.m = int(m)
         self.mode = Mode(mode)
@@ -197,7 +248,8 @@ class SlotineLiLaw(Law):
     def native_params(self) -> dict[str, Any]:
         """What adaptive_mj.sim.native_manipulator needs: "gains" (the SLOTINE_LI_GAINS record of `gains()`), Λ and
         the arrays by name."""
-        return {"gains": self.gains().record(), "lam": self.lam, **self.arrays()._asdict()}
+        return {"gains": self.gains().record(), "lam": self.lam, "recursive": self.recursive,
+                **self.arrays()._asdict()}
 
     def feedback(self) -> JointFeedback:
         """K_D and Λ (every mode: the baselines close the same feedback on s)."""
@@ -208,12 +260,21 @@ class SlotineLiLaw(Law):
         s, qd_r, qdd_r = np.empty(m), np.empty(m), np.empty(m)
         reference_terms(x, ref, self.lam, s, qd_r, qdd_r)
         if self.mode is Mode.PD_GRAVITY:
-            Y, tau_known = self.regressor(self._zero, self._zero, self._zero)
+            v, w, a = self._zero, self._zero, self._zero
         else:
-            Y, tau_known = self.regressor(x[1], qd_r, qdd_r)
+            v, w, a = x[1], qd_r, qdd_r
         u, rate = np.empty(m), np.empty(len(self.names))
         e_norm = float(np.linalg.norm(ref[0] - x[0]))
-        slotine_li_output(Y, tau_known, theta_hat, s, e_norm, self._gains, self._arrays, u, rate)
+        if self.recursive:  # O(n): Y π̂ and Yᵀ s by the plant's recursions (the native callback's numbers)
+            tau_model = self.regressor.torque(v, w, a, theta_hat)
+            s_rate = np.empty(m)
+            adapting, s_norm = slotine_li_torque_output(tau_model, s, e_norm, self._gains, self._arrays, u, s_rate)
+            if adapting:
+                self.regressor.rate(v, a, s_rate, rate)
+            slotine_li_rate_output(rate, theta_hat, s_norm, adapting, self._gains, self._arrays)
+        else:
+            Y, tau_known = self.regressor(v, w, a)
+            slotine_li_output(Y, tau_known, theta_hat, s, e_norm, self._gains, self._arrays, u, rate)
         return LawStep(u, rate, s, qdd_r)
 
     def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
@@ -234,6 +295,9 @@ OWN_KEYS = (
         doc="Λ of s = q̃' + Λ q̃, one for every joint or a table giving every joint"),
     Key("kd", "number or table {joint = number}", unit="N m s/rad (N s/m on a slide)", bounds="> 0", required=True,
         doc="K_D of τ = … + K_D s, one for every joint or a table giving every joint"),
+    Key("evaluation", "string", default="recursive", bounds="one of 'recursive', 'regressor'",
+        doc="how Y π̂ and Yᵀ s are evaluated: 'recursive' (O(n) Newton–Euler recursions, Y never formed) or "
+            "'regressor' (Y formed whole, as before the O(n) form); the same law to rounding"),
 )
 
 
@@ -271,10 +335,12 @@ def _read(t: Table, kind: str, *, adaptive: bool) -> LawSpec:
     saturation = shared.read_saturation(t)
     if saturation != "ignore" and not adaptive:
         raise t.fail("saturation", "'ignore' for a law without adaptation", saturation)
+    evaluation = t.string("evaluation", "recursive", choices=EVALUATIONS)
     t.finish()
     return LawSpec(kind=kind, order=2, lam=None if isinstance(lam, dict) else lam, k=0.0, gamma=gamma,
                    dead_zone=dead_zone, initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None,
-                   kd=kd, lam_joints=lam if isinstance(lam, dict) else None, robust=robust, saturation=saturation)
+                   kd=kd, lam_joints=lam if isinstance(lam, dict) else None, robust=robust, saturation=saturation,
+                   params={"evaluation": evaluation})
 
 
 def _builder(mode: Mode) -> Callable[[BuildContext], Law]:
@@ -290,7 +356,8 @@ def _builder(mode: Mode) -> Callable[[BuildContext], Law]:
                             gamma=ctx.gamma(arm.names) if L.gamma is not None else 1.0,
                             dead_zone=ctx.dead_zone(), mode=mode,
                             modification=ctx.modification if mode is Mode.ADAPTIVE else None,
-                            saturation=ctx.saturation() if L.saturation == "freeze" else None)
+                            saturation=ctx.saturation() if L.saturation == "freeze" else None,
+                            evaluation=(L.params or {}).get("evaluation", "recursive"))
 
     return build
 

@@ -191,6 +191,9 @@ class LogHeader:
     control_names: tuple[str, ...] = ()  # format 6: the k actuators where u is not one per joint (else ())
     state_names: tuple[str, ...] = ()  # format 6: a name per row of x where they are not y's derivatives (else ())
     encoding: str = "cdr"  # the row topics' encoding (ENCODINGS): "cdr" writes format 7, "json" format 6
+    # a Slotine–Li law's evaluation of Y π̂ and Yᵀ s, "recursive" (O(n)) or "regressor" (Y whole); "" for other
+    # laws. Written since the O(n) form; a log without it ran the regressor form (log.verify re-runs it so)
+    law_evaluation: str = ""
 
     @property
     def log_every(self) -> int:
@@ -532,6 +535,7 @@ class Recorder:
             "joint_limits": json.dumps(_finite_or_null(h.joint_limits)),
             "embedded_sha256": embedded_digest(h.model_xml, h.model_source, h.model_assets),
             "created_unix": repr(float(h.created_unix)),
+            "law_evaluation": h.law_evaluation,
         }
         if cdr:
             meta["encoding"] = "cdr"  # format 7: the row topics' message encoding

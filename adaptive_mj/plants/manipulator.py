@@ -39,7 +39,7 @@ import numpy as np
 from adaptive_mj.disturbance import JointDisturbance
 
 from adaptive_mj.errors import ModelError
-from adaptive_mj.numba_util import with_globals as _with_globals
+from adaptive_mj.numba_util import jit_tree, with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
 from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compile_for_scenario_with, control_callback,
@@ -380,6 +380,44 @@ class Regressor:
         self.dofnum = np.asarray(model.body_dofnum, dtype=np.int64)
         self.rootid = np.asarray(model.body_rootid, dtype=np.int64)
         self._kernel = kernel()
+        # the O(n) form (torque, rate): its work buffers
+        self._scratch = np.zeros(rk.RNE_SCRATCH * nb)
+        self._pi = np.zeros(max(self.n_standard, 1))
+        self._rate_std = np.zeros(max(self.n_standard, 1))
+        self._tau = np.zeros(nv)
+
+    @property
+    def base_map(self) -> np.ndarray | None:
+        """B (n_standard, n_base) of the base parameters, or None (the law's parameters are the standard ones)."""
+        return self._base_map
+
+    @base_map.setter
+    def base_map(self, B: np.ndarray | None) -> None:
+        self._base_map = B
+        n = len(self.layout.names)
+        self.base_columns = base_map_columns(B, n, B.shape[1]) if B is not None else base_map_columns(None, n, n)
+
+    def torque(self, v, w, a, theta) -> np.ndarray:
+        """Y(q, v, w, a) θ + τ_known (nv,) in O(n), without forming Y (regressor_kernel.rne_law_torque; θ the law's
+        parameters, base ones with a base map). A reused buffer; `rate` after it reads its forward pass."""
+        m, d, bc = self.model, self.data, self.base_columns
+        torque_kernel()(*self.static_args(), d.cdof, d.xpos, d.xmat, d.subtree_com, d.cinert, m.opt.gravity,
+                        np.ascontiguousarray(v, dtype=float), np.ascontiguousarray(w, dtype=float),
+                        np.ascontiguousarray(a, dtype=float), np.ascontiguousarray(theta, dtype=float),
+                        int(self._base_map is not None), bc["bptr"], bc["bidx"], bc["bval"], self._pi, self._tau,
+                        self._scratch)
+        return self._tau
+
+    def rate(self, v, a, s, out: np.ndarray) -> np.ndarray:
+        """out (n_params,) = Y(q, v, w, a)ᵀ s in O(n) (regressor_kernel.rne_law_rate), right after `torque` at the
+        same state and the same v, w, a."""
+        d, bc = self.data, self.base_columns
+        rate_kernel()(self.parent, self.dofadr, self.dofnum, self.rootid, self.body_col, self.col_arm, self.col_damp,
+                      self.col_coul, self.coulomb_eps, d.cdof, d.xpos, d.xmat, d.subtree_com,
+                      np.ascontiguousarray(v, dtype=float), np.ascontiguousarray(a, dtype=float),
+                      np.ascontiguousarray(s, dtype=float), int(self._base_map is not None), bc["bptr"], bc["bidx"],
+                      bc["bval"], self._rate_std, out, self._scratch)
+        return out
 
     def static_args(self):
         """The model arrays the kernel takes, in its order (also used by adaptive_mj.sim.native)."""
@@ -395,6 +433,46 @@ class Regressor:
         if self.base_map is None:
             return self.Y_std, self.tau_known
         return self.Y_std @ self.base_map, self.tau_known
+
+
+def base_map_columns(B, nstd: int, nth: int) -> dict:
+    """The base map B (nstd, nth) by columns, its nonzero entries only (B is a column selection):
+    {bptr, bidx, bval, need} as the compiled kernels read them (B None: the identity's need, no entries)."""
+    if B is None:
+        return {"need": np.ones(max(nstd, 1), dtype=np.int64), "bptr": np.zeros(1, dtype=np.int64),
+                "bidx": np.zeros(1, dtype=np.int64), "bval": np.zeros(1)}
+    B = np.asarray(B, dtype=float)
+    if B.shape != (nstd, nth):
+        raise ValueError(f"base map of shape {B.shape}, expected {(nstd, nth)}")
+    rows_, vals, ptr = [], [], [0]
+    for c in range(nth):
+        nz = np.nonzero(B[:, c])[0]
+        rows_ += nz.tolist()
+        vals += B[nz, c].tolist()
+        ptr.append(len(rows_))
+    return {"bptr": np.asarray(ptr, dtype=np.int64), "bidx": np.asarray(rows_ or [0], dtype=np.int64),
+            "bval": np.asarray(vals or [0.0], dtype=float), "need": np.any(B != 0, axis=1).astype(np.int64)}
+
+
+_RNE: dict[str, Any] = {}
+
+
+def torque_kernel():
+    """regressor_kernel.rne_law_torque compiled with numba (once per process)."""
+    if "torque" not in _RNE:
+        import numba
+
+        _RNE["torque"] = jit_tree(rk.rne_law_torque, numba.njit)
+    return _RNE["torque"]
+
+
+def rate_kernel():
+    """regressor_kernel.rne_law_rate compiled with numba (once per process)."""
+    if "rate" not in _RNE:
+        import numba
+
+        _RNE["rate"] = jit_tree(rk.rne_law_rate, numba.njit)
+    return _RNE["rate"]
 
 
 _KERNEL = None

@@ -7,10 +7,13 @@ At each stage the callback does what loop.Controller + SlotineLiLaw do in Python
 stage functions of adaptive_mj.sim.stage (the same source, compiled; sampled-data control
 evaluates the law once per control period and holds it, as there):
 measure x = [q; q̇] (+ noise), take the stage estimate θ̂_i = θ̂_k + h a_i k_{i-1},
-evaluate reference_terms, the regressor on the live MjData (cdof, xpos, xmat,
-subtree_com, cinert: MuJoCo has just computed them for this stage), the base map,
-slotine_li_output, clamp τ, write ctrl = τ / gear, accumulate the RK4-weighted
-rates, and after the last stage advance θ̂ once. The references at the stage times
+evaluate reference_terms, then τ = Y θ̂ + τ_known and Yᵀ s on the live MjData (cdof, xpos,
+xmat, subtree_com, cinert: MuJoCo has just computed them for this stage): by default by
+Slotine–Li's O(n) recursions (regressor_kernel.rne_law_torque / rne_law_rate with
+slotine_li_torque_output / slotine_li_rate_output, ctx.recursive; Y is never formed), else
+(law.evaluation = "regressor", a law plugin) the regressor formed whole, the base map and
+slotine_li_output (or the plugin's law); clamp τ, write ctrl = τ / gear, accumulate the
+RK4-weighted rates, and after the last stage advance θ̂ once. The references at the stage times
 are evaluated in Python, vectorised, before each chunk (MuJoCo's stage times are
 reproduced bit for bit, each distinct time evaluated once). tests/test_native_manipulator.py
 checks that the two paths give the same rows, bit for bit today, for the adaptive law,
@@ -47,6 +50,8 @@ from adaptive_mj.laws.plugin import PLUGIN_GAINS, joint_norm, tracking_error_nor
 from adaptive_mj.laws.slotine_li import SLOTINE_LI_GAINS, SlotineLiArrays
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.numba_util import jit_tree
+from adaptive_mj.plants import regressor_kernel as rk
+from adaptive_mj.plants.manipulator import base_map_columns
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import stage as stage_code
 from adaptive_mj.sim import native_step
@@ -69,6 +74,14 @@ if TYPE_CHECKING:
     pointer_at: Any
     law_stage: Any
     regressor: Any
+    regressor_output: Any
+    law_torque: Any
+    law_rate: Any
+    law_recursive_output: Any
+    law_recursive_rate: Any
+    torque_output: Any
+    rate_output: Any
+    RNE_SCRATCH: int
     ref_terms: Any
     output: Any
     law_point: Any
@@ -114,6 +127,9 @@ CONTEXT = native_step.context_dtype([  # after stage.control_stage's fields (nat
     ("nM", _i8), ("rec_M", _i8),  # MuJoCo's sparse M(q) at each step's start (mjData.M), for V
     # a multi-joint law plugin (laws.plugin.JointLawPlugin): its point's v and its params (nparams,)
     ("vpt", _i8), ("params", _i8), ("nparams", _i8),
+    # Slotine–Li in O(n) (laws.slotine_li, evaluation "recursive"): 1 when on; π = B θ̂ (nstd,), Yᵀ s in the
+    # standard parameters (nstd,), the s the rate takes (nv,)
+    ("recursive", _i8), ("pi_std", _i8), ("rate_std", _i8), ("s_rate", _i8),
 ])
 
 MODE_PD_GRAVITY = 2  # laws.slotine_li.Mode.PD_GRAVITY (the regressor at v = w = a = 0)
@@ -438,7 +454,43 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
     body_col, body_known = carray(iptr(ctx.body_col), nb), carray(iptr(ctx.body_known), nb)  # noqa: F821 (injected)
     col_arm, col_damp = carray(iptr(ctx.col_arm), nv), carray(iptr(ctx.col_damp), nv)  # noqa: F821 (injected)
     col_coul, eps = carray(iptr(ctx.col_coul), nv), ctx.coulomb_eps  # noqa: F821 (injected)
-    scratch, need = carray(fptr(ctx.scratch), 18 * nb), carray(iptr(ctx.need), nstd)  # noqa: F821 (injected)
+    scratch, need = carray(fptr(ctx.scratch), RNE_SCRATCH * nb), carray(iptr(ctx.need), nstd)  # noqa: F821 (injected)
+    u = carray(fptr(ctx.u), nv)  # noqa: F821 (injected)
+    if ctx.recursive != 0:  # Slotine–Li in O(n): Y is never formed
+        bptr, bidx = carray(iptr(ctx.bptr), nth + 1), carray(iptr(ctx.bidx), 1 << 30)  # noqa: F821 (injected)
+        bval = carray(fptr(ctx.bval), 1 << 30)  # noqa: F821 (injected)
+        law_torque(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, col_coul, arm, damp,  # noqa: F821 (injected)
+                   eps, cdof, xpos, xmat, subcom, cinert, gravity, v, w, a, th, ctx.has_base, bptr, bidx, bval,
+                   carray(fptr(ctx.pi_std), max(nstd, 1)), tau_known, scratch)  # noqa: F821 (injected)
+        s_rate = carray(fptr(ctx.s_rate), nv)  # noqa: F821 (injected)
+        adapting, s_norm = law_recursive_output(ctx, x, r, tau_known, s, u, s_rate, lower, upper)  # noqa: F821 (injected)
+        if adapting:
+            law_rate(parent, dofadr, dofnum, rootid, body_col, col_arm, col_damp, col_coul, eps, cdof, xpos,  # noqa: F821 (injected)
+                     xmat, subcom, v, a, s_rate, ctx.has_base, bptr, bidx, bval,
+                     carray(fptr(ctx.rate_std), max(nstd, 1)), rate, scratch)  # noqa: F821 (injected)
+        law_recursive_rate(ctx, th, rate, s_norm, adapting, lower, upper)  # noqa: F821 (injected)
+    else:
+        regressor_output(ctx, x, r, v, w, a, th, s, u, rate, lower, upper, parent, dofadr, dofnum, rootid, body_col,  # noqa: F821,E501 (injected)
+                         body_known, col_arm, col_damp, col_coul, arm, damp, eps, cdof, xpos, xmat, subcom, cinert,
+                         gravity, Y_std, tau_known, scratch, need)
+    lo, hi = carray(fptr(ctx.lo), nv), carray(fptr(ctx.hi), nv)  # noqa: F821 (injected)
+    u_hold, s_hold = carray(fptr(ctx.u_hold), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
+    for j in range(nv):
+        v = u[j]
+        if v < lo[j]:
+            v = lo[j]
+        if v > hi[j]:
+            v = hi[j]
+        u_hold[j] = v
+        s_hold[j] = s[j]
+
+
+def _regressor_output(ctx, x, r, v, w, a, th, s, u, rate, lower, upper, parent, dofadr, dofnum, rootid, body_col,
+                      body_known, col_arm, col_damp, col_coul, arm, damp, eps, cdof, xpos, xmat, subcom, cinert,
+                      gravity, Y_std, tau_known, scratch, need):
+    """The regressor form: Y formed whole (the specialised kernel, then Y = Y_std B with a base map), then the
+    law's output on it (Slotine–Li's slotine_li_output or a plugin's law)."""
+    nv, nth = ctx.nv, ctx.nth
     regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, col_coul, arm, damp, eps,  # noqa: F821,E501 (injected)
               cdof, xpos, xmat, subcom, cinert, gravity, v, w, a, Y_std, tau_known, scratch, need)
     if ctx.has_base != 0:  # Y = Y_std B, B stored by columns as (pointer, row index, value)
@@ -453,18 +505,7 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
                 Y[j, c] = acc
     else:
         Y = Y_std
-    u = carray(fptr(ctx.u), nv)  # noqa: F821 (injected)
     law_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper)  # noqa: F821 (injected)
-    lo, hi = carray(fptr(ctx.lo), nv), carray(fptr(ctx.hi), nv)  # noqa: F821 (injected)
-    u_hold, s_hold = carray(fptr(ctx.u_hold), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
-    for j in range(nv):
-        v = u[j]
-        if v < lo[j]:
-            v = lo[j]
-        if v > hi[j]:
-            v = hi[j]
-        u_hold[j] = v
-        s_hold[j] = s[j]
 
 
 def _builtin_point(ctx, x, r, s, qd_r, qdd_r):
@@ -481,13 +522,42 @@ def _builtin_point(ctx, x, r, s, qd_r, qdd_r):
 def _builtin_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper):
     """slotine_li_output with the law's gains read by name from its SLOTINE_LI_GAINS record (at the context's
     `gains` address) and its arrays by name (τ unclamped into u, the rate into rate)."""
-    nv, nth = ctx.nv, ctx.nth
     gains = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
     e_norm = tracking_error_norm(x, r) if not gains.dz_on_s else 0.0
-    arrays = SlotineLiArrays(carray(fptr(ctx.kd), nv), carray(fptr(ctx.gamma), nth),  # noqa: F821 (injected)
-                             carray(fptr(ctx.theta0), nth), lower, upper,  # noqa: F821 (injected)
-                             carray(fptr(ctx.sat_lo), nv), carray(fptr(ctx.sat_hi), nv))  # noqa: F821 (injected)
+    arrays = SlotineLiArrays(carray(fptr(ctx.kd), ctx.nv), carray(fptr(ctx.gamma), ctx.nth),  # noqa: F821 (injected)
+                             carray(fptr(ctx.theta0), ctx.nth), lower, upper,  # noqa: F821 (injected)
+                             carray(fptr(ctx.sat_lo), ctx.nv), carray(fptr(ctx.sat_hi), ctx.nv))  # noqa: F821 (injected)
     output(Y, tau_known, th, s, e_norm, gains, arrays, u, rate)  # noqa: F821 (injected)
+
+
+def _builtin_recursive_output(ctx, x, r, tau_model, s, u, s_rate, lower, upper):
+    """slotine_li_torque_output (the O(n) form's τ and the s the rate takes), the gains read by name from the
+    SLOTINE_LI_GAINS record, the arrays by name. Returns (adapting, ‖s‖)."""
+    gains = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
+    e_norm = tracking_error_norm(x, r) if not gains.dz_on_s else 0.0
+    arrays = SlotineLiArrays(carray(fptr(ctx.kd), ctx.nv), carray(fptr(ctx.gamma), ctx.nth),  # noqa: F821 (injected)
+                             carray(fptr(ctx.theta0), ctx.nth), lower, upper,  # noqa: F821 (injected)
+                             carray(fptr(ctx.sat_lo), ctx.nv), carray(fptr(ctx.sat_hi), ctx.nv))  # noqa: F821 (injected)
+    return torque_output(tau_model, s, e_norm, gains, arrays, u, s_rate)  # noqa: F821 (injected)
+
+
+def _builtin_recursive_rate(ctx, th, rate, s_norm, adapting, lower, upper):
+    """slotine_li_rate_output: θ' = Γ⁻¹ Yᵀ s (or 0), then the modifications."""
+    gains = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
+    arrays = SlotineLiArrays(carray(fptr(ctx.kd), ctx.nv), carray(fptr(ctx.gamma), ctx.nth),  # noqa: F821 (injected)
+                             carray(fptr(ctx.theta0), ctx.nth), lower, upper,  # noqa: F821 (injected)
+                             carray(fptr(ctx.sat_lo), ctx.nv), carray(fptr(ctx.sat_hi), ctx.nv))  # noqa: F821 (injected)
+    rate_output(rate, th, s_norm, adapting, gains, arrays)  # noqa: F821 (injected)
+
+
+def _no_recursive_output(ctx, x, r, tau_model, s, u, s_rate, lower, upper):
+    """A plugin law needs Y: the O(n) form is never on (ctx.recursive = 0)."""
+    return False, 0.0
+
+
+def _no_recursive_rate(ctx, th, rate, s_norm, adapting, lower, upper):
+    """A plugin law needs Y: the O(n) form is never on (ctx.recursive = 0)."""
+    return
 
 
 def _plugin_point(ctx, x, r, s, qd_r, qdd_r):
@@ -521,36 +591,52 @@ def compiled(plugin=None):
         return _compiled[mem_key]
     import numba
 
-    from adaptive_mj.laws.slotine_li import reference_terms, slotine_li_output
+    from adaptive_mj.laws.slotine_li import (reference_terms, slotine_li_output, slotine_li_rate_output,
+                                             slotine_li_torque_output)
     from adaptive_mj.numba_util import pointer
 
     off = offsets()
     key = source_key(*fns, native_step.callback_factory, stage_code.control_stage, _law_stage, _apply_control,
                      _record_row, _regressor, reference_terms, slotine_li_output, _builtin_point, _builtin_output,
-                     _plugin_point, _plugin_output, plugin_rate, stage_code.stage_estimate, stage_code.end_stage,
-                     stage_code.sense, context_address,
+                     _regressor_output, _builtin_recursive_output, _builtin_recursive_rate, _no_recursive_output,
+                     _no_recursive_rate, slotine_li_torque_output, slotine_li_rate_output, rk.rne_law_torque,
+                     rk.rne_law_rate, rk.rne_torque, rk.rne_rate, rk.rne_forward, rk._force_add, rk._bilinear_grad,
+                     rk._cinert_scalars, rk._cross, _plugin_point, _plugin_output, plugin_rate,
+                     stage_code.stage_estimate, stage_code.end_stage, stage_code.sense, context_address,
                      extra=(off, numba.__version__, str(SLOTINE_LI_GAINS), str(PLUGIN_GAINS)))
 
     def pieces(common: dict[str, Any], tag: str) -> dict[str, Any]:
         """This shape's law_stage (the regressor compiled apart, the law's point and output inlined into it),
         apply_control and record_row."""
         inline = inlined(numba)
-        common = {**common, "MODE_PD_GRAVITY": MODE_PD_GRAVITY,  # the law reads its gains through a pointer of
+        common = {**common, "MODE_PD_GRAVITY": MODE_PD_GRAVITY, "RNE_SCRATCH": rk.RNE_SCRATCH,
+                  # the law reads its gains through a pointer of
                   "gains_ptr": pointer(numba.from_dtype(SLOTINE_LI_GAINS if plugin is None else PLUGIN_GAINS))}
         if plugin is None:
             law_point = jit_tree(_builtin_point, inline, tag=tag,
                                  ref_terms=jit_tree(reference_terms, inline, tag=tag), **common)
             law_output = jit_tree(_builtin_output, inline, tag=tag,
                                   output=jit_tree(slotine_li_output, inline, tag=tag), **common)
+            recursive_output = jit_tree(_builtin_recursive_output, inline, tag=tag,
+                                        torque_output=jit_tree(slotine_li_torque_output, inline, tag=tag), **common)
+            recursive_rate = jit_tree(_builtin_recursive_rate, inline, tag=tag,
+                                      rate_output=jit_tree(slotine_li_rate_output, inline, tag=tag), **common)
         else:
             point, law = plugin
             law_point = jit_tree(_plugin_point, inline, tag=tag, user_point=jit_tree(point, inline, tag=tag),
                                  **common)
             law_output = jit_tree(_plugin_output, inline, tag=tag, user_law=jit_tree(law, inline, tag=tag),
                                   **common)
-        return {"law_stage": jit_tree(_law_stage, numba.njit, tag=tag,
-                                      regressor=jit_tree(_regressor, numba.njit, tag=tag, inner=inline),
-                                      law_point=law_point, law_output=law_output, **common),
+            recursive_output = jit_tree(_no_recursive_output, inline, tag=tag, **common)
+            recursive_rate = jit_tree(_no_recursive_rate, inline, tag=tag, **common)
+        regressor_output = jit_tree(_regressor_output, numba.njit, tag=tag,
+                                    regressor=jit_tree(_regressor, numba.njit, tag=tag, inner=inline),
+                                    law_output=law_output, **common)
+        return {"law_stage": jit_tree(_law_stage, numba.njit, tag=tag, regressor_output=regressor_output,
+                                      law_torque=jit_tree(rk.rne_law_torque, numba.njit, tag=tag, inner=inline),
+                                      law_rate=jit_tree(rk.rne_law_rate, numba.njit, tag=tag, inner=inline),
+                                      law_recursive_output=recursive_output, law_recursive_rate=recursive_rate,
+                                      law_point=law_point, **common),
                 "apply_control": jit_tree(_apply_control, inline, tag=tag, **common),
                 "record_row": jit_tree(_record_row, inline, tag=tag, **common)}
 
@@ -579,22 +665,6 @@ def supported(plant: Plant, law: Law) -> bool:
     return (plant.stages in (1, 4) and law.regressor is plant.regressor
             and len(law.names) == len(plant.names) and int(law.m) == int(plant.m)
             and plant.model.nuserdata >= USERDATA_SLOTS)
-
-
-def _base_map_columns(B, nstd: int, nth: int) -> dict:
-    """The base map B (nstd, nth) by columns, its nonzero entries only (B is a column selection):
-    {bptr, bidx, bval, need} as the callback reads them."""
-    B = np.asarray(B, dtype=float)
-    if B.shape != (nstd, nth):
-        raise ValueError(f"base map of shape {B.shape}, expected {(nstd, nth)}")
-    rows_, vals, ptr = [], [], [0]
-    for c in range(nth):
-        nz = np.nonzero(B[:, c])[0]
-        rows_ += nz.tolist()
-        vals += B[nz, c].tolist()
-        ptr.append(len(rows_))
-    return {"bptr": np.asarray(ptr, dtype=np.int64), "bidx": np.asarray(rows_ or [0], dtype=np.int64),
-            "bval": np.asarray(vals or [0.0], dtype=float), "need": np.any(B != 0, axis=1).astype(np.int64)}
 
 
 class NativeManipulatorController(ContextOwner):
@@ -638,7 +708,9 @@ class NativeManipulatorController(ContextOwner):
             "zero": np.zeros(nv), "u": np.zeros(nv), "u_hold": np.zeros(nv), "s_hold": np.zeros(nv),
             "delayed": np.zeros(nv), "ring": np.zeros((d + 1, nv)), "rate": np.zeros(nth),
             "y_std": np.zeros((nv, nstd)), "y": np.zeros((nv, nth)), "tau_known": np.zeros(nv),
-            "scratch": np.zeros(18 * nb), "ref": np.zeros((rows * self.nst, 3, nv)), "noise": np.zeros((rows, 2, nv)),
+            "scratch": np.zeros(rk.RNE_SCRATCH * nb), "pi_std": np.zeros(max(nstd, 1)),
+            "rate_std": np.zeros(max(nstd, 1)), "s_rate": np.zeros(nv),
+            "ref": np.zeros((rows * self.nst, 3, nv)), "noise": np.zeros((rows, 2, nv)),
             "rec_t": np.zeros(rows), "rec_x": np.zeros((rows, 2, nv)), "rec_u": np.zeros((rows, nv)),
             "rec_s": np.zeros((rows, nv)), "rec_ref": np.zeros((rows, 3, nv)), "rec_theta": np.zeros((rows, nth)),
             "rec_M": np.zeros((rows, max(model.nM, 1))),
@@ -648,13 +720,9 @@ class NativeManipulatorController(ContextOwner):
             "vpt": np.zeros(nv), "params": f64(p.get("plugin_params", np.zeros(1))),
         }
         B = reg.base_map
-        if B is not None:
-            buf.update(_base_map_columns(B, nstd, nth))
-        elif nstd != nth:
+        if B is None and nstd != nth:
             raise ValueError(f"the law has {nth} parameters, the regressor {nstd}")
-        else:
-            buf.update(need=np.ones(max(nstd, 1), dtype=np.int64), bptr=np.zeros(1, dtype=np.int64),
-                       bidx=np.zeros(1, dtype=np.int64), bval=np.zeros(1))
+        buf.update(base_map_columns(B, nstd, nth))
         self.buffers = buf
         ctx = np.zeros(1, dtype=CONTEXT)
         c = ctx[0]
@@ -666,6 +734,7 @@ class NativeManipulatorController(ContextOwner):
         c["gains"] = self.gains.ctypes.data  # held by self for the run's lifetime
         c["nparams"] = len(buf["params"])
         c["has_base"] = int(B is not None)
+        c["recursive"] = int(bool(p.get("recursive", False)))
         c["mode"], c["period_steps"], c["delay"], c["period"] = control.mode, control.steps, d, control.period
         c["h"] = plant.dt
         c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights

@@ -141,7 +141,13 @@ def log_header(scn: Scenario, setup: Setup):
         law_plugin=setup.law.installed.describe() if setup.law.installed is not None else None,
         plant_plugin=_plant_plugin(scn), control_mode=timing.describe()["control_mode"],
         control_period=timing.period, ctrl_range=_list(limits.get("ctrl_range")),
-        joint_limits=limits.get("joint_limits"), encoding=scn.log_encoding)
+        joint_limits=limits.get("joint_limits"), encoding=scn.log_encoding, law_evaluation=law_evaluation(setup.law))
+
+
+def law_evaluation(law) -> str:
+    """How a Slotine–Li law evaluates Y π̂ and Yᵀ s ("recursive": O(n), "regressor": Y whole), "" for another law."""
+    recursive = getattr(law, "recursive", None)
+    return "" if recursive is None else ("recursive" if recursive else "regressor")
 
 
 def _list(value) -> list | None:
