@@ -255,7 +255,7 @@ def test_merge_joins_cards_of_one_suite_and_refuses_another_version(cards, tmp_p
     r = subprocess.run([sys.executable, "-m", "adaptive_mj", "score", "--merge", str(a), str(old), "-o",
                         str(tmp_path / "n")], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
-    assert "old.json: key 'suite.version': expected 1" in r.stderr and "got 0" in r.stderr
+    assert f"old.json: key 'suite.version': expected {score_suite.SUITE_VERSION}" in r.stderr and "got 0" in r.stderr
     other = json.loads(b.read_text())
     other["suite"]["seeds"] = 8
     old.write_text(json.dumps(other))
