@@ -52,6 +52,7 @@ from adaptive_mj.laws.protocol import Law
 from adaptive_mj.numba_util import jit_tree
 from adaptive_mj.plants import regressor_kernel as rk
 from adaptive_mj.plants.manipulator import base_map_columns
+from adaptive_mj.plants.regressor_kernel import rne_forward
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import stage as stage_code
 from adaptive_mj.sim import native_step
@@ -232,56 +233,7 @@ def _regressor(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm
         tau_known[j] = 0.0
         for c in range(ncol):
             Y[j, c] = 0.0
-    for k in range(6):
-        cv[0, k] = 0.0
-        cw[0, k] = 0.0
-        ca[0, k] = 0.0
-    ca[0, 3] = -gravity[0]
-    ca[0, 4] = -gravity[1]
-    ca[0, 5] = -gravity[2]
-    for b in range(1, nbody):
-        p = parent[b]
-        v0, v1, v2, v3, v4, v5 = cv[p, 0], cv[p, 1], cv[p, 2], cv[p, 3], cv[p, 4], cv[p, 5]
-        w0, w1, w2, w3, w4, w5 = cw[p, 0], cw[p, 1], cw[p, 2], cw[p, 3], cw[p, 4], cw[p, 5]
-        a0, a1, a2, a3, a4, a5 = ca[p, 0], ca[p, 1], ca[p, 2], ca[p, 3], ca[p, 4], ca[p, 5]
-        for j in range(dofadr[b], dofadr[b] + dofnum[b]):
-            c0, c1, c2, c3, c4, c5 = cdof[j, 0], cdof[j, 1], cdof[j, 2], cdof[j, 3], cdof[j, 4], cdof[j, 5]
-            s = 0.5 * w[j]  # _cross_motion_add(cv, cdof_j, ½ w_j, ca)
-            a0 += s * (v1 * c2 - v2 * c1)
-            a1 += s * (v2 * c0 - v0 * c2)
-            a2 += s * (v0 * c1 - v1 * c0)
-            a3 += s * (v1 * c5 - v2 * c4 + v4 * c2 - v5 * c1)
-            a4 += s * (v2 * c3 - v0 * c5 + v5 * c0 - v3 * c2)
-            a5 += s * (v0 * c4 - v1 * c3 + v3 * c1 - v4 * c0)
-            s = 0.5 * v[j]  # _cross_motion_add(cw, cdof_j, ½ v_j, ca)
-            a0 += s * (w1 * c2 - w2 * c1)
-            a1 += s * (w2 * c0 - w0 * c2)
-            a2 += s * (w0 * c1 - w1 * c0)
-            a3 += s * (w1 * c5 - w2 * c4 + w4 * c2 - w5 * c1)
-            a4 += s * (w2 * c3 - w0 * c5 + w5 * c0 - w3 * c2)
-            a5 += s * (w0 * c4 - w1 * c3 + w3 * c1 - w4 * c0)
-            aj, vj, wj = a[j], v[j], w[j]
-            a0 += c0 * aj
-            a1 += c1 * aj
-            a2 += c2 * aj
-            a3 += c3 * aj
-            a4 += c4 * aj
-            a5 += c5 * aj
-            v0 += c0 * vj
-            v1 += c1 * vj
-            v2 += c2 * vj
-            v3 += c3 * vj
-            v4 += c4 * vj
-            v5 += c5 * vj
-            w0 += c0 * wj
-            w1 += c1 * wj
-            w2 += c2 * wj
-            w3 += c3 * wj
-            w4 += c4 * wj
-            w5 += c5 * wj
-        cv[b, 0], cv[b, 1], cv[b, 2], cv[b, 3], cv[b, 4], cv[b, 5] = v0, v1, v2, v3, v4, v5
-        cw[b, 0], cw[b, 1], cw[b, 2], cw[b, 3], cw[b, 4], cw[b, 5] = w0, w1, w2, w3, w4, w5
-        ca[b, 0], ca[b, 1], ca[b, 2], ca[b, 3], ca[b, 4], ca[b, 5] = a0, a1, a2, a3, a4, a5
+    rne_forward(parent, dofadr, dofnum, cdof, gravity, v, w, a, scratch)  # cv, cw, ca: the O(n) law's own pass
     for b in range(1, nbody):
         col = body_col[b]
         if body_known[b] == 0 and col < 0:
