@@ -75,6 +75,56 @@ def test_control_rate_rows_far_below_the_bound_are_not_said_to_test_it():
     assert "none of them tests the prediction" in control_rate._verdict(rows[:1], [])
 
 
+def test_control_rate_names_the_pre_flight_figure_beside_its_diagonal_one():
+    """Section 11 printed K_D T/M_jj = 4.65 for the 6-joint arm at 100 Hz while the same run's pre-flight check warned
+    μh = 4.96, with no word between them. The pre-flight's figure, recomputed here from the compiled model by its
+    definition (mj_fullM, armature included, at the check's 64 points of the reference: T · (max λ(M⁻¹K_D) + max Λ)),
+    is what the check prints and the section's coupled figure plus λT; the section's sentence names it beside the
+    diagonal figure, and the README quotes both as they are printed."""
+    from pathlib import Path
+
+    import mujoco
+
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.success import sampled_positions
+    from adaptive_mj.sim import preflight
+    from adaptive_mj.sim.runner import control_timing
+
+    path, T = sc.SCENARIOS_DIR / "ur5e_identification.toml", 0.01  # the section's slowest rate, 100 Hz
+    scn = sc.load(path, overrides=["control.mode='sampled'", f"control.period={T!r}"])
+    s = build(scn)
+    pre = preflight.check(s.plant, s.law, s.reference, duration=scn.simulation.duration, timing=control_timing(scn, s))
+    model, data = s.plant.model, mujoco.MjData(s.plant.model)
+    joints = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in s.plant.joint_names]
+    qadr, dadr = model.jnt_qposadr[joints], model.jnt_dofadr[joints]
+    kd = np.broadcast_to(np.asarray(s.law.kd, dtype=float), (len(joints),))
+    lam = np.broadcast_to(np.asarray(s.law.lam, dtype=float), (len(joints),))
+    worst = 0.0
+    for q in sampled_positions(s.reference, scn.simulation.duration, preflight.SAMPLES, s.law.order):
+        data.qpos[qadr] = q
+        mujoco.mj_forward(model, data)
+        full = np.zeros((model.nv, model.nv))
+        mujoco.mj_fullM(model, data, full)
+        M = full[np.ix_(dadr, dadr)]
+        worst = max(worst, float(np.linalg.eigvals(np.linalg.solve(M, np.diag(kd))).real.max()))
+    assert pre.figure == pytest.approx((worst + lam.max()) * T, rel=1e-9) and pre.step == T
+    assert f"μh = {pre.figure:.3g} at h = {T:.3g} s" in pre.line()
+
+    arm = control_rate.sampled_loop(path)
+    diagonal = arm.figure(T)[0]
+    assert arm.preflight_rate is not None and arm.coupled is not None
+    assert arm.preflight_rate * T == pytest.approx(pre.figure, rel=1e-9)
+    assert arm.coupled == pytest.approx(worst, rel=1e-9)  # the same points of the reference as the check's
+    assert diagonal <= arm.coupled * T < pre.figure  # the Rayleigh quotient, then + λT: two figures, not one
+    words = control_rate._preflight_words(arm, T)
+    assert (f"its warning's μh = {pre.figure:.3g} (the coupled figure {worst * T:.3g} plus λT = {lam.max() * T:.3g}), "
+            f"not the table's diagonal figure {diagonal:.3g}") in words
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert f"(μh = {pre.figure:.3g} > 2)" in readme and f"K_D T/M_jj ({diagonal:.3g} on {arm.figure(T)[1]}" in readme
+    assert f"T · (max λ(M⁻¹K_D) + max Λ) = {worst * T:.3g} + {lam.max() * T:.3g}" in readme
+
+
 def test_re_adaptation_is_claimed_only_when_the_error_came_back():
     slow = wing_rock._readapt_words("sliding", {"pre": 1e-4, "post": 4e-3, "err_change": 0.53, "err_end": 0.47})
     assert "40× its value" in slow and "re-adaptation is not shown within the run" in slow

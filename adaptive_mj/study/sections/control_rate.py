@@ -13,6 +13,7 @@ import numpy as np
 from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 from adaptive_mj.plants.protocol import has_joints
 from adaptive_mj.setup import scenario as sc
+from adaptive_mj.sim import preflight
 
 if TYPE_CHECKING:
     from adaptive_mj.laws.sliding import SlidingAdaptiveLaw
@@ -39,7 +40,10 @@ class SampledLoop:
     included) at its smallest along the reference; gain: the law's k, or K_D per joint.
     lam: the surface's λ per channel: the law's velocity feedback on ỹ' is (gain + inertia λ) / inertia,
     the λ-term coming from d̂ ṡ_r (M̂ q̈_r on an arm), so the whole figure is a_c T + λ_c T.
-    coupled: an arm's max over the reference of λ_max(M⁻¹K_D) [1/s] (the pole of the coupled loop)."""
+    coupled: an arm's max over the reference of λ_max(M⁻¹K_D) [1/s] (the pole of the coupled loop).
+    preflight_rate: an arm's μ = coupled + max_j Λ_j [1/s] as the run's pre-flight check (sim/preflight.py)
+    computes it; μT is the figure its warning prints. An arm's M is evaluated at the pre-flight check's own
+    preflight.SAMPLES points of the reference, so that the two agree to rounding."""
 
     kind: str
     names: tuple[str, ...]
@@ -47,6 +51,7 @@ class SampledLoop:
     inertia: np.ndarray
     lam: np.ndarray
     coupled: float | None = None
+    preflight_rate: float | None = None
 
     @property
     def rate(self) -> np.ndarray:
@@ -66,9 +71,11 @@ class SampledLoop:
         return float(((self.rate + self.lam) * T).max())
 
 
-def sampled_loop(scn_path: Path, overrides=(), *, samples_per_second: float = 100.0) -> SampledLoop:
+def sampled_loop(scn_path: Path, overrides=()) -> SampledLoop:
     """The SampledLoop of a scenario, every number from the compiled model and the law (see SampledLoop)."""
     from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.success import sampled_positions
+    from adaptive_mj.sim.runner import control_timing
 
     scn = sc.load(scn_path, overrides=list(overrides))
     setup = build(scn)
@@ -76,13 +83,14 @@ def sampled_loop(scn_path: Path, overrides=(), *, samples_per_second: float = 10
         plant = setup.plant
         assert has_joints(plant)  # a plant kind of the rigid-body form: a plant of joints
         arm_law = cast("SlotineLiLaw", setup.law)  # the manipulator laws (slotine_li and its baselines) are one class
-        t = np.arange(0.0, scn.simulation.duration, 1.0 / samples_per_second)
-        M = plant.mass_matrices(np.asarray(setup.reference(t, 0))[0])
+        duration = scn.simulation.duration
+        M = plant.mass_matrices(sampled_positions(setup.reference, duration, preflight.SAMPLES, arm_law.order))
         kd = np.broadcast_to(np.asarray(arm_law.kd, dtype=float), (plant.m,)).copy()
         lam = np.broadcast_to(np.asarray(arm_law.lam, dtype=float), (plant.m,)).copy()
         coupled = max(float(np.linalg.eigvals(np.linalg.solve(Mi, np.diag(kd))).real.max()) for Mi in M)
+        pre = preflight.check(plant, arm_law, setup.reference, duration=duration, timing=control_timing(scn, setup))
         return SampledLoop(scn.plant.kind, tuple(plant.joint_names), kd, np.einsum("nii->ni", M).min(axis=0),
-                           lam, coupled)
+                           lam, coupled, pre.rate)
     d = float(setup.plant.true_theta()[0])
     law = cast("SlidingAdaptiveLaw", setup.law)  # heave_tracking.toml: law.kind = 'sliding_adaptive'
     return SampledLoop(scn.plant.kind, ("d",), np.array([float(law.k)]), np.array([d]),
@@ -121,6 +129,17 @@ def _identification(r: JobResult, kind: str) -> tuple[str, float | None]:
         return "n/a", None
     worst = max(rels, key=rels.__getitem__)
     return f"max \\|θ̂ᵢ−θᵢ\\|/\\|θᵢ\\| {_g(100 * rels[worst])} % ({worst})", rels[worst]
+
+
+def _preflight_words(arm: SampledLoop, T: float) -> str:
+    """The sentence that tells the arm's pre-flight figure μh (its runs' warning) from the section's figures at
+    the period T [s]: the pre-flight check adds the coupling and λT to the diagonal K_D T/M_jj."""
+    assert arm.coupled is not None and arm.preflight_rate is not None  # sampled_loop sets them on an arm
+    return ("The arm's pre-flight check (docs/THEORY.md, \"Pre-flight check\") warns with a third figure, the "
+            "coupling and λT at once: μh = T · (max λ(M⁻¹K_D) + max Λ) over the same points of the reference (h = T "
+            f"under sampled control), so at {T * 1e3:g} ms its warning's μh = {arm.preflight_rate * T:.3g} (the "
+            f"coupled figure {arm.coupled * T:.3g} plus λT = {float(arm.lam.max()) * T:.3g}), not the table's "
+            f"diagonal figure {arm.figure(T)[0]:.3g}.")
 
 
 TITLE = "Control rate: sampled-data control"
@@ -207,7 +226,7 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
                 e = np.abs(tr.joint_errors).max(axis=1) if joints else np.abs(tr.y_tilde)
                 a.semilogy(tr.t, np.where(e > 0, e, np.nan), lw=1, label=f"{rate:g} Hz (figure {figure:.2g})")
         arm, heave = (loops[name] for _, name in CONTROL_RATE_PLANTS)
-        assert arm.coupled is not None  # sampled_loop sets it on the manipulator
+        assert arm.coupled is not None  # sampled_loop sets it on an arm
         ax[0].set_ylabel("max_j |q̃_j| [rad]")
         ax[0].set_title(f"6-joint arm, K_D = {_g(float(arm.gain.max()))} N m s/rad: the ideal sampled loop needs "
                         f"more than {arm.lowest_stable_rate():.0f} Hz (necessary, not sufficient)")
@@ -237,7 +256,8 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
                 "gain·T/inertia and is stable iff gain·T/inertia < 2. Heave: kT/d with k the law's and d = "
                 f"{float(heave.inertia[0]):.4g} kg read from the compiled model (stable below T = 2d/k = "
                 f"{2e3 / float(heave.rate[0]):.3g} ms). Arm: max over joints of K_D T / M_jj, M = mj_fullM (armature "
-                "included) evaluated along the reference, its smallest diagonal entry over the run; the worst joint "
+                f"included) evaluated at {preflight.SAMPLES} points of the reference (the pre-flight check's), its "
+                "smallest diagonal entry over the run; the worst joint "
                 f"is {arm.names[j]} (M_jj ≥ {float(arm.inertia[j]):.4g} kg m², K_D = {float(arm.gain[j]):g} N m s/rad: "
                 f"stable below T = {2e3 / float(arm.rate[j]):.3g} ms, i.e. above {arm.lowest_stable_rate():.0f} Hz). "
                 "The coupled loop's figure T · max λ(M⁻¹K_D) over the reference is "
@@ -246,8 +266,9 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
                 "leaves out the surface's own velocity feedback (d̂ λ ỹ' inside d̂ ṡ_r, M̂ Λ q̃' inside M̂ q̈_r), "
                 f"which adds λT: at {T_slow * 1e3:g} ms that makes {arm.figure_with_surface(T_slow):.3g} on the arm "
                 f"and {heave.figure_with_surface(T_slow):.3g} on the vehicle, and moves the vehicle's bound to "
-                f"T < 2/(k/d + λ) = {2e3 / float(heave.rate[0] + heave.lam[0]):.3g} ms. Neither figure has the hold's "
-                "lag T/2 or the plant's drag, so the real margin lies elsewhere again (`adaptive-mj sweep "
+                f"T < 2/(k/d + λ) = {2e3 / float(heave.rate[0] + heave.lam[0]):.3g} ms. "
+                f"{_preflight_words(arm, T_slow)} None of these figures has the hold's lag T/2 or the plant's "
+                "drag, so the real margin lies elsewhere again (`adaptive-mj sweep "
                 "heave_tracking --breaking-point control.period=LO:HI` measures it). "
                 "Measured: a run holds when it passes as in the breaking-point study: it finishes and its tail "
                 f"RMS error stays below {TAIL_BOUND['heave']:g} m (heave) or {TAIL_BOUND['arm']:g} rad (arm). "
