@@ -165,7 +165,7 @@ class RobustSpec:
     sigma: float = 0.0
     e_modification: float = 0.0
     theta0: dict[str, float] | None = None  # the leakage's prior; None: the initial estimates
-    projection: dict[str, tuple[float, float]] | str | None = None  # {name: (lo, hi)} or "physical"
+    projection: dict[str, tuple[float, float]] | str | None = None  # {name: (lo, hi)} or a RIGID_BODY_PROJECTIONS word
     composite_gain: float | None = None  # composite adaptation: κ
     composite_filter: float | None = None  # its filter λ_f [1/s]
 

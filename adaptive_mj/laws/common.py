@@ -10,6 +10,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from adaptive_mj.laws.pseudo_inertia import body_record, project_bodies
+
 
 class LawStep(NamedTuple):
     """One evaluation of a law.
@@ -123,6 +125,11 @@ class Modification:
         is cut where it would leave the box, and every estimate (each RK4 stage's and each
         step's) is clipped into it, so θ̂ never leaves [lower, upper].
       theta0: (n_theta,) the prior θ₀ the leakage pulls toward.
+      bodies: the indices in θ̂ of each rigid body's m whose ten parameters are kept physically consistent
+        (law.projection = "consistent", adaptive_mj.laws.pseudo_inertia): after the box's clip, every stage's
+        and step's estimate of each such body is projected, in the metric of Γ, onto {π : J(π) ⪰ 0}. The
+        arrays the loop clips with (`box`, `arrays`) then carry that projection's record after their first
+        n_theta entries (pseudo_inertia.body_record, built from the law's Γ).
     For the manipulator law |s| is the Euclidean norm ‖s‖.
     """
 
@@ -131,6 +138,7 @@ class Modification:
     theta0: np.ndarray | None = None
     lower: np.ndarray | None = None
     upper: np.ndarray | None = None
+    bodies: tuple[int, ...] = ()
 
     def __post_init__(self):
         for name in ("sigma", "e_mod"):
@@ -146,20 +154,28 @@ class Modification:
     def leaks(self) -> bool:
         return self.sigma > 0.0 or self.e_mod > 0.0
 
-    def box(self, n_theta: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """(lower, upper) (n_theta,) of the projection, or None without one: a law's `bounds`,
-        into which the loop clips every stage's and step's estimate."""
-        if self.lower is None and self.upper is None:
+    def box(self, n_theta: int, gamma=None) -> tuple[np.ndarray, np.ndarray] | None:
+        """(lower, upper) of the projection, or None without one: a law's `bounds`, into which the loop clips
+        (clip_into) every stage's and step's estimate; each (n_theta,), or with `bodies` (n_theta + record,)
+        (see `arrays`; gamma: the law's Γ, (n_theta,) or a scalar)."""
+        if self.lower is None and self.upper is None and not self.bodies:
             return None
-        return self.arrays(n_theta)[3:]
+        return self.arrays(n_theta, gamma=gamma)[3:]
 
-    def arrays(self, n_theta: int, theta_hat0=None) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray]:
+    def arrays(self, n_theta: int, theta_hat0=None, *,
+               gamma=None) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray]:
         """(sigma, e_mod, theta0, lower, upper) as the compiled laws take them: θ₀ defaults to
-        theta_hat0 (else zeros), the box to (-inf, inf)."""
+        theta_hat0 (else zeros), the box to (-inf, inf). With `bodies`, lower and upper each go on past
+        n_theta with the physically consistent projection's record (pseudo_inertia.body_record of the
+        bodies and the law's Γ = gamma; None: ones); every loop over the box stops at n_theta."""
         th0 = self.theta0 if self.theta0 is not None else theta_hat0
         th0 = np.zeros(n_theta) if th0 is None else np.array(th0, dtype=float).reshape(n_theta)
         lo = np.full(n_theta, -np.inf) if self.lower is None else np.array(self.lower, dtype=float).reshape(n_theta)
         hi = np.full(n_theta, np.inf) if self.upper is None else np.array(self.upper, dtype=float).reshape(n_theta)
+        if self.bodies:
+            g = np.broadcast_to(np.asarray(1.0 if gamma is None else gamma, dtype=float), (n_theta,))
+            record = body_record(self.bodies, g)
+            lo, hi = np.concatenate((lo, record)), np.concatenate((hi, record))
         return float(self.sigma), float(self.e_mod), th0, lo, hi
 
 
@@ -182,12 +198,17 @@ def modify_rate(rate, theta, s_abs, sigma, e_mod, theta0, gamma, lower, upper):
 
 
 def clip_into(theta, lower, upper):
-    """Clip θ̂ into [lower, upper] in place (a no-op with infinite bounds)."""
-    for i in range(theta.shape[0]):
+    """Clip θ̂ into [lower, upper] in place (a no-op with infinite bounds); where lower goes on past n_theta (a
+    Modification with `bodies`), then each of those bodies projected onto its physically consistent set
+    (pseudo_inertia.project_bodies, the record at lower[n_theta:])."""
+    n = theta.shape[0]
+    for i in range(n):
         if theta[i] < lower[i]:
             theta[i] = lower[i]
         elif theta[i] > upper[i]:
             theta[i] = upper[i]
+    if lower.shape[0] > n:
+        project_bodies(theta, lower, n)
 
 
 def plugin_rate(rate, theta, s_abs, signal, adapt, dz_width, sigma, e_mod, theta0, gamma, lower, upper):

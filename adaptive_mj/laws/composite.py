@@ -101,6 +101,6 @@ class CompositeSlidingLaw(SlidingAdaptiveLaw):
             return step
         Yf, e = self.prediction(theta_hat)
         rate = step.theta_hat_dot - self.kappa * Yf * e / self.gamma
-        _, _, theta0, lower, upper = self.modification.arrays(len(self.names))
+        _, _, theta0, lower, upper = self.modification.arrays(len(self.names), gamma=self.gamma)
         modify_rate(rate, theta_hat, 0.0, 0.0, 0.0, theta0, self.gamma, lower, upper)  # projection again
         return step._replace(theta_hat_dot=rate)

@@ -33,7 +33,8 @@ ROBUST = (
     Key("sigma", "number", default=0.0, bounds=">= 0", doc="σ-modification: θ̂' = … − σ Γ⁻¹ (θ̂ − θ₀)"),
     Key("e_modification", "number", default=0.0, bounds=">= 0", doc="e-modification: θ̂' = … − ν |s| Γ⁻¹ (θ̂ − θ₀)"),
     Key("theta0", "table {parameter = number}", doc="the prior θ₀ both leakages pull toward (default: θ̂(0))"),
-    Key("projection", "table {parameter = [lower, upper]}", doc="box projection of θ̂ (inf allowed)"),
+    Key("projection", "table {parameter = [lower, upper]}", doc="box projection of θ̂ (inf allowed); on an arm "
+        "also 'consistent' (each body's pseudo-inertia kept PSD) or 'nonnegative' (a box; 'physical' its older name)"),
     Key("composite", "table {gain, filter}",
         doc="composite adaptation: gain κ > 0 and filter λ_f > 0 [1/s] (sliding_adaptive only)"),
 )
@@ -92,11 +93,20 @@ def read_estimates(t: Table, name: str) -> dict[str, float] | str | None:
     return t.named_numbers(name, None)
 
 
+#: the words law.projection may be on a plant of rigid bodies (the arms) instead of a table:
+#:   "consistent"   each adapted body's ten parameters kept physically consistent (its pseudo-inertia PSD, projected
+#:                  in the metric of Γ: adaptive_mj.laws.pseudo_inertia), armature, damping and friction >= 0;
+#:   "nonnegative"  a box: masses, the principal moments about the body origin, armature, damping and friction
+#:                  >= 0 (cheaper; necessary, not sufficient: an estimate in it may be no possible body);
+#:   "physical"     the older name of "nonnegative" (scenarios and logs written before "consistent" existed).
+RIGID_BODY_PROJECTIONS = ("consistent", "nonnegative", "physical")
+
+
 def read_robust(t: Table, kind: str, *, adaptive: bool, composite: bool, presets: tuple[str, ...]) -> RobustSpec:
     """law.sigma, law.e_modification, law.theta0, law.projection, law.composite: checked for every
     law; the baselines ignore them (as they ignore gamma and dead_zone), so law.kind = a baseline
     turns any adaptive scenario into its baseline. presets: the words law.projection may be instead
-    of a table ("physical" on a multi-joint plant)."""
+    of a table (RIGID_BODY_PROJECTIONS on a multi-joint plant)."""
     sigma = t.number("sigma", 0.0, ge=0)
     e_mod = t.number("e_modification", 0.0, ge=0)
     theta0 = t.named_numbers("theta0", None)

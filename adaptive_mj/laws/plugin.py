@@ -174,8 +174,8 @@ class Shared:
     def of(cls, n_theta: int, *, gamma=None, dead_zone: DeadZone | None = None,
            modification: Modification | None = None) -> "Shared":
         """From the law's Γ (None: ones), dead-zone and modification (its θ₀ already resolved by the builder)."""
-        sigma, e_mod, theta0, lower, upper = (modification or NO_MODIFICATION).arrays(n_theta)
         g = np.ones(n_theta) if gamma is None else as_gamma(gamma, n_theta)
+        sigma, e_mod, theta0, lower, upper = (modification or NO_MODIFICATION).arrays(n_theta, gamma=g)
         return cls(0.0 if dead_zone is None else float(dead_zone.width),
                    dead_zone is None or dead_zone.on is DeadZoneOn.S, sigma, e_mod, theta0, lower, upper, g)
 
@@ -216,7 +216,7 @@ class _PluginBase(Law):
     @property
     def bounds(self) -> Box | None:
         """(lower, upper) of law.projection, or None."""
-        return self.modification.box(len(self.names)) if self.adapt else None
+        return self.modification.box(len(self.names), self.shared.gamma) if self.adapt else None
 
     def _error(self, t: float, exc: Exception) -> PluginError:
         inst = self.installed

@@ -221,7 +221,7 @@ class SlotineLiLaw(Law):
         self._dz_width = 0.0 if dead_zone is None else dead_zone.width  # the dead-zone, once (not per call)
         self._dz_on_s = dead_zone is None or dead_zone.on is DeadZoneOn.S
         self.modification = modification or NO_MODIFICATION
-        self._mod = self.modification.arrays(len(self.names))
+        self._mod = self.modification.arrays(len(self.names), gamma=self.gamma)
         self.freeze = saturation is not None
         lo, hi = saturation if saturation is not None else (-np.inf, np.inf)
         self.lo = np.broadcast_to(np.asarray(lo, dtype=float), (self.m,)).copy()
@@ -231,7 +231,7 @@ class SlotineLiLaw(Law):
     @property
     def bounds(self) -> Box | None:
         """(lower, upper) of the projection, or None (common.Modification.box)."""
-        return self.modification.box(len(self.names))
+        return self.modification.box(len(self.names), self.gamma)
 
     def gains(self) -> SlotineLiGains:
         """The law's scalar gains and switches, by name."""
@@ -315,7 +315,7 @@ def _reader(adaptive: bool) -> Callable[[Table, str, PlantSpec, int], LawSpec]:
 def _read(t: Table, kind: str, *, adaptive: bool) -> LawSpec:
     """law.lambda and law.kd (a number, or a table by joint), law.gamma (required when adapting), law.dead_zone,
     the estimates (a baseline needs law.nominal or law.initial_estimates), the robust modifications (projection
-    may be "physical") and law.saturation ("freeze" when adapting). The law is of order 2 (law.order is not a
+    may be "consistent" or "nonnegative", law_keys.RIGID_BODY_PROJECTIONS) and law.saturation ("freeze" when adapting). The law is of order 2 (law.order is not a
     key of these kinds)."""
     lam = joint_values(t, "lambda", arrays=False)
     kd = joint_values(t, "kd", arrays=False)
@@ -331,7 +331,7 @@ def _read(t: Table, kind: str, *, adaptive: bool) -> LawSpec:
     nominal = shared.read_estimates(t, "nominal")
     if not adaptive and nominal is None and initial is None:
         raise ScenarioError(f"{t.where}: law.nominal (or law.initial_estimates) is required for law.kind = {kind!r}")
-    robust = shared.read_robust(t, kind, adaptive=adaptive, composite=False, presets=("physical",))
+    robust = shared.read_robust(t, kind, adaptive=adaptive, composite=False, presets=shared.RIGID_BODY_PROJECTIONS)
     saturation = shared.read_saturation(t)
     if saturation != "ignore" and not adaptive:
         raise t.fail("saturation", "'ignore' for a law without adaptation", saturation)

@@ -23,8 +23,10 @@ from adaptive_mj.errors import ScenarioError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws import DeadZone, DeadZoneOn, Law, Modification
 from adaptive_mj.laws import kinds as law_kinds
+from adaptive_mj.laws import pseudo_inertia
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.plants import ModelSource
+from adaptive_mj.plants import regressor_kernel as rk
 from adaptive_mj.plants.protocol import CtrlRange, JointPlant, Plant, control_shape, has_form, has_joints
 from adaptive_mj.setup.scenario import (JOINT_REFERENCE_KINDS, JOINT_SIGNALS, STATE_SIGNALS, EventSpec, LawSpec,
                                        Scenario)
@@ -439,14 +441,24 @@ def _modification(scn: Scenario, names: tuple[str, ...], theta_hat0: np.ndarray)
         return None
     theta0 = _named(scn, "law.theta0", R.theta0, names) if R.theta0 is not None else np.array(theta_hat0)
     lower = upper = None
+    bodies: tuple[int, ...] = ()
     if R.projection is not None:
         lower, upper = np.full(len(names), -np.inf), np.full(len(names), np.inf)
-        if R.projection == "physical":  # masses, principal inertias about the body origin, armature, damping
+        if R.projection in ("nonnegative", "physical"):  # masses, principal inertias, armature, damping >= 0
             for i, name in enumerate(names):
                 if name.rsplit(".", 1)[-1] in PHYSICAL_NONNEGATIVE:
                     lower[i] = 0.0
+        elif R.projection == "consistent":  # each body's pseudo-inertia PSD; the joints' own terms >= 0
+            bodies = rigid_body_starts(names)
+            if not bodies:
+                raise ScenarioError(f"{scn.source}: law.projection = 'consistent' keeps rigid bodies' ten "
+                                    "parameters physically consistent, and the law adapts no whole body "
+                                    f"(parameters: {', '.join(names)})")
+            for i, name in enumerate(names):
+                if name.rsplit(".", 1)[-1] in JOINT_NONNEGATIVE:
+                    lower[i] = 0.0
         else:
-            assert not isinstance(R.projection, str)  # the one preset is "physical" (scenario._robust)
+            assert not isinstance(R.projection, str)  # law_keys.RIGID_BODY_PROJECTIONS are the presets
             for name, (lo, hi) in R.projection.items():
                 if name not in names:
                     raise ScenarioError(f"{scn.source}: law.projection names parameter {name!r}, which the law "
@@ -457,12 +469,34 @@ def _modification(scn: Scenario, names: tuple[str, ...], theta_hat0: np.ndarray)
             i = outside[0]
             raise ScenarioError(f"{scn.source}: law.projection: the initial estimate {names[i]} = "
                                 f"{theta_hat0[i]:g} is outside its box [{lower[i]:g}, {upper[i]:g}]")
-    return Modification(sigma=R.sigma, e_mod=R.e_modification, theta0=theta0, lower=lower, upper=upper)
+        for start in bodies:
+            lam = pseudo_inertia.eigenvalues(theta_hat0, (start,))[0]
+            if lam[0] < -pseudo_inertia.PSD_TOLERANCE * np.sum(np.abs(lam)):
+                body = names[start].rsplit(".", 1)[0]
+                raise ScenarioError(f"{scn.source}: law.projection = 'consistent': the initial estimate of body "
+                                    f"{body!r} is no possible body (its pseudo-inertia has the eigenvalue "
+                                    f"{lam[0]:.3g} < 0); expected initial estimates with J ⪰ 0")
+    return Modification(sigma=R.sigma, e_mod=R.e_modification, theta0=theta0, lower=lower, upper=upper,
+                        bodies=bodies)
 
 
-#: parameter-name suffixes kept >= 0 by law.projection = "physical" (manipulators): a convex box
-#: that every physical body satisfies (necessary, not sufficient, for physical consistency)
+#: parameter-name suffixes kept >= 0 by law.projection = "nonnegative" (its older name "physical"; manipulators):
+#: a convex box that every physical body satisfies (necessary, not sufficient, for physical consistency)
 PHYSICAL_NONNEGATIVE = ("m", "Ixx", "Iyy", "Izz", "armature", "damping", "coulomb")
+#: the joints' own parameters, kept >= 0 by law.projection = "consistent" beside the bodies' pseudo-inertias
+JOINT_NONNEGATIVE = ("armature", "damping", "coulomb")
+
+
+def rigid_body_starts(names: tuple[str, ...]) -> tuple[int, ...]:
+    """The index of each body's m among parameter names "<body>.<p>" whose ten parameters follow it in the
+    standard order (regressor_kernel.BODY_PARAM_NAMES); a body given only in part is left out."""
+    std = rk.BODY_PARAM_NAMES
+    out = []
+    for i, name in enumerate(names):
+        body, _, p = name.rpartition(".")
+        if p == std[0] and i + 10 <= len(names) and all(names[i + k] == f"{body}.{std[k]}" for k in range(10)):
+            out.append(i)
+    return tuple(out)
 
 
 def _estimates(scn: Scenario, names: tuple[str, ...], plant: Plant) -> np.ndarray:

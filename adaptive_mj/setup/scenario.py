@@ -26,7 +26,7 @@ from adaptive_mj.plants.wing_rock import WING_ROCK_W  # noqa: F401 (re-exported)
 from adaptive_mj.keys import _MISSING, Table as _Table, _Missing, _show, _suggest  # noqa: F401 (re-exported)
 from adaptive_mj.keys import joint_values as _joint_values
 from adaptive_mj.laws import kinds as law_kinds
-from adaptive_mj.laws.law_keys import (DEAD_ZONE_ON, read_dead_zone as _dead_zone,  # noqa: F401 (re-exported)
+from adaptive_mj.laws.law_keys import (DEAD_ZONE_ON, RIGID_BODY_PROJECTIONS, read_dead_zone as _dead_zone,  # noqa: F401 (re-exported)
                                        read_estimates as _estimate_table, read_gamma as _gamma,
                                        read_robust as _robust)
 from adaptive_mj.specs import (ControlSpec, DeadZoneSpec, DisturbanceSpec, EventSpec, JointFrictionSpec,  # noqa: F401
@@ -590,7 +590,7 @@ def _plugin_law(t: _Table, kind: str, inst: Installed[LawPlugin], plant: PlantSp
     dead_zone = _dead_zone(t) if "dead_zone" not in own else None
     robust = RobustSpec()
     if not own & {"sigma", "e_modification", "theta0", "projection"}:
-        presets = ("physical",) if _rigid_body(plant) else ()  # a physical box needs bodies' parameters
+        presets = RIGID_BODY_PROJECTIONS if _rigid_body(plant) else ()  # these need bodies' parameters
         robust = _robust(t, kind, adaptive=bool(inst.plugin.adapts), composite=False, presets=presets)
     t.finish()
     return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=None, dead_zone=dead_zone,

@@ -285,6 +285,7 @@ class NativeController(ContextOwner):
         c["gains"] = self.gains.ctypes.data  # the law's record (kept alive by self.gains)
         for name, buf in self.buffers.items():
             c[name] = addr(buf)
+        c["nbox"] = len(self.buffers["lower"])
         self.context = ctx
         self.bind()
 

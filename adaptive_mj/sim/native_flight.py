@@ -238,6 +238,7 @@ class NativeFlightController(ContextOwner):
         for name, arr in self.buffers.items():
             c[name] = addr(arr)
         c["nstages"], c["nth"], c["m"], c["maxrows"] = self.nst, nth, 4, rows
+        c["nbox"] = len(self.buffers["lower"])
         c["qadr"], c["dadr"], c["nq"], c["nv"], c["nu"] = plant.airframe.qpos, plant.airframe.qvel, model.nq, \
             model.nv, model.nu
         c["delay"], c["mode"], c["period_steps"], c["period"], c["h"] = d, control.mode, control.steps, \

@@ -681,6 +681,7 @@ class NativeManipulatorController(ContextOwner):
         for name, arr in buf.items():
             c[name] = addr(arr)
         c["nstages"], c["nv"], c["m"], c["nbody"], c["nth"], c["nstd"] = self.nst, nv, nv, nb, nth, nstd
+        c["nbox"] = len(buf["lower"])
         c["nq"], c["nu"], c["maxrows"], c["nM"] = model.nq, model.nu, rows, model.nM
         self.gains = gains_record(p["gains"], SLOTINE_LI_GAINS if "plugin_law" not in p else PLUGIN_GAINS)
         c["gains"] = self.gains.ctypes.data  # held by self for the run's lifetime

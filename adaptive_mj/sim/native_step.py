@@ -42,7 +42,8 @@ _i8, _f8 = np.int64, np.float64
 #: docstring lists them): the run's state, when the law runs, and the estimate and delay-line buffers (addresses)
 STAGE_CONTEXT = [
     ("stage", _i8), ("row", _i8), ("rows", _i8), ("step", _i8), ("t", _f8),
-    ("nstages", _i8), ("nth", _i8), ("m", _i8), ("mode", _i8), ("period_steps", _i8), ("delay", _i8), ("h", _f8),
+    ("nstages", _i8), ("nth", _i8), ("nbox", _i8), ("m", _i8), ("mode", _i8), ("period_steps", _i8), ("delay", _i8),
+    ("h", _f8),
     ("period", _f8), ("inc", _f8, 4), ("weights", _f8, 4),
     ("theta", _i8), ("rsum", _i8), ("prev", _i8), ("rate", _i8), ("lower", _i8), ("upper", _i8), ("u_hold", _i8),
     ("delayed", _i8), ("ring", _i8),

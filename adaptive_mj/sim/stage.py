@@ -157,13 +157,15 @@ def control_stage(ctx, io):
     at stage 0 → end_stage (at the step's end θ̂ advanced once, row, step and t moved on).
 
     ctx: the run's context (a compiled callback's CONTEXT record, or the Python path's loop.StepContext): the
-    fields stage, row, step, nstages, nth, m (controls), mode, period_steps, delay, h, period, t, weights and
-    the buffers theta, rsum, prev, rate, lower, upper (n_theta,), u_hold, delayed (m,), ring (delay + 1, m).
+    fields stage, row, step, nstages, nth, nbox (lower and upper's length: n_theta, or more with the physically
+    consistent projection's record, common.Modification), m (controls), mode, period_steps, delay, h, period, t,
+    weights and
+    the buffers theta, rsum, prev, rate (n_theta,), lower, upper (nbox,), u_hold, delayed (m,), ring (delay + 1, m).
     io: what the pieces reach the plant through (compiled: (mjData address, mjModel address, struct offsets);
     Python: (t [s], x) of the stage)."""
     stage, row, nth, m = ctx.stage, ctx.row, ctx.nth, ctx.m
     theta, rsum, prev = view(ctx.theta, nth), view(ctx.rsum, nth), view(ctx.prev, nth)
-    lower, upper = view(ctx.lower, nth), view(ctx.upper, nth)
+    lower, upper = view(ctx.lower, ctx.nbox), view(ctx.upper, ctx.nbox)  # the box, then any pseudo-inertia record
     sampled = ctx.mode == SAMPLED
     if (is_sample_step(ctx.step, ctx.period_steps) and stage == 0) if sampled else True:
         law_stage(ctx, io, stage, row, theta, prev, lower, upper)

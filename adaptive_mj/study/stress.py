@@ -19,7 +19,7 @@ composite adaptation (Python callback path: slow, so only with `--composite`); a
 baselines, fixed nominal parameters (the truth) and robust sliding control (K = 10 % of the
 actuator limit, Φ = 0.05).
 On the 6-joint arm the laws are Slotine–Li with the dead-zone (width_in_noise_std = 3), σ- and
-e-modification (the same leak rule), the physical projection and saturation-aware adaptation, and
+e-modification (the same leak rule), the nonnegative box ("physical" projection) and saturation-aware adaptation, and
 the computed-torque and PD + gravity baselines with the true parameters; its stressors are noise,
 encoder resolution Δ (counts = 2π/Δ), a differentiated velocity's filter time constant
 τ = 1/(2π f_c), a sinusoidal torque on every joint, actuator lag, the motors' torque limits divided
@@ -183,7 +183,7 @@ def laws(p: Plant, *, composite: bool) -> list[tuple[str, list[str]]]:
 
 def _arm_laws(p: Plant) -> list[tuple[str, list[str]]]:
     """The 6-joint arm: Slotine–Li with each modification (the dead-zone sized from the nominal noise,
-    σ- and e-modification with the leak toward the true θ, the physical projection, saturation-aware
+    σ- and e-modification with the leak toward the true θ, the nonnegative box, saturation-aware
     adaptation), and its two baselines with the true parameters (computed torque, PD + gravity)."""
     scn, s = _setup(p)
     gamma1 = float(s.law.gamma[0])
