@@ -196,6 +196,7 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
         print(json.dumps(summary, sort_keys=False))
         return
     from adaptive_mj.plants import kinds as units  # the units each plant kind declares
+    from adaptive_mj.report.metrics import TAIL_FRACTION
 
     m = summary["metrics"]
     yu, uu = units.output_unit(kind or ""), units.control_unit(kind or "")
@@ -209,7 +210,9 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
     if m:
         print(f"  tracking error rms {f(m['rms_tracking_error'], yu)}, tail rms {f(m['rms_tracking_error_tail'], yu)}, "
               f"tail max {f(m['max_abs_tracking_error_tail'], yu)}")
-        print(f"  control rms {f(m['control_rms'], uu)}, total variation {f(m['control_total_variation'], uu)}")
+        rate = m.get("control_total_variation_rate_hz")
+        print(f"  control rms {f(m['control_rms'], uu)}, total variation {f(m['control_total_variation'], uu)}"
+              + (f" (over the rows at {rate:.4g} Hz: a lower bound where the control moves faster)" if rate else ""))
         if "rms_tracking_error_tail_per_joint" in m:
             own = units.lookup(kind)  # a kind of named state rows (a quadrotor) has position axes, not joints
             word = "axis" if own is not None and own.noise_signals else "joint"
@@ -224,7 +227,17 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
             com = e.get("com_undefined") or f(e["com_error_mm"], "mm")  # m̂ = 0: no centre of mass to compare
             print(f"  identified {body}: mass {f(e['mass_error_percent'])} %, centre of mass "
                   f"{com}, inertia {f(e['inertia_error'], 'kg m²')} "
-                  f"({f(None if rel is None else 100 * rel)} % of |I|)")
+                  f"({f(None if rel is None else 100 * rel)} % of |I|) at the last row")
+            tl = e.get("tail")
+            if tl:  # the estimates may swing: the tail's mean [min, max] beside the last row
+                def rng(k, scale=1.0, unit="", tl=tl):
+                    v = tl[k]
+                    return (f"{f(None if v['mean'] is None else scale * v['mean'], unit)} "
+                            f"[{f(None if v['min'] is None else scale * v['min'])}, "
+                            f"{f(None if v['max'] is None else scale * v['max'])}]")
+                print(f"    over the tail (last {100 * TAIL_FRACTION:g} %, mean [min, max]): mass "
+                      f"{rng('mass_error_percent')} %, centre of mass {rng('com_error_mm', unit='mm')}, inertia "
+                      f"{rng('inertia_error', unit='kg m²')}")
     final = summary["final"]
     unit = functools.partial(units.param_unit, kind)
     parts = [f"{n} {f(final['theta_hat'][n], unit(n))} (true {f(final['theta'][n], unit(n))})"

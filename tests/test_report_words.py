@@ -65,6 +65,30 @@ def test_a_swinging_estimate_reports_its_spread_not_its_last_sample():
     assert sp["last"] == v[-1] and sp["min"] < sp["mean"] < sp["max"]
 
 
+def test_an_arm_run_s_summary_gives_the_tail_s_spread_of_its_identification_and_the_rate_of_its_tv(tmp_path,
+                                                                                                   capsys):
+    """ur5e_identification over 5 s: the estimates still swing, so the summary's tail spread is wide and holds the
+    last row; the CLI prints it beside the last row, and the total variation names its rows' rate."""
+    from adaptive_mj.cli import main
+    from adaptive_mj.report.metrics import TAIL_FRACTION, body_identification
+    from adaptive_mj.study.api import run_scenario
+
+    res = run_scenario("ur5e_identification", set=["simulation.duration=5"], seed=0)
+    tr, m = res.trajectory, res.summary["metrics"]
+    e = m["identification"]["payload/body"]
+    tail = e["tail"]
+    assert tail["mass_error_percent"]["min"] <= e["mass_error_percent"] <= tail["mass_error_percent"]["max"]
+    assert tail["com_error_mm"]["max"] - tail["com_error_mm"]["min"] > 5.0  # a swing of more than 5 mm
+    rows = tr.t >= tr.t[0] + (1 - TAIL_FRACTION) * (tr.t[-1] + tr.meta["dt"] - tr.t[0])
+    per_row = body_identification(tr.names, tr.theta_hat[rows], tr.theta[rows])["payload/body"]
+    assert tail["inertia_error"]["mean"] == pytest.approx(float(np.mean(per_row["inertia_error"])), rel=1e-12)
+    assert m["control_total_variation_rate_hz"] == pytest.approx(1.0 / tr.meta["dt"])
+    assert main(["run", "ur5e_identification", "--set", "simulation.duration=1", "-o", str(tmp_path / "a.mcap")]) == 0
+    out = capsys.readouterr().out
+    assert "over the tail (last 25 %, mean [min, max]): mass" in out
+    assert "(over the rows at 1000 Hz: a lower bound where the control moves faster)" in out
+
+
 def test_control_rate_rows_far_below_the_bound_are_not_said_to_test_it():
     rows = [{"plant": "heave", "rate_hz": 100.0, "figure": 0.05, "holds": True},
             {"plant": "arm", "rate_hz": 250.0, "figure": 1.86, "holds": True},

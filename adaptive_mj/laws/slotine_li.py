@@ -315,8 +315,8 @@ def _reader(adaptive: bool) -> Callable[[Table, str, PlantSpec, int], LawSpec]:
 def _read(t: Table, kind: str, *, adaptive: bool) -> LawSpec:
     """law.lambda and law.kd (a number, or a table by joint), law.gamma (required when adapting), law.dead_zone,
     the estimates (a baseline needs law.nominal or law.initial_estimates), the robust modifications (projection
-    may be "consistent" or "nonnegative", law_keys.RIGID_BODY_PROJECTIONS) and law.saturation ("freeze" when adapting). The law is of order 2 (law.order is not a
-    key of these kinds)."""
+    may be "consistent" or "nonnegative", law_keys.RIGID_BODY_PROJECTIONS) and law.saturation ("freeze" when
+    adapting). The law is of order 2 (law.order is not a key of these kinds)."""
     lam = joint_values(t, "lambda", arrays=False)
     kd = joint_values(t, "kd", arrays=False)
     for key, value in (("lambda", lam), ("kd", kd)):

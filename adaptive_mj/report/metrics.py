@@ -26,6 +26,12 @@ def tail_mask(traj: Trajectory, fraction: float = TAIL_FRACTION) -> np.ndarray:
     return traj.t >= t0 + (1.0 - fraction) * (t_end - t0)
 
 
+def _row_rate(traj: Trajectory) -> float | None:
+    """The rate of the trajectory's rows [Hz] (1/(dt · log_every)), or None where dt is not on record."""
+    dt = traj.meta.get("dt", 0.0) * traj.meta.get("log_every", 1)
+    return 1.0 / dt if dt > 0 else None
+
+
 def metrics(traj: Trajectory) -> dict:
     """The metrics of one run (see docs/METRICS.md)."""
     e = traj.y_tilde
@@ -40,6 +46,9 @@ def metrics(traj: Trajectory) -> dict:
         "max_abs_tracking_error_tail": float(np.max(np.abs(e[tail]))) if tail.any() else math.nan,
         "control_rms": _rms(traj.u),
         "control_total_variation": float(np.sum(du)),
+        # the rate of the rows the total variation is summed over [Hz] (every physics step live; the log's rate
+        # from a log): a lower bound of the control's where it moves faster than the rows
+        "control_total_variation_rate_hz": _row_rate(traj),
         "rms_s_tail": _rms(traj.s[tail]),
         "param_error_final": {n: float(v) for n, v in zip(traj.names, final_err, strict=True)},
         "lyapunov_initial": float(traj.V[0]) if len(traj) else math.nan,
@@ -50,6 +59,9 @@ def metrics(traj: Trajectory) -> dict:
         out.update(joint_metrics(traj))
         ident = body_identification(traj.names, traj.theta_hat[-1], traj.theta[-1]) if len(traj) else {}
         if ident:
+            spread = body_identification(traj.names, traj.theta_hat[tail], traj.theta[tail])
+            for body, e in ident.items():  # the last sample, and the tail's mean [min, max] beside it
+                e["tail"] = {k: _spread(v) for k, v in spread[body].items() if k != "com_undefined"}
             out["identification"] = ident
     out.update(saturation_metrics(traj))
     return out
@@ -62,12 +74,27 @@ _INERTIA = ("Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 COM_MASS_FLOOR = 1e-3
 
 
+def _spread(v: np.ndarray) -> dict:
+    """{"mean", "min", "max"} of a figure over the tail's rows, ignoring NaN (an undefined centre of mass); NaN
+    where no row has it."""
+    v = np.asarray(v, dtype=float)
+    ok = v[np.isfinite(v)]
+    if ok.size == 0:
+        return {"mean": math.nan, "min": math.nan, "max": math.nan}
+    return {"mean": float(ok.mean()), "min": float(ok.min()), "max": float(ok.max())}
+
+
 def body_identification(names, estimate, truth) -> dict:
     """For every body whose ten standard parameters ("<body>.m", ".mcx/.mcy/.mcz", ".Ixx" ... ".Izz",
-    inertia about the body's origin) are estimated: the final mass error [%], centre-of-mass error
+    inertia about the body's origin) are estimated: the mass error [%], centre-of-mass error
     |ĉ - c| with c = (m c) / m [mm], and inertia error ||Î - I||_F [kg m²], also relative to ||I||_F.
-    Where the estimated mass m̂ is <= COM_MASS_FLOOR |m| (0 under a physical projection), ĉ is undefined:
-    com_error_mm is NaN and com_undefined says why (otherwise "")."""
+    Where the estimated mass m̂ is <= COM_MASS_FLOOR |m| (0 under a projection that stops it there), ĉ is
+    undefined: com_error_mm is NaN and com_undefined says why (otherwise "").
+    estimate, truth: (n_theta,) one row (floats out), or (N, n_theta) rows ((N,) arrays out; com_undefined the
+    last row's)."""
+    est_all, true_all = np.asarray(estimate, dtype=float), np.asarray(truth, dtype=float)
+    rows = est_all.ndim == 2
+    est_all, true_all = np.atleast_2d(est_all), np.atleast_2d(true_all)
     index = {n: i for i, n in enumerate(names)}
     out = {}
     for name in names:
@@ -77,22 +104,28 @@ def body_identification(names, estimate, truth) -> dict:
         keys = [f"{body}.{k}" for k in ("m", "mcx", "mcy", "mcz", *_INERTIA)]
         if not all(k in index for k in keys):
             continue
-        est = np.array([estimate[index[k]] for k in keys], dtype=float)
-        true = np.array([truth[index[k]] for k in keys], dtype=float)
+        cols = [index[k] for k in keys]
+        est, true = est_all[:, cols], true_all[:, cols]
 
         def inertia(v):
-            xx, xy, yy, xz, yz, zz = v[4:]
-            return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+            xx, xy, yy, xz, yz, zz = (v[:, k] for k in range(4, 10))
+            return np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], -2)
 
-        defined = true[0] != 0 and est[0] > COM_MASS_FLOOR * abs(true[0])
-        com_err = np.linalg.norm(est[1:4] / est[0] - true[1:4] / true[0]) * 1e3 if defined else math.nan
-        undefined = "" if defined else (f"undefined (estimated mass {est[0]:.3g} kg)" if true[0] != 0
-                                        else "undefined (true mass 0 kg)")
-        i_err = float(np.linalg.norm(inertia(est) - inertia(true)))
-        i_norm = float(np.linalg.norm(inertia(true)))
-        out[body] = {"mass_error_percent": float(100 * (est[0] - true[0]) / true[0]) if true[0] else math.nan,
-                     "com_error_mm": float(com_err), "com_undefined": undefined, "inertia_error": i_err,
-                     "inertia_error_relative": i_err / i_norm if i_norm else math.nan}
+        defined = (true[:, 0] != 0) & (est[:, 0] > COM_MASS_FLOOR * np.abs(true[:, 0]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            com_err = np.where(defined, np.linalg.norm(est[:, 1:4] / est[:, :1] - true[:, 1:4] / true[:, :1],
+                                                       axis=1) * 1e3, math.nan)
+            mass = np.where(true[:, 0] != 0, 100 * (est[:, 0] - true[:, 0]) / true[:, 0], math.nan)
+            i_err = np.linalg.norm(inertia(est) - inertia(true), axis=(1, 2))
+            i_norm = np.linalg.norm(inertia(true), axis=(1, 2))
+            i_rel = np.where(i_norm != 0, i_err / i_norm, math.nan)
+        last_est, last_true = est[-1, 0], true[-1, 0]
+        undefined = "" if defined[-1] else (f"undefined (estimated mass {last_est:.3g} kg)" if last_true != 0
+                                            else "undefined (true mass 0 kg)")
+        fig = {"mass_error_percent": mass, "com_error_mm": com_err, "inertia_error": i_err,
+               "inertia_error_relative": i_rel}
+        out[body] = {k: (v if rows else float(v[0])) for k, v in fig.items()}
+        out[body]["com_undefined"] = undefined
     return out
 
 
