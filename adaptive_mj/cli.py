@@ -87,7 +87,8 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--set", dest="overrides", action="append", default=[], metavar="law.KEY=VALUE",
                    help="with --law: a key of that law (repeatable)")
     b.add_argument("--full-logs", action="store_true",
-                   help="the breaking-point study's runs log every row (default: their summary and a row per second)")
+                   help="the breaking-point study's and the quadrotor margin grid's runs log every row (default: "
+                        "their summary and a row per second)")
     _backend_arguments(b)
 
     sw = add_parser("sweep", help="run a scenario over a grid of keys and seeds, in parallel")

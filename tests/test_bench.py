@@ -103,3 +103,26 @@ def test_the_bench_s_breaking_point_runs_log_their_summary_and_a_row_per_second(
     one = sorted((tmp_path / "slim" / "logs").rglob("*.mcap"))[0]
     same = tmp_path / "full" / one.relative_to(tmp_path / "slim")
     assert len(read_log(one).trajectory.t) <= 5 < len(read_log(same).trajectory.t)  # 3 s: rows at 0, 1, 2 s (+ last)
+
+
+def test_the_quadrotor_margin_grid_logs_summaries_unless_full_logs_and_judges_on_the_full_trajectory(tmp_path):
+    """Bench section 18's margin grid (a breaking-point kind of study: 480 of the bench's runs) logs its summary and a
+    row per second by default; `bench --full-logs` gives every row; a run's success is the same either way."""
+    from adaptive_mj.study import bench_catalogue, flight
+    from adaptive_mj.study.job import SUMMARY_LOG_RATE_HZ, run_job
+    from adaptive_mj.study.sections import quadrotor_flight
+
+    slim = quadrotor_flight.section(True, tmp_path / "a", duration=1.0)
+    full = quadrotor_flight.section(True, tmp_path / "b", duration=1.0, full_logs=True)
+    grid = [j for j in slim.jobs if "quadrotor-margins" in str(j.log)]
+    assert grid and all(f"log.rate_hz={SUMMARY_LOG_RATE_HZ!r}" in j.overrides for j in grid)
+    assert not any(o == f"log.rate_hz={SUMMARY_LOG_RATE_HZ!r}" for j in full.jobs for o in j.overrides)  # flight's 20 Hz
+    tags = [s.key for s in bench_catalogue.catalogue(quick=True, logs=tmp_path / "c", full_logs=True)]
+    assert "quadrotor" in tags
+    one = grid[len(grid) // 2]
+    twin = next(j for j in full.jobs if j.tag == one.tag)
+    a, b = run_job(one), run_job(twin)
+    assert flight.succeeded(a) == flight.succeeded(b) and a.summary["metrics"] == b.summary["metrics"]
+    from adaptive_mj.log.replay import read_log
+
+    assert len(read_log(one.log).trajectory.t) <= 2 < len(read_log(twin.log).trajectory.t)  # 1 s: 1 Hz against 20 Hz

@@ -72,7 +72,8 @@ def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str |
     (built in or a plugin) with its `gains` file and --set keys, scored against the baselines in a section of
     its own (adaptive-mj score's quick suite, in `out/score`) and, in the full bench, added to the
     breaking-point study's laws on the plants it serves. full_logs: the breaking-point study's runs log every row
-    (default: their summary and a row per second, stress.SUMMARY_LOG_RATE_HZ; the catalogue's runs log in full)."""
+    (default: their summary and a row per second, job.SUMMARY_LOG_RATE_HZ, as do the quadrotor margin grid's; the
+    catalogue's other runs log in full)."""
     from adaptive_mj.study.bench_catalogue import catalogue
 
     from adaptive_mj.sim.runner import new_output_dir
@@ -91,7 +92,7 @@ def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str |
         for path in scenarios:
             check(load(path))
     out = new_output_dir(out, "bench-quick" if quick else "bench")
-    sections = catalogue(quick=quick, logs=out / "logs")
+    sections = catalogue(quick=quick, logs=out / "logs", full_logs=full_logs)
     if scenarios:
         from adaptive_mj.study.bench_catalogue import user_section
 

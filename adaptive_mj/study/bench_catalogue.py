@@ -45,7 +45,11 @@ _ship = ship_steering.section
 _quadrotor = quadrotor_flight.section
 
 
-def catalogue(*, quick: bool, logs: Path) -> list[Section]:
+def catalogue(*, quick: bool, logs: Path, full_logs: bool = False) -> list[Section]:
     """Every registered section, in the report's order (by number: the lecture's parts 1-8, then the arms,
-    sudden failure, the control rate, the ship, MRAC and wing rock; 14 is bench.py's breaking-point study)."""
-    return [entry(quick, logs) for entry in entries()]
+    sudden failure, the control rate, the ship, MRAC and wing rock; 14 is bench.py's breaking-point study).
+    full_logs: to the sections whose grids log summaries by default (their build takes `full_logs`), every row."""
+    import inspect
+
+    return [entry(quick, logs, **({"full_logs": True} if full_logs and "full_logs" in
+                                  inspect.signature(entry.build).parameters else {})) for entry in entries()]

@@ -19,6 +19,10 @@ from adaptive_mj.sim import interrupt
 from adaptive_mj.trajectory import Status, Trajectory
 
 
+#: the bench's breaking-point and margin-grid runs log their summary and a row per second (bench --full-logs: every
+#: row); their verdicts and figures come from the full trajectory either way
+SUMMARY_LOG_RATE_HZ = 1.0  # Hz
+
 @dataclass(frozen=True)
 class Job:
     """scenario: a scenario file; overrides: --set expressions; seed: noise seed or None;

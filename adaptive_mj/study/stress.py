@@ -47,6 +47,7 @@ from typing import Callable, TypedDict
 import numpy as np
 
 from adaptive_mj.errors import ScenarioError
+from adaptive_mj.study.job import SUMMARY_LOG_RATE_HZ  # noqa: F401 (the bench reads it here)
 from adaptive_mj.study import callable_module
 from adaptive_mj.laws.sliding import surface_noise_std
 from adaptive_mj.laws.kinds import Form
@@ -82,7 +83,6 @@ BENCH_SETTINGS: BenchSettings = {"seeds": 5, "steps": 2, "duration": 5.0,
 ROBUST_K_FRACTION = 0.1  # robust sliding: K = 10 % of the actuator's limit, boundary layer Φ = 0.05
 PERIOD_MAX = 1.0  # s: the control period stressor's high end (heave: 2d/k = 0.37 s; the 1-DOF arm: 2J/k = 0.085 s)
 PERIOD = "control period"  # the control period stressor's name
-SUMMARY_LOG_RATE_HZ = 1.0  # the bench's breaking-point runs log their summary and a row per second (--full-logs: all)
 
 
 @dataclass(frozen=True)

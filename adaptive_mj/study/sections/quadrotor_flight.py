@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from adaptive_mj.study.job import SUMMARY_LOG_RATE_HZ
 from adaptive_mj.study import flight
 from adaptive_mj.study.sections.common import (Built, SectionReport, _g, _job, _ok, _row, _save, _status_note, plt,
                                                register)
@@ -37,9 +38,10 @@ CLAIM = ("aircraft are among the systems whose dynamics change with configuratio
 
 
 @register(18, "quadrotor", TITLE, CLAIM)
-def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
+def section(quick: bool, logs: Path, duration: float | None = None, full_logs: bool = False) -> Built:
     """The tasks (every law on each), and the margins on a grid (quick: 8 levels, 1 seed; full: 12, 2 seeds);
-    duration: cut every task run to this many seconds (for tests)."""
+    duration: cut every task run to this many seconds (for tests). The grid's runs log their summary and a row per
+    second (job.SUMMARY_LOG_RATE_HZ; full_logs: every row), their success judged on the full trajectory."""
     dur = [f"simulation.duration={duration}"] if duration is not None else []
     task_jobs = tuple(_job("quadrotor", f"{name.removeprefix('quadrotor_')}-{law}", name, logs,
                            [f"law={law}", *dur], extras=("flight_metrics",),
@@ -50,6 +52,8 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
     levels, seeds = (8, 1) if quick else (12, 2)
     found = flight.searches()
     extra = [f"simulation.duration={min(duration, flight.RUN_SECONDS)}"] if duration is not None else []
+    if not full_logs:
+        extra.append(f"log.rate_hz={SUMMARY_LOG_RATE_HZ!r}")
     margin_jobs = tuple(flight.grid_jobs(found, levels, seeds, logs / "quadrotor-margins", extra))
 
     def analyze(res, out):
