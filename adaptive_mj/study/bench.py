@@ -92,7 +92,7 @@ def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str |
         for path in scenarios:
             check(load(path))
     out = new_output_dir(out, "bench-quick" if quick else "bench")
-    sections = catalogue(quick=quick, logs=out / "logs", full_logs=full_logs)
+    sections = catalogue(quick=quick, logs=out / "logs", **({"full_logs": True} if full_logs else {}))
     if scenarios:
         from adaptive_mj.study.bench_catalogue import user_section
 
