@@ -158,7 +158,7 @@ def test_re_adaptation_is_claimed_only_when_the_error_came_back():
 
 def test_the_6_joint_drift_run_s_onset_lists_its_precursors_well_before_the_failure():
     """ur5e_drift without a modification (150 s): measured torques at a limit from 65.6 s, 5× the baseline error at
-    73.5 s, 25× at 86.8 s, the 0.01 rad bound at 95.0 s: not sudden."""
+    73.5 s, 25× at 87.5 s, the 0.01 rad bound at 98.5 s (bench of 2026-11-28): not sudden."""
     from adaptive_mj.study.api import run_scenario
 
     res = run_scenario("ur5e_drift")
