@@ -94,8 +94,11 @@ def test_control_rate_rows_far_below_the_bound_are_not_said_to_test_it():
             {"plant": "arm", "rate_hz": 250.0, "figure": 1.86, "holds": True},
             {"plant": "arm", "rate_hz": 100.0, "figure": 4.65, "holds": False}]
     text = control_rate._verdict(rows, [])
-    assert "agree on every row. Only the rows with a figure within a factor 4 of 2 test it: arm at 250 Hz" in text
-    assert "the other 1 rows' figures are at most 0.05" in text and "heave at 100 Hz" not in text
+    assert text.startswith("2 of the 3 rows have a figure within a factor 4 of 2 and so test the prediction: arm at "
+                           "250 Hz (figure 1.86, holds), arm at 100 Hz (figure 4.65, breaks); the prediction and the "
+                           "measurement agree on all 2.")
+    assert "The other 1 rows' figures are at most 0.05" in text and "heave at 100 Hz" not in text
+    assert "agree on every row" not in text
     assert "none of them tests the prediction" in control_rate._verdict(rows[:1], [])
 
 

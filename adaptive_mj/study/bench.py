@@ -187,6 +187,8 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
               + ("" if quick else f", the breaking-point study {elapsed - run_seconds:.1f} s")
               + f", the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
               f"every catalogue run's MCAP log is in `logs/`"
+              + ("" if full_logs else " (the quadrotor margin grid's, `logs/quadrotor-margins/`, each its summary and "
+                 "a row per second)")
               + ("" if quick else ", the breaking-point study's in `stress/logs/`"
                  + ("" if full_logs else " (each its summary and a row per second: `bench --full-logs` keeps every "
                     "row)"))

@@ -157,15 +157,18 @@ def _verdict(rows: list[dict], disagree: list[str]) -> str:
     passes whatever the bound is, so it does not test it (the rows within TESTING_FACTOR of 2 do)."""
     near = [r for r in rows if "figure" in r and 2.0 / TESTING_FACTOR <= r["figure"] <= 2.0 * TESTING_FACTOR]
     far = [r for r in rows if "figure" in r and r["figure"] < 2.0 / TESTING_FACTOR]
-    head = ("The prediction and the measurement agree on every row" if not disagree else
-            "The prediction and the measurement disagree on " + ", ".join(disagree))
     if not near:
-        return head + ", but no row has its figure near 2: none of them tests the prediction."
+        return (("No row disagrees with the prediction" if not disagree else
+                 "The prediction and the measurement disagree on " + ", ".join(disagree))
+                + ", but no row has its figure near 2: none of them tests the prediction.")
     tested = ", ".join(f"{r['plant']} at {r['rate_hz']:g} Hz (figure {r['figure']:.3g}, "
                        f"{'holds' if r['holds'] else 'breaks'})" for r in near)
-    return (head + f". Only the rows with a figure within a factor {TESTING_FACTOR:g} of 2 test it: {tested}"
-            + (f"; the other {len(far)} rows' figures are at most {max(r['figure'] for r in far):.3g}, far below 2, "
-               "so they would hold under any bound near it" if far else "") + ".")
+    agree = (f"the prediction and the measurement agree on all {len(near)}" if not disagree else
+             "the prediction and the measurement disagree on " + ", ".join(disagree))
+    return (f"{len(near)} of the {len(near) + len(far)} rows have a figure within a factor {TESTING_FACTOR:g} of 2 "
+            f"and so test the prediction: {tested}; {agree}"
+            + (f". The other {len(far)} rows' figures are at most {max(r['figure'] for r in far):.3g}, far below 2: "
+               "they hold under any bound near it and test nothing" if far else "") + ".")
 
 
 @register(11, "control_rate", TITLE, CLAIM)
