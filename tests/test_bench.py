@@ -106,7 +106,7 @@ def test_the_bench_s_breaking_point_runs_log_their_summary_and_a_row_per_second(
 
 
 def test_the_quadrotor_margin_grid_logs_summaries_unless_full_logs_and_judges_on_the_full_trajectory(tmp_path):
-    """Bench section 18's margin grid (a breaking-point kind of study: 480 of the bench's runs) logs its summary and a
+    """Bench section 18's margin grid (a breaking-point kind of study: 432 of the bench's runs) logs its summary and a
     row per second by default; `bench --full-logs` gives every row; a run's success is the same either way."""
     from adaptive_mj.study import bench_catalogue, flight
     from adaptive_mj.study.job import SUMMARY_LOG_RATE_HZ, run_job

@@ -58,7 +58,7 @@ def metrics(traj: Trajectory) -> dict:
     if traj.joint_names:
         out.update(joint_metrics(traj))
         ident = body_identification(traj.names, traj.theta_hat[-1], traj.theta[-1]) if len(traj) else {}
-        if ident:
+        if ident and tail.any():
             spread = body_identification(traj.names, traj.theta_hat[tail], traj.theta[tail])
             for body, e in ident.items():  # the last sample, and the tail's mean [min, max] beside it
                 e["tail"] = {k: _spread(v) for k, v in spread[body].items() if k != "com_undefined"}
@@ -95,6 +95,8 @@ def body_identification(names, estimate, truth) -> dict:
     est_all, true_all = np.asarray(estimate, dtype=float), np.asarray(truth, dtype=float)
     rows = est_all.ndim == 2
     est_all, true_all = np.atleast_2d(est_all), np.atleast_2d(true_all)
+    if est_all.shape[0] == 0:  # no rows (a tail of a run too short to have one): nothing to say
+        return {}
     index = {n: i for i, n in enumerate(names)}
     out = {}
     for name in names:

@@ -91,6 +91,29 @@ def view(a, shape):
     return carray(fptr(a), shape)  # noqa: F821 (injected)
 
 
+_PROJECTION: dict = {}
+
+
+def stage_functions(numba, inline, tag: str) -> dict[str, Any]:
+    """STAGE_FUNCTIONS compiled for one callback variant (inlined into it), except the physically consistent
+    projection (laws.pseudo_inertia.project_bodies, which clip_into calls): compiled once per process as a function
+    of its own and called, not inlined, so its eigen-solver and iteration are not compiled again into every
+    variant at each of clip_into's call sites (that made a cold compile of each callback several times slower)."""
+    from adaptive_mj.laws import common as law_common
+    from adaptive_mj.laws import pseudo_inertia
+    from adaptive_mj.numba_util import jit_tree
+
+    if "project_bodies" not in _PROJECTION:
+        _PROJECTION["project_bodies"] = jit_tree(pseudo_inertia.project_bodies, numba.njit)
+    clip = jit_tree(law_common.clip_into, inline, tag=tag, project_bodies=_PROJECTION["project_bodies"])
+    out = {name: jit_tree(getattr(stage_code, name), inline, tag=tag) for name in STAGE_FUNCTIONS
+           if name not in ("stage_estimate", "advance_estimates", "end_stage")}
+    out["stage_estimate"] = jit_tree(stage_code.stage_estimate, inline, tag=tag, clip_into=clip)
+    out["advance_estimates"] = jit_tree(stage_code.advance_estimates, inline, tag=tag, clip_into=clip)
+    out["end_stage"] = jit_tree(stage_code.end_stage, inline, tag=tag, advance_estimates=out["advance_estimates"])
+    return out
+
+
 def compiled_callback(context_dtype, off, key: int, pieces: Callable[[dict, str], dict[str, Any]]):
     """The cfunc of one plant shape and law: control_stage with the shape's pieces, in the callback.
 
@@ -109,7 +132,7 @@ def compiled_callback(context_dtype, off, key: int, pieces: Callable[[dict, str]
     common: dict[str, Any] = {"carray": carray, "iptr": pointer(types.int64), "fptr": pointer(types.float64),
                               "np": np, "SAMPLED": stage_code.SAMPLED}
     common.update(context_functions(numba, carray, common["iptr"], tag))
-    common.update({name: jit_tree(getattr(stage_code, name), inline, tag=tag) for name in STAGE_FUNCTIONS})
+    common.update(stage_functions(numba, inline, tag))
     shape = pieces(common, tag)
     step = jit_tree(stage_code.control_stage, inline, tag=tag, view=jit_tree(view, inline, tag=tag, **common),
                     **common, **shape)
