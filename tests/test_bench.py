@@ -116,7 +116,7 @@ def test_the_quadrotor_margin_grid_logs_summaries_unless_full_logs_and_judges_on
     full = quadrotor_flight.section(True, tmp_path / "b", duration=1.0, full_logs=True)
     grid = [j for j in slim.jobs if "quadrotor-margins" in str(j.log)]
     assert grid and all(f"log.rate_hz={SUMMARY_LOG_RATE_HZ!r}" in j.overrides for j in grid)
-    assert not any(o == f"log.rate_hz={SUMMARY_LOG_RATE_HZ!r}" for j in full.jobs for o in j.overrides)  # flight's 20 Hz
+    assert not any(o == f"log.rate_hz={SUMMARY_LOG_RATE_HZ!r}" for j in full.jobs for o in j.overrides)  # 20 Hz
     tags = [s.key for s in bench_catalogue.catalogue(quick=True, logs=tmp_path / "c", full_logs=True)]
     assert "quadrotor" in tags
     one = grid[len(grid) // 2]
