@@ -156,6 +156,8 @@ class ModelResponse:
     amplitudes: tuple[float, ...] = ()
     omegas: tuple[float, ...] = ()
     phases: tuple[float, ...] = ()
+    _gains: tuple = field(default=(), init=False, repr=False, compare=False)  # G(jω) per sine (__post_init__)
+    _free: tuple = field(default=(), init=False, repr=False, compare=False)  # (λ, c): the free response's terms
 
     def __post_init__(self):
         if not (len(self.amplitudes) == len(self.omegas) == len(self.phases)):
@@ -163,6 +165,13 @@ class ModelResponse:
         lam = self.poles()
         if np.any(lam.real >= 0) or len(np.unique(np.round(lam, 12))) != len(lam):
             raise ValueError(f"ModelResponse: the reference model's poles must be distinct and stable, got {lam}")
+        # what every call would compute again from the same numbers (the same floats: a cache, not a change):
+        # G(jω) of each sine, the poles λ and the free response's coefficients c
+        object.__setattr__(self, "_gains", tuple(self._gain(1j * w) for w in self.omegas))
+        n = len(self.alpha)
+        vander = np.array([lam**k for k in range(n)])
+        c = np.linalg.solve(vander, -np.array([self._steady(0.0, k) for k in range(n)], dtype=complex))
+        object.__setattr__(self, "_free", (lam, c))
 
     def poles(self) -> np.ndarray:
         """λ (n,): roots of s^n + α_{n-1} s^{n-1} + ... + α_0."""
@@ -175,17 +184,13 @@ class ModelResponse:
     def _steady(self, t, k: int):
         """k-th derivative of the steady-state response at t."""
         out = np.zeros(np.shape(t)) + (self.beta * self.offset / self.alpha[0] if k == 0 else 0.0)
-        for a, w, p in zip(self.amplitudes, self.omegas, self.phases, strict=True):
-            out = out + a * np.imag((1j * w) ** k * self._gain(1j * w) * np.exp(1j * (w * np.asarray(t) + p)))
+        for a, w, p, g in zip(self.amplitudes, self.omegas, self.phases, self._gains, strict=True):
+            out = out + a * np.imag((1j * w) ** k * g * np.exp(1j * (w * np.asarray(t) + p)))
         return out
 
     def __call__(self, t, order: int) -> np.ndarray:
         t = np.asarray(t, dtype=float)
-        n = len(self.alpha)
-        lam = self.poles()
-        # free response Σ c_j e^{λ_j t}: Σ c_j λ_j^k = -steady^(k)(0), k < n
-        vander = np.array([lam**k for k in range(n)])
-        c = np.linalg.solve(vander, -np.array([self._steady(0.0, k) for k in range(n)], dtype=complex))
+        lam, c = self._free  # the free response Σ c_j e^{λ_j t}: Σ c_j λ_j^k = -steady^(k)(0), k < n
         out = np.empty((order + 1,) + t.shape)
         for k in range(order + 1):
             free = sum(cj * lj**k * np.exp(lj * t) for cj, lj in zip(c, lam, strict=True))

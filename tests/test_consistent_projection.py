@@ -160,3 +160,15 @@ def test_the_ideal_case_keeps_v_non_increasing_with_the_projection_working():
     assert all(_psd(th) for th in on.theta_hat)
     assert sum(not _psd(th) for th in off.theta_hat) > 0.9 * len(off.t)
     assert np.max(np.abs(on.theta_hat - off.theta_hat)) > 0.1  # the projection changed the run
+
+
+def test_callback_cache_key_reaches_the_projection_module():
+    """The compiled callbacks' cache key covers every module they compile in, however deep: the projection is
+    reached from the stage functions only through laws.common.clip_into (one level of globals missed it, so an
+    edit to pseudo_inertia.py alone left a developer's cached callbacks stale)."""
+    from adaptive_mj.sim import native_step, stage
+    from adaptive_mj.sim.native_context import reached_functions
+
+    reached = reached_functions(native_step.callback_factory, stage.control_stage, stage.stage_estimate)
+    assert pi.project_body in reached and pi.symmetric_eigen in reached
+    assert len(reached) == len({id(f) for f in reached})  # each once, however many callers

@@ -161,7 +161,7 @@ def project_body(theta, start, lipschitz, momentum, weights):
     J = np.empty((4, 4))
     pseudo_inertia(theta, start, J)
     lo, total = smallest_eigenvalue(J)
-    if lo >= -PSD_TOLERANCE * total:
+    if is_physical(lo, total):
         return False
     target = np.empty(start + 10)
     work = np.empty(start + 10)
@@ -241,12 +241,21 @@ def _hessian(weights: np.ndarray) -> np.ndarray:
     return 0.5 * (H + H.T)
 
 
+def is_physical(lowest, total):
+    """Whether a pseudo-inertia whose smallest eigenvalue is `lowest` and whose Σ|λ| is `total` counts as PSD
+    (lowest ≥ −PSD_TOLERANCE · total): scalars in the compiled projection, arrays (one per row) in numpy."""
+    return lowest >= -PSD_TOLERANCE * total
+
+
 def eigenvalues(theta, starts) -> np.ndarray:
-    """(len(starts), 4) each body's pseudo-inertia eigenvalues, ascending (numpy: for tests and the report)."""
-    J = np.empty((4, 4))
-    out = np.empty((len(starts), 4))
+    """Each body's pseudo-inertia eigenvalues, ascending (numpy: the scenario check, the report and the tests):
+    theta (n_theta,) gives (len(starts), 4); rows of θ̂ (N, n_theta) give (N, len(starts), 4)."""
     th = np.asarray(theta, dtype=float)
+    rows = th.reshape(-1, th.shape[-1])
+    J = np.empty((rows.shape[0], len(starts), 4, 4))
     for k, start in enumerate(starts):
-        pseudo_inertia(th, start, J)
-        out[k] = np.linalg.eigvalsh(J)
-    return out
+        for i, row in enumerate(rows):
+            pseudo_inertia(row, start, J[i, k])
+    out = np.linalg.eigvalsh(J)
+    return out[0] if th.ndim == 1 else out
+

@@ -471,7 +471,7 @@ def _modification(scn: Scenario, names: tuple[str, ...], theta_hat0: np.ndarray)
                                 f"{theta_hat0[i]:g} is outside its box [{lower[i]:g}, {upper[i]:g}]")
         for start in bodies:
             lam = pseudo_inertia.eigenvalues(theta_hat0, (start,))[0]
-            if lam[0] < -pseudo_inertia.PSD_TOLERANCE * np.sum(np.abs(lam)):
+            if not pseudo_inertia.is_physical(lam[0], np.sum(np.abs(lam))):
                 body = names[start].rsplit(".", 1)[0]
                 raise ScenarioError(f"{scn.source}: law.projection = 'consistent': the initial estimate of body "
                                     f"{body!r} is no possible body (its pseudo-inertia has the eigenvalue "

@@ -283,15 +283,25 @@ def addr(array: np.ndarray) -> int:
     return array.ctypes.data
 
 
+def reached_functions(*fns: Callable) -> list[Callable]:
+    """fns and every function they call through their globals, transitively, each once (source_key's inputs)."""
+    todo, seen = list(fns), {id(fn) for fn in fns}
+    for fn in todo:  # grows while it is walked
+        for n in global_names(fn.__code__):
+            v = fn.__globals__.get(n)
+            if isinstance(v, pytypes.FunctionType) and id(v) not in seen:
+                seen.add(id(v))
+                todo.append(v)
+    return todo
+
+
 def source_key(*fns: Callable, extra: Iterable = ()) -> int:
-    """A 60-bit key of the source of the modules defining fns (and the modules of the functions they
-    call, one level of globals), of the functions' closure values, and of `extra`."""
+    """A 60-bit key of the source of the modules defining fns and every function they call through their
+    globals, transitively (reached_functions: an edit to any module a callback compiles in, however deep,
+    changes the key), of the functions' closure values, and of `extra`."""
     h = hashlib.sha256()
     files: set[str] = set()
-    todo = list(fns)
-    for fn in list(todo):
-        todo += [v for n in global_names(fn.__code__) if isinstance(v := fn.__globals__.get(n), pytypes.FunctionType)]
-    for fn in todo:
+    for fn in reached_functions(*fns):
         try:
             files.add(inspect.getsourcefile(fn) or fn.__code__.co_filename)
         except TypeError:

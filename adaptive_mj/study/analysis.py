@@ -429,18 +429,10 @@ def pseudo_inertia_eigenvalues(theta: np.ndarray) -> np.ndarray:
     (Wensing, Kim & Slotine 2017: the body is physically possible exactly when J ⪰ 0), from rows of θ (N, 10 ×
     bodies) in the rigid-body order [m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] (I about the body frame's
     origin, h = m c)."""
+    from adaptive_mj.laws.pseudo_inertia import eigenvalues
+
     th = np.atleast_2d(np.asarray(theta, dtype=float))
-    n, k = th.shape[0], th.shape[1] // 10
-    p = th[:, : 10 * k].reshape(n, k, 10)
-    m, h = p[..., 0], p[..., 1:4]
-    ixx, ixy, iyy, ixz, iyz, izz = (p[..., i] for i in range(4, 10))
-    inertia = np.stack([np.stack([ixx, ixy, ixz], -1), np.stack([ixy, iyy, iyz], -1),
-                        np.stack([ixz, iyz, izz], -1)], -2)
-    J = np.zeros((n, k, 4, 4))
-    J[..., :3, :3] = 0.5 * np.trace(inertia, axis1=-2, axis2=-1)[..., None, None] * np.eye(3) - inertia
-    J[..., :3, 3] = J[..., 3, :3] = h
-    J[..., 3, 3] = m
-    return np.linalg.eigvalsh(J)
+    return eigenvalues(th, range(0, 10 * (th.shape[1] // 10), 10))
 
 
 def window_spread(t: np.ndarray, values: np.ndarray, window: float) -> dict:

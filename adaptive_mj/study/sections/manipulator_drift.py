@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
-from adaptive_mj.laws.pseudo_inertia import PSD_TOLERANCE
+from adaptive_mj.laws.pseudo_inertia import is_physical
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.analysis import SUDDEN_WINDOW, failure_onset, pseudo_inertia_eigenvalues
 
@@ -40,9 +40,9 @@ def _t(v: float | None) -> str:
 def _facts(tr, err: np.ndarray) -> dict:
     """What the section's words rest on, from one run's rows: how far θ̂ moved, ‖θ̃‖/‖θ‖ at 20 s and its median
     after, and the pseudo-inertia's smallest eigenvalue per row (the payload physically possible when ≥ 0, to the
-    rounding of a projected estimate: ≥ −PSD_TOLERANCE Σ|λ|, pseudo_inertia)."""
+    rounding of a projected estimate: pseudo_inertia.is_physical)."""
     eig = pseudo_inertia_eigenvalues(tr.theta_hat)[:, 0, :]
-    bad = eig[:, 0] < -PSD_TOLERANCE * np.sum(np.abs(eig), axis=1)
+    bad = ~is_physical(eig[:, 0], np.sum(np.abs(eig), axis=1))
     late = tr.t >= 20.0
     return {"moved": float(np.max(np.abs(tr.theta_hat - tr.theta_hat[0]))),
             "err_20": float(np.interp(20.0, tr.t, err)) if tr.t[-1] >= 20.0 else float("nan"),
