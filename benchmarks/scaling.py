@@ -277,9 +277,44 @@ def _peak_rss_kb(pid: int, stop: threading.Event, out: list) -> None:
         stop.wait(0.2)
 
 
+def _bare_runs(args) -> None:
+    """In a worker process: `runs` bare runs of the model (mj_resetData, then mj_step of `steps`), no law."""
+    import mujoco
+
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
+
+    name, overrides, runs = args
+    model = build(load(SCENARIOS_DIR / f"{name}.toml", overrides=overrides)).plant.model
+    data = mujoco.MjData(model)
+    steps = int(round(float(overrides[0].split("=")[1]) / model.opt.timestep))
+    for _ in range(runs):
+        mujoco.mj_resetData(model, data)
+        mujoco.mj_step(model, data, nstep=steps)
+
+
+def bare_limit(n: int, jobs: int = 2, sample: int = 1000) -> dict:
+    """The bare-stepping limit of study(n): `jobs` processes at once, each stepping `sample` bare 2-s heave_drift
+    runs (the model only: no law, no log), timed from all started to all done; the limit for n runs is
+    n / (jobs · sample) times that wall time (the machine's parallel ceiling included, as the study has it)."""
+    import multiprocessing as mp
+
+    overrides = ["simulation.duration=2.0"]
+    ctx = mp.get_context("fork")
+    with ctx.Pool(jobs) as pool:
+        pool.map(_bare_runs, [("heave_drift", overrides, 2)] * jobs)  # imports and model built once: warm
+        t0 = time.perf_counter()
+        pool.map(_bare_runs, [("heave_drift", overrides, sample)] * jobs)
+        wall = time.perf_counter() - t0
+    return {"sample_runs": jobs * sample, "sample_wall_s": wall, "limit_s": wall * n / (jobs * sample)}
+
+
 def study(n: int, jobs: int = 2, backend: str = "local", engine: str = "process", logs: str = "all") -> dict:
-    """`adaptive-mj sweep` over n 2-s runs of heave_drift (noise: the seeds differ); driver peak RSS.
+    """`adaptive-mj sweep` over n 2-s runs of heave_drift (noise: the seeds differ); driver peak RSS; and the
+    bare-stepping limit of the same runs measured just before and just after it (bare_limit, their mean), so
+    the ratio limit / wall is taken at the machine's load of the moment.
     engine: --engine (process or batch); logs: --logs (all, or summary: the table only)."""
+    before = bare_limit(n, jobs)
     points = 100 if n >= 1000 else 10
     seeds = n // points
     folder = Path(tempfile.mkdtemp(prefix="scaling-study-"))
@@ -302,9 +337,13 @@ def study(n: int, jobs: int = 2, backend: str = "local", engine: str = "process"
         size = sum(p.stat().st_size for p in (folder / "out" / "logs").glob("*.mcap")) if logs == "all" else 0
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+    after = bare_limit(n, jobs)
+    limit = 0.5 * (before["limit_s"] + after["limit_s"])
     return {"backend": backend, "engine": engine, "logs": logs, "runs": points * seeds, "rows": lines, "wall_s": wall,
             "runs_per_s": points * seeds / wall, "driver_peak_rss_mb": max(rss) / 1024 if rss else None,
-            "logs_mb": size / 2**20}
+            "logs_mb": size / 2**20, "bare_limit_s": limit, "bare_limit_before_after_s": [before["limit_s"],
+                                                                                         after["limit_s"]],
+            "to_limit": limit / wall}
 
 
 def _batch_spec(name: str, overrides: list[str]) -> dict:
@@ -605,7 +644,9 @@ def main() -> None:
             print(f"study ({s['backend']} backend, engine {s['engine']}, logs {s['logs']}): {s['runs']} runs of 2 s "
                   f"({s['rows']} rows): {s['wall_s']:.0f} s, "
                   f"{s['runs_per_s']:.1f} runs/s, driver peak RSS {s['driver_peak_rss_mb']:.0f} MB, "
-                  f"logs {s['logs_mb']:.0f} MB")
+                  f"logs {s['logs_mb']:.0f} MB; bare stepping of the same runs on 2 processes "
+                  f"{s['bare_limit_s']:.1f} s (before/after {s['bare_limit_before_after_s'][0]:.1f}/"
+                  f"{s['bare_limit_before_after_s'][1]:.1f}): {s['to_limit']:.2f}x the bare-stepping limit")
     print_batch(res.get("batch", {}))
     print_ray_nodes(res.get("ray_nodes"))
     print_per_run(res.get("per_run"))
