@@ -156,7 +156,9 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
         rep = section.analyze({job.tag: by_tag[job.tag] for job in section.jobs}, out)
         parts.append(f"## {section.title}\n\n**The lecture:** {section.claim}\n\n{rep.text}\n")
         rows.extend(rep.rows)
+    analysis_seconds = time.perf_counter() - t0 - run_seconds
     n_runs = len(results)
+    study_seconds = 0.0
     if not quick:  # the breaking-point study: its own batches (bisection), a reduced `adaptive-mj stress`
         from adaptive_mj.study.stress import BENCH_SETTINGS, SUMMARY_LOG_RATE_HZ, run_study
 
@@ -165,9 +167,11 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
             from adaptive_mj.study.score import read_gains
 
             extra = {"law": scoring["law"], "sets": tuple(scoring["sets"]), "gains": read_gains(scoring["gains"])}
+        t_study = time.perf_counter()
         margins, text, _ = run_study(out / "stress", n_jobs=backend.jobs, composite=False, backend=backend,
                                      log_rate_hz=None if full_logs else SUMMARY_LOG_RATE_HZ, **BENCH_SETTINGS,
                                      **extra)
+        study_seconds = time.perf_counter() - t_study
         n_runs += sum(len(e.tails) for m in margins for e in m.evaluations)
         before = sum(1 for section in sections if _number(section.title) < 14)  # in order: before 15, 16, ...
         parts.insert(before, "## 14. Breaking points: law × stressor margins\n\n**The lecture:** the modifications "
@@ -183,8 +187,8 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
     header = (f"# adaptive-mj benchmark report{' (quick)' if quick else ''}\n\n"
               f"{n_runs} runs on MuJoCo physics and "
               f"the analytic twin, {_where(backend)}. {expectation_text(results)} The {len(results)} catalogue runs "
-              f"took {run_seconds:.1f} s"
-              + ("" if quick else f", the breaking-point study {elapsed - run_seconds:.1f} s")
+              f"took {run_seconds:.1f} s, their sections' analyses and figures {analysis_seconds:.1f} s"
+              + ("" if quick else f", the breaking-point study {study_seconds:.1f} s")
               + f", the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
               f"every catalogue run's MCAP log is in `logs/`"
               + ("" if full_logs else " (the quadrotor margin grid's, `logs/quadrotor-margins/`, each its summary and "
