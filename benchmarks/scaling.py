@@ -368,9 +368,10 @@ def _rss_kb() -> int:
 PER_RUN_SECONDS = {"heave": (1.0, 2.0, 5.0, 30.0), "arm": (1.0, 2.0, 30.0), "ur5e": (0.2, 2.0)}
 
 
-def per_run(reps: int, runs: int) -> dict:
+def per_run(reps: int, runs: int, cases: str = "") -> dict:
     """One run's cost in this process (see the module's doc): ms per run, median [min, max] of reps, each
-    over `runs` runs; the runs vary as in the batch figures (BATCH_CASES), every run its own seed."""
+    over `runs` runs; the runs vary as in the batch figures (BATCH_CASES), every run its own seed. cases: e.g.
+    "ur5e=2" or "heave=2;ur5e=0.2,2" (plant=lengths [s], plants separated by ";"; "" = PER_RUN_SECONDS)."""
     import mujoco
 
     from adaptive_mj.setup.build import build
@@ -379,7 +380,11 @@ def per_run(reps: int, runs: int) -> dict:
     from adaptive_mj.study.job import run_job
 
     out: dict = {}
-    for label, lengths in PER_RUN_SECONDS.items():
+    chosen: dict[str, tuple[float, ...]] = {}
+    for part in cases.split(";") if cases else ():
+        plant, _, lengths = part.partition("=")
+        chosen[plant] = tuple(float(v) for v in lengths.split(",")) if lengths else PER_RUN_SECONDS[plant]
+    for label, lengths in (chosen or PER_RUN_SECONDS).items():
         name, _, vary = BATCH_CASES[label]
         for seconds in lengths:
             scn = load(SCENARIOS_DIR / f"{name}.toml", overrides=[f"simulation.duration={seconds!r}", *vary(0)])
@@ -591,6 +596,8 @@ def main() -> None:
                     "(default: heave 1, arm 1, ur5e 0.2)")
     ap.add_argument("--ray-node-runs", type=int, default=400, help="runs per measurement in the ray_nodes figure")
     ap.add_argument("--per-run-runs", type=int, default=20, help="runs per repetition in the per_run figures")
+    ap.add_argument("--per-run-cases", default="", help="the per_run figures' plants and run lengths [s], e.g. "
+                    "'ur5e=2' or 'heave=2;ur5e=0.2,2' (default: every plant at every length of PER_RUN_SECONDS)")
     ap.add_argument("--only", default="ceiling,local,ray,study,batch,ray_nodes,per_run")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
@@ -609,7 +616,7 @@ def main() -> None:
     if "ray_nodes" in parts:
         res["ray_nodes"] = ray_nodes(args.ray_node_runs)
     if "per_run" in parts:
-        res["per_run"] = per_run(args.reps, args.per_run_runs)
+        res["per_run"] = per_run(args.reps, args.per_run_runs, args.per_run_cases)
     if "batch" in parts:
         durations = {k: float(v) for k, v in (kv.split("=") for kv in args.batch_seconds.split(",") if kv)}
         res["batch"] = batch_figures([int(n) for n in args.batch_sims.split(",")], args.pool_sims,
