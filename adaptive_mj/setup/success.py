@@ -75,6 +75,39 @@ def _sampled(reference, duration: float, samples: int, order: int) -> np.ndarray
     return reference_positions(reference, np.linspace(0.0, duration, samples), order)
 
 
+def reference_rows(reference, ts: np.ndarray, order: int) -> np.ndarray:
+    """(order + 1, N, m) y_d and its derivatives 1..order at the times ts (N,) [s] (m = 1 for a 1-DOF plant): one
+    vectorised call of the reference (the bundled kinds take an array of t; every bundled joint reference gives each
+    time the numbers a scalar call gives, MRAC's model response may differ in the last bit), else one call per
+    time."""
+    n = len(ts)
+    try:
+        r = np.asarray(reference(ts, order), dtype=float)
+        if r.shape[:2] == (order + 1, n):
+            return r.reshape(order + 1, n, -1)
+    except (TypeError, ValueError):
+        pass
+    rows = [reference(t, order) for t in ts]
+    return np.array([[np.atleast_1d(np.asarray(r[k], dtype=float)) for r in rows] for k in range(order + 1)])
+
+
+def sampled_rows(reference, duration: float, samples: int, order: int) -> np.ndarray:
+    """reference_rows at `samples` evenly spaced times over [0, duration] [s], kept per (reference, duration,
+    samples, order) as sampled_positions keeps its positions (a study's runs share one reference); a copy each
+    time."""
+    if _frozen_dataclass(reference):
+        try:
+            return _sampled_rows(reference, float(duration), samples, order).copy()
+        except TypeError:  # a field numpy holds (unhashable): evaluated every time
+            pass
+    return reference_rows(reference, np.linspace(0.0, duration, samples), order)
+
+
+@functools.lru_cache(maxsize=32)
+def _sampled_rows(reference, duration: float, samples: int, order: int) -> np.ndarray:
+    return reference_rows(reference, np.linspace(0.0, duration, samples), order)
+
+
 def reference_half_range(reference, duration: float, order: int) -> np.ndarray:
     """(m,) half of max - min of y_d over [0, duration] per joint (m = 1 for a 1-DOF plant)."""
     y = sampled_positions(reference, duration, REFERENCE_SAMPLES, order)

@@ -32,7 +32,7 @@ import numpy as np
 
 from adaptive_mj.laws.protocol import AirframeFeedback, JointFeedback, Law, SurfaceFeedback
 from adaptive_mj.plants.protocol import FormPlant, JointPlant, Plant, has_form, has_joints
-from adaptive_mj.setup.success import sampled_positions
+from adaptive_mj.setup.success import sampled_positions, sampled_rows
 from adaptive_mj.sim.stage import ControlTiming
 
 RK4_REAL_LIMIT = 2.785293563405282  # the RK4 stability region's end on the negative real axis
@@ -222,8 +222,7 @@ def following_line(plant: Plant, reference, duration: float) -> str:
     if follow is None or limits is None:
         return ""
     ts = np.linspace(0.0, duration, SAMPLES)
-    rows = [reference(t, 2) for t in ts]
-    q, qd, qdd = (np.array([np.atleast_1d(np.asarray(r[k], dtype=float)) for r in rows]) for k in range(3))
+    q, qd, qdd = sampled_rows(reference, duration, SAMPLES, 2)  # each (SAMPLES, m)
     if not (np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(qdd).all()):
         return "pre-flight: the reference is not finite over the run: no law can follow it"
     need = np.asarray(follow(q, qd, qdd), dtype=float)
