@@ -123,7 +123,7 @@ def _parser() -> argparse.ArgumentParser:
     st.add_argument("--steps", type=int, default=4, help="bisection steps after the two ends (default 4)")
     st.add_argument("--duration", type=float, default=20.0, help="seconds per run (default 20)")
     st.add_argument("--composite", action="store_true",
-                    help="also composite adaptation (runs on the Python callback path: several times slower)")
+                    help="also composite adaptation (a row per plant that has one)")
     st.add_argument("--plants", metavar="P,Q,...", help="only these plants (heave, arm, ur5e, quadrotor)")
     st.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help=JOBS_HELP)
     st.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")

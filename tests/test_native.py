@@ -157,3 +157,74 @@ def test_block_offsets_take_the_struct_s_own_block_over_a_stale_copy_after_it():
     base = mem.ctypes.data
     out = block_offsets(base, values, block)
     assert out == {name: 8 * (10 + i) for i, name in enumerate(block)}
+
+
+# -- composite adaptation (laws.composite) on the compiled callback ---------------------------------------------
+
+def _scenario_both(name, overrides):
+    """A bundled scenario run on the Python path and on the native callback, with the runner's own arguments
+    (noise, events, the control delay)."""
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
+    from adaptive_mj.sim.runner import start
+
+    out = []
+    for nat in (False, True):
+        st = start(load(SCENARIOS_DIR / f"{name}.toml", overrides=overrides))
+        kw = dict(st.kwargs)
+        kw["native"] = nat
+        out.append((st.setup.law, run(st.setup.plant, st.setup.law, st.setup.reference, **kw)))
+    return out
+
+
+@pytest.mark.parametrize("extra", [
+    [],  # the bench's failure/composite run: noise, a 20 ms control delay
+    ["law.composite={gain=1.0, filter=2.0}", "events=[{t=1.5, kind='constant_force', value=20.0}]"],
+    ["law.composite={gain=1.0, filter=10.0}", "law.projection={d=[30.0, 45.0]}", "law.sigma=1e-3"],
+    ["law.composite={gain=1.0, filter=2.0}", "law.dead_zone={width_in_noise_std=3.0}", "law.e_modification=0.1"],
+    ["law.composite={gain=1.0, filter=2.0}", "simulation.integrator='euler'", "simulation.control_delay=0"],
+], ids=["failure", "force_event", "projection+sigma", "dead_zone+e_mod", "euler"])
+def test_composite_on_the_sudden_failure_scenario_gives_the_python_path_s_rows_bit_for_bit(extra):
+    from adaptive_mj.laws import CompositeSlidingLaw
+
+    (law, a), (_, b) = _scenario_both("heave_sudden_failure", ["law.composite={gain=1e-4, filter=2.0}",
+                                                                "simulation.duration=3", *extra])
+    assert isinstance(law, CompositeSlidingLaw)
+    assert_same(a, b, tol=0.0)
+    assert not np.array_equal(a.theta_hat[1], a.theta_hat[-1])
+
+
+def test_composite_with_a_payload_event_on_the_arm_gives_the_python_path_s_rows_bit_for_bit():
+    (law, a), (_, b) = _scenario_both("arm_payload_swap", ["simulation.duration=3",
+                                                            "events=[{t=1.5, kind='payload_mass', value=2.0}]",
+                                                            "law.composite={gain=1.0, filter=2.0}"])
+    assert_same(a, b, tol=0.0)
+    assert [label for _, label in b.meta["events"]] == [label for _, label in a.meta["events"]] != []
+
+
+def test_composite_with_a_parameter_change_on_the_heave_vehicle():
+    """A water-density step (drag b and buoyancy c change) during a tracking run, and the correction does move the
+    estimates: the composite run differs from the plain sliding law's."""
+    from adaptive_mj.laws import CompositeSlidingLaw
+
+    def make(p):
+        return CompositeSlidingLaw(p.form, lam=5, k=200, gamma=GAMMA, kappa=1.0, filter_rate=5.0)
+
+    events = lambda: [Event(1.2, "density", lambda p: p.set_fluid_density(1100.0))]  # noqa: E731
+    a, b = both(heave_plant(), make, Cosine(), duration=2.5, theta_hat0=[30, 50, 0.9], events=events)
+    assert_same(a, b, tol=0.0)
+    plain = heave_plant()()
+    c = run(plain, SlidingAdaptiveLaw(plain.form, lam=5, k=200, gamma=GAMMA), Cosine(), duration=2.5,
+            theta_hat0=[30, 50, 0.9], events=events())
+    assert np.max(np.abs(c.theta_hat - b.theta_hat)) > 1e-3
+
+
+def test_composite_native_is_chosen_and_refuses_sampled_control():
+    from adaptive_mj.laws import CompositeSlidingLaw
+    from adaptive_mj.sim.stage import ControlTiming
+
+    p = heave.load()
+    law = CompositeSlidingLaw(p.form, lam=5, k=200, gamma=GAMMA, kappa=1.0, filter_rate=2.0)
+    assert native.supported(p, law)
+    with pytest.raises(ValueError, match="continuous control only"):
+        native.NativeController(p, law, Cosine(), [0, 0, 0], 10,
+                                control=ControlTiming.of(p.dt, mode="sampled", period=2 * p.dt))

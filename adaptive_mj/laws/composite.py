@@ -24,19 +24,82 @@ so that V = ½ d s² + ½ θ̃ᵀΓθ̃ has V' = −k s² − κ (Y_f θ̃)² �
 estimates move along every direction the filtered regressor has excited, not only
 while s is large. The filters start at the first step's values.
 
-This law keeps filter state between calls (``has_filters``, laws.protocol), so it runs on the
-Python callback path: loop.Controller resets it, calls step_begins(x) with the measured state at
-the start of each step and step_ends(stage states, stage controls, weights, h) at its end.
+The arithmetic is written once, as plain array functions that numba compiles (the style of
+laws.sliding.sliding_law_values): `stage_sums` (φ̄, τ̄ with the integrator's weights, one stage at a
+time), `filter_gain` and `filter_step` (the filters' advance by one step), `composite_rate` (the
+prediction e = Y_f θ̂ − τ_f and the rate correction −κ Y_f e / γ, then the projection again). The
+filter state is two arrays: z = [z_a, z_φ (n_p), z_τ] and the pending step [y^(n-1) at its start,
+φ̄ (n_p), τ̄], both (n_p + 2,).
+
+This law keeps filter state between calls (``has_filters``, laws.protocol). On the Python callback
+path loop.Controller resets it, calls step_begins(x) with the measured state at the start of each
+step and step_ends(stage states, stage controls, weights, h) at its end. It is also ``native``: the
+compiled 1-DOF callback (adaptive_mj.sim.native, its composite variant) keeps z and the pending step
+in its buffers, adds each stage to the sums when it applies the stage's control and advances the
+filters at each step's first stage, calling the same functions: the same rows bit for bit
+(tests/test_native.py). Continuous control only (the loop refuses sampled-data control with filters).
 """
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws.common import DeadZone, LawStep, Modification, modify_rate
 from adaptive_mj.laws.sliding import SlidingAdaptiveLaw
+
+
+def filter_gain(filter_rate: float, h: float) -> float:
+    """1 − e^(−λ_f h): the gain of the zero-order-hold filter W(s) = λ_f / (s + λ_f) over a step h [s]."""
+    return 1.0 - math.exp(-filter_rate * h)
+
+
+def stage_sums(pending, w, phi, f, h, u):
+    """One stage into the step's sums, in place: pending[1:1+n_p] += w φ(x_i), pending[1+n_p] += w (f(x_i) +
+    h(x_i) u_i). pending (n_p + 2,) = [y^(n-1) at the step's start, φ̄, τ̄], the sums zero before the first
+    stage (so the sums are the same floats as Python's sum(), which starts from 0); w: the stage's b_i; phi
+    (n_p,), f, h: the form at the stage's measured state; u: the control applied over the stage."""
+    n_p = phi.shape[0]
+    for j in range(n_p):
+        pending[1 + j] += w * phi[j]
+    pending[1 + n_p] += w * (f + h * u)
+
+
+def filter_step(z, pending, v, h, gain, first):
+    """The filters advance by the step just done, in place: its input [a, φ̄, τ̄] with a = (v − pending[0]) / h
+    (v: y^(n-1) measured at the next step's start) into z (n_p + 2,) = [z_a, z_φ, z_τ]: z = input at the first
+    step (first), else z ← z + gain (input − z) (gain: filter_gain)."""
+    a = (v - pending[0]) / h
+    if first:
+        z[0] = a
+        for j in range(1, z.shape[0]):
+            z[j] = pending[j]
+    else:
+        z[0] = z[0] + gain * (a - z[0])
+        for j in range(1, z.shape[0]):
+            z[j] = z[j] + gain * (pending[j] - z[j])
+
+
+def prediction_error(z, theta):
+    """e = Y_f θ̂ − τ_f with Y_f = [z_a, −z_φ] (z (n_theta + 1,) = [z_a, z_φ, z_τ]), summed in θ's order."""
+    n = theta.shape[0]
+    e = 0.0
+    for j in range(n):
+        e += (z[0] if j == 0 else -z[j]) * theta[j]
+    return e - z[n]
+
+
+def composite_rate(z, theta, kappa, gamma, theta0, lower, upper, rate):
+    """The composite correction of the sliding law's rate (n_theta,), in place: rate_j −= κ Y_f,j e / γ_j
+    (e: prediction_error), then the projection's tangent cone again (common.modify_rate without leakage: the
+    sliding law applied the leakage already). Returns e."""
+    e = prediction_error(z, theta)
+    for j in range(theta.shape[0]):
+        rate[j] = rate[j] - kappa * (z[0] if j == 0 else -z[j]) * e / gamma[j]
+    modify_rate(rate, theta, 0.0, 0.0, 0.0, theta0, gamma, lower, upper)
+    return e
 
 
 class CompositeSlidingLaw(SlidingAdaptiveLaw):
@@ -46,8 +109,8 @@ class CompositeSlidingLaw(SlidingAdaptiveLaw):
     filter_rate: λ_f > 0 [1/s]. The other arguments as SlidingAdaptiveLaw.
     """
 
-    native = False  # filter state between calls: the Python callback path
-    has_filters = True  # the loop calls reset, step_begins and step_ends (laws.protocol)
+    native = True  # adaptive_mj.sim.native compiles it (continuous control, a 1-DOF MuJoCo plant)
+    has_filters = True  # the Python path: the loop calls reset, step_begins and step_ends (laws.protocol)
 
     def __init__(self, form: ModelForm, *, lam: float, k: float, gamma, kappa: float, filter_rate: float,
                  dead_zone: DeadZone | None = None, modification: Modification | None = None):
@@ -57,50 +120,58 @@ class CompositeSlidingLaw(SlidingAdaptiveLaw):
                 raise ValueError(f"{name} must be finite and > 0, got {v}")
         self.kappa = float(kappa)
         self.filter_rate = float(filter_rate)
-        self._z: np.ndarray | None = None  # [z_a, z_φ (n_p), z_τ]
-        # (y^(n-1) at the step's start, φ̄, τ̄, h) of the step just done
-        self._pending: tuple[float, np.ndarray, float, float] | None = None
+        self.reset()
 
     def reset(self) -> None:
         """Forget the filters (a new run)."""
-        self._z = None
-        self._pending = None
+        size = len(self.names) + 1  # n_p + 2
+        self._z = np.zeros(size)  # [z_a, z_φ (n_p), z_τ]
+        self._pending = np.zeros(size)  # [y^(n-1) at the step's start, φ̄, τ̄] of the step just done
+        self._h = 0.0
+        self._has_pending = False  # a step is done whose input the filters have not taken
+        self._filtered = False  # the filters hold a value (from the second step on)
+
+    def native_params(self) -> dict[str, Any]:
+        """The sliding law's (SlidingAdaptiveLaw.native_params) and "composite": (κ, λ_f)."""
+        return {**super().native_params(), "composite": (self.kappa, self.filter_rate)}
 
     def step_ends(self, xs, us, weights, h: float) -> None:
         """After a physics step: xs, us the measured stage states (n,) and applied controls the
         controller saw, weights the integrator's b_i, h the step [s]."""
-        form = self.form
-        phi_bar = sum(w * np.asarray(form.phi(x), dtype=float) for w, x in zip(weights, xs, strict=True))
-        tau_bar = sum(w * (form.f(x) + form.h(x) * u) for w, x, u in zip(weights, xs, us, strict=True))
-        self._pending = (float(xs[0][self.order - 1]), phi_bar, float(tau_bar), float(h))
+        form, pending = self.form, self._pending
+        pending[:] = 0.0
+        pending[0] = float(xs[0][self.order - 1])
+        for w, x, u in zip(weights, xs, us, strict=True):
+            stage_sums(pending, float(w), np.asarray(form.phi(x), dtype=float), float(form.f(x)), float(form.h(x)),
+                       float(u))
+        self._h = float(h)
+        self._has_pending = True
 
     def step_begins(self, x: np.ndarray) -> None:
         """At the start of a physics step, with its measured state x (n,): the previous step's
         a = Δy^(n-1)/h is now known, and the filters advance by one step."""
-        if self._pending is None:
+        if not self._has_pending:
             return
-        y0, phi_bar, tau_bar, h = self._pending
-        self._pending = None
-        inp = np.concatenate(([(float(x[self.order - 1]) - y0) / h], phi_bar, [tau_bar]))
-        if self._z is None:
-            self._z = inp
-        else:
-            self._z = self._z + (1.0 - math.exp(-self.filter_rate * h)) * (inp - self._z)
+        h = self._h
+        filter_step(self._z, self._pending, float(x[self.order - 1]), h, filter_gain(self.filter_rate, h),
+                    not self._filtered)
+        self._has_pending = False
+        self._filtered = True
 
     def prediction(self, theta_hat: np.ndarray) -> tuple[np.ndarray, float]:
         """(Y_f (n_theta,), e = Y_f θ̂ − τ_f); zeros before the first step is known."""
-        if self._z is None:
+        if not self._filtered:
             return np.zeros(len(self.names)), 0.0
         z = self._z
         Yf = np.concatenate(([z[0]], -z[1:-1]))
-        return Yf, float(Yf @ theta_hat - z[-1])
+        return Yf, float(prediction_error(z, np.asarray(theta_hat, dtype=float)))
 
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
         step = super().__call__(t, x, ref, theta_hat)
-        if self._z is None:
+        if not self._filtered:
             return step
-        Yf, e = self.prediction(theta_hat)
-        rate = step.theta_hat_dot - self.kappa * Yf * e / self.gamma
-        _, _, theta0, lower, upper = self.modification.arrays(len(self.names), gamma=self.gamma)
-        modify_rate(rate, theta_hat, 0.0, 0.0, 0.0, theta0, self.gamma, lower, upper)  # projection again
+        arrays = self._fixed[1] if self._fixed is not None else self.arrays()
+        rate = np.array(step.theta_hat_dot, dtype=float)
+        composite_rate(self._z, np.asarray(theta_hat, dtype=float), self.kappa, arrays.gamma, arrays.theta0,
+                       arrays.lower, arrays.upper, rate)
         return step._replace(theta_hat_dot=rate)

@@ -24,7 +24,8 @@ has every stage estimate and every θ̂_{k+1} clipped into its box. A law with f
 (``law.has_filters``, composite adaptation: ``law.reset()``, ``law.step_begins(x)``,
 ``law.step_ends(xs, us, weights, h)``) is reset when the controller is made, told the measured state
 at each step's start, and given the stage states, stage controls and RK4 weights of each step once it
-is done (continuous control only).
+is done (continuous control only); on the native path the 1-DOF callback runs the composite law's filters
+itself (adaptive_mj.sim.native, laws.composite), the quadrotor's L1 filters likewise (native_flight).
 """
 from __future__ import annotations
 

@@ -1,7 +1,8 @@
-"""The native closed loop for 1-DOF plants: the sliding law (`laws.sliding.sliding_law`, or a
-law plugin's function) and the plant's regressor functions, compiled with numba into a C control
-callback that MuJoCo calls without the GIL; physics advances with mj_step(m, d, nstep) in chunks,
-and Python only works between chunks (events, noise, logging, divergence checks).
+"""The native closed loop for 1-DOF plants: the sliding law (`laws.sliding.sliding_law`, with composite
+adaptation `laws.composite` in a variant of its own, or a law plugin's function) and the plant's regressor
+functions, compiled with numba into a C control callback that MuJoCo calls without the GIL; physics
+advances with mj_step(m, d, nstep) in chunks, and Python only works between chunks (events, noise, logging,
+divergence checks).
 
 At every call the callback runs adaptive_mj.sim.stage.control_stage, the step's order that the Python
 controller (adaptive_mj.sim.loop.Controller) runs too, compiled (adaptive_mj.sim.native_step) with this module's
@@ -24,6 +25,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from adaptive_mj.laws.common import plugin_rate
+from adaptive_mj.laws.composite import composite_rate, filter_gain, filter_step, stage_sums
 from adaptive_mj.laws.plugin import PLUGIN_GAINS
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.laws.sliding import SLIDING_GAINS, SlidingArrays, sliding_law_values
@@ -58,6 +60,7 @@ if TYPE_CHECKING:
     period_ends: Any
     delay_slot: Any
     end_stage: Any
+    applied: Any
     SAMPLED: int
 
 _i8, _f8 = np.int64, np.float64
@@ -70,6 +73,10 @@ CONTEXT = native_step.context_dtype([  # after stage.control_stage's fields (nat
     # buffers (addresses)
     ("ref", _i8), ("noise", _i8), ("rec", _i8), ("th", _i8), ("coeffs", _i8), ("gamma", _i8), ("theta0", _i8),
     ("params", _i8), ("xbuf", _i8), ("s_hold", _i8), ("dist", _i8),
+    # composite adaptation (laws.composite; the composite variant only): κ, the filters' gain 1 − e^(−λ_f h), and
+    # buffers (n_theta + 1,): the filters z = [z_a, z_φ, z_τ], the pending step [y' at its start, φ̄, τ̄], and the
+    # stage's [φ, f, h] (the law's, for the sums when the stage's control is applied)
+    ("kappa", _f8), ("fgain", _f8), ("zf", _i8), ("fpend", _i8), ("fval", _i8),
 ])
 _compiled: dict = {}
 
@@ -117,8 +124,10 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
 
 def _apply_control(ctx, io, row, u):
     """This shape's "apply" (adaptive_mj.sim.native_step): ctrl[act] = u, and with a disturbance the step's
-    external force (force_offset + disturbance(t), prepared per chunk) into qfrc_applied, held over its stages."""
+    external force (force_offset + disturbance(t), prepared per chunk) into qfrc_applied, held over its stages;
+    then the law's `applied` (the composite law's sums; nothing for the others)."""
     base, mbase, off = io
+    applied(ctx, u)  # noqa: F821 (injected)
     carray(fptr(pointer_at(base, off.ctrl)), ctx.act + 1)[ctx.act] = u[0]  # noqa: F821 (injected)
     if ctx.has_dist != 0:
         qfrc = carray(fptr(pointer_at(base, off.qfrc_applied)), ctx.dadr + 1)  # noqa: F821 (injected)
@@ -158,6 +167,51 @@ def _builtin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rat
     return u, s
 
 
+def _composite_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rate):
+    """laws.composite.CompositeSlidingLaw as the Python path runs it (loop.Controller: step_begins at stage 0,
+    the law, step_ends): at each step's first stage the filters advance by the step before (laws.composite
+    .filter_step; from the second step on) and the new step's pending sums start from y' measured now; then the
+    sliding law (_builtin_law's), and from the second step on the composite correction of its rate
+    (laws.composite.composite_rate). The stage's φ, f, h are kept in ctx.fval for _composite_applied."""
+    gains = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
+    nz = ctx.nth + 1
+    z, pending = carray(fptr(ctx.zf), nz), carray(fptr(ctx.fpend), nz)  # noqa: F821 (injected)
+    v = x[ctx.n - 1]
+    if ctx.stage == 0:
+        if ctx.step > 0:
+            filter_step(z, pending, v, ctx.h, ctx.fgain, ctx.step == 1)
+        for j in range(nz):
+            pending[j] = 0.0
+        pending[0] = v
+    phi, f, h = phi_fn(x), f_fn(x), h_fn(x)  # noqa: F821 (injected)
+    fval = carray(fptr(ctx.fval), nz)  # noqa: F821 (injected)
+    n_p = phi.shape[0]
+    for j in range(n_p):
+        fval[j] = phi[j]
+    fval[n_p] = f
+    fval[n_p + 1] = h
+    u, s, _ = sliding_law_values(x, r, th, gains, SlidingArrays(coeffs, gamma, theta0, lower, upper), phi, f, h,
+                                 rate)
+    if ctx.step > 0:
+        composite_rate(z, th, ctx.kappa, gamma, theta0, lower, upper, rate)
+    return u, s
+
+
+def _composite_applied(ctx, u):
+    """The composite law's `applied` (_apply_control): the stage's φ, f, h (ctx.fval) and its applied control u[0]
+    into the step's pending sums with the stage's weight b_i (laws.composite.stage_sums)."""
+    nz = ctx.nth + 1
+    fval = carray(fptr(ctx.fval), nz)  # noqa: F821 (injected)
+    n_p = nz - 2
+    stage_sums(carray(fptr(ctx.fpend), nz), ctx.weights[ctx.stage], fval[:n_p], fval[n_p], fval[n_p + 1],  # noqa: F821
+               u[0])
+
+
+def _no_filters(ctx, u):
+    """The other laws' `applied` (_apply_control): nothing."""
+    return None
+
+
 def _plugin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rate):
     """A law plugin's function (laws.plugin: law(x, ref, theta, phi, f, h, params, rate) -> (u, s)), then the
     shared modifications every plugin gets (laws.common.plugin_rate: a baseline's rate is zero, the
@@ -181,13 +235,17 @@ def gains_record(record: np.ndarray, dtype: np.dtype) -> np.ndarray:
     return record
 
 
-def compiled(form, plugin=None):
+def compiled(form, plugin=None, composite: bool = False):
     """The cfunc for one plant form and law (in memory per process, on disk across processes).
 
     plugin: None for the built-in sliding laws (laws.sliding.sliding_law), or a plugin's law
-    function (adaptive_mj.laws.plugin), compiled with numba the same way."""
+    function (adaptive_mj.laws.plugin), compiled with numba the same way; composite: the sliding
+    law with composite adaptation (laws.composite, _composite_law), a variant of its own."""
+    if composite and plugin is not None:
+        raise ValueError("composite adaptation is a built-in sliding law's, not a plugin's")
     fns = (form.phi, form.f, form.h) + ((plugin,) if plugin is not None else ())
-    mem_key = tuple((fn.__code__, tuple(c.cell_contents for c in (fn.__closure__ or ()))) for fn in fns)
+    mem_key = (composite,) + tuple((fn.__code__, tuple(c.cell_contents for c in (fn.__closure__ or ())))
+                                   for fn in fns)
     if mem_key in _compiled:
         return _compiled[mem_key]
     import numba
@@ -196,9 +254,11 @@ def compiled(form, plugin=None):
 
     off = offsets()
     key = source_key(*fns, native_step.callback_factory, stage_code.control_stage, _law_stage, _apply_control,
-                     _record_row, _builtin_law, _plugin_law, sliding_law_values, plugin_rate, record_columns,
-                     stage_code.stage_estimate, stage_code.end_stage, context_address,
-                     extra=(off, numba.__version__, str(SLIDING_GAINS), str(PLUGIN_GAINS)))
+                     _record_row, _builtin_law, _plugin_law, _composite_law, _composite_applied, _no_filters,
+                     sliding_law_values, plugin_rate, record_columns, stage_code.stage_estimate,
+                     stage_code.end_stage, context_address,
+                     extra=(off, numba.__version__, str(SLIDING_GAINS), str(PLUGIN_GAINS),
+                            "composite" if composite else "plain"))
 
     def pieces(common: dict[str, Any], tag: str) -> dict[str, Any]:
         """This shape's law_stage (the form's functions and the law inlined into it), apply_control and
@@ -206,14 +266,24 @@ def compiled(form, plugin=None):
         inline = inlined(numba)
         forms: dict[str, Any] = {name: jit_tree(fn, inline, tag=tag)
                                  for name, fn in (("phi_fn", form.phi), ("f_fn", form.f), ("h_fn", form.h))}
-        if plugin is None:  # the law reads its gains through a pointer of its record's dtype (gains_ptr)
+        applied = jit_tree(_no_filters, inline, tag=tag)
+        if composite:  # the sliding law with its filters (laws.composite), and their sums at each applied control
+            # compiled apart, not inlined into the law: a cold compile of the variant 13-14 s instead of 16-17 s
+            apart: dict[str, Any] = {name: jit_tree(fn, numba.njit, tag=tag, inner=inline)
+                                     for name, fn in (("filter_step", filter_step), ("composite_rate", composite_rate),
+                                                      ("stage_sums", stage_sums))}
+            law = jit_tree(_composite_law, inline, tag=tag, carray=common["carray"], fptr=common["fptr"],
+                           gains_ptr=pointer(numba.from_dtype(SLIDING_GAINS)), **forms, **apart)
+            applied = jit_tree(_composite_applied, inline, tag=tag, carray=common["carray"], fptr=common["fptr"],
+                               stage_sums=apart["stage_sums"])
+        elif plugin is None:  # the law reads its gains through a pointer of its record's dtype (gains_ptr)
             law = jit_tree(_builtin_law, inline, tag=tag, carray=common["carray"],
                            gains_ptr=pointer(numba.from_dtype(SLIDING_GAINS)), **forms)
         else:
             law = jit_tree(_plugin_law, inline, tag=tag, user_law=jit_tree(plugin, inline, tag=tag),
                            carray=common["carray"], gains_ptr=pointer(numba.from_dtype(PLUGIN_GAINS)), **forms)
         return {"law_stage": jit_tree(_law_stage, inline, tag=tag, law=law, **common),
-                "apply_control": jit_tree(_apply_control, inline, tag=tag, **common),
+                "apply_control": jit_tree(_apply_control, inline, tag=tag, applied=applied, **common),
                 "record_row": jit_tree(_record_row, inline, tag=tag, **common,
                                        record_columns=jit_tree(record_columns, inline, tag=tag))}
 
@@ -225,9 +295,10 @@ def compiled(form, plugin=None):
 def supported(plant: Plant, law: Law) -> bool:
     """Native path: a 1-DOF MuJoCo plant (a MujocoPlant: the callback reads its joint and actuator
     addresses) of order 2 (its state is [q, q'], which the callback reads directly) compiled with a
-    userdata slot, a law the callback compiles (``law.native``: a sliding law or a law plugin; not
-    the composite law, whose filters run in Python). A time-varying disturbance is evaluated per step in Python
-    when a chunk is prepared and written into qfrc_applied by the callback."""
+    userdata slot, a law the callback compiles (``law.native``: a sliding law, the sliding law with composite
+    adaptation (laws.composite: its filters live in the context's buffers, the composite variant of the callback;
+    continuous control only, as on the Python path) or a law plugin). A time-varying disturbance is evaluated
+    per step in Python when a chunk is prepared and written into qfrc_applied by the callback."""
     from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS, MujocoPlant
 
     return (isinstance(plant, MujocoPlant) and plant.order == 2 and law.native
@@ -254,8 +325,11 @@ class NativeController(ContextOwner):
         control = control if control is not None else stage_code.ControlTiming(period=plant.dt)
         p = law.native_params()
         plugin = p.get("plugin_law")
+        composite = p.get("composite")  # (κ, λ_f): the sliding law with composite adaptation (laws.composite)
+        if composite is not None and control.sampled:
+            raise ValueError("composite adaptation runs under continuous control only")
         self.gains = gains_record(p["gains"], SLIDING_GAINS if plugin is None else PLUGIN_GAINS)
-        self.callback = compiled(plant.form, plugin=plugin)
+        self.callback = compiled(plant.form, plugin=plugin, composite=composite is not None)
         n, nth = plant.form.order, len(law.names)
         self.n, self.nth, self.nst = n, nth, plant.stages
         self.columns = record_columns(n, nth)
@@ -269,6 +343,7 @@ class NativeController(ContextOwner):
             "u_hold": np.zeros(1), "s_hold": np.zeros(1), "delayed": np.zeros(1),
             "ref": np.zeros(max_rows * self.nst * (n + 1)), "noise": np.zeros(max_rows * n),
             "rec": np.zeros(max_rows * self.ncol), "xbuf": np.zeros(n), "dist": np.zeros(max_rows),
+            "zf": np.zeros(nth + 1), "fpend": np.zeros(nth + 1), "fval": np.zeros(nth + 1),  # composite's filters
         }
         self.theta = self.buffers["theta"]
         lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (-math.inf, math.inf)
@@ -286,6 +361,8 @@ class NativeController(ContextOwner):
         for name, buf in self.buffers.items():
             c[name] = addr(buf)
         c["nbox"] = len(self.buffers["lower"])
+        if composite is not None:  # κ and the filters' gain, as CompositeSlidingLaw.step_begins computes it
+            c["kappa"], c["fgain"] = float(composite[0]), filter_gain(float(composite[1]), plant.dt)
         self.context = ctx
         self.bind()
 

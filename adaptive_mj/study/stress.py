@@ -15,7 +15,7 @@ Failure: divergence, a crash, or tail RMS ỹ above the plant's bound (TAIL_BOUN
 Laws: the lecture's adaptive law with no modification; the dead-zone (ε = 3σ_s at the
 nominal noise); σ-modification and e-modification (leakage time constant 5 s on the first
 parameter, toward the true θ); projection onto [θ/2, 2θ] for the positive parameters;
-composite adaptation (Python callback path: slow, so only with `--composite`); and the two
+composite adaptation (only with `--composite`); and the two
 baselines, fixed nominal parameters (the truth) and robust sliding control (K = 10 % of the
 actuator limit, Φ = 0.05).
 On the 6-joint arm the laws are Slotine–Li with the dead-zone (width_in_noise_std = 3), σ- and
