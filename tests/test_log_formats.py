@@ -107,6 +107,19 @@ def test_format6_log_reads_and_verifies(capsys):
     assert "verify: bit-identical" in _verify(DATA / name, capsys)
 
 
+@pytest.mark.parametrize("name, joints, rows", [("heave_drift_format7.mcap", 0, 50),
+                                                ("ur5e_payload_swap_format7.mcap", 6, 30)])
+def test_format7_logs_read_and_verify(name, joints, rows, capsys):
+    """Written by adaptive-mj before format 8 (six CDR row topics, one message per topic and row): read through
+    its six CDR channels, re-simulated bit for bit (the heave one 1 s at 50 Hz, the 6-joint one 0.3 s at 100 Hz
+    with a payload swap at 0.15 s)."""
+    run = read_log(DATA / name)
+    assert run.header["log_format_version"] == 7 <= record.LOG_FORMAT_VERSION
+    assert run.header["encoding"] == "cdr"
+    assert run.status == "ok" and len(run.trajectory.joint_names) == joints and len(run.trajectory) == rows
+    assert "verify: bit-identical" in _verify(DATA / name, capsys)
+
+
 @pytest.mark.parametrize("name, extra", [
     ("heave_drift", ()),
     ("ur5e_payload_swap", ("simulation.duration=0.3", "events=[{t=0.15, kind='payload_swap', payload='sphere'}]"))])
