@@ -282,4 +282,4 @@ class Scenario:
     control: ControlSpec = ControlSpec()
     success: SuccessSpec = SuccessSpec()
     sensors: SensorSpec = SensorSpec()
-    log_encoding: str = "cdr"  # [log] encoding: the row topics in CDR (format 7) or JSON text (format 6)
+    log_encoding: str = "cdr"  # [log] encoding: rows in CDR, one /row message each (format 8), or JSON (format 6)

@@ -1,15 +1,18 @@
 """Log encoding benchmark (issue 34, item 1): the run log's row encodings against each other, in one process.
 
-  pack      the payloads of a block of rows packed by numpy, no MCAP: CDR (ros2msg: the 4-byte header, then
-            float64 t and one float64 per field), protobuf with one named double field per value (each a tag
-            byte and 8 bytes: what Foxglove would plot by name), protobuf with one packed repeated double
-            (tag, length, 8 bytes a value: plotted by index only); µs per message and zstd bytes per row
+  pack      the payloads of a block of rows packed by numpy, no MCAP: CDR as format 7 wrote it (six payloads a
+            row, one per row topic: the 4-byte header, then float64 t and one float64 per field) and as format 8
+            writes it (one /row payload a row: the header, t, then every topic's fields), protobuf with one named
+            double field per value (each a tag byte and 8 bytes: what Foxglove would plot by name), protobuf with
+            one packed repeated double (tag, length, 8 bytes a value: plotted by index only); µs per payload and
+            zstd bytes per row
   write     Recorder.write_rows of synthetic heave rows (order 2, 3 parameters, 1000-step blocks logged at
-            100 Hz, dt = 1 ms) with log.encoding json (format 6: today's JSON text, the same code as before
-            format 7) and cdr (format 7): µs per message and per row
-  size      a real heave_tracking run at 100 Hz (scenarios/heave_tracking.toml) of 2 s and 12 s with each
-            encoding: log bytes per simulated second (the difference over 10 s, without the header), and the
-            message index's share (16 bytes a message, uncompressed, needed by @mcap/core and Foxglove)
+            100 Hz, dt = 1 ms) with log.encoding json (format 6: JSON text, six messages a row, the same code as
+            before format 7) and cdr (format 8: one message a row): µs per row and per message
+  size      real heave runs at 100 Hz with each encoding: heave_drift of 2 s and 20 s (the 20 s file over 20 s,
+            and the difference over 18 s, without the header) and heave_tracking of 2 s and 12 s (the difference
+            over 10 s): log bytes per simulated second, and the message index's share (16 bytes a message,
+            uncompressed, needed by @mcap/core and Foxglove)
   steps     per physics step of heave_tracking (20 000 steps, RK4, 1 ms), interleaved in each repetition: bare
             mj_step (speed.py's a), the closed loop without a log (its b: the law's own cost), the closed loop
             logged at 100 Hz with log.encoding json (speed.py's c as it was before format 7: the JSON writer's
@@ -62,7 +65,16 @@ def blocks_of(rows: dict) -> tuple[np.ndarray, list[np.ndarray]]:
     return rows["t"][keep], [x, ref, control, rows["theta_hat"][keep], rows["theta"][keep], rows["V"][keep, None]]
 
 
+def pack_cdr_row(tk, blocks) -> list[bytes]:
+    """Format 8: one payload a row, the CDR header, t, then every topic's columns."""
+    rec = np.empty(len(tk), dtype=[("h", "u1", (4,)), ("v", "<f8", (1 + sum(b.shape[1] for b in blocks),))])
+    rec["h"] = np.frombuffer(CDR_HEADER, np.uint8)
+    rec["v"] = np.hstack([tk[:, None], *blocks])
+    return [rec.tobytes()]
+
+
 def pack_cdr(tk, blocks) -> list[bytes]:
+    """Format 7: six payloads a row, one per topic, each the CDR header, t and the topic's columns."""
     out = []
     for b in blocks:
         rec = np.empty(len(tk), dtype=[("h", "u1", (4,)), ("v", "<f8", (1 + b.shape[1],))])
@@ -99,11 +111,11 @@ def pack_proto_packed(tk, blocks) -> list[bytes]:
 
 def bench_pack(reps: int) -> dict:
     tk, blocks = blocks_of(synthetic(BLOCK * 20))
-    messages = len(tk) * len(blocks)
     zstd = zstandard.ZstdCompressor(level=3)
     out = {}
-    for name, pack in (("cdr", pack_cdr), ("protobuf_named_doubles", pack_proto_named),
-                       ("protobuf_packed_repeated", pack_proto_packed)):
+    for name, pack in (("cdr_format8_row", pack_cdr_row), ("cdr_format7_topics", pack_cdr),
+                       ("protobuf_named_doubles", pack_proto_named), ("protobuf_packed_repeated", pack_proto_packed)):
+        messages = len(tk) * (1 if pack is pack_cdr_row else len(blocks))
         times = []
         for _ in range(reps):
             t0 = time.perf_counter()
@@ -127,7 +139,7 @@ def header(encoding: str) -> LogHeader:
 
 def bench_write(reps: int, n_blocks: int) -> dict:
     rows = synthetic(BLOCK * n_blocks)
-    topics = len(row_fields(2, NAMES))
+    per_row = {"json": len(row_fields(2, NAMES)), "cdr": 1}  # messages a row: format 6 six, format 8 one
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         times: dict[str, list[float]] = {"json": [], "cdr": []}
@@ -142,30 +154,35 @@ def bench_write(reps: int, n_blocks: int) -> dict:
                 times[encoding].append((time.perf_counter() - t0) / rec.rows_written * 1e6)
                 rec.close("ok", "", {})
         for encoding, ts in times.items():
-            out[encoding] = {"us_per_row": med(ts), "us_per_message": med([t / topics for t in ts])}
+            out[encoding] = {"us_per_row": med(ts), "us_per_message": med([t / per_row[encoding] for t in ts])}
     return out
 
 
 def bench_size() -> dict:
+    """{scenario: {encoding: sizes}}: heave_drift 2 s and 20 s, heave_tracking 2 s and 12 s, at 100 Hz."""
     from mcap.stream_reader import StreamReader
 
-    out = {}
+    out: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for encoding in ("json", "cdr"):
-            sizes, index = {}, {}
-            for seconds in (2, 12):
-                scn = sc.load(REPO / "scenarios" / "heave_tracking.toml",
-                              overrides=[f"simulation.duration={seconds}", "log.rate_hz=100",
-                                         f"log.encoding={encoding!r}"])
-                path = Path(tmp) / f"{encoding}{seconds}.mcap"
-                execute(scn, log_path=path)
-                sizes[seconds] = path.stat().st_size
-                with open(path, "rb") as f:
-                    index[seconds] = sum(15 + 16 * len(r.records) for r in StreamReader(f).records
-                                         if type(r).__name__ == "MessageIndex")
-            out[encoding] = {"bytes_per_sim_second": (sizes[12] - sizes[2]) / 10,
-                             "message_index_bytes_per_sim_second": (index[12] - index[2]) / 10,
-                             "file_bytes_12s": sizes[12]}
+        for name, long in (("heave_drift", 20), ("heave_tracking", 12)):
+            for encoding in ("json", "cdr"):
+                sizes, index = {}, {}
+                for seconds in (2, long):
+                    scn = sc.load(REPO / "scenarios" / f"{name}.toml",
+                                  overrides=[f"simulation.duration={seconds}", "log.rate_hz=100",
+                                             f"log.encoding={encoding!r}"])
+                    path = Path(tmp) / f"{name}_{encoding}{seconds}.mcap"
+                    execute(scn, log_path=path)
+                    sizes[seconds] = path.stat().st_size
+                    with open(path, "rb") as f:
+                        index[seconds] = sum(15 + 16 * len(r.records) for r in StreamReader(f).records
+                                             if type(r).__name__ == "MessageIndex")
+                span = long - 2
+                out.setdefault(name, {})[encoding] = {
+                    "seconds": long, "bytes_per_sim_second": (sizes[long] - sizes[2]) / span,
+                    "whole_file_bytes_per_sim_second": sizes[long] / long,
+                    "message_index_bytes_per_sim_second": (index[long] - index[2]) / span,
+                    "file_bytes": sizes[long]}
     return out
 
 
@@ -205,21 +222,26 @@ def main() -> None:
     print(f"pack (a block of {BLOCK * 20 // EVERY} heave rows, 6 topics; median [min, max] of {args.reps}):")
     for name, r in pack.items():
         m = r["us_per_message"]
-        print(f"  {name:26s} {m['median']:6.3f} µs/message [{m['min']:.3f}, {m['max']:.3f}]  "
+        print(f"  {name:26s} {m['median']:6.3f} µs/payload [{m['min']:.3f}, {m['max']:.3f}]  "
               f"{r['bytes_per_row']:.0f} B/row raw, {r['zstd_bytes_per_row']:.1f} B/row zstd")
     write = bench_write(args.reps, args.blocks)
-    print(f"write (Recorder.write_rows, {args.blocks} blocks of 1000 steps at 100 Hz):")
+    print(f"write (Recorder.write_rows, {args.blocks} blocks of 1000 steps at 100 Hz; json 6 messages a row, "
+          "cdr 1):")
     for name, r in write.items():
         m, row = r["us_per_message"], r["us_per_row"]
-        print(f"  {name:5s} {m['median']:6.3f} µs/message [{m['min']:.3f}, {m['max']:.3f}], "
-              f"{row['median']:6.2f} µs/row")
+        print(f"  {name:5s} {row['median']:6.2f} µs/row [{row['min']:.2f}, {row['max']:.2f}], "
+              f"{m['median']:6.3f} µs/message")
     print(f"  json/cdr: {write['json']['us_per_row']['median'] / write['cdr']['us_per_row']['median']:.1f}x")
     size = bench_size()
-    print("size (heave_tracking at 100 Hz, 12 s run minus 2 s run, per simulated second):")
-    for name, r in size.items():
-        print(f"  {name:5s} {r['bytes_per_sim_second'] / 1000:5.1f} kB/s, of it the message index "
-              f"{r['message_index_bytes_per_sim_second'] / 1000:.1f} kB/s; 12 s file {r['file_bytes_12s']} B")
-    print(f"  cdr/json: {size['cdr']['bytes_per_sim_second'] / size['json']['bytes_per_sim_second']:.2f}")
+    for scenario, by_encoding in size.items():
+        long = by_encoding["json"]["seconds"]
+        print(f"size ({scenario} at 100 Hz, {long} s run minus 2 s run, per simulated second):")
+        for name, r in by_encoding.items():
+            print(f"  {name:5s} {r['bytes_per_sim_second'] / 1000:5.2f} kB/s (the whole {long} s file: "
+                  f"{r['whole_file_bytes_per_sim_second'] / 1000:.2f} kB/s, {r['file_bytes']} B), of it the message "
+                  f"index {r['message_index_bytes_per_sim_second'] / 1000:.2f} kB/s")
+        ratio = by_encoding["cdr"]["bytes_per_sim_second"] / by_encoding["json"]["bytes_per_sim_second"]
+        print(f"  cdr/json: {ratio:.2f}")
     if args.no_steps:
         return
     steps = bench_steps(args.reps, args.steps)

@@ -1,8 +1,9 @@
 """Foxglove: docs/foxglove_layout.json is a Foxglove layout whose every message path names
-a real topic and field of a real log (heave and arm), every channel carries the schema Foxglove needs
-(format 7: the row topics CDR with a ros2msg schema, /events and /summary JSON with a JSON Schema), and an
-independent MCAP reader (TypeScript @mcap/core, run with Node: tools/mcap_count.mjs) counts the same messages
-per topic as the Python reader and decodes every message (JSON, or CDR by its ros2msg schema)."""
+a real topic, sub-message and field of a real log (heave and arm), every channel carries the schema Foxglove needs
+(format 8: /row CDR with a ros2msg schema of nested sub-messages, its dependencies after MSG: lines as ROS 2 and
+Foxglove's parser read them; /events and /summary JSON with a JSON Schema), and an independent MCAP reader
+(TypeScript @mcap/core, run with Node: tools/mcap_count.mjs) counts the same messages per topic as the Python
+reader and decodes every message (JSON, or CDR by its ros2msg schema)."""
 import json
 import re
 import shutil
@@ -17,9 +18,14 @@ from adaptive_mj.cli import main
 REPO = Path(__file__).resolve().parents[1]
 LAYOUT = REPO / "docs" / "foxglove_layout.json"
 TOOLS = REPO / "tools"
+# the parameters' fields in the Row schema (ros2msg_field: ROS 2 field names are lower-case, the arm's J is j)
 HEAVE_PARAMS = {"d", "b", "c"}
-ARM_PARAMS = {"J", "b", "g_sin", "g_cos"}
-PATH_RE = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)\.([A-Za-z_][A-Za-z0-9_]*)$")
+ARM_PARAMS = {"j", "b", "g_sin", "g_cos"}
+# a Foxglove message path into a format-8 log: /row.<sub-message>.<field>
+PATH_RE = re.compile(r"^(/row)\.([a-z][a-z0-9_]*)\.([a-z][a-z0-9_]*)$")
+SEPARATOR = "=" * 80
+# Foxglove's ros2msg parser (@foxglove/rosmsg buildRos2Type) refuses any other field name, as ROS 2 does
+FIELD_NAME = re.compile(r"[a-z](?:_?[a-z0-9]+)*")
 
 
 @pytest.fixture(scope="module")
@@ -57,14 +63,39 @@ def _plot_paths(layout):
 
 
 def _ros2msg_fields(text: str) -> dict:
-    """{field: {"type": ...}} of a ros2msg schema of float64 fields (what Foxglove parses), in order."""
-    fields = {}
+    """{field: {"type": "number"}} or {field: {"type": "object", "properties": ...}} of a ros2msg schema with its
+    dependencies, in order, resolved as Foxglove's parser resolves them: the definitions split at lines starting
+    "==", a dependency named by its "MSG: <name>" line, a field of a complex type matched to the definition of
+    exactly that name; every field name one Foxglove accepts; float64 the only primitive here."""
+    sections, current = [[]], None
     for line in text.splitlines():
-        words = line.split("#")[0].split()
-        if words:
-            assert len(words) == 2 and words[0] == "float64" and re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", words[1]), line
-            fields[words[1]] = {"type": "number"}
-    return fields
+        line = line.strip()
+        if line.startswith("=="):
+            assert line == SEPARATOR, line
+            sections.append([])
+        elif line and not line.startswith("#"):
+            sections[-1].append(line)
+    definitions = {}
+    for k, lines in enumerate(sections):
+        current = None
+        if k:
+            assert lines[0].startswith("MSG: "), lines[0]
+            current, lines = lines[0][len("MSG: "):], lines[1:]
+        fields = []
+        for line in lines:
+            words = line.split("#")[0].split()
+            assert len(words) == 2 and FIELD_NAME.fullmatch(words[1]), line
+            fields.append(tuple(words))
+        assert current not in definitions, current
+        definitions[current] = fields
+
+    def resolve(name):
+        out = {}
+        for kind, field in definitions[name]:
+            out[field] = {"type": "number"} if kind == "float64" else {"type": "object", "properties": resolve(kind)}
+        return out
+
+    return resolve(None)
 
 
 def _schemas(log):
@@ -103,10 +134,10 @@ def test_layout_has_the_shape_of_a_foxglove_layout(layout):
 
 def test_layout_plots_what_the_issue_asks_for(layout):
     paths = set(_plot_paths(layout))
-    assert {"/state.y", "/reference.y_d", "/control.s", "/control.u", "/control.y_tilde",
-            "/lyapunov.V"} <= paths
+    assert {"/row.state.y", "/row.reference.y_d", "/row.control.s", "/row.control.u", "/row.control.y_tilde",
+            "/row.lyapunov.v"} <= paths
     for name in HEAVE_PARAMS | ARM_PARAMS:
-        assert {f"/estimates.{name}", f"/true_params.{name}"} <= paths, name
+        assert {f"/row.estimates.{name}", f"/row.true_params.{name}"} <= paths, name
     raw = {cfg["topicPath"] for cid, cfg in layout["configById"].items() if cid.startswith("RawMessages!")}
     assert raw == {"/summary", "/events"}
 
@@ -116,12 +147,12 @@ def test_every_layout_path_names_a_real_topic_and_field(layout, logs):
     params = {"heave": HEAVE_PARAMS, "arm": ARM_PARAMS}
     for value in _plot_paths(layout):
         match = PATH_RE.match(value)
-        assert match, f"{value!r} is not /topic.field"
-        topic, field = match.groups()
+        assert match, f"{value!r} is not /row.part.field"
+        topic, part, field = match.groups()
         owners = [plant for plant, s in schemas.items()
-                  if topic in s and field in s[topic][2]["properties"]]
-        assert owners, f"{value}: no log has this topic and field"
-        if topic in ("/estimates", "/true_params"):
+                  if topic in s and field in s[topic][2]["properties"].get(part, {}).get("properties", {})]
+        assert owners, f"{value}: no log has this topic, sub-message and field"
+        if part in ("estimates", "true_params"):
             assert owners == [p for p in ("heave", "arm") if field in params[p]], value
         else:
             assert owners == ["heave", "arm"], f"{value}: missing from a log"
@@ -132,24 +163,31 @@ def test_every_layout_path_names_a_real_topic_and_field(layout, logs):
 def test_every_channel_has_a_schema_with_the_plotted_fields(layout, logs):
     plotted = {}
     for value in _plot_paths(layout):
-        topic, field = PATH_RE.match(value).groups()
-        plotted.setdefault(topic, set()).add(field)
+        _topic, part, field = PATH_RE.match(value).groups()
+        plotted.setdefault(part, set()).add(field)
+    parts = ["state", "reference", "control", "estimates", "true_params", "lyapunov"]
     for plant, log in logs.items():
         names = HEAVE_PARAMS if plant == "heave" else ARM_PARAMS
-        for topic, (schema_encoding, message_encoding, schema) in _schemas(log).items():
-            row_topic = topic not in ("/events", "/summary")  # format 7: the row topics CDR, the others JSON
+        schemas = _schemas(log)
+        assert set(schemas) == {"/row", "/events", "/summary"}, plant
+        for topic, (schema_encoding, message_encoding, schema) in schemas.items():
+            row_topic = topic == "/row"  # format 8: the rows one CDR topic, the others JSON
             assert (schema_encoding, message_encoding) == (("ros2msg", "cdr") if row_topic else
                                                            ("jsonschema", "json")), topic
             assert schema["type"] == "object" and "properties" in schema, topic
             for prop in schema["properties"].values():   # what Foxglove's parser accepts
                 assert isinstance(prop.get("type"), str), (topic, prop)
-            fields = plotted.get(topic, set())
-            if topic in ("/estimates", "/true_params"):
+        row = schemas["/row"][2]["properties"]
+        assert list(row) == ["t", *parts] and row["t"] == {"type": "number"}
+        for part in parts:
+            fields = plotted.get(part, set())
+            sub = row[part]["properties"]
+            if part in ("estimates", "true_params"):
                 fields = fields & names
-                assert set(schema["properties"]) - {"t", "nonfinite"} == names, topic
-            assert fields <= set(schema["properties"]), (plant, topic, fields)
+                assert set(sub) == names, part
+            assert fields <= set(sub), (plant, part, fields)
             for field in fields:
-                assert schema["properties"][field]["type"] == "number", (topic, field)
+                assert sub[field]["type"] == "number", (part, field)
 
 
 def _python_counts(log):
@@ -183,19 +221,38 @@ def test_typescript_mcap_reader_counts_the_same_messages(logs, plant):
     assert ts["counts"] == read
     assert ts["statistics"] == stats
     assert {k: v for k, v in read.items() if v} == stats
-    assert ts["json_errors"] == 0 and ts["cdr_errors"] == 0
-    assert ts["cdr_decoded"] == 6 * read["/state"]  # every row message decoded by its ros2msg schema
-    assert ts["library"].startswith("adaptive_mj log format")
-    rows = read["/state"]
-    assert rows == 30 and all(read[t] == rows for t in ("/reference", "/control", "/estimates",
-                                                         "/true_params", "/lyapunov"))
+    assert ts["json_errors"] == 0 and ts["cdr_errors"] == 0 and ts["ros2msg_bad_names"] == []
+    assert ts["cdr_decoded"] == read["/row"] == 30  # every row message decoded by its nested ros2msg schema
+    assert ts["library"].startswith("adaptive_mj log format 8")
+    assert set(read) == {"/row", "/events", "/summary"}
     assert read["/summary"] == 1 and read["/events"] == (1 if plant == "arm" else 0)
-    for topic, (schema_name, schema_encoding, message_encoding) in ts["schemas"].items():
-        if topic in ("/events", "/summary"):
-            assert schema_name.startswith("adaptive_mj.") and schema_encoding == "jsonschema", topic
-            assert message_encoding == "json", topic
-        else:
-            assert schema_name.startswith("adaptive_mj/msg/") and schema_encoding == "ros2msg", topic
-            assert message_encoding == "cdr", topic
+    assert ts["schemas"]["/row"] == ["adaptive_mj/msg/Row", "ros2msg", "cdr"]
+    for topic in ("/events", "/summary"):
+        schema_name, schema_encoding, message_encoding = ts["schemas"][topic]
+        assert schema_name.startswith("adaptive_mj.") and schema_encoding == "jsonschema", topic
+        assert message_encoding == "json", topic
+    # the TypeScript reader's leaf paths of the Row schema are the layout's: /row.<part>.<field>
+    schema = _schemas(logs[plant])["/row"][2]["properties"]
+    want = ["t"] + [f"{part}.{field}" for part, sub in schema.items() if part != "t" for field in sub["properties"]]
+    assert ts["row_fields"] == want
     assert {"adaptive_mj", "scenario", "status"} <= set(ts["metadata"])
     assert "model_source.xml" in ts["attachments"]
+
+
+@pytest.mark.skipif(_node_reason() is not None, reason=_node_reason() or "")
+@pytest.mark.parametrize("name, rows, bad", [
+    ("heave_drift_format7.mcap", 50, ["adaptive_mj/msg/Lyapunov: V"]),
+    ("heave_drift_format6.mcap", 50, [])])
+def test_typescript_mcap_reader_reads_the_older_fixtures(name, rows, bad):
+    """The independent reader still decodes format 7's six flat CDR topics (six messages a row) and format 6's JSON;
+    it names the field names of format 7 that Foxglove's ros2msg parser refuses (V: upper case), which format 8
+    writes lower-case."""
+    log = REPO / "tests" / "data" / name
+    r = subprocess.run(["node", str(TOOLS / "mcap_count.mjs"), str(log)],
+                       capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+    assert r.returncode == 0, r.stderr
+    ts = json.loads(r.stdout)
+    assert ts["counts"] == _python_counts(log)[1]
+    assert ts["json_errors"] == 0 and ts["cdr_errors"] == 0 and ts["row_fields"] == []
+    assert ts["cdr_decoded"] == (6 * rows if "format7" in name else 0)
+    assert ts["ros2msg_bad_names"] == bad

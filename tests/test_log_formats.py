@@ -1,8 +1,9 @@
 """Formats are promises: logs written in format 1 (by adaptive-mj before multi-joint runs), format 2
 (before law plugins), format 3 (before sampled-data control), format 4 (before the verdict's limits
-and the embedded model's hash), format 5 and format 6 (JSON rows, before CDR) still read and replay bit for bit;
-the CDR and JSON encodings of one run read back the same; a multi-joint run round-trips; an
-altered embedded model is refused on read."""
+and the embedded model's hash), format 5, format 6 (JSON rows, before CDR) and format 7 (six CDR row topics,
+before the one /row topic of format 8) still read and replay bit for bit; the CDR (format 8) and JSON (format 6)
+encodings of one run read back the same; a multi-joint run round-trips; an altered embedded model is refused on
+read."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -107,12 +108,25 @@ def test_format6_log_reads_and_verifies(capsys):
     assert "verify: bit-identical" in _verify(DATA / name, capsys)
 
 
+@pytest.mark.parametrize("name, joints, rows", [("heave_drift_format7.mcap", 0, 50),
+                                                ("ur5e_payload_swap_format7.mcap", 6, 30)])
+def test_format7_logs_read_and_verify(name, joints, rows, capsys):
+    """Written by adaptive-mj before format 8 (six CDR row topics, one message per topic and row): read through
+    its six CDR channels, re-simulated bit for bit (the heave one 1 s at 50 Hz, the 6-joint one 0.3 s at 100 Hz
+    with a payload swap at 0.15 s)."""
+    run = read_log(DATA / name)
+    assert run.header["log_format_version"] == 7 < record.LOG_FORMAT_VERSION
+    assert run.header["encoding"] == "cdr"
+    assert run.status == "ok" and len(run.trajectory.joint_names) == joints and len(run.trajectory) == rows
+    assert "verify: bit-identical" in _verify(DATA / name, capsys)
+
+
 @pytest.mark.parametrize("name, extra", [
     ("heave_drift", ()),
     ("ur5e_payload_swap", ("simulation.duration=0.3", "events=[{t=0.15, kind='payload_swap', payload='sphere'}]"))])
 def test_cdr_and_json_encodings_of_one_run_give_the_same_trajectory(tmp_path, name, extra, capsys):
-    """log.encoding = "cdr" (format 7) and "json" (format 6) of the same run: every array read back is the same,
-    bit for bit, and both verify."""
+    """log.encoding = "cdr" (format 8: one /row message a row) and "json" (format 6) of the same run: every array
+    read back is the same, bit for bit, and both verify."""
     runs = {}
     for encoding in ("cdr", "json"):
         scn = scenario.load(scenario.SCENARIOS_DIR / f"{name}.toml",
@@ -122,7 +136,7 @@ def test_cdr_and_json_encodings_of_one_run_give_the_same_trajectory(tmp_path, na
         runs[encoding] = read_log(path)
         assert "verify: bit-identical" in _verify(path, capsys)
     cdr, js = runs["cdr"], runs["json"]
-    assert (cdr.header["log_format_version"], js.header["log_format_version"]) == (7, 6)
+    assert (cdr.header["log_format_version"], js.header["log_format_version"]) == (8, 6)
     assert cdr.header["encoding"] == "cdr" and "encoding" not in js.header
     for field in ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V"):
         a, b = getattr(cdr.trajectory, field), getattr(js.trajectory, field)
@@ -203,7 +217,7 @@ def test_multi_joint_log_round_trips(tmp_path):
     path = tmp_path / "arm.mcap"
     live = execute(scn, log_path=path).trajectory
     run = read_log(path)
-    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 7
+    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 8
     assert run.header["joint_names"] == list(live.joint_names) and len(live.joint_names) == 6
     tr = run.trajectory
     every = run.header["log_every"]

@@ -117,7 +117,7 @@ def test_the_log_names_rotors_and_state_rows_and_replays_bit_identically(tmp_pat
     gust = "events=[{t=0.5, kind='wind', velocity=[2.0, 0, 0]}, {t=1.5, kind='wind', velocity=[0, 0, 0]}]"
     res = run_scenario("quadrotor_wind_gust", set=["simulation.duration=2", gust], log=path)
     run = read_log(path)
-    assert run.header["log_format_version"] == LOG_FORMAT_VERSION  # 7: binary rows (CDR); names since 6
+    assert run.header["log_format_version"] == LOG_FORMAT_VERSION  # 8: one /row message a row; names since 6
     assert run.header["control_names"] == ["rotor1", "rotor2", "rotor3", "rotor4"]
     assert run.header["state_names"] == ["p", "v", "phi", "omega"]
     assert run.trajectory.u.shape == (len(run.trajectory), 4) and run.trajectory.x.shape[1:] == (4, 3)

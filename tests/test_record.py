@@ -10,6 +10,7 @@ import struct
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -193,16 +194,20 @@ def test_non_finite_values_round_trip(tmp_path, encoding):
     assert np.array_equal(traj.u, rows["u"][::LOG_EVERY])
     assert np.array_equal(traj.V, rows["V"][::LOG_EVERY], equal_nan=True)
     assert run.summary["rmse_y"] is None      # non-finite summary values become null
-    with open(path, "rb") as f:
-        control = [m.data for _, _, m in make_reader(f).iter_messages("/control")]
     y_tilde = rows["ref"][50, 0] - rows["x"][50, 0]
     if encoding == "json":
+        with open(path, "rb") as f:
+            control = [m.data for _, _, m in make_reader(f).iter_messages("/control")]
         assert json.loads(control[5]) == {"t": 0.05, "s": rows["s"][50], "y_tilde": y_tilde,
                                           "nonfinite": {"u": "inf"}}
-    else:  # CDR: the float64 themselves, inf and NaN included
-        assert control[5] == record.CDR_HEADER + np.array([0.05, math.inf, rows["s"][50], y_tilde], "<f8").tobytes()
-        lyapunov = np.frombuffer(list(make_reader(open(path, "rb")).iter_messages("/lyapunov"))[5][2].data[4:], "<f8")
-        assert lyapunov[0] == 0.05 and math.isnan(lyapunov[1])
+    else:  # CDR (format 8, one /row message a row): the float64 themselves, inf and NaN included
+        with open(path, "rb") as f:
+            data = [m.data for _, _, m in make_reader(f).iter_messages("/row")]
+        values = np.frombuffer(data[5][4:], "<f8")  # t, state 2, reference 3, control 3, estimates 3, true 3, V
+        assert data[5][:4] == record.CDR_HEADER and len(values) == 1 + 2 + 3 + 3 + 3 + 3 + 1
+        assert values[6:9].tobytes() == np.array([math.inf, rows["s"][50], y_tilde], "<f8").tobytes()
+        assert values[0] == 0.05 and math.isnan(values[-1])
+        assert np.frombuffer(data[6][4:], "<f8")[9 + 1] == -math.inf  # theta_hat[60, 1]
 
 
 @settings(max_examples=40, deadline=None,
@@ -280,42 +285,108 @@ def test_json_channels_have_json_schemas(tmp_path):
     assert summary.statistics.message_count == 500 * 6 + 2 + 1
 
 
-def test_cdr_channels_have_ros2msg_schemas(full_log):
-    """Format 7 (the default): the row topics are CDR with a ros2msg schema (float64 t, then a float64 per field,
-    as Foxglove decodes it); /events and /summary stay JSON; a payload is the header and the float64."""
+SEPARATOR = "=" * 80
+# Foxglove's ros2msg field-name rule (@foxglove/rosmsg buildRos2Type: "Invalid field name" otherwise), as ROS 2's
+ROS2_FIELD = r"[a-z](?:_?[a-z0-9]+)*"
+
+
+def parse_ros2msg(text: str) -> tuple[list[tuple[str, str]], dict[str, list[tuple[str, str]]]]:
+    """(top-level fields, {MSG: type name -> its fields}) of a ros2msg text with dependent definitions, split as
+    ROS 2 and Foxglove split it: a line of 80 "=" then "MSG: <name>" before each dependency; comments dropped;
+    fields as (type, name)."""
+    sections = text.split(SEPARATOR + "\n")
+    top, deps = sections[0], {}
+    def fields(body):
+        out = []
+        for line in body.splitlines():
+            words = line.split("#")[0].split()
+            if words and words[0] != "MSG:":
+                assert len(words) == 2, line
+                out.append((words[0], words[1]))
+        return out
+    for body in sections[1:]:
+        head = body.splitlines()[0]
+        assert head.startswith("MSG: "), head
+        deps[head[len("MSG: "):]] = fields(body)
+    return fields(top), deps
+
+
+def test_cdr_rows_are_one_row_message_with_a_nested_ros2msg_schema(full_log):
+    """Format 8 (the default): a row is one CDR message on /row whose ros2msg schema (adaptive_mj/msg/Row) is
+    float64 t, then one sub-message per row topic, each type defined after a separator line and a MSG: line as ROS
+    2 and Foxglove concatenate them; the payload is the header, t, then every part's float64 with no padding;
+    /events and /summary stay JSON; the message count is a sixth of format 7's."""
     path, rows = full_log
     with open(path, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
         topics = {ch.topic: ch for ch in summary.channels.values()}
-        first = {}
-        for _schema, channel, message in reader.iter_messages():
-            first.setdefault(channel.topic, message)
-    assert set(topics) == {*ROW_TOPICS, "/events", "/summary"}
+        messages = [m for _, _, m in reader.iter_messages(topics=["/row"])]
+    assert set(topics) == {"/row", "/events", "/summary"}
+    channel = topics["/row"]
+    schema = summary.schemas[channel.schema_id]
+    assert (channel.message_encoding, schema.encoding, schema.name) == ("cdr", "ros2msg", "adaptive_mj/msg/Row")
+    text = schema.data.decode()
+    top, deps = parse_ros2msg(text)
+    types = ["State", "Reference", "Control", "Estimates", "TrueParams", "Lyapunov"]
+    assert top == [("float64", "t")] + [(f"adaptive_mj/{t}", part)
+                                        for t, part in zip(types, record.ROW_PARTS, strict=True)]
+    assert list(deps) == [f"adaptive_mj/{t}" for t in types]  # the names the fields' types give, exactly
     fields = record.row_fields(2, NAMES)
-    for topic in ROW_TOPICS:
-        channel = topics[topic]
-        schema = summary.schemas[channel.schema_id]
-        assert (channel.message_encoding, schema.encoding) == ("cdr", "ros2msg")
-        assert schema.name == "adaptive_mj/msg/" + {"/true_params": "TrueParams"}.get(topic, topic[1:].title())
-        lines = [line.split("#")[0].split() for line in schema.data.decode().splitlines()]
-        assert [f for f in lines if f] == [["float64", "t"]] + [["float64", name] for name in fields[topic]]
-        data = first[topic].data
-        assert len(data) == 4 + 8 * (1 + len(fields[topic])) and data[:4] == b"\x00\x01\x00\x00"
-        assert np.frombuffer(data[4:], "<f8")[0] == 0.0
-    assert np.frombuffer(first["/state"].data[4:], "<f8")[1:].tolist() == rows["x"][0].tolist()
+    for t, topic in zip(types, ROW_TOPICS, strict=True):
+        want = [record.ros2msg_field(name) for name in fields[topic]]
+        assert deps[f"adaptive_mj/{t}"] == [("float64", name) for name in want], t
+    assert deps["adaptive_mj/Lyapunov"] == [("float64", "v")]  # V: ROS 2 field names are lower-case
+    assert "float64 v  # Lyapunov function value (field V)" in text
+    width = sum(len(f) for f in fields.values())
+    assert len(messages) == 500 and all(len(m.data) == 4 + 8 * (1 + width) for m in messages)
+    assert {m.data[:4] for m in messages} == {b"\x00\x01\x00\x00"}
+    first = np.frombuffer(messages[0].data[4:], "<f8")
+    assert first[0] == 0.0 and first[1:3].tolist() == rows["x"][0].tolist()
+    assert first[-1] == rows["V"][0] and first[-4:-1].tolist() == rows["theta"][0].tolist()
+    assert [m.log_time for m in messages] == [round(t * 1e9) for t in rows["t"][::LOG_EVERY]]
     for topic in ("/events", "/summary"):
         assert topics[topic].message_encoding == "json"
         assert summary.schemas[topics[topic].schema_id].encoding == "jsonschema"
-    assert summary.statistics.message_count == 500 * 6 + 2 + 1
+    assert summary.statistics.message_count == 500 + 2 + 1
 
 
-def test_ros2msg_field_names_are_identifiers():
-    assert record.ros2msg_field("payload/body.m") == "payload_body_m"
-    assert record.ros2msg_field("shoulder_pan.armature") == "shoulder_pan_armature"
-    assert record.ros2msg_field("Jxx") == "Jxx" and record.ros2msg_field("2nd") == "f_2nd"
-    schema = record._ros2msg(record._schemas(2, ("a.b", "a/b"))["/estimates"][1]).decode()
+def test_format8_is_at_most_half_the_size_of_format6_json(tmp_path):
+    """The same 2000 synthetic heave rows (full-precision floats, 20 s at 100 Hz): format 8 (one /row message a row)
+    is at most half the file of format 6 JSON (measured: 248 402 against 533 176 bytes; format 7's six CDR topics
+    were 452 330), and its MCAP message index holds one 16-byte entry a row."""
+    import io
+
+    from mcap.records import MessageIndex
+    from mcap.stream_reader import StreamReader
+
+    rows = synthetic(20000)
+    sizes, entries = {}, {}
+    for encoding in ("cdr", "json"):
+        path = tmp_path / f"{encoding}.mcap"
+        write_log(path, rows, header=make_header(encoding=encoding), events=())
+        data = path.read_bytes()
+        sizes[encoding] = len(data)
+        entries[encoding] = sum(len(r.records) for r in StreamReader(io.BytesIO(data)).records
+                                if isinstance(r, MessageIndex))
+    assert sizes["cdr"] <= 0.5 * sizes["json"], sizes
+    assert entries == {"cdr": 2000 + 1, "json": 6 * 2000 + 1}  # the rows and the /summary message
+
+
+def test_ros2msg_field_names_are_ros2_field_names():
+    """Every name ros2msg_field gives matches ROS 2's and Foxglove's field-name rule (lower case, single
+    underscores between runs, a letter first)."""
+    import re
+
+    cases = {"payload/body.m": "payload_body_m", "shoulder_pan.armature": "shoulder_pan_armature",
+             "Jxx": "jxx", "V": "v", "2nd": "f_2nd", "a__b_": "a_b", "_x": "x", "": "f", "__": "f",
+             "payload/body.Ixx": "payload_body_ixx", "q_tilde_elbow-1": "q_tilde_elbow_1"}
+    for name, want in cases.items():
+        assert record.ros2msg_field(name) == want, name
+        assert re.fullmatch(ROS2_FIELD, want), want
+    schema = "\n".join(record._ros2msg_lines(record._schemas(2, ("a.b", "a/b", "J", "j"))["/estimates"][1]))
     assert "float64 a_b  #" in schema and "float64 a_b_2  #" in schema and "(field a/b)" in schema
+    assert "float64 j  # estimate of J (field J)" in schema and "float64 j_2  # estimate of j" in schema
 
 
 def test_metadata_and_attachments_present(full_log):
@@ -655,13 +726,32 @@ def _check_readable_or_refused(path, data: bytes, full) -> None:
         assert run.summary is None and run.note.startswith(f"recovered {run.recovered_rows} rows (")
 
 
+def _rows_start(data: bytes) -> int:
+    """Where the records after the header, metadata and attachments (the model) begin: the rows' first chunk."""
+    import io
+
+    from mcap.records import Attachment, Metadata
+    from mcap.stream_reader import StreamReader
+
+    stream = io.BytesIO(data)
+    end = 0
+    for r in StreamReader(stream, emit_chunks=True).records:
+        if not isinstance(r, (Attachment, Metadata)) and end:
+            return end
+        end = stream.tell()
+    raise AssertionError("no record after the attachments")
+
+
 def test_real_log_cut_at_every_tenth_recovers_a_growing_prefix(real_log, tmp_path):
+    """Cut at every tenth of what follows the header and the embedded model (format 8's rows are a small part of
+    a 3 s heave log: a tenth of the whole file ends inside the model's attachments)."""
     _, data, full = real_log
     assert full.status == "ok" and full.recovered_rows == 300
+    head = _rows_start(data)
     counts = []
     for tenth in range(10):
         cut = tmp_path / f"cut{tenth}.mcap"
-        cut.write_bytes(data[:len(data) * tenth // 10])
+        cut.write_bytes(data[:head + (len(data) - head) * tenth // 10] if tenth else b"")
         if tenth == 0:
             with pytest.raises(LogFormatError, match=r"cut0\.mcap: empty file \(0 bytes\)"):
                 read_log(cut)
@@ -760,7 +850,8 @@ def test_batched_message_writing_gives_the_same_bytes_as_mcap_add_message(tmp_pa
         with open(path, "rb") as f:
             messages[name] = [(ch.topic, m.log_time, m.publish_time, m.sequence, m.data)
                               for _, ch, m in make_reader(f).iter_messages()]
-    assert len(messages["fast"]) == 6 * 250 + 2 and messages["fast"] == messages["public"]
+    per_row = 6 if encoding == "json" else 1  # format 6: a message per row topic; format 8: one /row message
+    assert len(messages["fast"]) == per_row * 250 + 2 and messages["fast"] == messages["public"]
     assert paths["fast"].read_bytes() == paths["public"].read_bytes()
 
 
@@ -812,15 +903,22 @@ def test_a_block_of_finite_rows_formatted_at_once_gives_the_bytes_of_one_message
     np.testing.assert_array_equal(read_log(paths["block"]).trajectory.x[:130], rows["x"][0:1300:LOG_EVERY])
 
 
-@pytest.mark.parametrize("change, match", [(lambda d: d[:-1], "is 27 bytes"),
-                                           (lambda d: b"\x00\x00" + d[2:], "expected 28 bytes of CDR")])
-def test_a_cdr_message_of_another_size_or_header_is_refused(tmp_path, change, match):
-    """Format 7: read_log decodes a topic's CDR messages by their fixed layout; a message cut short or in
-    another encapsulation (big-endian CDR) is a LogFormatError naming the topic, never a misread row."""
+FORMAT7_FIXTURE = Path(__file__).parent / "data" / "heave_drift_format7.mcap"
+
+
+@pytest.mark.parametrize("source, topic, size", [("format 8", "/row", 4 + 8 * 16), ("format 7", "/state", 28)])
+@pytest.mark.parametrize("change, cut", [(lambda d: d[:-1], True), (lambda d: b"\x00\x00" + d[2:], False)])
+def test_a_cdr_message_of_another_size_or_header_is_refused(tmp_path, source, topic, size, change, cut):
+    """read_log decodes CDR rows by their fixed layout (format 8: the one /row message of t and 15 float64 of a
+    heave row; format 7, the fixture: a /state message of t, y, y_dot); a message cut short or in another
+    encapsulation (big-endian CDR) is a LogFormatError naming the file, the topic, the size and header that came
+    and the size expected, never a misread row."""
     from mcap.writer import Writer
 
-    src = tmp_path / "good.mcap"
-    write_log(src, synthetic(500), events=())
+    src = FORMAT7_FIXTURE
+    if source == "format 8":
+        src = tmp_path / "good.mcap"
+        write_log(src, synthetic(500), events=())
     with open(src, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
@@ -828,6 +926,7 @@ def test_a_cdr_message_of_another_size_or_header_is_refused(tmp_path, change, ma
         metadata = list(reader.iter_metadata())
         library = reader.get_header().library
     bad = tmp_path / "bad.mcap"
+    seen = 0
     with open(bad, "wb") as f:
         w = Writer(f)
         w.start(library=library)
@@ -836,9 +935,16 @@ def test_a_cdr_message_of_another_size_or_header_is_refused(tmp_path, change, ma
                     for cid, c in summary.channels.items()}
         for m in metadata:
             w.add_metadata(m.name, dict(m.metadata))
-        for i, (_schema, channel, msg) in enumerate(messages):
-            data = change(msg.data) if channel.topic == "/state" and i == 60 else msg.data
+        for _schema, channel, msg in messages:
+            data = msg.data
+            if channel.topic == topic:
+                seen += 1
+                if seen == 10:
+                    assert len(data) == size
+                    data = change(data)
             w.add_message(channels[channel.id], msg.log_time, data, msg.publish_time)
         w.finish()
-    with pytest.raises(LogFormatError, match=rf"bad\.mcap: a /state message .*{match}"):
+    came = (rf"is {size - 1} bytes starting b'\\x00\\x01\\x00\\x00'" if cut else
+            rf"is {size} bytes starting b'\\x00\\x00")
+    with pytest.raises(LogFormatError, match=rf"bad\.mcap: a {topic} message {came}.*, expected {size} bytes of CDR"):
         read_log(bad)

@@ -11,10 +11,19 @@
 //    "statistics": {topic: count in the Statistics record, ...},
 //    "schemas": {topic: [schema name, schema encoding, message encoding]},
 //    "json_errors": number of "json" messages whose data is not a JSON object,
-//    "cdr_decoded": number of "cdr" messages decoded by their ros2msg schema (float64 fields only: the
-//                   4-byte little-endian CDR header 00 01 00 00, then one float64 per field, t first),
+//    "cdr_decoded": number of "cdr" messages decoded by their ros2msg schema (float64 fields only, nested
+//                   sub-messages flattened in order: the 4-byte little-endian CDR header 00 01 00 00, then
+//                   one float64 per leaf field, t first),
 //    "cdr_errors": "cdr" messages of another size or header, or whose t is not the message's log time,
+//    "ros2msg_bad_names": ["<schema name>: <field>", ...] that Foxglove's ros2msg parser refuses,
+//    "row_fields": the leaf fields of the /row schema (format 8) as dotted paths ("t", "state.y", ...), [] if none,
 //    "metadata": [names], "attachments": [names]}
+//
+// A ros2msg schema is read as ROS 2 (rosbag2) and Foxglove (@foxglove/rosmsg) write and read it: the top-level
+// definition first, then each dependency after a line of "=" and a line "MSG: <type>"; a field whose type is not
+// float64 names one of those types exactly. A field name Foxglove's parser would refuse (ROS 2's rule,
+// ^[a-z](?:_?[a-z0-9]+)*$) is listed in "ros2msg_bad_names" as "<schema>: <field>" (format 7 wrote V and J as
+// they are; format 8 lower-cases them). Format 7's row topics are flat (no dependency), format 8's /row is nested.
 // Exit status 1 (message on stderr) if the file cannot be read.
 import { open } from "node:fs/promises";
 
@@ -41,17 +50,15 @@ async function count(path) {
       schemas[channel.topic] = [schema?.name ?? null, schema?.encoding ?? null, channel.messageEncoding];
     }
     const decoder = new TextDecoder("utf-8", { fatal: true });
-    const fieldsOf = new Map(); // schema id -> float64 field names of a ros2msg schema
+    const badNames = [];
+    const fieldsOf = new Map(); // schema id -> the float64 leaf fields of a ros2msg schema, dotted, in order
     for (const schema of reader.schemasById.values()) {
       if (schema.encoding !== "ros2msg") continue;
-      const fields = [];
-      for (const line of decoder.decode(schema.data).split("\n")) {
-        const words = line.split("#")[0].trim().split(/\s+/).filter((w) => w);
-        if (words.length === 0) continue;
-        if (words.length !== 2 || words[0] !== "float64") throw new Error(`ros2msg ${schema.name}: ${line}`);
-        fields.push(words[1]);
-      }
-      fieldsOf.set(schema.id, fields);
+      fieldsOf.set(schema.id, ros2msgLeaves(schema.name, decoder.decode(schema.data), badNames));
+    }
+    let rowFields = [];
+    for (const channel of reader.channelsById.values()) {
+      if (channel.topic === "/row") rowFields = fieldsOf.get(channel.schemaId) ?? [];
     }
     let jsonErrors = 0;
     let cdrDecoded = 0;
@@ -96,12 +103,63 @@ async function count(path) {
       json_errors: jsonErrors,
       cdr_decoded: cdrDecoded,
       cdr_errors: cdrErrors,
+      ros2msg_bad_names: badNames,
+      row_fields: rowFields,
       metadata,
       attachments,
     };
   } finally {
     await handle.close();
   }
+}
+
+const FIELD_NAME = /^[a-z](?:_?[a-z0-9]+)*$/;
+
+// The float64 leaves of a ros2msg text with dependent definitions, depth first in field order, as dotted paths;
+// field names Foxglove would refuse are pushed onto badNames.
+function ros2msgLeaves(schemaName, text, badNames) {
+  const definitions = new Map(); // type name ("" for the top level) -> [[type, field], ...]
+  let name = "";
+  let fields = [];
+  const close = () => {
+    if (definitions.has(name)) throw new Error(`ros2msg ${schemaName}: ${name || "the top level"} defined twice`);
+    definitions.set(name, fields);
+  };
+  for (const raw of text.split("\n")) {
+    const line = raw.trim();
+    if (line === "" || line.startsWith("#")) continue;
+    if (line.startsWith("==")) {
+      close();
+      name = null; // the next line must be MSG: <type>
+      fields = [];
+      continue;
+    }
+    if (name === null) {
+      const match = /^MSG: ([^ ]+)\s*(?:#.*)?$/.exec(line);
+      if (!match) throw new Error(`ros2msg ${schemaName}: expected "MSG: <type>" after a separator, got ${line}`);
+      name = match[1];
+      continue;
+    }
+    const words = line.split("#")[0].trim().split(/\s+/).filter((w) => w);
+    if (words.length !== 2 || !/^[A-Za-z][A-Za-z0-9_]*$/.test(words[1])) {
+      throw new Error(`ros2msg ${schemaName}: ${line}`);
+    }
+    if (!FIELD_NAME.test(words[1])) badNames.push(`${schemaName}: ${words[1]}`);
+    fields.push(words);
+  }
+  close();
+  const leaves = [];
+  const walk = (type, prefix, depth) => {
+    const body = definitions.get(type);
+    if (body === undefined) throw new Error(`ros2msg ${schemaName}: no definition of ${type}`);
+    if (depth > 16) throw new Error(`ros2msg ${schemaName}: ${type} nests too deep`);
+    for (const [fieldType, field] of body) {
+      if (fieldType === "float64") leaves.push(prefix + field);
+      else walk(fieldType, `${prefix}${field}.`, depth + 1);
+    }
+  };
+  walk("", "", 0);
+  return leaves;
 }
 
 const path = process.argv[2];

@@ -9,10 +9,11 @@ chunk if it is full. It reads and writes the Writer's name-mangled attributes (`
 `_Writer__chunk_builder`, `_Writer__maybe_finalize_chunk`) and a chunk's `record_writer._buffer`: this
 module is the only place in adaptive_mj that does (tests/test_record.py checks both paths write the same
 bytes, and the independent @mcap/core reader reads the files, tests/test_foxglove.py). `add_rows_fast` does
-the same for a block of logged rows (six messages a row) with the message heads built by numpy: ~0.45 µs a
-message instead of ~0.7 (600 messages, measured here). `add_packed_rows_fast` writes a block of rows whose
-payloads are fixed-size binary (format 7's CDR): the whole block, message heads and payloads, is one packed numpy
-record array (`message_rows`) written with one `tobytes`; nothing is built per message but its index entry.
+the same for a block of logged rows (format 6's six JSON messages a row) with the message heads built by numpy:
+~0.45 µs a message instead of ~0.7 (600 messages, measured here). `add_packed_rows_fast` writes a block of rows
+whose payloads are fixed-size binary (format 8's CDR, one /row message a row; format 7 wrote six): the whole block,
+message heads and payloads, is one packed numpy record array (`message_rows`, one or more channels a row) written
+with one `tobytes`; nothing is built per message but its index entry.
 """
 from __future__ import annotations
 

@@ -1,22 +1,24 @@
 """The run log: one MCAP file per run, written while the run goes.
 
 A `Recorder` is the loop's `Sink`. It keeps every `log_every`-th physics step
-(global step index k with k % log_every == 0) and writes each kept row as six
-messages, one per topic, stamped with the simulation time (format 7, the default: CDR with ros2msg
-schemas, t then one float64 per field; `log.encoding = "json"`: JSON text, exactly format 6):
+(global step index k with k % log_every == 0) and writes each kept row stamped with the simulation time.
+Format 8 (the default) writes a row as ONE message on /row: CDR with a ros2msg schema (adaptive_mj/msg/Row),
+float64 t, then the sub-messages state, reference, control, estimates, true_params, lyapunov, each its fields as
+float64 (no t of their own). `log.encoding = "json"` writes format 6 exactly: a row as six JSON messages, one
+per row topic (ROW_TOPICS; format 7 had the same six topics in CDR):
 
-    /state        {t, y, y_dot[, y_ddot, ...]}            n entries
-    /reference    {t, y_d, y_d_dot, y_d_ddot[, ...]}      n+1 entries
-    /control      {t, u, s, y_tilde}
-    /estimates    {t, <param>: θ̂_i, ...}
-    /true_params  {t, <param>: θ_i, ...}
-    /lyapunov     {t, V}
+    /state        {t, y, y_dot[, y_ddot, ...]}            n entries         /row.state
+    /reference    {t, y_d, y_d_dot, y_d_ddot[, ...]}      n+1 entries       /row.reference
+    /control      {t, u, s, y_tilde}                                        /row.control
+    /estimates    {t, <param>: θ̂_i, ...}                                    /row.estimates
+    /true_params  {t, <param>: θ_i, ...}                                    /row.true_params
+    /lyapunov     {t, V}                                                    /row.lyapunov
     /events       {t, label, ...detail}                   one per event
     /summary      {...summary, status, reason}            once, at close()
 
-Every payload carries the exact float `t` (CDR holds the float64 itself; JSON floats are written with
+Every row carries the exact float `t` (CDR holds the float64 itself; JSON floats are written with
 repr, which round-trips), so replay rebuilds the arrays bit for bit. /events and /summary are JSON in both. The
-full layout is in docs/LOG_FORMAT.md; `adaptive_mj.log.replay.read_log` reads it.
+full layout is in docs/LOG_FORMAT.md; `adaptive_mj.log.replay.read_log` reads it (formats 1 to 8).
 
 Bounded loss: each `write_rows` call ends by closing the chunk in progress
 and flushing the file, so a run killed at any instant leaves a readable file
@@ -54,9 +56,12 @@ from adaptive_mj.trajectory import Status
 # 4: control_mode, control_period in the header; 3: law_plugin, plant_plugin;
 # 7: the row topics in CDR (ros2msg schemas: float64 t, then one float64 per field), packed by numpy a block at a
 #    time; /events and /summary JSON as before; `encoding = "cdr"` in the header. log.encoding = "json" writes 6.
-LOG_FORMAT_VERSION = 7  # 2: joint_names/notes, per-joint fields (1: 1-DOF only)
+# 8: the six CDR row topics become one topic /row, one message a row (ROW_TOPIC: float64 t, then the six parts as
+#    nested ros2msg sub-messages of float64 fields; field names lower-case, as ROS 2 and Foxglove require): a
+#    sixth of the messages, so a sixth of the MCAP message index (16 bytes a message).
+LOG_FORMAT_VERSION = 8  # 2: joint_names/notes, per-joint fields (1: 1-DOF only)
 
-#: The row encodings a Recorder writes (LogHeader.encoding, the scenario's log.encoding): "cdr" (format 7, the
+#: The row encodings a Recorder writes (LogHeader.encoding, the scenario's log.encoding): "cdr" (format 8, the
 #: default) or "json" (JSON text, written exactly as format 6, which every reader of format 6 reads).
 ENCODINGS = ("cdr", "json")
 #: The format version log.encoding = "json" writes: its layout is format 6's, byte for byte in kind.
@@ -87,8 +92,16 @@ def _finite_or_null(rows):
 #: Statuses a run can be closed with (replay adds "truncated" for a log that was never closed).
 CLOSE_STATUSES = (Status.OK, Status.DIVERGED, Status.INTERRUPTED, Status.FAILED)
 
-#: Topics that make up one logged row, in the order they are written.
+#: Topics that make up one logged row in formats 1 to 7 (and log.encoding = "json"), in the order they are written.
 ROW_TOPICS = ("/state", "/reference", "/control", "/estimates", "/true_params", "/lyapunov")
+#: Format 8: the one topic of a logged row, its message the six parts above nested in this order.
+ROW_TOPIC = "/row"
+#: Format 8: the Row message's sub-message field of each row topic (its name without the slash), in order.
+ROW_PARTS = tuple(topic[1:] for topic in ROW_TOPICS)
+#: Format 8: the Row schema's name; its sub-message types are adaptive_mj/<Type> (State, Reference, ...).
+ROW_SCHEMA_NAME = "adaptive_mj/msg/Row"
+#: The line ros2msg puts before each dependent definition (ROS 2's rosbag2 and Foxglove split on it): 80 "=".
+ROS2MSG_SEPARATOR = "=" * 80
 EVENT_TOPIC = "/events"
 SUMMARY_TOPIC = "/summary"
 
@@ -190,7 +203,7 @@ class LogHeader:
     joint_limits: list | None = None  # format 5: (m, 2) joint ranges [rad or m], null entries unlimited
     control_names: tuple[str, ...] = ()  # format 6: the k actuators where u is not one per joint (else ())
     state_names: tuple[str, ...] = ()  # format 6: a name per row of x where they are not y's derivatives (else ())
-    encoding: str = "cdr"  # the row topics' encoding (ENCODINGS): "cdr" writes format 7, "json" format 6
+    encoding: str = "cdr"  # the rows' encoding (ENCODINGS): "cdr" writes format 8 (/row), "json" format 6
     # a Slotine–Li law's evaluation of Y π̂ and Yᵀ s, "recursive" (O(n)) or "regressor" (Y whole); "" for other
     # laws. Written since the O(n) form; a log without it ran the regressor form (log.verify re-runs it so)
     law_evaluation: str = ""
@@ -335,21 +348,34 @@ def _schemas(order: int, names: tuple[str, ...], joint_names: tuple[str, ...] = 
 
 
 def ros2msg_field(name: str) -> str:
-    """A field name as a ros2msg schema may spell it (a letter, then letters, digits and _): a character outside
-    those becomes _, and a name that does not start with a letter gets an f_ in front (payload/body.m ->
-    payload_body_m). Only the schema (what Foxglove shows) uses it; the reader decodes by position."""
-    out = "".join(c if (c.isascii() and (c.isalnum() or c == "_")) else "_" for c in name)
-    return out if out[:1].isascii() and out[:1].isalpha() else "f_" + out
+    """A field name as ROS 2 and Foxglove accept it in a ros2msg schema (format 8): a lower-case letter, then
+    lower-case letters and digits in runs joined by single underscores (Foxglove's ros2msg parser refuses any other
+    field name, `^[a-z](?:_?[a-z0-9]+)*$`). Letters are lower-cased, a run of other characters becomes one _, an
+    _ at either end is dropped, and a name that then does not start with a letter gets f_ in front
+    (payload/body.Ixx -> payload_body_ixx, V -> v, 2nd -> f_2nd). Only the schema (what Foxglove shows and
+    plots) uses it; the reader decodes by position. Format 7 wrote names with their case kept."""
+    out: list[str] = []
+    gap = False
+    for c in name:
+        if c.isascii() and c.isalnum():
+            if gap and out:
+                out.append("_")
+            out.append(c.lower())
+            gap = False
+        else:
+            gap = True
+    text = "".join(out)
+    return text if text[:1].isalpha() else ("f_" + text if text else "f")
 
 
-def _ros2msg(schema: dict) -> bytes:
-    """The ros2msg text of a row topic's JSON Schema (_row_schema): float64 t, then one float64 per field in the
+def _ros2msg_lines(schema: dict) -> list[str]:
+    """The ros2msg field lines of a row topic's JSON Schema (_row_schema), t left out: one float64 per field in the
     payload's order, each with its description as a comment; names made distinct where ros2msg_field made two
     alike (a _2, _3 suffix)."""
-    lines = [f"# {schema['title']}: {schema['description']}"]
+    lines = []
     seen: set[str] = set()
     for name, prop in schema["properties"].items():
-        if name == NONFINITE_KEY:
+        if name in (NONFINITE_KEY, "t"):
             continue
         field_name, k = ros2msg_field(name), 2
         while field_name in seen:
@@ -358,6 +384,24 @@ def _ros2msg(schema: dict) -> bytes:
         alias = "" if field_name == name else f" (field {name})"
         description = prop["description"].split("; absent when")[0]
         lines.append(f"float64 {field_name}  # {description}{alias}")
+    return lines
+
+
+def _ros2msg_row(schemas: Mapping[str, tuple[str, dict]]) -> bytes:
+    """Format 8: the ros2msg text of the Row message (adaptive_mj/msg/Row), its dependencies concatenated as ROS 2
+    and Foxglove read them: the top-level definition first (float64 t, then a field of type adaptive_mj/<Type> per
+    row topic, ROW_PARTS' names), then for each row topic a line of 80 "=", a line "MSG: adaptive_mj/<Type>" (the
+    name the field's type gives, which Foxglove matches exactly) and the type's float64 fields (_ros2msg_lines).
+    `schemas`: _schemas' topic -> (name adaptive_mj.<Type>, JSON Schema)."""
+    lines = ["# Row: one logged row, at the start of the physics step it was logged at",
+             "float64 t  # simulation time [s]"]
+    for topic, part in zip(ROW_TOPICS, ROW_PARTS, strict=True):
+        name, schema = schemas[topic]
+        lines.append(f"{name.replace('.', '/')} {part}  # {schema['description']}")
+    for topic in ROW_TOPICS:
+        name, schema = schemas[topic]
+        lines += [ROS2MSG_SEPARATOR, f"MSG: {name.replace('.', '/')}",
+                  f"# {schema['title']}: {schema['description']}", *_ros2msg_lines(schema)]
     return ("\n".join(lines) + "\n").encode()
 
 
@@ -491,26 +535,29 @@ class Recorder:
         h = self.header
         self._channels: dict[str, int] = {}
         cdr = self.encoding == "cdr"
-        for topic, (name, schema) in _schemas(self.order, self.names, self.joint_names, self.control_names,
-                                              self.state_names).items():
-            if cdr and topic in ROW_TOPICS:  # ros2msg: the type's name as package/msg/Name
-                schema_id = self._writer.register_schema(name.replace(".", "/msg/"), "ros2msg", _ros2msg(schema))
-                self._channels[topic] = self._writer.register_channel(topic, "cdr", schema_id)
+        schemas = _schemas(self.order, self.names, self.joint_names, self.control_names, self.state_names)
+        fields = row_fields(self.order, self.names, self.joint_names, self.control_names, self.state_names)
+        if cdr:  # format 8: the six row topics' parts in one /row message
+            schema_id = self._writer.register_schema(ROW_SCHEMA_NAME, "ros2msg", _ros2msg_row(schemas))
+            self._channels[ROW_TOPIC] = self._writer.register_channel(ROW_TOPIC, "cdr", schema_id)
+        for topic, (name, schema) in schemas.items():
+            if cdr and topic in ROW_TOPICS:
                 continue
             schema_id = self._writer.register_schema(
                 name, "jsonschema", json.dumps(schema, separators=(",", ":")).encode())
             self._channels[topic] = self._writer.register_channel(topic, "json", schema_id)
-        fields = row_fields(self.order, self.names, self.joint_names, self.control_names, self.state_names)
-        self._row_fields = [(self._channels[topic], fields[topic]) for topic in ROW_TOPICS]
+        # JSON (format 6): a row is six messages, one per row topic (channel id, the topic's fields)
+        self._row_fields = [] if cdr else [(self._channels[topic], fields[topic]) for topic in ROW_TOPICS]
         self._templates = [_template(fields) for _, fields in self._row_fields]
         self._row_template: str | None = None  # the templates joined (_write_finite_block)
-        # CDR (format 7): a message is the 4-byte encapsulation header, then t and its fields as little-endian
-        # float64 (8-aligned counted from after the header: no padding between float64s)
-        payload_dtypes = [np.dtype([("cdr", "u1", (4,)), ("values", "<f8", (1 + len(f),))])
-                          for _, f in self._row_fields]
-        self._row_records = _message_rows([channel_id for channel_id, _ in self._row_fields], payload_dtypes)
-        for j in range(len(payload_dtypes)):  # a row's messages as written but for t, its values and times
-            self._row_records[f"p{j}"]["cdr"] = np.frombuffer(CDR_HEADER, dtype=np.uint8)
+        # CDR (format 8): a row is one message, the 4-byte encapsulation header, then t and every part's fields as
+        # little-endian float64 (8-aligned counted from after the header: no padding between float64s)
+        self._row_width = sum(len(fields[topic]) for topic in ROW_TOPICS)  # float64 a row but t
+        self._row_records: np.ndarray | None = None  # a row's message as written but for t, its values and times
+        if cdr:
+            payload = np.dtype([("cdr", "u1", (4,)), ("values", "<f8", (1 + self._row_width,))])
+            self._row_records = _message_rows([self._channels[ROW_TOPIC]], [payload])
+            self._row_records["p0"]["cdr"] = np.frombuffer(CDR_HEADER, dtype=np.uint8)
 
         meta = {
             "log_format_version": str(self.format_version),
@@ -538,7 +585,7 @@ class Recorder:
             "law_evaluation": h.law_evaluation,
         }
         if cdr:
-            meta["encoding"] = "cdr"  # format 7: the row topics' message encoding
+            meta["encoding"] = "cdr"  # formats 7 and 8: the rows' message encoding
         meta.update({VERSION_KEY_PREFIX + k: v for k, v in sorted(h.versions.items())})
         self._writer.add_metadata(HEADER_METADATA, meta)
         self._writer.add_metadata(SCENARIO_METADATA, {"text": h.scenario_text})
@@ -650,20 +697,20 @@ class Recorder:
         self._t_last = max(self._t_last, float(tk[-1]))
 
     def _write_cdr_block(self, tk: np.ndarray, log_ns: np.ndarray, blocks: list[np.ndarray]) -> None:
-        """Format 7: the block's messages as one packed record array (fast_mcap.message_rows: each row's six
-        Message records, head and CDR payload), filled a topic at a time by numpy (the encapsulation header, t,
-        the topic's columns) and written in one go; non-finite values are float64 like any other. With
-        flush_every_rows, the block is cut where the count of rows written reaches a multiple of it."""
+        """Format 8: the block's rows as one packed record array (fast_mcap.message_rows: each row's one /row
+        Message record, head and CDR payload), filled by numpy (the encapsulation header is the template's; t, then
+        each part's columns side by side: blocks[j] (m, width_j) in ROW_TOPICS' order) and written in one go;
+        non-finite values are float64 like any other. tk: (m,) [s]; log_ns: (m,) [ns]. With flush_every_rows, the
+        block is cut where the count of rows written reaches a multiple of it."""
         m, start = len(tk), 0
-        channel_ids = [channel_id for channel_id, _ in self._row_fields]
+        channel_ids = [self._channels[ROW_TOPIC]]
+        assert self._row_records is not None  # set for "cdr" in _write_header
+        row = np.hstack([tk[:, None], *blocks])  # (m, 1 + row width): a row's payload after its header
         while start < m:
             every = self._flush_every
             end = m if every is None else min(m, start + every - self._rows % every)
             records = np.repeat(self._row_records, end - start)  # the heads and CDR headers, as written
-            for j, b in enumerate(blocks):
-                values = records[f"p{j}"]["values"]
-                values[:, 0] = tk[start:end]
-                values[:, 1:] = b[start:end]
+            records["p0"]["values"] = row[start:end]
             _add_packed_rows(self._writer, channel_ids, log_ns[start:end], records)
             self._rows += end - start
             if every is not None and self._rows % every == 0:

@@ -36,6 +36,8 @@ from adaptive_mj.log.record import (
     MODEL_SOURCE_ATTACHMENT,
     MODEL_XML_ATTACHMENT,
     NONFINITE_KEY,
+    ROW_PARTS,
+    ROW_TOPIC,
     ROW_TOPICS,
     SCENARIO_METADATA,
     STATUS_METADATA,
@@ -239,13 +241,14 @@ def _check_embedded(name: str, header: dict, model_xml, model_source, assets) ->
 def _rows(name: str, messages: list[tuple[str, bytes]], order: int, names: tuple[str, ...],
           joints: tuple[str, ...] = (), controls: tuple[str, ...] = (), states: tuple[str, ...] = (),
           encodings: dict[str, str] | None = None):
-    """Decode the messages: (times, {row topic: (N, fields) array}, events, summary). A row topic's messages are
-    JSON objects (formats 1-6, and 7 with log.encoding = "json") or CDR (format 7), as its channel says
-    (`encodings`, topic -> message encoding; JSON where absent). A row is kept only if every row topic has a
-    message at its t (a cut log may end mid-row)."""
+    """Decode the messages: (times, {row topic: (N, fields) array}, events, summary). A log with a /row channel
+    (format 8) has one CDR message a row (_row_messages); otherwise a row topic's messages are JSON objects
+    (formats 1-6, and log.encoding = "json") or CDR (format 7), as its channel says (`encodings`, topic -> message
+    encoding; JSON where absent), and a row is kept only if every row topic has a message at its t (a cut log may
+    end mid-row)."""
     encodings = encodings or {}
     fields = row_fields(order, names, joints, controls, states)
-    raw_rows: dict[str, list[bytes]] = {topic: [] for topic in ROW_TOPICS}
+    raw_rows: dict[str, list[bytes]] = {topic: [] for topic in (*ROW_TOPICS, ROW_TOPIC)}
     events: list[dict] = []
     summary = None
     for topic, raw in messages:
@@ -257,6 +260,9 @@ def _rows(name: str, messages: list[tuple[str, bytes]], order: int, names: tuple
             events.append(payload)
         elif topic == SUMMARY_TOPIC:
             summary = payload
+    if ROW_TOPIC in encodings:
+        times, cols = _row_messages(raw_rows[ROW_TOPIC], fields, encodings[ROW_TOPIC], name)
+        return times, cols, events, summary
     # per row topic: its messages' times in order, and t -> the row's values (the last message at a t wins)
     by_t: dict[str, dict[float, Any]] = {}
     state_times: list[float] = []
@@ -285,6 +291,28 @@ def _rows(name: str, messages: list[tuple[str, bytes]], order: int, names: tuple
     return times, cols, events, summary
 
 
+def _row_messages(raws: list[bytes], fields: dict[str, tuple[str, ...]], encoding: str,
+                  name: str) -> tuple[list[float], dict[str, np.ndarray]]:
+    """Format 8: the /row messages (CDR: the encapsulation header, t, then every row topic's fields in ROW_TOPICS'
+    order, all little-endian float64) decoded in one np.frombuffer: (times [s] in file order, {row topic: (N,
+    fields) array}), the same arrays format 7 gives for the same run. Where two messages have the same t the
+    last one's values stand at that t, as in format 7."""
+    if encoding != "cdr":
+        raise LogFormatError(f"{name}: the {ROW_TOPIC} channel's message encoding is {encoding!r}, expected 'cdr'")
+    widths = [len(fields[topic]) for topic in ROW_TOPICS]
+    parts = ", ".join(f"{part} {w}" for part, w in zip(ROW_PARTS, widths, strict=True))
+    values = _cdr_rows(raws, sum(widths), name, ROW_TOPIC, f" ({parts})")
+    times = values[:, 0].tolist()
+    if len(set(times)) != len(times):  # the last message at a t wins
+        last = {t: i for i, t in enumerate(times)}
+        values = values[[last[t] for t in times]]
+    cols, at = {}, 1
+    for topic, width in zip(ROW_TOPICS, widths, strict=True):
+        cols[topic] = np.ascontiguousarray(values[:, at:at + width])
+        at += width
+    return times, cols
+
+
 def _json_object(raw: bytes, name: str, topic: str) -> dict:
     payload = json.loads(raw)
     if not isinstance(payload, dict):
@@ -293,14 +321,16 @@ def _json_object(raw: bytes, name: str, topic: str) -> dict:
     return payload
 
 
-def _cdr_rows(raws: list[bytes], width: int, name: str, topic: str) -> np.ndarray:
-    """Format 7: a row topic's CDR messages (the encapsulation header, then t and `width` little-endian float64)
-    as an (N, 1 + width) array, decoded in one go; any other size or header is a LogFormatError."""
+def _cdr_rows(raws: list[bytes], width: int, name: str, topic: str, detail: str = "") -> np.ndarray:
+    """A topic's CDR messages of fixed size (the encapsulation header, then t and `width` little-endian float64:
+    a format-7 row topic, or format 8's /row) as an (N, 1 + width) array [t in s, then the fields], decoded in one
+    np.frombuffer; any other size or header is a LogFormatError naming the file, the size and header expected
+    (`detail`: what the float64 are) and the message's."""
     size = len(CDR_HEADER) + 8 * (1 + width)
     bad = next((raw for raw in raws if len(raw) != size or raw[:len(CDR_HEADER)] != CDR_HEADER), None)
     if bad is not None:
         raise LogFormatError(f"{name}: a {topic} message is {len(bad)} bytes starting {bytes(bad[:4])!r}, expected "
-                             f"{size} bytes of CDR (header {CDR_HEADER!r}, t and {width} float64)")
+                             f"{size} bytes of CDR (header {CDR_HEADER!r}, t and {width} float64{detail})")
     block = np.frombuffer(b"".join(raws), dtype=np.uint8).reshape(len(raws), size)
     values = np.ascontiguousarray(block[:, len(CDR_HEADER):]).view("<f8")
     t = values[:, 0]

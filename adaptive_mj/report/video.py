@@ -2,7 +2,7 @@
 
 The log carries the exact MJCF that was compiled (docs/LOG_FORMAT.md), so a
 run can be watched without the repo that made it: the model is compiled from
-the log, posed at every frame from the logged state (/state y, y_dot), and
+the log, posed at every frame from the logged state (y, y_dot: /row.state, /state before format 8), and
 drawn by `mujoco.Renderer` beside a panel with the tracking error ỹ = y_d - y
 and each estimate θ̂_i against its true value θ_i, up to the current time.
 A translucent green copy of the moving bodies shows the reference pose y_d.
