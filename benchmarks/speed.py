@@ -19,7 +19,7 @@ with 1 and 2 jobs; log size per simulated second; peak memory of a 600 s run.
      (it loads it from the cache), heave vehicle and 6-joint arm
 
 Every figure is the median of --reps repetitions, with [min, max].
-Usage: python benchmarks/speed.py [--reps 5] [--steps 20000] [--json] [--quick]
+Usage: python benchmarks/speed.py [--reps 5] [--steps 20000] [--models heave,ur5e] [--no-sweep] [--no-startup] [--json]
 """
 from __future__ import annotations
 
@@ -227,7 +227,9 @@ def main() -> None:
     ap.add_argument("--models", default=",".join(CASES), help="which of " + ", ".join(CASES) + " (comma-separated)")
     ap.add_argument("--no-sweep", action="store_true", help="skip the sweep throughput and peak RSS figures")
     ap.add_argument("--log-encoding", choices=("cdr", "json"), default="cdr",
-                    help="log.encoding of the logged rows (c, d, g): cdr (format 7, the default) or json (format 6)")
+                    help="log.encoding of the logged rows (c, d, g): cdr (format 8, the default) or json (format 6)")
+    ap.add_argument("--no-startup", action="store_true",
+                    help="skip the start-up figure (a cold compile with an empty numba cache: about a minute)")
     args = ap.parse_args()
     out = {"cores": os.cpu_count(), "steps": args.steps, "reps": args.reps, "log_encoding": args.log_encoding,
            "models": {}}
@@ -280,7 +282,7 @@ def main() -> None:
                           if "e_plugin_native" in stats else {})},
             "log_bytes_per_sim_second_100Hz": statistics.median(sizes),
         }
-        if plant in ("heave", "ur5e"):
+        if plant in ("heave", "ur5e") and not args.no_startup:
             out["models"][plant]["startup_s"] = startup(name if plant == "heave" else "ur5e_identification",
                                                         max(3, args.reps))
     if args.no_sweep:
