@@ -39,42 +39,6 @@ class Criteria:
                 "param_error": dict(self.param_error), "saturation": self.saturation}
 
 
-def reference_positions(reference, ts: np.ndarray, order: int) -> np.ndarray:
-    """(N, m) y_d at the times ts (N,) [s], m = 1 for a 1-DOF plant: one vectorised call of the
-    reference (the bundled kinds take an array of t), else one call per time."""
-    try:
-        y = np.asarray(reference(ts, order)[0], dtype=float)
-        if y.shape[0] == len(ts):
-            return y.reshape(len(ts), -1)
-    except (TypeError, ValueError):
-        pass
-    return np.array([np.atleast_1d(np.asarray(reference(t, order)[0], dtype=float)) for t in ts])
-
-
-def sampled_positions(reference, duration: float, samples: int, order: int) -> np.ndarray:
-    """(samples, m) reference_positions at `samples` evenly spaced times over [0, duration] [s]. Kept per
-    (reference, duration, samples, order) when the reference is a frozen dataclass (every bundled kind:
-    equal fields, equal values), as a study's runs share one; a copy each time. A 6-joint reference's
-    2001 samples cost ~1 ms a run otherwise."""
-    if _frozen_dataclass(reference):
-        try:
-            return _sampled(reference, float(duration), samples, order).copy()
-        except TypeError:  # a field numpy holds (unhashable): evaluated every time
-            pass
-    return reference_positions(reference, np.linspace(0.0, duration, samples), order)
-
-
-def _frozen_dataclass(value: object) -> TypeGuard[Hashable]:
-    """A frozen dataclass: hashed by its fields (which may still fail to hash: a numpy array). Every
-    dataclass has __dataclass_params__; typeshed's DataclassInstance does not declare it."""
-    return dataclasses.is_dataclass(value) and value.__dataclass_params__.frozen  # type: ignore[union-attr]  # undeclared
-
-
-@functools.lru_cache(maxsize=32)
-def _sampled(reference, duration: float, samples: int, order: int) -> np.ndarray:
-    return reference_positions(reference, np.linspace(0.0, duration, samples), order)
-
-
 def reference_rows(reference, ts: np.ndarray, order: int) -> np.ndarray:
     """(order + 1, N, m) y_d and its derivatives 1..order at the times ts (N,) [s] (m = 1 for a 1-DOF plant): one
     vectorised call of the reference (the bundled kinds take an array of t; every bundled joint reference gives each
@@ -91,20 +55,37 @@ def reference_rows(reference, ts: np.ndarray, order: int) -> np.ndarray:
     return np.array([[np.atleast_1d(np.asarray(r[k], dtype=float)) for r in rows] for k in range(order + 1)])
 
 
+def reference_positions(reference, ts: np.ndarray, order: int) -> np.ndarray:
+    """(N, m) y_d at the times ts (N,) [s], m = 1 for a 1-DOF plant (reference_rows' first row)."""
+    return reference_rows(reference, ts, order)[0]
+
+
 def sampled_rows(reference, duration: float, samples: int, order: int) -> np.ndarray:
-    """reference_rows at `samples` evenly spaced times over [0, duration] [s], kept per (reference, duration,
-    samples, order) as sampled_positions keeps its positions (a study's runs share one reference); a copy each
-    time."""
+    """(order + 1, samples, m) reference_rows at `samples` evenly spaced times over [0, duration] [s]. Kept per
+    (reference, duration, samples, order) when the reference is a frozen dataclass (every bundled kind: equal
+    fields, equal values), as a study's runs share one; a copy each time. A 6-joint reference's 2001 samples
+    cost ~1 ms a run otherwise."""
     if _frozen_dataclass(reference):
         try:
-            return _sampled_rows(reference, float(duration), samples, order).copy()
+            return _sampled(reference, float(duration), samples, order).copy()
         except TypeError:  # a field numpy holds (unhashable): evaluated every time
             pass
     return reference_rows(reference, np.linspace(0.0, duration, samples), order)
 
 
+def sampled_positions(reference, duration: float, samples: int, order: int) -> np.ndarray:
+    """(samples, m) y_d at `samples` evenly spaced times over [0, duration] [s] (sampled_rows' first row)."""
+    return sampled_rows(reference, duration, samples, order)[0]
+
+
+def _frozen_dataclass(value: object) -> TypeGuard[Hashable]:
+    """A frozen dataclass: hashed by its fields (which may still fail to hash: a numpy array). Every
+    dataclass has __dataclass_params__; typeshed's DataclassInstance does not declare it."""
+    return dataclasses.is_dataclass(value) and value.__dataclass_params__.frozen  # type: ignore[union-attr]  # undeclared
+
+
 @functools.lru_cache(maxsize=32)
-def _sampled_rows(reference, duration: float, samples: int, order: int) -> np.ndarray:
+def _sampled(reference, duration: float, samples: int, order: int) -> np.ndarray:
     return reference_rows(reference, np.linspace(0.0, duration, samples), order)
 
 
