@@ -277,17 +277,22 @@ def _peak_rss_kb(pid: int, stop: threading.Event, out: list) -> None:
         stop.wait(0.2)
 
 
+#: [s] the simulated length of each run of the study figure (the issue's 10⁴-run study: 2 s heave_drift runs)
+STUDY_SECONDS = 2.0
+
+
 def _bare_runs(args) -> None:
-    """In a worker process: `runs` bare runs of the model (mj_resetData, then mj_step of `steps`), no law."""
+    """In a worker process: `runs` bare runs of the scenario's model of `seconds` [s] each (mj_resetData, then
+    mj_step of all its steps), no law."""
     import mujoco
 
     from adaptive_mj.setup.build import build
     from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
 
-    name, overrides, runs = args
-    model = build(load(SCENARIOS_DIR / f"{name}.toml", overrides=overrides)).plant.model
+    name, seconds, runs = args
+    model = build(load(SCENARIOS_DIR / f"{name}.toml", overrides=[f"simulation.duration={seconds!r}"])).plant.model
     data = mujoco.MjData(model)
-    steps = int(round(float(overrides[0].split("=")[1]) / model.opt.timestep))
+    steps = int(round(seconds / model.opt.timestep))
     for _ in range(runs):
         mujoco.mj_resetData(model, data)
         mujoco.mj_step(model, data, nstep=steps)
@@ -299,12 +304,11 @@ def bare_limit(n: int, jobs: int = 2, sample: int = 1000) -> dict:
     n / (jobs · sample) times that wall time (the machine's parallel ceiling included, as the study has it)."""
     import multiprocessing as mp
 
-    overrides = ["simulation.duration=2.0"]
     ctx = mp.get_context("fork")
     with ctx.Pool(jobs) as pool:
-        pool.map(_bare_runs, [("heave_drift", overrides, 2)] * jobs)  # imports and model built once: warm
+        pool.map(_bare_runs, [("heave_drift", STUDY_SECONDS, 2)] * jobs)  # imports and model built once: warm
         t0 = time.perf_counter()
-        pool.map(_bare_runs, [("heave_drift", overrides, sample)] * jobs)
+        pool.map(_bare_runs, [("heave_drift", STUDY_SECONDS, sample)] * jobs)
         wall = time.perf_counter() - t0
     return {"sample_runs": jobs * sample, "sample_wall_s": wall, "limit_s": wall * n / (jobs * sample)}
 
@@ -320,7 +324,7 @@ def study(n: int, jobs: int = 2, backend: str = "local", engine: str = "process"
     folder = Path(tempfile.mkdtemp(prefix="scaling-study-"))
     try:
         cmd = [sys.executable, "-m", "adaptive_mj", "sweep", "heave_drift", "--grid", f"law.k=100:300:{points}",
-               "--seeds", str(seeds), "--set", "simulation.duration=2.0", "--jobs", str(jobs),
+               "--seeds", str(seeds), "--set", f"simulation.duration={STUDY_SECONDS!r}", "--jobs", str(jobs),
                "-o", str(folder / "out"), "--backend", backend, "--engine", engine, "--logs", logs]
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
@@ -648,8 +652,8 @@ def main() -> None:
     for key in ("study_small", "study"):
         if key in res:
             s = res[key]
-            print(f"study ({s['backend']} backend, engine {s['engine']}, logs {s['logs']}): {s['runs']} runs of 2 s "
-                  f"({s['rows']} rows): {s['wall_s']:.0f} s, "
+            print(f"study ({s['backend']} backend, engine {s['engine']}, logs {s['logs']}): {s['runs']} runs of "
+                  f"{STUDY_SECONDS:g} s ({s['rows']} rows): {s['wall_s']:.0f} s, "
                   f"{s['runs_per_s']:.1f} runs/s, driver peak RSS {s['driver_peak_rss_mb']:.0f} MB, "
                   f"logs {s['logs_mb']:.0f} MB; bare stepping of the same runs on 2 processes "
                   f"{s['bare_limit_s']:.1f} s (before/after {s['bare_limit_before_after_s'][0]:.1f}/"
