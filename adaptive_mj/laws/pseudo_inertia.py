@@ -251,11 +251,10 @@ def eigenvalues(theta, starts) -> np.ndarray:
     """Each body's pseudo-inertia eigenvalues, ascending (numpy: the scenario check, the report and the tests):
     theta (n_theta,) gives (len(starts), 4); rows of θ̂ (N, n_theta) give (N, len(starts), 4)."""
     th = np.asarray(theta, dtype=float)
-    rows = th.reshape(-1, th.shape[-1])
-    J = np.empty((rows.shape[0], len(starts), 4, 4))
+    columns = th.reshape(-1, th.shape[-1]).T  # (n_theta, N): pseudo_inertia fills J[i, j] (N,) for every row at once
+    J = np.empty((len(starts), 4, 4, columns.shape[1]))
     for k, start in enumerate(starts):
-        for i, row in enumerate(rows):
-            pseudo_inertia(row, start, J[i, k])
-    out = np.linalg.eigvalsh(J)
+        pseudo_inertia(columns, start, J[k])
+    out = np.linalg.eigvalsh(np.moveaxis(J, -1, 0))  # (N, len(starts), 4)
     return out[0] if th.ndim == 1 else out
 
