@@ -126,3 +126,24 @@ def test_the_quadrotor_margin_grid_logs_summaries_unless_full_logs_and_judges_on
     from adaptive_mj.log.replay import read_log
 
     assert len(read_log(one.log).trajectory.t) <= 2 < len(read_log(twin.log).trajectory.t)  # 1 s: 1 Hz against 20 Hz
+
+
+def test_full_bench_runs_the_analyses_beside_the_breaking_point_study(tmp_path, small_catalogue, monkeypatch):
+    """The full bench draws its sections' analyses and figures in a forked process while the breaking-point study
+    runs (adaptive_mj.study.beside): the same report, section 14 in its place, the figures written by that process."""
+    from adaptive_mj.study import stress
+    from adaptive_mj.study.beside import can_fork
+
+    monkeypatch.setattr(stress, "BENCH_SETTINGS", {"seeds": 1, "steps": 0, "duration": 1.0,
+                                                   "arm_laws": ("adaptive",), "plant_names": ("heave",)})
+    out = tmp_path / "bench"
+    assert main(["bench", "-o", str(out), "--jobs", "2"]) == 0
+    report = (out / "report.md").read_text()
+    titles = [line for line in report.splitlines() if line.startswith("## ")]
+    assert titles[:3] == ["## 1. Adaptive control of a first-order system", "## 2. Phase-space view",
+                          "## 7. Payload swap on the arm"]
+    assert titles[3].startswith("## 14. Breaking points") and titles[-1] == "## Divergence"
+    for fig in ("first_order", "phase_portrait", "payload_swap"):
+        assert (out / "figures" / f"{fig}.png").stat().st_size > 10_000
+    assert ("(in a process of their own, beside the breaking-point study)" in report) == can_fork()
+    assert "diverged run: diverged" in report

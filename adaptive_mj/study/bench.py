@@ -12,6 +12,7 @@ from pathlib import Path
 from adaptive_mj.study import callable_module
 from adaptive_mj.report.html import write_html
 from adaptive_mj.report.metrics import TAIL_FRACTION
+from adaptive_mj.study.beside import Beside
 from adaptive_mj.study.job import JobResult, as_expected
 from adaptive_mj.study.parallel import Backend, progress_printer, run_jobs, session
 from adaptive_mj.study.result import Study, Table
@@ -151,15 +152,25 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
     results = run_jobs(jobs, backend=backend, on_done=progress_printer(len(jobs)))
     run_seconds = time.perf_counter() - t0
     by_tag = {r.job.tag: r for r in results}
-    parts, rows = [], []
-    for section in sections:
-        rep = section.analyze({job.tag: by_tag[job.tag] for job in section.jobs}, out)
-        parts.append(f"## {section.title}\n\n**The lecture:** {section.claim}\n\n{rep.text}\n")
-        rows.extend(rep.rows)
-    analysis_seconds = time.perf_counter() - t0 - run_seconds
+
+    def analyses() -> tuple[list[str], list[dict], float]:
+        """Every section's report text and main-table rows (its figures written under `out`), and the seconds taken."""
+        t_analyses, parts, rows = time.perf_counter(), [], []
+        for section in sections:
+            rep = section.analyze({job.tag: by_tag[job.tag] for job in section.jobs}, out)
+            parts.append(f"## {section.title}\n\n**The lecture:** {section.claim}\n\n{rep.text}\n")
+            rows.extend(rep.rows)
+        return parts, rows, time.perf_counter() - t_analyses
+
+    # the full bench: the analyses and figures in a forked process beside the breaking-point study (both cores
+    # busy meanwhile, adaptive_mj.study.beside); quick, or where fork is unsafe: here, before it
+    beside = Beside(analyses, fork=None if not quick and backend.kind == "local" else False)
+    overlapped = beside.forked
     n_runs = len(results)
     study_seconds = 0.0
-    if not quick:  # the breaking-point study: its own batches (bisection), a reduced `adaptive-mj stress`
+    if quick:
+        parts, rows, analysis_seconds = beside.result()
+    else:  # the breaking-point study: its own batches (bisection), a reduced `adaptive-mj stress`
         from adaptive_mj.study.stress import BENCH_SETTINGS, SUMMARY_LOG_RATE_HZ, run_study
 
         extra = {}
@@ -168,10 +179,15 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
 
             extra = {"law": scoring["law"], "sets": tuple(scoring["sets"]), "gains": read_gains(scoring["gains"])}
         t_study = time.perf_counter()
-        margins, text, _ = run_study(out / "stress", n_jobs=backend.jobs, composite=False, backend=backend,
-                                     log_rate_hz=None if full_logs else SUMMARY_LOG_RATE_HZ, **BENCH_SETTINGS,
-                                     **extra)
+        try:
+            margins, text, _ = run_study(out / "stress", n_jobs=backend.jobs, composite=False, backend=backend,
+                                         log_rate_hz=None if full_logs else SUMMARY_LOG_RATE_HZ, **BENCH_SETTINGS,
+                                         **extra)
+        except BaseException:
+            beside.cancel()
+            raise
         study_seconds = time.perf_counter() - t_study
+        parts, rows, analysis_seconds = beside.result()
         n_runs += sum(len(e.tails) for m in margins for e in m.evaluations)
         before = sum(1 for section in sections if _number(section.title) < 14)  # in order: before 15, 16, ...
         parts.insert(before, "## 14. Breaking points: law × stressor margins\n\n**The lecture:** the modifications "
@@ -188,6 +204,7 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
               f"{n_runs} runs on MuJoCo physics and "
               f"the analytic twin, {_where(backend)}. {expectation_text(results)} The {len(results)} catalogue runs "
               f"took {run_seconds:.1f} s, their sections' analyses and figures {analysis_seconds:.1f} s"
+              + (" (in a process of their own, beside the breaking-point study)" if overlapped else "")
               + ("" if quick else f", the breaking-point study {study_seconds:.1f} s")
               + f", the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
               f"every catalogue run's MCAP log is in `logs/`"

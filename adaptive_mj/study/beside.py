@@ -1,0 +1,91 @@
+"""Work done in a forked process beside the parent's own: the bench's section analyses and figures (CPU in one
+process) while its breaking-point study keeps the worker processes busy, so no core waits for the other.
+
+The child is forked, so it inherits the parent's memory: the runs' results and the sections' analysis closures
+are not pickled on the way in. It runs fn(), sends back its pickled return value (or its exception), and exits.
+Where fork is missing, or other threads run in the parent (a fork copies their locks as they stand: a Ray
+session's threads, say), fn() runs in the parent when `result` is asked, as it would without this module.
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import signal
+import threading
+import traceback
+from typing import Any, Callable, Generic, TypeVar
+
+T = TypeVar("T")
+
+
+def can_fork() -> bool:
+    """Whether a child can be forked safely now: fork exists and the parent runs no other thread."""
+    return "fork" in mp.get_all_start_methods() and threading.active_count() == 1
+
+
+class Beside(Generic[T]):
+    """fn() started in a forked child now (see the module docstring); `result()` waits for its value and raises
+    what it raised. `cancel()` ends the child (a stop signal in the parent). fork=False: fn() runs in the parent,
+    when result() is asked."""
+
+    def __init__(self, fn: Callable[[], T], *, fork: bool | None = None):
+        self._fn = fn
+        self._proc: Any = None
+        if fork is None:
+            fork = can_fork()
+        if not fork:
+            return
+        ctx = mp.get_context("fork")
+        self._recv, send = ctx.Pipe(duplex=False)
+        self._proc = ctx.Process(target=_child, args=(fn, send), daemon=True)
+        self._proc.start()
+        send.close()  # the child's end: the parent reads EOF if the child dies before sending
+
+    @property
+    def forked(self) -> bool:
+        return self._proc is not None
+
+    def result(self) -> T:
+        if self._proc is None:
+            return self._fn()
+        try:
+            ok, payload = self._recv.recv()
+        except EOFError:
+            self._proc.join()
+            raise RuntimeError(f"the process running {getattr(self._fn, '__name__', 'the work')} beside the study "
+                               f"ended without a result (exit code {self._proc.exitcode})") from None
+        finally:
+            self._recv.close()
+        self._proc.join()
+        self._proc = None
+        if ok:
+            return payload
+        exc, text = payload
+        exc.add_note(f"(raised in the process beside the study)\n{text}")
+        raise exc
+
+    def cancel(self) -> None:
+        if self._proc is not None and self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join()
+        self._proc = None
+
+
+def _child(fn: Callable[[], Any], send) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent takes a stop signal and ends this process
+    try:
+        value = (True, fn())
+    except BaseException as exc:  # sent to the parent, which raises it
+        value = (False, (_picklable(exc), traceback.format_exc()))
+    send.send(value)
+    send.close()
+
+
+def _picklable(exc: BaseException) -> BaseException:
+    """exc itself where it pickles, else a RuntimeError with its type and text."""
+    import pickle
+
+    try:
+        pickle.loads(pickle.dumps(exc))
+        return exc
+    except Exception:
+        return RuntimeError(f"{type(exc).__name__}: {exc}")
