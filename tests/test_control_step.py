@@ -147,11 +147,16 @@ def test_struct_offsets_find_every_pointer_of_a_real_model():
     m = compile_arm()
     d = mujoco.MjData(m)
     for name in ("userdata", "qpos", "qvel", "ctrl", "cdof", "xpos", "xmat", "subtree_com", "cinert",
-                 "qacc_warmstart", "qfrc_applied"):
+                 "qacc_warmstart", "qfrc_applied", "qfrc_passive", "qfrc_bias"):
         assert ctypes.c_int64.from_address(d._address + off[name]).value == getattr(d, name).ctypes.data, name
-    for name in ("dof_armature", "dof_damping", "body_mass"):
+    for name in ("dof_armature", "dof_damping", "body_mass", "actuator_gear", "actuator_gainprm"):
         assert ctypes.c_int64.from_address(m._address + off[f"model.{name}"]).value == getattr(m, name).ctypes.data
     assert ctypes.c_double.from_address(m._address + off["model.gravity"] + 16).value == m.opt.gravity[2]
+    # the activation state (the arm has none): the heave vehicle with its thruster lag
+    from adaptive_mj.setup.build import build
+
+    d = build(load_scenario(SCENARIOS_DIR / "heave_thruster_n3.toml")).plant.data
+    assert d.act.size == 1 and ctypes.c_int64.from_address(d._address + off["act"]).value == d.act.ctypes.data
 
 
 def test_a_second_process_loads_the_compiled_callback_from_the_disk_cache(tmp_path):

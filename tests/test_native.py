@@ -228,3 +228,32 @@ def test_composite_native_is_chosen_and_refuses_sampled_control():
     with pytest.raises(ValueError, match="continuous control only"):
         native.NativeController(p, law, Cosine(), [0, 0, 0], 10,
                                 control=ControlTiming.of(p.dt, mode="sampled", period=2 * p.dt))
+
+
+# -- order 3: the heave vehicle with its thruster lag (y'' from the thrust state and MuJoCo's forces) ---------
+
+@pytest.mark.parametrize("extra", [
+    [],  # the bench's nth_order/n3_models_lag run, cut short
+    ["noise.std={y=0.001, y_dot=0.01, y_ddot=0.1}", "noise.seed=3"],
+    ["events=[{t=0.9, kind='constant_force', value=25.0}, {t=1.6, kind='fluid_density_scale', value=1.1}]"],
+    ["disturbance={kind='sine', magnitude=30.0, omega=3.0}",
+     "events=[{t=1.2, kind='constant_force', value=-10.0}]"],
+    ["simulation.control_delay=5"],
+    ["control.mode='sampled'", "control.period=0.004"],
+    ["simulation.integrator='euler'"],
+], ids=["plain", "noise", "force+density_events", "disturbance+force", "delay", "sampled", "euler"])
+def test_order_three_on_the_native_callback_gives_the_python_path_s_rows_bit_for_bit(extra):
+    (law, a), (_, b) = _scenario_both("heave_thruster_n3", ["simulation.duration=2.5", *extra])
+    assert law.order == 3 and a.x.shape[1] == 3
+    assert_same(a, b, tol=0.0)
+    assert np.ptp(a.x[:, 2]) > 0.1  # y'' moves: the third state is read, not left at zero
+
+
+def test_order_three_is_native_only_on_the_lagged_heave_vehicle():
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
+
+    s = build(load(SCENARIOS_DIR / "heave_thruster_n3.toml"))
+    assert s.plant.native_third_state is not None and native.supported(s.plant, s.law)
+    p = heave.load()
+    assert p.native_third_state is None  # order 2: no third state to read

@@ -168,6 +168,12 @@ class HeavePlant(MujocoPlant):
         m, a = self.model, self.actuator_id
         return float(m.actuator_gear[a, 0] * m.actuator_gainprm[a, 0])
 
+    @property
+    def native_third_state(self) -> tuple[int, int] | None:
+        """(the thrust state's address in act, the body's id) for order 3: the compiled callback computes y'' as
+        `measure` does (adaptive_mj.sim.native._acceleration); None for order 2."""
+        return (self._act_adr, self.body_id) if self.form.order == 3 and self._act_adr >= 0 else None
+
     def measure(self, d, x) -> None:
         """[y, y'] or, for order 3, [y, y', y''] with y'' from the current forces."""
         super().measure(d, x)

@@ -229,6 +229,12 @@ class MujocoPlant(ModelClock):
         x[0] = d.qpos[self._qadr]
         x[1] = d.qvel[self._dadr]
 
+    @property
+    def native_third_state(self) -> tuple[int, int] | None:
+        """Where the compiled 1-DOF callback (adaptive_mj.sim.native) reads a third state as `measure` does: (the
+        thrust state's address in act, the body's id) on the heave vehicle with its thruster lag; None elsewhere."""
+        return None
+
     def observe(self) -> np.ndarray:
         """(n,) the law's state now, computed as the control callback would see it."""
         x = np.empty(self.form.order)

@@ -7,9 +7,11 @@ divergence checks).
 At every call the callback runs adaptive_mj.sim.stage.control_stage, the step's order that the Python
 controller (adaptive_mj.sim.loop.Controller) runs too, compiled (adaptive_mj.sim.native_step) with this module's
 pieces: `_law_stage` (measure [q, q'] (+ noise), the stage estimate, the law on the plant's ModelForm, u
-clamped), `_apply_control` (ctrl) and `_record_row` (the step's row). The references at the stage times
-t_k + c_i h are evaluated in Python, vectorised, before each chunk (MuJoCo's stage times are reproduced bit
-for bit).
+clamped), `_apply_control` (ctrl) and `_record_row` (the step's row). The heave vehicle with its thruster lag
+(order 3, state [y, y', y'']) runs here too: `_acceleration` computes y'' from the thrust state and the forces
+MuJoCo has just computed for the stage, the operations of plants.heave.HeavePlant.measure in its order.
+The references at the stage times t_k + c_i h are evaluated in Python, vectorised, before each chunk (MuJoCo's
+stage times are reproduced bit for bit).
 
 The callback finds its run through mjData.userdata (adaptive_mj.sim.native_context): the context
 block `CONTEXT` (named fields) holds the run's settings, its state (stage, row, the held control)
@@ -61,6 +63,8 @@ if TYPE_CHECKING:
     delay_slot: Any
     end_stage: Any
     applied: Any
+    acceleration: Any
+    applied_now: Any
     SAMPLED: int
 
 _i8, _f8 = np.int64, np.float64
@@ -77,6 +81,10 @@ CONTEXT = native_step.context_dtype([  # after stage.control_stage's fields (nat
     # buffers (n_theta + 1,): the filters z = [z_a, z_φ, z_τ], the pending step [y' at its start, φ̄, τ̄], and the
     # stage's [φ, f, h] (the law's, for the sums when the stage's control is applied)
     ("kappa", _f8), ("fgain", _f8), ("zf", _i8), ("fpend", _i8), ("fval", _i8),
+    # order 3 (the heave vehicle with its thruster lag, plants.heave.HeavePlant.measure): y'' from the thrust state
+    # act[act_adr] and the forces on the body `body`; applied_row: the external force the step's row reads, as the
+    # Python path's observe() does before the step (the force the step before held)
+    ("act_adr", _i8), ("body", _i8), ("applied_row", _f8),
 ])
 _compiled: dict = {}
 
@@ -115,6 +123,8 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
     x = carray(fptr(ctx.xbuf), n)  # noqa: F821 (injected)
     x[0] = qpos[ctx.qadr] + noise[row * n]
     x[1] = qvel[ctx.dadr] + noise[row * n + 1]
+    if n == 3:  # y'' under the force this step applies (the Python path sets it before mj_step)
+        x[2] = acceleration(ctx, base, mbase, off, applied_now(ctx, base, off, row)) + noise[row * n + 2]  # noqa: F821
     stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
     u, s = law(x, r, th, ctx, carray(fptr(ctx.coeffs), n), carray(fptr(ctx.gamma), nth),  # noqa: F821 (injected)
                carray(fptr(ctx.theta0), nth), lower, upper, carray(fptr(ctx.params), 1 << 30), rate)  # noqa: F821,E501 (injected globals; one carray per line)
@@ -149,12 +159,40 @@ def _record_row(ctx, io, row, u, theta):
     rec[o + col.t] = ctx.t
     rec[o + col.x] = qpos[ctx.qadr]
     rec[o + col.x + 1] = qvel[ctx.dadr]
+    if n == 3:  # y'' as observe() reads it before the step: under the force the step before applied
+        rec[o + col.x + 2] = acceleration(ctx, base, mbase, off, ctx.applied_row)  # noqa: F821 (injected)
+        ctx.applied_row = applied_now(ctx, base, off, row)  # noqa: F821 (injected)
     rec[o + col.u] = u[0]
     rec[o + col.s] = carray(fptr(ctx.s_hold), 1)[0]  # noqa: F821 (injected)
     for i in range(n + 1):
         rec[o + col.ref + i] = r[i]
     for j in range(nth):
         rec[o + col.theta + j] = theta[j]
+
+
+def _applied_now(ctx, base, off, row):
+    """[N] the external force on the joint over this step: the step's disturbance (prepared per chunk; the
+    callback writes it into qfrc_applied in _apply_control, after the law's first stage) or the constant one
+    (qfrc_applied as MujocoPlant.native_prestep left it)."""
+    if ctx.has_dist != 0:
+        return carray(fptr(ctx.dist), row + 1)[row]  # noqa: F821 (injected)
+    return carray(fptr(pointer_at(base, off.qfrc_applied)), ctx.dadr + 1)[ctx.dadr]  # noqa: F821 (injected)
+
+
+def _acceleration(ctx, base, mbase, off, applied):
+    """y'' [m/s²] of the heave vehicle with its thruster lag, as plants.heave.HeavePlant.measure computes it, the
+    same operations in the same order: (gear·gain·act + qfrc_passive − qfrc_bias + applied) / (mass + armature),
+    the forces MuJoCo computed for this stage, `applied` the external force [N]."""
+    a, dof, b = ctx.act, ctx.dadr, ctx.body
+    gear = carray(fptr(pointer_at(mbase, off.actuator_gear)), (a + 1) * 6)[a * 6]  # noqa: F821 (injected)
+    gain = carray(fptr(pointer_at(mbase, off.actuator_gainprm)), (a + 1) * 10)[a * 10]  # noqa: F821 (injected)
+    act = carray(fptr(pointer_at(base, off.act)), ctx.act_adr + 1)[ctx.act_adr]  # noqa: F821 (injected)
+    passive = carray(fptr(pointer_at(base, off.qfrc_passive)), dof + 1)[dof]  # noqa: F821 (injected)
+    bias = carray(fptr(pointer_at(base, off.qfrc_bias)), dof + 1)[dof]  # noqa: F821 (injected)
+    mass = carray(fptr(pointer_at(mbase, off.body_mass)), b + 1)[b]  # noqa: F821 (injected)
+    armature = carray(fptr(pointer_at(mbase, off.dof_armature)), dof + 1)[dof]  # noqa: F821 (injected)
+    force = gear * gain * act + passive - bias + applied
+    return force / (mass + armature)
 
 
 def _builtin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rate):
@@ -254,7 +292,8 @@ def compiled(form, plugin=None, composite: bool = False):
 
     off = offsets()
     key = source_key(*fns, native_step.callback_factory, stage_code.control_stage, _law_stage, _apply_control,
-                     _record_row, _builtin_law, _plugin_law, _composite_law, _composite_applied, _no_filters,
+                     _record_row, _acceleration, _applied_now, _builtin_law, _plugin_law, _composite_law,
+                     _composite_applied, _no_filters,
                      sliding_law_values, plugin_rate, record_columns, stage_code.stage_estimate,
                      stage_code.end_stage, context_address,
                      extra=(off, numba.__version__, str(SLIDING_GAINS), str(PLUGIN_GAINS),
@@ -282,9 +321,11 @@ def compiled(form, plugin=None, composite: bool = False):
         else:
             law = jit_tree(_plugin_law, inline, tag=tag, user_law=jit_tree(plugin, inline, tag=tag),
                            carray=common["carray"], gains_ptr=pointer(numba.from_dtype(PLUGIN_GAINS)), **forms)
-        return {"law_stage": jit_tree(_law_stage, inline, tag=tag, law=law, **common),
+        third: dict[str, Any] = {"acceleration": jit_tree(_acceleration, inline, tag=tag, **common),  # order 3's y''
+                                 "applied_now": jit_tree(_applied_now, inline, tag=tag, **common)}
+        return {"law_stage": jit_tree(_law_stage, inline, tag=tag, law=law, **third, **common),
                 "apply_control": jit_tree(_apply_control, inline, tag=tag, applied=applied, **common),
-                "record_row": jit_tree(_record_row, inline, tag=tag, **common,
+                "record_row": jit_tree(_record_row, inline, tag=tag, **third, **common,
                                        record_columns=jit_tree(record_columns, inline, tag=tag))}
 
     callback = native_step.compiled_callback(CONTEXT, off, key, pieces)
@@ -294,14 +335,17 @@ def compiled(form, plugin=None, composite: bool = False):
 
 def supported(plant: Plant, law: Law) -> bool:
     """Native path: a 1-DOF MuJoCo plant (a MujocoPlant: the callback reads its joint and actuator
-    addresses) of order 2 (its state is [q, q'], which the callback reads directly) compiled with a
+    addresses) of order 2 (its state is [q, q'], which the callback reads directly), or of order 3 where
+    the plant says where its third state is read (MujocoPlant.native_third_state: the lagged heave
+    vehicle), compiled with a
     userdata slot, a law the callback compiles (``law.native``: a sliding law, the sliding law with composite
     adaptation (laws.composite: its filters live in the context's buffers, the composite variant of the callback;
     continuous control only, as on the Python path) or a law plugin). A time-varying disturbance is evaluated
     per step in Python when a chunk is prepared and written into qfrc_applied by the callback."""
     from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS, MujocoPlant
 
-    return (isinstance(plant, MujocoPlant) and plant.order == 2 and law.native
+    return (isinstance(plant, MujocoPlant)
+            and (plant.order == 2 or plant.order == 3 and plant.native_third_state is not None) and law.native
             and plant.stages in (1, 4)
             and plant.model.nuserdata >= USERDATA_SLOTS)
 
@@ -356,6 +400,12 @@ class NativeController(ContextOwner):
         c["delay"], c["mode"], c["period_steps"], c["period"] = control.delay, control.mode, control.steps, \
             control.period
         c["has_dist"] = int(plant.disturbance is not None)
+        if n == 3:  # y'' read as the plant's measure does (_acceleration: MuJoCo's gear and gain layout)
+            if not plant.native_third_state or (plant.model.actuator_gear.shape[1],
+                                                plant.model.actuator_gainprm.shape[1]) != (6, 10):
+                raise ValueError(f"the native callback reads the third state of the heave vehicle with its thruster "
+                                 f"lag only, not of a {type(plant).__name__}")
+            c["act_adr"], c["body"] = plant.native_third_state
         c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
         c["gains"] = self.gains.ctypes.data  # the law's record (kept alive by self.gains)
         for name, buf in self.buffers.items():
@@ -386,6 +436,7 @@ class NativeController(ContextOwner):
                 dist[k] = force
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
+        c["applied_row"] = plant.data.qfrc_applied[plant._dadr]  # what the first row's y'' reads (_record_row)
         self.bind()
 
     def finish(self, rows: int, *, partial: bool = False) -> tuple[np.ndarray, ...]:

@@ -135,7 +135,8 @@ def mujoco_offsets() -> dict[str, int]:
 
 
 class Offsets(NamedTuple):
-    """Byte offsets of the MjData (and MjModel: dof_armature, dof_damping, gravity) fields the callback reads,
+    """Byte offsets of the MjData (and MjModel: dof_armature, dof_damping, gravity, body_mass, actuator_gear,
+    actuator_gainprm) fields the callback reads,
     by name (adaptive_mj.sim.native_context.mujoco_offsets), instead of slots of a tuple kept in step by hand."""
 
     userdata: int
@@ -152,10 +153,19 @@ class Offsets(NamedTuple):
     gravity: int
     qfrc_applied: int
     M: int
+    # the order-3 heave vehicle's y'' (plants.heave.HeavePlant.measure): its thrust state and forces
+    act: int
+    qfrc_passive: int
+    qfrc_bias: int
+    body_mass: int
+    actuator_gear: int
+    actuator_gainprm: int
 
 
 #: the Offsets fields that name a field of MjModel (mujoco_offsets' "model." keys)
-MUJOCO_FIELDS = {"dof_armature": "model.dof_armature", "dof_damping": "model.dof_damping", "gravity": "model.gravity"}
+MUJOCO_FIELDS = {"dof_armature": "model.dof_armature", "dof_damping": "model.dof_damping", "gravity": "model.gravity",
+                 "body_mass": "model.body_mass", "actuator_gear": "model.actuator_gear",
+                 "actuator_gainprm": "model.actuator_gainprm"}
 
 
 def offsets() -> Offsets:
