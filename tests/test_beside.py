@@ -30,6 +30,12 @@ def test_the_childs_exception_is_raised_in_the_parent_with_its_type_and_text():
 
 
 @needs_fork
+def test_any_other_exception_is_a_runtime_error_naming_its_class():
+    with pytest.raises(RuntimeError, match=r"ZeroDivisionError: division by zero"):
+        Beside(lambda: 1 / 0).result()
+
+
+@needs_fork
 def test_a_child_that_dies_is_a_clear_error_not_a_hang():
     with pytest.raises(RuntimeError, match="ended without a result"):
         Beside(lambda: os._exit(3)).result()

@@ -2,7 +2,8 @@
 process) while its breaking-point study keeps the worker processes busy, so no core waits for the other.
 
 The child is forked, so it inherits the parent's memory: the runs' results and the sections' analysis closures
-are not pickled on the way in. It runs fn(), sends back its pickled return value (or its exception), and exits.
+are not copied on the way in. It runs fn(), sends its return value back through a pipe (or its exception's class,
+text and traceback), and exits.
 Where fork is missing, or other threads run in the parent (a fork copies their locks as they stand: a Ray
 session's threads, say), fn() runs in the parent when `result` is asked, as it would without this module.
 """
@@ -24,7 +25,7 @@ def can_fork() -> bool:
 
 class Beside(Generic[T]):
     """fn() started in a forked child now (see the module docstring); `result()` waits for its value and raises
-    what it raised. `cancel()` ends the child (a stop signal in the parent). fork=False: fn() runs in the parent,
+    what it raised (adaptive_mj.errors' classes as themselves, any other as a RuntimeError naming it). `cancel()` ends the child (a stop signal in the parent). fork=False: fn() runs in the parent,
     when result() is asked."""
 
     def __init__(self, fn: Callable[[], T], *, fork: bool | None = None):
@@ -59,9 +60,7 @@ class Beside(Generic[T]):
         self._proc = None
         if ok:
             return payload
-        exc, text = payload
-        exc.add_note(f"(raised in the process beside the study)\n{text}")
-        raise exc
+        raise _raised(*payload)
 
     def cancel(self) -> None:
         if self._proc is not None and self._proc.is_alive():
@@ -74,18 +73,23 @@ def _child(fn: Callable[[], Any], send) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent takes a stop signal and ends this process
     try:
         value = (True, fn())
-    except BaseException as exc:  # sent to the parent, which raises it
-        value = (False, (_picklable(exc), traceback.format_exc()))
+    except BaseException as exc:  # told to the parent as text (its class by name), which raises it again
+        value = (False, (type(exc).__module__, type(exc).__qualname__, str(exc), traceback.format_exc()))
     send.send(value)
     send.close()
 
 
-def _picklable(exc: BaseException) -> BaseException:
-    """exc itself where it pickles, else a RuntimeError with its type and text."""
-    import pickle
+def _raised(module: str, name: str, text: str, trace: str) -> BaseException:
+    """The child's exception for the parent to raise: one of adaptive_mj.errors' own classes again (a user's
+    mistake stays a one-line error), anything else a RuntimeError naming its class; the child's traceback in a
+    note."""
+    from adaptive_mj import errors
 
-    try:
-        pickle.loads(pickle.dumps(exc))
-        return exc
-    except Exception:
-        return RuntimeError(f"{type(exc).__name__}: {exc}")
+    cls = getattr(errors, name, None) if module == errors.__name__ else None
+    exc: BaseException
+    if isinstance(cls, type) and issubclass(cls, errors.AdaptiveMJError):
+        exc = cls(text)
+    else:
+        exc = RuntimeError(f"{name}: {text}")
+    exc.add_note(f"(raised in the process beside the study)\n{trace}")
+    return exc
