@@ -25,8 +25,8 @@ def can_fork() -> bool:
 
 class Beside(Generic[T]):
     """fn() started in a forked child now (see the module docstring); `result()` waits for its value and raises
-    what it raised (adaptive_mj.errors' classes as themselves, any other as a RuntimeError naming it). `cancel()` ends the child (a stop signal in the parent). fork=False: fn() runs in the parent,
-    when result() is asked."""
+    what it raised (adaptive_mj.errors' classes as themselves, any other as a RuntimeError naming it). `cancel()`
+    ends the child (a stop signal in the parent). fork=False: fn() runs in the parent, when result() is asked."""
 
     def __init__(self, fn: Callable[[], T], *, fork: bool | None = None):
         self._fn = fn
