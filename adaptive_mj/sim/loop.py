@@ -41,6 +41,7 @@ from adaptive_mj.laws.common import LawStep
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.plants import Event, plant_order
 from adaptive_mj.plants.protocol import CtrlRange, Plant, control_shape, has_joints, termination
+from adaptive_mj.plants.twin import PythonStepped
 from adaptive_mj.sim import stage as st
 from adaptive_mj.sim.interrupt import deferred
 from adaptive_mj.sim.stage import TABLEAU, ControlTiming
@@ -505,6 +506,9 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
     make: Callable[..., ContextOwner]
     if getattr(plant, "state_names", ()):  # a quadrotor: its own compiled callback (the flight kernel inside)
         from adaptive_mj.sim.native_flight import NativeFlightController as make, supported
+    elif isinstance(plant, PythonStepped):  # an analytic plant: its compiled loop where there is one (the linear
+        # plant under MRAC: one compiled call steps a chunk), else the Python path
+        from adaptive_mj.sim.native_analytic import NativeAnalyticController as make, supported
     elif plant.joint_shape:  # a manipulator: its own compiled callback (regressor inside)
         from adaptive_mj.sim.native_manipulator import NativeManipulatorController as make, supported
     else:
