@@ -150,52 +150,26 @@ def chunk_factory(key):
         D = ctx.in_delay
         y, ub = np.zeros(1), np.zeros(1)
         io = (y, ub)
-        xs, ax = np.empty(nx), np.empty(nx)
-        k1, k2, k3, k4 = np.empty(nx), np.empty(nx), np.empty(nx), np.empty(nx)
+        xs, ax, ks = np.empty(nx), np.empty(nx), np.empty((4, nx))
         for r in range(rows):
             force = dist[r]
             y[0] = output(C, x)
-            control_stage(ctx, io)
-            u0 = clamp(ub[0], lo, hi)
+            control_stage(ctx, io)  # noqa: F821 (injected: stage.control_stage, compiled)
             k = ctx.k
-            if D == 0:
-                plant_rate(A, B, x, u0, force, ax, k1)
+            u = clamp(ub[0], lo, hi)
+            if D > 0:  # the delay line: this step's stage-0 control in, the one of D steps ago held over the step
+                ring[k % (D + 1)] = u
+                u = ring[(k - D) % (D + 1)] if k >= D else 0.0
+            plant_rate(A, B, x, u, force, ax, ks[0])
+            for j in range(1, 4):  # stages t + h/2, t + h/2, t + h on x + (h/2) k1, x + (h/2) k2, x + h k3
+                c = h if j == 3 else h / 2
                 for i in range(nx):
-                    xs[i] = x[i] + h / 2 * k1[i]
+                    xs[i] = x[i] + c * ks[j - 1, i]
                 y[0] = output(C, xs)
-                control_stage(ctx, io)
-                plant_rate(A, B, xs, clamp(ub[0], lo, hi), force, ax, k2)
-                for i in range(nx):
-                    xs[i] = x[i] + h / 2 * k2[i]
-                y[0] = output(C, xs)
-                control_stage(ctx, io)
-                plant_rate(A, B, xs, clamp(ub[0], lo, hi), force, ax, k3)
-                for i in range(nx):
-                    xs[i] = x[i] + h * k3[i]
-                y[0] = output(C, xs)
-                control_stage(ctx, io)
-                plant_rate(A, B, xs, clamp(ub[0], lo, hi), force, ax, k4)
-            else:
-                ring[k % (D + 1)] = u0
-                held = ring[(k - D) % (D + 1)] if k >= D else 0.0
-                plant_rate(A, B, x, held, force, ax, k1)
-                for i in range(nx):
-                    xs[i] = x[i] + h / 2 * k1[i]
-                y[0] = output(C, xs)
-                control_stage(ctx, io)  # the law's stages (its estimates integrate by RK4)
-                plant_rate(A, B, xs, held, force, ax, k2)
-                for i in range(nx):
-                    xs[i] = x[i] + h / 2 * k2[i]
-                y[0] = output(C, xs)
-                control_stage(ctx, io)
-                plant_rate(A, B, xs, held, force, ax, k3)
-                for i in range(nx):
-                    xs[i] = x[i] + h * k3[i]
-                y[0] = output(C, xs)
-                control_stage(ctx, io)
-                plant_rate(A, B, xs, held, force, ax, k4)
+                control_stage(ctx, io)  # noqa: F821 (injected; with a delay line only the law's stage)
+                plant_rate(A, B, xs, clamp(ub[0], lo, hi) if D == 0 else u, force, ax, ks[j])
             for i in range(nx):
-                x[i] = x[i] + h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
+                x[i] = x[i] + h / 6 * (ks[0, i] + 2 * ks[1, i] + 2 * ks[2, i] + ks[3, i])
             ctx.k = k + 1
 
     return callback
@@ -222,10 +196,10 @@ def compiled():
     common: dict[str, Any] = {"carray": carray, "fptr": pointer(types.float64), "np": np,
                               "SAMPLED": stage_code.SAMPLED}
     common.update(native_step.stage_functions(numba, inline, tag))
-    pieces = {"law_stage": jit_tree(_law_stage, inline, tag=tag, gains_ptr=pointer(numba.from_dtype(MRAC_GAINS)),
-                                    **common),
-              "apply_control": jit_tree(_apply_control, inline, tag=tag, **common),
-              "record_row": jit_tree(_record_row, inline, tag=tag, **common)}
+    gains_ptr = pointer(numba.from_dtype(MRAC_GAINS))
+    pieces: dict[str, Any] = {"law_stage": jit_tree(_law_stage, inline, tag=tag, gains_ptr=gains_ptr, **common),
+                              "apply_control": jit_tree(_apply_control, inline, tag=tag, **common),
+                              "record_row": jit_tree(_record_row, inline, tag=tag, **common)}
     step = jit_tree(stage_code.control_stage, inline, tag=tag,
                     view=jit_tree(native_step.view, inline, tag=tag, **common), **common, **pieces)
     g = {**chunk_factory.__globals__, **common, "numba": numba, "control_stage": step,
