@@ -28,8 +28,10 @@ The gains γ here are adaptation *rates* (the textbooks' Γ), unlike the lecture
 (1/γ): Nguyen's γ = 2 and 2.9 and Rohrs' γ = 1 are written as published. The modifications
 (laws.common.Modification) are applied with Γ: θ̂' -= (σ + ν|s|) Γ (θ̂ - θ₀), projection the same.
 
-Plain array code; no mujoco. The analytic plants it runs on are stepped in Python
-(adaptive_mj.plants.linear, adaptive_mj.plants.wing_rock), so it has no compiled callback.
+Plain array code; no mujoco. The law's arithmetic is mrac_regressor and mrac_values, plain loops that MracLaw
+calls in Python and adaptive_mj.sim.native_analytic compiles: on the linear plant (adaptive_mj.plants.linear) the
+Lyapunov rule runs compiled, bit for bit the Python path's rows; the MIT rule (its filter) and the wing-rock
+plant (adaptive_mj.plants.wing_rock, its ψ) run on the Python path.
 """
 from __future__ import annotations
 

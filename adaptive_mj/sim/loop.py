@@ -1,6 +1,11 @@
 """The closed loop: one definition of a control step, driven on the Python path (the policy inside
 MuJoCo's control callback, or an analytic twin's stages), on the native path (a compiled
-callback, adaptive_mj.sim.native / native_manipulator) and by adaptive_mj.env.
+callback, adaptive_mj.sim.native / native_manipulator / native_flight; for the linear plant under MRAC's
+Lyapunov rule, a compiled chunk of the plant's own RK4 steps, adaptive_mj.sim.native_analytic) and by
+adaptive_mj.env. The native path is taken wherever the plant and law have one (`_native_controller`; else,
+and with simulation.python_callback = true, the Python path): what is compiled is the MuJoCo plants' sliding
+laws, composite adaptation and law plugins, the arms' and the quadrotor's laws, and the linear plant with
+MRAC; the analytic twin, the wing-rock plant and the MIT rule run in Python.
 
 The order of a control step, written once:
     events due → measure (true state + the step's noise) → reference → law (at the integrator's
