@@ -187,3 +187,19 @@ def test_a_python_path_log_verifies_on_the_compiled_path(tmp_path, monkeypatch, 
     assert ok, message
     assert main(["replay", str(log), "--verify"]) == 0
     assert "bit-identical" in capsys.readouterr().out
+
+
+def test_the_cache_key_follows_every_compiled_source():
+    """The compiled stepper's cache key hashes the modules of everything it compiles in, however deep: the law's
+    arithmetic (mrac_values → common.modify_rate, dead_zone_open), the step's order (stage.control_stage → clip_into)
+    and the stepper itself."""
+    import inspect
+
+    from adaptive_mj.sim.native_context import reached_functions
+
+    fns = reached_functions(*native_analytic.key_functions())
+    names = {fn.__name__ for fn in fns}
+    assert {"mrac_values", "mrac_regressor", "modify_rate", "dead_zone_open", "clip_into", "control_stage",
+            "end_stage", "accumulate_rate", "delay_slot"} <= names
+    files = {Path(inspect.getsourcefile(fn) or "").name for fn in fns}
+    assert {"mrac.py", "common.py", "stage.py", "native_analytic.py", "native_step.py"} <= files

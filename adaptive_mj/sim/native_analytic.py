@@ -178,6 +178,14 @@ def chunk_factory(key):
 _compiled: dict = {}
 
 
+def key_functions() -> tuple:
+    """The functions compiled into the chunk stepper (and, through native_context.reached_functions, every function
+    they call): the cache key hashes their modules' source, so an edit to any of them compiles afresh."""
+    return (chunk_factory, stage_code.control_stage, native_step.view, _law_stage, _apply_control, _record_row,
+            output, plant_rate, clamp, mrac_regressor, mrac_values, stage_code.stage_estimate, stage_code.end_stage,
+            stage_code.advance_estimates)
+
+
 def compiled():
     """The chunk stepper, compiled (in memory per process, on disk across processes)."""
     if "linear_mrac" in _compiled:
@@ -187,10 +195,7 @@ def compiled():
 
     from adaptive_mj.numba_util import jit_tree, pointer
 
-    key = source_key(chunk_factory, stage_code.control_stage, native_step.view, _law_stage, _apply_control,
-                     _record_row, output, plant_rate, clamp, mrac_regressor, mrac_values, stage_code.stage_estimate,
-                     stage_code.end_stage, stage_code.advance_estimates,
-                     extra=(numba.__version__, str(CONTEXT), str(MRAC_GAINS), "linear_mrac"))
+    key = source_key(*key_functions(), extra=(numba.__version__, str(CONTEXT), str(MRAC_GAINS), "linear_mrac"))
     tag = f"_{key:x}"
     inline = inlined(numba)
     common: dict[str, Any] = {"carray": carray, "fptr": pointer(types.float64), "np": np,
