@@ -197,6 +197,38 @@ class ModelResponse:
             out[k] = self._steady(t, k) + np.real(free)
         return out
 
+    def scalar_rows(self, t, order: int) -> np.ndarray:
+        """(order+1, T): [y_m, ..., y_m^(order)] at each of the times t (T,) [s], bit for bit what T calls
+        `self(float(t_i), order)` give, in one vectorised pass (the compiled analytic loop's references,
+        adaptive_mj.sim.native_analytic). An array call of __call__ is not that: numpy multiplies complex
+        arrays with fused multiply-adds, complex scalars without, so here every complex product is written
+        out in real arrays as numpy's scalar arithmetic computes it ((a+bi)(c+di) = (ac - bd) + (ad + bc)i,
+        a complex times a real component by component); the constants (1jω)^k G(jω) and c_j λ_j^k are the
+        scalar path's own numbers, and np.exp gives the same bits on arrays as on scalars (tested:
+        tests/test_native_analytic.py)."""
+        t = np.ascontiguousarray(t, dtype=float).reshape(-1)
+        lam, c = self._free
+        out = np.empty((order + 1,) + t.shape)
+        for k in range(order + 1):
+            # _steady(t, k), its arithmetic in the scalar path's order
+            steady = np.zeros(t.shape) + (self.beta * self.offset / self.alpha[0] if k == 0 else 0.0)
+            for a, w, p, g in zip(self.amplitudes, self.omegas, self.phases, self._gains, strict=True):
+                K = (1j * w) ** k * g
+                E = np.exp(1j * (w * t + p))
+                steady = steady + a * (K.real * E.imag + K.imag * E.real)  # imag(K E)
+            # free = sum(c_j λ_j^k e^{λ_j t}): Python's sum from 0, a complex scalar times a real or complex array
+            re: np.ndarray | int = 0
+            for cj, lj in zip(c, lam, strict=True):
+                Kj = cj * lj**k
+                Ej = np.exp(lj * t)
+                if np.iscomplexobj(Ej):
+                    term_re = Kj.real * Ej.real - Kj.imag * Ej.imag
+                else:
+                    term_re = Kj.real * Ej
+                re = re + term_re
+            out[k] = steady + re
+        return out
+
 
 # --------------------------------------------------------------------------
 # Joint-space references for an arm of m joints.

@@ -28,20 +28,24 @@ The gains γ here are adaptation *rates* (the textbooks' Γ), unlike the lecture
 (1/γ): Nguyen's γ = 2 and 2.9 and Rohrs' γ = 1 are written as published. The modifications
 (laws.common.Modification) are applied with Γ: θ̂' -= (σ + ν|s|) Γ (θ̂ - θ₀), projection the same.
 
-Plain array code; no mujoco. The analytic plants it runs on are stepped in Python
-(adaptive_mj.plants.linear, adaptive_mj.plants.wing_rock), so it has no compiled callback.
+Plain array code; no mujoco. The law's arithmetic is mrac_regressor and mrac_values, plain loops that MracLaw
+calls in Python and adaptive_mj.sim.native_analytic compiles: on the linear plant (adaptive_mj.plants.linear) the
+Lyapunov rule runs compiled, bit for bit the Python path's rows; the MIT rule (its filter) and the wing-rock
+plant (adaptive_mj.plants.wing_rock, its ψ) run on the Python path.
 """
 from __future__ import annotations
 
 import enum
 import math
-from typing import Callable
+from dataclasses import dataclass
+from typing import Any, Callable
 
 import numpy as np
 
 from adaptive_mj.keys import Key, Table
 from adaptive_mj.laws import law_keys as shared
-from adaptive_mj.laws.common import NO_MODIFICATION, DeadZone, LawStep, Modification, as_gamma, modify_rate
+from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, Gains, LawStep, Modification, as_gamma,
+                                     dead_zone_open, modify_rate, record_dtype)
 from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, Law
 from adaptive_mj.specs import LawSpec, MracSpec, PlantSpec
@@ -79,6 +83,76 @@ def lyapunov_matrix(alpha) -> np.ndarray:
     return 0.5 * (P + P.T)
 
 
+_NO_PSI = np.zeros(0)
+
+
+@dataclass
+class MracGains(Gains):
+    """The MRAC law's scalars, by name (common.record_dtype: the compiled analytic loop reads them as a record).
+    beta: the reference model's gain on r; sign_b: ±1; always: no dead-zone (adapt whatever s is, NaN too);
+    dz_width: the dead-zone's width [unit of y]; dz_on_s: the dead-zone on |s| (else on |e_1|);
+    sigma [1/s], e_mod [1/(s · unit of y)]: the leakage (common.modify_rate)."""
+
+    beta: float
+    sign_b: float
+    always: bool
+    dz_width: float
+    dz_on_s: bool
+    sigma: float
+    e_mod: float
+
+
+MRAC_GAINS = record_dtype(MracGains)
+
+
+def mrac_regressor(x, ref, alpha, beta, psi, omega):
+    """ω = [x_1..x_n; r; ψ] into omega (n_theta,) in place, and r = (y_m^(n) + αᵀx_m) / β returned [unit of r].
+    x: (≥ n,) the measured state; ref: (n+1,) [y_m, ..., y_m^(n)]; alpha: (n,); psi: (len ψ,) ψ(x), evaluated
+    by the caller. Plain loops (αᵀx_m summed from 0 in order, as numpy's dot of a few entries does, bit for
+    bit): MracLaw calls it in Python, adaptive_mj.sim.native_analytic compiled."""
+    n = alpha.shape[0]
+    acc = 0.0
+    for i in range(n):
+        acc += alpha[i] * ref[i]
+    r = (ref[n] + acc) / beta
+    for i in range(n):
+        omega[i] = x[i]
+    omega[n] = r
+    for j in range(psi.shape[0]):
+        omega[n + 1 + j] = psi[j]
+    return r
+
+
+def mrac_values(x, ref, theta, omega, omega_f, pb, gamma, inv_gamma, sign_b, mit, always, dz_width, dz_on_s,
+                sigma, e_mod, theta0, lower, upper, rate):
+    """One evaluation of the law (module docstring): returns (u, s) and writes θ̂' into rate (n_theta,).
+
+    u = θ̂ᵀω; e = x - x_m; s = eᵀP b_n (pb (n,)); Lyapunov rule: rate = -sign_b Γ ω s; MIT rule (mit): rate =
+    -sign_b Γ ω_f e_1 (omega_f (n_theta,), the filtered regressor). Adaptation is on while `always` (no
+    dead-zone) or dead_zone_open(s, or e_1 without dz_on_s, dz_width); then the leakage and the projection's
+    tangent cone (common.modify_rate with 1/Γ = inv_gamma as the stiffness). theta: (n_theta,) the stage estimate;
+    gamma: (n_theta,) rates; theta0, lower, upper: (n_theta,) the modification's arrays. Plain loops, every dot
+    summed from 0 in order (numpy's dot of a few entries gives the same bits): MracLaw calls it in Python and
+    adaptive_mj.sim.native_analytic compiles it."""
+    n = pb.shape[0]
+    u = 0.0
+    for i in range(theta.shape[0]):
+        u += theta[i] * omega[i]
+    s = 0.0
+    for i in range(n):
+        s += (x[i] - ref[i]) * pb[i]
+    e0 = x[0] - ref[0]
+    signal = e0 if mit else s
+    if always or dead_zone_open(s if dz_on_s else e0, dz_width):
+        for i in range(rate.shape[0]):
+            rate[i] = -sign_b * gamma[i] * (omega_f[i] if mit else omega[i]) * signal
+    else:
+        for i in range(rate.shape[0]):
+            rate[i] = 0.0
+    modify_rate(rate, theta, abs(s), sigma, e_mod, theta0, inv_gamma, lower, upper)
+    return u, s
+
+
 class MracLaw(Law):
     """Direct MRAC (see the module docstring).
 
@@ -113,6 +187,8 @@ class MracLaw(Law):
         self.dead_zone = dead_zone
         self.modification = modification or NO_MODIFICATION
         self._mod = self.modification.arrays(len(self.names))
+        # the modifications divide by a stiffness: Γ is a rate here, so 1/Γ is passed to them
+        self._inv_gamma = 1.0 / self.gamma
         self.pb = np.array([1.0]) if order == 1 else lyapunov_matrix(self.alpha)[:, -1]  # P b_n
         self.has_filters = self.rule is Rule.MIT
         self.omega_f = np.zeros(len(self.names))  # MIT: the filtered regressor, at the step's start
@@ -124,32 +200,42 @@ class MracLaw(Law):
 
     def regressor(self, x, ref) -> tuple[np.ndarray, float]:
         """(ω, r): ω = [x; r; ψ(x)] (n_theta,), r recovered from the reference model."""
-        n = self.order
-        r = float((ref[n] + self.alpha @ ref[:n]) / self.beta)
-        parts = [np.asarray(x[:n], dtype=float), np.array([r])]
-        if self.psi is not None:
-            parts.append(np.asarray(self.psi(x), dtype=float))
-        return np.concatenate(parts), r
+        omega = np.empty(len(self.names))
+        psi = np.asarray(self.psi(x), dtype=float) if self.psi is not None else _NO_PSI
+        r = mrac_regressor(np.asarray(x, dtype=float), np.asarray(ref, dtype=float), self.alpha, self.beta, psi, omega)
+        return omega, r
 
     def __call__(self, t, x, ref, theta_hat) -> LawStep:
-        n = self.order
-        omega, r = self.regressor(x, ref)
-        u = float(theta_hat @ omega)
-        e = np.asarray(x[:n], dtype=float) - np.asarray(ref[:n], dtype=float)
-        s = float(e @ self.pb)
-        if self.rule is Rule.MIT:
+        omega, _ = self.regressor(x, ref)
+        mit = self.rule is Rule.MIT
+        if mit:
             self._stage_omegas.append(omega)
-            signal, direction = float(e[0]), self.omega_f
-        else:
-            signal, direction = s, omega
-        if self.dead_zone is None or self.dead_zone.adapting(s, float(e[0])):
-            rate = -self.sign_b * self.gamma * direction * signal
-        else:
-            rate = np.zeros(len(self.names))
+        rate = np.empty(len(self.names))
         sigma, e_mod, theta0, lower, upper = self._mod
-        # the modifications divide by a stiffness: Γ is a rate here, so 1/Γ is passed
-        modify_rate(rate, theta_hat, abs(s), sigma, e_mod, theta0, 1.0 / self.gamma, lower, upper)
-        return LawStep(u, rate, -s, float(ref[n]))
+        dz = self.dead_zone
+        u, s = mrac_values(np.asarray(x, dtype=float), np.asarray(ref, dtype=float), theta_hat, omega, self.omega_f,
+                           self.pb, self.gamma, self._inv_gamma, self.sign_b, mit, dz is None,
+                           0.0 if dz is None else dz.width, dz is None or dz.on is DeadZoneOn.S,
+                           sigma, e_mod, theta0, lower, upper, rate)
+        return LawStep(u, rate, -s, float(ref[self.order]))
+
+    def native_arrays(self) -> dict[str, Any]:
+        """What the compiled analytic loop (adaptive_mj.sim.native_analytic) takes of this law, by name: its
+        scalars as one MRAC_GAINS record ("gains") and its arrays: alpha (n,), pb (n,), gamma and 1/gamma,
+        theta0, lower, upper (n_theta,). The Lyapunov rule without ψ only (`compiled_form`)."""
+        sigma, e_mod, theta0, lower, upper = self._mod
+        dz = self.dead_zone
+        gains = MracGains(beta=self.beta, sign_b=self.sign_b, always=dz is None,
+                          dz_width=0.0 if dz is None else dz.width, dz_on_s=dz is None or dz.on is DeadZoneOn.S,
+                          sigma=sigma, e_mod=e_mod).record()
+        return {"gains": gains, "alpha": self.alpha, "pb": self.pb, "gamma": self.gamma, "inv_gamma": self._inv_gamma,
+                "theta0": theta0, "lower": lower, "upper": upper}
+
+    @property
+    def compiled_form(self) -> bool:
+        """Whether the compiled analytic loop runs this law: the Lyapunov rule (the MIT rule's filter is stepped in
+        Python), no matched nonlinear terms ψ (a Python callable), no physically consistent projection."""
+        return self.rule is Rule.LYAPUNOV and self.psi is None and not self.modification.bodies
 
     # --- the MIT rule's sensitivity filter (loop: law.has_filters) -----------------------------
     def reset(self) -> None:

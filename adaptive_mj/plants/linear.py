@@ -15,12 +15,16 @@ delay each stage's control drives that stage; with plant.input_delay = τ = D h 
 the plant is driven over step k by the control computed at stage 0 of step k - D, held over the
 step (zero before t = τ): an exact delay line of D steps on a zero-order-held input.
 
-The analytic plants are stepped in Python: the compiled MuJoCo callback (adaptive_mj.sim.native)
-does not apply to them.
+Compiled: under MRAC with the Lyapunov rule (laws.mrac) the run is stepped by adaptive_mj.sim.native_analytic,
+one numba function per chunk of steps that runs this integration, its delay line and the law's stages
+(stage.control_stage) with the same arithmetic in the same order, bit for bit (tests/test_native_analytic.py):
+loop._run_native calls step_native(n). The MIT rule (its sensitivity filter), simulation.python_callback = true,
+and any law the compiled loop does not know take the Python path: `step`, the policy called at each stage.
 """
 from __future__ import annotations
 
-from typing import Callable
+import contextlib
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -96,6 +100,7 @@ class LinearPlant(PythonStepped):
         self._ring = np.zeros(self.delay_steps + 1)  # the stage-0 controls of the last D + 1 steps
         self._k = 0
         self._force = 0.0  # the input disturbance held over the current step
+        self._advance: Callable[[int], None] | None = None  # the compiled loop's chunk (controlled_natively)
 
     @property
     def form(self):
@@ -128,6 +133,24 @@ class LinearPlant(PythonStepped):
 
     def _rate(self, x: np.ndarray, u: float) -> np.ndarray:
         return self.A @ x + self.B * (u + self._force)
+
+    # --- the compiled loop (adaptive_mj.sim.native_analytic): loop._run_native drives it like a MuJoCo plant's
+    @contextlib.contextmanager
+    def controlled_natively(self, advance: Callable[[int], None]) -> Iterator[None]:
+        """For the length of a compiled run: step_native(n) calls advance(n) (NativeAnalyticController.advance,
+        which steps this plant n steps in one compiled call)."""
+        self._advance = advance
+        try:
+            yield
+        finally:
+            self._advance = None
+
+    def step_native(self, nstep: int) -> None:
+        """nstep physics steps under the compiled loop (controlled_natively): the same steps as `step`, bit for
+        bit (tests/test_native_analytic.py)."""
+        if self._advance is None:
+            raise RuntimeError("LinearPlant.step_native outside controlled_natively(advance)")
+        self._advance(nstep)
 
     def step(self) -> None:
         h, t, x = self.dt, self._t, self.x

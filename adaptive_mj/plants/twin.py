@@ -39,7 +39,9 @@ class Integrator(enum.Enum):
 
 class PythonStepped:
     """What the plants stepped in Python (the twin, the linear plant) share: no MuJoCo warnings, and a
-    control policy (t, x) -> u installed for the length of a run (protocol.Plant.controlled_by)."""
+    control policy (t, x) -> u installed for the length of a run (protocol.Plant.controlled_by). loop asks
+    adaptive_mj.sim.native_analytic whether such a plant has a compiled loop under its law (the linear plant
+    under MRAC's Lyapunov rule: step_native); the others are stepped here, in Python."""
 
     _policy: Policy | None = None
 

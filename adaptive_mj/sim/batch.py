@@ -54,7 +54,7 @@ def run_batch(runs: Sequence[dict[str, Any]], *, nthread: int = 0, chunk: int = 
             prepared.append(prepare(**{**r, "chunk": chunk}))
         groups: dict[tuple, list[int]] = defaultdict(list)
         for i, p in enumerate(prepared):
-            if p.nc is None:
+            if p.nc is None or not p.nc.in_mujoco:  # the Python path, or an analytic plant's compiled loop
                 out[i] = drive(p, runs[i]["law"], runs[i]["reference"])
             else:
                 groups[(id(p.nc.callback), layout(p.nc.plant.model))].append(i)

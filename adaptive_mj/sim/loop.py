@@ -1,6 +1,11 @@
 """The closed loop: one definition of a control step, driven on the Python path (the policy inside
 MuJoCo's control callback, or an analytic twin's stages), on the native path (a compiled
-callback, adaptive_mj.sim.native / native_manipulator) and by adaptive_mj.env.
+callback, adaptive_mj.sim.native / native_manipulator / native_flight; for the linear plant under MRAC's
+Lyapunov rule, a compiled chunk of the plant's own RK4 steps, adaptive_mj.sim.native_analytic) and by
+adaptive_mj.env. The native path is taken wherever the plant and law have one (`_native_controller`; else,
+and with simulation.python_callback = true, the Python path): what is compiled is the MuJoCo plants' sliding
+laws, composite adaptation and law plugins, the arms' and the quadrotor's laws, and the linear plant with
+MRAC; the analytic twin, the wing-rock plant and the MIT rule run in Python.
 
 The order of a control step, written once:
     events due → measure (true state + the step's noise) → reference → law (at the integrator's
@@ -41,6 +46,7 @@ from adaptive_mj.laws.common import LawStep
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.plants import Event, plant_order
 from adaptive_mj.plants.protocol import CtrlRange, Plant, control_shape, has_joints, termination
+from adaptive_mj.plants.twin import PythonStepped
 from adaptive_mj.sim import stage as st
 from adaptive_mj.sim.interrupt import deferred
 from adaptive_mj.sim.stage import TABLEAU, ControlTiming
@@ -505,6 +511,9 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
     make: Callable[..., ContextOwner]
     if getattr(plant, "state_names", ()):  # a quadrotor: its own compiled callback (the flight kernel inside)
         from adaptive_mj.sim.native_flight import NativeFlightController as make, supported
+    elif isinstance(plant, PythonStepped):  # an analytic plant: its compiled loop where there is one (the linear
+        # plant under MRAC: one compiled call steps a chunk), else the Python path
+        from adaptive_mj.sim.native_analytic import NativeAnalyticController as make, supported
     elif plant.joint_shape:  # a manipulator: its own compiled callback (regressor inside)
         from adaptive_mj.sim.native_manipulator import NativeManipulatorController as make, supported
     else:

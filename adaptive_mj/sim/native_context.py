@@ -228,6 +228,7 @@ class ContextOwner:
     callback: Any  # the numba cfunc MuJoCo calls
     theta: np.ndarray
     max_rows: int  # the most physics steps one chunk takes (its buffers' rows)
+    in_mujoco = True  # the plant steps in MuJoCo (mj_step calls `callback`); False: an analytic plant's compiled loop
 
     def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat), each (rows, ...)."""
