@@ -189,6 +189,11 @@ class MracLaw(Law):
         self._mod = self.modification.arrays(len(self.names))
         # the modifications divide by a stiffness: Γ is a rate here, so 1/Γ is passed to them
         self._inv_gamma = 1.0 / self.gamma
+        # the scalars mrac_values takes, made once: the Python path reads them here, the compiled loop as a record
+        self._scalars = MracGains(beta=self.beta, sign_b=self.sign_b, always=dead_zone is None,
+                                  dz_width=0.0 if dead_zone is None else dead_zone.width,
+                                  dz_on_s=dead_zone is None or dead_zone.on is DeadZoneOn.S,
+                                  sigma=self._mod[0], e_mod=self._mod[1])
         self.pb = np.array([1.0]) if order == 1 else lyapunov_matrix(self.alpha)[:, -1]  # P b_n
         self.has_filters = self.rule is Rule.MIT
         self.omega_f = np.zeros(len(self.names))  # MIT: the filtered regressor, at the step's start
@@ -211,24 +216,20 @@ class MracLaw(Law):
         if mit:
             self._stage_omegas.append(omega)
         rate = np.empty(len(self.names))
-        sigma, e_mod, theta0, lower, upper = self._mod
-        dz = self.dead_zone
+        _, _, theta0, lower, upper = self._mod
+        g = self._scalars
         u, s = mrac_values(np.asarray(x, dtype=float), np.asarray(ref, dtype=float), theta_hat, omega, self.omega_f,
-                           self.pb, self.gamma, self._inv_gamma, self.sign_b, mit, dz is None,
-                           0.0 if dz is None else dz.width, dz is None or dz.on is DeadZoneOn.S,
-                           sigma, e_mod, theta0, lower, upper, rate)
+                           self.pb, self.gamma, self._inv_gamma, g.sign_b, mit, g.always, g.dz_width, g.dz_on_s,
+                           g.sigma, g.e_mod, theta0, lower, upper, rate)
         return LawStep(u, rate, -s, float(ref[self.order]))
 
     def native_arrays(self) -> dict[str, Any]:
         """What the compiled analytic loop (adaptive_mj.sim.native_analytic) takes of this law, by name: its
         scalars as one MRAC_GAINS record ("gains") and its arrays: alpha (n,), pb (n,), gamma and 1/gamma,
         theta0, lower, upper (n_theta,). The Lyapunov rule without ψ only (`compiled_form`)."""
-        sigma, e_mod, theta0, lower, upper = self._mod
-        dz = self.dead_zone
-        gains = MracGains(beta=self.beta, sign_b=self.sign_b, always=dz is None,
-                          dz_width=0.0 if dz is None else dz.width, dz_on_s=dz is None or dz.on is DeadZoneOn.S,
-                          sigma=sigma, e_mod=e_mod).record()
-        return {"gains": gains, "alpha": self.alpha, "pb": self.pb, "gamma": self.gamma, "inv_gamma": self._inv_gamma,
+        _, _, theta0, lower, upper = self._mod
+        return {"gains": self._scalars.record(), "alpha": self.alpha, "pb": self.pb, "gamma": self.gamma,
+                "inv_gamma": self._inv_gamma,
                 "theta0": theta0, "lower": lower, "upper": upper}
 
     @property

@@ -82,9 +82,10 @@ CONTEXT = native_step.context_dtype([  # after stage.control_stage's fields (nat
     # stage's [φ, f, h] (the law's, for the sums when the stage's control is applied)
     ("kappa", _f8), ("fgain", _f8), ("zf", _i8), ("fpend", _i8), ("fval", _i8),
     # order 3 (the heave vehicle with its thruster lag, plants.heave.HeavePlant.measure): y'' from the thrust state
-    # act[act_adr] and the forces on the body `body`; applied_row: the external force the step's row reads, as the
-    # Python path's observe() does before the step (the force the step before held)
-    ("act_adr", _i8), ("body", _i8), ("applied_row", _f8),
+    # act[act_adr] and the forces on the body `body`; gear_w, gain_w: the widths of MjModel's actuator_gear and
+    # actuator_gainprm rows; applied_row: the external force the step's row reads, as the Python path's observe()
+    # does before the step (the force the step before held)
+    ("act_adr", _i8), ("body", _i8), ("gear_w", _i8), ("gain_w", _i8), ("applied_row", _f8),
 ])
 _compiled: dict = {}
 
@@ -184,8 +185,8 @@ def _acceleration(ctx, base, mbase, off, applied):
     same operations in the same order: (gear·gain·act + qfrc_passive − qfrc_bias + applied) / (mass + armature),
     the forces MuJoCo computed for this stage, `applied` the external force [N]."""
     a, dof, b = ctx.act, ctx.dadr, ctx.body
-    gear = carray(fptr(pointer_at(mbase, off.actuator_gear)), (a + 1) * 6)[a * 6]  # noqa: F821 (injected)
-    gain = carray(fptr(pointer_at(mbase, off.actuator_gainprm)), (a + 1) * 10)[a * 10]  # noqa: F821 (injected)
+    gear = carray(fptr(pointer_at(mbase, off.actuator_gear)), (a + 1) * ctx.gear_w)[a * ctx.gear_w]  # noqa: F821
+    gain = carray(fptr(pointer_at(mbase, off.actuator_gainprm)), (a + 1) * ctx.gain_w)[a * ctx.gain_w]  # noqa: F821
     act = carray(fptr(pointer_at(base, off.act)), ctx.act_adr + 1)[ctx.act_adr]  # noqa: F821 (injected)
     passive = carray(fptr(pointer_at(base, off.qfrc_passive)), dof + 1)[dof]  # noqa: F821 (injected)
     bias = carray(fptr(pointer_at(base, off.qfrc_bias)), dof + 1)[dof]  # noqa: F821 (injected)
@@ -400,12 +401,12 @@ class NativeController(ContextOwner):
         c["delay"], c["mode"], c["period_steps"], c["period"] = control.delay, control.mode, control.steps, \
             control.period
         c["has_dist"] = int(plant.disturbance is not None)
-        if n == 3:  # y'' read as the plant's measure does (_acceleration: MuJoCo's gear and gain layout)
-            if not plant.native_third_state or (plant.model.actuator_gear.shape[1],
-                                                plant.model.actuator_gainprm.shape[1]) != (6, 10):
+        if n == 3:  # y'' read as the plant's measure does (_acceleration)
+            if plant.native_third_state is None:
                 raise ValueError(f"the native callback reads the third state of the heave vehicle with its thruster "
                                  f"lag only, not of a {type(plant).__name__}")
             c["act_adr"], c["body"] = plant.native_third_state
+            c["gear_w"], c["gain_w"] = plant.model.actuator_gear.shape[1], plant.model.actuator_gainprm.shape[1]
         c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
         c["gains"] = self.gains.ctypes.data  # the law's record (kept alive by self.gains)
         for name, buf in self.buffers.items():

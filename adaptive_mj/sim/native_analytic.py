@@ -217,7 +217,16 @@ def compiled():
 
 def _gemv_agrees(A: np.ndarray) -> bool:
     """Whether numba's np.dot(A, x) (the compiled loop's A x) gives numpy's A @ x bit for bit on this machine
-    (both call a BLAS, not necessarily the same library), on a few vectors of this A."""
+    (both call a BLAS, not necessarily the same library), on a few vectors of this A (the answer kept per A: a
+    study's runs of one plant ask once)."""
+    known = _compiled.setdefault("gemv_agrees", {})
+    key = (A.shape, A.tobytes())
+    if key not in known:
+        known[key] = _gemv_check(A)
+    return known[key]
+
+
+def _gemv_check(A: np.ndarray) -> bool:
     if "gemv" not in _compiled:
         import numba
 
@@ -329,9 +338,11 @@ class NativeAnalyticController(ContextOwner):
             values = np.stack([np.asarray(self.reference(float(s), n), dtype=float) for s in times], axis=1)
         self.buffers["ref"][: rows * self.nst * (n + 1)] = np.moveaxis(values, 1, 0)[which].ravel()
         self.buffers["noise"][: rows * n] = 0.0 if noise is None else noise.ravel()
-        for k in range(rows):  # LinearPlant.step's force, the same arithmetic
-            self.dist[k] = plant.force_offset + (plant.disturbance(float(t[k])) if plant.disturbance is not None
-                                                 else 0.0)
+        if plant.disturbance is None:  # LinearPlant.step's force, the same arithmetic: the offset + 0.0
+            self.dist[:rows] = plant.force_offset + 0.0
+        else:
+            for k in range(rows):
+                self.dist[k] = plant.force_offset + plant.disturbance(float(t[k]))
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"], c["k"] = 0, 0, rows, t[0], plant._k
 
