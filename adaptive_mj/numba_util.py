@@ -79,6 +79,9 @@ def jit_tree(fn: Callable, njit: Callable, *, tag: str = "", seen: dict | None =
             g[name] = replace[name]
             continue
         value = g.get(name)
+        if value is scalar_power:  # the C library's pow, its exponent hidden from the optimiser
+            g[name] = libm_pow()
+            continue
         if isinstance(value, pytypes.FunctionType) and not _is_jitted(value):
             g[name] = jit_tree(value, inner or njit, tag=tag, seen=seen, inner=inner)
     code = fn.__code__
@@ -133,3 +136,48 @@ def address_of():
         return sig, codegen
 
     return address
+
+
+def scalar_power(v, e):
+    """v ** e as numpy computes it for a float64 scalar v (and Python for a float): the C library's pow(v, e).
+
+    Write a power in a plant's form (a ModelForm's φ, f, h) with it where the compiled and Python paths must agree
+    bit for bit: numba (and numpy for an array) turns a constant exponent 2 into v·v, which is correctly rounded
+    where pow may be one unit in the last place off, so the two paths part. jit_tree compiles this function as
+    `libm_pow`: the same pow, called with the exponent hidden from the optimiser."""
+    return v ** e
+
+
+_INTRINSICS: dict[str, Any] = {}
+
+
+def libm_pow():
+    """A numba intrinsic (made once per process): pow(v, e) of the C library for float64 v and e, through LLVM's
+    llvm.pow with e passed through an empty inline-assembly barrier, so that no constant exponent is folded into
+    multiplications (numba lowers v ** 2 to v·v). The machine's register class for a double: "x" (x86-64, SSE) or
+    "w" (AArch64); on another machine no barrier (its v ** 2 may then be v·v)."""
+    if "libm_pow" in _INTRINSICS:
+        return _INTRINSICS["libm_pow"]
+    import platform
+
+    from llvmlite import ir
+    from numba import types
+    from numba.extending import intrinsic
+
+    reg = {"x86_64": "x", "amd64": "x", "aarch64": "w", "arm64": "w"}.get(platform.machine().lower())
+
+    @intrinsic
+    def libm_pow_(typingctx, v, e):
+        sig = types.float64(types.float64, types.float64)
+
+        def codegen(context, builder, signature, args):
+            x, y = args
+            dbl = ir.DoubleType()
+            if reg is not None:
+                y = builder.asm(ir.FunctionType(dbl, [dbl]), "", f"={reg},0", [y], side_effect=False)
+            return builder.call(builder.module.declare_intrinsic("llvm.pow", [dbl]), [x, y])
+
+        return sig, codegen
+
+    _INTRINSICS["libm_pow"] = libm_pow_
+    return libm_pow_

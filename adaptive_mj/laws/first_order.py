@@ -8,21 +8,68 @@
 With a common.Modification: p̂' -= (σ + ν|x̃|)(p̂ - p₀)/gamma, projected onto a box.
 
 This is the n = 1 sliding law with d = 1 known and s = x̃; it is kept as its
-own class because it is the lecture's first example, written in its notation.
+own class because it is the lecture's first example, written in its notation. Its arithmetic is
+`first_order_values`, plain loops that the Python class calls and the analytic twin's compiled loop
+(adaptive_mj.sim.native_twin) compiles.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from adaptive_mj.form import ModelForm
 from adaptive_mj.keys import Table
-from adaptive_mj.laws.common import NO_MODIFICATION, DeadZone, LawStep, Modification, as_gamma, modify_rate
+from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, Gains, LawStep, Modification, as_gamma,
+                                     dead_zone_open, modify_rate, record_dtype)
 from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, Law, SurfaceFeedback
 from adaptive_mj.laws.sliding import model_law_keys, read_model_law
 from adaptive_mj.specs import LawSpec, PlantSpec
+
+
+@dataclass(frozen=True)
+class FirstOrderGains(Gains):
+    """The first-order law's scalars, by name: what `first_order_values` reads of them (the compiled loop reads
+    the same names as fields of a FIRST_ORDER_GAINS record, `record()`, through its address).
+
+    k: gain on x̃ [u per unit of x]; dead_zone: adaptation stops while |x̃| < dz_width (False: it never stops);
+    sigma, e_mod: the leakage (common.modify_rate)."""
+
+    k: float
+    dz_width: float
+    sigma: float
+    e_mod: float
+    dead_zone: bool
+
+
+FIRST_ORDER_GAINS = record_dtype(FirstOrderGains)
+
+
+def first_order_values(x, ref, theta, gains, gamma, theta0, lower, upper, phi, f, h, rate):
+    """One evaluation of the lecture's first-order law at x (1,) on ref (2,) = [x_d, x_d'] with θ̂ theta (n_p,),
+    the form's values phi (n_p,), f, h at x; gains: FirstOrderGains (or its record); gamma, theta0, lower, upper
+    (n_p,): the adaptation gains, the leakage's prior and the projection's box. Writes θ̂' into rate (n_p,) and
+    returns (u, x̃):
+
+        x̃ = x_d - x,   u = (x_d' - f - φ·θ̂ + k x̃) / h,   θ̂' = -φ x̃ / γ  [- (σ + ν|x̃|)(θ̂ - θ₀)/γ, projected]
+
+    Plain loops (φ·θ̂ summed from 0, as numpy's dot of a short vector sums it), so numba compiles it."""
+    x_tilde = ref[0] - x[0]
+    dot = 0.0
+    for j in range(phi.shape[0]):
+        dot += phi[j] * theta[j]
+    u = (ref[1] - f - dot + gains.k * x_tilde) / h
+    if not gains.dead_zone or dead_zone_open(x_tilde, gains.dz_width):
+        for j in range(phi.shape[0]):
+            rate[j] = -phi[j] * x_tilde / gamma[j]
+    else:
+        for j in range(phi.shape[0]):
+            rate[j] = 0.0
+    modify_rate(rate, theta, abs(x_tilde), gains.sigma, gains.e_mod, theta0, gamma, lower, upper)
+    return u, x_tilde
 
 
 class FirstOrderAdaptiveLaw(Law):
@@ -45,7 +92,9 @@ class FirstOrderAdaptiveLaw(Law):
         self.gamma = as_gamma(gamma, len(self.names))
         self.dead_zone = dead_zone
         self.modification = modification or NO_MODIFICATION
-        self._mod = self.modification.arrays(len(self.names))
+        sigma, e_mod, self._theta0, self._lower, self._upper = self.modification.arrays(len(self.names))
+        self.gains = FirstOrderGains(self.k, dead_zone.width if dead_zone is not None else 0.0, sigma, e_mod,
+                                     dead_zone is not None)
 
     @property
     def bounds(self) -> Box | None:
@@ -58,16 +107,16 @@ class FirstOrderAdaptiveLaw(Law):
 
     def __call__(self, t, x, ref, theta_hat) -> LawStep:
         form = self.form
-        x_tilde = float(ref[0] - x[0])
-        phi = form.phi(x)
-        u = (ref[1] - form.f(x) - float(phi @ theta_hat) + self.k * x_tilde) / form.h(x)
-        if self.dead_zone is None or self.dead_zone.adapting(x_tilde, x_tilde):
-            rate = -phi * x_tilde / self.gamma
-        else:
-            rate = np.zeros(len(self.names))
-        sigma, e_mod, theta0, lower, upper = self._mod
-        modify_rate(rate, theta_hat, abs(x_tilde), sigma, e_mod, theta0, self.gamma, lower, upper)
-        return LawStep(u, rate, x_tilde, float(ref[1]))
+        rate = np.empty(len(self.names))
+        u, x_tilde = first_order_values(x, ref, theta_hat, self.gains, self.gamma, self._theta0, self._lower,
+                                        self._upper, form.phi(x), form.f(x), form.h(x), rate)
+        return LawStep(float(u), rate, float(x_tilde), float(ref[1]))
+
+    def native_arrays(self) -> dict[str, Any]:
+        """What the twin's compiled loop (adaptive_mj.sim.native_twin) takes of this law, by name: "gains", the
+        FIRST_ORDER_GAINS record, and the arrays gamma, theta0, lower, upper (n_p,)."""
+        return {"gains": self.gains.record(), "gamma": self.gamma, "theta0": self._theta0, "lower": self._lower,
+                "upper": self._upper}
 
     def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
         """V = ½ x̃² + ½ sum_i gamma_i p̃_i²."""

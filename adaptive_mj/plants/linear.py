@@ -23,8 +23,7 @@ and any law the compiled loop does not know take the Python path: `step`, the po
 """
 from __future__ import annotations
 
-import contextlib
-from typing import Callable, Iterator
+from typing import Callable
 
 import numpy as np
 
@@ -78,6 +77,7 @@ class LinearPlant(PythonStepped):
     joint_shape: tuple[int, ...] = ()
     joint_names: tuple[str, ...] = ()
     first_contact: tuple[float, str] | None = None
+    compiled_loop = "adaptive_mj.sim.native_analytic"
     joint_limits: np.ndarray | None = None  # a 1-DOF plant's joint is not limited
     order = 1
     stages = 4
@@ -100,7 +100,6 @@ class LinearPlant(PythonStepped):
         self._ring = np.zeros(self.delay_steps + 1)  # the stage-0 controls of the last D + 1 steps
         self._k = 0
         self._force = 0.0  # the input disturbance held over the current step
-        self._advance: Callable[[int], None] | None = None  # the compiled loop's chunk (controlled_natively)
 
     @property
     def form(self):
@@ -133,24 +132,6 @@ class LinearPlant(PythonStepped):
 
     def _rate(self, x: np.ndarray, u: float) -> np.ndarray:
         return self.A @ x + self.B * (u + self._force)
-
-    # --- the compiled loop (adaptive_mj.sim.native_analytic): loop._run_native drives it like a MuJoCo plant's
-    @contextlib.contextmanager
-    def controlled_natively(self, advance: Callable[[int], None]) -> Iterator[None]:
-        """For the length of a compiled run: step_native(n) calls advance(n) (NativeAnalyticController.advance,
-        which steps this plant n steps in one compiled call)."""
-        self._advance = advance
-        try:
-            yield
-        finally:
-            self._advance = None
-
-    def step_native(self, nstep: int) -> None:
-        """nstep physics steps under the compiled loop (controlled_natively): the same steps as `step`, bit for
-        bit (tests/test_native_analytic.py)."""
-        if self._advance is None:
-            raise RuntimeError("LinearPlant.step_native outside controlled_natively(advance)")
-        self._advance(nstep)
 
     def step(self) -> None:
         h, t, x = self.dt, self._t, self.x

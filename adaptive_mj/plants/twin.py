@@ -27,6 +27,7 @@ from adaptive_mj.plants.kinds import PlantKind, first_order, register
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
+from adaptive_mj.numba_util import scalar_power
 
 if TYPE_CHECKING:
     from adaptive_mj.plants.mujoco_plant import MujocoPlant
@@ -38,12 +39,17 @@ class Integrator(enum.Enum):
 
 
 class PythonStepped:
-    """What the plants stepped in Python (the twin, the linear plant) share: no MuJoCo warnings, and a
-    control policy (t, x) -> u installed for the length of a run (protocol.Plant.controlled_by). loop asks
-    adaptive_mj.sim.native_analytic whether such a plant has a compiled loop under its law (the linear plant
-    under MRAC's Lyapunov rule: step_native); the others are stepped here, in Python."""
+    """What the plants stepped without MuJoCo (the twin, the linear plant) share: no MuJoCo warnings, a control
+    policy (t, x) -> u installed for the length of a run (protocol.Plant.controlled_by), and the hook of a
+    compiled loop. `compiled_loop` names the module of the plant's compiled closed loop (its `supported(plant,
+    law)` and `Controller`: adaptive_mj.sim.native_analytic for the linear plant under MRAC's Lyapunov rule,
+    adaptive_mj.sim.native_twin for the twin under the first-order or a sliding law); loop._native_controller
+    asks it whether it runs this plant under the run's law, and then drives it chunk by chunk through
+    controlled_natively/step_native like a MuJoCo plant. Every other run is stepped here, in Python (`step`)."""
 
     _policy: Policy | None = None
+    _advance: Callable[[int], None] | None = None  # the compiled loop's chunk (controlled_natively)
+    compiled_loop: str | None = None  # the module of this plant's compiled loop, or None: none
 
     def instability(self) -> str | None:
         return None
@@ -64,6 +70,23 @@ class PythonStepped:
         finally:
             self._policy = None
 
+    @contextlib.contextmanager
+    def controlled_natively(self, advance: Callable[[int], None]) -> Iterator[None]:
+        """For the length of a compiled run: step_native(n) calls advance(n) (the compiled loop's controller,
+        which steps this plant n steps in one compiled call)."""
+        self._advance = advance
+        try:
+            yield
+        finally:
+            self._advance = None
+
+    def step_native(self, nstep: int) -> None:
+        """nstep physics steps under the compiled loop (controlled_natively): the same steps as `step`, bit for
+        bit (tests/test_native_analytic.py, tests/test_native_twin.py)."""
+        if self._advance is None:
+            raise RuntimeError(f"{type(self).__name__}.step_native outside controlled_natively(advance)")
+        self._advance(nstep)
+
 
 class TwinPlant(PythonStepped):
     """form: the plant's structure; theta: (n_theta,) true parameters;
@@ -74,6 +97,7 @@ class TwinPlant(PythonStepped):
     joint_names: tuple[str, ...] = ()
     first_contact: tuple[float, str] | None = None  # no contacts in the analytic twin
     joint_limits: np.ndarray | None = None  # a 1-DOF plant's joint is not limited
+    compiled_loop = "adaptive_mj.sim.native_twin"
 
     def __init__(self, form: ModelForm, theta, *, dt: float, integrator: Integrator = Integrator.RK4,
                  ctrl_range: tuple[float, float] | None = None, x0=None):
@@ -124,6 +148,16 @@ class TwinPlant(PythonStepped):
         """Change the true parameters (an event on the twin)."""
         self._theta = np.array(theta, dtype=float)
 
+    @property
+    def form_theta(self) -> np.ndarray:
+        """(n_theta,) θ of the form this plant integrates (its true parameters; a subclass may name others)."""
+        return self._theta
+
+    def moved_to(self, t: float, steps: int) -> None:
+        """The compiled loop (adaptive_mj.sim.native_twin) stepped `steps` steps and left the time at t [s]."""
+        self._t = t
+        self._step_index += steps
+
     def _rate(self, t: float, x: np.ndarray) -> np.ndarray:
         if self._policy is None:
             raise RuntimeError("TwinPlant.step outside controlled_by(policy)")
@@ -168,8 +202,9 @@ def lecture_first_order_form() -> ModelForm:
 
 
 def sin_squared_form() -> ModelForm:
-    """The lecture's phase-space example: x' = sin²(x) p + u (one unknown p, f = 0)."""
-    return ModelForm(order=1, p_names=("p",), phi=lambda x: np.array([np.sin(x[0]) ** 2]), d_name=None)
+    """The lecture's phase-space example: x' = sin²(x) p + u (one unknown p, f = 0). sin² is numpy's scalar
+    power (numba_util.scalar_power: the C library's pow, which the compiled loop calls too)."""
+    return ModelForm(order=1, p_names=("p",), phi=lambda x: np.array([scalar_power(np.sin(x[0]), 2)]), d_name=None)
 
 
 def twin_of(plant: MujocoPlant, *, integrator: Integrator | None = None) -> TwinPlant:

@@ -1,11 +1,13 @@
 """The closed loop: one definition of a control step, driven on the Python path (the policy inside
 MuJoCo's control callback, or an analytic twin's stages), on the native path (a compiled
-callback, adaptive_mj.sim.native / native_manipulator / native_flight; for the linear plant under MRAC's
-Lyapunov rule, a compiled chunk of the plant's own RK4 steps, adaptive_mj.sim.native_analytic) and by
-adaptive_mj.env. The native path is taken wherever the plant and law have one (`_native_controller`; else,
-and with simulation.python_callback = true, the Python path): what is compiled is the MuJoCo plants' sliding
-laws, composite adaptation and law plugins, the arms' and the quadrotor's laws, and the linear plant with
-MRAC; the analytic twin, the wing-rock plant and the MIT rule run in Python.
+callback, adaptive_mj.sim.native / native_manipulator / native_flight; for an analytic plant, a compiled chunk of
+the plant's own steps: the linear plant under MRAC's Lyapunov rule, adaptive_mj.sim.native_analytic, and the
+analytic twin under the first-order or a sliding law, adaptive_mj.sim.native_twin) and by adaptive_mj.env. The
+native path is taken wherever the plant and law have one (`_native_controller`; else, and with
+simulation.python_callback = true, the Python path): what is compiled is the MuJoCo plants' sliding laws,
+composite adaptation and law plugins, the arms' and the quadrotor's laws, the linear plant with MRAC and the twin
+with the first-order and sliding laws; the wing-rock plant, the MIT rule and the twin under composite adaptation
+run in Python.
 
 The order of a control step, written once:
     events due → measure (true state + the step's noise) → reference → law (at the integrator's
@@ -34,6 +36,7 @@ itself (adaptive_mj.sim.native, laws.composite), the quadrotor's L1 filters like
 """
 from __future__ import annotations
 
+import importlib
 import math
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -503,6 +506,20 @@ def native_steps(plant: Plant, nc: ContextOwner, rows: Rows, queue: EventQueue, 
     return Status.OK, ""
 
 
+def compile_native(plant: Plant, law: Law, reference, theta_hat0) -> bool:
+    """Compile (or load from numba's disk cache) the native controller a run of this plant and law would take, and
+    run nothing: a parent process does it before it forks its workers, so they do not each compile the same
+    variant. True where there is one (every shape: the 1-DOF, arm and quadrotor callbacks, the analytic plants'
+    compiled loops)."""
+    timing = ControlTiming(period=plant.dt)
+    nc = _native_controller(plant, law, reference, np.asarray(theta_hat0, dtype=float), timing, None, chunk=1)
+    if nc is None:
+        return False
+    if nc.in_mujoco:  # the controller bound itself to the plant's MjData: let it go
+        nc.__exit__(None, None, None)
+    return True
+
+
 def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: ControlTiming,
                        native: bool | None, sensors: st.Sensors | None = None,
                        chunk: int = NATIVE_CHUNK) -> ContextOwner | None:
@@ -511,9 +528,13 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
     make: Callable[..., ContextOwner]
     if getattr(plant, "state_names", ()):  # a quadrotor: its own compiled callback (the flight kernel inside)
         from adaptive_mj.sim.native_flight import NativeFlightController as make, supported
-    elif isinstance(plant, PythonStepped):  # an analytic plant: its compiled loop where there is one (the linear
-        # plant under MRAC: one compiled call steps a chunk), else the Python path
-        from adaptive_mj.sim.native_analytic import NativeAnalyticController as make, supported
+    elif isinstance(plant, PythonStepped):  # an analytic plant: the compiled loop it names where there is one (the
+        # linear plant under MRAC, the twin under the first-order or a sliding law: one compiled call steps a chunk),
+        # else the Python path
+        if plant.compiled_loop is None:
+            return None
+        loop_module = importlib.import_module(plant.compiled_loop)
+        make, supported = loop_module.Controller, loop_module.supported
     elif plant.joint_shape:  # a manipulator: its own compiled callback (regressor inside)
         from adaptive_mj.sim.native_manipulator import NativeManipulatorController as make, supported
     else:

@@ -372,3 +372,7 @@ class NativeAnalyticController(ContextOwner):
         return (b["rec_t"][:rows].copy(), b["rec_y"][:rows].reshape(rows, 1).copy(), b["rec_u"][:rows].copy(),
                 b["rec_s"][:rows].copy(), b["rec_ref"][: rows * (n + 1)].reshape(rows, n + 1).copy(),
                 b["rec_theta"][: rows * self.nth].reshape(rows, self.nth).copy())
+
+
+#: what loop._native_controller takes of a compiled loop's module (plants.twin.PythonStepped.compiled_loop)
+Controller = NativeAnalyticController

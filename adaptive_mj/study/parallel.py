@@ -30,7 +30,7 @@ from contextlib import contextmanager
 from typing import Callable, Iterator, Sequence, cast
 
 from adaptive_mj.sim import interrupt
-from adaptive_mj.errors import AdaptiveMJError, Interrupted
+from adaptive_mj.errors import Interrupted
 # Job, JobResult and Backend are imported from here by the study's commands, tests and benchmarks
 from adaptive_mj.study.job import (STOP_TIMEOUT, Backend, Job, JobResult, interrupted_note, run_in_worker, run_job,
                                    run_jobs_batched)
@@ -272,11 +272,14 @@ def _worker_context(jobs: Sequence[Job]):
 
 
 def _prewarm(jobs: Sequence[Job]) -> None:
-    """Compile the native callback of each distinct scenario file among the jobs (in this process)."""
-    from adaptive_mj.plants.protocol import has_form
-    from adaptive_mj.sim import native
+    """Compile the native controller of each distinct scenario file among the jobs (in this process): the 1-DOF,
+    arm and quadrotor callbacks and the analytic plants' compiled loops (loop.compile_native)."""
+    import contextlib
+    import io
+
     from adaptive_mj.setup import scenario as sc
     from adaptive_mj.setup.build import build
+    from adaptive_mj.sim.loop import compile_native
 
     seen = set()
     for job in jobs:
@@ -285,15 +288,10 @@ def _prewarm(jobs: Sequence[Job]) -> None:
         seen.add(job.scenario)
         try:
             setup = build(sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed))
-            if native.supported(setup.plant, setup.law) and has_form(setup.plant):  # supported: a 1-DOF plant
-                native.compiled(setup.plant.form, plugin=setup.law.native_params().get("plugin_law"))
-            elif setup.plant.joint_shape:
-                from adaptive_mj.sim import native_manipulator
-
-                if native_manipulator.supported(setup.plant, setup.law):
-                    native_manipulator.compiled(native_manipulator.plugin_functions(setup.law))
-        except AdaptiveMJError:
-            continue  # the worker reports it
+            with contextlib.redirect_stderr(io.StringIO()):  # a plugin's "could not be compiled": the worker says it
+                compile_native(setup.plant, setup.law, setup.reference, setup.theta_hat0)
+        except Exception:  # noqa: BLE001 (only a head start: the worker runs the job and reports what is wrong)
+            continue
 
 
 PLAIN_PROGRESS_EVERY = 5.0  # s between progress lines when stderr is not a terminal
