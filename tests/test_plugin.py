@@ -258,6 +258,24 @@ def test_plugin_runs_natively_and_matches_its_python_path(on_path):
     assert np.abs(py.theta_hat[-1] - py.theta_hat[0]).max() > 0  # it adapts
 
 
+def test_plugin_runs_compiled_on_the_twin_bit_for_bit(on_path):
+    """The plugin's scenario on the analytic twin (plant.backend = "twin"): the twin's compiled loop
+    (adaptive_mj.sim.native_twin) runs the plugin's function and gives the Python path's rows bit for bit."""
+    from adaptive_mj import run
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.scenario import load
+
+    out = []
+    for native in (False, True):
+        s = build(load(SCENARIO, overrides=["simulation.duration=1", "plant.backend='twin'"]))
+        out.append(run(s.plant, s.law, s.reference, duration=1.0, theta_hat0=s.theta_hat0, native=native))
+    py, nat = out
+    assert nat.meta["native"] and not py.meta["native"]
+    for f in ("t", "x", "u", "s", "ref", "theta_hat"):
+        np.testing.assert_array_equal(getattr(nat, f), getattr(py, f), err_msg=f)
+    assert np.abs(py.theta_hat[-1] - py.theta_hat[0]).max() > 0  # it adapts
+
+
 def test_a_law_numba_cannot_compile_runs_in_python_with_one_line(on_path, capsys):
     from adaptive_mj import run
     from adaptive_mj.setup.build import build
