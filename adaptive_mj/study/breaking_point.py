@@ -20,6 +20,14 @@ worst ⌈10 %⌉ of seeds: with 5 seeds, the worst one); at first_fail: the fail
 Searches for many (scenario, law, stressor) triples run in lockstep: every bisection
 level of every search is one batch of parallel runs (adaptive_mj.study.parallel), so
 the study takes (2 + steps) batches whatever its size. Every run's MCAP log is kept.
+
+Screening (`screen=True`, the stress study's): a value is run on its first seed alone, and on
+the others only if that one passed. A value whose first seed fails fails whatever the others
+do, so the bisection takes the same path to the same margin and first_fail, and the margin's
+seeds (all of which passed) are all run; at the end each search's first_fail is completed on its
+other seeds, so its failure rate is over every seed as before. What is skipped: the other seeds
+of the failing values the bisection passed on the way (2 batches per level instead of 1, and
+one more at the end).
 """
 from __future__ import annotations
 
@@ -218,41 +226,91 @@ def _midpoints(searches: Sequence[Search], brackets: list[tuple[float, float] | 
     return wanted
 
 
+class _Batches:
+    """The runs of search_all's batches: each (search, value) on its seeds, the Evaluations kept in `margins`."""
+
+    def __init__(self, searches: Sequence[Search], margins: list[Margin], *, seeds: int, logs: Path, n_jobs: int,
+                 backend: Backend | None, on_done: Callable[[JobResult], None] | None, keep_trajectory: bool,
+                 screen: bool):
+        self.searches, self.margins, self.seeds, self.logs = searches, margins, seeds, logs
+        self.n_jobs, self.backend, self.on_done, self.keep_trajectory = n_jobs, backend, on_done, keep_trajectory
+        self.screen = screen and seeds > 1
+
+    def jobs_for(self, i: int, value: float, which: range) -> list[Job]:
+        s = self.searches[i]
+        safe = _file_name(s.label.replace("/", "-"))
+        text = str(int(value)) if s.stressor.integer else f"{value:.6g}"
+        return [Job(s.scenario, overrides=(REFUSE_UNSTABLE, *s.overrides, *s.stressor.overrides(value)), seed=k,
+                    log=self.logs / safe / f"{_file_name(s.stressor.name)}={text}-seed{k}.mcap",
+                    tag=f"{s.label} {s.stressor.name}={text} seed {k}", keep_trajectory=self.keep_trajectory)
+                for k in which]
+
+    def run(self, batch: list[tuple[int, float, range]]) -> list[list[JobResult]]:
+        """The results of each (search, value, seeds) of one batch of parallel runs, in order."""
+        jobs = [job for i, v, which in batch for job in self.jobs_for(i, v, which)]
+        results = run_jobs(jobs, n_jobs=self.n_jobs, on_done=self.on_done, backend=self.backend) if jobs else []
+        out, start = [], 0
+        for _, _, which in batch:
+            out.append(results[start:start + len(which)])
+            start += len(which)
+        return out
+
+    def seeds_of(self, i: int, first: int = 0) -> range:
+        """Search i's seeds from its `first`-th on."""
+        return range(self.searches[i].seed + first, self.searches[i].seed + self.seeds)
+
+    def evaluate(self, wanted: list[tuple[int, float]]) -> list[Evaluation]:
+        """Each (search, value) of `wanted` run (screened: the first seed, then the others where it passed)."""
+        if self.screen:
+            chunks = self.run([(i, v, self.seeds_of(i)[:1]) for i, v in wanted])
+            go_on = [n for n, ((i, _), c) in enumerate(zip(wanted, chunks, strict=True))
+                     if passes(c[0], self.searches[i].tail_bound)]
+            rest = self.run([(wanted[n][0], wanted[n][1], self.seeds_of(wanted[n][0], 1)) for n in go_on])
+            for n, more in zip(go_on, rest, strict=True):
+                chunks[n] = chunks[n] + more
+        else:
+            chunks = self.run([(i, v, self.seeds_of(i)) for i, v in wanted])
+        out = []
+        for (i, v), chunk in zip(wanted, chunks, strict=True):
+            bound = self.searches[i].tail_bound
+            ev = Evaluation(v, [_tail(r, bound) for r in chunk], [r.status for r in chunk],
+                            [_raw_tail(r) for r in chunk])
+            self.margins[i].evaluations.append(ev)
+            out.append(ev)
+        return out
+
+    def complete_first_fails(self) -> None:
+        """Screened: each search's first_fail run on its other seeds too (its failure rate over every seed)."""
+        if not self.screen:
+            return
+        short = [(i, ev) for i, m in enumerate(self.margins) if (ev := m.at(m.first_fail)) is not None
+                 and len(ev.tails) < self.seeds]
+        rest = self.run([(i, ev.value, self.seeds_of(i, len(ev.tails))) for i, ev in short])
+        for (i, ev), more in zip(short, rest, strict=True):
+            bound = self.searches[i].tail_bound
+            ev.tails += [_tail(r, bound) for r in more]
+            ev.statuses += [r.status for r in more]
+            ev.raw += [_raw_tail(r) for r in more]
+
+
 def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path, n_jobs: int = 1,
                backend: Backend | None = None, on_batch: Callable[[int, int], None] | None = None,
-               on_done: Callable[[JobResult], None] | None = None, keep_trajectory: bool = True) -> list[Margin]:
+               on_done: Callable[[JobResult], None] | None = None, keep_trajectory: bool = True,
+               screen: bool = False) -> list[Margin]:
     """Run every search to its margin, in lockstep batches (see the module docstring).
 
     seeds: seeds 0..seeds-1 per stress value; steps: bisection steps after the two ends;
     logs: every run's MCAP log goes to logs/<label>/<stressor>=<value>-seed<k>.mcap;
-    keep_trajectory: whether each run sends its decimated rows back (False: the summary only)."""
+    keep_trajectory: whether each run sends its decimated rows back (False: the summary only);
+    screen: run a value's other seeds only where its first passed (the module docstring: the same margins,
+    first_fail and statistics, fewer runs; a failing value on the way keeps its first seed's run only)."""
     margins = [Margin(s, None, None) for s in searches]
     brackets: list[tuple[float, float] | None] = [None] * len(searches)
-
-    def jobs_for(i: int, value: float) -> list[Job]:
-        s = searches[i]
-        safe = _file_name(s.label.replace("/", "-"))
-        text = str(int(value)) if s.stressor.integer else f"{value:.6g}"
-        return [Job(s.scenario, overrides=(REFUSE_UNSTABLE, *s.overrides, *s.stressor.overrides(value)), seed=k,
-                    log=logs / safe / f"{_file_name(s.stressor.name)}={text}-seed{k}.mcap",
-                    tag=f"{s.label} {s.stressor.name}={text} seed {k}", keep_trajectory=keep_trajectory)
-                for k in range(s.seed, s.seed + seeds)]
-
-    def evaluate(wanted: list[tuple[int, float]]) -> list[Evaluation]:
-        jobs = [job for i, v in wanted for job in jobs_for(i, v)]
-        results = run_jobs(jobs, n_jobs=n_jobs, on_done=on_done, backend=backend) if jobs else []
-        out = []
-        for n, (i, v) in enumerate(wanted):
-            chunk = results[n * seeds:(n + 1) * seeds]
-            ev = Evaluation(v, [_tail(r, searches[i].tail_bound) for r in chunk], [r.status for r in chunk],
-                            [_raw_tail(r) for r in chunk])
-            margins[i].evaluations.append(ev)
-            out.append(ev)
-        return out
-
+    batches = _Batches(searches, margins, seeds=seeds, logs=logs, n_jobs=n_jobs, backend=backend, on_done=on_done,
+                       keep_trajectory=keep_trajectory, screen=screen)
     total = 2 + steps
     ends = [(i, s.stressor.lo) for i, s in enumerate(searches)] + [(i, s.stressor.hi) for i, s in enumerate(searches)]
-    evs = evaluate(ends)
+    evs = batches.evaluate(ends)
     if on_batch:
         on_batch(1, total)
     n = len(searches)
@@ -269,7 +327,7 @@ def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path
         wanted = _midpoints(searches, brackets)
         if not wanted:
             break
-        for (i, v), ev in zip(wanted, evaluate(wanted), strict=True):
+        for (i, v), ev in zip(wanted, batches.evaluate(wanted), strict=True):
             bracket = brackets[i]
             assert bracket is not None  # _midpoints wants values of bracketed searches only
             lo, hi = bracket
@@ -281,6 +339,7 @@ def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path
                 margins[i].first_fail = v
         if on_batch:
             on_batch(2 + step, total)
+    batches.complete_first_fails()
     return margins
 
 

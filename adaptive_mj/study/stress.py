@@ -446,10 +446,12 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
         print(f"\nstress: batch {k}/{total} done ({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
 
     margins = search_all(searches, seeds=seeds, steps=steps, logs=out / "logs", n_jobs=n_jobs, backend=backend,
-                         on_batch=batch, on_done=progress_printer(at_most, label="runs (at most)"))
+                         on_batch=batch, on_done=progress_printer(at_most, label="runs (at most)"), screen=True)
     wall = time.perf_counter() - t0
     runs = sum(len(e.tails) for m in margins for e in m.evaluations)
-    text = (f"{len(searches)} breaking-point searches (plant × law × stressor), {seeds} seeds per value, "
+    screened = ("" if seeds == 1 else " (a value's other seeds run where its first passed: a value fails when "
+                "any seed fails; the first failing value runs on every seed)")
+    text = (f"{len(searches)} breaking-point searches (plant × law × stressor), {seeds} seeds per value{screened}, "
             f"the two ends and {steps} bisection steps: {runs} runs of {duration:g} s in {wall:.0f} s. "
             f"A run fails when it diverges, crashes or its tail RMS ỹ exceeds {_bounds_text(searches)}; the tail "
             "is the last "
