@@ -258,7 +258,66 @@ def supported(plant: Plant, law: Law) -> bool:
             and _gemv_agrees(np.ascontiguousarray(plant.A)))
 
 
-class NativeAnalyticController(ContextOwner):
+class AnalyticLoop(ContextOwner):
+    """What the compiled loops of the plants stepped without MuJoCo share (this module's, and the twin's:
+    adaptive_mj.sim.native_twin): no MjData to bind, the plant's step_native(n) calls `advance(n)` (the
+    `callback` loop._run_native hands the plant); the context record made from the run's sizes, limits and
+    timing; the steps' external force as the plant's own step computes it; a chunk is prepare, advance, finish."""
+
+    in_mujoco = False
+    buffers: dict[str, np.ndarray]
+    gains: np.ndarray  # the law's (1,) gains record, read by the compiled law through its address
+    dist: np.ndarray  # (max_rows,) the external force of each step of a chunk
+    lo: float  # the plant's control limits (±inf: none)
+    hi: float
+
+    def new_context(self, dtype: np.dtype, *, n: int, nth: int, nst: int, h: float,
+                    control: stage_code.ControlTiming) -> np.ndarray:
+        """The (1,) context record of `dtype`: stage.control_stage's fields (the tableau of nst stages, the run's
+        timing, the law's sizes n and n_theta, one control), the clamp [lo, hi] (set as self.lo, self.hi), the
+        gains' and every buffer's address."""
+        inc, weights = stage_code.TABLEAU[nst]
+        ctx = np.zeros(1, dtype=dtype)
+        c = ctx[0]
+        c["nstages"], c["n"], c["m"], c["nth"], c["h"], c["lo"], c["hi"] = nst, n, 1, nth, h, self.lo, self.hi
+        c["delay"], c["mode"], c["period_steps"], c["period"] = control.delay, control.mode, control.steps, \
+            control.period
+        c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
+        c["gains"] = self.gains.ctypes.data  # the law's record (kept alive by self.gains)
+        for name, buf in self.buffers.items():
+            c[name] = addr(buf)
+        c["nbox"] = len(self.buffers["lower"])
+        return ctx
+
+    def forces(self, t: np.ndarray, rows: int) -> None:
+        """self.dist[:rows]: the external force over each step starting at t (rows,) [s], as the plant's step
+        computes it (force_offset + disturbance(t), or the offset + 0.0 without one: the same arithmetic)."""
+        plant = self.plant
+        if plant.disturbance is None:
+            self.dist[:rows] = plant.force_offset + 0.0
+        else:
+            for k in range(rows):
+                self.dist[k] = plant.force_offset + plant.disturbance(float(t[k]))
+
+    def bind(self) -> None:
+        """Nothing to bind: the plant has no MjData; its step_native calls `advance` (controlled_natively)."""
+        return None
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+    def advance(self, rows: int) -> None:
+        """Step the plant `rows` physics steps (the compiled chunk; prepare first)."""
+        raise NotImplementedError
+
+    def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
+        """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat) rows, each (rows, ...)."""
+        self.prepare(rows, noise)
+        self.advance(rows)
+        return self.finish(rows)
+
+
+class NativeAnalyticController(AnalyticLoop):
     """Owns the context and buffers of one compiled analytic run and steps its plant chunk by chunk: the plant's
     step_native(n) calls `advance(n)` (the `callback` it is given by loop._run_native).
 
@@ -266,7 +325,6 @@ class NativeAnalyticController(ContextOwner):
     (n_theta,); max_rows: the most steps a chunk takes; control: the run's ControlTiming."""
 
     plant: LinearPlant  # type: ignore[assignment]  # not a MuJoCo plant: no MjData to bind
-    in_mujoco = False
 
     def __init__(self, plant: Plant, law: Law, reference, theta_hat0, max_rows: int, *,
                  control: stage_code.ControlTiming | None = None):
@@ -302,28 +360,10 @@ class NativeAnalyticController(ContextOwner):
         self.theta = self.buffers["theta"]
         self.lo, self.hi = plant.ctrl_range if plant.ctrl_range is not None else (-math.inf, math.inf)
         self.lo, self.hi = float(self.lo), float(self.hi)
-        inc, weights = stage_code.TABLEAU[nst]
-        self.stage_offsets = np.asarray(inc)  # RK4: c_i = a_i (see stage.TABLEAU)
+        self.stage_offsets = np.asarray(stage_code.TABLEAU[nst][0])  # RK4: c_i = a_i (see stage.TABLEAU)
         self.dist = np.zeros(max_rows)
-        ctx = np.zeros(1, dtype=CONTEXT)
-        c = ctx[0]
-        c["nstages"], c["n"], c["m"], c["nth"], c["h"], c["lo"], c["hi"] = nst, n, 1, nth, plant.dt, self.lo, self.hi
-        c["delay"], c["mode"], c["period_steps"], c["period"] = control.delay, control.mode, control.steps, \
-            control.period
-        c["in_delay"] = plant.delay_steps
-        c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
-        c["gains"] = self.gains.ctypes.data  # the law's record (kept alive by self.gains)
-        for name, buf in self.buffers.items():
-            c[name] = addr(buf)
-        c["nbox"] = len(self.buffers["lower"])
-        self.context = ctx
-
-    def bind(self) -> None:
-        """Nothing to bind: the plant has no MjData; its step_native calls `advance` (controlled_natively)."""
-        return None
-
-    def __exit__(self, *exc) -> None:
-        return None
+        self.context = self.new_context(CONTEXT, n=n, nth=nth, nst=nst, h=plant.dt, control=control)
+        self.context[0]["in_delay"] = plant.delay_steps
 
     def prepare(self, rows: int, noise: np.ndarray | None) -> None:
         """The references at every stage time of the next `rows` steps, the steps' noise and disturbance, and the
@@ -338,11 +378,7 @@ class NativeAnalyticController(ContextOwner):
             values = np.stack([np.asarray(self.reference(float(s), n), dtype=float) for s in times], axis=1)
         self.buffers["ref"][: rows * self.nst * (n + 1)] = np.moveaxis(values, 1, 0)[which].ravel()
         self.buffers["noise"][: rows * n] = 0.0 if noise is None else noise.ravel()
-        if plant.disturbance is None:  # LinearPlant.step's force, the same arithmetic: the offset + 0.0
-            self.dist[:rows] = plant.force_offset + 0.0
-        else:
-            for k in range(rows):
-                self.dist[k] = plant.force_offset + plant.disturbance(float(t[k]))
+        self.forces(t, rows)  # LinearPlant.step's force
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"], c["k"] = 0, 0, rows, t[0], plant._k
 
@@ -355,12 +391,6 @@ class NativeAnalyticController(ContextOwner):
                      rows)
         c = self.context[0]
         plant._t, plant._k = float(c["t"]), int(c["k"])
-
-    def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
-        """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat) rows, each (rows, ...)."""
-        self.prepare(rows, noise)
-        self.advance(rows)
-        return self.finish(rows)
 
     def finish(self, rows: int, *, partial: bool = False) -> tuple[np.ndarray, ...]:
         """The rows recorded over the `rows` steps just taken: t (rows,) [s], x (rows, 1) y at each step's start,

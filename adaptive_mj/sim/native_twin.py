@@ -38,8 +38,8 @@ from adaptive_mj.laws.sliding import SLIDING_GAINS, sliding_law_values
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import native, native_step
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_analytic import clamp
-from adaptive_mj.sim.native_context import ContextOwner, addr, inlined, source_key, unique_factory
+from adaptive_mj.sim.native_analytic import AnalyticLoop, clamp
+from adaptive_mj.sim.native_context import inlined, source_key, unique_factory
 
 if TYPE_CHECKING:
     from adaptive_mj.plants.twin import TwinPlant
@@ -283,7 +283,7 @@ def supported(plant: Plant, law: Law) -> bool:
             and getattr(getattr(law, "form", None), "order", None) == plant.order)
 
 
-class NativeTwinController(ContextOwner):
+class NativeTwinController(AnalyticLoop):
     """Owns the context and buffers of one compiled twin run and steps the plant chunk by chunk: the plant's
     step_native(n) calls `advance(n)` (the `callback` it is given by loop._run_native).
 
@@ -291,7 +291,6 @@ class NativeTwinController(ContextOwner):
     max_rows: the most steps a chunk takes; control: the run's ControlTiming."""
 
     plant: TwinPlant  # type: ignore[assignment]  # not a MuJoCo plant: no MjData to bind
-    in_mujoco = False
 
     def __init__(self, plant: Plant, law: Law, reference, theta_hat0, max_rows: int, *,
                  control: stage_code.ControlTiming | None = None):
@@ -332,28 +331,10 @@ class NativeTwinController(ContextOwner):
         self.theta = self.buffers["theta"]
         lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (-math.inf, math.inf)
         self.lo, self.hi = float(lo), float(hi)
-        inc, weights = stage_code.TABLEAU[nst]
-        self.stage_offsets = np.asarray(inc)  # RK4: c_i = a_i (see stage.TABLEAU)
+        self.stage_offsets = np.asarray(stage_code.TABLEAU[nst][0])  # RK4: c_i = a_i (see stage.TABLEAU)
         self.dist = np.zeros(max_rows)
         self.d_known = plant.form.d_name is None
-        ctx = np.zeros(1, dtype=CONTEXT)
-        c = ctx[0]
-        c["nstages"], c["n"], c["m"], c["nth"], c["h"], c["lo"], c["hi"] = nst, n, 1, nth, plant.dt, self.lo, self.hi
-        c["delay"], c["mode"], c["period_steps"], c["period"] = control.delay, control.mode, control.steps, \
-            control.period
-        c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
-        c["gains"] = self.gains.ctypes.data  # the law's record (kept alive by self.gains)
-        for name, buf in self.buffers.items():
-            c[name] = addr(buf)
-        c["nbox"] = len(self.buffers["lower"])
-        self.context = ctx
-
-    def bind(self) -> None:
-        """Nothing to bind: the plant has no MjData; its step_native calls `advance` (controlled_natively)."""
-        return None
-
-    def __exit__(self, *exc) -> None:
-        return None
+        self.context = self.new_context(CONTEXT, n=n, nth=nth, nst=nst, h=plant.dt, control=control)
 
     def prepare(self, rows: int, noise: np.ndarray | None) -> None:
         """The references at every stage time of the next `rows` steps, the steps' noise and external force, and
@@ -362,11 +343,7 @@ class NativeTwinController(ContextOwner):
         t, refs = stage_code.stage_references(self.reference, plant.time, plant.dt, rows, self.stage_offsets, n)
         self.buffers["ref"][: rows * self.nst * (n + 1)] = refs.ravel()
         self.buffers["noise"][: rows * n] = 0.0 if noise is None else noise.ravel()
-        if plant.disturbance is None:  # TwinPlant.step's force, the same arithmetic: the offset + 0.0
-            self.dist[:rows] = plant.force_offset + 0.0
-        else:
-            for k in range(rows):
-                self.dist[k] = plant.force_offset + plant.disturbance(float(t[k]))
+        self.forces(t, rows)  # TwinPlant.step's force
         c = self.context[0]
         c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
 
@@ -379,12 +356,6 @@ class NativeTwinController(ContextOwner):
         self._kernel(self.context, plant.x, theta, self.dist, self.lo, self.hi, self.d_known, rows)
         c = self.context[0]
         plant.moved_to(float(c["t"]), rows)
-
-    def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
-        """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat) rows, each (rows, ...)."""
-        self.prepare(rows, noise)
-        self.advance(rows)
-        return self.finish(rows)
 
     def finish(self, rows: int, *, partial: bool = False) -> tuple[np.ndarray, ...]:
         """The rows recorded over the `rows` steps just taken: t (rows,) [s], x (rows, n) the true state at each
