@@ -168,6 +168,8 @@ def libm_pow():
 
     @intrinsic
     def libm_pow_(typingctx, v, e):
+        if not all(isinstance(a, (types.Float, types.Integer)) for a in (v, e)):
+            return None  # scalars only (numba then says which types it got)
         sig = types.float64(types.float64, types.float64)
 
         def codegen(context, builder, signature, args):

@@ -144,3 +144,16 @@ def test_scalar_power_compiles_to_numpy_scalar_pow():
     numpy_pow = np.array([np.float64(v) ** 2 for v in values])
     assert np.array_equal(np.array([compiled(v) for v in values]), numpy_pow)
     assert not np.array_equal(np.array([product(v) for v in values]), numpy_pow)
+
+
+def test_each_variant_is_named_apart():
+    """Every variant's compiled function carries its cache key in its name (native_context.unique_factory): the
+    variants share their argument types, so two of them compiled in two processes must not define one symbol."""
+    names = set()
+    for name in ("lecture_phase_space", "lecture_first_order", "lecture_heave"):
+        setup = build(sc.load(SCENARIOS / f"{name}.toml"))
+        law = setup.law
+        fn = native_twin.compiled(law.form, setup.plant.form, native_twin._law_variant(law))
+        names.add(fn.py_func.__qualname__)
+        assert fn.py_func.__qualname__.startswith("chunk_factory_") and ".callback_" in fn.py_func.__qualname__
+    assert len(names) == 3

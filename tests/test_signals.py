@@ -364,3 +364,23 @@ def test_a_signal_during_a_flush_waits_until_its_rows_are_written():
         for _ in range(5):
             rows.put(row)
     assert written == [(0, 5)] and rows.flushed == 5
+
+
+def test_a_stop_between_the_last_step_and_the_verdict_still_closes_the_log(tmp_path, monkeypatch):
+    """A stop signal after a run's last step, before its verdict closed the log (a compiled twin run's loop is over in
+    20 ms, its verdict takes about as long): the log is closed as "interrupted" with every row, never left
+    unfinished."""
+    from adaptive_mj.errors import Interrupted
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR
+    from adaptive_mj.sim import runner
+
+    def stopped(*args, **kwargs):
+        raise Interrupted(signal.SIGTERM)
+
+    monkeypatch.setattr(runner, "verdict", stopped)
+    log = tmp_path / "phase.mcap"
+    with pytest.raises(Interrupted):
+        runner.execute(sc.load(SCENARIOS_DIR / "lecture_phase_space.toml"), log_path=log)
+    assert closed_status(log)["status"] == "interrupted"
+    assert len(read_log(log).trajectory.t) == 2000  # every row of the 20 s run, at the log's 100 Hz

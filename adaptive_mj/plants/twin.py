@@ -97,7 +97,7 @@ class TwinPlant(PythonStepped):
     joint_names: tuple[str, ...] = ()
     first_contact: tuple[float, str] | None = None  # no contacts in the analytic twin
     joint_limits: np.ndarray | None = None  # a 1-DOF plant's joint is not limited
-    compiled_loop = "adaptive_mj.sim.native_twin"
+    compiled_loop: str | None = "adaptive_mj.sim.native_twin"
 
     def __init__(self, form: ModelForm, theta, *, dt: float, integrator: Integrator = Integrator.RK4,
                  ctrl_range: tuple[float, float] | None = None, x0=None):

@@ -337,6 +337,9 @@ def unique_factory(factory: Callable, globals_: dict, key: int) -> Callable:
     same symbol twice, which LLVM refuses (abort)."""
     tag = f"_{key:x}"
     code = factory.__code__
+    if not any(isinstance(c, pytypes.CodeType) and c.co_name == "callback" for c in code.co_consts):
+        raise TypeError(f"{factory.__qualname__} must define its compiled function as `callback` (unique_factory "
+                        "names it apart per variant)")
     consts = tuple(c.replace(co_name=c.co_name + tag, co_qualname=code.co_name + tag + ".<locals>." + c.co_name + tag)
                    if isinstance(c, pytypes.CodeType) and c.co_name == "callback" else c for c in code.co_consts)
     code = code.replace(co_consts=consts, co_name=code.co_name + tag, co_qualname=code.co_qualname + tag)

@@ -148,10 +148,12 @@ def twin_rate(x, u, theta, force, d_known, out):
 
 
 def chunk_factory(key):
-    """The chunk stepper's source, closed over the cache key only (native_context.unique_factory names it apart)."""
+    """The chunk stepper's source, closed over the cache key only (native_context.unique_factory names it, `callback`,
+    apart per variant: every variant has the same argument types, so without the key in its name two variants
+    compiled in two processes could define one symbol)."""
 
     @numba.njit(cache=True, nogil=True)  # noqa: F821 (injected)
-    def stepper(context, x, theta, dist, lo, hi, d_known, rows):
+    def callback(context, x, theta, dist, lo, hi, d_known, rows):
         """`rows` steps of the twin from the context's state (TwinPlant.step, step by step): x (n,) advanced in
         place; theta the plant's true θ; dist (rows,) the external force of each step; lo, hi the plant's
         ctrl_range (±inf: none); d_known: the plant's form has d = 1. RK4 with 4 stages, else semi-implicit Euler."""
@@ -184,7 +186,7 @@ def chunk_factory(key):
                 for i in range(n - 2, -1, -1):
                     x[i] = x[i] + h * x[i + 1]
 
-    return stepper
+    return callback
 
 
 _compiled: dict = {}
@@ -272,8 +274,8 @@ MAX_ORDER = 3  # the twin's order n at most (the forms a plant gives: the heave 
 
 
 def supported(plant: Plant, law: Law) -> bool:
-    """The twin's compiled loop runs this plant and law: a TwinPlant (not a subclass that integrates or names its
-    parameters otherwise, e.g. plants.wing_rock.MracWingRock: its compiled_loop is not this module) of order
+    """The twin's compiled loop runs this plant and law: a TwinPlant whose compiled_loop is this module (not
+    plants.wing_rock.MracWingRock, whose law is MRAC: compiled_loop None) of order
     <= MAX_ORDER with RK4 (4 stages) or Euler (1), under the first-order law, a sliding law or a law plugin with a
     form of the plant's order (laws' `native`; composite adaptation and every other law take the Python path)."""
     from adaptive_mj.plants.twin import TwinPlant

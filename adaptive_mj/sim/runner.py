@@ -26,6 +26,7 @@ from adaptive_mj.report.metrics import clean_json, summary as make_summary
 from adaptive_mj.setup.scenario import Scenario
 from adaptive_mj.setup.success import Criteria, criteria, judge
 from adaptive_mj.sim import preflight
+from adaptive_mj.sim.interrupt import deferred
 from adaptive_mj.trajectory import Status, Trajectory
 
 # Run outputs: logs/ under the current directory (in the repository, its logs/, ignored by git), or
@@ -202,12 +203,13 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
     single: the only run of this process (the CLI's `run`): a short 1-DOF run then takes the
     Python callback (QUICK_START_MAX_STEPS); studies leave it False and stay compiled."""
     st = start(scn, log_path=log_path, source=source, single=single, label=label)
+    traj = None
     try:
         traj = run(st.setup.plant, st.setup.law, st.setup.reference, sink=st.recorder, **st.kwargs)
-    except BaseException as exc:
-        st.abandon(exc)
+        return st.finish(traj)
+    except BaseException as exc:  # a stop signal after the last step, before the verdict closed the log: all rows
+        st.abandon(exc, traj)
         raise
-    return st.finish(traj)
 
 
 def execute_batch(scenarios: Sequence[tuple[Scenario, Path | None]], *, nthread: int = 0) -> list[RunResult]:
@@ -257,10 +259,13 @@ class Started:
     def finish(self, traj: Trajectory) -> RunResult:
         """The verdict, and the log closed with it. The plant's MjData is handed back for the next run
         (MujocoPlant.release): setup.plant has none after this."""
-        traj, result = verdict(self.scn, traj, self.crit, self.pre)
-        if self.recorder is not None:
-            self.recorder.close(traj.status, traj.reason, result)
-        self._release()
+        try:
+            with deferred():  # a stop signal during the verdict waits until the log is closed with it
+                traj, result = verdict(self.scn, traj, self.crit, self.pre)
+                if self.recorder is not None:
+                    self.recorder.close(traj.status, traj.reason, result)
+        finally:
+            self._release()
         return RunResult(traj, result, self.log_path)
 
     def _release(self) -> None:
@@ -272,12 +277,15 @@ class Started:
         or "failed" (anything else). partial: the run's rows so far (default: the exception's
         `trajectory`, as loop.run's Interrupted carries it). The plant's MjData is handed back, as in finish."""
         self._release()
-        if self.recorder is None:
+        if self.recorder is None or self.recorder.closed:  # closed already: the signal came after the verdict
             return
         if isinstance(exc, KeyboardInterrupt):  # loop.run has handed the recorder every whole row
             partial = partial if partial is not None else getattr(exc, "trajectory", None)
             summary = {} if partial is None else clean_json(make_summary(self.scn.name, partial))
-            self.recorder.close(Status.INTERRUPTED, summary.get("reason") or str(exc) or "interrupted", summary)
+            reason = summary.get("reason") or str(exc) or "interrupted"
+            if summary:  # a run whose last step came before the signal, its verdict not: closed as interrupted too
+                summary.update(status=str(Status.INTERRUPTED), reason=reason)
+            self.recorder.close(Status.INTERRUPTED, reason, summary)
             if isinstance(exc, Interrupted):
                 exc.summary = summary or None
         else:

@@ -224,14 +224,17 @@ def stage_references(reference, t0: float, h: float, rows: int, offsets: np.ndar
 
     A reference is a pure function of its parameters (the frozen dataclasses of adaptive_mj.reference): the chunks
     of a study's runs of one reference are the same numbers, so the last REFERENCE_CACHE ones are kept (by an equal
-    reference and the same t0, h, rows, offsets and order; a reference that cannot be hashed is not kept) and
-    handed out read-only."""
-    try:
-        key = (reference, float(t0), float(h), int(rows), tuple(np.asarray(offsets, dtype=float).tolist()),
-               int(order))
-        hash(key)
-    except TypeError:
-        key = None
+    reference and the same t0, h, rows, offsets and order; only a frozen dataclass that can be hashed: any other
+    callable is evaluated each time) and handed out read-only."""
+    key = None
+    params = getattr(reference, "__dataclass_params__", None)
+    if params is not None and params.frozen:  # a frozen dataclass: equal ones are the same function of t
+        try:
+            key = (reference, float(t0), float(h), int(rows), tuple(np.asarray(offsets, dtype=float).tolist()),
+                   int(order))
+            hash(key)
+        except TypeError:  # a field that cannot be hashed (an array)
+            key = None
     if key is not None and key in _STAGE_REFERENCES:
         return _STAGE_REFERENCES[key]
     t = step_times(t0, h, rows)
