@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from same_rows import FIELDS, run_scenario, same_rows
 
 from adaptive_mj.laws.common import DeadZone, DeadZoneOn, Modification, modify_rate
 from adaptive_mj.laws.mrac import MracLaw, Rule
@@ -19,26 +20,7 @@ from adaptive_mj.sim.runner import execute
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 DELAY, ROHRS = SCENARIOS / "mrac_time_delay.toml", SCENARIOS / "rohrs_counterexample.toml"
-FIELDS = ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V")
-
-
-def _run(path: Path, overrides, *, python: bool):
-    scn = sc.load(path, overrides=list(overrides) + (["simulation.python_callback=true"] if python else []))
-    return execute(scn).trajectory
-
-
-def _same(path: Path, overrides, *, native: bool = True):
-    """The compiled and Python runs of a scenario: every row equal bit for bit, status and reason equal; the
-    compiled one took the compiled loop (native) or fell back to the Python path."""
-    compiled, python = _run(path, overrides, python=False), _run(path, overrides, python=True)
-    assert python.meta["native"] is False
-    assert compiled.meta["native"] is native
-    for name in FIELDS:
-        a, b = getattr(compiled, name), getattr(python, name)
-        assert a.shape == b.shape, name
-        assert np.array_equal(a, b, equal_nan=True), name
-    assert (compiled.status, compiled.reason) == (python.status, python.reason)
-    return compiled
+_same = same_rows
 
 
 def test_nguyen_delay_bounded():
@@ -100,7 +82,7 @@ def test_mit_rule_falls_back_to_the_python_path():
 
 
 def test_python_callback_forces_the_python_path():
-    traj = _run(ROHRS, ["simulation.duration=1"], python=True)
+    traj = run_scenario(ROHRS, ["simulation.duration=1"], python=True)
     assert traj.meta["native"] is False
     setup = build(sc.load(ROHRS))
     assert native_analytic.supported(setup.plant, setup.law)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from same_rows import same_rows
 
 from adaptive_mj.laws.common import modify_rate
 from adaptive_mj.laws.first_order import FirstOrderGains, first_order_values
@@ -16,30 +17,13 @@ from adaptive_mj.numba_util import scalar_power
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
 from adaptive_mj.sim import native_twin
-from adaptive_mj.sim.runner import execute
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
-FIELDS = ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V")
-
-
-def _run(name: str, overrides, *, python: bool):
-    scn = sc.load(SCENARIOS / f"{name}.toml",
-                  overrides=list(overrides) + (["simulation.python_callback=true"] if python else []))
-    return execute(scn).trajectory
 
 
 def _same(name: str, overrides, *, native: bool = True):
-    """The compiled and Python runs of a scenario: every row equal bit for bit, status and reason equal; the
-    compiled one took the compiled loop (native) or fell back to the Python path."""
-    compiled, python = _run(name, overrides, python=False), _run(name, overrides, python=True)
-    assert python.meta["native"] is False
-    assert compiled.meta["native"] is native
-    for field in FIELDS:
-        a, b = getattr(compiled, field), getattr(python, field)
-        assert a.shape == b.shape, field
-        assert np.array_equal(a, b, equal_nan=True), field
-    assert (compiled.status, compiled.reason) == (python.status, python.reason)
-    return compiled
+    """same_rows on the bundled scenario `name`."""
+    return same_rows(SCENARIOS / f"{name}.toml", overrides, native=native)
 
 
 @pytest.mark.parametrize("start", [[-5.0, -4.0], [2.0, 3.0], [-1.0, -3.0]], ids=["lecture", "x+2_p-4", "x+1_p+4"])

@@ -109,6 +109,21 @@ def record_columns(n: int, nth: int) -> RecordColumns:
     return RecordColumns(0, 1, 1 + n, 2 + n, 3 + n, 4 + 2 * n, 4 + 2 * n + nth)
 
 
+def recorded_rows(context, rec: np.ndarray, col: RecordColumns, n: int, rows: int, partial: bool,
+                  what: str) -> tuple[np.ndarray, ...]:
+    """The rows a compiled loop recorded over the `rows` steps just taken (this module's callback, or the analytic
+    twin's loop, sim.native_twin: the same record layout), copied out of its record buffer `rec` (flat, float64):
+    t (rows,) [s], x (rows, n) the true state at each step's start, u (rows,) applied, s (rows,), ref (rows, n+1),
+    theta_hat (rows, n_theta) at each step's start. context: the run's context record, whose row and stage must
+    say the loop took exactly `rows` whole steps (unless partial: the first `rows` of a chunk cut short,
+    ContextOwner.rows_recorded); what: the loop's name in the error otherwise."""
+    if not partial and (int(context["row"]) != rows or int(context["stage"]) != 0):
+        raise RuntimeError(f"{what} ran {int(context['row'])} steps (stage {int(context['stage'])}), expected {rows}")
+    r = rec[: rows * col.width].reshape(rows, col.width)
+    return (r[:, col.t].copy(), r[:, col.x:col.x + n].copy(), r[:, col.u].copy(), r[:, col.s].copy(),
+            r[:, col.ref:col.ref + n + 1].copy(), r[:, col.theta:].copy())
+
+
 def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
     """This shape's law at a stage (adaptive_mj.sim.native_step): measure x = [q, q'] + the step's noise, the
     stage estimate θ̂_i, the law (the built-in sliding law or a plugin's) on the stage's reference, u clamped
@@ -443,10 +458,5 @@ class NativeController(ContextOwner):
     def finish(self, rows: int, *, partial: bool = False) -> tuple[np.ndarray, ...]:
         """The rows the callback recorded over the `rows` steps just taken: (t, x, u, s, ref, theta_hat)
         (partial: the first `rows` of a chunk MuJoCo cut short, ContextOwner.rows_recorded)."""
-        c, n = self.context[0], self.n
-        if not partial and (int(c["row"]) != rows or int(c["stage"]) != 0):
-            raise RuntimeError(f"native callback ran {int(c['row'])} steps (stage {int(c['stage'])}), "
-                               f"expected {rows}")
-        rec, col = self.buffers["rec"][: rows * self.ncol].reshape(rows, self.ncol), self.columns
-        return (rec[:, col.t].copy(), rec[:, col.x:col.x + n].copy(), rec[:, col.u].copy(), rec[:, col.s].copy(),
-                rec[:, col.ref:col.ref + n + 1].copy(), rec[:, col.theta:].copy())
+        return recorded_rows(self.context[0], self.buffers["rec"], self.columns, self.n, rows, partial,
+                             "native callback")

@@ -363,13 +363,8 @@ class NativeTwinController(AnalyticLoop):
         """The rows recorded over the `rows` steps just taken: t (rows,) [s], x (rows, n) the true state at each
         step's start, u (rows,) applied, s (rows,), ref (rows, n+1), theta_hat (rows, n_theta) at each step's
         start."""
-        c, n = self.context[0], self.n
-        if not partial and (int(c["row"]) != rows or int(c["stage"]) != 0):
-            raise RuntimeError(f"the twin's compiled loop ran {int(c['row'])} steps (stage {int(c['stage'])}), "
-                               f"expected {rows}")
-        rec, col = self.buffers["rec"][: rows * self.ncol].reshape(rows, self.ncol), self.columns
-        return (rec[:, col.t].copy(), rec[:, col.x:col.x + n].copy(), rec[:, col.u].copy(), rec[:, col.s].copy(),
-                rec[:, col.ref:col.ref + n + 1].copy(), rec[:, col.theta:].copy())
+        return native.recorded_rows(self.context[0], self.buffers["rec"], self.columns, self.n, rows, partial,
+                             "the twin's compiled loop")
 
 
 #: what loop._native_controller takes of a compiled loop's module (plants.twin.PythonStepped.compiled_loop)
