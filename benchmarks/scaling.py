@@ -289,26 +289,49 @@ def _bare_runs(args) -> None:
     from adaptive_mj.setup.build import build
     from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
 
-    name, seconds, runs = args
+    name, seconds, runs, timers = args
     model = build(load(SCENARIOS_DIR / f"{name}.toml", overrides=[f"simulation.duration={seconds!r}"])).plant.model
     data = mujoco.MjData(model)
     steps = int(round(seconds / model.opt.timestep))
-    for _ in range(runs):
-        mujoco.mj_resetData(model, data)
-        mujoco.mj_step(model, data, nstep=steps)
+    with timers_off(not timers):
+        for _ in range(runs):
+            mujoco.mj_resetData(model, data)
+            mujoco.mj_step(model, data, nstep=steps)
 
 
-def bare_limit(n: int, jobs: int = 2, sample: int = 1000) -> dict:
+@contextmanager
+def timers_off(off: bool = True):
+    """MuJoCo's profiling timers off in the block (off=True): mjcb_time = plants.mujoco_plant.no_timer, as the
+    native runs step (mujoco_plant.compiled_control). The bare-stepping figures are measured both ways: "bare" is
+    mj_step as MuJoCo ships it (its clock read around each timed stage), "bare, timers off" the floor the runs
+    themselves step at."""
+    import mujoco
+
+    from adaptive_mj.plants.mujoco_plant import no_timer
+
+    if not off:
+        yield
+        return
+    previous = mujoco.get_mjcb_time()
+    mujoco.set_mjcb_time(no_timer().ctypes)
+    try:
+        yield
+    finally:
+        mujoco.set_mjcb_time(previous)
+
+
+def bare_limit(n: int, jobs: int = 2, sample: int = 1000, timers: bool = True) -> dict:
     """The bare-stepping limit of study(n): `jobs` processes at once, each stepping `sample` bare 2-s heave_drift
     runs (the model only: no law, no log), timed from all started to all done; the limit for n runs is
-    n / (jobs · sample) times that wall time (the machine's parallel ceiling included, as the study has it)."""
+    n / (jobs · sample) times that wall time (the machine's parallel ceiling included, as the study has it).
+    timers: MuJoCo's profiling timers on (mj_step as MuJoCo ships it) or off (timers_off: as the runs step)."""
     import multiprocessing as mp
 
     ctx = mp.get_context("fork")
     with ctx.Pool(jobs) as pool:
-        pool.map(_bare_runs, [("heave_drift", STUDY_SECONDS, 2)] * jobs)  # imports and model built once: warm
+        pool.map(_bare_runs, [("heave_drift", STUDY_SECONDS, 2, timers)] * jobs)  # imports, model built: warm
         t0 = time.perf_counter()
-        pool.map(_bare_runs, [("heave_drift", STUDY_SECONDS, sample)] * jobs)
+        pool.map(_bare_runs, [("heave_drift", STUDY_SECONDS, sample, timers)] * jobs)
         wall = time.perf_counter() - t0
     return {"sample_runs": jobs * sample, "sample_wall_s": wall, "limit_s": wall * n / (jobs * sample)}
 
@@ -318,7 +341,7 @@ def study(n: int, jobs: int = 2, backend: str = "local", engine: str = "process"
     bare-stepping limit of the same runs measured just before and just after it (bare_limit, their mean), so
     the ratio limit / wall is taken at the machine's load of the moment.
     engine: --engine (process or batch); logs: --logs (all, or summary: the table only)."""
-    before = bare_limit(n, jobs)
+    before, before_off = bare_limit(n, jobs), bare_limit(n, jobs, timers=False)
     points = 100 if n >= 1000 else 10
     seeds = n // points
     folder = Path(tempfile.mkdtemp(prefix="scaling-study-"))
@@ -341,13 +364,14 @@ def study(n: int, jobs: int = 2, backend: str = "local", engine: str = "process"
         size = sum(p.stat().st_size for p in (folder / "out" / "logs").glob("*.mcap")) if logs == "all" else 0
     finally:
         shutil.rmtree(folder, ignore_errors=True)
-    after = bare_limit(n, jobs)
+    after, after_off = bare_limit(n, jobs), bare_limit(n, jobs, timers=False)
     limit = 0.5 * (before["limit_s"] + after["limit_s"])
+    limit_off = 0.5 * (before_off["limit_s"] + after_off["limit_s"])
     return {"backend": backend, "engine": engine, "logs": logs, "runs": points * seeds, "rows": lines, "wall_s": wall,
             "runs_per_s": points * seeds / wall, "driver_peak_rss_mb": max(rss) / 1024 if rss else None,
             "logs_mb": size / 2**20, "bare_limit_s": limit, "bare_limit_before_after_s": [before["limit_s"],
                                                                                          after["limit_s"]],
-            "to_limit": limit / wall}
+            "to_limit": limit / wall, "bare_limit_timers_off_s": limit_off, "to_limit_timers_off": limit_off / wall}
 
 
 def _batch_spec(name: str, overrides: list[str]) -> dict:
@@ -397,14 +421,16 @@ def per_run(reps: int, runs: int, cases: str = "") -> dict:
             steps = int(round(seconds / model.opt.timestep))
             for job in _batch_jobs(name, seconds, vary, 2, None):  # the compiled callback loaded, caches warm
                 run_job(job)
-            times: dict[str, list[float]] = {"bare": [], "start": [], "unlogged": [], "law_stepping": [],
-                                             "logged": []}
+            times: dict[str, list[float]] = {"bare": [], "bare_timers_off": [], "start": [], "unlogged": [],
+                                             "law_stepping": [], "logged": []}
             for _rep in range(reps):
-                t0 = time.perf_counter()
-                for _ in range(runs):
-                    mujoco.mj_resetData(model, data)
-                    mujoco.mj_step(model, data, nstep=steps)
-                times["bare"].append((time.perf_counter() - t0) / runs)
+                for key, off in (("bare", False), ("bare_timers_off", True)):
+                    with timers_off(off):
+                        t0 = time.perf_counter()
+                        for _ in range(runs):
+                            mujoco.mj_resetData(model, data)
+                            mujoco.mj_step(model, data, nstep=steps)
+                        times[key].append((time.perf_counter() - t0) / runs)
                 scns = [load(SCENARIOS_DIR / f"{name}.toml", overrides=[f"simulation.duration={seconds!r}", *vary(i)],
                              seed=i) for i in range(runs)]
                 t0 = time.perf_counter()
@@ -430,6 +456,10 @@ def per_run(reps: int, runs: int, cases: str = "") -> dict:
             row["unlogged_to_bare"] = row["bare"]["median"] / row["unlogged"]["median"]
             row["logged_to_bare"] = row["bare"]["median"] / row["logged"]["median"]
             row["law_ceiling"] = row["bare"]["median"] / row["law_stepping"]["median"]
+            off = row["bare_timers_off"]["median"]  # the same ratios against bare stepping with the timers off
+            row["unlogged_to_bare_timers_off"] = off / row["unlogged"]["median"]
+            row["logged_to_bare_timers_off"] = off / row["logged"]["median"]
+            row["law_ceiling_timers_off"] = off / row["law_stepping"]["median"]
             out[f"{label} {seconds:g} s"] = row
             print(f"  per_run {label} {seconds:g} s: " + ", ".join(
                 f"{k} {v['median']:.2f} ms" if isinstance(v, dict) else f"{k} {v:.3g}" for k, v in row.items()),
@@ -466,7 +496,10 @@ def print_per_run(fig: dict | None) -> None:
         print(f"per_run {case} ({r['steps']} steps): bare stepping {f(r['bare'])} ms; start (build) {f(r['start'])} "
               f"ms; run unlogged {f(r['unlogged'])} ms ({r['unlogged_to_bare']:.2f}x bare); run logged "
               f"{f(r['logged'])} ms ({r['logged_to_bare']:.2f}x bare); its physics with the law in the callback "
-              f"{f(r['law_stepping'])} ms (the law's ceiling: {r['law_ceiling']:.2f}x bare)")
+              f"{f(r['law_stepping'])} ms (the law's ceiling: {r['law_ceiling']:.2f}x bare); bare stepping with "
+              f"MuJoCo's timers off {f(r['bare_timers_off'])} ms (against it: unlogged "
+              f"{r['unlogged_to_bare_timers_off']:.2f}x, logged {r['logged_to_bare_timers_off']:.2f}x, the law's "
+              f"ceiling {r['law_ceiling_timers_off']:.2f}x)")
 
 
 #: plant -> (scenario, simulated seconds per run, the --set that varies a run i). The 6-joint runs are
@@ -657,7 +690,9 @@ def main() -> None:
                   f"{s['runs_per_s']:.1f} runs/s, driver peak RSS {s['driver_peak_rss_mb']:.0f} MB, "
                   f"logs {s['logs_mb']:.0f} MB; bare stepping of the same runs on 2 processes "
                   f"{s['bare_limit_s']:.1f} s (before/after {s['bare_limit_before_after_s'][0]:.1f}/"
-                  f"{s['bare_limit_before_after_s'][1]:.1f}): {s['to_limit']:.2f}x the bare-stepping limit")
+                  f"{s['bare_limit_before_after_s'][1]:.1f}): {s['to_limit']:.2f}x the bare-stepping limit; with "
+                  f"MuJoCo's timers off (as the runs step) {s['bare_limit_timers_off_s']:.1f} s: "
+                  f"{s['to_limit_timers_off']:.2f}x")
     print_batch(res.get("batch", {}))
     print_ray_nodes(res.get("ray_nodes"))
     print_per_run(res.get("per_run"))

@@ -2,7 +2,10 @@
 the closed loop, on the heave and arm models, in one process; sweep throughput
 with 1 and 2 jobs; log size per simulated second; peak memory of a 600 s run.
 
-  a  bare MuJoCo: mj_step(m, d, nstep=N), no control
+  a  bare MuJoCo: mj_step(m, d, nstep=N), no control, as MuJoCo ships it (its profiling timers read the clock
+     around each timed stage)
+  a0 the same with MuJoCo's timers off (mjcb_time returns 0: plants.mujoco_plant.no_timer), as the native runs
+     (b, c, d, f, g) step; the ratios are given against both
   b  closed loop, adaptive law in the control callback (native path), no logging
   b_py  the same law through the Python callback (the path users' own laws take)
   c  closed loop with MCAP logging at the default rate (100 Hz)
@@ -36,6 +39,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from adaptive_mj.plants.mujoco_plant import no_timer
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
 from adaptive_mj.sim.loop import run
@@ -62,15 +66,23 @@ REAL_CONDITIONS = ("noise.std={q=1e-4}", "sensors={encoder_counts=131072, veloci
                    "plant.friction_params=true")
 
 
-def bare(name: str, steps: int, extra=()) -> float:
+def bare(name: str, steps: int, extra=(), *, timers: bool = True) -> float:
+    """µs per bare mj_step of the scenario's model; timers: MuJoCo's profiling timers on (mj_step as MuJoCo ships
+    it) or off (mjcb_time = plants.mujoco_plant.no_timer, as the native runs step: compiled_control)."""
     setup = build(_scenario(name, steps, extra))
     m, d = setup.plant.model, setup.plant.data
-    airframe = getattr(setup.plant, "airframe", None)
-    if airframe is not None:
-        return _bare_hover(setup, steps)
-    t0 = time.perf_counter()
-    mujoco.mj_step(m, d, nstep=steps)
-    return (time.perf_counter() - t0) / steps * 1e6
+    previous = mujoco.get_mjcb_time()
+    if not timers:
+        mujoco.set_mjcb_time(no_timer().ctypes)
+    try:
+        airframe = getattr(setup.plant, "airframe", None)
+        if airframe is not None:
+            return _bare_hover(setup, steps)
+        t0 = time.perf_counter()
+        mujoco.mj_step(m, d, nstep=steps)
+        return (time.perf_counter() - t0) / steps * 1e6
+    finally:
+        mujoco.set_mjcb_time(previous)
 
 
 HOVER_CHUNK = 250  # [steps] of open-loop hover before the quadrotor's state is put back (0.5 s: it stays aloft)
@@ -237,11 +249,12 @@ def main() -> None:
     for plant in args.models.split(","):
         name = CASES[plant]
         loop(name, 500, True)  # compile the native callback once (numba), outside the timing
-        rows = {"a_bare": [], "b_closed_loop": [], "b_py_python_callback": [], "c_logged_100Hz": [],
-                "d_logged_every_step": [], "f_sampled_250Hz": []}
+        rows = {"a_bare": [], "a0_bare_timers_off": [], "b_closed_loop": [], "b_py_python_callback": [],
+                "c_logged_100Hz": [], "d_logged_every_step": [], "f_sampled_250Hz": []}
         sizes = []
         for _ in range(args.reps):
             rows["a_bare"].append(bare(name, args.steps))
+            rows["a0_bare_timers_off"].append(bare(name, args.steps, timers=False))
             rows["b_closed_loop"].append(loop(name, args.steps, True))
             rows["b_py_python_callback"].append(loop(name, max(2000, args.steps // 5), False))
             c, size = logged(name, args.steps, None, encoding)
@@ -263,7 +276,7 @@ def main() -> None:
                 rows["e_plugin_native"].append(plugin_loop(plant, args.steps, True))
                 rows["e_plugin_python"].append(plugin_loop(plant, max(2000, args.steps // 5), False))
         stats = {k: med(v) for k, v in rows.items()}
-        a = stats["a_bare"]["median"]
+        a, a0 = stats["a_bare"]["median"], stats["a0_bare_timers_off"]["median"]
         out["models"][plant] = {
             "integrator": "RK4", "timestep": timestep(name), "us_per_step": stats,
             "ratios": {"b/a": stats["b_closed_loop"]["median"] / a,
@@ -271,6 +284,8 @@ def main() -> None:
                        "c/a": stats["c_logged_100Hz"]["median"] / a,
                        "d/a": stats["d_logged_every_step"]["median"] / a,
                        "f/a": stats["f_sampled_250Hz"]["median"] / a,
+                       "a0/a": a0 / a, "b/a0": stats["b_closed_loop"]["median"] / a0,
+                       "c/a0": stats["c_logged_100Hz"]["median"] / a0,
                        **({"b_geometric/a": stats["b_geometric"]["median"] / a,
                            "b_l1/a": stats["b_l1_geometric"]["median"] / a} if "b_geometric" in stats else {}),
                        **({"g/a": stats["g_real_conditions_logged_100Hz"]["median"] / a,

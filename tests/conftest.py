@@ -22,7 +22,7 @@ ARM_GAINS = dict(lam=10.0, k=5.0, gamma=[0.16, 0.07, 0.025, 0.075])
 
 @pytest.fixture(autouse=True)
 def _no_leaked_control_callback():
-    """Every test starts and ends with no MuJoCo control callback installed."""
+    """Every test starts and ends with no MuJoCo control callback installed (and ends with no timer callback)."""
     before = mujoco.get_mjcb_control()
     if before is not None:  # repair so later tests can still compile, then complain
         mujoco.set_mjcb_control(None)
@@ -32,6 +32,10 @@ def _no_leaked_control_callback():
     if after is not None:
         mujoco.set_mjcb_control(None)
         pytest.fail(f"this test left mjcb_control installed: {after!r}")
+    timer = mujoco.get_mjcb_time()  # plants.mujoco_plant.compiled_control turns MuJoCo's timers off while it steps
+    if timer is not None:
+        mujoco.set_mjcb_time(None)
+        pytest.fail(f"this test left mjcb_time installed: {timer!r}")
 
 
 @pytest.fixture

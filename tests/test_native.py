@@ -257,3 +257,29 @@ def test_order_three_is_native_only_on_the_lagged_heave_vehicle():
     assert s.plant.native_third_state is not None and native.supported(s.plant, s.law)
     p = heave.load()
     assert p.native_third_state is None  # order 2: no third state to read
+
+
+def test_mujoco_timers_are_off_while_a_native_run_steps_and_the_physics_is_the_same(monkeypatch):
+    """The native path steps with mjcb_time = mujoco_plant.no_timer (MuJoCo's clock not read: mjData.timer stays
+    zero), restores the previous mjcb_time afterwards, and gives the rows and final state of a run with MuJoCo's
+    own timers on, bit for bit."""
+    import mujoco
+
+    from adaptive_mj.plants import mujoco_plant
+
+    def one(timers_on: bool):
+        if timers_on:  # mjcb_time None: MuJoCo's own clock
+            monkeypatch.setattr(mujoco_plant, "no_timer", lambda: type("On", (), {"ctypes": None})())
+        plant = heave_plant()()
+        law = SlidingAdaptiveLaw(plant.form, lam=5, k=200, gamma=GAMMA)
+        traj = run(plant, law, Cosine(), native=True, duration=1.0, theta_hat0=[0, 0, 0])
+        monkeypatch.undo()
+        return traj, plant.data.qpos.copy(), plant.data.qvel.copy(), float(plant.data.timer[0].duration)
+
+    off, on = one(False), one(True)
+    assert mujoco.get_mjcb_time() is None
+    assert off[0].meta["native"] and on[0].meta["native"]
+    assert off[3] == 0.0 and on[3] > 0.0  # mjTIMER_STEP: the clock was read only with the timers on
+    for f in FIELDS:
+        assert np.array_equal(getattr(off[0], f), getattr(on[0], f)), f
+    assert np.array_equal(off[1], on[1]) and np.array_equal(off[2], on[2])

@@ -42,8 +42,8 @@ from adaptive_mj.errors import ModelError
 from adaptive_mj.numba_util import jit_tree, with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
 from adaptive_mj.plants import BuiltPlant, ModelSource
-from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compile_for_scenario_with, control_callback,
-                                             new_warnings, scratch_data)
+from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compile_for_scenario_with, compiled_control,
+                                             control_callback, new_warnings, scratch_data)
 from adaptive_mj.plants.protocol import Policy
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, StressPlant, body_param_unit, register
@@ -724,7 +724,7 @@ class ManipulatorPlant(ModelClock, BodyEdits):
 
     @contextlib.contextmanager
     def controlled_natively(self, cfunc) -> Iterator[None]:
-        with control_callback(cfunc.ctypes):
+        with compiled_control(cfunc):
             yield
 
     def step_native(self, nstep: int) -> None:

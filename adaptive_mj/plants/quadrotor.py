@@ -44,8 +44,8 @@ from adaptive_mj.plants import events as ev
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants.airframe import Airframe
 from adaptive_mj.plants.kinds import PlantKind, StressPlant, register
-from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, control_callback, new_warnings, release_data,
-                                             run_data, scratch_data)
+from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compiled_control, control_callback, new_warnings,
+                                             release_data, run_data, scratch_data)
 
 MODEL_PATH = MODELS / "quadrotor.xml"
 BODY = "quad"  # the flying body's name in the model
@@ -321,7 +321,7 @@ class QuadrotorPlant(ModelClock, BodyEdits):
     # --- the native path's (adaptive_mj.sim.native_flight) ------------------------------
     @contextlib.contextmanager
     def controlled_natively(self, cfunc) -> Iterator[None]:
-        with control_callback(cfunc.ctypes):
+        with compiled_control(cfunc):
             yield
 
     def native_prestep(self) -> None:

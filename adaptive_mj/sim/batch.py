@@ -82,7 +82,7 @@ def _drive(prepared: list[PreparedRun], ncs: list[ContextOwner], nthread: int, o
            ids: list[int]) -> None:
     """Step the runs `prepared` (of one callback and model layout) in one Batch; each run's trajectory goes
     to out[ids[i]] as it ends."""
-    from adaptive_mj.plants.mujoco_plant import control_callback
+    from adaptive_mj.plants.mujoco_plant import compiled_control
 
     plants = [nc.plant for nc in ncs]
     batch = mujoco.batch.Batch(plants[0].model, nsim=len(prepared), nthread=nthread)
@@ -90,7 +90,7 @@ def _drive(prepared: list[PreparedRun], ncs: list[ContextOwner], nthread: int, o
     state = np.empty(mujoco.mj_stateSize(plants[0].model, _STATE))
     results = _Ended(prepared, out, ids)
     steps = {}
-    with control_callback(ncs[0].callback.ctypes), _all_bound(ncs):
+    with compiled_control(ncs[0].callback), _all_bound(ncs):
         asks: dict[int, int] = {}
         for i, p in enumerate(prepared):
             assert p.nc is not None  # every run here has its native controller (grouped by its callback above)
