@@ -286,6 +286,7 @@ def _bare_runs(args) -> None:
     mj_step of all its steps), no law."""
     import mujoco
 
+    from adaptive_mj.plants.mujoco_plant import timers_off
     from adaptive_mj.setup.build import build
     from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
 
@@ -299,32 +300,13 @@ def _bare_runs(args) -> None:
             mujoco.mj_step(model, data, nstep=steps)
 
 
-@contextmanager
-def timers_off(off: bool = True):
-    """MuJoCo's profiling timers off in the block (off=True): mjcb_time = plants.mujoco_plant.no_timer, as the
-    native runs step (mujoco_plant.compiled_control). The bare-stepping figures are measured both ways: "bare" is
-    mj_step as MuJoCo ships it (its clock read around each timed stage), "bare, timers off" the floor the runs
-    themselves step at."""
-    import mujoco
-
-    from adaptive_mj.plants.mujoco_plant import no_timer
-
-    if not off:
-        yield
-        return
-    previous = mujoco.get_mjcb_time()
-    mujoco.set_mjcb_time(no_timer().ctypes)
-    try:
-        yield
-    finally:
-        mujoco.set_mjcb_time(previous)
-
-
 def bare_limit(n: int, jobs: int = 2, sample: int = 1000, timers: bool = True) -> dict:
     """The bare-stepping limit of study(n): `jobs` processes at once, each stepping `sample` bare 2-s heave_drift
     runs (the model only: no law, no log), timed from all started to all done; the limit for n runs is
     n / (jobs · sample) times that wall time (the machine's parallel ceiling included, as the study has it).
-    timers: MuJoCo's profiling timers on (mj_step as MuJoCo ships it) or off (timers_off: as the runs step)."""
+    timers: MuJoCo's profiling timers on (mj_step as MuJoCo ships it) or off (plants.mujoco_plant.timers_off, as
+    the native runs step). The bare-stepping figures are measured both ways: "bare" as MuJoCo ships mj_step (its
+    clock read around each timed stage), "bare, timers off" the floor the runs themselves step at."""
     import multiprocessing as mp
 
     ctx = mp.get_context("fork")
@@ -402,6 +384,7 @@ def per_run(reps: int, runs: int, cases: str = "") -> dict:
     "ur5e=2" or "heave=2;ur5e=0.2,2" (plant=lengths [s], plants separated by ";"; "" = PER_RUN_SECONDS)."""
     import mujoco
 
+    from adaptive_mj.plants.mujoco_plant import timers_off
     from adaptive_mj.setup.build import build
     from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
     from adaptive_mj.sim.runner import start

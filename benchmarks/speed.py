@@ -4,8 +4,8 @@ with 1 and 2 jobs; log size per simulated second; peak memory of a 600 s run.
 
   a  bare MuJoCo: mj_step(m, d, nstep=N), no control, as MuJoCo ships it (its profiling timers read the clock
      around each timed stage)
-  a0 the same with MuJoCo's timers off (mjcb_time returns 0: plants.mujoco_plant.no_timer), as the native runs
-     (b, c, d, f, g) step; the ratios are given against both
+  a0 the same with MuJoCo's timers off (mjcb_time returns 0), as the native runs
+     (b, c, d, f, g) step (plants.mujoco_plant.timers_off); the ratios are given against both
   b  closed loop, adaptive law in the control callback (native path), no logging
   b_py  the same law through the Python callback (the path users' own laws take)
   c  closed loop with MCAP logging at the default rate (100 Hz)
@@ -39,7 +39,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from adaptive_mj.plants.mujoco_plant import no_timer
+from adaptive_mj.plants.mujoco_plant import timers_off
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
 from adaptive_mj.sim.loop import run
@@ -71,18 +71,12 @@ def bare(name: str, steps: int, extra=(), *, timers: bool = True) -> float:
     it) or off (mjcb_time = plants.mujoco_plant.no_timer, as the native runs step: compiled_control)."""
     setup = build(_scenario(name, steps, extra))
     m, d = setup.plant.model, setup.plant.data
-    previous = mujoco.get_mjcb_time()
-    if not timers:
-        mujoco.set_mjcb_time(no_timer().ctypes)
-    try:
-        airframe = getattr(setup.plant, "airframe", None)
-        if airframe is not None:
+    with timers_off(not timers):
+        if getattr(setup.plant, "airframe", None) is not None:
             return _bare_hover(setup, steps)
         t0 = time.perf_counter()
         mujoco.mj_step(m, d, nstep=steps)
         return (time.perf_counter() - t0) / steps * 1e6
-    finally:
-        mujoco.set_mjcb_time(previous)
 
 
 HOVER_CHUNK = 250  # [steps] of open-loop hover before the quadrotor's state is put back (0.5 s: it stays aloft)

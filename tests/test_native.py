@@ -278,6 +278,11 @@ def test_mujoco_timers_are_off_while_a_native_run_steps_and_the_physics_is_the_s
 
     off, on = one(False), one(True)
     assert mujoco.get_mjcb_time() is None
+    with mujoco_plant.timers_off(False):
+        assert mujoco.get_mjcb_time() is None
+    with mujoco_plant.timers_off():
+        assert mujoco.get_mjcb_time() is not None
+    assert mujoco.get_mjcb_time() is None
     assert off[0].meta["native"] and on[0].meta["native"]
     assert off[3] == 0.0 and on[3] > 0.0  # mjTIMER_STEP: the clock was read only with the timers on
     for f in FIELDS:

@@ -66,18 +66,28 @@ def no_timer():
 
 
 @contextlib.contextmanager
-def compiled_control(cfunc) -> Iterator[None]:
-    """Install a compiled (numba cfunc) control callback for the block, with MuJoCo's profiling timers off
-    (mjcb_time = no_timer): reading the clock cost 11-38 % of a bare RK4 step on the project's machine (heave
-    vehicle 8.5 -> 5.3 µs a step, UR5e 14.6 -> 13.2 µs; docs/PERFORMANCE.md), and mjData.timer is not used here.
-    The physics is the same bit for bit (tests/test_native.py). Both callbacks are restored afterwards."""
+def timers_off(off: bool = True) -> Iterator[None]:
+    """MuJoCo's profiling timers off for the block (mjcb_time = no_timer; off=False: left as they are), then the
+    previous mjcb_time restored. Reading the clock cost 11-38 % of a bare RK4 step on the project's machine (heave
+    vehicle 8.5 -> 5.3 µs a step, UR5e 14.6 -> 13.2 µs; docs/PERFORMANCE.md); only mjData.timer reads it."""
+    if not off:
+        yield
+        return
     previous = mujoco.get_mjcb_time()
     mujoco.set_mjcb_time(no_timer().ctypes)
     try:
-        with control_callback(cfunc.ctypes):
-            yield
+        yield
     finally:
         mujoco.set_mjcb_time(previous)
+
+
+@contextlib.contextmanager
+def compiled_control(cfunc) -> Iterator[None]:
+    """Install a compiled (numba cfunc) control callback for the block, with MuJoCo's profiling timers off
+    (timers_off: mjData.timer is not used here; the physics is the same bit for bit, tests/test_native.py). Both
+    callbacks are restored afterwards."""
+    with timers_off(), control_callback(cfunc.ctypes):
+        yield
 
 
 def compile_xml_path(path: str | Path) -> mujoco.MjModel:
