@@ -57,9 +57,12 @@ def no_timer():
         import numba
         from numba import types
 
-        @numba.cfunc(types.float64(), nogil=True, cache=True)
-        def zero_time():
-            return 0.0
+        from adaptive_mj.numba_util import cache_lock
+
+        with cache_lock():
+            @numba.cfunc(types.float64(), nogil=True, cache=True)
+            def zero_time():
+                return 0.0
 
         _NO_TIMER.append(zero_time)
     return _NO_TIMER[0]
