@@ -2,80 +2,11 @@
 they are called)."""
 from __future__ import annotations
 
-import contextlib
-import os
 import sys
-import tempfile
-import threading
 import types as pytypes
-from typing import Any, Callable, Iterable, Iterator
-
-try:
-    import fcntl
-except ImportError:  # not on Windows: the lock is then this process's own only
-    fcntl = None  # type: ignore[assignment]
+from typing import Any, Callable, Iterable
 
 _registries_loaded = False
-
-#: the inter-process lock's state in this process (pid: the process that opened fd; a forked child opens its own)
-_CACHE_LOCK: dict[str, Any] = {"pid": None, "fd": None, "depth": 0}
-_CACHE_THREADS = threading.RLock()
-
-
-def cache_lock_path() -> str:
-    """The file cache_lock locks: in NUMBA_CACHE_DIR where set, else in the temporary directory, one per user."""
-    folder = os.environ.get("NUMBA_CACHE_DIR") or tempfile.gettempdir()
-    uid = os.getuid() if hasattr(os, "getuid") else 0
-    return os.path.join(folder, f"adaptive_mj-numba-cache-{uid}.lock")
-
-
-@contextlib.contextmanager
-def cache_lock() -> Iterator[None]:
-    """Held while this package compiles or loads a function of numba's on-disk cache (cache=True): one process at a
-    time on this machine, one thread at a time in a process; reentrant.
-
-    numba's cache is not safe for processes that compile and save the same function at once (numba issue 4807,
-    "Cache causes Segmentation Faults when generated in parallel"): a function's index and its object code are two
-    files, so a process can read one written by another process's compile with the other's, and crash. That
-    happened here when a sweep's workers, or two test workers, compiled the same callback on a cold cache. Under
-    this lock the second process waits, then loads what the first saved (a load takes milliseconds, a compile
-    seconds). An advisory flock on cache_lock_path(), taken on a file description of this process's own (a forked
-    child opens its own: a description shared with the parent would let both hold it)."""
-    with _CACHE_THREADS:
-        state = _CACHE_LOCK
-        if state["pid"] != os.getpid():  # first use in this process, or in a forked child of one that used it
-            state.update(pid=os.getpid(), fd=None, depth=0)
-        if state["depth"] == 0 and fcntl is not None:
-            fd = os.open(cache_lock_path(), os.O_RDWR | os.O_CREAT, 0o600)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX)
-            except BaseException:
-                os.close(fd)
-                raise
-            state["fd"] = fd
-        state["depth"] += 1
-        try:
-            yield
-        finally:
-            state["depth"] -= 1
-            if state["depth"] == 0 and state["fd"] is not None:
-                fd, state["fd"] = state["fd"], None
-                fcntl.flock(fd, fcntl.LOCK_UN)
-                os.close(fd)
-
-
-_CALLED: set[int] = set()
-
-
-def first_call_locked(fn: Callable, *args) -> Any:
-    """fn(*args), the first call of fn in this process under cache_lock (a lazily compiled numba function compiles,
-    or loads from the disk cache, at its first call); later calls as they are."""
-    if id(fn) in _CALLED:
-        return fn(*args)
-    with cache_lock():
-        out = fn(*args)
-    _CALLED.add(id(fn))
-    return out
 
 
 def load_registries() -> None:

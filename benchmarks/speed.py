@@ -21,8 +21,7 @@ with 1 and 2 jobs; log size per simulated second; peak memory of a 600 s run.
      process: the first call with an empty numba cache (it compiles the callback) and the second
      (it loads it from the cache), heave vehicle and 6-joint arm
 
-Every figure is the median of --reps repetitions, with [min, max]. The ratios are given twice: of the medians,
-and paired (each repetition's own ratio of rows measured one after another, then the median of those).
+Every figure is the median of --reps repetitions, with [min, max].
 Usage: python benchmarks/speed.py [--reps 5] [--steps 20000] [--models heave,ur5e] [--no-sweep] [--no-startup] [--json]
 """
 from __future__ import annotations
@@ -177,10 +176,6 @@ def logged(name: str, steps: int, rate_hz: float | None, extra=()) -> tuple[floa
         return el / steps * 1e6, path.stat().st_size
 
 
-#: the rows the paired ratios name
-PAIRED = {"a": "a_bare", "a0": "a0_bare_timers_off", "b": "b_closed_loop", "c": "c_logged_100Hz"}
-
-
 def med(xs):
     return {"median": statistics.median(xs), "min": min(xs), "max": max(xs)}
 
@@ -295,11 +290,6 @@ def main() -> None:
                            "e_native/b": stats["e_plugin_native"]["median"] / stats["b_closed_loop"]["median"]}
                           if "e_plugin_native" in stats else {})},
             "log_bytes_per_sim_second_100Hz": statistics.median(sizes),
-            # each repetition's own ratio (its rows measured one after another, within about a second), then their
-            # median: a slow spell of the shared machine moves both sides of a ratio, not one
-            "paired_ratios": {f"{num}/{den}": med([x / y for x, y in zip(rows[PAIRED[num]], rows[PAIRED[den]],
-                                                                          strict=True)])
-                              for num, den in (("b", "a"), ("c", "a"), ("b", "a0"), ("c", "a0"), ("a0", "a"))},
         }
         if plant in ("heave", "ur5e") and not args.no_startup:
             out["models"][plant]["startup_s"] = startup(name if plant == "heave" else "ur5e_identification",
@@ -337,8 +327,6 @@ def _print_models(out: dict) -> None:
         for key, v in res["us_per_step"].items():
             print(f"  {key:24s} {v['median']:8.2f} µs/step  [{v['min']:.2f}, {v['max']:.2f}]")
         print("  ratios: " + ", ".join(f"{k} = {v:.2f}" for k, v in res["ratios"].items()))
-        print("  paired ratios (each repetition's own, median [min, max]): " + ", ".join(
-            f"{k} = {v['median']:.2f} [{v['min']:.2f}, {v['max']:.2f}]" for k, v in res["paired_ratios"].items()))
         print(f"  log size at 100 Hz: {res['log_bytes_per_sim_second_100Hz'] / 1000:.1f} kB per simulated second")
         if "startup_s" in res:
             st = res["startup_s"]

@@ -57,12 +57,9 @@ def no_timer():
         import numba
         from numba import types
 
-        from adaptive_mj.numba_util import cache_lock
-
-        with cache_lock():
-            @numba.cfunc(types.float64(), nogil=True, cache=True)
-            def zero_time():
-                return 0.0
+        @numba.cfunc(types.float64(), nogil=True, cache=True)
+        def zero_time():
+            return 0.0
 
         _NO_TIMER.append(zero_time)
     return _NO_TIMER[0]

@@ -32,7 +32,6 @@ import numpy as np
 
 from adaptive_mj.laws.mrac import MRAC_GAINS, mrac_regressor, mrac_values
 from adaptive_mj.laws.protocol import Law
-from adaptive_mj.numba_util import first_call_locked
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import native_step
 from adaptive_mj.sim import stage as stage_code
@@ -236,7 +235,7 @@ def _gemv_check(A: np.ndarray) -> bool:
     out = np.empty(A.shape[0])
     for _ in range(16):
         v = rng.normal(size=A.shape[0]) * 10.0 ** rng.integers(-3, 4, size=A.shape[0])
-        first_call_locked(_compiled["gemv"], A, v, out)
+        _compiled["gemv"](A, v, out)
         if not np.array_equal(A @ v, out):
             return False
     return True
@@ -388,8 +387,8 @@ class NativeAnalyticController(AnalyticLoop):
         step count where LinearPlant.step would."""
         plant = self.plant
         plant.x = np.ascontiguousarray(plant.x, dtype=np.float64)
-        first_call_locked(self._kernel, self.context, plant.A, plant.B, plant.C, plant.x, plant._ring, self.dist,
-                          self.lo, self.hi, rows)
+        self._kernel(self.context, plant.A, plant.B, plant.C, plant.x, plant._ring, self.dist, self.lo, self.hi,
+                     rows)
         c = self.context[0]
         plant._t, plant._k = float(c["t"]), int(c["k"])
 

@@ -125,7 +125,7 @@ def compiled_callback(context_dtype, off, key: int, pieces: Callable[[dict, str]
     import numpy as np
     from numba import carray, types
 
-    from adaptive_mj.numba_util import address_of, cache_lock, jit_tree, pointer
+    from adaptive_mj.numba_util import address_of, jit_tree, pointer
 
     tag = f"_{key:x}"  # every function of this variant named apart (numba_util.jit_tree)
     inline = inlined(numba)
@@ -138,5 +138,4 @@ def compiled_callback(context_dtype, off, key: int, pieces: Callable[[dict, str]
                     **common, **shape)
     g = {**callback_factory.__globals__, **common, "numba": numba, "types": types, "address": address_of(),
          "cptr": pointer(numba.from_dtype(context_dtype)), "control_stage": step}
-    with cache_lock():  # the cfunc compiles, or loads from numba's disk cache, here (numba_util.cache_lock)
-        return unique_factory(callback_factory, g, key)(off, key)
+    return unique_factory(callback_factory, g, key)(off, key)

@@ -35,7 +35,6 @@ from adaptive_mj.laws.first_order import FIRST_ORDER_GAINS, first_order_values
 from adaptive_mj.laws.plugin import PLUGIN_GAINS
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.laws.sliding import SLIDING_GAINS, sliding_law_values
-from adaptive_mj.numba_util import first_call_locked
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import native, native_step
 from adaptive_mj.sim import stage as stage_code
@@ -356,8 +355,7 @@ class NativeTwinController(AnalyticLoop):
         plant = self.plant
         plant.x = np.ascontiguousarray(plant.x, dtype=np.float64)
         theta = np.ascontiguousarray(plant.form_theta, dtype=np.float64)
-        first_call_locked(self._kernel, self.context, plant.x, theta, self.dist, self.lo, self.hi, self.d_known,
-                          rows)
+        self._kernel(self.context, plant.x, theta, self.dist, self.lo, self.hi, self.d_known, rows)
         c = self.context[0]
         plant.moved_to(float(c["t"]), rows)
 
