@@ -6,7 +6,17 @@ import pytest
 from adaptive_mj.errors import AdaptiveMJError
 from adaptive_mj.study.beside import Beside, can_fork
 
-needs_fork = pytest.mark.skipif(not can_fork(), reason="fork is not available (or threads run) here")
+
+@pytest.fixture
+def forkable():
+    """Skips the test unless a child can be forked now. Checked when the test runs, not when the module is imported:
+    an earlier test in this process (a Ray session, say) may have left threads running, and Beside then runs fn in
+    this process, where the dying child's os._exit would end the test worker itself (pytest-xdist: "node down")."""
+    if not can_fork():
+        pytest.skip("fork is not available, or other threads run in this process now")
+
+
+needs_fork = pytest.mark.usefixtures("forkable")
 
 
 @needs_fork
@@ -56,3 +66,19 @@ def test_cancel_ends_the_child():
     proc = b._proc
     b.cancel()
     assert not proc.is_alive()
+
+
+def test_with_other_threads_running_the_fork_tests_skip_instead_of_ending_the_process():
+    """This file's fork tests in a process where another thread runs (as after a Ray session in the same test worker):
+    each skips when it runs, none runs the dying child's os._exit in the process itself (which ended a test worker:
+    pytest-xdist's "node down", then a hung run)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, threading, pytest; e = threading.Event(); "
+            "threading.Thread(target=e.wait, daemon=True).start(); "
+            f"rc = pytest.main(['-q', '-p', 'no:cacheprovider', '-k', 'not other_threads', {__file__!r}]); "
+            "e.set(); sys.exit(rc)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    assert "1 passed, 5 skipped" in r.stdout, r.stdout[-2000:]
