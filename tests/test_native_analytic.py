@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from same_rows import FIELDS, run_scenario, same_rows
 
+from adaptive_mj.form import plain_dot
 from adaptive_mj.laws.common import DeadZone, DeadZoneOn, Modification, modify_rate
 from adaptive_mj.laws.mrac import MracLaw, Rule
 from adaptive_mj.reference import ModelResponse
@@ -104,12 +105,13 @@ def test_mrac_values_are_the_numpy_expressions_it_replaced():
                       sign_b=[1.0, -1.0][trial % 2], dead_zone=dz, modification=mod)
         x, ref, th = rng.normal(size=order), rng.normal(size=order + 1), rng.normal(size=nth)
         out = law(0.0, x, ref, th)
-        # the former arithmetic
-        r = float((ref[order] + law.alpha @ ref[:order]) / law.beta)
+        # the former arithmetic, its dot products (numpy's `@`, BLAS) summed as BLAS sums them without fused
+        # multiply-adds (form.plain_dot: OpenBLAS fuses on AVX-512, one ulp apart in about a quarter of draws)
+        r = float((ref[order] + plain_dot(law.alpha, ref[:order])) / law.beta)
         omega = np.concatenate([np.asarray(x[:order], dtype=float), np.array([r])])
-        u = float(th @ omega)
+        u = plain_dot(th, omega)
         e = x[:order] - ref[:order]
-        s = float(e @ law.pb)
+        s = plain_dot(e, law.pb)
         if dz is None or dz.adapting(s, float(e[0])):
             rate = -law.sign_b * law.gamma * omega * s
         else:

@@ -11,6 +11,7 @@ import subprocess
 import sys
 import textwrap
 import time
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -181,6 +182,164 @@ def test_sigterm_to_bench_closes_every_log_and_leaves_no_worker(tmp_path):
     assert statuses and set(statuses) <= {"ok", "diverged", "interrupted"}
     assert "interrupted" in statuses
     assert not (out_dir / "report.md").exists()  # no report made of an interrupted bench
+
+
+# A study whose workers compile: the parent does not compile their callbacks first (parallel._prewarm off, as
+# where fork is missing or a job's variant is not among the parent's), and numba's cache is empty (the test's
+# NUMBA_CACHE_DIR). With SPIN set, each worker first spends about a minute in one compiled call before it
+# compiles (an LLVM pass as long as that: no Python signal handler can run until it returns), having touched
+# <MARKERS>/<pid> so the test knows it is there.
+_COMPILING_STUDY = textwrap.dedent("""
+    import math, os, sys, time
+    from pathlib import Path
+    from adaptive_mj.study import parallel
+    from adaptive_mj.sim import loop
+    from adaptive_mj.cli import main
+
+    parallel._prewarm = lambda jobs: None
+    markers, spin_s = Path(sys.argv[1]), float(sys.argv[2])
+    if spin_s > 0:
+        import numba
+
+        @numba.njit(cache=False)
+        def spin(n):
+            x = 0.0
+            for i in range(n):
+                x = math.sin(x + 1e-9 * i)
+            return x
+
+        spin(10)  # compiled here, in the parent
+        t0 = time.perf_counter()
+        spin(2_000_000)
+        n = int(2_000_000 * spin_s / max(time.perf_counter() - t0, 1e-6))
+        native_controller = loop._native_controller
+
+        def spinning_native_controller(*args, **kwargs):
+            (markers / str(os.getpid())).touch()
+            spin(n)
+            return native_controller(*args, **kwargs)
+
+        loop._native_controller = spinning_native_controller
+    else:
+        native_controller = loop._native_controller
+
+        def marked_native_controller(*args, **kwargs):
+            (markers / str(os.getpid())).touch()
+            return native_controller(*args, **kwargs)
+
+        loop._native_controller = marked_native_controller
+    sys.exit(main(sys.argv[3:]))
+""")
+
+
+def start_compiling_sweep(tmp_path: Path, spin_s: float) -> tuple[subprocess.Popen, Path, Path]:
+    out_dir, markers = tmp_path / "sweep", tmp_path / "markers"
+    markers.mkdir()
+    env = dict(os.environ, MUJOCO_GL="egl", NUMBA_CACHE_DIR=str(tmp_path / "numba_cache"))
+    proc = subprocess.Popen([sys.executable, "-c", _COMPILING_STUDY, str(markers), str(spin_s), "sweep", "heave_drift",
+                             "--grid", "law.k=100,200,300", "--jobs", "2", "-o", str(out_dir), "--set", LONG],
+                            cwd=REPO, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    return proc, out_dir / "logs", markers
+
+
+def test_sigterm_while_the_workers_compile_ends_the_sweep_within_seconds(tmp_path):
+    """The signal comes while both workers compile their first run's callback from an empty numba cache: the sweep
+    ends within seconds, every log closed as 'interrupted' (or, for a worker that had to be killed, named as
+    unfinished), no worker left."""
+    proc, logs, markers = start_compiling_sweep(tmp_path, spin_s=0.0)
+    wait_for(lambda: len(list(markers.iterdir())) == 2, proc, timeout=300, what="both workers to start compiling")
+    workers = children(proc.pid)
+    assert {int(m.name) for m in markers.iterdir()} <= workers
+    t0 = time.monotonic()
+    os.kill(proc.pid, signal.SIGTERM)
+    out, err = proc.communicate(timeout=60)
+    took = time.monotonic() - t0
+    assert proc.returncode == 143, err
+    assert "Traceback" not in err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("adaptive-mj: interrupted by SIGTERM; 0 of 3 runs had finished"), last
+    assert took < 20.0, f"{took:.1f} s from SIGTERM to exit"
+    assert_gone(workers)
+    written = sorted(logs.glob("*.mcap"))
+    assert len(written) == 2
+    for path in written:
+        if str(path) in last:  # a worker killed after the grace period: named, and read as truncated
+            assert read_log(path).status == "truncated"
+        else:
+            assert closed_status(path)["status"] == "interrupted"
+
+
+def test_the_parent_does_not_wait_for_a_worker_deep_in_a_native_call(tmp_path):
+    """Each worker is a minute deep in one compiled call (as in a long LLVM pass) when the parent gets SIGTERM: it
+    gives them parallel.STOP_GRACE s, kills them, and says which logs they left unfinished; it does not wait the
+    minute. (Before: the parent waited up to 30 s for each.)"""
+    from adaptive_mj.study.parallel import STOP_GRACE
+
+    proc, logs, markers = start_compiling_sweep(tmp_path, spin_s=120.0)
+    wait_for(lambda: len(list(markers.iterdir())) == 2, proc, timeout=300, what="both workers to be in the call")
+    workers = children(proc.pid)
+    t0 = time.monotonic()
+    os.kill(proc.pid, signal.SIGTERM)
+    out, err = proc.communicate(timeout=100)
+    took = time.monotonic() - t0
+    assert proc.returncode == 143, err
+    assert STOP_GRACE <= took < 15.0, f"{took:.1f} s from SIGTERM to exit"  # a minute, had it waited
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("adaptive-mj: interrupted by SIGTERM; 0 of 3 runs had finished"), last
+    assert f"2 worker(s) had not stopped {STOP_GRACE:g} s after SIGTERM and were killed" in last
+    assert_gone(workers)
+    written = sorted(logs.glob("*.mcap"))
+    assert len(written) == 2
+    assert last.endswith(", ".join(map(str, written))) or last.endswith(", ".join(map(str, reversed(written))))
+    assert [read_log(path).status for path in written] == ["truncated", "truncated"]
+
+
+def test_workers_whose_parent_is_killed_close_their_logs_and_exit(tmp_path):
+    """SIGKILL to the parent (no handler runs there): its workers see it (parallel._watch_parent), close
+    their runs' logs as 'interrupted' and exit; none runs on."""
+    out_dir = tmp_path / "sweep"
+    proc = start("sweep", "heave_drift", "--grid", "law.k=100,200,300", "--jobs", "2", "-o", out_dir,
+                 "--set", LONG)
+    logs = out_dir / "logs"
+    wait_for(lambda: len([p for p in logs.glob("*.mcap") if p.stat().st_size > 50_000]) == 2, proc,
+             what="both workers' logs to grow")
+    workers = children(proc.pid)
+    assert len(workers) == 2
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.communicate(timeout=30)
+    assert_gone(workers, timeout=15.0)
+    written = sorted(logs.glob("*.mcap"))
+    assert len(written) == 2
+    for path in written:
+        assert closed_status(path)["status"] == "interrupted"
+
+
+def test_a_stop_raised_inside_a_weakref_callback_is_raised_again_in_the_main_code(capfd):
+    """Python drops an exception raised inside a weakref callback (printed as "Exception ignored"): a stop signal
+    whose handler ran there would be lost, and the process would go on (seen: a bench's worker ran its run to the
+    end, a bench ran all 241 runs after SIGTERM). interrupt delivers it again until it is raised where it can be."""
+    from adaptive_mj.errors import Interrupted
+    from adaptive_mj.sim import interrupt
+    from adaptive_mj.sim.interrupt import stop_on_signals
+
+    class Thing:
+        pass
+
+    hook = sys.unraisablehook
+    t0 = time.monotonic()
+    with pytest.raises(Interrupted) as info, stop_on_signals():
+        thing = Thing()
+        ref = weakref.ref(thing, lambda r: signal.raise_signal(signal.SIGTERM))  # the handler runs inside it
+        del thing  # Python drops the Interrupted raised in the callback
+        while time.monotonic() - t0 < 5.0:  # plain Python code: where the second delivery raises
+            pass
+    assert info.value.signum == signal.SIGTERM
+    assert time.monotonic() - t0 < 2.0
+    assert ref() is None
+    assert "Exception ignored" not in capfd.readouterr().err  # taken by interrupt's hook, not printed
+    assert sys.unraisablehook is hook  # put back when the block ends
+    assert interrupt.requested() is None
 
 
 # A `run` whose every reading of the plant state also stores the simulated time reached in a

@@ -28,6 +28,7 @@ from typing import Callable
 import numpy as np
 
 from adaptive_mj.errors import ScenarioError
+from adaptive_mj.form import plain_dot
 from adaptive_mj.plants import BuiltPlant
 from adaptive_mj.plants.protocol import Plant, Policy
 from adaptive_mj.plants.twin import PythonStepped
@@ -117,7 +118,7 @@ class LinearPlant(PythonStepped):
         self._ring[:] = 0.0
 
     def observe(self) -> np.ndarray:
-        return np.array([self.C @ self.x])
+        return np.array([plain_dot(self.C, self.x)])  # the compiled loop's sum (native_analytic.output)
 
     def true_theta(self) -> np.ndarray:
         return self._theta
@@ -125,7 +126,7 @@ class LinearPlant(PythonStepped):
     def _control(self, t: float, x: np.ndarray) -> float:
         if self._policy is None:
             raise RuntimeError("LinearPlant.step outside controlled_by(policy)")
-        u = float(self._policy(t, np.array([self.C @ x])))
+        u = float(self._policy(t, np.array([plain_dot(self.C, x)])))
         if self.ctrl_range is not None:
             u = min(max(u, self.ctrl_range[0]), self.ctrl_range[1])
         return u

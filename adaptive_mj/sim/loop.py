@@ -51,6 +51,7 @@ from adaptive_mj.plants import Event, plant_order
 from adaptive_mj.plants.protocol import CtrlRange, Plant, control_shape, has_joints, termination
 from adaptive_mj.plants.twin import PythonStepped
 from adaptive_mj.sim import stage as st
+from adaptive_mj.sim import interrupt
 from adaptive_mj.sim.interrupt import deferred
 from adaptive_mj.sim.stage import TABLEAU, ControlTiming
 from adaptive_mj.trajectory import Status, Trajectory
@@ -548,6 +549,7 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
             return make(plant, law, reference, theta_hat0, chunk, control=timing, sensors=sensors)
         return make(plant, law, reference, theta_hat0, chunk, control=timing)
     except Exception as exc:  # a user's law numba cannot compile: say why, run it in Python
+        interrupt.reraise_stop(exc)  # a stop signal that came while numba compiled, wrapped by Python
         plugin = law.installed
         if plugin is None:
             raise
@@ -700,8 +702,11 @@ def _interruptible(stopped: Callable[[str], Trajectory]):
     """Turn a KeyboardInterrupt into errors.Interrupted carrying stopped(reason), the rows so far."""
     try:
         yield
-    except KeyboardInterrupt as exc:
-        interrupted = exc if isinstance(exc, Interrupted) else Interrupted()
+    except BaseException as exc:
+        stop = interrupt.stop_behind(exc)  # also one Python wrapped (interrupt's module docstring)
+        if stop is None and not isinstance(exc, KeyboardInterrupt):
+            raise
+        interrupted = stop if stop is not None else Interrupted()
         interrupted.trajectory = stopped(str(interrupted))
         if interrupted is exc:
             raise

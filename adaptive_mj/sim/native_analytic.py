@@ -15,7 +15,8 @@ Before each chunk Python evaluates the reference at the stage times (reference.M
 scalar calls' bits, vectorised; another reference is called once per distinct stage time as the Python path
 calls it) and the input disturbance per step (force_offset + disturbance(t), LinearPlant.step's arithmetic).
 Every product and sum is the Python path's, in its order: the dots of a few entries (C x, θ̂ᵀω, αᵀx_m) are
-plain loops from 0, which numpy's dot gives bit for bit; A x is numba's np.dot, the BLAS matrix-vector product
+plain loops from 0 with no fused multiply-add, as the Python path sums them (form.plain_dot: numpy's dot is
+BLAS's, which fuses on AVX-512); A x is numba's np.dot, the BLAS matrix-vector product
 numpy's A @ x calls (`supported` checks on the run's A that the two agree, else the run takes the Python path).
 tests/test_native_analytic.py shows the two paths give the same rows bit for bit.
 
@@ -60,7 +61,7 @@ CONTEXT = native_step.context_dtype([
     ("rec_t", _i8), ("rec_y", _i8), ("rec_u", _i8), ("rec_s", _i8), ("rec_ref", _i8), ("rec_theta", _i8),
 ])
 
-MAX_STATES = 8  # the plant's order n_x at most (C x summed as numpy's dot sums a short vector: checked to 8)
+MAX_STATES = 8  # the plant's order n_x at most (C x summed as form.plain_dot sums it)
 
 
 def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
@@ -114,7 +115,7 @@ def _record_row(ctx, io, row, u, theta):
 
 
 def output(C, x):
-    """y = C x (C, x (n_x,)): summed from 0 in order, as numpy's dot of a short vector sums it."""
+    """y = C x (C, x (n_x,)): summed from 0 in order with no fused multiply-add, as form.plain_dot (LinearPlant)."""
     acc = 0.0
     for i in range(x.shape[0]):
         acc += C[i] * x[i]

@@ -13,10 +13,10 @@ noise, divergence and rows between chunks), the plant's step_native(n) calling t
 
 The law's form and the plant's form are compiled apart (a law may be designed on another model than the twin
 integrates): the law's φ, f, h into the law (the names native._builtin_law and native._plugin_law call), the
-plant's into `twin_rate`, ModelForm.highest_derivative's arithmetic in its order (φ·p summed from 0, as numpy's
-dot of a short vector sums it). The references at the stage times are evaluated in Python before each chunk,
-vectorised (stage.stage_references: TwinPlant.step's stage times t + h/2, t + h are the same numbers), and so are
-the steps' external forces (force_offset + disturbance(t), TwinPlant.step's arithmetic).
+plant's into `twin_rate`, ModelForm.highest_derivative's arithmetic in its order (φ·p summed from 0 with no
+fused multiply-add, as form.plain_dot sums it). The references at the stage times are evaluated in Python before
+each chunk, vectorised (stage.stage_references: TwinPlant.step's stage times t + h/2, t + h are the same numbers),
+and so are the steps' external forces (force_offset + disturbance(t), TwinPlant.step's arithmetic).
 tests/test_native_twin.py shows the two paths give the same rows bit for bit.
 
 The context record (CONTEXT: stage.control_stage's fields, then this shape's) holds the run's state and its

@@ -26,6 +26,7 @@ from adaptive_mj.report.metrics import clean_json, summary as make_summary
 from adaptive_mj.setup.scenario import Scenario
 from adaptive_mj.setup.success import Criteria, criteria, judge
 from adaptive_mj.sim import preflight
+from adaptive_mj.sim import interrupt
 from adaptive_mj.sim.interrupt import deferred
 from adaptive_mj.trajectory import Status, Trajectory
 
@@ -208,7 +209,10 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
         traj = run(st.setup.plant, st.setup.law, st.setup.reference, sink=st.recorder, **st.kwargs)
         return st.finish(traj)
     except BaseException as exc:  # a stop signal after the last step, before the verdict closed the log: all rows
-        st.abandon(exc, traj)
+        stop = interrupt.stop_behind(exc)  # also one Python wrapped while numba compiled (sim.interrupt)
+        st.abandon(stop if stop is not None else exc, traj)
+        if stop is not None and stop is not exc:
+            raise stop from exc
         raise
 
 
@@ -224,7 +228,10 @@ def execute_batch(scenarios: Sequence[tuple[Scenario, Path | None]], *, nthread:
         trajs = run_batch([dict(plant=st.setup.plant, law=st.setup.law, reference=st.setup.reference,
                                 sink=st.recorder, **st.kwargs) for st in starts], nthread=nthread)
     except BaseException as exc:
-        settle_batch(starts, exc)
+        stop = interrupt.stop_behind(exc)
+        settle_batch(starts, stop if stop is not None else exc)
+        if stop is not None and stop is not exc:
+            raise stop from exc
         raise
     return [st.finish(traj) for st, traj in zip(starts, trajs, strict=True)]
 

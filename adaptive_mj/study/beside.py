@@ -54,6 +54,9 @@ class Beside(Generic[T]):
             self._proc.join()
             raise RuntimeError(f"the process running {getattr(self._fn, '__name__', 'the work')} beside the study "
                                f"ended without a result (exit code {self._proc.exitcode})") from None
+        except BaseException:  # a stop signal while waiting: the child goes too
+            self.cancel()
+            raise
         finally:
             self._recv.close()
         self._proc.join()
@@ -62,10 +65,14 @@ class Beside(Generic[T]):
             return payload
         raise _raised(*payload)
 
-    def cancel(self) -> None:
+    def cancel(self, grace: float = 5.0) -> None:
+        """End the child: SIGTERM, and SIGKILL if it has not exited `grace` s later [s]."""
         if self._proc is not None and self._proc.is_alive():
             self._proc.terminate()
-            self._proc.join()
+            self._proc.join(grace)
+            if self._proc.is_alive():
+                self._proc.kill()
+                self._proc.join()
         self._proc = None
 
 

@@ -11,10 +11,15 @@ SIGINT and SIGTERM. Workers ignore SIGINT (a Ctrl-C reaches the whole process
 group; stopping is the parent's job). On KeyboardInterrupt (the CLI turns
 SIGTERM into one too) the parent sends each worker SIGTERM: a worker in a run
 raises errors.Interrupted there, so the run's log is closed with status
-"interrupted", and starts no further job; the parent waits for every worker to
-exit, then re-raises. Workers are started (forked, after the parent compiled the
-native callbacks; spawned where fork is missing) with both signals blocked until
-their handlers are in place, so no signal can kill one half set up.
+"interrupted", and starts no further job. The parent gives them STOP_GRACE s to
+exit, kills any still running (one deep in a native call, such as an LLVM pass of
+numba's compiler, runs no Python handler until the call returns) and re-raises;
+the message names any log a killed worker left unfinished. Workers are started
+(forked, after the parent compiled the native callbacks; spawned where fork is
+missing) with both signals blocked until their handlers are in place, so no signal
+can kill one half set up. A worker whose parent died (SIGKILL, a crash) sees it
+within PARENT_POLL_S (a thread of its own): it closes the log of its run as
+"interrupted" and exits, and exits at once between runs.
 """
 from __future__ import annotations
 
@@ -23,8 +28,10 @@ import multiprocessing as mp
 import os
 import signal
 import sys
+import threading
 import time
 from collections import deque
+from pathlib import Path
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from typing import Callable, Iterator, Sequence, cast
@@ -32,7 +39,7 @@ from typing import Callable, Iterator, Sequence, cast
 from adaptive_mj.sim import interrupt
 from adaptive_mj.errors import Interrupted
 # Job, JobResult and Backend are imported from here by the study's commands, tests and benchmarks
-from adaptive_mj.study.job import (STOP_TIMEOUT, Backend, Job, JobResult, interrupted_note, run_in_worker, run_job,
+from adaptive_mj.study.job import (Backend, Job, JobResult, interrupted_note, run_in_worker, run_job,
                                    run_jobs_batched)
 from adaptive_mj.trajectory import Status
 
@@ -44,7 +51,41 @@ def _quiet(message: str) -> None:
     its reason naming MuJoCo's warning: plants.mujoco_plant.new_warnings)."""
 
 
-def _init_worker() -> None:
+#: [s] how long a worker told to stop (SIGTERM) has to close its run's log and exit before it is killed
+STOP_GRACE = 5.0
+
+#: [s] how often a worker looks whether its parent is still there
+PARENT_POLL_S = 0.2
+
+# the process that started this worker (set in each worker by _init_worker; empty in the parent)
+_parent_pid: list[int] = []
+
+
+def _orphaned() -> bool:
+    """Whether this worker's parent has died (the worker now belongs to init or a subreaper)."""
+    return bool(_parent_pid) and os.getppid() != _parent_pid[0]
+
+
+def _exit_if_orphaned(signum: int) -> None:
+    """A stop signal between runs (interrupt.install's `unarmed`): a worker whose parent is gone ends at once (no
+    one will send it another job or read its results); with its parent alive it only takes note (run_in_worker
+    starts no further run)."""
+    if _orphaned():
+        os._exit(128 + signum)
+
+
+def _watch_parent() -> None:
+    """A worker's daemon thread: once the parent is gone (killed, crashed), SIGTERM to this worker's main thread,
+    so that a run in progress closes its log as "interrupted" and the worker exits (_run_in_pool_worker; between
+    runs, _exit_if_orphaned); if it is still here STOP_GRACE s later, it ends."""
+    while not _orphaned():
+        time.sleep(PARENT_POLL_S)
+    signal.pthread_kill(threading.main_thread().ident or 0, signal.SIGTERM)  # (the main thread has an ident)
+    time.sleep(STOP_GRACE)
+    os._exit(128 + signal.SIGTERM)
+
+
+def _init_worker(parent_pid: int | None = None) -> None:
     import warnings
 
     import mujoco
@@ -55,9 +96,21 @@ def _init_worker() -> None:
     warnings.simplefilter("ignore", RuntimeWarning)
     mujoco.set_mju_user_warning(_quiet)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    interrupt.install([signal.SIGTERM])  # raised only inside a run (interrupt.armed)
+    # raised only inside a run (interrupt.armed); between runs, an orphan exits
+    interrupt.install([signal.SIGTERM], unarmed=_exit_if_orphaned)
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)  # blocked by the parent for the spawn
+    if parent_pid is not None:
+        _parent_pid[:] = [parent_pid]
+        threading.Thread(target=_watch_parent, name="adaptive-mj parent watch", daemon=True).start()
+
+
+def _run_in_pool_worker(job: Job) -> JobResult:
+    """run_in_worker in a pool's worker; one whose parent died meanwhile exits after the run (its log closed)."""
+    result = run_in_worker(job)
+    if _orphaned():
+        os._exit(128 + signal.SIGTERM)
+    return result
 
 
 @contextmanager
@@ -73,20 +126,53 @@ def _stop_signals_blocked():
         signal.pthread_sigmask(signal.SIG_SETMASK, old)  # a signal that came meanwhile is raised now
 
 
-def _stop_workers(pool: cf.ProcessPoolExecutor, *, timeout: float = STOP_TIMEOUT) -> None:
-    """SIGTERM every worker (its run closes its log as "interrupted"), cancel what has not
-    started, and wait for all of them to exit; kill one that has not after `timeout` s."""
+def _stop_workers(pool: cf.ProcessPoolExecutor, *, grace: float = STOP_GRACE) -> int:
+    """SIGTERM every worker (its run closes its log as "interrupted"), cancel what has not started, give them
+    `grace` s to exit, and kill those still running (a native call, such as a compile, lets no handler run until it
+    returns). Returns how many were killed."""
     procs = list((getattr(pool, "_processes", None) or {}).values())
     for p in procs:
         if p.is_alive():
             p.terminate()
     pool.shutdown(wait=False, cancel_futures=True)
-    deadline = time.monotonic() + timeout
+    deadline = time.monotonic() + grace
+    killed = 0
     for p in procs:
         p.join(max(0.0, deadline - time.monotonic()))
         if p.is_alive():
             p.kill()
             p.join()
+            killed += 1
+    return killed
+
+
+def _unfinished_logs(jobs: Sequence[Job]) -> list[Path]:
+    """The logs of `jobs` that exist but were not closed (no MCAP footer: a worker killed in its run wrote them)."""
+    out = []
+    for path in (job.log for job in jobs if job.log is not None):
+        try:
+            with open(path, "rb") as f:
+                f.seek(-len(_MCAP_MAGIC), os.SEEK_END)
+                closed = f.read() == _MCAP_MAGIC
+        except (OSError, ValueError):  # no log yet, or shorter than the magic
+            continue
+        if not closed:
+            out.append(path)
+    return out
+
+
+_MCAP_MAGIC = b"\x89MCAP0\r\n"  # the last bytes of a closed MCAP file
+
+
+def _killed_note(killed: int, unfinished: list[Path]) -> str:
+    """What the stop left behind when workers had to be killed (empty when none was)."""
+    if not killed:
+        return ""
+    text = f"; {killed} worker(s) had not stopped {STOP_GRACE:g} s after SIGTERM and were killed"
+    if unfinished:
+        text += (f", leaving {len(unfinished)} log(s) unfinished (`adaptive-mj replay` reads them as 'truncated' and "
+                 f"recovers their rows): " + ", ".join(map(str, unfinished)))
+    return text
 
 
 @contextmanager
@@ -180,7 +266,8 @@ def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
         alone = bool(suspects)
         source, width = (suspects, 1) if alone else (queue, n_jobs)
         lost: list[int] = []
-        with cf.ProcessPoolExecutor(max_workers=width, mp_context=ctx, initializer=_init_worker) as pool:
+        with cf.ProcessPoolExecutor(max_workers=width, mp_context=ctx, initializer=_init_worker,
+                                    initargs=(os.getpid(),)) as pool:
             futures: dict[cf.Future, int] = {}
             try:
                 while source or futures:
@@ -188,7 +275,7 @@ def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
                         while source and len(futures) < (1 if alone else WINDOW_PER_WORKER * n_jobs):
                             i = source.popleft()
                             try:
-                                futures[pool.submit(run_in_worker, jobs[i])] = i
+                                futures[pool.submit(_run_in_pool_worker, jobs[i])] = i
                             except BrokenProcessPool:  # a worker died since the last wait
                                 source.appendleft(i)
                                 break
@@ -214,11 +301,13 @@ def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
                         futures.clear()
                         break
             except (KeyboardInterrupt, GeneratorExit) as exc:  # a signal, or the caller stopped reading
-                _stop_workers(pool)
+                in_flight = [jobs[i] for fut, i in futures.items() if not fut.done()]
+                killed = _stop_workers(pool)
                 if isinstance(exc, Interrupted):
                     if finished:
                         sys.stderr.write("\n")  # end the progress line
-                    exc.note = interrupted_note(finished, len(jobs))
+                    exc.note = interrupted_note(finished, len(jobs)) + _killed_note(killed,
+                                                                                     _unfinished_logs(in_flight))
                 raise
         for i, result in _put_back_lost(lost, jobs, attempts, retries, queue, suspects, on_retry):
             finished += 1
@@ -290,7 +379,8 @@ def _prewarm(jobs: Sequence[Job]) -> None:
             setup = build(sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed))
             with contextlib.redirect_stderr(io.StringIO()):  # a plugin's "could not be compiled": the worker says it
                 compile_native(setup.plant, setup.law, setup.reference, setup.theta_hat0)
-        except Exception:  # noqa: BLE001 (only a head start: the worker runs the job and reports what is wrong)
+        except Exception as exc:  # noqa: BLE001 (only a head start: the worker runs the job and reports what is wrong)
+            interrupt.reraise_stop(exc)  # a stop signal that came while numba compiled, wrapped by Python
             continue
 
 
