@@ -119,9 +119,10 @@ class SuccessSpec:
     tail_fraction x the reference's half-range over the run on that joint, at least tail_floor.
     param_error: bound on |θ̂_i - θ_i| / |θ_i| at the end, for every parameter (a number) or the
     named ones (a table); None = not judged. saturation: the largest fraction of the run any one
-    actuator may spend at its limit. preflight: "warn" (one line, the run goes on) or "refuse"
-    (`run --strict`; studies) when the sampled loop's fastest mode is past the integrator's
-    or the hold's stability limit (adaptive_mj.sim.preflight)."""
+    actuator may spend at its limit. preflight: what a failed pre-flight check does when the sampled loop's
+    fastest mode is past the integrator's or the hold's stability limit (adaptive_mj.sim.preflight): "warn" (one
+    line, the run goes on), "refuse" (`run --strict`: no run) or "record" (the run goes on, the check's result in
+    its summary only: a study's runs, which are judged by their outcome whatever the law)."""
 
     tail_rms: float | None = None
     tail_fraction: float = 0.05
@@ -131,7 +132,7 @@ class SuccessSpec:
     preflight: str = "warn"
 
 
-PREFLIGHT_ACTIONS = ("warn", "refuse")
+PREFLIGHT_ACTIONS = ("warn", "refuse", "record")
 
 
 @dataclass(frozen=True)

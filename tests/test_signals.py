@@ -178,9 +178,12 @@ def test_sigterm_to_bench_closes_every_log_and_leaves_no_worker(tmp_path):
     last = err.strip().splitlines()[-1]
     assert last.startswith("adaptive-mj: interrupted by SIGTERM; ") and "Traceback" not in err
     assert_gone(workers)
-    statuses = [closed_status(path)["status"] for path in logs.glob("*.mcap")]
-    assert statuses and set(statuses) <= {"ok", "diverged", "interrupted"}
-    assert "interrupted" in statuses
+    # every log closed, but one a worker left unfinished when it was killed after the grace period (deep in a
+    # native call, a compile of a cold cache under load): named in the message, and read as truncated
+    statuses = [closed_status(path)["status"] if str(path) not in last else read_log(path).status
+                for path in logs.glob("*.mcap")]
+    assert statuses and set(statuses) <= {"ok", "diverged", "interrupted", "truncated"}
+    assert "interrupted" in statuses or "truncated" in statuses
     assert not (out_dir / "report.md").exists()  # no report made of an interrupted bench
 
 
@@ -340,6 +343,46 @@ def test_a_stop_raised_inside_a_weakref_callback_is_raised_again_in_the_main_cod
     assert "Exception ignored" not in capfd.readouterr().err  # taken by interrupt's hook, not printed
     assert sys.unraisablehook is hook  # put back when the block ends
     assert interrupt.requested() is None
+
+
+# The pool of the test below, for its forked worker to reach the result pipe's write end.
+_POOL: list = []
+
+
+def _half_a_result(_):
+    """A worker that has sent half of a result (a 1 MB message's length and its first 100 bytes) and is then deaf
+    to SIGTERM: killed after the grace period."""
+    import struct
+
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    os.write(_POOL[0]._result_queue._writer.fileno(), struct.pack("!i", 1_000_000) + bytes(100))
+    time.sleep(120)
+
+
+@pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(), reason="needs fork")
+def test_a_worker_killed_while_it_sends_a_result_does_not_hang_the_parent():
+    """The CI hang of issue 55: a worker killed in the middle of sending its result left the pool's manager thread
+    waiting for the rest of the message, and concurrent.futures joins that thread at exit: the bench printed its
+    stop line and never ended. After _stop_workers, the thread ends within seconds."""
+    import concurrent.futures as cf
+    import multiprocessing as mp
+
+    from adaptive_mj.study.parallel import _stop_workers
+
+    pool = cf.ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("fork"))
+    _POOL[:] = [pool]
+    try:
+        future = pool.submit(_half_a_result, None)
+        manager = pool._executor_manager_thread
+        time.sleep(1.0)  # the worker has written its half message, and the manager thread waits for the rest
+        assert manager.is_alive() and not future.done()
+        assert _stop_workers(pool, grace=0.5) == 1  # deaf to SIGTERM: killed
+        manager.join(10.0)
+        assert not manager.is_alive(), "the pool's manager thread still waits for the half-sent result"
+        assert isinstance(future.exception(timeout=5), cf.process.BrokenProcessPool)
+    finally:
+        _POOL.clear()
+        pool.shutdown(wait=False)
 
 
 # A `run` whose every reading of the plant state also stores the simulated time reached in a

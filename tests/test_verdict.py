@@ -221,7 +221,7 @@ def test_demonstration_of_sudden_failure_is_a_failed_verdict_with_its_measured_s
     ("success.param_error={nope=0.1}",
      r"success.param_error.nope: not a parameter of the law \(its parameters: d, b, c\)"),
     ("success.saturation=1.5", r"success.saturation must be a fraction of the run's time in \[0, 1\], got 1.5"),
-    ("success.preflight='maybe'", r"success.preflight must be one of 'warn', 'refuse', got 'maybe'"),
+    ("success.preflight='maybe'", r"success.preflight must be one of 'warn', 'refuse', 'record', got 'maybe'"),
     ("success.tail_rms=-1", r"success.tail_rms must be > 0, got -1.0"),
     ("success.tail_rsm=1", r"unknown key 'success.tail_rsm'"),
 ])

@@ -38,6 +38,12 @@ rows: s (N,) or (N, m), theta_hat and theta (N, n_theta), M (N, m, m) the plant'
 None on a 1-DOF plant); without it V is logged as NaN. ``gain`` names a per-parameter key that is Γ (the
 adaptation stiffness, θ̂' = Γ⁻¹ ...), which the shared modifications divide by.
 
+Either may declare ``feedback(params) -> SurfaceFeedback | JointFeedback`` (adaptive_mj.laws.protocol; params:
+{key: value}, a float or, for a per-parameter key, an (n_theta,) array): its velocity feedback, which the
+pre-flight check (adaptive_mj.sim.preflight) scales into the loop's fastest mode, so that a run past the sampled
+loop's stability limit is warned of as a built-in law's is. Without it the check is skipped. Either way a study
+runs every probe and judges it by its outcome (adaptive_mj.study.job.RECORD_PREFLIGHT).
+
 What every plugin gets, as the built-in laws do (adaptive_mj.laws.common.plugin_rate, after the plugin wrote
 its rate, on both paths): law.dead_zone (on |s| / ‖s‖ or the tracking error), law.sigma,
 law.e_modification, law.theta0 and law.projection, unless the plugin declares a key of that name itself.
@@ -57,7 +63,7 @@ from adaptive_mj.errors import PluginError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
                                      Gains, plugin_rate, record_dtype)
-from adaptive_mj.laws.protocol import Box, Law
+from adaptive_mj.laws.protocol import Box, Feedback, Law
 from adaptive_mj.plugins import Installed, discover
 
 ENTRY_POINT_GROUP = "adaptive_mj.laws"
@@ -100,6 +106,7 @@ class LawPlugin:
     gain: str | None = None
     forms: tuple[str, ...] = ("model",)
     orders: tuple[int, ...] | None = None  # the plant orders n the law is written for (None: any)
+    feedback: Callable[[dict[str, Any]], Feedback] | None = None  # for the pre-flight check (module docstring)
 
     def __post_init__(self):
         names = [p.name for p in self.params]
@@ -115,6 +122,15 @@ class LawPlugin:
     def _allowed_forms(self) -> tuple[str, ...]:
         """The forms this kind of plugin's functions are called in (the model form's phi, f, h)."""
         return ("model",)
+
+    def named(self, params: np.ndarray, n_theta: int) -> dict[str, Any]:
+        """The params array the law function takes, by key: a float each, an (n_theta,) array for a per-parameter
+        key."""
+        out: dict[str, Any] = {}
+        for p in self.params:
+            where = self.layout(n_theta)[p.name]
+            out[p.name] = np.array(params[where]) if p.per_parameter else float(params[where][0])
+        return out
 
     def describe_keys(self) -> str:
         """Its keys as `list --laws` shows them."""
@@ -239,6 +255,11 @@ class _PluginBase(Law):
         sh = self.shared
         return {"plugin_params": self.params, "gains": self.gains().record(), "theta0": sh.theta0,
                 "lower": sh.lower, "upper": sh.upper, "gamma": sh.gamma}
+
+    def feedback(self) -> Feedback | None:
+        """The plugin's declared velocity feedback (LawPlugin.feedback) at its keys' values, or None."""
+        fn = self.plugin.feedback
+        return None if fn is None else fn(self.plugin.named(self.params, len(self.names)))
 
     def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
         """The plugin's declared V (LawPlugin.lyapunov), or NaN when it declares none (the log's V says so)."""

@@ -64,13 +64,18 @@ def _raise_if_due() -> None:
 
 def stop_behind(exc: BaseException | None) -> Interrupted | None:
     """The Interrupted behind `exc`: exc itself, or one in its chain of causes and contexts (a stop signal whose
-    exception Python wrapped, or one during which another error was raised); None when there is none."""
+    exception Python wrapped, or one during which another error was raised); else, when a stop signal came before
+    `exc` was raised, that signal's (exc is its consequence: numba's "no compiled object yet" after a compile the
+    signal cut short); None when no stop signal came."""
     seen: set[int] = set()
     while exc is not None and id(exc) not in seen:
         if isinstance(exc, Interrupted):
             return exc
         seen.add(id(exc))
         exc = exc.__cause__ or exc.__context__
+    if _state["signum"] is not None:
+        _state["raised"] = True  # this is its delivery: not again
+        return Interrupted(_state["signum"])
     return None
 
 

@@ -1,7 +1,9 @@
 """Breaking points: raise one stressor until a law fails, by bisection over runs.
 
 A run *fails* when it diverges (or cannot run) or when its tail RMS tracking error
-exceeds a stated bound. A stress value *passes* when every seed passes. For one
+exceeds a stated bound. Every probe is run, whatever the law: the pre-flight check's
+prediction is recorded beside the outcome (Evaluation.predicted), never taken for it.
+A stress value *passes* when every seed passes. For one
 (scenario, law, stressor) the search
 
   1. runs every seed at the low end and at the high end of the range;
@@ -42,7 +44,7 @@ import numpy as np
 from adaptive_mj.plants import kinds
 from adaptive_mj.study import callable_module
 from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
-from adaptive_mj.study.job import REFUSE_UNSTABLE, crashed
+from adaptive_mj.study.job import RECORD_PREFLIGHT, crashed, predicted_unstable
 from adaptive_mj.trajectory import Status
 
 CVAR_LEVEL = 0.10  # the worst 10 % of seeds
@@ -123,6 +125,7 @@ class Evaluation:
     tails: list[float]  # per seed, inf for a run that diverged or failed
     statuses: list[str]
     raw: list[float] = field(default_factory=list)  # per seed, the tail error even beyond the bound
+    predicted: list[bool] = field(default_factory=list)  # per seed, the pre-flight check found the loop unstable
 
     @property
     def passes(self) -> bool:
@@ -240,7 +243,7 @@ class _Batches:
         s = self.searches[i]
         safe = _file_name(s.label.replace("/", "-"))
         text = str(int(value)) if s.stressor.integer else f"{value:.6g}"
-        return [Job(s.scenario, overrides=(REFUSE_UNSTABLE, *s.overrides, *s.stressor.overrides(value)), seed=k,
+        return [Job(s.scenario, overrides=(RECORD_PREFLIGHT, *s.overrides, *s.stressor.overrides(value)), seed=k,
                     log=self.logs / safe / f"{_file_name(s.stressor.name)}={text}-seed{k}.mcap",
                     tag=f"{s.label} {s.stressor.name}={text} seed {k}", keep_trajectory=self.keep_trajectory)
                 for k in which]
@@ -274,7 +277,7 @@ class _Batches:
         for (i, v), chunk in zip(wanted, chunks, strict=True):
             bound = self.searches[i].tail_bound
             ev = Evaluation(v, [_tail(r, bound) for r in chunk], [r.status for r in chunk],
-                            [_raw_tail(r) for r in chunk])
+                            [_raw_tail(r) for r in chunk], [predicted_unstable(r.summary) for r in chunk])
             self.margins[i].evaluations.append(ev)
             out.append(ev)
         return out

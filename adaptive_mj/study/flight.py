@@ -8,8 +8,8 @@ the *delay margin* is the margin of a control delay (theirs: a sweep from 0 to 0
 The runs: the bundled lemniscate (A = 0.5 m, ω = 1 rad/s at 1 m) without its payload, RUN_SECONDS long (their
 5 s), with small measurement noise (NOISE, a seed per run), the disturbance from t = 0 (a rotor's loss from 1 s).
 A run the pre-flight check finds unstable by construction (adaptive_mj.sim.preflight: the attitude loop with a
-control delay past its linearised limit, 61 ms for these gains) is refused, as in the breaking-point study, and
-counts as a failure; every measured margin lies below that limit. Two searches per (law, disturbance): by
+control delay past its linearised limit) is run like any other and judged by its outcome, as in every study
+(job.RECORD_PREFLIGHT). Two searches per (law, disturbance): by
 bisection (`margins`: lo and hi, then `steps` rounds, every search's runs in one parallel batch per round) or on
 a fixed grid (`grid_jobs`, `grid_results`: one batch; the bench's section). Every run is logged (MCAP) under the
 folder given.
@@ -24,7 +24,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from adaptive_mj.setup import scenario as sc
-from adaptive_mj.study.job import REFUSE_UNSTABLE, crashed
+from adaptive_mj.study.job import RECORD_PREFLIGHT, crashed
 from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
 from adaptive_mj.trajectory import Status
 
@@ -132,7 +132,7 @@ def _jobs(s: Search, v: float, seeds: int, logs: Path, extra: Sequence[str]) -> 
     d = s.disturbance
     name = f"{s.law}-{d.name.replace(' ', '_')}={v:.6g}"
     return [Job(sc.SCENARIOS_DIR / f"{TASK}.toml",
-                overrides=(REFUSE_UNSTABLE, *BASE, *extra, f"law={s.law}", *d.overrides(v)),
+                overrides=(RECORD_PREFLIGHT, *BASE, *extra, f"law={s.law}", *d.overrides(v)),
                 seed=k, log=logs / f"{name}-seed{k}.mcap", tag=f"{name} seed {k}", extras=("flight_metrics",),
                 keep_trajectory=False, expect="measured")  # a probe of a margin: its verdict is the measurement
             for k in range(seeds)]

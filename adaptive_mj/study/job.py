@@ -94,10 +94,18 @@ def decimate(traj: Trajectory, every: int) -> Trajectory:
                    theta_hat=traj.theta_hat[rows], theta=traj.theta[rows], V=traj.V[rows], meta=meta)
 
 
-#: Study rows (sweep, stress, breaking points) refuse a run whose loop the pre-flight check finds unstable
-#: by construction (status "refused"; a failure of a search) instead of simulating it (sim.preflight).
-#: It comes first in a job's overrides, so a user's own --set success.preflight wins.
-REFUSE_UNSTABLE = "success.preflight='refuse'"
+#: Study rows (sweep, stress, score, breaking points, the flight margins) run every probe, whatever the law, and
+#: judge it by its outcome: the pre-flight check (sim.preflight) never stands in for a run, so a law that declares
+#: its feedback (and is checked) and one that does not are measured alike. Its result goes into the run's summary
+#: (`preflight`), not onto the terminal. It comes first in a job's overrides, so a user's own --set
+#: success.preflight wins.
+RECORD_PREFLIGHT = "success.preflight='record'"
+
+
+def predicted_unstable(summary: dict | None) -> bool:
+    """Whether the run's pre-flight check found its loop past the stability limit (its summary's `preflight`)."""
+    pre = (summary or {}).get("preflight") or {}
+    return bool(pre.get("checked")) and pre.get("ok") is False
 
 
 def log_write_error(log: Path | None, exc: OSError) -> str:

@@ -33,6 +33,7 @@ import time
 from collections import deque
 from pathlib import Path
 from concurrent.futures.process import BrokenProcessPool
+from multiprocessing.connection import wait as wait_ready
 from contextlib import contextmanager
 from typing import Callable, Iterator, Sequence, cast
 
@@ -131,6 +132,7 @@ def _stop_workers(pool: cf.ProcessPoolExecutor, *, grace: float = STOP_GRACE) ->
     `grace` s to exit, and kill those still running (a native call, such as a compile, lets no handler run until it
     returns). Returns how many were killed."""
     procs = list((getattr(pool, "_processes", None) or {}).values())
+    results = getattr(pool, "_result_queue", None)  # (shutdown forgets it)
     for p in procs:
         if p.is_alive():
             p.terminate()
@@ -138,11 +140,17 @@ def _stop_workers(pool: cf.ProcessPoolExecutor, *, grace: float = STOP_GRACE) ->
     deadline = time.monotonic() + grace
     killed = 0
     for p in procs:
-        p.join(max(0.0, deadline - time.monotonic()))
-        if p.is_alive():
+        # exited once its end of the sentinel pipe is closed (is_alive may still be True then: not yet reaped)
+        if not wait_ready([p.sentinel], max(0.0, deadline - time.monotonic())):
             p.kill()
-            p.join()
             killed += 1
+        p.join()
+    if killed and results is not None:
+        # A worker killed while it sent a result left half a message in the pipe, and the pool's manager thread
+        # waits for the rest; this process holds the pipe's last write end (the workers are gone): closed, the
+        # thread reads end-of-file, marks the pool broken and ends, instead of hanging this process at exit
+        # (concurrent.futures joins it; seen in CI as a bench that printed its stop line and never exited).
+        results._writer.close()
     return killed
 
 

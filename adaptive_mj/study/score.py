@@ -27,7 +27,7 @@ from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import score_suite as suite
 from adaptive_mj.study import stress
 from adaptive_mj.study.breaking_point import TAIL_BOUND, Search, _file_name, search_all
-from adaptive_mj.study.job import REFUSE_UNSTABLE, Job, JobResult, crashed
+from adaptive_mj.study.job import RECORD_PREFLIGHT, Job, JobResult, crashed
 from adaptive_mj.study.sweep import to_toml
 from adaptive_mj.study.stats import CONFIDENCE, Estimate, cvar, estimate, ranks
 from adaptive_mj.trajectory import Status
@@ -420,7 +420,7 @@ def task_jobs(pl: Plan, out: Path) -> tuple[list[Job], list[tuple[str, str, str,
                 over = task_overrides(p, task, pl.settings.duration(task.name))
                 for k in range(pl.seeds):
                     jobs.append(Job(sc.SCENARIOS_DIR / f"{task.scenario}.toml",
-                                    overrides=(REFUSE_UNSTABLE, *over, *e.overrides), seed=k,
+                                    overrides=(RECORD_PREFLIGHT, *over, *e.overrides), seed=k,
                                     log=out / "logs" / "tasks" / p.name / _file_name(e.label)
                                     / f"{task.name}-seed{k}.mcap",
                                     tag=f"{p.name}/{e.label} {task.name} seed {k}", extras=task.extras,

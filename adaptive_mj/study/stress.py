@@ -42,7 +42,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, TypedDict
+from typing import Callable, Sequence, TypedDict
 
 import numpy as np
 
@@ -410,6 +410,19 @@ def table(margins: list[Margin], *, seeds: int) -> str:
     return "\n".join(lines)
 
 
+def preflight_text(margins: Sequence[Margin]) -> str:
+    """One sentence: how many of the study's runs the pre-flight check predicted unstable, and how many of those
+    failed when run (every probe is run, whatever the law: job.RECORD_PREFLIGHT)."""
+    predicted = [(p, math.isfinite(t)) for m in margins for e in m.evaluations
+                 for p, t in zip(e.predicted, e.tails, strict=True) if p]
+    if not predicted:
+        return ("The pre-flight check predicted none of the runs unstable; every probe was run and judged by its "
+                "outcome, whatever the law.")
+    failed = sum(not passed for _, passed in predicted)
+    return (f"The pre-flight check predicted {len(predicted)} of the runs unstable (a law that declares its feedback "
+            f"is checked); they were run like the others, whatever the law, and {failed} of them failed.")
+
+
 def _bounds_text(searches: list[Search] | None = None) -> str:
     """Each plant's failure bound in words: "0.01 m (heave), 0.05 rad (arm) or ..." (PlantKind.tail_bound, its
     output unit and StressPlant.label), of the plants among `searches` (None: all)."""
@@ -462,7 +475,7 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
             f"{seeds}) of the tail error, and the failure rate at the failing value. n/a: the stressor does not "
             "apply to that plant. Every run's log is in `logs/`"
             + ("" if log_rate_hz is None else f" (its summary and a row every {1 / log_rate_hz:g} s; the margins "
-               "come from the full-rate rows)") + ".\n\n" + table(margins, seeds=seeds))
+               "come from the full-rate rows)") + ". " + preflight_text(margins) + "\n\n" + table(margins, seeds=seeds))
     return margins, text, wall
 
 

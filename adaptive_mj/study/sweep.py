@@ -37,7 +37,7 @@ from adaptive_mj.errors import AdaptiveMJError, ScenarioError
 from adaptive_mj.report.html import write_html
 from adaptive_mj.report.metrics import TAIL_FRACTION, clean_json, metrics as run_metrics
 from adaptive_mj.study.parallel import Backend, Job, JobResult, iter_results, progress_printer, session
-from adaptive_mj.study.job import REFUSE_UNSTABLE
+from adaptive_mj.study.job import RECORD_PREFLIGHT
 from adaptive_mj.study.result import Study, Table
 from adaptive_mj.trajectory import Status, Trajectory
 
@@ -534,7 +534,7 @@ def plan(path: Path, points: Sequence[dict[str, Any]], *, seeds: int, overrides:
     for p, point in enumerate(points):
         for seed in range(seeds):
             name = run_name(p * seeds + seed, point, seed, names=names, width=width)
-            job = Job(path, overrides=(REFUSE_UNSTABLE, *overrides, *_grid_overrides(point)), seed=seed,
+            job = Job(path, overrides=(RECORD_PREFLIGHT, *overrides, *_grid_overrides(point)), seed=seed,
                       log=None if logs is None else logs / f"{name}.mcap",
                       tag=name, keep_trajectory=False)
             planned.append((point, job))
@@ -636,7 +636,8 @@ def run_breaking_point(path: Path, *, point: str, tail_bound: float, seeds: int,
               "seeds": seeds,
               "steps": steps, "tail_bound": tail_bound, "overrides": list(overrides), **stats,
               "evaluations": [{"value": e.value, "passes": e.passes, "statuses": e.statuses,
-                               "tail": [x if math.isfinite(x) else None for x in e.raw]} for e in m.evaluations]}
+                               "tail": [x if math.isfinite(x) else None for x in e.raw],
+                               "predicted_unstable": e.predicted} for e in m.evaluations]}
     (out / "breaking_point.json").write_text(json.dumps(clean_json(record), indent=1), encoding="utf-8")
     text = (f"{key}: margin {margin_text(m)}"
             + (f", resolution {m.resolution:.3g}" if m.resolution is not None else "")

@@ -8,6 +8,7 @@ The law is a plain function over arrays and floats (no numpy calls that allocate
 Python objects), so adaptive-mj compiles it into MuJoCo's native control callback.
 """
 from adaptive_mj.laws.plugin import LawPlugin, Param
+from adaptive_mj.laws.protocol import SurfaceFeedback
 
 
 def emod(x, ref, theta, phi, f, h, params, rate):
@@ -26,6 +27,13 @@ def emod(x, ref, theta, phi, f, h, params, rate):
     return acc / h, s
 
 
+def feedback(params):
+    """Its velocity feedback for the pre-flight check: k on s = ỹ' + λ ỹ, the surface adding λ to the loop's
+    fastest mode (the built-in sliding law's, for order 2)."""
+    return SurfaceFeedback(k=params["k"], lam=params["lambda"], effective=params["k"], surface_rate=params["lambda"],
+                           keys="law.k")
+
+
 LAW = LawPlugin(
     law=emod,
     params=(Param("lambda", gt=0.0, unit="1/s", doc="surface slope λ"),
@@ -35,4 +43,5 @@ LAW = LawPlugin(
             Param("nu", default=0.0, ge=0.0, doc="e-modification leakage ν")),
     doc="order-2 sliding law with e-modification (leakage ν|s|θ̂)",
     orders=(2,),  # it reads ref[2] and x[1]: a plant of order 2
+    feedback=feedback,  # the pre-flight check warns of a sampled loop past its stability limit
 )
