@@ -146,6 +146,9 @@ def _parser() -> argparse.ArgumentParser:
                      help="quick: 3 seeds, 6 bisection steps, 5 s margin runs (default); full: 5 seeds, 8 steps, 20 s")
     sc_.add_argument("--seeds", type=int, help="seeds per figure (default: the suite's)")
     sc_.add_argument("--plants", metavar="P,Q,...", help="only these plants (heave, arm, ur5e, quadrotor)")
+    sc_.add_argument("--scenario", action="append", default=[], type=Path, metavar="FILE.toml",
+                     help="score on your own plant too: a scenario file, tracked as given, its payload changed and "
+                          "its start held; its plant kind's stressors (repeatable; alone: only these plants)")
     sc_.add_argument("--label", metavar="NAME", help="the law's name on the card (default LAW)")
     sc_.add_argument("--full-logs", action="store_true",
                      help="the margin runs' logs at the scenario's rate (default: their summary and a row per second)")
@@ -429,7 +432,7 @@ def _study(args):
             raise ScenarioError("score: --set needs LAW (the baselines keep their own keys)")
         return api.score(args.law, set=args.overrides, gains=args.gains, against=args.against, suite=args.suite,
                          seeds=args.seeds, plants=args.plants, label=args.label, out=args.output,
-                         full_logs=args.full_logs, merge=args.merge or (), **where)
+                         full_logs=args.full_logs, merge=args.merge or (), scenarios=args.scenario, **where)
     if args.breaking_point:  # sweep --breaking-point: one key bisected instead of a grid
         if args.grid:
             raise ScenarioError("--breaking-point and --grid cannot be combined (one stressor at a time)")

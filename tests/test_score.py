@@ -324,3 +324,65 @@ def test_bench_law_section_is_the_law_s_scorecard(tmp_path, monkeypatch):
     assert "| **sliding_adaptive** |" in text and "| dead_zone |" in text
     assert (tmp_path / "score" / "heave-performance.png").is_file()
     assert runs >= 2 * 3 * 2 + 2 * 5 * 2 * 2  # tasks, and both ends of every margin search
+
+
+# ---------------------------------------------------------------- your own plant (score --scenario)
+
+
+def test_score_on_a_users_own_arm_writes_its_card_and_its_runs_replay_bit_identically(tmp_path, capsys):
+    """A two-link servo arm that is not bundled (tests/test_manipulator_runs.py's), scored by --scenario: its card
+    has the arm as a plant of its own with its leaderboard and margins, the tasks derived from the file (tracking as
+    given, the payload's mass ×4 at half time, the start held) and the file's hash; a task run and a margin run
+    replay bit-identically."""
+    import hashlib
+
+    from test_manipulator_runs import SERVO_ARM, SERVO_SCENARIO
+
+    from adaptive_mj.cli import main
+
+    (tmp_path / "my_arm.xml").write_text(SERVO_ARM)
+    scenario = tmp_path / "my_arm.toml"
+    scenario.write_text(SERVO_SCENARIO.format(servo="true"))
+    card = api.score(None, scenarios=[scenario], against=["adaptive", "pd_gravity"], seeds=2, out=tmp_path / "card",
+                     cost=False, jobs=2)
+    assert card.exit_code == 0 and card.plants == ["my_arm"]
+    assert card.laws("my_arm") == ["adaptive", "pd_gravity"] or card.laws("my_arm") == ["pd_gravity", "adaptive"]
+    for law in ("adaptive", "pd_gravity"):
+        for name in ("performance", "robustness", "tail_error", "drift_rate"):
+            assert math.isfinite(card.figure("my_arm", law, name).mean), (law, name)
+        assert card.rank("my_arm", law) in (1, 2)
+    data = json.loads((card.out / "scorecard.json").read_text())
+    mine = data["plants"]["my_arm"]
+    assert mine["kind"] == "manipulator" and mine["scenario"]["file"] == str(scenario.resolve())
+    assert mine["scenario"]["sha256"] == hashlib.sha256(scenario.read_bytes()).hexdigest()
+    tasks = {t["name"]: t for t in mine["scenario"]["tasks"]}
+    assert tasks["tracking"]["overrides"] == [] and tasks["tracking"]["noise_scale"] == 0.0
+    assert "kind='payload_mass'" in tasks["change"]["overrides"][1]
+    # (templates, as the suite's own tasks are written: {{ }} is one brace) the keyframe 'ready' held
+    assert "center={{\"shoulder\"=0.3, \"elbow\"=-0.6}}" in tasks["hold"]["overrides"][2]
+    assert set(mine["laws"]["adaptive"]["stressors"]) >= {"noise σ_y", "payload ratio", "delay", "control period"}
+    # the derived hold held still: the adaptive law's estimates drift, the fixed-parameter law's cannot
+    assert card.figure("my_arm", "pd_gravity", "drift_rate").mean == 0.0
+    task_log = card.out / "logs" / "tasks" / "my_arm" / "adaptive" / "change-seed0.mcap"
+    margin_log = next((card.out / "logs" / "margins").rglob("*.mcap"))
+    capsys.readouterr()
+    for log in (task_log, margin_log):
+        assert main(["replay", str(log), "--verify"]) in (0, 1)  # the run's own verdict: ok, or a failed probe
+        assert "verify: bit-identical" in capsys.readouterr().out, log
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda text: text.replace('payload = "sphere"\npayload_mass = 0.3\n', ""),
+     r"my_arm.toml: score's change task multiplies the payload's mass: expected plant.payload"),
+    (lambda text: text.replace('kind = "manipulator"', 'kind = "ship"'), r"plant.kind"),
+])
+def test_score_on_a_scenario_it_cannot_derive_tasks_from_is_one_line(tmp_path, edit, match):
+    from test_manipulator_runs import SERVO_ARM, SERVO_SCENARIO
+
+    (tmp_path / "my_arm.xml").write_text(SERVO_ARM)
+    scenario = tmp_path / "my_arm.toml"
+    scenario.write_text(edit(SERVO_SCENARIO.format(servo="true")))
+    with pytest.raises(ScenarioError, match=match) as err:
+        api.score(None, scenarios=[scenario], seeds=2, out=tmp_path / "card", cost=False, jobs=1)
+    assert "\n" not in str(err.value)
+    assert not (tmp_path / "card").exists()

@@ -293,16 +293,28 @@ def _names(option: str, value: Any) -> list[str] | None:
     return [x.strip() for x in items]
 
 
+def _scenario_file(path: str | Path) -> Path:
+    """--scenario FILE.toml of `score`: a scenario file that exists, or one line."""
+    path = Path(path)
+    if path.suffix != ".toml" or not path.is_file():
+        raise ScenarioError(f"--scenario {path}: expected a scenario file (.toml), got "
+                            + ("no such file" if not path.exists() else "another kind of file"))
+    return path.resolve()
+
+
 def score(law: str | None = None, *, set: Sequence[str] = (), gains: str | Path | None = None,  # noqa: A002
           against: str | Sequence[str] | None = None, suite: str = "quick", seeds: int | None = None,
           plants: str | Sequence[str] | None = None, label: str | None = None, out: str | Path | None = None,
           full_logs: bool = False, cost: bool = True, merge: Sequence[str | Path] = (),
           backend: str | Backend = "local", jobs: int | None = None, address: str | None = None,
-          ray_logs: str = "bytes", retries: int = 3, engine: str = "process"):
+          ray_logs: str = "bytes", retries: int = 3, engine: str = "process",
+          scenarios: Sequence[str | Path] = ()):
     """A law scored against the baselines on every plant kind it serves (`adaptive-mj score`): the suite of
     adaptive_mj.study.score_suite (`suite` "quick" or "full"), `seeds` per figure (default the suite's), the law's
     gains per plant kind from `gains` (a TOML file, a table per plant kind) and `set` (law.KEY=V), against every
-    baseline or those named in `against`, on every plant it serves or those named in `plants`. merge: instead,
+    baseline or those named in `against`, on every plant it serves or those named in `plants`, or on the users'
+    scenario files `scenarios` (each a plant of its own: tracking the scenario as given, a payload change and a
+    hold derived from it, the stressors of its plant kind; with `plants` too, both). merge: instead,
     join these scorecard.json files (one suite version) into one leaderboard. Returns a
     adaptive_mj.study.score.Scorecard (its data is scorecard.json; .figure(plant, law, name), .rank(...))."""
     from adaptive_mj.study import score as sc_
@@ -319,4 +331,5 @@ def score(law: str | None = None, *, set: Sequence[str] = (), gains: str | Path 
     return sc_.run_score(law, label=label, sets=sets, gains=None if gains is None else Path(gains),
                          against=_names("--against", against), suite_name=suite, seeds=seeds,
                          plants=_names("--plants", plants), out=None if out is None else Path(out),
-                         backend=backend_, full_logs=bool(full_logs), cost=bool(cost))
+                         backend=backend_, full_logs=bool(full_logs), cost=bool(cost),
+                         scenarios=[_scenario_file(s) for s in scenarios])

@@ -26,9 +26,10 @@ from adaptive_mj.plants import kinds
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import score_suite as suite
 from adaptive_mj.study import stress
-from adaptive_mj.study.breaking_point import TAIL_BOUND, Search, _file_name, search_all
+from adaptive_mj.study.breaking_point import Search, _file_name, search_all
 from adaptive_mj.study.job import RECORD_PREFLIGHT, Job, JobResult, crashed
 from adaptive_mj.study.sweep import to_toml
+from adaptive_mj.laws.kinds import Form
 from adaptive_mj.study.stats import CONFIDENCE, Estimate, cvar, estimate, ranks
 from adaptive_mj.trajectory import Status
 
@@ -96,21 +97,62 @@ def task_overrides(p: stress.Plant, task: suite.Task, duration: float) -> tuple[
     if "{theta_half}" in text:
         values["theta_half"] = _truth_half(p)
     if "{payload_x4}" in text:
-        m0 = sc.load(sc.SCENARIOS_DIR / f"{task.scenario}.toml").plant.payload_mass
+        m0 = sc.load(stress.scenario_path(task.scenario)).plant.payload_mass
         if m0 is None:
             raise ScenarioError(f"{task.scenario}: the change task needs plant.payload_mass")
         values["payload_x4"] = repr(4.0 * float(m0))
     out = [f"simulation.duration={duration!r}"]
     if task.noise_scale > 0:
         y, y_dot = _kind(p).stress.noise_signals  # type: ignore[union-attr]
-        sig = task.noise_scale * stress.NOMINAL_NOISE[p.name]
+        sig = task.noise_scale * stress.nominal_noise(p)
         out.append(f"noise.std={{{y}={sig!r}, {y_dot}={10 * sig!r}}}")
     out += [o.format(**values) for o in task.overrides]
     return tuple(out)
 
 
 def _kind(p: stress.Plant) -> kinds.PlantKind:
-    return kinds.built_in()[stress.STRESS_PLANT_KIND[p.name]]
+    return stress._kind(p)
+
+
+def tasks_of(p: stress.Plant) -> tuple[suite.Task, ...]:
+    """Plant row p's tasks: those derived from a user's scenario (score --scenario), else the suite's."""
+    return p.tasks or suite.TASKS[p.name]
+
+
+def scenario_row(path: Path, duration: float) -> stress.Plant:
+    """A user's scenario file as a scored plant row (stress.user_plant) with the suite's three tasks derived from
+    it, as the suite's own tasks are built:
+      tracking  the scenario as given (its own estimates and noise);
+      change    from the estimates at the truth, under the nominal noise, its payload's mass times four at half
+                the run (plant.payload_mass; a scenario without a payload: one line);
+      hold      its reference held at its value at t = 0 (joints: every joint at its start) under the nominal
+                noise, from the estimates at the truth: any change of the estimates is drift.
+    One line for a plant kind whose reference cannot be held this way (the quadrotor's)."""
+    from adaptive_mj.setup.build import build
+
+    path = Path(path)
+    scn = sc.load(path)
+    if scn.plant.payload_mass is None:
+        raise ScenarioError(f"{path}: score's change task multiplies the payload's mass: expected plant.payload and "
+                            "plant.payload_mass, got none")
+    setup = build(scn)
+    start = np.asarray(setup.reference(0.0, 0), dtype=float)[0]  # y_d(0): (m,) on joints, a float else
+    kind = kinds.built_in()[scn.plant.kind]
+    if Form.RIGID_BODY in kind.forms:
+        center = ", ".join(f"{json.dumps(j)}={float(v)!r}" for j, v in zip(setup.plant.joint_names, start, strict=True))
+        held = "reference={{kind='joint_sum_of_sines', center={{" + center + "}}, amplitudes=[0.0], omegas=[1.0]}}"
+    elif np.ndim(start) == 0 and Form.AIRFRAME not in kind.forms:
+        held = f"reference={{{{kind='constant', value={float(start)!r}}}}}"
+    else:
+        raise ScenarioError(f"{path}: score's hold task holds the reference's start; expected a plant of one output "
+                            f"or of joints, got plant.kind {scn.plant.kind!r}")
+    tasks = (suite.Task("tracking", str(path), (), noise_scale=0.0),
+             suite.Task("change", str(path), ("law.initial_estimates='model'",
+                                              "events=[{{t={half}, kind='payload_mass', value={payload_x4}}}]"),
+                        extras=("change_response",)),
+             suite.Task("hold", str(path), ("law.initial_estimates='model'", "events=[]", held),
+                        extras=("drift_rate",)))
+    return stress.user_plant(path, duration, tasks=tasks)
 
 
 def serves(law: str, p: stress.Plant) -> bool:
@@ -245,7 +287,7 @@ def compute_ratio(p: stress.Plant, entry: Entry, task: suite.Task, *, seconds: f
     from adaptive_mj.sim.loop import run
     from adaptive_mj.sim.runner import start
 
-    path = sc.SCENARIOS_DIR / f"{task.scenario}.toml"
+    path = stress.scenario_path(task.scenario)
     over = [*task_overrides(p, task, seconds), *entry.overrides]
 
     def timed(sec: float) -> tuple[float, float]:
@@ -325,8 +367,8 @@ def card_hash(duration: float) -> str:
     nominal noise, whichever plants a card covers (so cards of different plants merge), hashed together."""
     import hashlib
 
-    rows = {p.name: {"stressors": stressor_text(p, duration), "tail_bound": TAIL_BOUND[p.name],
-                     "nominal_noise": stress.NOMINAL_NOISE[p.name]} for p in stress.plants(duration)}
+    rows = {p.name: {"stressors": stressor_text(p, duration), "tail_bound": stress.tail_bound(p),
+                     "nominal_noise": stress.nominal_noise(p)} for p in stress.plants(duration)}
     text = suite.definitions_hash() + json.dumps(rows, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -352,15 +394,25 @@ class Plan:
     gains: dict[str, list[str]]
 
 
-def _rows(law: str | None, plants: Sequence[str] | None, duration: float) -> list[stress.Plant]:
-    """The scored plant rows: those named in `plants` (all when None) that `law` serves."""
+def _rows(law: str | None, plants: Sequence[str] | None, duration: float,
+          scenarios: Sequence[Path] = ()) -> list[stress.Plant]:
+    """The scored plant rows: those named in `plants` (all when None; none when only `scenarios` are given) and
+    the users' scenario files `scenarios` (scenario_row), those `law` serves."""
     rows = stress.plants(duration)
+    if scenarios and plants is None:
+        plants = ()
     if plants is not None:
         unknown = [n for n in plants if n not in {p.name for p in rows}]
         if unknown:
             raise ScenarioError(f"--plants: {unknown[0]!r} is not a scored plant (expected one of "
                                 f"{', '.join(p.name for p in rows)})")
         rows = [p for p in rows if p.name in plants]
+    for path in scenarios:
+        row = scenario_row(path, duration)
+        if row.name in {p.name for p in rows}:
+            raise ScenarioError(f"--scenario {path}: a plant named {row.name!r} is scored already; expected one file "
+                                "name per plant")
+        rows.append(row)
     if law is not None:
         chosen = [p for p in rows if serves(law, p)]
         if not chosen:
@@ -371,13 +423,14 @@ def _rows(law: str | None, plants: Sequence[str] | None, duration: float) -> lis
 
 
 def plan(law: str | None, *, label: str | None, sets: Sequence[str], gains: Path | None,
-         against: Sequence[str] | None, suite_name: str, seeds: int | None, plants: Sequence[str] | None) -> Plan:
+         against: Sequence[str] | None, suite_name: str, seeds: int | None, plants: Sequence[str] | None,
+         scenarios: Sequence[Path] = ()) -> Plan:
     """The runs' plan, every option checked, and the law built once on each plant (a missing gain: one line)."""
     settings = suite.SUITES[suite_name]
     if law is not None:
         law_kind_checked(law)
     gain_sets = read_gains(gains)
-    rows = _rows(law, plants, settings.stress_duration)
+    rows = _rows(law, plants, settings.stress_duration, scenarios)
     served = {_kind(p).name for p in _rows(law, None, settings.stress_duration)} if law is not None else set()
     for kind in gain_sets:
         if kind not in served:
@@ -403,9 +456,9 @@ def _check_builds(p: stress.Plant, law: str, e: Entry) -> None:
     """The law under test built on p's tracking task, or one line naming the plant and the --gains table."""
     from adaptive_mj.setup.build import build
 
-    t = suite.TASKS[p.name][0]
+    t = tasks_of(p)[0]
     try:
-        build(sc.load(sc.SCENARIOS_DIR / f"{t.scenario}.toml", overrides=[*task_overrides(p, t, 0.01), *e.overrides]))
+        build(sc.load(stress.scenario_path(t.scenario), overrides=[*task_overrides(p, t, 0.01), *e.overrides]))
     except ScenarioError as exc:
         raise ScenarioError(f"score: law {law!r} on plant {p.name} ({_kind(p).name}): {exc} (give its gains in a "
                             f"[{_kind(p).name}] table of --gains FILE.toml, or --set law.KEY=V)") from None
@@ -416,10 +469,10 @@ def task_jobs(pl: Plan, out: Path) -> tuple[list[Job], list[tuple[str, str, str,
     jobs, keys = [], []
     for p in pl.rows:
         for e in pl.entries[p.name]:
-            for task in suite.TASKS[p.name]:
+            for task in tasks_of(p):
                 over = task_overrides(p, task, pl.settings.duration(task.name))
                 for k in range(pl.seeds):
-                    jobs.append(Job(sc.SCENARIOS_DIR / f"{task.scenario}.toml",
+                    jobs.append(Job(stress.scenario_path(task.scenario),
                                     overrides=(RECORD_PREFLIGHT, *over, *e.overrides), seed=k,
                                     log=out / "logs" / "tasks" / p.name / _file_name(e.label)
                                     / f"{task.name}-seed{k}.mcap",
@@ -434,14 +487,14 @@ def searches(pl: Plan, *, full_logs: bool) -> list[Search]:
     out = []
     log_rate = () if full_logs else (f"log.rate_hz={MARGIN_LOG_RATE_HZ!r}",)
     for p in pl.rows:
-        path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
+        path = stress.scenario_path(p.scenario)
         for e in pl.entries[p.name]:
             for st in stress.stressors(p, pl.settings.stress_duration):
                 if st.name == stress.PERIOD and stress.continuous_only(p, e.overrides):
                     continue  # n/a: a law with filters runs under continuous control only
                 for k in range(pl.seeds):
                     out.append(Search(path, f"{p.name}/{e.label}", (*p.base, *log_rate, *e.overrides), st,
-                                      TAIL_BOUND[p.name], seed=k))
+                                      stress.tail_bound(p), seed=k))
     return out
 
 
@@ -467,7 +520,7 @@ def plant_card(pl: Plan, p: stress.Plant, task_runs: dict, margins: list, cost_o
     """The card's entry for plant row p: its units, bound, normalisers, stressors, and every law's figures."""
     k = _kind(p)
     durations = dict(pl.settings.durations)
-    bound, limits = TAIL_BOUND[p.name], actuator_limits(p)
+    bound, limits = stress.tail_bound(p), actuator_limits(p)
     plant: dict[str, Any] = {"kind": k.name, "output_unit": k.output_unit, "control_unit": k.control_unit,
                              "tail_bound": bound, "normalisers": normalisers(bound, limits, durations),
                              "stressors": stressor_text(p, pl.settings.stress_duration), "laws": {}}
@@ -494,6 +547,13 @@ def plant_card(pl: Plan, p: stress.Plant, task_runs: dict, margins: list, cost_o
         plant["laws"][e.label] = {"tested": e.tested, "oracle": e.oracle, "overrides": list(e.overrides),
                                   "figures": figures, "stressors": st_out, "compute_ratio": cost_of.get((p.name,
                                                                                                         e.label))}
+    if p.tasks:  # a user's scenario: the file and the tasks derived from it, so that the card can be re-run
+        import hashlib
+
+        path = stress.scenario_path(p.scenario)
+        plant["scenario"] = {"file": str(path), "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+                             "tasks": [{"name": t.name, "overrides": list(t.overrides), "noise_scale": t.noise_scale,
+                                        "extras": list(t.extras)} for t in p.tasks]}
     rank_laws(plant)
     return plant
 
@@ -501,7 +561,8 @@ def plant_card(pl: Plan, p: stress.Plant, task_runs: dict, margins: list, cost_o
 def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] = (), gains: Path | None = None,
               against: Sequence[str] | None = None, suite_name: str = "quick", seeds: int | None = None,
               plants: Sequence[str] | None = None, out: Path | None = None, backend=None, full_logs: bool = False,
-              cost: bool = True, on_progress: Callable[[str], None] | None = None) -> Scorecard:
+              cost: bool = True, on_progress: Callable[[str], None] | None = None,
+              scenarios: Sequence[Path] = ()) -> Scorecard:
     """Run the suite for `law` (None: the baselines alone) and write the card into `out` (checked options: see
     adaptive_mj.study.api.score)."""
     import sys
@@ -514,7 +575,7 @@ def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] 
     backend = backend or Backend()
     say = on_progress or (lambda text: print(text, file=sys.stderr))
     pl = plan(law, label=label, sets=sets, gains=gains, against=against, suite_name=suite_name, seeds=seeds,
-              plants=plants)
+              plants=plants, scenarios=scenarios)
     out = new_output_dir(out, "score")
     t0 = time.perf_counter()
     jobs, keys = task_jobs(pl, out)
@@ -535,7 +596,7 @@ def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] 
     for p in pl.rows if cost else ():  # per-step compute cost, in this process
         for e in pl.entries[p.name]:
             try:
-                cost_of[(p.name, e.label)] = compute_ratio(p, e, suite.TASKS[p.name][0])
+                cost_of[(p.name, e.label)] = compute_ratio(p, e, tasks_of(p)[0])
             except Exception as exc:  # noqa: BLE001 (a law that cannot run has its runs' errors on the card)
                 say(f"score: {p.name}/{e.label}: no compute-cost timing: {type(exc).__name__}: {exc}")
     errors = [r for r in results if r.status == "error"]

@@ -87,17 +87,35 @@ PERIOD = "control period"  # the control period stressor's name
 
 @dataclass(frozen=True)
 class Plant:
-    """A row of the study: its name, its scenario, the overrides of its every run and its plant kind."""
+    """A row of the study: its name, its scenario (a bundled scenario's name, or the path of a user's scenario
+    file, `score --scenario`), the overrides of its every run, its plant kind and, for a user's scenario, the
+    score's tasks derived from it (adaptive_mj.study.score_suite.Task; empty: the suite's TASKS of its name)."""
 
     name: str
     scenario: str
     base: tuple[str, ...]
     kind: str = ""  # "": STRESS_PLANT_KIND[name]
+    tasks: tuple = ()
+
+
+def scenario_path(scenario: str) -> Path:
+    """A bundled scenario's file by its name, or the scenario file a path names (ending in .toml)."""
+    return Path(scenario) if scenario.endswith(".toml") else sc.SCENARIOS_DIR / f"{scenario}.toml"
 
 
 def _kind(p: Plant) -> kinds.PlantKind:
     """The plant kind of row p."""
     return kinds.built_in()[p.kind or STRESS_PLANT_KIND[p.name]]
+
+
+def tail_bound(p: Plant) -> float:
+    """[output unit] Row p's failure bound on the tail RMS error: its plant kind's (PlantKind.tail_bound)."""
+    return kind_number(_kind(p).name, "tail_bound")
+
+
+def nominal_noise(p: Plant) -> float:
+    """[output unit] Row p's nominal measurement noise σ_y: its plant kind's (PlantKind.nominal_noise)."""
+    return kind_number(_kind(p).name, "nominal_noise")
 
 
 def _row(p: Plant) -> kinds.StressPlant:
@@ -126,13 +144,30 @@ def plants(duration: float = DURATION) -> list[Plant]:
     return out
 
 
+def user_plant(path: Path, duration: float = DURATION, *, tasks: tuple = ()) -> Plant:
+    """A row for a user's scenario file (`score --scenario`): its plant kind's study row (PlantKind.stress: the
+    overrides of a stress run, the signals the nominal noise is on) applied to this scenario, named after the
+    file. One line when the file cannot be loaded or its plant kind declares no study row."""
+    scn = sc.load(path)
+    kind = kinds.built_in().get(scn.plant.kind)
+    if kind is None or kind.stress is None:
+        scored = sorted(k.name for k in kinds.built_in().values() if k.stress is not None)
+        raise ScenarioError(f"{path}: plant.kind {scn.plant.kind!r} declares no study row (PlantKind.stress: its "
+                            f"laws, stressors and failure bound); expected a scenario of one of {', '.join(scored)}")
+    row = kind.stress
+    sig, (y, y_dot) = kind_number(kind.name, "nominal_noise"), row.noise_signals
+    return Plant(Path(path).stem, str(path), (f"simulation.duration={duration}", *row.overrides,
+                                              "law.initial_estimates='model'",
+                                              f"noise.std={{{y}={sig!r}, {y_dot}={10 * sig!r}}}"), kind.name, tasks)
+
+
 def continuous_only(p: Plant, overrides: tuple[str, ...]) -> bool:
     """Whether the law of these overrides on p has filters integrated in the stage states (composite adaptation,
     L1's predictor and filter): sampled-data control does not apply to it, so neither does the control period."""
     from adaptive_mj.setup.build import build
 
     if overrides not in _FILTERS:
-        scn = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml", overrides=[*p.base, *overrides])
+        scn = sc.load(scenario_path(p.scenario), overrides=[*p.base, *overrides])
         law = build(scn).law
         _FILTERS[overrides] = bool(getattr(law, "has_filters", False))
     return _FILTERS[overrides]
@@ -144,7 +179,7 @@ _FILTERS: dict[tuple[str, ...], bool] = {}
 def _setup(p: Plant):
     from adaptive_mj.setup.build import build
 
-    scn = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml", overrides=list(p.base))
+    scn = sc.load(scenario_path(p.scenario), overrides=list(p.base))
     return scn, build(scn)
 
 
@@ -162,7 +197,7 @@ def laws(p: Plant, *, composite: bool) -> list[tuple[str, list[str]]]:
     scn, s = _setup(p)
     names, theta = s.law.names, s.plant.true_theta()
     gamma1 = float(s.law.gamma[0])
-    sig_y = NOMINAL_NOISE[p.name]
+    sig_y = nominal_noise(p)
     sig_s = surface_noise_std(2, scn.law.lam, [sig_y, 10 * sig_y])  # the noise of s at the nominal noise
     theta0 = "{" + ", ".join(f"{n}={float(v)!r}" for n, v in zip(names, theta, strict=True)) + "}"
     box = "{" + ", ".join(f"{n}=[{0.5 * float(v)!r}, {2.0 * float(v)!r}]"
@@ -187,7 +222,7 @@ def _arm_laws(p: Plant) -> list[tuple[str, list[str]]]:
     adaptation), and its two baselines with the true parameters (computed torque, PD + gravity)."""
     scn, s = _setup(p)
     gamma1 = float(s.law.gamma[0])
-    sig_q = NOMINAL_NOISE[p.name]
+    sig_q = nominal_noise(p)
     lam = float(scn.law.lam)
     sig_s = float(np.sqrt(6 * ((10 * sig_q) ** 2 + lam**2 * sig_q**2)))  # noise in ‖s‖ (6 joints)
     pairs = zip(s.law.names, s.plant.true_theta(), strict=True)
@@ -210,7 +245,7 @@ def _airframe_laws(p: Plant) -> list[tuple[str, list[str]]]:
     scn, s = _setup(p)
     names, theta = s.law.names, s.plant.true_theta()
     gamma1 = float(s.law.gamma[0])  # the mass estimate's stiffness
-    sig = NOMINAL_NOISE[p.name]
+    sig = nominal_noise(p)
     lam = float(scn.law.lam)
     sig_s = float(np.sqrt(3 * ((10 * sig) ** 2 + lam**2 * sig**2)))  # the noise in ‖s‖, s = e_v + λ e_x (3 axes)
     theta0 = "{" + ", ".join(f"'{n}'={float(v)!r}" for n, v in zip(names, theta, strict=True)) + "}"
@@ -259,7 +294,7 @@ def _arm_stressors(p: Plant, duration: float) -> list[Stressor]:
     """The 6-joint arm's conditions: noise, encoder resolution, a differentiated velocity's filter
     time constant, a sinusoidal torque on every joint, actuator lag, the motors' torque limits divided by
     a factor, payload ratio, delay, and the control period (added by `stressors`)."""
-    sig = NOMINAL_NOISE[p.name]
+    sig = nominal_noise(p)
     plant = _setup(p)[1].plant
     m0 = float(plant.true_theta()[0])  # the payload's mass [kg], from the compiled model
     limits = dict(zip(plant.joint_names, np.asarray(plant.ctrl_range[1], dtype=float).tolist(), strict=True))
@@ -300,7 +335,7 @@ def _thruster_lag(p: Plant, duration: float) -> Stressor:
 
 def _payload_ratio(p: Plant, duration: float) -> Stressor:
     """The payload's mass × ratio at half the run (a payload_mass event; the scenario sets plant.payload_mass)."""
-    m0 = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml").plant.payload_mass
+    m0 = sc.load(scenario_path(p.scenario)).plant.payload_mass
     if m0 is None:  # the bundled arm_payload_swap sets it
         raise ScenarioError(f"{p.scenario}: the payload ratio stressor needs plant.payload_mass")
     t_swap = 0.5 * duration
@@ -328,7 +363,7 @@ def stressors(p: Plant, duration: float = DURATION) -> list[Stressor]:
         out += [OWN_STRESSORS[name](p, duration) for name in _row(p).stressors]
     out.append(Stressor("delay", lambda v: [f"simulation.control_delay={int(v)}"], 0, 200, integer=True,
                         unit="steps"))
-    dt = sc.load(sc.SCENARIOS_DIR / f"{p.scenario}.toml", overrides=list(p.base)).simulation.timestep
+    dt = sc.load(scenario_path(p.scenario), overrides=list(p.base)).simulation.timestep
     if dt is None:  # the model's own timestep
         dt = float(_setup(p)[1].plant.dt)
     out.append(Stressor.control_period(dt, min(PERIOD_MAX, duration), dt, name=PERIOD))
@@ -366,7 +401,7 @@ def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, .
     for p in plants(duration):
         if plant_names is not None and p.name not in plant_names:
             continue
-        path = sc.SCENARIOS_DIR / f"{p.scenario}.toml"
+        path = scenario_path(p.scenario)
         entries = with_law(p, laws(p, composite=composite), law, sets, gains)
         served = served or (law is not None and len(entries) > len(laws(p, composite=composite)))
         for name, over in entries:
@@ -375,7 +410,7 @@ def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, .
             for st in stressors(p, duration):
                 if st.name == PERIOD and continuous_only(p, tuple(over)):  # n/a: its filters integrate per step
                     continue
-                out.append(Search(path, f"{p.name}/{name}", (*p.base, *extra, *over), st, TAIL_BOUND[p.name]))
+                out.append(Search(path, f"{p.name}/{name}", (*p.base, *extra, *over), st, tail_bound(p)))
     if law is not None and not served:
         raise ScenarioError(f"--law: {law!r} serves none of the study's plants ({', '.join(STRESS_PLANT_KIND)})")
     return out
