@@ -223,3 +223,53 @@ def test_a_law_the_pre_flight_check_flags_and_a_copy_without_feedback_get_the_sa
         np.testing.assert_allclose(e.raw, at[0].raw, rtol=1e-6)
     assert max(at[0].raw) < 0.01
     assert [(m.margin, m.first_fail) for m in margins] == [(0.2, None)] * 3
+
+
+# ---------------------------------------------------------------- one search for every study
+
+
+def test_a_value_passes_by_its_search_s_rule():
+    """rule "all": every seed must pass (a margin); rule "any": one seed suffices (AdaptiveQuadBench's when2fail is
+    then the first value where none does); a run_passes predicate replaces the tail bound."""
+    st = Stressor.key("x", 0.0, 1.0)
+    ev = Evaluation(0.5, [0.001, math.inf], ["ok", "diverged"])
+    assert not Search(HEAVE, "a", (), st, 0.01).value_passes(ev)
+    assert Search(HEAVE, "a", (), st, 0.01, rule="any").value_passes(ev)
+    assert not Search(HEAVE, "a", (), st, 0.01, rule="any").value_passes(Evaluation(0.5, [math.inf] * 2, []))
+    with pytest.raises(ValueError, match=r"Search.rule must be one of \('all', 'any'\), got 'most'"):
+        Search(HEAVE, "a", (), st, 0.01, rule="most")
+
+    class Run:  # a completed run whose tail is beyond the bound, which its own predicate passes
+        status, extras = "ok", {}
+        summary = {"metrics": {"rms_tracking_error_tail": 0.5}, "reason": ""}
+
+    assert Search(HEAVE, "a", (), st, 0.01).judged(Run()) == math.inf
+    assert Search(HEAVE, "a", (), st, 0.01, run_passes=lambda r: True).judged(Run()) == 0.5
+    assert Search(HEAVE, "a", (), st, 0.01, run_passes=lambda r: False).judged(Run()) == math.inf
+
+
+def test_the_quadrotor_s_when2fail_and_the_heave_breaking_point_come_from_one_search(monkeypatch, tmp_path):
+    """flight.margins (AdaptiveQuadBench's margin and when2fail) runs breaking_point.search_all, the search of the
+    stress study and the scorecard: a search of rule "all" and one of rule "any" per (law, disturbance), both judging
+    a run by flight.succeeded and sharing the runs both ask for (one log per intensity and seed)."""
+    from adaptive_mj.study import breaking_point, flight
+
+    calls = []
+    real = breaking_point.search_all
+
+    def spy(searches, **kw):
+        margins = real(searches, **kw)
+        calls.append((list(searches), margins))
+        return margins
+
+    monkeypatch.setattr(breaking_point, "search_all", spy)
+    force = next(d for d in flight.DISTURBANCES if d.name == "force")
+    (s,) = flight.margins(flight.searches(laws=("geometric_adaptive",), disturbances=(force,)), seeds=2, steps=3,
+                          logs=tmp_path)
+    ((probes, (margin, when2fail)),) = calls
+    assert [p.rule for p in probes] == ["all", "any"] and all(p.run_passes is flight.succeeded for p in probes)
+    assert margin.margin is not None and margin.first_fail is not None and when2fail.first_fail is not None
+    assert s.margin() == (margin.margin, margin.first_fail)
+    assert s.when2fail() == (when2fail.margin, when2fail.first_fail)
+    assert not any(s.evaluations[when2fail.first_fail]) and any(s.evaluations[when2fail.margin])
+    assert len(list(tmp_path.rglob("*.mcap"))) == 2 * len(s.evaluations)  # shared: each value and seed run once

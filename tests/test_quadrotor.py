@@ -251,7 +251,7 @@ def test_the_margins_bracket_the_payload_each_law_can_carry(tmp_path):
     for s in found:
         lo, hi = s.when2fail()
         assert hi is not None and (lo is None or lo < hi) and s.margin()[0] <= hi
-    assert len(list(tmp_path.glob("*.mcap"))) == sum(len(s.evaluations) for s in found)
+    assert len(list(tmp_path.rglob("*.mcap"))) == sum(len(s.evaluations) for s in found)  # logs/<law>/<disturbance>=v
 
 
 def test_the_bench_section_reports_every_law_on_every_task(tmp_path):

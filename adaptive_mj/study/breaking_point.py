@@ -109,7 +109,15 @@ class Stressor:
 
 @dataclass(frozen=True)
 class Search:
-    """One breaking-point search: scenario file, fixed overrides (the law), the stressor."""
+    """One breaking-point search: scenario file, fixed overrides (the law), the stressor, and what passes.
+
+    A run passes when it completed without a crash and its tail RMS error is at most tail_bound, or, with
+    `run_passes`, when that says so (the quadrotor's AdaptiveQuadBench criterion: adaptive_mj.study.flight).
+    rule "all": a value passes when every seed passes, so `margin` is the largest value where all did and
+    `first_fail` the smallest where one did not (a breaking point); rule "any": a value passes when any seed
+    does, so `first_fail` is the smallest value at which every seed fails (AdaptiveQuadBench's when2fail) and
+    `margin` the largest below it where one seed still passed. extras: the analyses each run's job computes
+    (adaptive_mj.study.job.EXTRAS), for `run_passes` to read."""
 
     scenario: Path
     label: str  # e.g. "heave/sigma"
@@ -117,6 +125,31 @@ class Search:
     stressor: Stressor
     tail_bound: float  # [m or rad] tail RMS above this is a failure
     seed: int = 0  # the first seed: the search runs seeds seed .. seed + seeds - 1 (the scorecard: one each)
+    rule: str = "all"
+    run_passes: Callable[[JobResult], bool] | None = None
+    extras: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        if self.rule not in RULES:
+            raise ValueError(f"Search.rule must be one of {RULES}, got {self.rule!r}")
+
+    def judged(self, result: JobResult) -> float:
+        """One run as this search judges it: its tail RMS error when it passes, inf when it fails."""
+        if self.run_passes is None:
+            return _tail(result, self.tail_bound)
+        if not self.run_passes(result):
+            return math.inf
+        tail = _raw_tail(result)
+        return tail if math.isfinite(tail) else 0.0  # passed by its own criterion, with no tail to show
+
+    def value_passes(self, ev: "Evaluation") -> bool:
+        """Whether a value passes by this search's rule (every seed, or any seed)."""
+        ok = [math.isfinite(t) for t in ev.tails]
+        return all(ok) if self.rule == "all" else any(ok)
+
+
+#: A value passes when every seed passes ("all": a margin) or when any does ("any": AdaptiveQuadBench's when2fail).
+RULES = ("all", "any")
 
 
 @dataclass
@@ -238,6 +271,7 @@ class _Batches:
         self.searches, self.margins, self.seeds, self.logs = searches, margins, seeds, logs
         self.n_jobs, self.backend, self.on_done, self.keep_trajectory = n_jobs, backend, on_done, keep_trajectory
         self.screen = screen and seeds > 1
+        self.done: dict[Path, JobResult] = {}  # by log: searches of one label and stressor share their runs
 
     def jobs_for(self, i: int, value: float, which: range) -> list[Job]:
         s = self.searches[i]
@@ -245,13 +279,18 @@ class _Batches:
         text = str(int(value)) if s.stressor.integer else f"{value:.6g}"
         return [Job(s.scenario, overrides=(RECORD_PREFLIGHT, *s.overrides, *s.stressor.overrides(value)), seed=k,
                     log=self.logs / safe / f"{_file_name(s.stressor.name)}={text}-seed{k}.mcap",
-                    tag=f"{s.label} {s.stressor.name}={text} seed {k}", keep_trajectory=self.keep_trajectory)
+                    tag=f"{s.label} {s.stressor.name}={text} seed {k}", keep_trajectory=self.keep_trajectory,
+                    extras=s.extras)
                 for k in which]
 
     def run(self, batch: list[tuple[int, float, range]]) -> list[list[JobResult]]:
-        """The results of each (search, value, seeds) of one batch of parallel runs, in order."""
+        """The results of each (search, value, seeds) of one batch of parallel runs, in order; a run another
+        search of the same label and stressor has made (a margin's and a when2fail's) is not made again."""
         jobs = [job for i, v, which in batch for job in self.jobs_for(i, v, which)]
-        results = run_jobs(jobs, n_jobs=self.n_jobs, on_done=self.on_done, backend=self.backend) if jobs else []
+        fresh = list({job.log: job for job in jobs if job.log not in self.done}.values())
+        made = run_jobs(fresh, n_jobs=self.n_jobs, on_done=self.on_done, backend=self.backend) if fresh else []
+        self.done.update((job.log, r) for job, r in zip(fresh, made, strict=True))  # type: ignore[misc]
+        results = [self.done[job.log] for job in jobs]  # type: ignore[index]
         out, start = [], 0
         for _, _, which in batch:
             out.append(results[start:start + len(which)])
@@ -267,7 +306,7 @@ class _Batches:
         if self.screen:
             chunks = self.run([(i, v, self.seeds_of(i)[:1]) for i, v in wanted])
             go_on = [n for n, ((i, _), c) in enumerate(zip(wanted, chunks, strict=True))
-                     if passes(c[0], self.searches[i].tail_bound)]
+                     if self.searches[i].rule != "all" or math.isfinite(self.searches[i].judged(c[0]))]
             rest = self.run([(wanted[n][0], wanted[n][1], self.seeds_of(wanted[n][0], 1)) for n in go_on])
             for n, more in zip(go_on, rest, strict=True):
                 chunks[n] = chunks[n] + more
@@ -275,8 +314,7 @@ class _Batches:
             chunks = self.run([(i, v, self.seeds_of(i)) for i, v in wanted])
         out = []
         for (i, v), chunk in zip(wanted, chunks, strict=True):
-            bound = self.searches[i].tail_bound
-            ev = Evaluation(v, [_tail(r, bound) for r in chunk], [r.status for r in chunk],
+            ev = Evaluation(v, [self.searches[i].judged(r) for r in chunk], [r.status for r in chunk],
                             [_raw_tail(r) for r in chunk], [predicted_unstable(r.summary) for r in chunk])
             self.margins[i].evaluations.append(ev)
             out.append(ev)
@@ -290,10 +328,10 @@ class _Batches:
                  and len(ev.tails) < self.seeds]
         rest = self.run([(i, ev.value, self.seeds_of(i, len(ev.tails))) for i, ev in short])
         for (i, ev), more in zip(short, rest, strict=True):
-            bound = self.searches[i].tail_bound
-            ev.tails += [_tail(r, bound) for r in more]
+            ev.tails += [self.searches[i].judged(r) for r in more]
             ev.statuses += [r.status for r in more]
             ev.raw += [_raw_tail(r) for r in more]
+            ev.predicted += [predicted_unstable(r.summary) for r in more]
 
 
 def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path, n_jobs: int = 1,
@@ -319,9 +357,9 @@ def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path
     n = len(searches)
     for i in range(n):
         low, high = evs[i], evs[n + i]
-        if not low.passes:
+        if not searches[i].value_passes(low):
             margins[i].first_fail = low.value
-        elif high.passes:
+        elif searches[i].value_passes(high):
             margins[i].margin = high.value
         else:
             margins[i].margin, margins[i].first_fail = low.value, high.value
@@ -334,7 +372,7 @@ def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path
             bracket = brackets[i]
             assert bracket is not None  # _midpoints wants values of bracketed searches only
             lo, hi = bracket
-            if ev.passes:
+            if searches[i].value_passes(ev):
                 brackets[i] = (v, hi)
                 margins[i].margin = v
             else:

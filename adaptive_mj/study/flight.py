@@ -24,8 +24,9 @@ from typing import Callable, Sequence
 import numpy as np
 
 from adaptive_mj.setup import scenario as sc
+from adaptive_mj.study.breaking_point import Stressor
 from adaptive_mj.study.job import RECORD_PREFLIGHT, crashed
-from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
+from adaptive_mj.study.parallel import Backend, Job, JobResult
 from adaptive_mj.trajectory import Status
 
 LAWS = ("geometric", "geometric_adaptive", "l1_geometric")
@@ -119,15 +120,6 @@ class Search:
         return float(np.mean(self.evaluations[v]))
 
 
-def _mid(lo: float, hi: float, d: Disturbance) -> float | None:
-    """The next intensity between lo and hi (geometric over a decade or more), on the step grid; None when lo and
-    hi are neighbours there."""
-    if d.step > 0:
-        a, b = round(lo / d.step), round(hi / d.step)
-        return None if b - a <= 1 else round((a + b) / 2) * d.step
-    return math.sqrt(lo * hi) if lo > 0 and hi / lo >= 10.0 else 0.5 * (lo + hi)
-
-
 def _jobs(s: Search, v: float, seeds: int, logs: Path, extra: Sequence[str]) -> list[Job]:
     d = s.disturbance
     name = f"{s.law}-{d.name.replace(' ', '_')}={v:.6g}"
@@ -138,35 +130,34 @@ def _jobs(s: Search, v: float, seeds: int, logs: Path, extra: Sequence[str]) -> 
             for k in range(seeds)]
 
 
-def _evaluate(wanted: list[tuple[Search, float]], *, seeds: int, logs: Path, n_jobs: int, backend: Backend | None,
-              extra: Sequence[str]) -> None:
-    jobs = [j for s, v in wanted for j in _jobs(s, v, seeds, logs, extra)]
-    results = run_jobs(jobs, n_jobs=n_jobs, backend=backend) if jobs else []
-    for n, (s, v) in enumerate(wanted):
-        s.evaluations[v] = [succeeded(r) for r in results[n * seeds:(n + 1) * seeds]]
-
-
 def searches(laws: Sequence[str] = LAWS, disturbances: Sequence[Disturbance] = (*DISTURBANCES, DELAY)) -> list[Search]:
     return [Search(law, d) for d in disturbances for law in laws]
 
 
+def stressor(d: Disturbance) -> Stressor:
+    """A disturbance as the breaking-point search's stressor (its intensities, range and step)."""
+    return Stressor(d.name, d.overrides, d.lo, d.hi, unit=d.unit, step=d.step)
+
+
 def margins(found: list[Search], *, seeds: int, steps: int, logs: Path, n_jobs: int = 1,
             backend: Backend | None = None, extra: Sequence[str] = ()) -> list[Search]:
-    """Bisect every search's margin and when2fail (module docstring): the range's ends, then `steps` rounds."""
-    _evaluate([(s, v) for s in found for v in (s.disturbance.lo, s.disturbance.hi)], seeds=seeds, logs=logs,
-              n_jobs=n_jobs, backend=backend, extra=extra)
-    for _ in range(steps):
-        wanted: list[tuple[Search, float]] = []
-        for s in found:
-            for lo, hi in (s.margin(), s.when2fail()):
-                if lo is None or hi is None:
-                    continue
-                v = _mid(lo, hi, s.disturbance)
-                if v is not None and v not in s.evaluations and (s, v) not in wanted:
-                    wanted.append((s, v))
-        if not wanted:
-            break
-        _evaluate(wanted, seeds=seeds, logs=logs, n_jobs=n_jobs, backend=backend, extra=extra)
+    """Bisect every search's margin and when2fail (module docstring) with the breaking-point search
+    (adaptive_mj.study.breaking_point.search_all, the one bisection of every study): per (law, disturbance) a
+    search of rule "all" (the margin) and one of rule "any" (when2fail: its first_fail), both judging a run by
+    `succeeded` and sharing the runs they both ask for; the range's ends, then `steps` rounds. Each Search's
+    evaluations are then every intensity tried, with each seed's success."""
+    from adaptive_mj.study.breaking_point import Search as Probe, search_all
+
+    task = sc.SCENARIOS_DIR / f"{TASK}.toml"
+    probes = [Probe(task, s.law, (*BASE, *extra, f"law={s.law}"), stressor(s.disturbance), math.inf, rule=rule,
+                    run_passes=succeeded, extras=("flight_metrics",))
+              for s in found for rule in ("all", "any")]
+    done = search_all(probes, seeds=seeds, steps=steps, logs=logs, n_jobs=n_jobs, backend=backend,
+                      keep_trajectory=False)
+    for n, s in enumerate(found):
+        for m in done[2 * n:2 * n + 2]:
+            for ev in m.evaluations:
+                s.evaluations[ev.value] = [math.isfinite(t) for t in ev.tails]
     return found
 
 

@@ -278,7 +278,8 @@ def _airframe_stressors(p: Plant, duration: float) -> list[Stressor]:
             m0 = float(plant.true_theta()[0] - plant.nominal_theta()[0])  # the payload's mass [kg], from the model
             out.append(Stressor("payload added", _payload_added(m0), 0.001, d.hi - m0, unit=d.unit))
         else:
-            out.append(Stressor(d.name, d.overrides, d.lo, d.hi, unit="fraction" if d.unit == "%" else d.unit))
+            st = flight.stressor(d)
+            out.append(Stressor(st.name, st.overrides, st.lo, st.hi, unit="fraction" if d.unit == "%" else d.unit))
     return out
 
 
