@@ -453,3 +453,35 @@ def test_a_plugin_copy_of_the_built_in_law_gets_its_scores_and_ranks_on_every_pl
             assert card.rank(plant, "sliding_copy", score) == card.rank(plant, "adaptive", score) == 1
         for stressor in ("control period", "delay"):
             assert card.margin(plant, "sliding_copy", stressor) == card.margin(plant, "adaptive", stressor)
+
+
+def test_a_multi_joint_plugin_copy_of_slotine_li_gets_its_scores_and_ranks_on_the_ur5e(monkeypatch, tmp_path):
+    """examples/robust_sl_law with k_s = 0 is Slotine–Li (its robust term off, its box unbounded): scored beside the
+    built-in law on the 6-joint arm with the bundled scenarios' gains, the same S and R to the last printed digit,
+    the same ranks."""
+    from adaptive_mj.laws import plugin
+    from adaptive_mj.plugins import Installed
+
+    spec = importlib.util.spec_from_file_location("robust_sl_law", REPO / "examples" / "robust_sl_law" /
+                                                  "robust_sl_law.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    monkeypatch.setitem(sys.modules, "robust_sl_law", module)
+    real = plugin.installed
+    monkeypatch.setattr(plugin, "installed", lambda: {**real(), "robust_sl": Installed(
+        "robust_sl", module.LAW, "adaptive-mj-robust-sl-law", "0.1.0", "0" * 64)})
+    import tomllib
+
+    law = tomllib.loads((REPO / "scenarios" / "ur5e_identification.toml").read_text())["law"]
+    gains = tmp_path / "gains.toml"
+    gains.write_text(f"[manipulator]\nlambda = {law['lambda']!r}\nkd = {law['kd']!r}\nks = 0.0\n"
+                     f"gamma = {law['gamma']!r}\n")
+    card = api.score("robust_sl", gains=gains, against="adaptive", plants="ur5e", seeds=2, out=tmp_path / "card",
+                     cost=False, jobs=2)
+    assert card.exit_code == 0
+    for name in ("performance", "robustness", "tail_error", "drift_rate", "param_error"):
+        copy, built_in = card.figure("ur5e", "robust_sl", name), card.figure("ur5e", "adaptive", name)
+        assert f"{copy.mean:.3g} [{copy.lo:.3g}, {copy.hi:.3g}]" == \
+            f"{built_in.mean:.3g} [{built_in.lo:.3g}, {built_in.hi:.3g}]", name
+    for score in ("performance", "robustness"):
+        assert card.rank("ur5e", "robust_sl", score) == card.rank("ur5e", "adaptive", score) == 1
