@@ -32,7 +32,7 @@ from adaptive_mj.plants.attach import compose
 from adaptive_mj.plants.mujoco_plant import (BodyEdits, MujocoPlant, compile_for_scenario, compile_xml_path,
                                              find_joint_and_actuator, scratch_data, spec_from_text, with_userdata)
 from adaptive_mj.laws.kinds import Form
-from adaptive_mj.plants.kinds import PlantKind, StressPlant, register
+from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, register
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Table
@@ -197,5 +197,13 @@ KIND = register(PlantKind(
     reader=plant_keys.SharedReader(theta=theta_names),
     events={ev.PAYLOAD_MASS: "mujoco", ev.CONSTANT_FORCE: None},
     stress=StressPlant("arm", "arm_payload_swap", ("events=[]",), composite="{gain=1.0, filter=2.0}",
-                       stressors=("payload ratio",)),
+                       stressors=("payload ratio",),
+                       tasks=(ScoreTask("tracking", "arm_payload_swap",
+                                        ("events=[]", "law.initial_estimates={theta_half}")),
+                              ScoreTask("change", "arm_payload_swap",
+                                        ("events=[{{t={half}, kind='payload_mass', value={payload_x4}}}]",),
+                                        extras=("change_response",)),
+                              ScoreTask("hold", "arm_payload_swap",
+                                        ("events=[]", "reference={{kind='constant', value=0.5}}"), noise_scale=2.0,
+                                        extras=("drift_rate",)))),
     sections=("payload swap",)))

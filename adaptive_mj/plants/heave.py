@@ -41,7 +41,7 @@ from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path,
                                              find_joint_and_actuator, read_model_file, scratch_data)
 from adaptive_mj.laws.kinds import Form
-from adaptive_mj.plants.kinds import PlantKind, StressPlant, register
+from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, register
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
@@ -283,5 +283,11 @@ KIND = register(PlantKind(
     events={FLUID_DENSITY_SCALE: "mujoco", ev.CONSTANT_FORCE: None}, order=order,
     orders_text="2, or 3 with plant.thruster_time_constant",
     stress=StressPlant("heave", "heave_tracking", ("simulation.initial_state='reference'",),
-                       disturbance=(1.0, 1000.0), composite="{gain=3e-4, filter=1.0}", stressors=("lag τ",)),
+                       disturbance=(1.0, 1000.0), composite="{gain=3e-4, filter=1.0}", stressors=("lag τ",),
+                       tasks=(ScoreTask("tracking", "heave_tracking", ("law.initial_estimates={theta_half}",)),
+                              ScoreTask("change", "heave_tracking",
+                                        ("simulation.initial_state='reference'", "law.initial_estimates='model'",
+                                         "events=[{{t={half}, kind='fluid_density_scale', value=1.1}}]"),
+                                        extras=("change_response",)),
+                              ScoreTask("hold", "heave_drift", (), noise_scale=0.0, extras=("drift_rate",)))),
     sections=("Lyapunov", "2nd order", "n-th order", "drift", "excitation", "failure")))

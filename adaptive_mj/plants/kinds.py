@@ -56,12 +56,28 @@ def first_order(plant: PlantSpec, law_order: Any) -> int:
 
 
 @dataclass(frozen=True)
+class ScoreTask:
+    """One task of the scorecard (adaptive_mj.study.score_suite) on a plant kind's row, one run per seed: a bundled
+    scenario and its overrides, as templates over the plant's derived numbers ({half}: half the run [s];
+    {theta_half}: half the true θ as a law.initial_estimates table; {payload_x4}: four times the scenario's
+    plant.payload_mass [kg]; {{ }}: one brace); noise_scale: the plant's nominal noise times this (0: the
+    scenario's own noise); extras: the analyses the task reads (adaptive_mj.study.job.EXTRAS)."""
+
+    name: str
+    scenario: str
+    overrides: tuple[str, ...]
+    noise_scale: float = 1.0
+    extras: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class StressPlant:
     """A plant kind's row in the breaking-point study (adaptive_mj.study.stress): name (its label, e.g. "ur5e"),
     the bundled scenario it runs (without ".toml"), and the overrides that make it a stress run beyond the
     duration, the estimates at the truth and the nominal noise (e.g. "events=[]"; each plant's own);
     noise_signals: the measured signals the nominal noise σ_y [output unit] and 10 σ_y [per s] are on; label,
-    disturbance, composite, stressors: see each (a stressor by its name in adaptive_mj.study.stress)."""
+    disturbance, composite, stressors: see each (a stressor by its name in adaptive_mj.study.stress); tasks: the
+    scorecard's tracking, change and hold tasks on this plant (ScoreTask)."""
 
     name: str
     scenario: str
@@ -71,6 +87,7 @@ class StressPlant:
     disturbance: tuple[float, float] = (0.1, 100.0)  # the sinusoidal disturbance's range [control unit]
     composite: str | None = None  # law.composite of the composite law (None: no composite row)
     stressors: tuple[str, ...] = ()  # the study's stressors of this plant beyond the common ones, by name
+    tasks: tuple[ScoreTask, ...] = ()  # the scorecard's tasks on this plant (none: not scored)
 
 
 @dataclass(frozen=True)

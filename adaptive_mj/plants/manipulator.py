@@ -46,7 +46,7 @@ from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compile_for_
                                              control_callback, new_warnings, scratch_data)
 from adaptive_mj.plants.protocol import Policy
 from adaptive_mj.laws.kinds import Form
-from adaptive_mj.plants.kinds import PlantKind, StressPlant, body_param_unit, register
+from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, body_param_unit, register
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
@@ -916,5 +916,11 @@ KIND = register(PlantKind(
     events={ev.PAYLOAD_MASS: "mujoco", ev.PAYLOAD_SWAP: "mujoco"}, starts_on_reference=True,
     group_params_by_unit=True, stress=StressPlant(
         "ur5e", "ur5e_identification", noise_signals=("q", "q_dot"), disturbance=(0.1, 1000.0),
-        label="the 6-joint arm: the RMS over its joints and the tail's rows, ‖q̃‖'s RMS / √6"),
+        label="the 6-joint arm: the RMS over its joints and the tail's rows, ‖q̃‖'s RMS / √6",
+        tasks=(ScoreTask("tracking", "ur5e_identification", ()),
+               ScoreTask("change", "ur5e_payload_swap",
+                         ("law.initial_estimates='model'",
+                          "events=[{{t={half}, kind='payload_swap', payload='sphere'}}]"),
+                         extras=("change_response",)),
+               ScoreTask("hold", "ur5e_drift", (), noise_scale=0.0, extras=("drift_rate",)))),
     sections=("manipulator",)))

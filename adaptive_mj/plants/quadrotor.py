@@ -43,7 +43,7 @@ from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants import events as ev
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants.airframe import Airframe
-from adaptive_mj.plants.kinds import PlantKind, StressPlant, register
+from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, register
 from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compiled_control, control_callback, new_warnings,
                                              release_data, run_data, scratch_data)
 
@@ -629,5 +629,12 @@ KIND = register(PlantKind(
     tail_bound=0.02, nominal_noise=1e-3,
     stress=StressPlant("quadrotor", "quadrotor_lemniscate", (), noise_signals=("p", "v"),
                        label="the quadrotor: the RMS over x, y and z, ‖p̃‖'s RMS / √3",
-                       stressors=("wind", "force", "torque", "payload", "rotor loss")),
+                       stressors=("wind", "force", "torque", "payload", "rotor loss"),
+                       tasks=(ScoreTask("tracking", "quadrotor_lemniscate", ()),
+                              ScoreTask("change", "quadrotor_lemniscate",
+                                        ("law.initial_estimates='model'",
+                                         "events=[{{t={half}, kind='payload_release'}}]"),
+                                        extras=("change_response",)),
+                              ScoreTask("hold", "quadrotor_hover_payload", ("law.initial_estimates='model'",),
+                                        extras=("drift_rate",)))),
     noise_signals=STATE_NAMES, reference_reader=read_reference, reference_builder=build_reference))

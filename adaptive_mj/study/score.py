@@ -398,7 +398,7 @@ def _rows(law: str | None, plants: Sequence[str] | None, duration: float,
           scenarios: Sequence[Path] = ()) -> list[stress.Plant]:
     """The scored plant rows: those named in `plants` (all when None; none when only `scenarios` are given) and
     the users' scenario files `scenarios` (scenario_row), those `law` serves."""
-    rows = stress.plants(duration)
+    rows = [p for p in stress.plants(duration) if p.name in suite.TASKS]  # the kinds that declare score tasks
     if scenarios and plants is None:
         plants = ()
     if plants is not None:

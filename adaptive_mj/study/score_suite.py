@@ -37,21 +37,13 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass
 
+from adaptive_mj.plants.kinds import ScoreTask, built_in
+
 SUITE_VERSION = 2  # 2: the quadrotor's row; R over the stressors that apply to a law
 
 
-@dataclass(frozen=True)
-class Task:
-    """One run per seed: a bundled scenario and its overrides, as templates over the plant's derived numbers
-    ({half}: half the run [s]; {theta_half}: half the true θ as a law.initial_estimates table; {payload_x4}: four
-    times the scenario's plant.payload_mass [kg]); noise_scale: the plant's nominal noise times this (0: the
-    scenario's own noise); extras: the analyses the task reads (adaptive_mj.study.job.EXTRAS)."""
-
-    name: str
-    scenario: str
-    overrides: tuple[str, ...]
-    noise_scale: float = 1.0
-    extras: tuple[str, ...] = ()
+#: One task of the card (its fields: plants.kinds.ScoreTask); each plant kind declares its own beside its keys
+Task = ScoreTask
 
 
 @dataclass(frozen=True)
@@ -68,32 +60,9 @@ class Criterion:
     doc: str
 
 
-TASKS: dict[str, tuple[Task, ...]] = {
-    "heave": (
-        Task("tracking", "heave_tracking", ("law.initial_estimates={theta_half}",)),
-        Task("change", "heave_tracking", ("simulation.initial_state='reference'", "law.initial_estimates='model'",
-                                          "events=[{{t={half}, kind='fluid_density_scale', value=1.1}}]"),
-             extras=("change_response",)),
-        Task("hold", "heave_drift", (), noise_scale=0.0, extras=("drift_rate",))),
-    "arm": (
-        Task("tracking", "arm_payload_swap", ("events=[]", "law.initial_estimates={theta_half}")),
-        Task("change", "arm_payload_swap", ("events=[{{t={half}, kind='payload_mass', value={payload_x4}}}]",),
-             extras=("change_response",)),
-        Task("hold", "arm_payload_swap", ("events=[]", "reference={{kind='constant', value=0.5}}"),
-             noise_scale=2.0, extras=("drift_rate",))),
-    "ur5e": (
-        Task("tracking", "ur5e_identification", ()),
-        Task("change", "ur5e_payload_swap", ("law.initial_estimates='model'",
-                                             "events=[{{t={half}, kind='payload_swap', payload='sphere'}}]"),
-             extras=("change_response",)),
-        Task("hold", "ur5e_drift", (), noise_scale=0.0, extras=("drift_rate",))),
-    "quadrotor": (
-        Task("tracking", "quadrotor_lemniscate", ()),
-        Task("change", "quadrotor_lemniscate", ("law.initial_estimates='model'",
-                                                "events=[{{t={half}, kind='payload_release'}}]"),
-             extras=("change_response",)),
-        Task("hold", "quadrotor_hover_payload", ("law.initial_estimates='model'",), extras=("drift_rate",))),
-}
+#: The tasks per scored plant row, as each plant kind declares them (PlantKind.stress.tasks), in the registry's order
+TASKS: dict[str, tuple[Task, ...]] = {k.stress.name: k.stress.tasks for k in built_in().values()
+                                      if k.stress is not None and k.stress.tasks}
 
 CRITERIA: tuple[Criterion, ...] = (
     Criterion("tail_error", "tracking", "tail RMS error", "output", "the plant's failure bound (tail_bound)", 0.30,
