@@ -60,6 +60,9 @@ def test_screening_gives_the_same_margins_with_fewer_runs(tmp_path):
     assert screened[1].margin is None and screened[1].first_fail == 0  # the low end failed: completed at the end
     runs = lambda ms: [st for m in ms for e in m.evaluations for st in e.statuses]  # noqa: E731
     assert len(runs(screened)) < len(runs(full))
+    # what screening left out is counted (the stress report says it): the full search's runs less the screened's
+    assert sum(m.screened_out for m in screened) == len(runs(full)) - len(runs(screened)) > 0
+    assert sum(m.screened_out for m in full) == 0
     logs = len(list((tmp_path / "screened").rglob("*.mcap")))
     assert logs == len(runs(screened)) and "refused" not in runs(screened)
 

@@ -72,6 +72,12 @@ def test_the_scorecard_ranks_the_adaptive_law_above_the_geometric_baseline_on_th
     assert "control period" in data["mine"]["stressors"]
     assert "n/a" in (card.out / "scorecard.md").read_text()
     assert math.isfinite(card.figure("quadrotor", "l1_geometric", "robustness").mean)
+    # the card lists what it did not run, and why: the same rule for every law
+    (left,) = card.data["runs"]["not_run"]
+    assert (left["plant"], left["law"], left["stressor"], left["seeds"]) == ("quadrotor", "l1_geometric",
+                                                                             "control period", 2)
+    assert "Not run: 1 searches of 2 seeds each (quadrotor/l1_geometric: control period): a law with filters" in \
+        (card.out / "scorecard.md").read_text()
 
 
 def test_stress_plants_narrows_the_study_and_refuses_an_unknown_plant_in_one_line(tmp_path):

@@ -211,6 +211,10 @@ def test_a_plugin_law_is_scored_against_the_baselines_with_its_files(cards):
     assert data["versions"]["law_plugin"]["distribution"] == "adaptive-mj-emod-law"
     md = (card.out / "scorecard.md").read_text()
     assert "| **emod** |" in md and "![heave performance](heave-performance.png)" in md
+    # every probe run, whatever the law; the card counts the pre-flight check's predictions and lists what it left out
+    assert data["runs"]["not_run"] == [] and data["runs"]["predicted_unstable"] >= 0
+    assert (f"**Runs.** {data['runs']['tasks']} task runs and {data['runs']['margins']} margin runs. Every probe is "
+            "run and judged by its outcome") in md and "none was refused" in md
     assert (card.out / "scorecard.html").stat().st_size > 10_000  # the figures embedded
     logs = sorted((card.out / "logs" / "tasks" / "heave" / "emod").glob("*.mcap"))
     assert [p.name for p in logs][:3] == ["change-seed0.mcap", "change-seed1.mcap", "change-seed2.mcap"]

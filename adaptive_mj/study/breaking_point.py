@@ -174,6 +174,7 @@ class Margin:
     margin: float | None  # largest passing value (None: the low end fails)
     first_fail: float | None  # smallest failing value (None: the high end passes)
     evaluations: list[Evaluation] = field(default_factory=list)
+    screened_out: int = 0  # runs not made by screening: a value's other seeds once its first had failed
 
     @property
     def resolution(self) -> float | None:
@@ -307,6 +308,8 @@ class _Batches:
             chunks = self.run([(i, v, self.seeds_of(i)[:1]) for i, v in wanted])
             go_on = [n for n, ((i, _), c) in enumerate(zip(wanted, chunks, strict=True))
                      if self.searches[i].rule != "all" or math.isfinite(self.searches[i].judged(c[0]))]
+            for n in set(range(len(wanted))) - set(go_on):
+                self.margins[wanted[n][0]].screened_out += self.seeds - 1
             rest = self.run([(wanted[n][0], wanted[n][1], self.seeds_of(wanted[n][0], 1)) for n in go_on])
             for n, more in zip(go_on, rest, strict=True):
                 chunks[n] = chunks[n] + more
@@ -328,6 +331,7 @@ class _Batches:
                  and len(ev.tails) < self.seeds]
         rest = self.run([(i, ev.value, self.seeds_of(i, len(ev.tails))) for i, ev in short])
         for (i, ev), more in zip(short, rest, strict=True):
+            self.margins[i].screened_out -= len(more)  # run after all
             ev.tails += [self.searches[i].judged(r) for r in more]
             ev.statuses += [r.status for r in more]
             ev.raw += [_raw_tail(r) for r in more]

@@ -482,8 +482,21 @@ def task_jobs(pl: Plan, out: Path) -> tuple[list[Job], list[tuple[str, str, str,
     return jobs, keys
 
 
+#: Why a search is not run (the card's "not run"): the one rule, the same for every law
+NOT_RUN_WHY = {stress.PERIOD: "a law with filters integrated per step (composite adaptation, L1) runs under "
+                              "continuous control only: the control period does not apply to it (n/a, not in its R)"}
+
+
+def not_run(pl: Plan) -> list[dict]:
+    """The searches the card does not run: plant, law, stressor, how many seeds, and why (NOT_RUN_WHY)."""
+    return [{"plant": p.name, "law": e.label, "stressor": st.name, "seeds": pl.seeds, "why": NOT_RUN_WHY[st.name]}
+            for p in pl.rows for e in pl.entries[p.name] for st in stress.stressors(p, pl.settings.stress_duration)
+            if st.name == stress.PERIOD and stress.continuous_only(p, e.overrides)]
+
+
 def searches(pl: Plan, *, full_logs: bool) -> list[Search]:
-    """Every plant × law × stressor × seed as a breaking-point search of its own (one seed each)."""
+    """Every plant × law × stressor × seed as a breaking-point search of its own (one seed each), but those
+    `not_run` lists."""
     out = []
     log_rate = () if full_logs else (f"log.rate_hz={MARGIN_LOG_RATE_HZ!r}",)
     for p in pl.rows:
@@ -491,7 +504,7 @@ def searches(pl: Plan, *, full_logs: bool) -> list[Search]:
         for e in pl.entries[p.name]:
             for st in stress.stressors(p, pl.settings.stress_duration):
                 if st.name == stress.PERIOD and stress.continuous_only(p, e.overrides):
-                    continue  # n/a: a law with filters runs under continuous control only
+                    continue  # n/a: not_run
                 for k in range(pl.seeds):
                     out.append(Search(path, f"{p.name}/{e.label}", (*p.base, *log_rate, *e.overrides), st,
                                       stress.tail_bound(p), seed=k))
@@ -611,7 +624,9 @@ def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] 
                                          "sets": list(sets), "gains": pl.gains},
         "plants": {p.name: plant_card(pl, p, task_runs, margins, cost_of) for p in pl.rows},
         "errors": len(errors),
-        "runs": {"tasks": len(jobs), "margins": sum(len(ev.tails) for m in margins for ev in m.evaluations)},
+        "runs": {"tasks": len(jobs), "margins": sum(len(ev.tails) for m in margins for ev in m.evaluations),
+                 "not_run": not_run(pl),
+                 "predicted_unstable": sum(p for m in margins for ev in m.evaluations for p in ev.predicted)},
     }
     data["wall_seconds"] = time.perf_counter() - t0
     card = Scorecard(data, out, exit_code=1 if errors else 0)
@@ -673,6 +688,10 @@ def merge(paths: Sequence[Path], out: Path | None) -> Scorecard:
     merged["merged_from"] = [c["path"] for c in cards]
     merged["versions"] = [c["versions"] for c in cards]
     merged["wall_seconds"] = None
+    runs = [c.get("runs") or {} for c in cards]  # every card's runs (older cards: no not_run, no predictions)
+    merged["runs"] = {"tasks": sum(r.get("tasks", 0) for r in runs), "margins": sum(r.get("margins", 0) for r in runs),
+                      "not_run": [n for r in runs for n in r.get("not_run", [])],
+                      "predicted_unstable": sum(r.get("predicted_unstable", 0) for r in runs)}
     for n, data in enumerate(cards[1:], start=2):
         for pn, plant in data["plants"].items():
             target = merged["plants"].setdefault(pn, {**json.loads(json.dumps(plant)), "laws": {}})

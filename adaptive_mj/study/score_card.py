@@ -172,6 +172,21 @@ def formula_text(data: dict) -> str:
             "3 timings; not in S). docs/METRICS.md, \"Scorecard\", defines each criterion.")
 
 
+def runs_text(data: dict) -> str:
+    """What the card ran and did not: every probe run whatever the law (the pre-flight check's predictions
+    counted, never taken for a run), and each search left out with why (score.not_run)."""
+    runs = data.get("runs") or {}
+    text = (f"**Runs.** {runs.get('tasks', 0)} task runs and {runs.get('margins', 0)} margin runs. Every probe is "
+            "run and judged by its outcome, whatever the law: the pre-flight check predicted "
+            f"{runs.get('predicted_unstable', 0)} of the margin runs unstable (laws that declare their feedback are "
+            "checked), and none was refused.")
+    left = runs.get("not_run") or []
+    if left:
+        text += (f" Not run: {len(left)} searches of {left[0]['seeds']} seeds each ("
+                 + "; ".join(f"{n['plant']}/{n['law']}: {n['stressor']}" for n in left) + "): " + left[0]["why"] + ".")
+    return text
+
+
 def write_card(card) -> None:
     """scorecard.json, the figures, scorecard.md and scorecard.html into card.out; card.text: the leaderboards."""
     from adaptive_mj.report.html import write_html
@@ -207,7 +222,7 @@ def write_card(card) -> None:
             text.append(f" {mark} {e['rank']['performance']:>2} {lb:26s} S "
                         f"{Estimate.from_dict(e['figures']['performance']).text('.3f'):28s} R "
                         f"{Estimate.from_dict(e['figures']['robustness']).text('.3f')}")
-    body += ["## How the card scores", "", formula_text(data), ""]
+    body += ["## How the card scores", "", formula_text(data), "", runs_text(data), ""]
     (out / "scorecard.md").write_text("\n".join(head + body), encoding="utf-8")
     html = write_html(out / "scorecard.md")
     card.text = "\n".join(text) + f"\n\nscorecard: {out / 'scorecard.md'}\nhtml: {html}\njson: {out / 'scorecard.json'}"

@@ -451,12 +451,16 @@ def preflight_text(margins: Sequence[Margin]) -> str:
     failed when run (every probe is run, whatever the law: job.RECORD_PREFLIGHT)."""
     predicted = [(p, math.isfinite(t)) for m in margins for e in m.evaluations
                  for p, t in zip(e.predicted, e.tails, strict=True) if p]
+    skipped = sum(m.screened_out for m in margins)
+    screened = (f" Screening left out {skipped} runs (a value's other seeds once its first had failed: the value "
+                "fails either way), by the same rule for every law." if skipped else "")
     if not predicted:
         return ("The pre-flight check predicted none of the runs unstable; every probe was run and judged by its "
-                "outcome, whatever the law.")
+                "outcome, whatever the law." + screened)
     failed = sum(not passed for _, passed in predicted)
     return (f"The pre-flight check predicted {len(predicted)} of the runs unstable (a law that declares its feedback "
-            f"is checked); they were run like the others, whatever the law, and {failed} of them failed.")
+            f"is checked); they were run like the others, whatever the law, and {failed} of them failed."
+            + screened)
 
 
 def _bounds_text(searches: list[Search] | None = None) -> str:
