@@ -35,7 +35,7 @@ from pathlib import Path
 from concurrent.futures.process import BrokenProcessPool
 from multiprocessing.connection import wait as wait_ready
 from contextlib import contextmanager
-from typing import Callable, Iterator, Sequence, cast
+from typing import Callable, Generator, Iterator, Sequence, cast
 
 from adaptive_mj.sim import interrupt
 from adaptive_mj.errors import Interrupted
@@ -196,7 +196,7 @@ def session(backend: Backend):
 
 
 def iter_results(jobs: Sequence[Job], backend: Backend | None = None, *,
-                 on_retry: Callable[[Job, str], None] | None = None) -> Iterator[tuple[int, JobResult]]:
+                 on_retry: Callable[[Job, str], None] | None = None) -> Generator[tuple[int, JobResult], None, None]:
     """(index into `jobs`, result) for each job as it finishes, exactly once per job.
 
     on_retry(job, why) is called when the Ray backend submits a run again (its worker died)."""
@@ -238,15 +238,37 @@ def _iter_batched(jobs: Sequence[Job], nthread: int) -> Iterator[tuple[int, JobR
         yield from ((g + k, r) for k, r in enumerate(results))
 
 
+@contextmanager
+def stopping_with(results: Generator[tuple[int, JobResult], None, None], total: int, finished: Callable[[], int]):
+    """A loop over iter_results' `results` in this block. A stop signal that comes in the loop's own body, between
+    two results (interrupt's second delivery lands anywhere), is thrown into the generator at its yield: its workers
+    are stopped and its note written there, before the signal goes on (else the note says `finished()` of
+    `total`). The generator is closed when the block ends, whatever ended it."""
+    try:
+        yield
+    except Interrupted as exc:
+        try:
+            results.throw(exc)
+        except (Interrupted, StopIteration):
+            pass
+        if not exc.note:
+            exc.note = interrupted_note(finished(), total)
+        raise
+    finally:
+        results.close()
+
+
 def run_jobs(jobs: Sequence[Job], *, n_jobs: int = 1, on_done: Callable[[JobResult], None] | None = None,
              backend: Backend | None = None) -> list[JobResult]:
     """Run jobs (on `backend`, default local processes, n_jobs of them); results in the order of `jobs`."""
     backend = backend or Backend(jobs=n_jobs)
     results: list[JobResult | None] = [None] * len(jobs)
-    for i, result in iter_results(jobs, backend, on_retry=getattr(on_done, "retried", None)):
-        results[i] = result
-        if on_done:
-            on_done(result)
+    gen = iter_results(jobs, backend, on_retry=getattr(on_done, "retried", None))
+    with stopping_with(gen, len(jobs), lambda: sum(r is not None for r in results)):
+        for i, result in gen:
+            results[i] = result
+            if on_done:
+                on_done(result)
     return cast("list[JobResult]", results)  # every slot filled: iter_results yields each job once
 
 

@@ -36,7 +36,8 @@ from adaptive_mj.setup import scenario as sc
 from adaptive_mj.errors import AdaptiveMJError, ScenarioError
 from adaptive_mj.report.html import write_html
 from adaptive_mj.report.metrics import TAIL_FRACTION, clean_json, metrics as run_metrics
-from adaptive_mj.study.parallel import Backend, Job, JobResult, iter_results, progress_printer, session
+from adaptive_mj.study.parallel import (Backend, Job, JobResult, iter_results, progress_printer, session,
+                                       stopping_with)
 from adaptive_mj.study.job import RECORD_PREFLIGHT
 from adaptive_mj.study.result import Study, Table
 from adaptive_mj.trajectory import Status, Trajectory
@@ -878,10 +879,12 @@ def run_sweep(path: Path, *, grid: Sequence[str], seeds: int, overrides: Sequenc
               + f"{where} -> {out}", file=sys.stderr)
         progress = progress_printer(len(todo), label="runs")
         if todo:
-            for k, result in iter_results([planned[i][1] for i in todo], backend, on_retry=progress.retried):
-                i = todo[k]
-                progress(result)
-                stream.append(i, rows([(planned[i][0], result)], root=out)[0])
+            gen = iter_results([planned[i][1] for i in todo], backend, on_retry=progress.retried)
+            with stopping_with(gen, len(todo), lambda: progress.n):
+                for k, result in gen:
+                    i = todo[k]
+                    progress(result)
+                    stream.append(i, rows([(planned[i][0], result)], root=out)[0])
         del todo, finished
 
     inputs = {"scenario": str(path), "scenario_name": base.name,
