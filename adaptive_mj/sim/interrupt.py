@@ -79,6 +79,13 @@ def stop_behind(exc: BaseException | None) -> Interrupted | None:
     return None
 
 
+def stop_or(exc: BaseException) -> BaseException:
+    """The Interrupted behind `exc` (stop_behind) where there is one, else exc: what a run's except block closes the
+    log by and raises (`raise stop from exc` when it is not exc itself)."""
+    stop = stop_behind(exc)
+    return exc if stop is None else stop
+
+
 def reraise_stop(exc: BaseException) -> None:
     """Raise the Interrupted behind `exc` (stop_behind) where there is one: for `except Exception` blocks that would
     otherwise go on as after an ordinary error."""

@@ -209,9 +209,9 @@ def execute(scn: Scenario, *, log_path: Path | None = None, source: ModelSource 
         traj = run(st.setup.plant, st.setup.law, st.setup.reference, sink=st.recorder, **st.kwargs)
         return st.finish(traj)
     except BaseException as exc:  # a stop signal after the last step, before the verdict closed the log: all rows
-        stop = interrupt.stop_behind(exc)  # also one Python wrapped while numba compiled (sim.interrupt)
-        st.abandon(stop if stop is not None else exc, traj)
-        if stop is not None and stop is not exc:
+        stop = interrupt.stop_or(exc)  # also a stop Python wrapped while numba compiled (sim.interrupt)
+        st.abandon(stop, traj)
+        if stop is not exc:
             raise stop from exc
         raise
 
@@ -228,9 +228,9 @@ def execute_batch(scenarios: Sequence[tuple[Scenario, Path | None]], *, nthread:
         trajs = run_batch([dict(plant=st.setup.plant, law=st.setup.law, reference=st.setup.reference,
                                 sink=st.recorder, **st.kwargs) for st in starts], nthread=nthread)
     except BaseException as exc:
-        stop = interrupt.stop_behind(exc)
-        settle_batch(starts, stop if stop is not None else exc)
-        if stop is not None and stop is not exc:
+        stop = interrupt.stop_or(exc)
+        settle_batch(starts, stop)
+        if stop is not exc:
             raise stop from exc
         raise
     return [st.finish(traj) for st, traj in zip(starts, trajs, strict=True)]

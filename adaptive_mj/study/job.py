@@ -14,7 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
-from adaptive_mj.errors import AdaptiveMJError, PreflightRefused
+from adaptive_mj.errors import AdaptiveMJError, Interrupted, PreflightRefused
 from adaptive_mj.sim import interrupt
 from adaptive_mj.trajectory import Status, Trajectory
 
@@ -183,12 +183,12 @@ def run_jobs_batched(jobs: Sequence[Job], *, nthread: int = 0) -> list[JobResult
         trajs = run_batch([dict(plant=st.setup.plant, law=st.setup.law, reference=st.setup.reference,
                                 sink=st.recorder, **st.kwargs) for st in started.values()], nthread=nthread)
     except BaseException as exc:
-        stop = interrupt.stop_behind(exc)  # also one Python wrapped (sim.interrupt)
-        ended = settle_batch(list(started.values()), stop if stop is not None else exc)
-        if stop is not None:  # the runs that had ended before the signal count as finished
+        stop = interrupt.stop_or(exc)  # also a stop Python wrapped (sim.interrupt)
+        ended = settle_batch(list(started.values()), stop)
+        if isinstance(stop, Interrupted):  # the runs that had ended before the signal count as finished
             stop.finished = sum(r is not None for r in ended)
-            if stop is not exc:
-                raise stop from exc
+        if stop is not exc:
+            raise stop from exc
         raise
     for i, traj in zip(ids, trajs, strict=True):
         out[i] = _job_result(jobs[i], started[i], traj)

@@ -156,20 +156,19 @@ def _stop_workers(pool: cf.ProcessPoolExecutor, *, grace: float = STOP_GRACE) ->
 
 def _unfinished_logs(jobs: Sequence[Job]) -> list[Path]:
     """The logs of `jobs` that exist but were not closed (no MCAP footer: a worker killed in its run wrote them)."""
+    from adaptive_mj.log.replay import MCAP_MAGIC  # the last bytes of a closed MCAP file
+
     out = []
     for path in (job.log for job in jobs if job.log is not None):
         try:
             with open(path, "rb") as f:
-                f.seek(-len(_MCAP_MAGIC), os.SEEK_END)
-                closed = f.read() == _MCAP_MAGIC
+                f.seek(-len(MCAP_MAGIC), os.SEEK_END)
+                closed = f.read() == MCAP_MAGIC
         except (OSError, ValueError):  # no log yet, or shorter than the magic
             continue
         if not closed:
             out.append(path)
     return out
-
-
-_MCAP_MAGIC = b"\x89MCAP0\r\n"  # the last bytes of a closed MCAP file
 
 
 def _killed_note(killed: int, unfinished: list[Path]) -> str:

@@ -15,7 +15,7 @@ import json
 import math
 import platform
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence, TypeGuard
 
@@ -487,11 +487,16 @@ NOT_RUN_WHY = {stress.PERIOD: "a law with filters integrated per step (composite
                               "continuous control only: the control period does not apply to it (n/a, not in its R)"}
 
 
+def _not_applicable(p: stress.Plant, e: Entry, st) -> bool:
+    """Whether stressor `st` does not apply to law entry e on row p (its reason: NOT_RUN_WHY[st.name])."""
+    return st.name == stress.PERIOD and stress.continuous_only(p, e.overrides)
+
+
 def not_run(pl: Plan) -> list[dict]:
     """The searches the card does not run: plant, law, stressor, how many seeds, and why (NOT_RUN_WHY)."""
     return [{"plant": p.name, "law": e.label, "stressor": st.name, "seeds": pl.seeds, "why": NOT_RUN_WHY[st.name]}
             for p in pl.rows for e in pl.entries[p.name] for st in stress.stressors(p, pl.settings.stress_duration)
-            if st.name == stress.PERIOD and stress.continuous_only(p, e.overrides)]
+            if _not_applicable(p, e, st)]
 
 
 def searches(pl: Plan, *, full_logs: bool) -> list[Search]:
@@ -503,7 +508,7 @@ def searches(pl: Plan, *, full_logs: bool) -> list[Search]:
         path = stress.scenario_path(p.scenario)
         for e in pl.entries[p.name]:
             for st in stress.stressors(p, pl.settings.stress_duration):
-                if st.name == stress.PERIOD and stress.continuous_only(p, e.overrides):
+                if _not_applicable(p, e, st):
                     continue  # n/a: not_run
                 for k in range(pl.seeds):
                     out.append(Search(path, f"{p.name}/{e.label}", (*p.base, *log_rate, *e.overrides), st,
@@ -565,8 +570,7 @@ def plant_card(pl: Plan, p: stress.Plant, task_runs: dict, margins: list, cost_o
 
         path = stress.scenario_path(p.scenario)
         plant["scenario"] = {"file": str(path), "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
-                             "tasks": [{"name": t.name, "overrides": list(t.overrides), "noise_scale": t.noise_scale,
-                                        "extras": list(t.extras)} for t in p.tasks]}
+                             "tasks": [asdict(t) for t in p.tasks]}
     rank_laws(plant)
     return plant
 

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence, TypedDict
 
@@ -137,11 +137,18 @@ def plants(duration: float = DURATION) -> list[Plant]:
     for name, kind in STRESS_PLANT_KIND.items():
         row = kinds.built_in()[kind].stress
         assert row is not None  # STRESS_PLANT_KIND holds the kinds that declare one
-        sig, (y, y_dot) = NOMINAL_NOISE[name], row.noise_signals
-        out.append(Plant(name, row.scenario, (f"simulation.duration={duration}", *row.overrides,
-                                              "law.initial_estimates='model'",
-                                              f"noise.std={{{y}={sig!r}, {y_dot}={10 * sig!r}}}"), kind))
+        out.append(Plant(name, row.scenario, _base(kinds.built_in()[kind], duration), kind))
     return out
+
+
+def _base(kind: kinds.PlantKind, duration: float) -> tuple[str, ...]:
+    """The overrides of every stress run on a plant of `kind` (it declares a study row): `duration` [s], the row's
+    own overrides, the estimates at the truth and the kind's nominal noise σ_y (10 σ_y on the rate)."""
+    row = kind.stress
+    assert row is not None
+    sig, (y, y_dot) = kind_number(kind.name, "nominal_noise"), row.noise_signals
+    return (f"simulation.duration={duration}", *row.overrides, "law.initial_estimates='model'",
+            f"noise.std={{{y}={sig!r}, {y_dot}={10 * sig!r}}}")
 
 
 def user_plant(path: Path, duration: float = DURATION, *, tasks: tuple = ()) -> Plant:
@@ -154,11 +161,7 @@ def user_plant(path: Path, duration: float = DURATION, *, tasks: tuple = ()) -> 
         scored = sorted(k.name for k in kinds.built_in().values() if k.stress is not None)
         raise ScenarioError(f"{path}: plant.kind {scn.plant.kind!r} declares no study row (PlantKind.stress: its "
                             f"laws, stressors and failure bound); expected a scenario of one of {', '.join(scored)}")
-    row = kind.stress
-    sig, (y, y_dot) = kind_number(kind.name, "nominal_noise"), row.noise_signals
-    return Plant(Path(path).stem, str(path), (f"simulation.duration={duration}", *row.overrides,
-                                              "law.initial_estimates='model'",
-                                              f"noise.std={{{y}={sig!r}, {y_dot}={10 * sig!r}}}"), kind.name, tasks)
+    return Plant(Path(path).stem, str(path), _base(kind, duration), kind.name, tasks)
 
 
 def continuous_only(p: Plant, overrides: tuple[str, ...]) -> bool:
@@ -278,8 +281,7 @@ def _airframe_stressors(p: Plant, duration: float) -> list[Stressor]:
             m0 = float(plant.true_theta()[0] - plant.nominal_theta()[0])  # the payload's mass [kg], from the model
             out.append(Stressor("payload added", _payload_added(m0), 0.001, d.hi - m0, unit=d.unit))
         else:
-            st = flight.stressor(d)
-            out.append(Stressor(st.name, st.overrides, st.lo, st.hi, unit="fraction" if d.unit == "%" else d.unit))
+            out.append(replace(flight.stressor(d), unit="fraction" if d.unit == "%" else d.unit))
     return out
 
 
