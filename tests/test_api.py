@@ -3,6 +3,7 @@ arguments return a Study (rows as dicts, a pandas-free table, the folder, report
 the command line gives the same tables, being a layer over these; bad options fail with one line
 before any folder is made."""
 import csv
+import math
 import re
 
 import pytest
@@ -151,3 +152,18 @@ def test_margin_position_is_on_the_bisections_scale():
     assert margin_position(row) == pytest.approx(2 / 3)  # geometric: 3 decades, 2 of them passed
     assert margin_position({**row, "lo": 0, "hi": 200, "margin": 50, "first_fail": 60}) == 0.25
     assert margin_position({**row, "margin": None}) == 0.0 and margin_position({**row, "first_fail": None}) == 1.0
+
+
+def test_overrides_given_as_python_values_are_the_same_run_as_the_set_expressions():
+    """run_scenario(set={key: value}) writes each value as the TOML a scenario holds: the same run as the strings."""
+    from adaptive_mj import run_scenario
+
+    typed = run_scenario("heave_tracking", set={"simulation.duration": 0.5, "noise.std": {"y": 0.001},
+                                                "success.tail_rms": math.inf, "law.k": 150})
+    text = run_scenario("heave_tracking", set=[*FAST, "law.k=150"])
+    assert typed.summary == text.summary and typed.trajectory.x.tobytes() == text.trajectory.x.tobytes()
+    assert api.overrides_of("--set", {"law.dead_zone": {"width": 0.01}, "law.kind": "sigma", "x": [1, True]}) == [
+        "law.dead_zone={width = 0.01}", 'law.kind="sigma"', "x=[1, true]"]
+    with pytest.raises(ScenarioError, match=r"--set: expected scenario keys \(e\.g\. 'law\.k'\) as the dict's keys, "
+                                            r"got 3"):
+        api.overrides_of("--set", {3: 1})

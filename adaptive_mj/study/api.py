@@ -30,6 +30,9 @@ from adaptive_mj.study.result import Study, Table
 __all__ = ["Study", "Table", "bench", "breaking_point", "run_scenario", "score", "stress", "sweep"]
 
 GridSpec = Mapping[str, Any] | Sequence[str]
+#: a run's overrides: {key: value} with Python values (a number, a string, a bool, a list, a dict: written as the
+#: TOML value a scenario file would hold), or --set expressions "KEY=VALUE" as the command line takes them
+Overrides = Mapping[str, Any] | Sequence[str] | str
 
 
 def count(option: str, value: Any, lowest: int) -> int:
@@ -97,6 +100,19 @@ def grid_expressions(grid: GridSpec) -> list[str]:
     return [str(expr) for expr in grid]
 
 
+def overrides_of(option: str, value: Any) -> list[str]:
+    """--set expressions from Overrides: {key: value} (each value as TOML: setup.scenario's loader reads it back
+    as that value) or KEY=VALUE strings; one line naming the option otherwise."""
+    if isinstance(value, Mapping):
+        from adaptive_mj.study.sweep import to_toml
+
+        bad = [k for k in value if not isinstance(k, str) or not k]
+        if bad:
+            raise ScenarioError(f"{option}: expected scenario keys (e.g. 'law.k') as the dict's keys, got {bad[0]!r}")
+        return [f"{key}={to_toml(v)}" for key, v in value.items()]
+    return _strings(option, value)
+
+
 def _strings(option: str, value: Any) -> list[str]:
     if isinstance(value, str):
         return [value]
@@ -105,7 +121,7 @@ def _strings(option: str, value: Any) -> list[str]:
     return list(value)
 
 
-def sweep(scenario: str | Path, *, grid: GridSpec, seeds: int = 1, overrides: Sequence[str] = (),
+def sweep(scenario: str | Path, *, grid: GridSpec, seeds: int = 1, overrides: Overrides = (),
           metrics: Sequence[str] = (), out: str | Path | None = None, resume: str | Path | None = None,
           logs: str = "all", backend: str | Backend = "local", jobs: int | None = None,
           address: str | None = None, ray_logs: str = "bytes", retries: int = 3,
@@ -116,8 +132,8 @@ def sweep(scenario: str | Path, *, grid: GridSpec, seeds: int = 1, overrides: Se
     as a grid axis law.kind = [a, b] does per point.
 
     grid: {key: [values]} or {key: "LO:HI:N"} or ["KEY=LO:HI:N", "KEY=V1,V2"] (a key dotted, law.k, or
-    bare, payload_mass); overrides: --set expressions; metrics: the columns summarised and plotted
-    (default rms_tracking_error_tail); out: a new or empty folder (default a new logs/sweep-...);
+    bare, payload_mass); overrides: {key: value} or --set expressions (Overrides); metrics: the columns
+    summarised and plotted (default rms_tracking_error_tail); out: a new or empty folder (default a new logs/sweep-...);
     resume: finish the study in that folder (the same arguments); logs: "all" (an MCAP log per run) or
     "summary" (the rows only). Returns the Study: one row per run (its grid values, seed, status,
     reason, every metric, log)."""
@@ -133,7 +149,7 @@ def sweep(scenario: str | Path, *, grid: GridSpec, seeds: int = 1, overrides: Se
         raise ScenarioError("--logs summary writes no logs, and --resume and --breaking-point read the runs' logs "
                             "back; leave out --logs summary")
     return run_sweep(scenario_path(scenario), grid=grid_expressions(grid), seeds=seeds,
-                     overrides=with_law(law, _strings("--set", overrides)), metrics=_strings("--metric", metrics),
+                     overrides=with_law(law, overrides_of("--set", overrides)), metrics=_strings("--metric", metrics),
                      out=None if out is None else Path(out), resume=None if resume is None else Path(resume),
                      logs=logs, backend=backend_)
 
@@ -151,7 +167,7 @@ def with_law(law: str | None, overrides: list[str]) -> list[str]:
 
 
 def breaking_point(scenario: str | Path, *, key: str, lo: float | None = None, hi: float | None = None,
-                   tail_bound: float, seeds: int = 1, steps: int = 5, overrides: Sequence[str] = (),
+                   tail_bound: float, seeds: int = 1, steps: int = 5, overrides: Overrides = (),
                    out: str | Path | None = None, backend: str | Backend = "local", jobs: int | None = None,
                    address: str | None = None, ray_logs: str = "bytes", retries: int = 3,
                    engine: str = "process") -> Study:
@@ -177,14 +193,14 @@ def breaking_point(scenario: str | Path, *, key: str, lo: float | None = None, h
     steps = count("--steps", steps, 0)
     backend_ = where(backend, jobs=jobs, address=address, ray_logs=ray_logs, retries=retries, engine=engine)
     return run_breaking_point(scenario_path(scenario), point=key, tail_bound=float(tail_bound), seeds=seeds,
-                              steps=steps, overrides=_strings("--set", overrides),
+                              steps=steps, overrides=overrides_of("--set", overrides),
                               out=None if out is None else Path(out), backend=backend_)
 
 
 def stress(*, seeds: int = 5, steps: int = 4, duration: float = 20.0, composite: bool = False,
            out: str | Path | None = None, backend: str | Backend = "local", jobs: int | None = None,
            address: str | None = None, ray_logs: str = "bytes", retries: int = 3,
-           engine: str = "process", law: str | None = None, set: Sequence[str] = (),  # noqa: A002
+           engine: str = "process", law: str | None = None, set: Overrides = (),  # noqa: A002
            plants: str | Sequence[str] | None = None) -> Study:
     """The breaking-point study, every plant × law × stressor (`adaptive-mj stress`): `seeds` per value,
     `steps` bisection steps, runs of `duration` s; composite: also composite adaptation; law: also this law
@@ -210,9 +226,10 @@ def stress(*, seeds: int = 5, steps: int = 4, duration: float = 20.0, composite:
                       plant_names=None if names is None else tuple(names))
 
 
-def _law_sets(law: str | None, sets: Sequence[str] | str) -> list[str]:
-    """A law kind's name checked (one line naming the close ones) and its --set law.KEY=V expressions."""
-    items = [sets] if isinstance(sets, str) else list(sets)
+def _law_sets(law: str | None, sets: Overrides) -> list[str]:
+    """A law kind's name checked (one line naming the close ones) and its --set law.KEY=V expressions ({key:
+    value} or the expressions: Overrides)."""
+    items = overrides_of("--set", sets)
     if law is None:
         if items:
             raise ScenarioError("--set needs --law (the built-in laws keep their own keys)")
@@ -239,7 +256,7 @@ def _law_sets(law: str | None, sets: Sequence[str] | str) -> list[str]:
 def bench(*, quick: bool = False, scenarios: Sequence[str | Path] = (), out: str | Path | None = None,
           backend: str | Backend = "local", jobs: int | None = None, address: str | None = None,
           ray_logs: str = "bytes", retries: int = 3, engine: str = "process", law: str | None = None,
-          gains: str | Path | None = None, set: Sequence[str] = (),  # noqa: A002
+          gains: str | Path | None = None, set: Overrides = (),  # noqa: A002
           full_logs: bool = False) -> Study:
     """The benchmark catalogue (`adaptive-mj bench`): quick: shorter runs, no breaking-point study; full_logs: the
     breaking-point study's runs log every row (default: their summary and a row per second);
@@ -258,19 +275,18 @@ def bench(*, quick: bool = False, scenarios: Sequence[str | Path] = (), out: str
                      full_logs=bool(full_logs))
 
 
-def run_scenario(scenario: str | Path, *, set: Sequence[str] = (), seed: int | None = None,  # noqa: A002
+def run_scenario(scenario: str | Path, *, set: Overrides = (), seed: int | None = None,  # noqa: A002
                  law: str | None = None, log: str | Path | bool = False, python_callback: bool = False):
     """One scenario run as `adaptive-mj run` runs it, from Python: a scenario file or a bundled scenario's name,
-    `set` its --set overrides (KEY=VALUE), `seed` the noise seed, `law` a law kind swapped in (`run --law`),
+    `set` its overrides ({key: value} or --set KEY=VALUE expressions: Overrides), `seed` the noise seed, `law` a
+    law kind swapped in (`run --law`),
     `log` a log file to write (True: a new file under logs/, as `run` names it; False: none). Returns a
     adaptive_mj.sim.runner.RunResult: .trajectory, .summary, .status (the same verdict as `run`, [success]
     applied), .log_path. Bad input raises adaptive_mj.errors.ScenarioError (one line)."""
     from adaptive_mj.setup import scenario as sc
     from adaptive_mj.sim.runner import execute, reserve_log_path
 
-    sets = [set] if isinstance(set, str) else list(set)
-    if not all(isinstance(x, str) for x in sets):
-        raise ScenarioError(f"set must be KEY=VALUE strings, got {set!r}")
+    sets = overrides_of("set", set)
     if seed is not None:
         seed = count("seed", seed, 0)
     overrides = [*with_law(law, sets), *(["simulation.python_callback=true"] if python_callback else [])]
@@ -302,7 +318,7 @@ def _scenario_file(path: str | Path) -> Path:
     return path.resolve()
 
 
-def score(law: str | None = None, *, set: Sequence[str] = (), gains: str | Path | None = None,  # noqa: A002
+def score(law: str | None = None, *, set: Overrides = (), gains: str | Path | None = None,  # noqa: A002
           against: str | Sequence[str] | None = None, suite: str = "quick", seeds: int | None = None,
           plants: str | Sequence[str] | None = None, label: str | None = None, out: str | Path | None = None,
           full_logs: bool = False, cost: bool = True, merge: Sequence[str | Path] = (),

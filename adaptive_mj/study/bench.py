@@ -37,25 +37,9 @@ def status_text(r: dict) -> str:
     return str(r["status"])
 
 
-def main_table(rows: list[dict]) -> str:
-    """The terminal table: one line per run (units: the run's output and control units)."""
-    ws, wr = (max([len(k), *(len(str(r[k])) for r in rows)]) for k in ("section", "run"))
-    wt = max([len("status"), *(len(status_text(r)) for r in rows)])
-    head = (f"{'section':{ws}s} {'run':{wr}s} {'status':{wt}s} {'rms err tail':>16s} {'u rms':>12s} {'u TV':>14s}"
-            "  key result")
-    lines = [head, "-" * len(head)]
-    for r in rows:  # the columns as wide as their longest entry: a long run label does not break them
-        yu, uu = r.get("y_unit", ""), r.get("u_unit", "")
-        lines.append(f"{r['section']:{ws}s} {r['run']:{wr}s} {status_text(r):{wt}s} "
-                     f"{_fmt(r.get('tail')) + ' ' + yu:>16s} "
-                     f"{_fmt(r.get('u_rms')) + ' ' + uu:>12s} {_fmt(r.get('u_tv')) + ' ' + uu:>14s}  "
-                     f"{r.get('key', '')}")
-    return "\n".join(lines)
-
-
-def main_table_markdown(rows: list[dict]) -> str:
-    """The main table for report.md (and so a sortable table in report.html): the terminal table's columns,
-    each number with its unit."""
+def main_table(rows: list[dict]) -> Table:
+    """The main table: one row per run, each number with its unit (the run's output and control units); its
+    to_text is the terminal's, its to_markdown report.md's (and so a sortable table in report.html)."""
     def with_unit(v, unit: str) -> str:
         return _fmt(v) + (f" {unit}" if v is not None and unit and unit != "-" else "")
 
@@ -63,7 +47,11 @@ def main_table_markdown(rows: list[dict]) -> str:
                       "rms err tail": with_unit(r.get("tail"), r.get("y_unit", "")),
                       "u rms": with_unit(r.get("u_rms"), r.get("u_unit", "")),
                       "u TV": with_unit(r.get("u_tv"), r.get("u_unit", "")), "key result": r.get("key", "")}
-                     for r in rows]).to_markdown()
+                     for r in rows], MAIN_COLUMNS)
+
+
+MAIN_COLUMNS = ("section", "run", "status", "rms err tail", "u rms", "u TV", "key result")
+TEXT_LEFT = ("section", "run", "status", "key result")  # the terminal table's text columns (numbers: right)
 
 
 def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str | None = None,
@@ -224,7 +212,7 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
               + ("**Quick mode:** runs are shorter (15–60 s instead of 20–200 s), so estimates that need "
                  "time to converge (first-order example, payload swap, drift) have not; run `adaptive-mj bench` "
                  "for the full catalogue.\n\n" if quick else "")
-              + main_table_markdown(rows) + "\n\n")
+              + main_table(rows).to_markdown() + "\n\n")
     (out / "report.md").write_text(header + "\n".join(parts), encoding="utf-8")
     write_html(out / "report.md")  # report.html: the same text, figures embedded, for a browser
     summary = {r.job.tag: {"scenario": str(r.job.scenario.name), "overrides": list(r.job.overrides),
@@ -233,8 +221,8 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
                            "error": r.error, "summary": r.summary, "extras": r.extras}
                for r in results}
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=_json_default), encoding="utf-8")
-    text = (main_table(rows) + f"\n\nreport: {out / 'report.md'}  ({n_runs} runs, {elapsed:.1f} s)\n"
-            f"html: {out / 'report.html'}")
+    text = (main_table(rows).to_text(left=TEXT_LEFT, rule=True)
+            + f"\n\nreport: {out / 'report.md'}  ({n_runs} runs, {elapsed:.1f} s)\nhtml: {out / 'report.html'}")
     return Study("bench", out, 0 if not failed else 1, out / "report.md", out / "report.html", text,
                  info={"runs": n_runs, "seconds": elapsed}, load_rows=lambda: rows,
                  plotter=lambda path=None: plot_tails(rows, path or out / "figures" / "tails.png"))

@@ -27,6 +27,7 @@ from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.breaking_point import Stressor
 from adaptive_mj.study.job import RECORD_PREFLIGHT, crashed
 from adaptive_mj.study.parallel import Backend, Job, JobResult
+from adaptive_mj.study.result import Table
 from adaptive_mj.trajectory import Status
 
 LAWS = ("geometric", "geometric_adaptive", "l1_geometric")
@@ -198,23 +199,19 @@ def bracket_text(d: Disturbance, lo: float | None, hi: float | None, *, upper: b
     return f"{d.text(lo)} (< {d.text(hi)})" if hi is not None else f"≥ {d.text(lo)}"
 
 
-def table(found: list[Search], laws: Sequence[str] = LAWS) -> str:
-    """Markdown: per disturbance, each law's margin (every seed succeeds) and when2fail (every seed fails), each
-    with the nearest evaluated value on its other side (the resolution)."""
-    dists = list(dict.fromkeys(s.disturbance.name for s in found))
+def table(found: list[Search], laws: Sequence[str] = LAWS) -> Table:
+    """Per disturbance, each law's margin (every seed succeeds) and when2fail (every seed fails), each with the
+    nearest evaluated value on its other side (the resolution); its to_markdown() is the report's table."""
     by = {(s.law, s.disturbance.name): s for s in found}
-    head = "| disturbance | " + " | ".join(LAW_LABEL.get(law, law) for law in laws) + " |"
-    lines = [head, "|---|" + "---|" * len(laws)]
-    for name in dists:
-        cells = []
+    rows = []
+    for name in dict.fromkeys(s.disturbance.name for s in found):
+        row: dict[str, str] = {"disturbance": name}
         for law in laws:
             s = by[(law, name)]
-            d = s.disturbance
-            m = bracket_text(d, *s.margin(), upper=False)
-            w = bracket_text(d, *s.when2fail(), upper=True)
-            cells.append(f"margin {m}; when2fail {w}")
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+            row[LAW_LABEL.get(law, law)] = (f"margin {bracket_text(s.disturbance, *s.margin(), upper=False)}; "
+                                            f"when2fail {bracket_text(s.disturbance, *s.when2fail(), upper=True)}")
+        rows.append(row)
+    return Table.of(rows, ["disturbance", *(LAW_LABEL.get(law, law) for law in laws)])
 
 
 def as_rows(found: list[Search]) -> list[dict]:

@@ -1,8 +1,14 @@
 """What a study gives back to Python (adaptive_mj.study.api): a Study, whose rows are plain dicts,
-and a Table over them that needs no pandas (columns by name, text and Markdown, HTML in a notebook).
+and the one Table every study's results are written through, with no pandas: columns by name, aligned text
+for a terminal, Markdown for a report (and so HTML), CSV and JSON lines for analysis (`Table.write` picks by
+the file's suffix). A table's cells are its values: numbers stay numbers in CSV and JSON lines, and are shown
+to 4 significant digits in text and Markdown; a cell that is already text (a margin with its bracket, a score
+with its interval) is written as it is.
 """
 from __future__ import annotations
 
+import csv
+import json
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -46,9 +52,18 @@ class Table:
         return [row.get(column) for row in self.rows]
 
     def __str__(self) -> str:
+        return self.to_text()
+
+    def to_text(self, *, left: Sequence[str] = (), rule: bool = False) -> str:
+        """Aligned text, one line per row under the column names: columns in `left` left-aligned, the others
+        right-aligned; rule: a line of dashes under the names."""
         cells = [list(self.columns)] + [[cell(row.get(c)) for c in self.columns] for row in self.rows]
         widths = [max(len(r[i]) for r in cells) for i in range(len(self.columns))]
-        return "\n".join("  ".join(v.rjust(w) for v, w in zip(r, widths, strict=True)) for r in cells)
+        lines = ["  ".join(v.ljust(w) if c in left else v.rjust(w)
+                           for v, w, c in zip(r, widths, self.columns, strict=True)).rstrip() for r in cells]
+        if rule:
+            lines.insert(1, "-" * max(len(line) for line in lines))
+        return "\n".join(lines)
 
     def to_markdown(self) -> str:
         def md(v: Any) -> str:
@@ -58,10 +73,63 @@ class Table:
         lines += ["| " + " | ".join(md(row.get(c)) for c in self.columns) + " |" for row in self.rows]
         return "\n".join(lines)
 
-    def _repr_html_(self) -> str:  # Jupyter shows a table as HTML
+    def to_html(self) -> str:
+        """An HTML table (the report's renderer of to_markdown; Jupyter shows a Table so)."""
         from adaptive_mj.report.html import markdown_to_html
 
         return markdown_to_html(self.to_markdown())[0]
+
+    def _repr_html_(self) -> str:  # Jupyter shows a table as HTML
+        return self.to_html()
+
+    def to_csv(self, path: Path | str) -> Path:
+        """CSV with a header of the column names; a value as it is (None empty, a list or dict as JSON)."""
+        path = Path(path)
+        with path.open("w", newline="", encoding="utf-8") as f:
+            w = csv.writer(f)
+            w.writerow(self.columns)
+            w.writerows([_csv_value(row.get(c)) for c in self.columns] for row in self.rows)
+        return path
+
+    def to_jsonl(self, path: Path | str) -> Path:
+        """JSON lines: one object per row, its columns in order (a non-finite float as null)."""
+        path = Path(path)
+        with path.open("w", encoding="utf-8") as f:
+            for row in self.rows:
+                f.write(json.dumps({c: _json_value(row.get(c)) for c in self.columns}, ensure_ascii=False) + "\n")
+        return path
+
+    def write(self, path: Path | str) -> Path:
+        """The table in the format its file's suffix names: .csv, .jsonl, .md or .html; one line otherwise."""
+        path = Path(path)
+        writers = {".csv": self.to_csv, ".jsonl": self.to_jsonl}
+        if path.suffix in writers:
+            return writers[path.suffix](path)
+        texts = {".md": self.to_markdown, ".html": self.to_html}
+        if path.suffix not in texts:
+            raise ValueError(f"{path}: a table is written as .csv, .jsonl, .md or .html, not {path.suffix!r}")
+        path.write_text(texts[path.suffix]() + "\n", encoding="utf-8")
+        return path
+
+
+def _json_value(value: Any) -> Any:
+    """A cell for JSON: a non-finite float as None (JSON has no inf or NaN), containers element-wise."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, (list, tuple)):
+        return [_json_value(v) for v in value]
+    if isinstance(value, Mapping):
+        return {str(k): _json_value(v) for k, v in value.items()}
+    return value
+
+
+def _csv_value(value: Any) -> Any:
+    """A cell for CSV: None empty, a list or mapping as JSON, anything else as csv writes it."""
+    if value is None:
+        return ""
+    if isinstance(value, (list, tuple, Mapping)):
+        return json.dumps(_json_value(value), ensure_ascii=False)
+    return value
 
 
 @dataclass(frozen=True, eq=False)

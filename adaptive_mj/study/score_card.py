@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 from adaptive_mj.study import score_suite as suite
+from adaptive_mj.study.result import Table
 from adaptive_mj.study.stats import Estimate
 
 SCORE_COLUMNS = (("performance", "S"), ("robustness", "R"), ("success", "success"))
@@ -38,15 +39,16 @@ def _with_n(est: Estimate, seeds: int) -> str:
     return est.text() + (f" ({est.n} of {seeds} seeds)" if est.n < seeds else "")
 
 
-def leaderboard(plant: dict) -> str:
-    """Markdown: one row per law (ranked), the scores and every criterion with its interval."""
+def leaderboard(plant: dict) -> Table:
+    """One row per law (ranked): the ranks, the scores and every criterion with its interval, and the compute
+    cost; its to_markdown() is the card's table."""
     cols = ["rank S", "rank R", "law", *(c for _, c in SCORE_COLUMNS),
             *(f"{c.metric} [{_unit(c.unit, plant)}]" for c in suite.CRITERIA), "cost × mj_step"]
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    rows = []
     for lb in _order(plant):
         e = plant["laws"][lb]
         f = e["figures"]
-        cells = [str(e["rank"]["performance"]), str(e["rank"]["robustness"]), _name(lb, e)]
+        cells = [e["rank"]["performance"], e["rank"]["robustness"], _name(lb, e)]
         seeds = len(f["performance"]["values"])
         for name, _ in SCORE_COLUMNS:
             est = Estimate.from_dict(f[name])
@@ -54,17 +56,17 @@ def leaderboard(plant: dict) -> str:
         cells += [_with_n(Estimate.from_dict(f[c.name]), seeds) for c in suite.CRITERIA]
         ratio = e.get("compute_ratio")
         cells.append("n/a" if ratio is None else f"{ratio:.2f}")
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        rows.append(dict(zip(cols, cells, strict=True)))
+    return Table.of(rows, cols)
 
 
-def margins_table(plant: dict) -> str:
-    """Markdown: one row per law, one column per stressor: the margin's mean [interval] over seeds, and the
-    failure rate at the range's high end."""
+def margins_table(plant: dict) -> Table:
+    """One row per law, one column per stressor: the margin's mean [interval] over seeds, and the failure rate at
+    the range's high end; its to_markdown() is the card's table."""
     names = [s["name"] for s in plant["stressors"]]
     units = {s["name"]: s["unit"] for s in plant["stressors"]}
     cols = ["law", "R", *(f"{n} [{units[n]}]" if units[n] else n for n in names)]
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    rows = []
     for lb in _order(plant):
         e = plant["laws"][lb]
         cells = [_name(lb, e), Estimate.from_dict(e["figures"]["robustness"]).text()]
@@ -80,8 +82,21 @@ def margins_table(plant: dict) -> str:
                 text = f"< {text} (bottom)"
             fr = st.get("failure_rate_at_hi")
             cells.append(text + ("" if fr is None else f"<br>fail@hi {100 * fr:.0f} %"))
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        rows.append(dict(zip(cols, cells, strict=True)))
+    return Table.of(rows, cols)
+
+
+def terminal_table(plant: dict) -> Table:
+    """The leaderboard as the terminal shows it: both ranks, the law (* under test, † given the true parameters)
+    and S and R with their 95 % intervals."""
+    rows = []
+    for lb in _order(plant):
+        e = plant["laws"][lb]
+        rows.append({"rank S": e["rank"]["performance"], "rank R": e["rank"]["robustness"],
+                     "law": ("* " if e.get("tested") else "  ") + lb + (" †" if e.get("oracle") else ""),
+                     "S": Estimate.from_dict(e["figures"]["performance"]).text(".3f"),
+                     "R": Estimate.from_dict(e["figures"]["robustness"]).text(".3f")})
+    return Table.of(rows, ["rank S", "rank R", "law", "S", "R"])
 
 
 NOT_APPLIED = Estimate(math.nan, math.nan, math.nan, 0)  # a stressor that does not apply to a law: no bar
@@ -212,17 +227,13 @@ def write_card(card) -> None:
     body = []
     text = []
     for pn, plant in data["plants"].items():
-        body += [f"## {pn} (plant kind {plant['kind']}): leaderboard", "", leaderboard(plant), "",
+        body += [f"## {pn} (plant kind {plant['kind']}): leaderboard", "", leaderboard(plant).to_markdown(), "",
                  f"![{pn} performance]({made[pn][0].name})", "", f"### {pn}: breaking points", "",
-                 margins_table(plant), "", f"![{pn} robustness]({made[pn][1].name})", ""]
-        text.append(f"{pn}:")
-        for lb in _order(plant):
-            e = plant["laws"][lb]
-            mark = "*" if e.get("tested") else " "
-            text.append(f" {mark} {e['rank']['performance']:>2} {lb:26s} S "
-                        f"{Estimate.from_dict(e['figures']['performance']).text('.3f'):28s} R "
-                        f"{Estimate.from_dict(e['figures']['robustness']).text('.3f')}")
+                 margins_table(plant).to_markdown(), "", f"![{pn} robustness]({made[pn][1].name})", ""]
+        text += [f"{pn}:", terminal_table(plant).to_text(left=("law", "S", "R")), ""]
     body += ["## How the card scores", "", formula_text(data), "", runs_text(data), ""]
     (out / "scorecard.md").write_text("\n".join(head + body), encoding="utf-8")
     html = write_html(out / "scorecard.md")
+    text.append("*: the law under test; †: a baseline given the true parameters (it knows the answer); S: performance, "
+                "R: robustness, each the mean [95 % interval]; a rank is 1 + the number of laws separably better")
     card.text = "\n".join(text) + f"\n\nscorecard: {out / 'scorecard.md'}\nhtml: {html}\njson: {out / 'scorecard.json'}"

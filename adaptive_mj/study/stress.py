@@ -56,7 +56,7 @@ from adaptive_mj.report.metrics import TAIL_FRACTION
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.breaking_point import (STRESS_PLANT_KIND, TAIL_BOUND, Margin, Search, Stressor, kind_number,
                                              margin_text, search_all)
-from adaptive_mj.study.result import Study
+from adaptive_mj.study.result import Study, Table
 
 # TAIL_BOUND (breaking_point, shared with the bench): [m], [rad]: tail RMS above this is a failure
 # σ_y [m], [rad]; σ_y' = 10 σ_y [per s]: each kind's own
@@ -419,33 +419,31 @@ def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, .
     return out
 
 
-def table(margins: list[Margin], *, seeds: int) -> str:
-    """Markdown: one row per plant/law, one column per stressor: margin (next failing value),
-    and below it, at the margin over the seeds, mean / CVaR10 % of the tail error and the
-    failure rate at the next value."""
-    stressor_names: list[str] = []
-    for m in margins:
-        if m.search.stressor.name not in stressor_names:
-            stressor_names.append(m.search.stressor.name)
+def table(margins: list[Margin], *, seeds: int) -> Table:
+    """One row per plant/law, one column per stressor: margin (next failing value), and below it, at the margin
+    over the seeds, mean / CVaR10 % of the tail error and the failure rate at the next value; n/a: the stressor
+    does not apply (its to_markdown() is the report's table)."""
+    stressor_names = list(dict.fromkeys(m.search.stressor.name for m in margins))
     by = {(m.search.label, m.search.stressor.name): m for m in margins}
-    labels = list(dict.fromkeys(m.search.label for m in margins))
-    lines = ["| plant / law | " + " | ".join(stressor_names) + " |", "|---|" + "---|" * len(stressor_names)]
-    for label in labels:
-        cells = []
+    rows = []
+    for label in dict.fromkeys(m.search.label for m in margins):
+        row = {"plant / law": label}
         for name in stressor_names:
             margin = by.get((label, name))
-            if margin is None:
-                cells.append("n/a")
-                continue
-            st = margin.stats()
-            extra = []
-            if st["tail_mean"] is not None:
-                extra.append(f"tail {st['tail_mean']:.2g}/{st['tail_cvar10']:.2g}")
-            if st["failure_rate_beyond"] is not None:
-                extra.append(f"fail {100 * st['failure_rate_beyond']:.0f} %")
-            cells.append(margin_text(margin) + ("<br>" + ", ".join(extra) if extra else ""))
-        lines.append(f"| {label} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+            row[name] = "n/a" if margin is None else _cell(margin)
+        rows.append(row)
+    return Table.of(rows, ["plant / law", *stressor_names])
+
+
+def _cell(margin: Margin) -> str:
+    """A margin as the stress table shows it: its bracket, then the tail mean / CVaR10 and failure rate beyond."""
+    st = margin.stats()
+    extra = []
+    if st["tail_mean"] is not None:
+        extra.append(f"tail {st['tail_mean']:.2g}/{st['tail_cvar10']:.2g}")
+    if st["failure_rate_beyond"] is not None:
+        extra.append(f"fail {100 * st['failure_rate_beyond']:.0f} %")
+    return margin_text(margin) + ("<br>" + ", ".join(extra) if extra else "")
 
 
 def preflight_text(margins: Sequence[Margin]) -> str:
@@ -517,7 +515,8 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
             f"{seeds}) of the tail error, and the failure rate at the failing value. n/a: the stressor does not "
             "apply to that plant. Every run's log is in `logs/`"
             + ("" if log_rate_hz is None else f" (its summary and a row every {1 / log_rate_hz:g} s; the margins "
-               "come from the full-rate rows)") + ". " + preflight_text(margins) + "\n\n" + table(margins, seeds=seeds))
+               "come from the full-rate rows)") + ". " + preflight_text(margins) + "\n\n"
+            + table(margins, seeds=seeds).to_markdown())
     return margins, text, wall
 
 
@@ -538,17 +537,9 @@ def run_stress(*, seeds: int, steps: int, duration: float, composite: bool, out:
     report = "# adaptive-mj breaking points\n\n" + text + "\n"
     (out / "report.md").write_text(report, encoding="utf-8")
     html = write_html(out / "report.md")  # report.html: the same text, for a browser
-    rows = []
-    for m in margins:
-        st = m.stats()
-        rows.append({"plant_law": m.search.label, "stressor": m.search.stressor.name, "unit": m.search.stressor.unit,
-                     "lo": m.search.stressor.lo, "hi": m.search.stressor.hi, **st})
-    import csv
-
-    with (out / "margins.csv").open("w", newline="", encoding="utf-8") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    rows = [{"plant_law": m.search.label, "stressor": m.search.stressor.name, "unit": m.search.stressor.unit,
+             "lo": m.search.stressor.lo, "hi": m.search.stressor.hi, **m.stats()} for m in margins]
+    Table.of(rows).to_csv(out / "margins.csv")
     return Study("stress", out, 0, out / "report.md", html,
                  text + f"\n\nreport: {out / 'report.md'}  ({wall:.0f} s)\nhtml: {html}",
                  info={"seconds": wall}, load_rows=lambda: rows,
