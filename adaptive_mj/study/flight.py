@@ -5,8 +5,10 @@ time (their "unstable if the maximum error exceeds 1 m"); a disturbance's *when2
 which every seed fails (their success rate reaching 0 %), its *margin* the largest at which every seed succeeds;
 the *delay margin* is the margin of a control delay (theirs: a sweep from 0 to 0.5 s in 0.01 s steps).
 
-The runs: the bundled lemniscate (A = 0.5 m, ω = 1 rad/s at 1 m) without its payload, RUN_SECONDS long (their
-5 s), with small measurement noise (NOISE, a seed per run), the disturbance from t = 0 (a rotor's loss from 1 s).
+The disturbances are the quadrotor kind's (adaptive_mj.plants.quadrotor.DISTURBANCES, which its breaking-point row
+raises too); the delay is this study's (DELAY). The runs: the bundled lemniscate (A = 0.5 m, ω = 1 rad/s at 1 m)
+without its payload, RUN_SECONDS long (their 5 s), with small measurement noise (NOISE, a seed per run), the
+disturbance from t = 0 (a rotor's loss from 1 s).
 A run the pre-flight check finds unstable by construction (adaptive_mj.sim.preflight: the attitude loop with a
 control delay past its linearised limit) is run like any other and judged by its outcome, as in every study
 (job.RECORD_PREFLIGHT). Two searches per (law, disturbance): by
