@@ -274,6 +274,7 @@ def _fluid_density(e, scn, source) -> ev.Event:
 FLUID_DENSITY_SCALE = ev.EventKind("fluid_density_scale", _fluid_density,
                                    doc="multiplies the fluid density by value from t on")
 
+
 def study_stressors(ctx: StudyContext, duration: float) -> list[Stressor]:
     """The heave vehicle's stressors in the breaking-point study (kinds.StressPlant.stressors): the 1-DOF ones
     (sliding_study.stressors) and an unmodelled thruster lag τ [s] (plant.thruster_time_constant)."""
