@@ -135,7 +135,7 @@ def test_full_bench_runs_the_analyses_beside_the_breaking_point_study(tmp_path, 
     from adaptive_mj.study.beside import can_fork
 
     monkeypatch.setattr(stress, "BENCH_SETTINGS", {"seeds": 1, "steps": 0, "duration": 1.0,
-                                                   "arm_laws": ("adaptive",), "plant_names": ("heave",)})
+                                                   "plant_laws": {"ur5e": ("adaptive",)}, "plant_names": ("heave",)})
     out = tmp_path / "bench"
     assert main(["bench", "-o", str(out), "--jobs", "2"]) == 0
     report = (out / "report.md").read_text()

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from adaptive_mj.cli import main
+from adaptive_mj.plants import study_spec
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.scenario import SCENARIOS_DIR
 from adaptive_mj.study.breaking_point import Evaluation, Margin, Search, Stressor, margin_text, search_all
@@ -149,7 +150,7 @@ def test_the_stress_study_covers_the_six_joint_arm(tmp_path):
                           "computed_torque", "pd_gravity"]
     scn = sc.load(sc.SCENARIOS_DIR / "ur5e_identification.toml", overrides=list(arm6.base))
     s = build(scn)
-    assert laws["sigma"][0] == f"law.sigma={float(s.law.gamma[0]) / stress.LEAK_TIME!r}"
+    assert laws["sigma"][0] == f"law.sigma={float(s.law.gamma[0]) / study_spec.LEAK_TIME!r}"
     assert f"'payload/body.m'={float(s.plant.true_theta()[0])!r}" in laws["sigma"][1]
     names = [st.name for st in stress.stressors(arm6, 2.0)]
     assert names == ["noise σ_y", "encoder Δ", "velocity filter τ", "disturbance", "lag τ", "torque limit ÷",
@@ -159,9 +160,9 @@ def test_the_stress_study_covers_the_six_joint_arm(tmp_path):
                    "wrist_3=2.8}"]
     enc = stress.stressors(arm6, 2.0)[1]
     assert enc.overrides(2 * math.pi / 4096) == ["sensors={encoder_counts=4096.0}"]
-    bench = stress.study(composite=False, duration=2.0, arm_laws=stress.BENCH_SETTINGS["arm_laws"])
+    bench = stress.study(composite=False, duration=2.0, plant_laws=stress.BENCH_SETTINGS["plant_laws"])
     assert {s.label for s in bench if s.label.startswith("ur5e/")} == {
-        f"ur5e/{law}" for law in stress.BENCH_SETTINGS["arm_laws"]}
+        f"ur5e/{law}" for law in stress.BENCH_SETTINGS["plant_laws"]["ur5e"]}
     noise = [x for x in stress.study(composite=False, duration=2.0)
              if x.label == "ur5e/adaptive" and x.stressor.name == "noise σ_y"]
     (m,) = search_all(noise, seeds=1, steps=2, logs=tmp_path / "logs", n_jobs=2)

@@ -285,7 +285,8 @@ def test_stress_law_adds_the_law_beside_the_built_in_ones_on_the_plants_it_serve
     labels = {s.label for s in stress.study(composite=False, duration=1.0, law="sliding_adaptive")}
     assert {"heave/sliding_adaptive", "arm/sliding_adaptive", "heave/adaptive"} <= labels
     assert not any(lb.startswith("ur5e/sliding_adaptive") for lb in labels)  # a 1-DOF law: not on the 6-joint arm
-    joint = {s.label for s in stress.study(composite=False, duration=1.0, law="slotine_li", arm_laws=("adaptive",))}
+    joint = {s.label for s in stress.study(composite=False, duration=1.0, law="slotine_li",
+                                        plant_laws={"ur5e": ("adaptive",)})}
     assert "ur5e/slotine_li" in joint and "ur5e/sigma" not in joint and "heave/slotine_li" not in joint
     searches = [s for s in stress.study(composite=False, duration=1.0, law="sliding_adaptive",
                                         sets=("law.k=150.0",)) if s.label == "heave/sliding_adaptive"]

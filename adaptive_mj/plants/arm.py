@@ -25,7 +25,7 @@ import mujoco
 import numpy as np
 
 from adaptive_mj.data import MODELS, PAYLOADS
-from adaptive_mj.errors import ModelError
+from adaptive_mj.errors import ModelError, ScenarioError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.attach import compose
@@ -33,6 +33,8 @@ from adaptive_mj.plants.mujoco_plant import (BodyEdits, MujocoPlant, compile_for
                                              find_joint_and_actuator, scratch_data, spec_from_text, with_userdata)
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, register
+from adaptive_mj.plants import sliding_study
+from adaptive_mj.plants.study_spec import Stressor, StudyContext, payload_ratio
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Table
@@ -187,6 +189,15 @@ def theta_names(t: Table) -> tuple[str, ...]:
     return arm_form().names
 
 
+def study_stressors(ctx: StudyContext, duration: float) -> list[Stressor]:
+    """The 1-DOF arm's stressors in the breaking-point study (kinds.StressPlant.stressors): the 1-DOF ones
+    (sliding_study.stressors) and the payload's mass × ratio at half the run (the scenario sets
+    plant.payload_mass)."""
+    if ctx.payload_mass is None:  # the bundled arm_payload_swap sets it
+        raise ScenarioError(f"{ctx.scenario}: the payload ratio stressor needs plant.payload_mass")
+    return [*sliding_study.stressors(ctx), payload_ratio(ctx.payload_mass, duration)]
+
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "arm"
 KIND = register(PlantKind(
     "arm", __name__, frozenset({Form.MODEL}), output_unit="rad", control_unit="N m",
@@ -197,7 +208,7 @@ KIND = register(PlantKind(
     reader=plant_keys.SharedReader(theta=theta_names),
     events={ev.PAYLOAD_MASS: "mujoco", ev.CONSTANT_FORCE: None},
     stress=StressPlant("arm", "arm_payload_swap", ("events=[]",), composite="{gain=1.0, filter=2.0}",
-                       stressors=("payload ratio",),
+                       laws=sliding_study.laws, stressors=study_stressors,
                        tasks=(ScoreTask("tracking", "arm_payload_swap",
                                         ("events=[]", "law.initial_estimates={theta_half}")),
                               ScoreTask("change", "arm_payload_swap",

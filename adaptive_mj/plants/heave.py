@@ -42,6 +42,8 @@ from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, 
                                              find_joint_and_actuator, read_model_file, scratch_data)
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, register
+from adaptive_mj.plants import sliding_study
+from adaptive_mj.plants.study_spec import Stressor, StudyContext
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
@@ -272,6 +274,14 @@ def _fluid_density(e, scn, source) -> ev.Event:
 FLUID_DENSITY_SCALE = ev.EventKind("fluid_density_scale", _fluid_density,
                                    doc="multiplies the fluid density by value from t on")
 
+
+def study_stressors(ctx: StudyContext, duration: float) -> list[Stressor]:
+    """The heave vehicle's stressors in the breaking-point study (kinds.StressPlant.stressors): the 1-DOF ones
+    (sliding_study.stressors) and an unmodelled thruster lag τ [s] (plant.thruster_time_constant)."""
+    return [*sliding_study.stressors(ctx),
+            Stressor("lag τ", lambda v: [f"plant.thruster_time_constant={v!r}"], 1e-3, 1.0, unit="s")]
+
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "heave"
 KIND = register(PlantKind(
     "heave", __name__, frozenset({Form.MODEL}), output_unit="m", control_unit="N",
@@ -283,7 +293,8 @@ KIND = register(PlantKind(
     events={FLUID_DENSITY_SCALE: "mujoco", ev.CONSTANT_FORCE: None}, order=order,
     orders_text="2, or 3 with plant.thruster_time_constant",
     stress=StressPlant("heave", "heave_tracking", ("simulation.initial_state='reference'",),
-                       disturbance=(1.0, 1000.0), composite="{gain=3e-4, filter=1.0}", stressors=("lag τ",),
+                       disturbance=(1.0, 1000.0), composite="{gain=3e-4, filter=1.0}",
+                       laws=sliding_study.laws, stressors=study_stressors,
                        tasks=(ScoreTask("tracking", "heave_tracking", ("law.initial_estimates={theta_half}",)),
                               ScoreTask("change", "heave_tracking",
                                         ("simulation.initial_state='reference'", "law.initial_estimates='model'",

@@ -30,6 +30,7 @@ from adaptive_mj.specs import PlantSpec
 if TYPE_CHECKING:
     from adaptive_mj.laws.kinds import MracState
     from adaptive_mj.plants.events import EventKind
+    from adaptive_mj.plants.study_spec import LawSet, StressorSet
     from adaptive_mj.specs import Scenario
 
     Reader = Callable[["PlantKind", Table, Path], PlantSpec]
@@ -72,12 +73,17 @@ class ScoreTask:
 
 @dataclass(frozen=True)
 class StressPlant:
-    """A plant kind's row in the breaking-point study (adaptive_mj.study.stress): name (its label, e.g. "ur5e"),
+    """A plant kind's row in the breaking-point study (adaptive_mj.study.stress), everything the study judges it by
+    but its failure bound and nominal noise (PlantKind.tail_bound, .nominal_noise): name (its label, e.g. "ur5e"),
     the bundled scenario it runs (without ".toml"), and the overrides that make it a stress run beyond the
     duration, the estimates at the truth and the nominal noise (e.g. "events=[]"; each plant's own);
     noise_signals: the measured signals the nominal noise σ_y [output unit] and 10 σ_y [per s] are on; label,
-    disturbance, composite, stressors: see each (a stressor by its name in adaptive_mj.study.stress); tasks: the
-    scorecard's tracking, change and hold tasks on this plant (ScoreTask)."""
+    disturbance, composite: see each; laws: its laws, `laws(ctx, composite)` -> [(label, overrides)], and
+    stressors: its own stressors, `stressors(ctx, duration [s])` -> [Stressor] (the study adds the delay and the
+    control period, the same on every plant), each a function of the row's adaptive_mj.plants.study_spec
+    StudyContext (its numbers from the compiled model) declared beside the kind (the 1-DOF sliding family:
+    adaptive_mj.plants.sliding_study); tasks: the scorecard's tracking, change and hold tasks on this plant
+    (ScoreTask)."""
 
     name: str
     scenario: str
@@ -86,8 +92,9 @@ class StressPlant:
     label: str = ""  # how the report names it beside its failure bound (default: name)
     disturbance: tuple[float, float] = (0.1, 100.0)  # the sinusoidal disturbance's range [control unit]
     composite: str | None = None  # law.composite of the composite law (None: no composite row)
-    stressors: tuple[str, ...] = ()  # the study's stressors of this plant beyond the common ones, by name
     tasks: tuple[ScoreTask, ...] = ()  # the scorecard's tasks on this plant (none: not scored)
+    laws: LawSet = field(kw_only=True)
+    stressors: StressorSet = field(kw_only=True)
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator
 
@@ -47,6 +48,8 @@ from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compile_for_
 from adaptive_mj.plants.protocol import Policy
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, body_param_unit, register
+from adaptive_mj.plants.study_spec import (LEAK_TIME, Stressor, StudyContext, payload_ratio, sine_disturbance,
+                                           surface_noise, theta_table)
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
@@ -904,6 +907,54 @@ def joint_friction(t: Table, spec: ManipulatorSpec) -> ManipulatorSpec:
                                                                  coulomb_smoothing=eps))
 
 
+def study_laws(ctx: StudyContext, composite: bool) -> list[tuple[str, list[str]]]:
+    """The 6-joint arm's laws in the breaking-point study (kinds.StressPlant.laws; no composite row): Slotine–Li
+    with each modification (the dead-zone sized from the nominal noise, σ- and e-modification leaking toward the
+    true θ in study_spec.LEAK_TIME on the first parameter, the nonnegative box, saturation-aware adaptation), and
+    its two baselines with the true parameters (computed torque, PD + gravity)."""
+    gamma1 = float(ctx.gamma[0])
+    assert ctx.lam is not None  # the row's scenario sets law.lam (Λ of ‖s‖'s noise)
+    sig_s = surface_noise(6, float(ctx.lam), ctx.nominal_noise)  # noise in ‖s‖ (6 joints)
+    theta0 = theta_table(ctx.law_names, ctx.theta, quoted=True)
+    return [("adaptive", []),
+            ("dead_zone", ["law.dead_zone={width_in_noise_std=3.0}"]),
+            ("sigma", [f"law.sigma={gamma1 / LEAK_TIME!r}", f"law.theta0={theta0}"]),
+            ("e_modification", [f"law.e_modification={gamma1 / (LEAK_TIME * sig_s)!r}", f"law.theta0={theta0}"]),
+            ("projection", ["law.projection='physical'"]),
+            ("saturation_freeze", ["law.saturation='freeze'"]),
+            ("computed_torque", ["law.kind='computed_torque'", "law.nominal='model'"]),
+            ("pd_gravity", ["law.kind='pd_gravity'", "law.nominal='model'"])]
+
+
+def study_stressors(ctx: StudyContext, duration: float) -> list[Stressor]:
+    """The 6-joint arm's stressors in the breaking-point study (kinds.StressPlant.stressors): noise σ_q [rad] (σ_q'
+    = 10 σ_q per second), encoder resolution Δ [rad] (counts = 2π/Δ), a differentiated velocity's filter time
+    constant τ = 1/(2π f_c) [s], the sinusoidal torque on every joint, actuator lag [s], the motors' torque limits
+    (from the compiled model) divided by a factor, and the payload's mass (θ's first, from the compiled model) ×
+    ratio at half the run."""
+    sig = ctx.nominal_noise
+    plant = ctx.plant
+    limits = dict(zip(plant.joint_names, np.asarray(plant.ctrl_range[1], dtype=float).tolist(), strict=True))
+
+    def torque_limit(v: float) -> list[str]:  # the model's limits divided by v
+        return ["plant.torque_limit={" + ", ".join(f"{j}={L / v!r}" for j, L in limits.items()) + "}"]
+
+    return [Stressor("noise σ_y", lambda v: [f"noise.std={{q={v!r}, q_dot={10 * v!r}}}"], 1e-5, 0.1, unit="rad"),
+            Stressor("encoder Δ", lambda v: [f"sensors={{encoder_counts={2 * math.pi / v!r}}}"], 1e-5, 0.5,
+                     unit="rad"),
+            Stressor("velocity filter τ",
+                     lambda v: [f"noise.std={{q={sig!r}}}",
+                                f"sensors={{velocity='differentiated', velocity_cutoff_hz={1 / (2 * math.pi * v)!r}}}"],
+                     1e-3, 0.5, unit="s"),  # from f_c = 159 Hz: a shorter τ passes more encoder noise (the
+            # stress is not monotone there: 0.1 ms failed for the plain law where 7 ms passed), a longer more lag
+            sine_disturbance(ctx),
+            # from one physics step: a lag much shorter than the step is stiff for an explicit integrator (RK4:
+            # h/τ < 2.785), a failure of the numerics, not of the loop
+            Stressor("lag τ", lambda v: [f"plant.actuator_lag={v!r}"], 1e-3, 1.0, unit="s"),
+            Stressor("torque limit ÷", torque_limit, 1.0, 100.0, unit="÷"),
+            payload_ratio(float(ctx.theta[0]), duration)]
+
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "manipulator"
 KIND = register(PlantKind(
     "manipulator", __name__, frozenset({Form.RIGID_BODY}), output_unit="rad", control_unit="N m",
@@ -916,6 +967,7 @@ KIND = register(PlantKind(
     events={ev.PAYLOAD_MASS: "mujoco", ev.PAYLOAD_SWAP: "mujoco"}, starts_on_reference=True,
     group_params_by_unit=True, stress=StressPlant(
         "ur5e", "ur5e_identification", noise_signals=("q", "q_dot"), disturbance=(0.1, 1000.0),
+        laws=study_laws, stressors=study_stressors,
         label="the 6-joint arm: the RMS over its joints and the tail's rows, ‖q̃‖'s RMS / √6",
         tasks=(ScoreTask("tracking", "ur5e_identification", ()),
                ScoreTask("change", "ur5e_payload_swap",

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Iterator
 
@@ -44,6 +44,7 @@ from adaptive_mj.plants import events as ev
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants.airframe import Airframe
 from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, register
+from adaptive_mj.plants.study_spec import LEAK_TIME, Stressor, StudyContext, box_table, surface_noise, theta_table
 from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compiled_control, control_callback, new_warnings,
                                              release_data, run_data, scratch_data)
 
@@ -613,6 +614,95 @@ PAYLOAD_RELEASE = ev.EventKind("payload_release", _release, value="none", on_bui
                                doc="lets the payload body go at t (its mass and inertia removed)")
 
 
+@dataclass(frozen=True)
+class Disturbance:
+    """A disturbance raised to failure: name, unit, overrides(v) the scenario keys that apply intensity v, the range
+    [lo, hi] searched, step > 0: intensities are whole multiples of step (the delay: physics steps)."""
+
+    name: str
+    unit: str
+    overrides: Callable[[float], list[str]]
+    lo: float
+    hi: float
+    step: float = 0.0
+    doc: str = ""
+
+    def text(self, v: float | None) -> str:
+        if v is None:
+            return "n/a"
+        if self.unit == "%":
+            return f"{100 * v:.3g} %"
+        return f"{v:.3g} {self.unit}".strip()
+
+    def stressor(self) -> Stressor:
+        """As the breaking-point search's stressor (its intensities, range and step)."""
+        return Stressor(self.name, self.overrides, self.lo, self.hi, unit=self.unit, step=self.step)
+
+
+def _event(text: str) -> list[str]:
+    return [f"events=[{text}]"]
+
+
+#: AdaptiveQuadBench's disturbances (arXiv 2510.03471) on this vehicle: the flight study's (adaptive_mj.study.flight)
+#: and the breaking-point study's (study_stressors)
+DISTURBANCES = (
+    Disturbance("wind", "m/s", lambda v: [f"plant.wind=[{v!r}, 0.0, 0.0]"], 0.5, 40.0,
+                doc="a steady wind along x (MuJoCo's fluid drag on the fuselage)"),
+    Disturbance("force", "N", lambda v: _event(f"{{t=0.0, kind='external_force', force=[{v!r}, 0.0, 0.0]}}"),
+                0.003, 1.0, doc="a constant force along x on the body (the vehicle weighs 0.29 N)"),
+    Disturbance("torque", "N m", lambda v: _event(f"{{t=0.0, kind='external_force', torque=[{v!r}, 0.0, 0.0]}}"),
+                1e-5, 1e-2, doc="a constant torque about x (a rotor's thrust gives at most 4.4e-3 N m about x)"),
+    Disturbance("payload", "kg", lambda v: ["plant.payload='quad_box'", f"plant.payload_mass={v!r}"], 0.002, 0.028,
+                doc="a rigid payload under the body, unknown to the laws (the rotors lift 58.6 g in all: the range "
+                    "stops below the 28.6 g that leave the 30 g vehicle no thrust to spare)"),
+    Disturbance("rotor loss", "%",
+                lambda v: _event(f"{{t=1.0, kind='rotor_efficiency', rotor=1, value={1.0 - v!r}}}"), 0.02, 0.95,
+                doc="rotor 1 loses this fraction of its thrust at t = 1 s"),
+)
+PAYLOAD_AT = 1.0  # [s] when the breaking-point study's payload stressor adds its mass (as the rotor loss starts)
+
+
+def study_laws(ctx: StudyContext, composite: bool) -> list[tuple[str, list[str]]]:
+    """The quadrotor's laws in the breaking-point study (kinds.StressPlant.laws; no composite row): the geometric
+    adaptive law, with its inertia adapted too (law.adapt_inertia), with each modification (the dead-zone at 3 σ of
+    ‖s‖ under the nominal noise, σ- and e-modification leaking toward the true θ in study_spec.LEAK_TIME on the
+    mass, the box [θ/2, 2θ] on the mass and the inertia's diagonal), L1 augmentation, and the geometric baseline
+    holding the true parameters (law.nominal = 'model')."""
+    gamma1 = float(ctx.gamma[0])  # the mass estimate's stiffness
+    assert ctx.lam is not None  # the row's scenario sets law.lam (λ of ‖s‖'s noise)
+    sig_s = surface_noise(3, float(ctx.lam), ctx.nominal_noise)  # the noise in ‖s‖, s = e_v + λ e_x (3 axes)
+    theta0 = theta_table(ctx.law_names, ctx.theta, quoted=True)
+    return [("adaptive", []),
+            ("adaptive_inertia", ["law.adapt_inertia=true"]),
+            ("dead_zone", [f"law.dead_zone={{width={3.0 * sig_s!r}}}"]),
+            ("sigma", [f"law.sigma={gamma1 / LEAK_TIME!r}", f"law.theta0={theta0}"]),
+            ("e_modification", [f"law.e_modification={gamma1 / (LEAK_TIME * sig_s)!r}", f"law.theta0={theta0}"]),
+            ("projection", [f"law.projection={box_table(ctx.law_names, ctx.theta, quoted=True)}"]),
+            ("l1_geometric", ["law.kind='l1_geometric'"]),
+            ("geometric", ["law.kind='geometric'", "law.nominal='model'"])]
+
+
+def study_stressors(ctx: StudyContext, duration: float) -> list[Stressor]:
+    """The quadrotor's stressors in the breaking-point study (kinds.StressPlant.stressors): noise σ_p [m] (σ_v =
+    10 σ_p per second), and AdaptiveQuadBench's disturbances (DISTURBANCES: a steady wind, a constant force and
+    torque, mass v [kg] added to the payload at PAYLOAD_AT up to the most the rotors lift, one rotor's thrust loss
+    as a fraction)."""
+    out = [Stressor("noise σ_y", lambda v: [f"noise.std={{p={v!r}, v={10 * v!r}}}"], 1e-4, 0.1,
+                    unit=ctx.output_unit)]
+    for d in DISTURBANCES:
+        if d.name == "payload":  # mass added to the payload at 1 s (the estimates are the truth at the start)
+            m0 = float(ctx.theta[0] - ctx.plant.nominal_theta()[0])  # the payload's mass [kg], from the model
+            out.append(Stressor("payload added", _payload_added(m0), 0.001, d.hi - m0, unit=d.unit))
+        else:
+            out.append(replace(d.stressor(), unit="fraction" if d.unit == "%" else d.unit))
+    return out
+
+
+def _payload_added(m0: float) -> Callable[[float], list[str]]:
+    """The payload's mass m0 + v [kg] from PAYLOAD_AT on (a payload_mass event)."""
+    return lambda v: [f"events=[{{t={PAYLOAD_AT!r}, kind='payload_mass', value={m0 + v!r}}}]"]
+
+
 #: this plant kind, registered (adaptive_mj.plants.kinds): plant.kind = "quadrotor"
 KIND = register(PlantKind(
     "quadrotor", __name__, frozenset({Form.AIRFRAME}), output_unit="m", control_unit="N", params=PARAM_UNITS,
@@ -629,7 +719,7 @@ KIND = register(PlantKind(
     tail_bound=0.02, nominal_noise=1e-3,
     stress=StressPlant("quadrotor", "quadrotor_lemniscate", (), noise_signals=("p", "v"),
                        label="the quadrotor: the RMS over x, y and z, ‖p̃‖'s RMS / √3",
-                       stressors=("wind", "force", "torque", "payload", "rotor loss"),
+                       laws=study_laws, stressors=study_stressors,
                        tasks=(ScoreTask("tracking", "quadrotor_lemniscate", ()),
                               ScoreTask("change", "quadrotor_lemniscate",
                                         ("law.initial_estimates='model'",

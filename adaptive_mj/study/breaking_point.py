@@ -42,6 +42,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from adaptive_mj.plants import kinds
+# what a search raises, below the study layer (each plant kind declares its own stressors); studies import it here
+from adaptive_mj.plants.study_spec import Stressor, whole_steps
 from adaptive_mj.study import callable_module
 from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
 from adaptive_mj.study.job import RECORD_PREFLIGHT, crashed, predicted_unstable
@@ -63,48 +65,6 @@ def kind_number(kind: str, field: str) -> float:
 
 
 TAIL_BOUND = {name: kind_number(kind, "tail_bound") for name, kind in STRESS_PLANT_KIND.items()}  # each kind's own
-
-
-def whole_steps(value: float, step: float) -> float:
-    """value rounded to a whole multiple of step, at least one step (e.g. a control period [s] in
-    physics steps of `step` seconds): round(value / step) · step, computed the same way every time
-    so that equal step counts give equal floats."""
-    return max(1, round(value / step)) * step
-
-
-@dataclass(frozen=True)
-class Stressor:
-    """name: a label; overrides(v) -> the --set expressions that apply stress value v;
-    lo, hi: the range searched; integer: round to whole numbers (e.g. delay steps);
-    unit: the value's unit for reports; step > 0: every value tried is a whole multiple of step
-    (lo and hi must be already; e.g. a control period [s] in physics steps of dt)."""
-
-    name: str
-    overrides: Callable[[float], list[str]]
-    lo: float
-    hi: float
-    integer: bool = False
-    unit: str = ""
-    step: float = 0.0
-
-    @classmethod
-    def key(cls, key: str, lo: float, hi: float, *, integer: bool = False, unit: str = "") -> "Stressor":
-        """The stressor that sets one scenario key (`sweep --breaking-point KEY=LO:HI`)."""
-        fmt = (lambda v: str(int(v))) if integer else repr
-        return cls(key, lambda v: [f"{key}={fmt(v)}"], lo, hi, integer, unit)
-
-    @classmethod
-    def control_period(cls, lo: float, hi: float, dt: float, *, name: str = "control.period") -> "Stressor":
-        """The sampled-data control period T [s] from lo to hi, both rounded to whole physics steps
-        of dt (as is every bisection value): each value v sets control.mode = 'sampled' and
-        control.period = v (the scenario's loader refuses a period that is not a whole multiple of
-        dt)."""
-        lo, hi = whole_steps(lo, dt), whole_steps(hi, dt)
-        return cls(name, lambda v: ["control.mode='sampled'", f"control.period={v!r}"], lo, hi, unit="s", step=dt)
-
-    def steps_between(self, lo: float, hi: float) -> int:
-        """Whole steps from lo to hi (a stressor with a step)."""
-        return round(hi / self.step) - round(lo / self.step)
 
 
 @dataclass(frozen=True)

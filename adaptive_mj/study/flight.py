@@ -5,8 +5,10 @@ time (their "unstable if the maximum error exceeds 1 m"); a disturbance's *when2
 which every seed fails (their success rate reaching 0 %), its *margin* the largest at which every seed succeeds;
 the *delay margin* is the margin of a control delay (theirs: a sweep from 0 to 0.5 s in 0.01 s steps).
 
-The runs: the bundled lemniscate (A = 0.5 m, ω = 1 rad/s at 1 m) without its payload, RUN_SECONDS long (their
-5 s), with small measurement noise (NOISE, a seed per run), the disturbance from t = 0 (a rotor's loss from 1 s).
+The disturbances are the quadrotor kind's (adaptive_mj.plants.quadrotor.DISTURBANCES, which its breaking-point row
+raises too); the delay is this study's (DELAY). The runs: the bundled lemniscate (A = 0.5 m, ω = 1 rad/s at 1 m)
+without its payload, RUN_SECONDS long (their 5 s), with small measurement noise (NOISE, a seed per run), the
+disturbance from t = 0 (a rotor's loss from 1 s).
 A run the pre-flight check finds unstable by construction (adaptive_mj.sim.preflight: the attitude loop with a
 control delay past its linearised limit) is run like any other and judged by its outcome, as in every study
 (job.RECORD_PREFLIGHT). Two searches per (law, disturbance): by
@@ -19,10 +21,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
+from adaptive_mj.plants.quadrotor import DISTURBANCES, Disturbance
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.breaking_point import Stressor
 from adaptive_mj.study.job import RECORD_PREFLIGHT, crashed
@@ -41,45 +44,6 @@ NOISE = "noise={std={p=0.001, v=0.01, phi=0.001, omega=0.01}}"
 BASE = ("plant.payload='none'", f"simulation.duration={RUN_SECONDS!r}", "log.rate_hz=20", NOISE)
 
 
-@dataclass(frozen=True)
-class Disturbance:
-    """A disturbance raised to failure: name, unit, overrides(v) the scenario keys that apply intensity v, the range
-    [lo, hi] searched, step > 0: intensities are whole multiples of step (the delay: physics steps)."""
-
-    name: str
-    unit: str
-    overrides: Callable[[float], list[str]]
-    lo: float
-    hi: float
-    step: float = 0.0
-    doc: str = ""
-
-    def text(self, v: float | None) -> str:
-        if v is None:
-            return "n/a"
-        if self.unit == "%":
-            return f"{100 * v:.3g} %"
-        return f"{v:.3g} {self.unit}".strip()
-
-
-def _event(text: str) -> list[str]:
-    return [f"events=[{text}]"]
-
-
-DISTURBANCES = (
-    Disturbance("wind", "m/s", lambda v: [f"plant.wind=[{v!r}, 0.0, 0.0]"], 0.5, 40.0,
-                doc="a steady wind along x (MuJoCo's fluid drag on the fuselage)"),
-    Disturbance("force", "N", lambda v: _event(f"{{t=0.0, kind='external_force', force=[{v!r}, 0.0, 0.0]}}"),
-                0.003, 1.0, doc="a constant force along x on the body (the vehicle weighs 0.29 N)"),
-    Disturbance("torque", "N m", lambda v: _event(f"{{t=0.0, kind='external_force', torque=[{v!r}, 0.0, 0.0]}}"),
-                1e-5, 1e-2, doc="a constant torque about x (a rotor's thrust gives at most 4.4e-3 N m about x)"),
-    Disturbance("payload", "kg", lambda v: ["plant.payload='quad_box'", f"plant.payload_mass={v!r}"], 0.002, 0.028,
-                doc="a rigid payload under the body, unknown to the laws (the rotors lift 58.6 g in all: the range "
-                    "stops below the 28.6 g that leave the 30 g vehicle no thrust to spare)"),
-    Disturbance("rotor loss", "%",
-                lambda v: _event(f"{{t=1.0, kind='rotor_efficiency', rotor=1, value={1.0 - v!r}}}"), 0.02, 0.95,
-                doc="rotor 1 loses this fraction of its thrust at t = 1 s"),
-)
 DELAY = Disturbance("delay", "s", lambda v: [f"simulation.control_delay={int(round(v / DT))}"], 0.0, 0.5, step=DT,
                     doc="a control delay (whole physics steps of 2 ms)")
 
@@ -137,7 +101,7 @@ def searches(laws: Sequence[str] = LAWS, disturbances: Sequence[Disturbance] = (
 
 def stressor(d: Disturbance) -> Stressor:
     """A disturbance as the breaking-point search's stressor (its intensities, range and step)."""
-    return Stressor(d.name, d.overrides, d.lo, d.hi, unit=d.unit, step=d.step)
+    return d.stressor()
 
 
 def margins(found: list[Search], *, seeds: int, steps: int, logs: Path, n_jobs: int = 1,

@@ -12,46 +12,32 @@ that seeds differ):
   quadrotor: quadrotor_lemniscate (the figure-eight with its 10 g payload), σ_p = 1 mm, σ_v = 1 cm/s.
 Failure: divergence, a crash, or tail RMS ỹ above the plant's bound (TAIL_BOUND).
 
-Laws: the lecture's adaptive law with no modification; the dead-zone (ε = 3σ_s at the
-nominal noise); σ-modification and e-modification (leakage time constant 5 s on the first
-parameter, toward the true θ); projection onto [θ/2, 2θ] for the positive parameters;
-composite adaptation (only with `--composite`); and the two
-baselines, fixed nominal parameters (the truth) and robust sliding control (K = 10 % of the
-actuator limit, Φ = 0.05).
-On the 6-joint arm the laws are Slotine–Li with the dead-zone (width_in_noise_std = 3), σ- and
-e-modification (the same leak rule), the nonnegative box ("physical" projection) and saturation-aware adaptation, and
-the computed-torque and PD + gravity baselines with the true parameters; its stressors are noise,
-encoder resolution Δ (counts = 2π/Δ), a differentiated velocity's filter time constant
-τ = 1/(2π f_c), a sinusoidal torque on every joint, actuator lag, the motors' torque limits divided
-by a factor (plant.torque_limit), payload ratio, delay and the control period.
-On the quadrotor the laws are the geometric adaptive law with the dead-zone, σ- and e-modification (the same leak
-rule, on the mass) and the box [θ/2, 2θ], L1 augmentation (continuous control only: n/a for the control period),
-and the geometric baseline with the true parameters; its stressors are noise, AdaptiveQuadBench's disturbances
-(wind, force, torque, mass added to the payload at 1 s, a rotor's thrust loss; adaptive_mj.study.flight), delay and the
-control period.
-Stressors: noise σ (y', 10× y), a sinusoidal disturbance force (ω = 2 rad/s), an unmodelled
-thruster lag τ (heave), a payload ratio (arm), a
-control delay of whole physics steps (arm: the payload's mass × ratio at half the run), and
-the control period T of sampled-data control: control.mode = 'sampled', control.period = n·dt,
-searched over whole physics steps n from 1 to PERIOD_MAX (or the run's duration), reported in
-seconds. Composite adaptation runs under continuous control only: n/a for the control period.
+Laws and stressors: each plant kind declares its own beside its keys (PlantKind.stress: StressPlant.laws and
+.stressors, functions of the row's plants.study_spec.StudyContext, every number from the compiled model): on heave
+and the 1-DOF arm the lecture's sliding law and its modifications and baselines (plants.sliding_study) with a
+thruster lag (heave) or a payload ratio (arm); on the 6-joint arm Slotine–Li's (plants.manipulator.study_laws,
+.study_stressors); on the quadrotor the geometric laws under AdaptiveQuadBench's disturbances
+(plants.quadrotor.study_laws, .study_stressors). The study adds the stressors of every plant: a control delay of
+whole physics steps, and the control period T of sampled-data control: control.mode = 'sampled', control.period =
+n·dt, searched over whole physics steps n from 1 to PERIOD_MAX (or the run's duration), reported in seconds. A law
+with filters integrated per step (composite adaptation, L1) runs under continuous control only: n/a for the control
+period.
 """
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence, TypedDict
+from typing import Mapping, Sequence, TypedDict
 
 import numpy as np
 
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.study.job import SUMMARY_LOG_RATE_HZ  # noqa: F401 (the bench reads it here)
 from adaptive_mj.study import callable_module
-from adaptive_mj.laws.sliding import surface_noise_std
-from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants import kinds
+from adaptive_mj.plants.study_spec import StudyContext
 from adaptive_mj.report.metrics import TAIL_FRACTION
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.breaking_point import (STRESS_PLANT_KIND, TAIL_BOUND, Margin, Search, Stressor, kind_number,
@@ -61,7 +47,6 @@ from adaptive_mj.study.result import Study, Table
 # TAIL_BOUND (breaking_point, shared with the bench): [m], [rad]: tail RMS above this is a failure
 # σ_y [m], [rad]; σ_y' = 10 σ_y [per s]: each kind's own
 NOMINAL_NOISE = {name: kind_number(kind, "nominal_noise") for name, kind in STRESS_PLANT_KIND.items()}
-LEAK_TIME = 5.0  # s: σ = γ_1 / LEAK_TIME; ν = γ_1 / (LEAK_TIME σ_s)
 DURATION = 20.0  # s per run (its tail: report.metrics.TAIL_FRACTION, the last 25 %)
 
 
@@ -71,16 +56,15 @@ class BenchSettings(TypedDict):
     seeds: int
     steps: int
     duration: float
-    arm_laws: tuple[str, ...]
+    plant_laws: dict[str, tuple[str, ...]]
     plant_names: tuple[str, ...]
 
 
 # the full bench's reduced study: 5 s runs, and on the 6-joint arm four laws (the full study: eight); not the
 # quadrotor, whose margins the bench measures in its own section (adaptive_mj.study.sections.quadrotor_flight)
 BENCH_SETTINGS: BenchSettings = {"seeds": 5, "steps": 2, "duration": 5.0,
-                                 "arm_laws": ("adaptive", "dead_zone", "sigma", "computed_torque"),
+                                 "plant_laws": {"ur5e": ("adaptive", "dead_zone", "sigma", "computed_torque")},
                                  "plant_names": ("heave", "arm", "ur5e")}
-ROBUST_K_FRACTION = 0.1  # robust sliding: K = 10 % of the actuator's limit, boundary layer Φ = 0.05
 PERIOD_MAX = 1.0  # s: the control period stressor's high end (heave: 2d/k = 0.37 s; the 1-DOF arm: 2J/k = 0.085 s)
 PERIOD = "control period"  # the control period stressor's name
 
@@ -123,11 +107,6 @@ def _row(p: Plant) -> kinds.StressPlant:
     row = _kind(p).stress
     assert row is not None  # the study's plants are the kinds that declare one (STRESS_PLANT_KIND)
     return row
-
-
-def _on_joints(p: Plant) -> bool:
-    """Whether p is a multi-joint plant (the rigid-body form: Slotine–Li's laws and the arm's conditions)."""
-    return Form.RIGID_BODY in _kind(p).forms
 
 
 def plants(duration: float = DURATION) -> list[Plant]:
@@ -186,191 +165,33 @@ def _setup(p: Plant):
     return scn, build(scn)
 
 
-def _on_airframe(p: Plant) -> bool:
-    """Whether p is a flying plant (the airframe form: the flight laws and the flight disturbances)."""
-    return Form.AIRFRAME in _kind(p).forms
-
-
-def laws(p: Plant, *, composite: bool) -> list[tuple[str, list[str]]]:
-    """(law name, overrides) for plant p; every number derived from the scenario and its model."""
-    if _on_joints(p):
-        return _arm_laws(p)
-    if _on_airframe(p):
-        return _airframe_laws(p)
+def context(p: Plant) -> StudyContext:
+    """What row p's law and stressor sets read (plants.study_spec.StudyContext), from its scenario with its
+    overrides and the compiled model."""
     scn, s = _setup(p)
-    names, theta = s.law.names, s.plant.true_theta()
-    gamma1 = float(s.law.gamma[0])
-    sig_y = nominal_noise(p)
-    sig_s = surface_noise_std(2, scn.law.lam, [sig_y, 10 * sig_y])  # the noise of s at the nominal noise
-    theta0 = "{" + ", ".join(f"{n}={float(v)!r}" for n, v in zip(names, theta, strict=True)) + "}"
-    box = "{" + ", ".join(f"{n}=[{0.5 * float(v)!r}, {2.0 * float(v)!r}]"
-                          for n, v in zip(names, theta, strict=True) if v > 0) + "}"
-    K = ROBUST_K_FRACTION * float(s.plant.ctrl_range[1])
-    out = [("adaptive", []),
-           ("dead_zone", [f"law.dead_zone={{width={3.0 * sig_s!r}}}"]),
-           ("sigma", [f"law.sigma={gamma1 / LEAK_TIME!r}", f"law.theta0={theta0}"]),
-           ("e_modification", [f"law.e_modification={gamma1 / (LEAK_TIME * sig_s)!r}", f"law.theta0={theta0}"]),
-           ("projection", [f"law.projection={box}"])]
-    if composite and _row(p).composite is not None:
-        out.append(("composite", [f"law.composite={_row(p).composite}"]))
-    out += [("fixed_nominal", ["law.kind='fixed_nominal'", "law.nominal='model'"]),
-            ("robust_sliding", ["law.kind='robust_sliding'", "law.nominal='model'", f"law.K={K!r}",
-                                "law.boundary_layer=0.05"])]
-    return out
-
-
-def _arm_laws(p: Plant) -> list[tuple[str, list[str]]]:
-    """The 6-joint arm: Slotine–Li with each modification (the dead-zone sized from the nominal noise,
-    σ- and e-modification with the leak toward the true θ, the nonnegative box, saturation-aware
-    adaptation), and its two baselines with the true parameters (computed torque, PD + gravity)."""
-    scn, s = _setup(p)
-    gamma1 = float(s.law.gamma[0])
-    sig_q = nominal_noise(p)
-    lam = float(scn.law.lam)
-    sig_s = float(np.sqrt(6 * ((10 * sig_q) ** 2 + lam**2 * sig_q**2)))  # noise in ‖s‖ (6 joints)
-    pairs = zip(s.law.names, s.plant.true_theta(), strict=True)
-    theta0 = "{" + ", ".join(f"'{n}'={float(v)!r}" for n, v in pairs) + "}"
-    return [("adaptive", []),
-            ("dead_zone", ["law.dead_zone={width_in_noise_std=3.0}"]),
-            ("sigma", [f"law.sigma={gamma1 / LEAK_TIME!r}", f"law.theta0={theta0}"]),
-            ("e_modification", [f"law.e_modification={gamma1 / (LEAK_TIME * sig_s)!r}", f"law.theta0={theta0}"]),
-            ("projection", ["law.projection='physical'"]),
-            ("saturation_freeze", ["law.saturation='freeze'"]),
-            ("computed_torque", ["law.kind='computed_torque'", "law.nominal='model'"]),
-            ("pd_gravity", ["law.kind='pd_gravity'", "law.nominal='model'"])]
-
-
-def _airframe_laws(p: Plant) -> list[tuple[str, list[str]]]:
-    """The quadrotor: the geometric adaptive law, with its inertia adapted too (law.adapt_inertia), with each
-    modification (the dead-zone at 3 σ of ‖s‖ under the nominal noise, σ- and e-modification leaking toward the
-    true θ in LEAK_TIME on the mass, the box [θ/2, 2θ] on the mass and the inertia's diagonal), L1 augmentation,
-    and the geometric baseline holding the true parameters (law.nominal = 'model')."""
-    scn, s = _setup(p)
-    names, theta = s.law.names, s.plant.true_theta()
-    gamma1 = float(s.law.gamma[0])  # the mass estimate's stiffness
-    sig = nominal_noise(p)
-    lam = float(scn.law.lam)
-    sig_s = float(np.sqrt(3 * ((10 * sig) ** 2 + lam**2 * sig**2)))  # the noise in ‖s‖, s = e_v + λ e_x (3 axes)
-    theta0 = "{" + ", ".join(f"'{n}'={float(v)!r}" for n, v in zip(names, theta, strict=True)) + "}"
-    box = "{" + ", ".join(f"'{n}'=[{0.5 * float(v)!r}, {2.0 * float(v)!r}]"
-                          for n, v in zip(names, theta, strict=True) if v > 0) + "}"
-    return [("adaptive", []),
-            ("adaptive_inertia", ["law.adapt_inertia=true"]),
-            ("dead_zone", [f"law.dead_zone={{width={3.0 * sig_s!r}}}"]),
-            ("sigma", [f"law.sigma={gamma1 / LEAK_TIME!r}", f"law.theta0={theta0}"]),
-            ("e_modification", [f"law.e_modification={gamma1 / (LEAK_TIME * sig_s)!r}", f"law.theta0={theta0}"]),
-            ("projection", [f"law.projection={box}"]),
-            ("l1_geometric", ["law.kind='l1_geometric'"]),
-            ("geometric", ["law.kind='geometric'", "law.nominal='model'"])]
-
-
-def _airframe_stressors(p: Plant, duration: float) -> list[Stressor]:
-    """The quadrotor's conditions: noise σ_p (σ_v = 10 σ_p per second), and AdaptiveQuadBench's disturbances as
-    adaptive_mj.study.flight declares them (a steady wind, a constant force and torque, mass v added to the payload
-    at PAYLOAD_AT up to the most the rotors lift, one rotor's thrust loss), the delay and the control period (added
-    by `stressors`)."""
-    from adaptive_mj.study import flight
-
-    out = [Stressor("noise σ_y", lambda v: [f"noise.std={{p={v!r}, v={10 * v!r}}}"], 1e-4, 0.1,
-                    unit=_kind(p).output_unit)]
-    own = {d.name: d for d in flight.DISTURBANCES}
-    for name in _row(p).stressors:
-        d = own[name]
-        if name == "payload":  # mass added to the payload at 1 s (the estimates are the truth at the start)
-            plant = _setup(p)[1].plant
-            m0 = float(plant.true_theta()[0] - plant.nominal_theta()[0])  # the payload's mass [kg], from the model
-            out.append(Stressor("payload added", _payload_added(m0), 0.001, d.hi - m0, unit=d.unit))
-        else:
-            out.append(replace(flight.stressor(d), unit="fraction" if d.unit == "%" else d.unit))
-    return out
-
-
-def _payload_added(m0: float) -> Callable[[float], list[str]]:
-    """The payload's mass m0 + v [kg] from PAYLOAD_AT on (a payload_mass event)."""
-    return lambda v: [f"events=[{{t={PAYLOAD_AT!r}, kind='payload_mass', value={m0 + v!r}}}]"]
-
-
-PAYLOAD_AT = 1.0  # [s] when the quadrotor's payload stressor adds its mass (as the rotor loss starts)
-
-
-def _arm_stressors(p: Plant, duration: float) -> list[Stressor]:
-    """The 6-joint arm's conditions: noise, encoder resolution, a differentiated velocity's filter
-    time constant, a sinusoidal torque on every joint, actuator lag, the motors' torque limits divided by
-    a factor, payload ratio, delay, and the control period (added by `stressors`)."""
-    sig = nominal_noise(p)
-    plant = _setup(p)[1].plant
-    m0 = float(plant.true_theta()[0])  # the payload's mass [kg], from the compiled model
-    limits = dict(zip(plant.joint_names, np.asarray(plant.ctrl_range[1], dtype=float).tolist(), strict=True))
-    t_swap = 0.5 * duration
-
-    def torque_limit(v: float) -> list[str]:  # the model's limits divided by v
-        return ["plant.torque_limit={" + ", ".join(f"{j}={L / v!r}" for j, L in limits.items()) + "}"]
-
-    return [Stressor("noise σ_y", lambda v: [f"noise.std={{q={v!r}, q_dot={10 * v!r}}}"], 1e-5, 0.1, unit="rad"),
-            Stressor("encoder Δ", lambda v: [f"sensors={{encoder_counts={2 * math.pi / v!r}}}"], 1e-5, 0.5,
-                     unit="rad"),
-            Stressor("velocity filter τ",
-                     lambda v: [f"noise.std={{q={sig!r}}}",
-                                f"sensors={{velocity='differentiated', velocity_cutoff_hz={1 / (2 * math.pi * v)!r}}}"],
-                     1e-3, 0.5, unit="s"),  # from f_c = 159 Hz: a shorter τ passes more encoder noise (the
-            # stress is not monotone there: 0.1 ms failed for the plain law where 7 ms passed), a longer more lag
-            _disturbance(p),
-            # from one physics step: a lag much shorter than the step is stiff for an explicit integrator (RK4:
-            # h/τ < 2.785), a failure of the numerics, not of the loop
-            Stressor("lag τ", lambda v: [f"plant.actuator_lag={v!r}"], 1e-3, 1.0, unit="s"),
-            Stressor("torque limit ÷", torque_limit, 1.0, 100.0, unit="÷"),
-            Stressor("payload ratio",
-                     lambda v: [f"events=[{{t={t_swap!r}, kind='payload_mass', value={v * m0!r}}}]"], 1.0, 100.0,
-                     unit="×")]
-
-
-def _disturbance(p: Plant) -> Stressor:
-    """A sinusoidal disturbance (ω = 2 rad/s) of magnitude in the plant's range [its control unit]."""
-    lo, hi = _row(p).disturbance
-    return Stressor("disturbance", lambda v: [f"disturbance={{kind='sine', magnitude={v!r}, omega=2.0}}"], lo, hi,
-                    unit=_kind(p).control_unit)
-
-
-def _thruster_lag(p: Plant, duration: float) -> Stressor:
-    """An unmodelled thruster lag τ [s] (plant.thruster_time_constant)."""
-    return Stressor("lag τ", lambda v: [f"plant.thruster_time_constant={v!r}"], 1e-3, 1.0, unit="s")
-
-
-def _payload_ratio(p: Plant, duration: float) -> Stressor:
-    """The payload's mass × ratio at half the run (a payload_mass event; the scenario sets plant.payload_mass)."""
-    m0 = sc.load(scenario_path(p.scenario)).plant.payload_mass
-    if m0 is None:  # the bundled arm_payload_swap sets it
-        raise ScenarioError(f"{p.scenario}: the payload ratio stressor needs plant.payload_mass")
-    t_swap = 0.5 * duration
-    return Stressor("payload ratio", lambda v: [f"events=[{{t={t_swap!r}, kind='payload_mass', value={v * m0!r}}}]"],
-                    1.0, 100.0, unit="×")
-
-
-#: the stressors a 1-DOF plant kind may name (StressPlant.stressors), each built for a plant and a duration [s]
-OWN_STRESSORS = {"lag τ": _thruster_lag, "payload ratio": _payload_ratio}
-
-
-def stressors(p: Plant, duration: float = DURATION) -> list[Stressor]:
-    if _on_joints(p):
-        out = _arm_stressors(p, duration)
-        out.append(Stressor("delay", lambda v: [f"simulation.control_delay={int(v)}"], 0, 200, integer=True,
-                            unit="steps"))
-        out.append(Stressor.control_period(0.001, min(PERIOD_MAX, duration), 0.001, name=PERIOD))
-        return out
-    if _on_airframe(p):
-        out = _airframe_stressors(p, duration)
-    else:
-        out = [Stressor("noise σ_y", lambda v: [f"noise.std={{y={v!r}, y_dot={10 * v!r}}}"], 1e-4, 0.1,
-                        unit=_kind(p).output_unit),
-               _disturbance(p)]
-        out += [OWN_STRESSORS[name](p, duration) for name in _row(p).stressors]
-    out.append(Stressor("delay", lambda v: [f"simulation.control_delay={int(v)}"], 0, 200, integer=True,
-                        unit="steps"))
-    dt = sc.load(scenario_path(p.scenario), overrides=list(p.base)).simulation.timestep
+    kind, row = _kind(p), _row(p)
+    dt = scn.simulation.timestep
     if dt is None:  # the model's own timestep
-        dt = float(_setup(p)[1].plant.dt)
-    out.append(Stressor.control_period(dt, min(PERIOD_MAX, duration), dt, name=PERIOD))
-    return out
+        dt = float(s.plant.dt)
+    return StudyContext(p.name, p.scenario, kind.output_unit, kind.control_unit, row.disturbance, row.composite,
+                        tuple(s.law.names), np.asarray(s.law.gamma), scn.law.lam, s.plant.true_theta(), dt,
+                        nominal_noise(p), scn.plant.payload_mass, s.plant)
+
+
+def laws(p: Plant, *, composite: bool, ctx: StudyContext | None = None) -> list[tuple[str, list[str]]]:
+    """(law label, overrides) for plant p: what its plant kind declares (StressPlant.laws), every number derived
+    from the scenario and its model (ctx: context(p), when the caller has it)."""
+    return _row(p).laws(ctx or context(p), composite)
+
+
+def stressors(p: Plant, duration: float = DURATION, *, ctx: StudyContext | None = None) -> list[Stressor]:
+    """Plant p's stressors for runs of `duration` [s]: its plant kind's own (StressPlant.stressors), then those of
+    every plant: a control delay of 0 to 200 whole physics steps and the control period from one physics step to
+    PERIOD_MAX or the run's duration (ctx: context(p), when the caller has it)."""
+    ctx = ctx or context(p)
+    return [*_row(p).stressors(ctx, duration),
+            Stressor("delay", lambda v: [f"simulation.control_delay={int(v)}"], 0, 200, integer=True, unit="steps"),
+            Stressor.control_period(ctx.dt, min(PERIOD_MAX, duration), ctx.dt, name=PERIOD)]
 
 
 def with_law(p: Plant, entries: list[tuple[str, list[str]]], law: str | None, sets: tuple[str, ...] = (),
@@ -390,13 +211,13 @@ def with_law(p: Plant, entries: list[tuple[str, list[str]]], law: str | None, se
     return [*entries, (label, [sc.law_swap(law), *(gains or {}).get(k.name, []), *sets])]
 
 
-def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, ...] | None = None,
+def study(*, composite: bool, duration: float = DURATION, plant_laws: Mapping[str, tuple[str, ...]] | None = None,
           law: str | None = None, sets: tuple[str, ...] = (),
           gains: dict[str, list[str]] | None = None, plant_names: tuple[str, ...] | None = None,
           extra: tuple[str, ...] = ()) -> list[Search]:
     """Every plant × law × stressor search; plant_names: the plants to include (None: all); extra: overrides of
-    every run after the plant's (e.g. the log's rate); arm_laws: the 6-joint arm's built-in laws to include (None:
-    all);
+    every run after the plant's (e.g. the log's rate); plant_laws: plant name -> the built-in laws to include on
+    it (a plant not named, or None: all its laws);
     law: a law kind added on the plants it serves, with its gains and --set keys `sets` (with_law); one line when
     it serves none of them."""
     out = []
@@ -405,12 +226,16 @@ def study(*, composite: bool, duration: float = DURATION, arm_laws: tuple[str, .
         if plant_names is not None and p.name not in plant_names:
             continue
         path = scenario_path(p.scenario)
-        entries = with_law(p, laws(p, composite=composite), law, sets, gains)
-        served = served or (law is not None and len(entries) > len(laws(p, composite=composite)))
+        ctx = context(p)
+        own = laws(p, composite=composite, ctx=ctx)
+        entries = with_law(p, own, law, sets, gains)
+        served = served or (law is not None and len(entries) > len(own))
+        kept = (plant_laws or {}).get(p.name)
+        conditions = stressors(p, duration, ctx=ctx)
         for name, over in entries:
-            if _on_joints(p) and arm_laws is not None and name not in arm_laws and not (law and name.startswith(law)):
+            if kept is not None and name not in kept and not (law and name.startswith(law)):
                 continue
-            for st in stressors(p, duration):
+            for st in conditions:
                 if st.name == PERIOD and continuous_only(p, tuple(over)):  # n/a: its filters integrate per step
                     continue
                 out.append(Search(path, f"{p.name}/{name}", (*p.base, *extra, *over), st, tail_bound(p)))
@@ -479,7 +304,7 @@ def _bounds_text(searches: list[Search] | None = None) -> str:
 
 def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int,
               duration: float = DURATION, backend=None,
-              arm_laws: tuple[str, ...] | None = None, law: str | None = None,
+              plant_laws: Mapping[str, tuple[str, ...]] | None = None, law: str | None = None,
               sets: tuple[str, ...] = (), gains: dict[str, list[str]] | None = None,
               plant_names: tuple[str, ...] | None = None,
               log_rate_hz: float | None = None) -> tuple[list[Margin], str, float]:
@@ -490,7 +315,7 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
     from adaptive_mj.study.parallel import progress_printer
 
     extra = () if log_rate_hz is None else (f"log.rate_hz={log_rate_hz!r}",)
-    searches = study(composite=composite, duration=duration, arm_laws=arm_laws, law=law, sets=sets, gains=gains,
+    searches = study(composite=composite, duration=duration, plant_laws=plant_laws, law=law, sets=sets, gains=gains,
                      plant_names=plant_names, extra=extra)
     t0 = time.perf_counter()
     at_most = len(searches) * seeds * (2 + steps)  # bisection stops early where a bracket closes

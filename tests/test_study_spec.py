@@ -1,0 +1,100 @@
+"""What a plant kind declares for the breaking-point study (issue 49, item 5): its laws and stressors on its
+StressPlant, beside its keys (adaptive_mj.plants.study_spec), and the study (adaptive_mj.study.stress) only calls
+them: the same searches as when the study chose them by the plant's form."""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import re
+from pathlib import Path
+
+import pytest
+
+from adaptive_mj.plants import kinds
+from adaptive_mj.study import stress
+
+STUDY_DIR = Path(stress.__file__).parent
+
+
+def _rows(searches: list[stress.Search]) -> list:
+    """Each search as plain data: label, scenario file, overrides, the stressor's name, range, unit, integer and
+    step, the tail bound, and the stressor's overrides at its low end, high end and mid (geometric from > 0)."""
+    out = []
+    for s in searches:
+        st = s.stressor
+        mid = math.sqrt(st.lo * st.hi) if st.lo > 0 else 0.5 * (st.lo + st.hi)
+        out.append([s.label, Path(s.scenario).name, list(s.overrides), st.name, repr(st.lo), repr(st.hi), st.unit,
+                    st.integer, repr(st.step), repr(s.tail_bound), [st.overrides(v) for v in (st.lo, st.hi, mid)]])
+    return out
+
+
+def _digest(data) -> str:
+    return hashlib.sha256(json.dumps(data, ensure_ascii=True).encode()).hexdigest()
+
+
+def _bench() -> dict:
+    return {k: v for k, v in stress.BENCH_SETTINGS.items() if k not in ("seeds", "steps")}
+
+
+# (search count, sha256 of _rows) of each call, taken from commit e9d9e7b, before the laws and stressors moved from
+# study/stress.py (chosen there by the plant's form) into each plant kind's StressPlant (there `plant_laws` was
+# arm_laws=("adaptive",), which applied to the 6-joint arm alone)
+STUDIES = {
+    "composite": (lambda: stress.study(composite=True),
+                  213, "fcfcbbf35ef454258fb67c7d0284af66b82b7734825d82ab0c30e67dcb257ad7"),
+    "bench": (lambda: stress.study(composite=False, **_bench()),
+              106, "9755926c50125a9f5dbe476ec12c2e85d4435e47b675c85e5309c10695a58903"),
+    "law": (lambda: stress.study(composite=False, law="sliding_adaptive"),
+            215, "05b8fd0cf66fb8082d4142b04f42848bec24e03c8862965422297be998c40889"),
+    "law_filtered": (lambda: stress.study(composite=False, duration=1.0, law="slotine_li",
+                                          plant_laws={"ur5e": ("adaptive",)}),
+                     151, "241af9f5e0ee9ff30b52d396bb4c7a2e72e54151deed794d8f35ac215ca8742b"),
+    "geometric": (lambda: stress.study(composite=True, duration=3.0, law="geometric_adaptive"),
+                  221, "cdc35f518a0d1be8347cba5ebc42da20dde2fd2584897adff1fc56eabd9910af"),
+}
+
+
+@pytest.mark.parametrize("name", list(STUDIES))
+def test_the_study_runs_the_same_searches_as_before_the_kinds_declared_them(name):
+    """Every search (its label, scenario, overrides, and its stressor's name, range, unit, step and overrides at
+    three values) is as the study made it when it chose laws and stressors by the plant's form (commit e9d9e7b)."""
+    make, count, digest = STUDIES[name]
+    searches = make()
+    assert len(searches) == count
+    assert _digest(_rows(searches)) == digest
+
+
+def test_a_user_s_scenario_gets_the_same_laws_and_stressors_as_before():
+    """score --scenario's rows (stress.user_plant on each bundled study scenario): the same laws and stressors as at
+    commit e9d9e7b."""
+    users = []
+    for p in stress.plants():
+        u = stress.user_plant(stress.scenario_path(p.scenario))
+        users.append([u.name, list(u.base), stress.laws(u, composite=True),
+                      _rows([stress.Search(Path(u.scenario), u.name, u.base, st, 0.0)
+                             for st in stress.stressors(u, 7.0)])])
+    assert _digest(users) == "a4c1e571f3b781d06a5aa29fe34a707ed5cdc20d1248b5c564ed529f00ef8b65"
+
+
+def test_each_studied_kind_declares_its_laws_and_stressors_and_the_study_only_calls_them():
+    """stress.laws and stress.stressors are the row's own functions of its context, the latter followed by the
+    delay and the control period on the row's physics step."""
+    for p in stress.plants(4.0):
+        row = kinds.built_in()[p.kind].stress
+        assert row is not None
+        ctx = stress.context(p)
+        assert stress.laws(p, composite=True) == row.laws(ctx, True)
+        own = row.stressors(ctx, 4.0)
+        common = stress.stressors(p, 4.0)[len(own):]
+        assert [st.name for st in stress.stressors(p, 4.0)][:len(own)] == [st.name for st in own]
+        assert [st.name for st in common] == ["delay", stress.PERIOD]
+        assert common[1].lo == common[1].step == ctx.dt
+
+
+def test_nothing_in_the_study_chooses_laws_or_stressors_by_plant_kind_or_form():
+    """No study module tests a plant's form or kind to pick its laws or stressors (the kinds declare them)."""
+    for path in sorted(STUDY_DIR.glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        assert not re.search(r"_on_joints|_on_airframe|OWN_STRESSORS|_arm_laws|_airframe_laws", text), path.name
+    assert "Form." not in (STUDY_DIR / "stress.py").read_text(encoding="utf-8")
