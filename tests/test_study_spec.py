@@ -98,3 +98,27 @@ def test_nothing_in_the_study_chooses_laws_or_stressors_by_plant_kind_or_form():
         text = path.read_text(encoding="utf-8")
         assert not re.search(r"_on_joints|_on_airframe|OWN_STRESSORS|_arm_laws|_airframe_laws", text), path.name
     assert "Form." not in (STUDY_DIR / "stress.py").read_text(encoding="utf-8")
+
+
+def test_a_user_s_quadrotor_scenario_is_held_by_a_hover_at_its_start(tmp_path):
+    """score --scenario on a quadrotor: the hold task is the kind's declared hold (StressPlant.hold), a hover at the
+    reference's start y_d(0), and that override loads; the 1-DOF arm's is a constant at its y_d(0)."""
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.study.score import scenario_row
+
+    text = (sc.SCENARIOS_DIR / "quadrotor_lemniscate.toml").read_text().replace(
+        'payload = "quad_box"', 'payload = "quad_box"\npayload_mass = 0.01')
+    path = tmp_path / "my_quad.toml"
+    path.write_text(text)
+    hold = {t.name: t for t in scenario_row(path, 5.0).tasks}["hold"]
+    start = build(sc.load(path)).reference(0.0, 0)[0]
+    assert start[0] == 0.0 and start[2] == 1.0  # the figure-eight starts at its center
+    held = hold.overrides[-1].replace("{{", "{").replace("}}", "}")
+    assert held == "reference={kind='hover', center=[" + ", ".join(repr(float(v)) for v in start) + "]}"
+    scn = sc.load(path, overrides=[*hold.overrides[:-1], held])
+    assert scn.reference.kind == "hover" and list(build(scn).reference(3.0, 0)[0]) == list(start)
+    arm = sc.SCENARIOS_DIR / "arm_payload_swap.toml"
+    y0 = float(build(sc.load(arm)).reference(0.0, 0)[0])
+    assert {t.name: t for t in scenario_row(arm, 5.0).tasks}["hold"].overrides[-1] == (
+        f"reference={{{{kind='constant', value={y0!r}}}}}")

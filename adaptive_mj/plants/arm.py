@@ -34,7 +34,7 @@ from adaptive_mj.plants.mujoco_plant import (BodyEdits, MujocoPlant, compile_for
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, register
 from adaptive_mj.plants import sliding_study
-from adaptive_mj.plants.study_spec import Stressor, StudyContext, payload_ratio
+from adaptive_mj.plants.study_spec import Stressor, StudyContext, hold_constant, payload_ratio
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Table
@@ -208,7 +208,7 @@ KIND = register(PlantKind(
     reader=plant_keys.SharedReader(theta=theta_names),
     events={ev.PAYLOAD_MASS: "mujoco", ev.CONSTANT_FORCE: None},
     stress=StressPlant("arm", "arm_payload_swap", ("events=[]",), composite="{gain=1.0, filter=2.0}",
-                       laws=sliding_study.laws, stressors=study_stressors,
+                       laws=sliding_study.laws, stressors=study_stressors, hold=hold_constant,
                        tasks=(ScoreTask("tracking", "arm_payload_swap",
                                         ("events=[]", "law.initial_estimates={theta_half}")),
                               ScoreTask("change", "arm_payload_swap",

@@ -43,7 +43,7 @@ from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, 
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, register
 from adaptive_mj.plants import sliding_study
-from adaptive_mj.plants.study_spec import Stressor, StudyContext
+from adaptive_mj.plants.study_spec import Stressor, StudyContext, hold_constant
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
@@ -294,7 +294,7 @@ KIND = register(PlantKind(
     orders_text="2, or 3 with plant.thruster_time_constant",
     stress=StressPlant("heave", "heave_tracking", ("simulation.initial_state='reference'",),
                        disturbance=(1.0, 1000.0), composite="{gain=3e-4, filter=1.0}",
-                       laws=sliding_study.laws, stressors=study_stressors,
+                       laws=sliding_study.laws, stressors=study_stressors, hold=hold_constant,
                        tasks=(ScoreTask("tracking", "heave_tracking", ("law.initial_estimates={theta_half}",)),
                               ScoreTask("change", "heave_tracking",
                                         ("simulation.initial_state='reference'", "law.initial_estimates='model'",

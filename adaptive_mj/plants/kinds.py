@@ -95,6 +95,9 @@ class StressPlant:
     tasks: tuple[ScoreTask, ...] = ()  # the scorecard's tasks on this plant (none: not scored)
     laws: LawSet = field(kw_only=True)
     stressors: StressorSet = field(kw_only=True)
+    # score --scenario's hold task on a user's scenario of this kind: the built plant and its reference's start
+    # y_d(0) (a float, or (m,) on m joints or axes) -> the override that holds it (adaptive_mj.plants.study_spec)
+    hold: "Callable[[Any, Any], str]" = field(kw_only=True)
 
 
 @dataclass(frozen=True)

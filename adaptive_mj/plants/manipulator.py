@@ -48,8 +48,8 @@ from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compile_for_
 from adaptive_mj.plants.protocol import Policy
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, body_param_unit, register
-from adaptive_mj.plants.study_spec import (LEAK_TIME, Stressor, StudyContext, payload_ratio, sine_disturbance,
-                                           surface_noise, theta_table)
+from adaptive_mj.plants.study_spec import (LEAK_TIME, Stressor, StudyContext, hold_joints, payload_ratio,
+                                           sine_disturbance, surface_noise, theta_table)
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants import events as ev
 from adaptive_mj.keys import Key, Table
@@ -967,7 +967,7 @@ KIND = register(PlantKind(
     events={ev.PAYLOAD_MASS: "mujoco", ev.PAYLOAD_SWAP: "mujoco"}, starts_on_reference=True,
     group_params_by_unit=True, stress=StressPlant(
         "ur5e", "ur5e_identification", noise_signals=("q", "q_dot"), disturbance=(0.1, 1000.0),
-        laws=study_laws, stressors=study_stressors,
+        laws=study_laws, stressors=study_stressors, hold=hold_joints,
         label="the 6-joint arm: the RMS over its joints and the tail's rows, ‖q̃‖'s RMS / √6",
         tasks=(ScoreTask("tracking", "ur5e_identification", ()),
                ScoreTask("change", "ur5e_payload_swap",

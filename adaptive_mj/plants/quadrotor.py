@@ -30,7 +30,7 @@ import contextlib
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 import mujoco
 import numpy as np
@@ -698,6 +698,13 @@ def study_stressors(ctx: StudyContext, duration: float) -> list[Stressor]:
     return out
 
 
+def study_hold(plant: Any, start: Any) -> str:
+    """score --scenario's hold task on a quadrotor: a hover at its reference's start y_d(0) (3,) [m] (a template:
+    {{ }} is one brace, as the scorecard's tasks are written)."""
+    center = ", ".join(repr(float(v)) for v in np.asarray(start, dtype=float).reshape(3))
+    return f"reference={{{{kind='hover', center=[{center}]}}}}"
+
+
 def _payload_added(m0: float) -> Callable[[float], list[str]]:
     """The payload's mass m0 + v [kg] from PAYLOAD_AT on (a payload_mass event)."""
     return lambda v: [f"events=[{{t={PAYLOAD_AT!r}, kind='payload_mass', value={m0 + v!r}}}]"]
@@ -719,7 +726,7 @@ KIND = register(PlantKind(
     tail_bound=0.02, nominal_noise=1e-3,
     stress=StressPlant("quadrotor", "quadrotor_lemniscate", (), noise_signals=("p", "v"),
                        label="the quadrotor: the RMS over x, y and z, ‖p̃‖'s RMS / √3",
-                       laws=study_laws, stressors=study_stressors,
+                       laws=study_laws, stressors=study_stressors, hold=study_hold,
                        tasks=(ScoreTask("tracking", "quadrotor_lemniscate", ()),
                               ScoreTask("change", "quadrotor_lemniscate",
                                         ("law.initial_estimates='model'",

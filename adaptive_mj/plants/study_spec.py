@@ -122,3 +122,18 @@ def payload_ratio(m0: float, duration: float) -> Stressor:
 def surface_noise(n_axes: int, lam: float, sig: float) -> float:
     """The noise in ‖s‖, s = ė + λ e on n_axes axes, under noise σ on e and 10 σ on ė."""
     return float(np.sqrt(n_axes * ((10 * sig) ** 2 + lam**2 * sig**2)))
+
+
+def hold_constant(plant: Any, start: Any) -> str:
+    """The reference held at its start y_d(0) (a plant of one output): a constant reference (a template: {{ }} is
+    one brace, as the scorecard's tasks are written)."""
+    return f"reference={{{{kind='constant', value={float(start)!r}}}}}"
+
+
+def hold_joints(plant: Any, start: Any) -> str:
+    """Every joint held at its start y_d(0) (m,) [rad]: a joint sum of sines of zero amplitude about it (a
+    template, as hold_constant)."""
+    import json
+
+    center = ", ".join(f"{json.dumps(j)}={float(v)!r}" for j, v in zip(plant.joint_names, start, strict=True))
+    return "reference={{kind='joint_sum_of_sines', center={{" + center + "}}, amplitudes=[0.0], omegas=[1.0]}}"

@@ -29,7 +29,6 @@ from adaptive_mj.study import stress
 from adaptive_mj.study.breaking_point import Search, _file_name, search_all
 from adaptive_mj.study.job import RECORD_PREFLIGHT, Job, JobResult, crashed
 from adaptive_mj.study.sweep import to_toml
-from adaptive_mj.laws.kinds import Form
 from adaptive_mj.study.stats import CONFIDENCE, Estimate, cvar, estimate, ranks
 from adaptive_mj.trajectory import Status
 
@@ -125,9 +124,9 @@ def scenario_row(path: Path, duration: float) -> stress.Plant:
       tracking  the scenario as given (its own estimates and noise);
       change    from the estimates at the truth, under the nominal noise, its payload's mass times four at half
                 the run (plant.payload_mass; a scenario without a payload: one line);
-      hold      its reference held at its value at t = 0 (joints: every joint at its start) under the nominal
-                noise, from the estimates at the truth: any change of the estimates is drift.
-    One line for a plant kind whose reference cannot be held this way (the quadrotor's)."""
+      hold      its reference held at its value at t = 0 as its plant kind declares (StressPlant.hold: a constant,
+                every joint at its start, a hover at the start) under the nominal noise, from the estimates at the
+                truth: any change of the estimates is drift."""
     from adaptive_mj.setup.build import build
 
     path = Path(path)
@@ -136,16 +135,9 @@ def scenario_row(path: Path, duration: float) -> stress.Plant:
         raise ScenarioError(f"{path}: score's change task multiplies the payload's mass: expected plant.payload and "
                             "plant.payload_mass, got none")
     setup = build(scn)
-    start = np.asarray(setup.reference(0.0, 0), dtype=float)[0]  # y_d(0): (m,) on joints, a float else
-    kind = kinds.built_in()[scn.plant.kind]
-    if Form.RIGID_BODY in kind.forms:
-        center = ", ".join(f"{json.dumps(j)}={float(v)!r}" for j, v in zip(setup.plant.joint_names, start, strict=True))
-        held = "reference={{kind='joint_sum_of_sines', center={{" + center + "}}, amplitudes=[0.0], omegas=[1.0]}}"
-    elif np.ndim(start) == 0 and Form.AIRFRAME not in kind.forms:
-        held = f"reference={{{{kind='constant', value={float(start)!r}}}}}"
-    else:
-        raise ScenarioError(f"{path}: score's hold task holds the reference's start; expected a plant of one output "
-                            f"or of joints, got plant.kind {scn.plant.kind!r}")
+    start = np.asarray(setup.reference(0.0, 0), dtype=float)[0]  # y_d(0): (m,) on joints or axes, a float else
+    row = stress.study_row(path, scn.plant.kind)
+    held = row.hold(setup.plant, start)
     tasks = (suite.Task("tracking", str(path), (), noise_scale=0.0),
              suite.Task("change", str(path), ("law.initial_estimates='model'",
                                               "events=[{{t={half}, kind='payload_mass', value={payload_x4}}}]"),

@@ -135,12 +135,20 @@ def user_plant(path: Path, duration: float = DURATION, *, tasks: tuple = ()) -> 
     overrides of a stress run, the signals the nominal noise is on) applied to this scenario, named after the
     file. One line when the file cannot be loaded or its plant kind declares no study row."""
     scn = sc.load(path)
-    kind = kinds.built_in().get(scn.plant.kind)
+    study_row(path, scn.plant.kind)
+    kind = kinds.built_in()[scn.plant.kind]
+    return Plant(Path(path).stem, str(path), _base(kind, duration), kind.name, tasks)
+
+
+def study_row(path: Path, kind_name: str) -> kinds.StressPlant:
+    """What plant kind `kind_name` (of the scenario file at `path`) declares for the studies (PlantKind.stress);
+    one line naming the file when it declares nothing."""
+    kind = kinds.built_in().get(kind_name)
     if kind is None or kind.stress is None:
         scored = sorted(k.name for k in kinds.built_in().values() if k.stress is not None)
-        raise ScenarioError(f"{path}: plant.kind {scn.plant.kind!r} declares no study row (PlantKind.stress: its "
+        raise ScenarioError(f"{path}: plant.kind {kind_name!r} declares no study row (PlantKind.stress: its "
                             f"laws, stressors and failure bound); expected a scenario of one of {', '.join(scored)}")
-    return Plant(Path(path).stem, str(path), _base(kind, duration), kind.name, tasks)
+    return kind.stress
 
 
 def continuous_only(p: Plant, overrides: tuple[str, ...]) -> bool:
