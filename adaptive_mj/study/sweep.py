@@ -290,7 +290,7 @@ class PointStats:
     """One grid point's metric over its seeds: mean, min, max, and n_ok of n runs. basis: the runs the numbers
     are of: "ok" (the seeds whose run is ok), or "failed" where no ok seed has a value and some run that
     completed but missed its [success] criteria does (status failed: its metrics are whole; a diverged run's
-    are not); n_basis: how many runs that is (0: NaN, no run has a value)."""
+    are not; a crashed run's count too, FAILED_BASIS); n_basis: how many runs that is (0: NaN, no run has a value)."""
 
     point: dict[str, Any]
     mean: float
