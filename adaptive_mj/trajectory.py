@@ -8,21 +8,44 @@ import numpy as np
 
 
 class Status(enum.StrEnum):
-    """A run's verdict (and a study row's outcome), a closed set. A StrEnum: equal to its text, which is what
-    logs, JSON summaries and CSV rows hold, so older logs and rows compare as before.
+    """A run's verdict (and a study row's outcome), a closed set: every way a run ends is one of these. A StrEnum:
+    equal to its text, which is what logs, JSON summaries and CSV rows hold, so older logs and rows compare as before.
 
     OK: completed and met its [success] criteria; FAILED: completed (or stopped by an error) without them;
-    DIVERGED: stopped at a non-finite or out-of-bound value or a MuJoCo instability (reason says which);
-    INTERRUPTED: stopped by a signal or by reset/close; TRUNCATED: a log never closed (replay recovered its
-    rows); ERROR / REFUSED: a study row whose run could not start / whose pre-flight check refused it."""
+    CRASHED: the vehicle hit the ground or tipped over (a quadrotor: plants.quadrotor.crash_check), the run cut
+    short there, its reason saying when and how ("crashed at t = … s: …"; before log format 9 such a run closed as
+    FAILED with that reason, which replay reads as CRASHED: `ending`); DIVERGED: stopped at a non-finite or
+    out-of-bound value or a MuJoCo instability (reason says which); INTERRUPTED: stopped by a signal or by
+    reset/close; TRUNCATED: a log never closed (replay recovered its rows); NOT_RUN: a study's row that was not
+    run, its reason saying why. ERROR / REFUSED: a study row whose run could not start / whose pre-flight check
+    refused it (kept as they are, so older rows read as before: both are rows not run, for those two reasons).
+
+    A run *completed* (ran to its end, every row there) when it is OK or FAILED; every other ending is a failure
+    of the run whatever its figures (CLI exit codes and studies count CRASHED as they count FAILED)."""
 
     OK = "ok"
     FAILED = "failed"
+    CRASHED = "crashed"
     DIVERGED = "diverged"
     INTERRUPTED = "interrupted"
     TRUNCATED = "truncated"
+    NOT_RUN = "not run"
     ERROR = "error"
     REFUSED = "refused"
+
+
+#: How a crash's reason begins (plants.quadrotor.crash_text): "crashed at t = … s: …". Logs before format 9 closed a
+#: crash as "failed" with such a reason; `ending` reads them as CRASHED.
+CRASH_REASON_PREFIX = "crashed at"
+
+
+def ending(status: str, reason: str) -> Status:
+    """The Status of a run that ended with `status` and `reason`, as this version names it: a "failed" run whose
+    reason is a crash's (CRASH_REASON_PREFIX, as logs and rows written before Status.CRASHED have it) is CRASHED;
+    any other status is itself."""
+    if status == Status.FAILED and str(reason).startswith(CRASH_REASON_PREFIX):
+        return Status.CRASHED
+    return Status(status)
 
 
 @dataclass(frozen=True)
@@ -42,7 +65,7 @@ class Trajectory:
     joint_names: () for a 1-DOF plant (scalar y and u), else the m joint names
     control_names: the k actuators' names where they are not one per joint (a quadrotor's 4 rotors on its 3
        position axes: u is then (N, k)); () when u has one entry per joint (`actuators`)
-    status: a Status: OK, DIVERGED, INTERRUPTED, FAILED or TRUNCATED
+    status: a Status: OK, FAILED, CRASHED, DIVERGED, INTERRUPTED or TRUNCATED
     """
 
     t: np.ndarray

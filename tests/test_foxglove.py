@@ -14,6 +14,7 @@ import pytest
 from mcap.reader import make_reader
 
 from adaptive_mj.cli import main
+from adaptive_mj.log import record
 
 REPO = Path(__file__).resolve().parents[1]
 LAYOUT = REPO / "docs" / "foxglove_layout.json"
@@ -223,7 +224,7 @@ def test_typescript_mcap_reader_counts_the_same_messages(logs, plant):
     assert {k: v for k, v in read.items() if v} == stats
     assert ts["json_errors"] == 0 and ts["cdr_errors"] == 0 and ts["ros2msg_bad_names"] == []
     assert ts["cdr_decoded"] == read["/row"] == 30  # every row message decoded by its nested ros2msg schema
-    assert ts["library"].startswith("adaptive_mj log format 8")
+    assert ts["library"].startswith(f"adaptive_mj log format {record.LOG_FORMAT_VERSION}")
     assert set(read) == {"/row", "/events", "/summary"}
     assert read["/summary"] == 1 and read["/events"] == (1 if plant == "arm" else 0)
     assert ts["schemas"]["/row"] == ["adaptive_mj/msg/Row", "ros2msg", "cdr"]

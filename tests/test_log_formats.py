@@ -1,7 +1,8 @@
 """Formats are promises: logs written in format 1 (by adaptive-mj before multi-joint runs), format 2
 (before law plugins), format 3 (before sampled-data control), format 4 (before the verdict's limits
 and the embedded model's hash), format 5, format 6 (JSON rows, before CDR) and format 7 (six CDR row topics,
-before the one /row topic of format 8) still read and replay bit for bit; the CDR (format 8) and JSON (format 6)
+before the one /row topic of format 8) and format 8 (before a crash closed as "crashed", format 9) still read and
+replay bit for bit; the CDR (format 8) and JSON (format 6)
 encodings of one run read back the same; a multi-joint run round-trips; an altered embedded model is refused on
 read."""
 from __future__ import annotations
@@ -18,6 +19,7 @@ from adaptive_mj.setup import scenario
 from adaptive_mj.cli import main
 from adaptive_mj.log.replay import read_log
 from adaptive_mj.sim.runner import execute
+from adaptive_mj.trajectory import Status
 
 DATA = Path(__file__).parent / "data"
 OTHER_MACHINE = "verify: MISMATCH before the first step"
@@ -136,13 +138,59 @@ def test_cdr_and_json_encodings_of_one_run_give_the_same_trajectory(tmp_path, na
         runs[encoding] = read_log(path)
         assert "verify: bit-identical" in _verify(path, capsys)
     cdr, js = runs["cdr"], runs["json"]
-    assert (cdr.header["log_format_version"], js.header["log_format_version"]) == (8, 6)
+    assert (cdr.header["log_format_version"], js.header["log_format_version"]) == (9, 6)
     assert cdr.header["encoding"] == "cdr" and "encoding" not in js.header
     for field in ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V"):
         a, b = getattr(cdr.trajectory, field), getattr(js.trajectory, field)
         assert a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes(), field
     assert cdr.trajectory.meta == js.trajectory.meta and cdr.events == js.events
     assert cdr.summary == js.summary and cdr.status == js.status
+
+
+def _closed_with(path: Path) -> tuple[str, str]:
+    """(status, reason) as the file itself holds them (its "status" metadata), not as read_log names them."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        (meta,) = [m.metadata for m in make_reader(f).iter_metadata() if m.name == record.STATUS_METADATA]
+    return meta["status"], meta["reason"]
+
+
+def test_a_format8_crash_closed_as_failed_reads_as_crashed_and_verifies(capsys):
+    """Written by adaptive-mj before format 9 (a quadrotor too heavy to fly, 2 s, Python callback, rows at 50 Hz): the
+    crash closed the log as "failed" with the reason "crashed at t = …"; read back, the run is "crashed" (its
+    trajectory, its summary), replay's exit code is a failure's, and it re-simulates bit for bit (as "crashed")."""
+    path = DATA / "quadrotor_crash_format8.mcap"
+    status, reason = _closed_with(path)
+    assert status == "failed" and reason.startswith("crashed at t = 0.744 s: hit the ground")
+    run = read_log(path)
+    assert run.header["log_format_version"] == 8 < record.LOG_FORMAT_VERSION
+    assert run.status == run.trajectory.status == run.summary["status"] == Status.CRASHED
+    assert run.trajectory.reason == run.summary["reason"] == reason and len(run.trajectory) == 38
+    assert main(["replay", str(path), "--verify"]) == 1  # bit-identical, and the run it re-ran crashed again
+    out = capsys.readouterr().out
+    if OTHER_MACHINE in out:
+        pytest.skip(out.strip().splitlines()[-1])
+    assert "verify: bit-identical" in out and "crashed" in out
+
+
+def test_a_crash_closes_as_crashed_in_format9_and_as_failed_in_the_json_encoding(tmp_path):
+    """The same crash logged in CDR (format 9: status "crashed") and in JSON (format 6, byte for byte in kind: "failed"
+    with the crash's reason, as every format-6 reader expects): both read back as "crashed", with the same summary."""
+    runs = {}
+    for encoding in ("cdr", "json"):
+        scn = scenario.load(scenario.SCENARIOS_DIR / "quadrotor_lemniscate.toml",
+                            overrides=["plant.payload_mass=0.05", "simulation.duration=2", "log.rate_hz=50",
+                                       "simulation.python_callback=true", f"log.encoding={encoding!r}"])
+        path = tmp_path / f"{encoding}.mcap"
+        live = execute(scn, log_path=path)
+        assert live.status == Status.CRASHED and live.summary["reason"].startswith("crashed at t = ")
+        runs[encoding] = read_log(path), _closed_with(path)
+    (cdr, cdr_closed), (js, js_closed) = runs["cdr"], runs["json"]
+    assert (cdr.header["log_format_version"], js.header["log_format_version"]) == (9, 6)
+    assert cdr_closed[0] == "crashed" and js_closed[0] == "failed" and cdr_closed[1] == js_closed[1]
+    assert cdr.status == js.status == Status.CRASHED and cdr.summary == js.summary
+    assert cdr.summary["status"] == "crashed"
 
 
 def test_format5_and_later_headers_record_control_limits_and_the_embedded_hash(tmp_path):
@@ -217,7 +265,7 @@ def test_multi_joint_log_round_trips(tmp_path):
     path = tmp_path / "arm.mcap"
     live = execute(scn, log_path=path).trajectory
     run = read_log(path)
-    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 8
+    assert run.header["log_format_version"] == record.LOG_FORMAT_VERSION == 9
     assert run.header["joint_names"] == list(live.joint_names) and len(live.joint_names) == 6
     tr = run.trajectory
     every = run.header["log_every"]

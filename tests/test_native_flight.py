@@ -62,7 +62,7 @@ def test_the_compiled_callback_gives_the_python_path_s_rows_bit_for_bit(case):
         a, b = getattr(py.trajectory, field), getattr(nat.trajectory, field)
         assert a.shape == b.shape and np.array_equal(a, b), field
     if case in ("crash mid-chunk", "crash under sampled control", "tilt crash"):
-        assert nat.summary["status"] == "failed" and nat.summary["reason"].startswith("crashed at t = ")
+        assert nat.summary["status"] == "crashed" and nat.summary["reason"].startswith("crashed at t = ")
     if case == "divergence before a crash":  # the state bound is passed on the way down, before the ground
         assert nat.summary["status"] == "diverged" and "beyond the bound 1.3" in nat.summary["reason"]
 

@@ -19,6 +19,7 @@ from adaptive_mj.plants.quadrotor import rigid_inertia
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
 from adaptive_mj.study.api import run_scenario
+from adaptive_mj.trajectory import Status
 
 G = 9.81
 M_BARE, M_PAYLOAD = 0.03, 0.01
@@ -69,10 +70,11 @@ def test_the_released_payload_is_recovered_from():
     assert ("payload released: payload/body" in label for _, label in res.trajectory.meta["events"])
 
 
-def test_a_vehicle_too_heavy_to_fly_crashes_and_the_run_ends_failed():
-    """50 g on a vehicle that lifts 58.6 g in all (4 T_max/g) with its 30 g: it falls from 1 m and hits the ground."""
+def test_a_vehicle_too_heavy_to_fly_crashes_and_the_run_ends_crashed():
+    """50 g on a vehicle that lifts 58.6 g in all (4 T_max/g) with its 30 g: it falls from 1 m and hits the ground;
+    the run ends with status "crashed" (not "ok": the command's exit code is a failure's)."""
     res = run_scenario("quadrotor_lemniscate", set=["plant.payload_mass=0.05", "simulation.duration=5"])
-    assert res.status == "failed"
+    assert res.status == "crashed" == Status.CRASHED and not res.ok
     reason = res.summary["reason"]
     assert reason.startswith("crashed at t = ") and "hit the ground at" in reason, reason
     assert res.trajectory.t[-1] < 1.5  # it ended at the crash, not at 5 s
@@ -109,7 +111,7 @@ def test_a_payload_on_a_cable_cannot_be_released_and_other_front_ends_say_what_t
 def test_a_tilt_past_the_bound_is_a_crash():
     res = run_scenario("quadrotor_rotor_loss", set=["plant.crash_tilt=2", "simulation.duration=3",
                                                     "events=[{t=0.5, kind='rotor_efficiency', rotor=1, value=0.7}]"])
-    assert res.status == "failed" and "past plant.crash_tilt = 2 deg" in res.summary["reason"]
+    assert res.status == "crashed" and "past plant.crash_tilt = 2 deg" in res.summary["reason"]
 
 
 def test_the_log_names_rotors_and_state_rows_and_replays_bit_identically(tmp_path, capsys):
@@ -117,7 +119,7 @@ def test_the_log_names_rotors_and_state_rows_and_replays_bit_identically(tmp_pat
     gust = "events=[{t=0.5, kind='wind', velocity=[2.0, 0, 0]}, {t=1.5, kind='wind', velocity=[0, 0, 0]}]"
     res = run_scenario("quadrotor_wind_gust", set=["simulation.duration=2", gust], log=path)
     run = read_log(path)
-    assert run.header["log_format_version"] == LOG_FORMAT_VERSION  # 8: one /row message a row; names since 6
+    assert run.header["log_format_version"] == LOG_FORMAT_VERSION  # 9 (rows: one /row message a row); names since 6
     assert run.header["control_names"] == ["rotor1", "rotor2", "rotor3", "rotor4"]
     assert run.header["state_names"] == ["p", "v", "phi", "omega"]
     assert run.trajectory.u.shape == (len(run.trajectory), 4) and run.trajectory.x.shape[1:] == (4, 3)

@@ -9,8 +9,9 @@ from pathlib import Path
 import pytest
 
 from adaptive_mj.study import api, stress
-from adaptive_mj.study.breaking_point import TAIL_BOUND, passes
+from adaptive_mj.study.breaking_point import TAIL_BOUND
 from adaptive_mj.study.job import Job, JobResult
+from adaptive_mj.study.outcome import RunOutcome, passes
 from adaptive_mj.trajectory import Status
 
 
@@ -41,11 +42,18 @@ def test_the_quadrotor_row_has_the_flight_laws_and_disturbances_derived_from_its
 
 
 def test_a_crashed_run_fails_whatever_its_tail_error():
+    """A crash (status "crashed", or an older row's "failed" with a crash's reason) fails whatever its figures."""
     job = Job(Path("x.toml"))
     summary = {"status": "failed", "reason": "", "metrics": {"rms_tracking_error_tail": 0.001}}
-    assert passes(JobResult(job, Status.FAILED, summary), TAIL_BOUND["quadrotor"])
-    crashed = {**summary, "reason": "crashed at t = 1.2 s: tilted 85.0 deg, past plant.crash_tilt = 80 deg"}
-    assert not passes(JobResult(job, Status.FAILED, crashed), TAIL_BOUND["quadrotor"])
+    assert passes(JobResult(job, Status.FAILED, summary), tail_bound=TAIL_BOUND["quadrotor"])
+    reason = "crashed at t = 1.2 s: tilted 85.0 deg, past plant.crash_tilt = 80 deg"
+    crashed = {**summary, "status": "crashed", "reason": reason}
+    older = {**summary, "reason": reason}
+    for r in (JobResult(job, Status.CRASHED, crashed), JobResult(job, Status.FAILED, older)):
+        run = RunOutcome.of(r)
+        assert run.crashed and not run.completed and run.status == Status.CRASHED
+        assert run.tail_error == math.inf  # the tail of a run cut short is not the run's
+        assert not passes(r) and not passes(r, tail_bound=TAIL_BOUND["quadrotor"])
 
 
 @pytest.fixture(scope="module")
@@ -74,8 +82,8 @@ def test_the_scorecard_ranks_the_adaptive_law_above_the_geometric_baseline_on_th
     assert math.isfinite(card.figure("quadrotor", "l1_geometric", "robustness").mean)
     # the card lists what it did not run, and why: the same rule for every law
     (left,) = card.data["runs"]["not_run"]
-    assert (left["plant"], left["law"], left["stressor"], left["seeds"]) == ("quadrotor", "l1_geometric",
-                                                                             "control period", 2)
+    assert (left["plant"], left["law"], left["stressor"], left["seeds"], left["status"]) == (
+        "quadrotor", "l1_geometric", "control period", 2, Status.NOT_RUN)
     assert "Not run: 1 searches of 2 seeds each (quadrotor/l1_geometric: control period): a law with filters" in \
         (card.out / "scorecard.md").read_text()
 

@@ -59,13 +59,19 @@ from adaptive_mj.trajectory import Status
 # 8: the six CDR row topics become one topic /row, one message a row (ROW_TOPIC: float64 t, then the six parts as
 #    nested ros2msg sub-messages of float64 fields; field names lower-case, as ROS 2 and Foxglove require): a
 #    sixth of the messages, so a sixth of the MCAP message index (16 bytes a message).
-LOG_FORMAT_VERSION = 8  # 2: joint_names/notes, per-joint fields (1: 1-DOF only)
+# 9: a run may close as "crashed" (Status.CRASHED: the vehicle hit the ground or tipped over), in /summary, the
+#    "status" metadata and the Summary schema's enum; formats 1 to 8 closed a crash as "failed" with the reason
+#    "crashed at t = …", which replay reads as crashed. The rows are format 8's. log.encoding = "json" still
+#    writes 6, byte for byte in kind: a crash closes there as "failed" with that reason (status_written).
+LOG_FORMAT_VERSION = 9  # 2: joint_names/notes, per-joint fields (1: 1-DOF only)
 
 #: The row encodings a Recorder writes (LogHeader.encoding, the scenario's log.encoding): "cdr" (format 8, the
 #: default) or "json" (JSON text, written exactly as format 6, which every reader of format 6 reads).
 ENCODINGS = ("cdr", "json")
 #: The format version log.encoding = "json" writes: its layout is format 6's, byte for byte in kind.
 JSON_LOG_FORMAT_VERSION = 6
+#: The first format whose logs may close as "crashed" (before: "failed", the reason "crashed at t = …").
+CRASHED_SINCE_VERSION = 9
 #: A CDR payload's encapsulation header: CDR_LE (plain CDR, little-endian), options 0.
 CDR_HEADER = b"\x00\x01\x00\x00"
 
@@ -90,7 +96,19 @@ def _finite_or_null(rows):
 
 
 #: Statuses a run can be closed with (replay adds "truncated" for a log that was never closed).
-CLOSE_STATUSES = (Status.OK, Status.DIVERGED, Status.INTERRUPTED, Status.FAILED)
+CLOSE_STATUSES = (Status.OK, Status.DIVERGED, Status.INTERRUPTED, Status.FAILED, Status.CRASHED)
+
+
+def close_statuses(version: int) -> tuple[Status, ...]:
+    """The statuses a log of format `version` closes with: CLOSE_STATUSES, less "crashed" before format 9."""
+    return CLOSE_STATUSES if version >= CRASHED_SINCE_VERSION else tuple(s for s in CLOSE_STATUSES
+                                                                        if s != Status.CRASHED)
+
+
+def status_written(status: str, version: int) -> Status:
+    """The status a log of format `version` records for a run that ended with `status`: "crashed" is "failed"
+    before format 9 (its reason, "crashed at t = …", says it crashed; trajectory.ending reads it back)."""
+    return Status.FAILED if status == Status.CRASHED and version < CRASHED_SINCE_VERSION else Status(status)
 
 #: Topics that make up one logged row in formats 1 to 7 (and log.encoding = "json"), in the order they are written.
 ROW_TOPICS = ("/state", "/reference", "/control", "/estimates", "/true_params", "/lyapunov")
@@ -291,8 +309,9 @@ def _row_schema(title: str, description: str, fields: Mapping[str, str]) -> dict
 
 
 def _schemas(order: int, names: tuple[str, ...], joint_names: tuple[str, ...] = (),
-             control_names: tuple[str, ...] = (), state_names: tuple[str, ...] = ()) -> dict[str, tuple[str, dict]]:
-    """topic -> (schema name, JSON Schema)."""
+             control_names: tuple[str, ...] = (), state_names: tuple[str, ...] = (),
+             statuses: tuple[Status, ...] = CLOSE_STATUSES) -> dict[str, tuple[str, dict]]:
+    """topic -> (schema name, JSON Schema); statuses: those /summary's status may hold (close_statuses)."""
     state = {n: f"output derivative {j} (y in m or rad)" for j, n in enumerate(state_fields(order))}
     ref = {n: f"reference derivative {j}" for j, n in enumerate(reference_fields(order))}
     control = {"u": "applied control after saturation [N or N*m]",
@@ -339,7 +358,7 @@ def _schemas(order: int, names: tuple[str, ...], joint_names: tuple[str, ...] = 
             "title": "Summary",
             "description": "the run's summary metrics, with its final status and reason",
             "type": "object",
-            "properties": {"status": {"type": "string", "enum": list(CLOSE_STATUSES)},
+            "properties": {"status": {"type": "string", "enum": list(statuses)},
                            "reason": {"type": "string"}},
             "required": ["status", "reason"],
             "additionalProperties": True,
@@ -535,7 +554,8 @@ class Recorder:
         h = self.header
         self._channels: dict[str, int] = {}
         cdr = self.encoding == "cdr"
-        schemas = _schemas(self.order, self.names, self.joint_names, self.control_names, self.state_names)
+        schemas = _schemas(self.order, self.names, self.joint_names, self.control_names, self.state_names,
+                           close_statuses(self.format_version))
         fields = row_fields(self.order, self.names, self.joint_names, self.control_names, self.state_names)
         if cdr:  # format 8: the six row topics' parts in one /row message
             schema_id = self._writer.register_schema(ROW_SCHEMA_NAME, "ros2msg", _ros2msg_row(schemas))
@@ -745,7 +765,8 @@ class Recorder:
     def close(self, status: str, reason: str = "",
               summary: Mapping[str, Any] | None = None) -> None:
         """Write /summary ({...summary, status, reason}) and the "status" metadata,
-        then finish the file (summary section and footer). status: one of CLOSE_STATUSES."""
+        then finish the file (summary section and footer). status: one of CLOSE_STATUSES ("crashed" is written
+        "failed" in a format before 9, the JSON encoding's: status_written; the reason must then say it crashed)."""
         self._check_open()
         if status not in CLOSE_STATUSES:
             raise ValueError(f"close: status must be one of {CLOSE_STATUSES}, got {status!r}")
@@ -755,6 +776,7 @@ class Recorder:
                 raise ValueError(f"close: summary[{key!r}] = {payload[key]!r} disagrees with "
                                  f"the {key} argument {value!r}")
             payload[key] = value
+        payload["status"] = status = str(status_written(status, self.format_version))
         ns = _ns(self._t_last)
         self._writer.add_message(self._channels[SUMMARY_TOPIC], ns, _dumps(payload), ns)
         self._writer.flush()

@@ -28,7 +28,7 @@ from adaptive_mj.errors import LogFormatError
 from adaptive_mj.log.record import (
     ASSET_ATTACHMENT_PREFIX,
     CDR_HEADER,
-    CLOSE_STATUSES,
+    CRASHED_SINCE_VERSION,
     EVENT_TOPIC,
     HEADER_METADATA,
     LOG_FORMAT_VERSION,
@@ -43,9 +43,10 @@ from adaptive_mj.log.record import (
     STATUS_METADATA,
     SUMMARY_TOPIC,
     VERSION_KEY_PREFIX,
+    close_statuses,
     row_fields,
 )
-from adaptive_mj.trajectory import Status, Trajectory
+from adaptive_mj.trajectory import Status, Trajectory, ending
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 # Footer record: opcode, record length, summary_start, summary_offset_start, summary CRC.
@@ -70,8 +71,9 @@ class LoggedRun:
     param_names/overrides as lists, versions as a dict under "versions").
     trajectory: rows at the logging rate (every log_every-th physics step).
     events: the /events payloads, in order; summary: the /summary payload
-    (None when status is "truncated": the rows do not cover the whole run).
-    status: "ok", "diverged", "interrupted", "failed", or "truncated" when
+    (None when status is "truncated": the rows do not cover the whole run; a log before format 9 that closed a
+    crash as "failed", "crashed at t = …", reads with status "crashed", here and in `status`).
+    status: "ok", "failed", "crashed", "diverged", "interrupted", or "truncated" when
     the rows are a recovered prefix (the run never closed its log, or part of
     the file is damaged); note says what was recovered ("" for a whole log).
     damaged: part of the file is corrupt (a chunk failing its CRC, an unreadable
@@ -158,7 +160,10 @@ def _read(name: str, data: bytes) -> LoggedRun:
     times, cols, events, summary = _rows(name, scan.messages, order, names, joints, controls, states,
                                          encodings=scan.encodings)
     n_rows = len(times)
-    status, reason, note = _final_status(name, scan, summary, n_rows, span=n_rows * log_every * dt)
+    status, reason, note = _final_status(name, scan, summary, n_rows, span=n_rows * log_every * dt,
+                                         version=header["log_format_version"])
+    if summary is not None and status == Status.CRASHED:  # an older log's "failed": the crash it was
+        summary = {**summary, "status": str(status)}
 
     event_list = [(_number(e.get("t"), name, EVENT_TOPIC, "t"), str(e.get("label", "")))
                   for e in events]
@@ -341,9 +346,10 @@ def _cdr_rows(raws: list[bytes], width: int, name: str, topic: str, detail: str 
 
 
 def _final_status(name: str, scan: _Scan, summary: dict | None, n_rows: int,
-                  *, span: float) -> tuple[Status, str, str]:
-    """(status, reason, note): the run's own status when its rows are all there,
-    else "truncated" with a note saying what was recovered (span [s])."""
+                  *, span: float, version: int) -> tuple[Status, str, str]:
+    """(status, reason, note): the run's own status when its rows are all there (as this version names it: a
+    crash that a log before format 9 closed as "failed" is "crashed"), else "truncated" with a note saying what
+    was recovered (span [s])."""
     if scan.damaged:
         if n_rows == 0:
             raise LogFormatError(f"{name}: {scan.problem}, and no whole row precedes it; "
@@ -358,14 +364,15 @@ def _final_status(name: str, scan: _Scan, summary: dict | None, n_rows: int,
         cause = scan.problem or "the log has no final status"
         note = f"recovered {n_rows} rows ({span:.1f} s) of a truncated log ({cause})"
         return Status.TRUNCATED, note, note
-    status = final.get("status")
-    if status not in CLOSE_STATUSES:
+    status, allowed = final.get("status"), close_statuses(version)
+    if status not in allowed:
         raise LogFormatError(f"{name}: final status is {status!r}, expected one of "
-                             f"{CLOSE_STATUSES}")
+                             f"{allowed}")
     # /summary is written after the last row, so its presence means no row is missing.
     note = "" if scan.complete else (
         f"all {n_rows} rows ({span:.1f} s) read; the footer is missing ({scan.problem})")
-    return Status(status), str(final.get("reason", "")), note
+    reason = str(final.get("reason", ""))
+    return (ending(status, reason) if version < CRASHED_SINCE_VERSION else Status(status)), reason, note
 
 
 # -- the two ways through the file ----------------------------------------------------------

@@ -38,8 +38,8 @@ Optional, read where present (getattr: control_shape, termination below; a plant
                3 position axes; u is then (k,)) [(): u is shaped like joint_shape]
   state_names  a name per row of x where the rows are not the output's derivatives (a quadrotor's x is
                [p; v; φ; Ω]: the log names its fields by them) [(): y, y', ...]
-  termination()  text of why the run must end now as failed (a quadrotor's crash), or None; asked after
-               every physics step [None]
+  termination()  text of why the run must end now because the vehicle crashed (a quadrotor: "crashed at t = …"),
+               or None; asked after every physics step; the run ends with status "crashed" [None]
 
 `FormPlant`, a 1-DOF plant or twin (joint_shape ()):
   form         the ModelForm d y^(n) = f(x) + φ(x)ᵀp + h(x) u the 1-DOF laws are built on

@@ -17,11 +17,11 @@ How the loop sees it (the plant protocol, adaptive_mj.plants.protocol):
               frame: the same at level flight)
               Every number comes from the compiled model (`truth`), none is typed.
 
-A crash ends the run failed (`termination`, asked after every physics step; `crash_check`): the vehicle down to
-its ground clearance (the height at which it would rest level on the ground with its payload) after it has been
-airborne (AIRBORNE_RISE above where it started), its centre below the ground plane, or a tilt past
-plant.crash_tilt. The check reads the body's height and attitude only (no contact list), so the compiled
-callback makes the same one. Its events (wind, a rotor's efficiency, an external force, a
+A crash ends the run with status "crashed" (Status.CRASHED; `termination`, asked after every physics step;
+`crash_check`): the vehicle down to its ground clearance (the height at which it would rest level on the ground
+with its payload) after it has been airborne (AIRBORNE_RISE above where it started), its centre below the ground
+plane, or a tilt past plant.crash_tilt. The check reads the body's height and attitude only (no contact list), so
+the compiled callback makes the same one. Its events (wind, a rotor's efficiency, an external force, a
 payload released) are below.
 """
 from __future__ import annotations
@@ -47,6 +47,7 @@ from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, register
 from adaptive_mj.plants.study_spec import LEAK_TIME, Stressor, StudyContext, box_table, surface_noise, theta_table
 from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compiled_control, control_callback, new_warnings,
                                              release_data, run_data, scratch_data)
+from adaptive_mj.trajectory import CRASH_REASON_PREFIX
 
 MODEL_PATH = MODELS / "quadrotor.xml"
 BODY = "quad"  # the flying body's name in the model
@@ -126,13 +127,15 @@ def crash_check(z, qw, qx, qy, qz, airborne, z0, clearance, cos_tilt):
 
 
 def crash_text(code: int, value: float, t: float, crash_tilt: float, speed: float) -> str:
-    """The reason a crash gives (crash_check's code and value at time t [s]; speed [m/s] the body's)."""
+    """The reason a crash gives (crash_check's code and value at time t [s]; speed [m/s] the body's): "crashed at
+    t = … s: …" (trajectory.CRASH_REASON_PREFIX, which replay reads older logs' crashes by)."""
+    when = f"{CRASH_REASON_PREFIX} t = {t:.4g} s"
     if code == CRASH_TILT_CODE:
         tilt = math.degrees(math.acos(max(-1.0, min(1.0, value))))
-        return f"crashed at t = {t:.4g} s: tilted {tilt:.1f} deg, past plant.crash_tilt = {crash_tilt:g} deg"
+        return f"{when}: tilted {tilt:.1f} deg, past plant.crash_tilt = {crash_tilt:g} deg"
     if code == CRASH_BELOW:
-        return f"crashed at t = {t:.4g} s: the body's centre is {-value:.3g} m below the ground plane"
-    return f"crashed at t = {t:.4g} s: hit the ground at {speed:.3g} m/s (its centre {value:.3g} m up)"
+        return f"{when}: the body's centre is {-value:.3g} m below the ground plane"
+    return f"{when}: hit the ground at {speed:.3g} m/s (its centre {value:.3g} m up)"
 
 
 def ground_clearance(model: mujoco.MjModel, root: int) -> float:
@@ -203,7 +206,7 @@ def rigid_inertia(model: mujoco.MjModel, root: int) -> tuple[float, np.ndarray, 
 @dataclass(frozen=True)
 class QuadrotorSpec:
     """plant.* keys of kind "quadrotor" beyond the shared ones: crash_tilt [deg], the tilt past which the run ends
-    failed; rotor_time_constant τ [s] of a first-order lag on every rotor's thrust that the laws do not model
+    crashed; rotor_time_constant τ [s] of a first-order lag on every rotor's thrust that the laws do not model
     (None: none); wind (3,) [m/s] the air's velocity from t = 0 (None: the model's)."""
 
     crash_tilt: float = CRASH_TILT_DEG
@@ -338,7 +341,7 @@ class QuadrotorPlant(ModelClock, BodyEdits):
         mujoco.mj_step(self.model, self.data, nstep=nstep)
 
     def termination(self) -> str | None:
-        """The crash that ends the run as failed ("crashed at t = … s: …"), or None."""
+        """The crash that ends the run as crashed (Status.CRASHED; "crashed at t = … s: …"), or None."""
         return self._crash
 
     def unmodelled_drag(self) -> float | None:
@@ -506,7 +509,7 @@ def _own_keys(t, fields) -> dict:
 
 
 CRASH_TILT = Key("crash_tilt", "number", "deg", CRASH_TILT_DEG, "(0, 180]",
-                 "the tilt past which the run ends failed (a crash)")
+                 "the tilt past which the run ends crashed")
 ROTOR_TIME_CONSTANT = Key("rotor_time_constant", "number", "s", None, "> 0",
                           "a first-order lag on every rotor's thrust, unknown to the laws (default: none)")
 WIND = Key("wind", "array [x, y, z]", "m/s", None, "3 numbers", "the air's velocity from t = 0 (default: the model's)")

@@ -352,8 +352,9 @@ def run(plant: Plant, law: Law, reference, *, duration: float, theta_hat0: Seque
 
     Returns a Trajectory with one row per physics step (the state at the step's start and what was
     applied during it). A run that diverges stops at that step with status "diverged" and the
-    reason. A KeyboardInterrupt (SIGINT, or SIGTERM through the CLI) first hands the sink every
-    whole row, then comes out as errors.Interrupted carrying them (status "interrupted").
+    reason; one whose plant crashed (its termination(): a quadrotor) stops there with status "crashed".
+    A KeyboardInterrupt (SIGINT, or SIGTERM through the CLI) first hands the sink every whole row, then
+    comes out as errors.Interrupted carrying them (status "interrupted").
     """
     r = prepare(plant, law, reference, duration=duration, theta_hat0=theta_hat0, noise_std=noise_std, rng=rng,
                 events=events, state_bound=state_bound, sink=sink, sink_every=sink_every, native=native,
@@ -444,7 +445,7 @@ def _run_python(plant: Plant, step: ControlStep, rows: Rows) -> tuple[Status, st
                 return Status.DIVERGED, row.reason
             ended = termination(plant)
             if ended:
-                return Status.FAILED, ended
+                return Status.CRASHED, ended
     return Status.OK, ""
 
 
@@ -494,7 +495,7 @@ def native_steps(plant: Plant, nc: ContextOwner, rows: Rows, queue: EventQueue, 
             t, x, u, s, ref, th = block
             bad, why = _first_bad(x[1:keep + 1], u[:keep], th[1:keep + 1], state_bound)
             rows.put_block(tuple(a[:keep] for a in block), theta_now, keep if bad is None else bad)
-            return (Status.FAILED, reason) if bad is None else (Status.DIVERGED, why)
+            return (Status.CRASHED, reason) if bad is None else (Status.DIVERGED, why)
         block = nc.finish(n)
         bad, reason = first_divergence(plant, block[1], block[2], block[5], nc.theta, state_bound)
         rows.put_block(block, theta_now, n if bad is None else bad, mass=nc.mass_rows(n))
@@ -503,7 +504,7 @@ def native_steps(plant: Plant, nc: ContextOwner, rows: Rows, queue: EventQueue, 
         nc.end_of_chunk()
         ended = termination(plant)
         if ended:
-            return Status.FAILED, ended
+            return Status.CRASHED, ended
     return Status.OK, ""
 
 

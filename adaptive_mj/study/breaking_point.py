@@ -46,8 +46,8 @@ from adaptive_mj.plants import kinds
 from adaptive_mj.plants.study_spec import Stressor, whole_steps
 from adaptive_mj.study import callable_module
 from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
-from adaptive_mj.study.job import RECORD_PREFLIGHT, crashed, predicted_unstable
-from adaptive_mj.trajectory import Status
+from adaptive_mj.study.job import RECORD_PREFLIGHT
+from adaptive_mj.study.outcome import RunOutcome, passes
 
 CVAR_LEVEL = 0.10  # the worst 10 % of seeds
 # [m], [rad]: the stress study's failure bound on the tail RMS error (the 6-joint arm: RMS over its joints)
@@ -71,8 +71,9 @@ TAIL_BOUND = {name: kind_number(kind, "tail_bound") for name, kind in STRESS_PLA
 class Search:
     """One breaking-point search: scenario file, fixed overrides (the law), the stressor, and what passes.
 
-    A run passes when it completed without a crash and its tail RMS error is at most tail_bound, or, with
-    `run_passes`, when that says so (the quadrotor's AdaptiveQuadBench criterion: adaptive_mj.study.flight).
+    A run passes when it completed without a crash and its tail RMS error is at most tail_bound (study.outcome's
+    `passes`), or, with `run_passes`, when that says so (the quadrotor's AdaptiveQuadBench criterion:
+    adaptive_mj.study.flight).
     rule "all": a value passes when every seed passes, so `margin` is the largest value where all did and
     `first_fail` the smallest where one did not (a breaking point); rule "any": a value passes when any seed
     does, so `first_fail` is the smallest value at which every seed fails (AdaptiveQuadBench's when2fail) and
@@ -95,11 +96,11 @@ class Search:
 
     def judged(self, result: JobResult) -> float:
         """One run as this search judges it: its tail RMS error when it passes, inf when it fails."""
+        tail = RunOutcome.of(result).tail_error
         if self.run_passes is None:
-            return _tail(result, self.tail_bound)
+            return tail if passes(result, tail_bound=self.tail_bound) else math.inf
         if not self.run_passes(result):
             return math.inf
-        tail = _raw_tail(result)
         return tail if math.isfinite(tail) else 0.0  # passed by its own criterion, with no tail to show
 
     def value_passes(self, ev: "Evaluation") -> bool:
@@ -157,32 +158,6 @@ class Margin:
         if bad is not None:
             out["failure_rate_beyond"] = bad.failure_rate()
         return out
-
-
-#: Runs that completed: the search judges them by its own tail bound, whatever the scenario's verdict.
-COMPLETED = (Status.OK, Status.FAILED)
-
-
-def _tail(result: JobResult, bound: float) -> float:
-    if result.status not in COMPLETED or result.summary is None or crashed(result.summary):
-        return math.inf
-    tail = (result.summary.get("metrics") or {}).get("rms_tracking_error_tail")
-    if tail is None:
-        tail = (result.summary.get("metrics") or {}).get("rms_tracking_error_norm_tail")
-    if tail is None or not math.isfinite(tail) or tail > bound:
-        return math.inf
-    return float(tail)
-
-
-def passes(result: JobResult, bound: float) -> bool:
-    """Whether one run passes: it finished and its tail RMS error is at most `bound` (as a search judges it)."""
-    return math.isfinite(_tail(result, bound))
-
-
-def _raw_tail(result: JobResult) -> float:
-    m = (result.summary or {}).get("metrics") or {}
-    v = m.get("rms_tracking_error_tail", m.get("rms_tracking_error_norm_tail"))
-    return math.inf if v is None or result.status not in COMPLETED or crashed(result.summary) else float(v)
 
 
 def _file_name(text: str) -> str:
@@ -277,8 +252,9 @@ class _Batches:
             chunks = self.run([(i, v, self.seeds_of(i)) for i, v in wanted])
         out = []
         for (i, v), chunk in zip(wanted, chunks, strict=True):
+            runs = [RunOutcome.of(r) for r in chunk]
             ev = Evaluation(v, [self.searches[i].judged(r) for r in chunk], [r.status for r in chunk],
-                            [_raw_tail(r) for r in chunk], [predicted_unstable(r.summary) for r in chunk])
+                            [o.tail_error for o in runs], [o.predicted_unstable for o in runs])
             self.margins[i].evaluations.append(ev)
             out.append(ev)
         return out
@@ -294,8 +270,9 @@ class _Batches:
             self.margins[i].screened_out -= len(more)  # run after all
             ev.tails += [self.searches[i].judged(r) for r in more]
             ev.statuses += [r.status for r in more]
-            ev.raw += [_raw_tail(r) for r in more]
-            ev.predicted += [predicted_unstable(r.summary) for r in more]
+            runs = [RunOutcome.of(r) for r in more]
+            ev.raw += [o.tail_error for o in runs]
+            ev.predicted += [o.predicted_unstable for o in runs]
 
 
 def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path, n_jobs: int = 1,

@@ -28,10 +28,10 @@ import numpy as np
 from adaptive_mj.plants.quadrotor import DISTURBANCES, Disturbance
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.breaking_point import Stressor
-from adaptive_mj.study.job import RECORD_PREFLIGHT, crashed
+from adaptive_mj.study.job import RECORD_PREFLIGHT
+from adaptive_mj.study.outcome import passes
 from adaptive_mj.study.parallel import Backend, Job, JobResult
 from adaptive_mj.study.result import Table
-from adaptive_mj.trajectory import Status
 
 LAWS = ("geometric", "geometric_adaptive", "l1_geometric")
 LAW_LABEL = {"geometric": "geometric (Lee 2010)", "geometric_adaptive": "geometric adaptive (m̂, d̂, τ̂)",
@@ -50,13 +50,9 @@ DELAY = Disturbance("delay", "s", lambda v: [f"simulation.control_delay={int(rou
 
 def succeeded(r: JobResult) -> bool:
     """AdaptiveQuadBench's success: the run completed without a crash and its position error stayed within
-    MAX_ERROR (a run its scenario's own [success] tail bound calls failed still succeeds here)."""
-    if r.status not in (Status.OK, Status.FAILED) or r.summary is None:
-        return False
-    if crashed(r.summary):
-        return False
-    fm = r.extras.get("flight_metrics") or {}
-    return float(fm.get("max_error", math.inf)) <= MAX_ERROR
+    MAX_ERROR (a run its scenario's own [success] tail bound calls failed still succeeds here): study.outcome's
+    `passes` with that bound, named for the searches' run_passes."""
+    return passes(r, max_error=MAX_ERROR)
 
 
 @dataclass

@@ -48,12 +48,16 @@ EXPECTATIONS = ("ok", "fail", "measured")
 
 def as_expected(r: "JobResult") -> bool | None:
     """Whether a run ended as its job expected (None: a measured run, which expects nothing): an "ok" run ok, a
-    "fail" run failed or diverged."""
+    "fail" run failed, crashed or diverged."""
     if r.job.expect == "measured":
         return None
     if r.job.expect == "fail":
-        return r.status in ("failed", "diverged")
-    return r.status == "ok"
+        return r.status in FAILURES
+    return r.status == Status.OK
+
+
+#: The endings of a run that ran and did not make it: what a "fail" job expects.
+FAILURES = (Status.FAILED, Status.CRASHED, Status.DIVERGED)
 
 
 #: The analyses a Job may name (a closed set, so no text from a scenario or log picks a function).
@@ -67,18 +71,13 @@ STOP_TIMEOUT = 30.0
 @dataclass(frozen=True)
 class JobResult:
     job: Job
-    status: str  # the summary status ("ok", "failed", "diverged"), "error" when the run could not be set up,
-    # "refused" when its pre-flight check refused it (success.preflight = "refuse"), or "interrupted"
+    status: str  # the summary status ("ok", "failed", "crashed", "diverged"; trajectory.Status), "error" when the run
+    # could not be set up, "refused" when its pre-flight check refused it (success.preflight = "refuse"), or
+    # "interrupted"; study.outcome reads it, the summary and the analyses as a RunOutcome
     summary: dict | None
     extras: dict = field(default_factory=dict)
     trajectory: Trajectory | None = None  # decimated to the scenario's logging rate
     error: str = ""
-
-
-def crashed(summary: dict | None) -> bool:
-    """Whether a run ended because its vehicle crashed (a quadrotor: plants.quadrotor.crash_text, "crashed at t =
-    ..."): a failure whatever its tail error, since the tail of a run cut short is not the tail of the run."""
-    return str((summary or {}).get("reason") or "").startswith("crashed at")
 
 
 def decimate(traj: Trajectory, every: int) -> Trajectory:
@@ -100,12 +99,6 @@ def decimate(traj: Trajectory, every: int) -> Trajectory:
 #: (`preflight`), not onto the terminal. It comes first in a job's overrides, so a user's own --set
 #: success.preflight wins.
 RECORD_PREFLIGHT = "success.preflight='record'"
-
-
-def predicted_unstable(summary: dict | None) -> bool:
-    """Whether the run's pre-flight check found its loop past the stability limit (its summary's `preflight`)."""
-    pre = (summary or {}).get("preflight") or {}
-    return bool(pre.get("checked")) and pre.get("ok") is False
 
 
 def log_write_error(log: Path | None, exc: OSError) -> str:

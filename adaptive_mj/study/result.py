@@ -137,7 +137,7 @@ class Study:
     """A finished study.
 
     kind: "sweep", "breaking_point", "stress" or "bench"; out: its output folder;
-    exit_code: the command's (0 every run ok, 1 some run diverged or failed);
+    exit_code: the command's (0 every run ok, 1 some run failed, crashed or diverged);
     report / html: report.md and report.html in `out`;
     text: what the command prints as its result; notes: what it says on stderr after it;
     info: the study's own figures (a sweep: its keys, metrics and counts; a breaking point: its margin).

@@ -27,7 +27,8 @@ from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import score_suite as suite
 from adaptive_mj.study import stress
 from adaptive_mj.study.breaking_point import Search, _file_name, search_all
-from adaptive_mj.study.job import RECORD_PREFLIGHT, Job, JobResult, crashed
+from adaptive_mj.study.job import RECORD_PREFLIGHT, Job, JobResult
+from adaptive_mj.study.outcome import RunOutcome, passes
 from adaptive_mj.study.sweep import to_toml
 from adaptive_mj.study.stats import CONFIDENCE, Estimate, cvar, estimate, ranks
 from adaptive_mj.trajectory import Status
@@ -189,12 +190,6 @@ def baseline_names(p: stress.Plant) -> list[str]:
 # ---------------------------------------------------------------- one seed's figures
 
 
-def _tail(summary: dict | None) -> float:
-    m = (summary or {}).get("metrics") or {}
-    v = m.get("rms_tracking_error_tail", m.get("rms_tracking_error_norm_tail"))
-    return math.nan if v is None else float(v)
-
-
 def _param_error(summary: dict | None) -> float:
     final = (summary or {}).get("final") or {}
     est, true = final.get("theta_hat") or {}, final.get("theta") or {}
@@ -208,9 +203,9 @@ def _param_error(summary: dict | None) -> float:
 
 
 def _completed(r: JobResult | None) -> TypeGuard[JobResult]:
-    """Whether a run finished (ok or failed by its criteria; not diverged, crashed, refused or in error)."""
-    return r is not None and r.status in (Status.OK, Status.FAILED) and r.summary is not None \
-        and not crashed(r.summary)
+    """Whether a run finished (ok or failed by its criteria; not crashed, diverged, refused or in error):
+    study.outcome's `passes` with no bound (None: a task not run)."""
+    return r is not None and passes(r)
 
 
 def seed_figures(runs: dict[str, JobResult], bound: float, limits: tuple[float, float],
@@ -218,11 +213,11 @@ def seed_figures(runs: dict[str, JobResult], bound: float, limits: tuple[float, 
     """The criteria (score_suite.CRITERIA) of one law on one plant for one seed, from its task runs (task name ->
     JobResult): a dict criterion -> value, plus "success" (0 or 1) and "performance"."""
     tr, ch, hold = runs.get("tracking"), runs.get("change"), runs.get("hold")
-    ok = _completed(ch) and all(_completed(r) and _tail(r.summary) <= bound for r in (tr, hold))
+    ok = _completed(ch) and all(r is not None and passes(r, tail_bound=bound) for r in (tr, hold))
     out: dict[str, float] = {c.name: math.nan for c in suite.CRITERIA}
     if _completed(tr):
         m = (tr.summary or {})["metrics"]
-        out["tail_error"] = _tail(tr.summary)
+        out["tail_error"] = RunOutcome.of(tr).tail_error
         out["control_rms"] = float(m["control_rms"])
         out["control_tv_rate"] = float(m["control_total_variation"]) / durations["tracking"]
         out["param_error"] = _param_error(tr.summary)
@@ -485,8 +480,10 @@ def _not_applicable(p: stress.Plant, e: Entry, st) -> bool:
 
 
 def not_run(pl: Plan) -> list[dict]:
-    """The searches the card does not run: plant, law, stressor, how many seeds, and why (NOT_RUN_WHY)."""
-    return [{"plant": p.name, "law": e.label, "stressor": st.name, "seeds": pl.seeds, "why": NOT_RUN_WHY[st.name]}
+    """The searches the card does not run: plant, law, stressor, how many seeds, status "not run" (Status.NOT_RUN)
+    and why (NOT_RUN_WHY)."""
+    return [{"plant": p.name, "law": e.label, "stressor": st.name, "seeds": pl.seeds, "status": str(Status.NOT_RUN),
+             "why": NOT_RUN_WHY[st.name]}
             for p in pl.rows for e in pl.entries[p.name] for st in stress.stressors(p, pl.settings.stress_duration)
             if _not_applicable(p, e, st)]
 

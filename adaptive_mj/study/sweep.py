@@ -290,7 +290,7 @@ class PointStats:
     """One grid point's metric over its seeds: mean, min, max, and n_ok of n runs. basis: the runs the numbers
     are of: "ok" (the seeds whose run is ok), or "failed" where no ok seed has a value and some run that
     completed but missed its [success] criteria does (status failed: its metrics are whole; a diverged run's
-    are not); n_basis: how many runs that is (0: NaN, no run has a value)."""
+    are not; a crashed run's count too, FAILED_BASIS); n_basis: how many runs that is (0: NaN, no run has a value)."""
 
     point: dict[str, Any]
     mean: float
@@ -318,6 +318,12 @@ def _values(rows: Sequence[dict[str, Any]], metric: str) -> np.ndarray:
     return vals[np.isfinite(vals)]
 
 
+#: The runs a point's metric falls back to where no ok seed has it (basis "failed"): those that failed their
+#: [success] criteria, and, as before the crash had a status of its own, those that crashed (their metrics cover
+#: the rows up to the crash).
+FAILED_BASIS = (Status.FAILED, Status.CRASHED)
+
+
 def point_stats(table: Sequence[dict[str, Any]], keys: Sequence[str], metric: str) -> list[PointStats]:
     """The metric per grid point, over the seeds whose run is ok; where none of those has a value, over the
     runs that failed their [success] criteria (basis "failed": they ran to the end, so their metrics are
@@ -330,7 +336,7 @@ def point_stats(table: Sequence[dict[str, Any]], keys: Sequence[str], metric: st
         ok = [r for r in group if r["status"] == Status.OK]
         basis, vals = "ok", _values(ok, metric)
         if not vals.size:
-            failed = _values([r for r in group if r["status"] == Status.FAILED], metric)
+            failed = _values([r for r in group if r["status"] in FAILED_BASIS], metric)
             if failed.size:
                 basis, vals = str(Status.FAILED.value), failed
         mean, lo, hi = (float(vals.mean()), float(vals.min()), float(vals.max())) if vals.size else (math.nan,) * 3
@@ -747,8 +753,8 @@ def check_manifest(out: Path, manifest: dict) -> None:
 
 
 def finished_results(jobs: Sequence[Job]) -> Iterator[tuple[int, JobResult]]:
-    """(index, result) for each job whose log is complete (closed with a summary: ok, diverged or
-    failed), read back from the log; a missing, truncated or interrupted log (or one a dead Ray
+    """(index, result) for each job whose log is complete (closed with a summary: ok, failed, crashed
+    or diverged), read back from the log; a missing, truncated or interrupted log (or one a dead Ray
     worker left as NAME.partial) is removed so that its run starts afresh."""
     from adaptive_mj.errors import LogFormatError
     from adaptive_mj.log.replay import read_log
@@ -764,7 +770,7 @@ def finished_results(jobs: Sequence[Job]) -> Iterator[tuple[int, JobResult]]:
             logged = read_log(job.log)
         except LogFormatError:
             logged = None
-        ended = (Status.OK, Status.DIVERGED, Status.FAILED)
+        ended = (Status.OK, Status.DIVERGED, Status.FAILED, Status.CRASHED)
         if logged is not None and logged.summary is not None and logged.status in ended:
             yield i, JobResult(job, logged.status, logged.summary)
         else:

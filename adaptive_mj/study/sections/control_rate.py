@@ -192,7 +192,8 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
     jobs = tuple(p[-1] for p in plan)
 
     def analyze(res, out):
-        from adaptive_mj.study.breaking_point import TAIL_BOUND, passes
+        from adaptive_mj.study.breaking_point import TAIL_BOUND
+        from adaptive_mj.study.outcome import passes
 
         loops = {name: sampled_loop(SCN / f"{name}.toml", dur) for _, name in CONTROL_RATE_PLANTS}
         lines = ["| plant | rate [Hz] | period T | predicted kT/d or max_j K_D T/M_jj | sampled pole | status | "
@@ -208,7 +209,7 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
             m = (r.summary or {}).get("metrics", {})
             tail = m.get("rms_tracking_error_tail")
             ident, ident_value = _identification(r, kind)
-            holds = passes(r, bound)
+            holds = passes(r, tail_bound=bound)
             joints = units.is_rigid_body(kind)  # a multi-joint plant: per-joint figures and errors
             predicted = figure < 2.0
             if holds != predicted:

@@ -12,6 +12,7 @@ import numpy as np
 
 from adaptive_mj.study.job import SUMMARY_LOG_RATE_HZ
 from adaptive_mj.study import flight
+from adaptive_mj.study.outcome import RunOutcome, passes
 from adaptive_mj.study.sections.common import (Built, SectionReport, _g, _job, _ok, _row, _save, _status_note, plt,
                                                register)
 
@@ -71,14 +72,19 @@ def _task_figures(r) -> dict:
     fm = r.extras.get("flight_metrics") or {}
     e = np.linalg.norm(tr.y_tilde, axis=1)
     after = tr.t >= SETTLE
-    crashed = str((r.summary or {}).get("reason", "")).startswith("crashed")
+    crashed = RunOutcome.of(r).crashed
     i = tr.names.index("m")
     m_err = (tr.theta_hat[-1, i] - tr.theta[-1, i]) / tr.theta[-1, i]
     J_err = float(np.linalg.norm(tr.theta_hat[-1, 1:7] - tr.theta[-1, 1:7]) / np.linalg.norm(tr.theta[-1, 1:7]))
     max_after = float(e[after].max()) if after.any() else math.nan
     return {"tail": fm.get("tail_rms_error"), "max": max_after, "heading": fm.get("max_heading_deg"),
             "sat": fm.get("saturation_any"), "m_err": float(m_err), "J_err": J_err, "crashed": crashed,
-            "success": (not crashed) and max_after <= TASK_BOUND}
+            "success": passes(r) and max_after <= TASK_BOUND}
+
+
+def _flown(r) -> bool:
+    """A task run with rows to analyse: it completed, or it crashed (its rows up to the crash)."""
+    return _ok(r) or (RunOutcome.of(r).crashed and r.trajectory is not None)
 
 
 def _tasks(res, out: Path) -> tuple[str, list[dict]]:
@@ -90,7 +96,7 @@ def _tasks(res, out: Path) -> tuple[str, list[dict]]:
         for law in (*flight.LAWS, *((INERTIA,) if name == "quadrotor_lemniscate" else ())):
             tag = f"{name.removeprefix('quadrotor_')}-{law}"
             r = res.get(f"quadrotor/{tag}")
-            if r is None or not _ok(r):
+            if r is None or not _flown(r):
                 lines.append(f"| {name.removeprefix('quadrotor_')} | {law} | {r.status if r else 'missing'} |||||||")
                 if r is not None:
                     rows.append(_row("quadrotor", tag, r))
