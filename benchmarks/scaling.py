@@ -86,9 +86,9 @@ def ceiling(reps: int) -> dict:
 
 
 def _jobs(folder: Path, runs: int, tag: str):
-    from adaptive_mj.study.parallel import Job
+    from adaptive_mj.study.parallel import RunSpec
 
-    return [Job(HEAVE, (f"simulation.duration={SECONDS}", f"law.k={150.0 + i}"), seed=0,
+    return [RunSpec(HEAVE, (f"simulation.duration={SECONDS}", f"law.k={150.0 + i}"), seed=0,
                 log=folder / f"{tag}-{i}.mcap", tag=f"{tag}-{i}", keep_trajectory=False) for i in range(runs)]
 
 
@@ -229,7 +229,7 @@ def ray_nodes(runs: int, seconds: float = 2.0) -> dict:
     from ray.cluster_utils import Cluster
 
     from adaptive_mj.setup.scenario import SCENARIOS_DIR
-    from adaptive_mj.study.job import Backend, Job
+    from adaptive_mj.study.job import Backend, RunSpec
     from adaptive_mj.study.parallel import iter_results
 
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
@@ -245,10 +245,10 @@ def ray_nodes(runs: int, seconds: float = 2.0) -> dict:
             for logs in ("bytes", "shared"):
                 backend = Backend(kind="ray", jobs=nodes, address=c.address, logs=logs, engine="batch")
                 with tempfile.TemporaryDirectory() as tmp:
-                    warm = [Job(SCENARIOS_DIR / "heave_drift.toml", ("simulation.duration=0.1",), seed=i,
+                    warm = [RunSpec(SCENARIOS_DIR / "heave_drift.toml", ("simulation.duration=0.1",), seed=i,
                                 log=Path(tmp) / f"w{i}.mcap") for i in range(4 * nodes)]
                     list(iter_results(warm, backend))  # the workers up and their callbacks loaded
-                    jobs = [Job(SCENARIOS_DIR / "heave_drift.toml", (f"simulation.duration={seconds!r}",
+                    jobs = [RunSpec(SCENARIOS_DIR / "heave_drift.toml", (f"simulation.duration={seconds!r}",
                                                                      f"law.k={150 + i % 100}"), seed=i,
                                 log=Path(tmp) / f"r{i:05d}.mcap", keep_trajectory=False) for i in range(runs)]
                     c0, t0 = time.process_time(), time.perf_counter()
@@ -495,10 +495,10 @@ BATCH_CASES = {
 
 
 def _batch_jobs(name: str, seconds: float, vary, n: int, folder: Path | None):
-    from adaptive_mj.study.job import Job
+    from adaptive_mj.study.job import RunSpec
     from adaptive_mj.setup.scenario import SCENARIOS_DIR
 
-    return [Job(SCENARIOS_DIR / f"{name}.toml", overrides=(f"simulation.duration={seconds!r}", "log.rate_hz=100",
+    return [RunSpec(SCENARIOS_DIR / f"{name}.toml", overrides=(f"simulation.duration={seconds!r}", "log.rate_hz=100",
                                                            *vary(i)),
                 seed=i, log=None if folder is None else folder / f"{i:05d}.mcap", keep_trajectory=False)
             for i in range(n)]

@@ -43,7 +43,7 @@ from adaptive_mj.plants.mujoco_plant import timers_off
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
 from adaptive_mj.sim.loop import run
-from adaptive_mj.study.parallel import Job, run_jobs
+from adaptive_mj.study.parallel import RunSpec, run_jobs
 
 REPO = Path(__file__).resolve().parents[1]
 CASES = {"heave": "heave_tracking", "arm": "arm_payload_swap", "ur5e": "ur5e_payload_swap",
@@ -189,7 +189,7 @@ def sweep_throughput(jobs: int, runs: int) -> float:
     workers. The native callback is compiled once in this process beforehand (as the sweep
     command does), so neither case pays the numba compile inside the timing."""
     with tempfile.TemporaryDirectory() as tmp:
-        js = [Job(REPO / "scenarios" / "heave_tracking.toml", (f"simulation.duration={SWEEP_SECONDS}",), seed=i,
+        js = [RunSpec(REPO / "scenarios" / "heave_tracking.toml", (f"simulation.duration={SWEEP_SECONDS}",), seed=i,
                   log=Path(tmp) / f"{i}.mcap") for i in range(runs)]
         t0 = time.perf_counter()
         res = run_jobs(js, n_jobs=jobs)

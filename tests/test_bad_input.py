@@ -334,9 +334,9 @@ def test_bench_and_sweep_never_write_into_a_used_folder(tmp_path, capsys):
 
 
 def test_an_analysis_is_picked_from_a_closed_set(tmp_path):
-    from adaptive_mj.study.job import EXTRAS, Job, run_job
+    from adaptive_mj.study.job import EXTRAS, RunSpec, run_job
 
-    result = run_job(Job(REPO / "scenarios" / "lecture_first_order.toml", overrides=("simulation.duration=0.2",),
+    result = run_job(RunSpec(REPO / "scenarios" / "lecture_first_order.toml", overrides=("simulation.duration=0.2",),
                          extras=("__class__",)))
     assert result.status == "error"
     assert result.error == f"unknown analysis '__class__'; expected one of {', '.join(EXTRAS)}"

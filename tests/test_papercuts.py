@@ -220,9 +220,9 @@ def test_the_chattering_panel_shows_where_u_chatters():
 def test_a_studys_decimated_rows_end_on_the_runs_final_row():
     """The bench reads "final" values from a run's rows at the logging rate: those rows end on the full-rate
     run's last row, so they are the summary's final values (docs/METRICS.md), not those up to 9 ms before."""
-    from adaptive_mj.study.job import Job, run_job
+    from adaptive_mj.study.job import RunSpec, run_job
 
-    result = run_job(Job(REPO / "scenarios" / "heave_tracking.toml", ("simulation.duration=0.555",)))
+    result = run_job(RunSpec(REPO / "scenarios" / "heave_tracking.toml", ("simulation.duration=0.555",)))
     traj, final = result.trajectory, result.summary["final"]
     assert traj.meta["log_every"] == 10 and len(traj.t) == 57  # rows 0, 10, ..., 550, and 554
     assert traj.t[-1] == pytest.approx(0.554) and np.all(np.diff(traj.t) > 0)

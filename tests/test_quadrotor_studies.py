@@ -10,8 +10,8 @@ import pytest
 
 from adaptive_mj.study import api, stress
 from adaptive_mj.study.breaking_point import TAIL_BOUND
-from adaptive_mj.study.job import Job, JobResult
-from adaptive_mj.study.outcome import RunOutcome, passes
+from adaptive_mj.study.job import RunSpec, RunOutcome
+from adaptive_mj.study.job import passes
 from adaptive_mj.trajectory import Status
 
 
@@ -43,14 +43,14 @@ def test_the_quadrotor_row_has_the_flight_laws_and_disturbances_derived_from_its
 
 def test_a_crashed_run_fails_whatever_its_tail_error():
     """A crash (status "crashed", or an older row's "failed" with a crash's reason) fails whatever its figures."""
-    job = Job(Path("x.toml"))
+    job = RunSpec(Path("x.toml"))
     summary = {"status": "failed", "reason": "", "metrics": {"rms_tracking_error_tail": 0.001}}
-    assert passes(JobResult(job, Status.FAILED, summary), tail_bound=TAIL_BOUND["quadrotor"])
+    assert passes(RunOutcome(job, Status.FAILED, summary), tail_bound=TAIL_BOUND["quadrotor"])
     reason = "crashed at t = 1.2 s: tilted 85.0 deg, past plant.crash_tilt = 80 deg"
     crashed = {**summary, "status": "crashed", "reason": reason}
     older = {**summary, "reason": reason}
-    for r in (JobResult(job, Status.CRASHED, crashed), JobResult(job, Status.FAILED, older)):
-        run = RunOutcome.of(r)
+    for r in (RunOutcome(job, Status.CRASHED, crashed), RunOutcome(job, Status.FAILED, older)):
+        run = r
         assert run.crashed and not run.completed and run.status == Status.CRASHED
         assert run.tail_error == math.inf  # the tail of a run cut short is not the run's
         assert not passes(r) and not passes(r, tail_bound=TAIL_BOUND["quadrotor"])

@@ -262,13 +262,13 @@ def test_ray_options_are_checked_in_one_line(tmp_path):
 def test_runs_that_fail_or_diverge_are_recorded_once_and_not_retried(cluster, tmp_path):
     """Through the Python API on the cluster: a scenario file no node has is an error naming the node
     and the remedy; a run that diverges is a result; neither is submitted again."""
-    from adaptive_mj.study.parallel import Backend, Job, iter_results
+    from adaptive_mj.study.parallel import Backend, RunSpec, iter_results
 
     retried = []
-    jobs = [Job(tmp_path / "nowhere.toml", tag="missing"),
-            Job(REPO / "scenarios" / "heave_tracking.toml", ("simulation.state_bound=0.5",
+    jobs = [RunSpec(tmp_path / "nowhere.toml", tag="missing"),
+            RunSpec(REPO / "scenarios" / "heave_tracking.toml", ("simulation.state_bound=0.5",
                                                             "simulation.initial_state=[1.0, 0.0]"), tag="diverges"),
-            Job(REPO / "scenarios" / "heave_tracking.toml", ("simulation.duration=0.2",), tag="fine")]
+            RunSpec(REPO / "scenarios" / "heave_tracking.toml", ("simulation.duration=0.2",), tag="fine")]
     results = dict(iter_results(jobs, Backend(kind="ray", address=cluster),
                                 on_retry=lambda job, why: retried.append(job.tag)))
     assert sorted(results) == [0, 1, 2] and retried == []

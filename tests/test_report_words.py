@@ -179,9 +179,9 @@ def test_a_study_s_pre_flight_warning_names_the_run_and_words_a_saturating_bound
     """bench's robust_phi1e-5 run ended ok under a warning that said its loop "cannot be stable" and did not say
     which run it was: the line now names the run and says the figure is the linearised loop's."""
     from adaptive_mj.setup import scenario as sc
-    from adaptive_mj.study.job import Job, run_job
+    from adaptive_mj.study.job import RunSpec, run_job
 
-    job = Job(sc.SCENARIOS_DIR / "heave_tracking.toml", tag="second_order/robust_phi1e-5",
+    job = RunSpec(sc.SCENARIOS_DIR / "heave_tracking.toml", tag="second_order/robust_phi1e-5",
               overrides=("law.kind=robust_sliding", "law.nominal='model'", "law.K=29.6", "law.boundary_layer=1e-05",
                          "simulation.duration=1.0"))
     r = run_job(job)

@@ -589,12 +589,12 @@ def test_a_stop_in_the_loop_body_between_two_results_stops_the_workers_before_it
 
     from adaptive_mj.errors import Interrupted
     from adaptive_mj.setup.scenario import SCENARIOS_DIR
-    from adaptive_mj.study.parallel import Job, run_jobs, stopping_with
+    from adaptive_mj.study.parallel import RunSpec, run_jobs, stopping_with
 
     def stop_after_the_first(result):
         raise Interrupted(signal.SIGTERM)
 
-    jobs = [Job(SCENARIOS_DIR / "lecture_first_order.toml", overrides=("simulation.duration=0.5",), seed=k,
+    jobs = [RunSpec(SCENARIOS_DIR / "lecture_first_order.toml", overrides=("simulation.duration=0.5",), seed=k,
                 log=tmp_path / f"{k}.mcap") for k in range(4)]
     with pytest.raises(Interrupted) as info:
         run_jobs(jobs, n_jobs=2, on_done=stop_after_the_first)

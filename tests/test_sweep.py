@@ -16,7 +16,7 @@ from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import sweep
 from adaptive_mj.cli import main
 from adaptive_mj.errors import AdaptiveMJError, ScenarioError
-from adaptive_mj.study.parallel import Job, JobResult
+from adaptive_mj.study.parallel import RunSpec, RunOutcome
 
 REPO = Path(__file__).resolve().parents[1]
 ARM = REPO / "scenarios" / "arm_payload_swap.toml"
@@ -152,7 +152,7 @@ def _result(tmp_path, seed, status, metrics, *, error=""):
     log = tmp_path / "logs" / f"run{seed}.mcap"
     summary = None if status == "error" else {"status": status, "reason": "why" if status != "ok" else "",
                                               "metrics": metrics}
-    return JobResult(Job(ARM, seed=seed, log=log, tag=f"run{seed}"), status, summary, error=error)
+    return RunOutcome(RunSpec(ARM, seed=seed, log=log, tag=f"run{seed}"), status, summary, error=error)
 
 
 def test_rows_flatten_metrics_and_keep_failures(tmp_path):
@@ -299,7 +299,7 @@ def test_progress_is_plain_lines_when_not_a_terminal():
     import io
     from pathlib import Path
 
-    from adaptive_mj.study.parallel import PLAIN_PROGRESS_EVERY, Job, JobResult, progress_printer
+    from adaptive_mj.study.parallel import PLAIN_PROGRESS_EVERY, RunSpec, RunOutcome, progress_printer
 
     class Pipe(io.StringIO):
         def isatty(self):
@@ -312,18 +312,18 @@ def test_progress_is_plain_lines_when_not_a_terminal():
     now = [0.0]
     pipe = Pipe()
     update = progress_printer(5, stream=pipe, clock=lambda: now[0])
-    job = Job(Path("x.toml"), tag="run")
+    job = RunSpec(Path("x.toml"), tag="run")
     for t in (0.1, 0.2, PLAIN_PROGRESS_EVERY + 0.3, PLAIN_PROGRESS_EVERY + 0.4, PLAIN_PROGRESS_EVERY + 0.5):
         now[0] = t
-        update(JobResult(job, "ok", None))
+        update(RunOutcome(job, "ok", None))
     lines = pipe.getvalue().splitlines()
     assert "\r" not in pipe.getvalue() and len(lines) == 2
     assert lines[0].startswith("3/5 runs done, 34.0/min after 5 s") and lines[1].startswith("5/5 runs")
     term = Terminal()  # on a terminal: a tqdm bar redrawn in place, closed with a newline after the last run
     update = progress_printer(2, stream=term)
-    update(JobResult(job, "ok", None))
+    update(RunOutcome(job, "ok", None))
     update.retried(job, "its worker died")
-    update(JobResult(job, "diverged", None))
+    update(RunOutcome(job, "diverged", None))
     out = term.getvalue()
     assert out.startswith("\rruns:") and out.endswith("\n") and out.count("\n") == 2
     assert "\rretrying run: its worker died\n" in out  # a line of its own, above the bar
@@ -465,7 +465,7 @@ def _fake_jobs(monkeypatch, fake_run_job, folder: Path, *, n: int, crash: int):
 
     monkeypatch.setattr(job, "run_job", fake_run_job)
     monkeypatch.setattr(parallel, "_prewarm", lambda jobs: None)
-    return [parallel.Job(Path("unused.toml"), log=folder / f"{k}.mcap", tag="crash" if k == crash else f"run{k}")
+    return [parallel.RunSpec(Path("unused.toml"), log=folder / f"{k}.mcap", tag="crash" if k == crash else f"run{k}")
             for k in range(n)]
 
 def test_a_run_that_keeps_killing_its_worker_is_blamed_alone(tmp_path, monkeypatch):
@@ -482,7 +482,7 @@ def test_a_run_that_keeps_killing_its_worker_is_blamed_alone(tmp_path, monkeypat
         if job.tag == "crash":
             os._exit(1)
         time.sleep(0.05)
-        return parallel.JobResult(job, "ok", {"tag": job.tag})
+        return parallel.RunOutcome(job, "ok", {"tag": job.tag})
 
     jobs = _fake_jobs(monkeypatch, fake_run_job, tmp_path, n=12, crash=3)
     retried = []
@@ -511,7 +511,7 @@ def test_a_worker_dying_while_the_caller_is_busy_loses_no_run(tmp_path, monkeypa
             marker.write_text("x")
             time.sleep(0.3)
             os._exit(1)
-        return parallel.JobResult(job, "ok", {"tag": job.tag})
+        return parallel.RunOutcome(job, "ok", {"tag": job.tag})
 
     jobs = _fake_jobs(monkeypatch, fake_run_job, tmp_path, n=20, crash=1)
     results = []

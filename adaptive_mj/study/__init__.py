@@ -1,4 +1,4 @@
-"""Many runs at once: job.py says what one run is (Job, JobResult, Backend, run_job),
+"""Many runs at once: job.py says what one run is (RunSpec, RunOutcome, Backend, run_job),
 parallel.py runs jobs in worker processes (or, for --backend ray, hands them to
 ray_backend.py, which runs each as a Ray task), sweep.py runs a scenario over a grid
 of overrides and seeds, bench.py runs the catalogue of the lecture's phenomena

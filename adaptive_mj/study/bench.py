@@ -13,7 +13,7 @@ from adaptive_mj.study import callable_module
 from adaptive_mj.report.html import write_html
 from adaptive_mj.report.metrics import TAIL_FRACTION
 from adaptive_mj.study.beside import Beside
-from adaptive_mj.study.job import JobResult, as_expected
+from adaptive_mj.study.job import RunOutcome, as_expected
 from adaptive_mj.study.parallel import Backend, progress_printer, run_jobs, session
 from adaptive_mj.study.result import Study, Table
 from adaptive_mj.trajectory import Status
@@ -29,7 +29,7 @@ def _fmt(v, spec=".3g") -> str:
 
 def status_text(r: dict) -> str:
     """A row's status as the tables show it: "(unexpected)" after a run that did not end as declared
-    (Job.expect), "(as meant)" after a demonstration that failed as it was meant to."""
+    (RunSpec.expect), "(as meant)" after a demonstration that failed as it was meant to."""
     if r.get("as_expected") is False:
         return f"{r['status']} (unexpected)"
     if r.get("as_expected") and r["status"] != Status.OK:
@@ -114,8 +114,8 @@ def _law_section(out: Path, backend: Backend, law: str, gains: Path | None, sets
             f"\n{body}\n"), runs
 
 
-def expectation_text(results: list[JobResult]) -> str:
-    """The catalogue's runs against what each was declared for (Job.expect): "N as expected (K ok, M failing as
+def expectation_text(results: list[RunOutcome]) -> str:
+    """The catalogue's runs against what each was declared for (RunSpec.expect): "N as expected (K ok, M failing as
     meant: demonstrations), U unexpected: tags; X measured (baselines, sweeps, margin probes: Y of them ok)"."""
     ok_ok = sum(1 for r in results if r.job.expect == "ok" and r.status == Status.OK)
     meant = sum(1 for r in results if r.job.expect == "fail" and as_expected(r))

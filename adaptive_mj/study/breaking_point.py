@@ -45,9 +45,8 @@ from adaptive_mj.plants import kinds
 # what a search raises, below the study layer (each plant kind declares its own stressors); studies import it here
 from adaptive_mj.plants.study_spec import Stressor, whole_steps
 from adaptive_mj.study import callable_module
-from adaptive_mj.study.parallel import Backend, Job, JobResult, run_jobs
-from adaptive_mj.study.job import RECORD_PREFLIGHT
-from adaptive_mj.study.outcome import RunOutcome, passes
+from adaptive_mj.study.parallel import Backend, RunSpec, RunOutcome, run_jobs
+from adaptive_mj.study.job import RECORD_PREFLIGHT, passes
 
 CVAR_LEVEL = 0.10  # the worst 10 % of seeds
 # [m], [rad]: the stress study's failure bound on the tail RMS error (the 6-joint arm: RMS over its joints)
@@ -71,7 +70,7 @@ TAIL_BOUND = {name: kind_number(kind, "tail_bound") for name, kind in STRESS_PLA
 class Search:
     """One breaking-point search: scenario file, fixed overrides (the law), the stressor, and what passes.
 
-    A run passes when it completed without a crash and its tail RMS error is at most tail_bound (study.outcome's
+    A run passes when it completed without a crash and its tail RMS error is at most tail_bound (study.job's
     `passes`), or, with `run_passes`, when that says so (the quadrotor's AdaptiveQuadBench criterion:
     adaptive_mj.study.flight).
     rule "all": a value passes when every seed passes, so `margin` is the largest value where all did and
@@ -87,16 +86,16 @@ class Search:
     tail_bound: float  # [m or rad] tail RMS above this is a failure
     seed: int = 0  # the first seed: the search runs seeds seed .. seed + seeds - 1 (the scorecard: one each)
     rule: str = "all"
-    run_passes: Callable[[JobResult], bool] | None = None
+    run_passes: Callable[[RunOutcome], bool] | None = None
     extras: tuple[str, ...] = ()
 
     def __post_init__(self):
         if self.rule not in RULES:
             raise ValueError(f"Search.rule must be one of {RULES}, got {self.rule!r}")
 
-    def judged(self, result: JobResult) -> float:
+    def judged(self, result: RunOutcome) -> float:
         """One run as this search judges it: its tail RMS error when it passes, inf when it fails."""
-        tail = RunOutcome.of(result).tail_error
+        tail = result.tail_error
         if self.run_passes is None:
             return tail if passes(result, tail_bound=self.tail_bound) else math.inf
         if not self.run_passes(result):
@@ -202,24 +201,24 @@ class _Batches:
     """The runs of search_all's batches: each (search, value) on its seeds, the Evaluations kept in `margins`."""
 
     def __init__(self, searches: Sequence[Search], margins: list[Margin], *, seeds: int, logs: Path, n_jobs: int,
-                 backend: Backend | None, on_done: Callable[[JobResult], None] | None, keep_trajectory: bool,
+                 backend: Backend | None, on_done: Callable[[RunOutcome], None] | None, keep_trajectory: bool,
                  screen: bool):
         self.searches, self.margins, self.seeds, self.logs = searches, margins, seeds, logs
         self.n_jobs, self.backend, self.on_done, self.keep_trajectory = n_jobs, backend, on_done, keep_trajectory
         self.screen = screen and seeds > 1
-        self.done: dict[Path, JobResult] = {}  # by log: searches of one label and stressor share their runs
+        self.done: dict[Path, RunOutcome] = {}  # by log: searches of one label and stressor share their runs
 
-    def jobs_for(self, i: int, value: float, which: range) -> list[Job]:
+    def jobs_for(self, i: int, value: float, which: range) -> list[RunSpec]:
         s = self.searches[i]
         safe = _file_name(s.label.replace("/", "-"))
         text = str(int(value)) if s.stressor.integer else f"{value:.6g}"
-        return [Job(s.scenario, overrides=(RECORD_PREFLIGHT, *s.overrides, *s.stressor.overrides(value)), seed=k,
+        return [RunSpec(s.scenario, overrides=(RECORD_PREFLIGHT, *s.overrides, *s.stressor.overrides(value)), seed=k,
                     log=self.logs / safe / f"{_file_name(s.stressor.name)}={text}-seed{k}.mcap",
                     tag=f"{s.label} {s.stressor.name}={text} seed {k}", keep_trajectory=self.keep_trajectory,
                     extras=s.extras)
                 for k in which]
 
-    def run(self, batch: list[tuple[int, float, range]]) -> list[list[JobResult]]:
+    def run(self, batch: list[tuple[int, float, range]]) -> list[list[RunOutcome]]:
         """The results of each (search, value, seeds) of one batch of parallel runs, in order; a run another
         search of the same label and stressor has made (a margin's and a when2fail's) is not made again."""
         jobs = [job for i, v, which in batch for job in self.jobs_for(i, v, which)]
@@ -252,7 +251,7 @@ class _Batches:
             chunks = self.run([(i, v, self.seeds_of(i)) for i, v in wanted])
         out = []
         for (i, v), chunk in zip(wanted, chunks, strict=True):
-            runs = [RunOutcome.of(r) for r in chunk]
+            runs = [r for r in chunk]
             ev = Evaluation(v, [self.searches[i].judged(r) for r in chunk], [r.status for r in chunk],
                             [o.tail_error for o in runs], [o.predicted_unstable for o in runs])
             self.margins[i].evaluations.append(ev)
@@ -270,14 +269,14 @@ class _Batches:
             self.margins[i].screened_out -= len(more)  # run after all
             ev.tails += [self.searches[i].judged(r) for r in more]
             ev.statuses += [r.status for r in more]
-            runs = [RunOutcome.of(r) for r in more]
+            runs = [r for r in more]
             ev.raw += [o.tail_error for o in runs]
             ev.predicted += [o.predicted_unstable for o in runs]
 
 
 def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path, n_jobs: int = 1,
                backend: Backend | None = None, on_batch: Callable[[int, int], None] | None = None,
-               on_done: Callable[[JobResult], None] | None = None, keep_trajectory: bool = True,
+               on_done: Callable[[RunOutcome], None] | None = None, keep_trajectory: bool = True,
                screen: bool = False) -> list[Margin]:
     """Run every search to its margin, in lockstep batches (see the module docstring).
 

@@ -29,8 +29,8 @@ from adaptive_mj.plants.quadrotor import DISTURBANCES, Disturbance
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study.breaking_point import Stressor
 from adaptive_mj.study.job import RECORD_PREFLIGHT
-from adaptive_mj.study.outcome import passes
-from adaptive_mj.study.parallel import Backend, Job, JobResult
+from adaptive_mj.study.job import passes
+from adaptive_mj.study.parallel import Backend, RunSpec, RunOutcome
 from adaptive_mj.study.result import Table
 
 LAWS = ("geometric", "geometric_adaptive", "l1_geometric")
@@ -48,9 +48,9 @@ DELAY = Disturbance("delay", "s", lambda v: [f"simulation.control_delay={int(rou
                     doc="a control delay (whole physics steps of 2 ms)")
 
 
-def succeeded(r: JobResult) -> bool:
+def succeeded(r: RunOutcome) -> bool:
     """AdaptiveQuadBench's success: the run completed without a crash and its position error stayed within
-    MAX_ERROR (a run its scenario's own [success] tail bound calls failed still succeeds here): study.outcome's
+    MAX_ERROR (a run its scenario's own [success] tail bound calls failed still succeeds here): study.job's
     `passes` with that bound, named for the searches' run_passes."""
     return passes(r, max_error=MAX_ERROR)
 
@@ -81,10 +81,10 @@ class Search:
         return float(np.mean(self.evaluations[v]))
 
 
-def _jobs(s: Search, v: float, seeds: int, logs: Path, extra: Sequence[str]) -> list[Job]:
+def _jobs(s: Search, v: float, seeds: int, logs: Path, extra: Sequence[str]) -> list[RunSpec]:
     d = s.disturbance
     name = f"{s.law}-{d.name.replace(' ', '_')}={v:.6g}"
-    return [Job(sc.SCENARIOS_DIR / f"{TASK}.toml",
+    return [RunSpec(sc.SCENARIOS_DIR / f"{TASK}.toml",
                 overrides=(RECORD_PREFLIGHT, *BASE, *extra, f"law={s.law}", *d.overrides(v)),
                 seed=k, log=logs / f"{name}-seed{k}.mcap", tag=f"{name} seed {k}", extras=("flight_metrics",),
                 keep_trajectory=False, expect="measured")  # a probe of a margin: its verdict is the measurement
@@ -132,12 +132,12 @@ def grid(d: Disturbance, levels: int) -> list[float]:
     return [float(v) for v in np.linspace(d.lo, d.hi, levels)]
 
 
-def grid_jobs(found: list[Search], levels: int, seeds: int, logs: Path, extra: Sequence[str] = ()) -> list[Job]:
+def grid_jobs(found: list[Search], levels: int, seeds: int, logs: Path, extra: Sequence[str] = ()) -> list[RunSpec]:
     """Every search's runs on its grid (one batch: the bench's section)."""
     return [j for s in found for v in grid(s.disturbance, levels) for j in _jobs(s, v, seeds, logs, extra)]
 
 
-def grid_results(found: list[Search], levels: int, seeds: int, results: dict[str, JobResult]) -> list[Search]:
+def grid_results(found: list[Search], levels: int, seeds: int, results: dict[str, RunOutcome]) -> list[Search]:
     """Fill every search's evaluations from its grid runs' results (by tag)."""
     for s in found:
         for v in grid(s.disturbance, levels):

@@ -1,6 +1,7 @@
-"""One run of a study, as both backends see it: the Job (a scenario file, overrides, a seed, where
-to log), the JobResult sent back, the Backend the runs go to, and run_job / run_in_worker, which
-run one job in this process, a worker process (adaptive_mj.study.parallel) or a Ray task
+"""One run of a study, as every backend sees it: the RunSpec (a scenario file, overrides, a seed, where
+to log), the RunOutcome sent back (its Status, summary, analyses, and the figures studies judge, with `passes`,
+the one predicate every study's pass or fail goes through), the Backend the runs go to, and run_job /
+run_in_worker, which run one job in this process, a worker process (adaptive_mj.study.parallel) or a Ray task
 (adaptive_mj.study.ray_backend).
 
 The two backends share these pieces through this module: parallel.py dispatches to ray_backend.py
@@ -8,6 +9,7 @@ for `--backend ray`, and ray_backend.py imports nothing from parallel.py (no imp
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
@@ -16,7 +18,7 @@ import numpy as np
 
 from adaptive_mj.errors import AdaptiveMJError, Interrupted, PreflightRefused
 from adaptive_mj.sim import interrupt
-from adaptive_mj.trajectory import Status, Trajectory
+from adaptive_mj.trajectory import Status, Trajectory, ending
 
 
 #: the bench's breaking-point and margin-grid runs log their summary and a row per second (bench --full-logs: every
@@ -24,9 +26,10 @@ from adaptive_mj.trajectory import Status, Trajectory
 SUMMARY_LOG_RATE_HZ = 1.0  # Hz
 
 @dataclass(frozen=True)
-class Job:
-    """scenario: a scenario file; overrides: --set expressions; seed: noise seed or None;
-    log: the MCAP path to write (None: no log); tag: caller's label;
+class RunSpec:
+    """One run as a study asks for it. scenario: a scenario file; overrides: --set expressions (a law swapped in
+    comes first: setup.scenario.law_swap); seed: noise seed or None; log: the MCAP path to write (None: no log);
+    tag: caller's label;
     extras: names of functions in adaptive_mj.study.analysis run on the full-rate trajectory (from EXTRAS);
     keep_trajectory: send the decimated trajectory back (False: the summary only, as a sweep needs);
     expect: what the run is for (EXPECTATIONS): "ok", meant to meet its [success] criteria (a failure is a
@@ -46,7 +49,7 @@ class Job:
 EXPECTATIONS = ("ok", "fail", "measured")
 
 
-def as_expected(r: "JobResult") -> bool | None:
+def as_expected(r: "RunOutcome") -> bool | None:
     """Whether a run ended as its job expected (None: a measured run, which expects nothing): an "ok" run ok, a
     "fail" run failed, crashed or diverged."""
     if r.job.expect == "measured":
@@ -60,7 +63,7 @@ def as_expected(r: "JobResult") -> bool | None:
 FAILURES = (Status.FAILED, Status.CRASHED, Status.DIVERGED)
 
 
-#: The analyses a Job may name (a closed set, so no text from a scenario or log picks a function).
+#: The analyses a RunSpec may name (a closed set, so no text from a scenario or log picks a function).
 EXTRAS = ("excitation_index", "excitation_rate", "drift_rate", "swap_response", "lyapunov_check",
           "manipulator_response", "sudden_failure", "chattering", "change_response", "flight_metrics")
 
@@ -69,15 +72,99 @@ STOP_TIMEOUT = 30.0
 
 
 @dataclass(frozen=True)
-class JobResult:
-    job: Job
-    status: str  # the summary status ("ok", "failed", "crashed", "diverged"; trajectory.Status), "error" when the run
-    # could not be set up, "refused" when its pre-flight check refused it (success.preflight = "refuse"), or
-    # "interrupted"; study.outcome reads it, the summary and the analyses as a RunOutcome
+class RunOutcome:
+    """One run's outcome, as every backend sends it back and every study reads it.
+
+    job: its RunSpec; status: how it ended (a Status: the summary's verdict "ok", "failed", "crashed", "diverged";
+    "interrupted"; "error" when it could not be set up, "refused" when its pre-flight check refused it; a "failed"
+    run whose reason is a crash's, as older logs and rows have it, reads as "crashed": trajectory.ending);
+    summary: the run's summary (None when it did not run or was stopped before one); extras: the analyses its
+    spec asked for (EXTRAS: name -> result); trajectory: its rows decimated to the scenario's logging rate (None
+    unless the spec keeps them); error: why it did not run (one line)."""
+
+    job: RunSpec
+    status: str  # given as a Status or its text; a Status once made (__post_init__)
     summary: dict | None
     extras: dict = field(default_factory=dict)
-    trajectory: Trajectory | None = None  # decimated to the scenario's logging rate
+    trajectory: Trajectory | None = None
     error: str = ""
+
+    def __post_init__(self):
+        object.__setattr__(self, "status", ending(self.status, self.reason))
+
+    @property
+    def spec(self) -> RunSpec:
+        """What was run (the same as .job)."""
+        return self.job
+
+    @property
+    def reason(self) -> str:
+        """Why it ended so: its summary's reason ("" for an ok run), or for a run that never ran, its error."""
+        return self.error if self.summary is None else str(self.summary.get("reason") or "")
+
+    @property
+    def completed(self) -> bool:
+        """It ran to its end (status ok or failed, its summary there): not crashed, diverged, interrupted, refused
+        or in error; its figures are the whole run's."""
+        return self.status in COMPLETED and self.summary is not None
+
+    @property
+    def crashed(self) -> bool:
+        """Its vehicle hit the ground or tipped over (a quadrotor), cutting the run short."""
+        return self.status == Status.CRASHED
+
+    @property
+    def tail_error(self) -> float:
+        """The tail RMS tracking error [m or rad] (TAIL_METRICS: the 1-DOF one, else the joint-norm one); inf when
+        the run did not complete or the figure is absent or not finite."""
+        if not self.completed:
+            return math.inf
+        metrics = (self.summary or {}).get("metrics") or {}
+        return _finite_or_inf(next((metrics[k] for k in TAIL_METRICS if metrics.get(k) is not None), None))
+
+    @property
+    def max_position_error(self) -> float:
+        """The largest position error ‖p_d − p‖ over the run [m] (the flight_metrics analysis, a quadrotor's); inf
+        where the run has no such analysis or its figure is not finite."""
+        return _finite_or_inf((self.extras.get("flight_metrics") or {}).get("max_error"))
+
+    @property
+    def predicted_unstable(self) -> bool:
+        """The run's pre-flight check found its loop past the stability limit (its summary's `preflight`)."""
+        pre = (self.summary or {}).get("preflight") or {}
+        return bool(pre.get("checked")) and pre.get("ok") is False
+
+
+#: the names before 0.2.0 (a plugin or a script may still import them)
+Job = RunSpec
+JobResult = RunOutcome
+
+#: Endings of a run that ran to its end, every row there: judged by their figures, whatever the scenario's verdict.
+COMPLETED = (Status.OK, Status.FAILED)
+
+#: The summary metrics that hold the tail RMS tracking error, in the order read: the 1-DOF one [m or rad] (on a
+#: plant with joints the RMS over every joint's error), then the RMS of the joint error norm |q̃| [rad or m].
+TAIL_METRICS = ("rms_tracking_error_tail", "rms_tracking_error_norm_tail")
+
+
+def _finite_or_inf(value: float | None) -> float:
+    """A summary's or an analysis's figure as a float, inf where it is absent (None) or not finite."""
+    v = math.inf if value is None else float(value)
+    return v if math.isfinite(v) else math.inf
+
+
+def passes(result: RunOutcome, *, tail_bound: float | None = None, max_error: float | None = None) -> bool:
+    """Whether a study's run passes, the one predicate every study's pass or fail goes through (the breaking
+    points of the stress study, the scorecard and the control-rate section by a tail bound; the quadrotor's flight
+    margins by a position-error bound; the bench's quadrotor tasks): it completed (ok or failed: it ran to its
+    end, the scenario's own [success] verdict aside; so it did not crash, diverge, or stop interrupted, refused or
+    in error) and each bound given holds: its tail RMS tracking error at most tail_bound [m or rad]
+    (RunOutcome.tail_error), its largest position error at most max_error [m] (RunOutcome.max_position_error).
+    None: that bound is not asked. A crash fails whatever its figures: the tail of a run cut short is not the tail
+    of the run."""
+    return (result.completed and not result.crashed
+            and (tail_bound is None or result.tail_error <= tail_bound)
+            and (max_error is None or result.max_position_error <= max_error))
 
 
 def decimate(traj: Trajectory, every: int) -> Trajectory:
@@ -109,7 +196,7 @@ def log_write_error(log: Path | None, exc: OSError) -> str:
     return f"{log}: the log could not be written ({what}){left}"
 
 
-def _job_scenario(job: Job):
+def _job_scenario(job: RunSpec):
     """A job's scenario, loaded with its overrides and seed, after checking its analyses and that its log
     can be made (its folder, and no file there yet); an AdaptiveMJError (or OSError) otherwise."""
     from adaptive_mj.setup import scenario as sc
@@ -125,7 +212,7 @@ def _job_scenario(job: Job):
     return scn
 
 
-def run_job(job: Job) -> JobResult:
+def run_job(job: RunSpec) -> RunOutcome:
     """Load, run and log one job (in a worker or in-process)."""
     from adaptive_mj.study import analysis
     from adaptive_mj.setup.build import build
@@ -142,17 +229,17 @@ def run_job(job: Job) -> JobResult:
                 setup = build(scn)  # law and form, for analyses that need them (no run)
             extras[name] = getattr(analysis, name)(traj, setup)
         every = max(1, round(1.0 / (scn.log_rate_hz * traj.meta["dt"])))
-        return JobResult(job, result.summary["status"], result.summary, extras,
+        return RunOutcome(job, result.summary["status"], result.summary, extras,
                          decimate(traj, every) if job.keep_trajectory else None)
     except PreflightRefused as exc:  # the loop cannot be stable: a result of the study, not a broken job
-        return JobResult(job, Status.REFUSED, None, error=str(exc))
+        return RunOutcome(job, Status.REFUSED, None, error=str(exc))
     except AdaptiveMJError as exc:
-        return JobResult(job, "error", None, error=str(exc))
+        return RunOutcome(job, "error", None, error=str(exc))
     except OSError as exc:  # the log could not be written (disk full, a file-size limit, a read-only folder)
-        return JobResult(job, "error", None, error=log_write_error(job.log, exc))
+        return RunOutcome(job, "error", None, error=log_write_error(job.log, exc))
 
 
-def run_jobs_batched(jobs: Sequence[Job], *, nthread: int = 0) -> list[JobResult]:
+def run_jobs_batched(jobs: Sequence[RunSpec], *, nthread: int = 0) -> list[RunOutcome]:
     """run_job for each of `jobs`, their physics stepped together in one mujoco.batch.Batch of nthread
     threads (runner.execute_batch's pieces): the same logs, summaries and verdicts. A job that cannot be
     set up is an "error" (or "refused") result and the others go on. A stop signal closes every log of
@@ -160,17 +247,17 @@ def run_jobs_batched(jobs: Sequence[Job], *, nthread: int = 0) -> list[JobResult
     from adaptive_mj.sim.batch import run_batch
     from adaptive_mj.sim.runner import settle_batch, start
 
-    out: list[JobResult | None] = [None] * len(jobs)
+    out: list[RunOutcome | None] = [None] * len(jobs)
     started = {}
     for i, job in enumerate(jobs):
         try:
             started[i] = start(_job_scenario(job), log_path=job.log, label=job.tag)
         except PreflightRefused as exc:
-            out[i] = JobResult(job, Status.REFUSED, None, error=str(exc))
+            out[i] = RunOutcome(job, Status.REFUSED, None, error=str(exc))
         except AdaptiveMJError as exc:
-            out[i] = JobResult(job, "error", None, error=str(exc))
+            out[i] = RunOutcome(job, "error", None, error=str(exc))
         except OSError as exc:
-            out[i] = JobResult(job, "error", None, error=log_write_error(job.log, exc))
+            out[i] = RunOutcome(job, "error", None, error=log_write_error(job.log, exc))
     ids = list(started)
     try:
         trajs = run_batch([dict(plant=st.setup.plant, law=st.setup.law, reference=st.setup.reference,
@@ -188,30 +275,30 @@ def run_jobs_batched(jobs: Sequence[Job], *, nthread: int = 0) -> list[JobResult
     return [r for r in out if r is not None]
 
 
-def _job_result(job: Job, st, traj: Trajectory) -> JobResult:
+def _job_result(job: RunSpec, st, traj: Trajectory) -> RunOutcome:
     """A started run's verdict, log closed, analyses and decimated rows, as run_job returns them."""
     from adaptive_mj.study import analysis
 
     try:
         result = st.finish(traj)
     except OSError as exc:
-        return JobResult(job, "error", None, error=log_write_error(job.log, exc))
+        return RunOutcome(job, "error", None, error=log_write_error(job.log, exc))
     extras = {name: getattr(analysis, name)(result.trajectory, st.setup) for name in job.extras}
     every = max(1, round(1.0 / (st.scn.log_rate_hz * result.trajectory.meta["dt"])))
-    return JobResult(job, result.summary["status"], result.summary, extras,
+    return RunOutcome(job, result.summary["status"], result.summary, extras,
                      decimate(result.trajectory, every) if job.keep_trajectory else None)
 
 
-def run_in_worker(job: Job) -> JobResult:
+def run_in_worker(job: RunSpec) -> RunOutcome:
     """run_job in a worker process or a Ray task: a stop signal interrupts the run (its log closed as "interrupted");
     once one came, jobs still queued are not started."""
     if interrupt.requested() is not None:
-        return JobResult(job, "interrupted", None, error="not started: the runs were interrupted")
+        return RunOutcome(job, "interrupted", None, error="not started: the runs were interrupted")
     try:
         with interrupt.armed():
             return run_job(job)
     except KeyboardInterrupt as exc:
-        return JobResult(job, "interrupted", getattr(exc, "summary", None), error=str(exc) or "interrupted")
+        return RunOutcome(job, "interrupted", getattr(exc, "summary", None), error=str(exc) or "interrupted")
 
 
 def interrupted_note(finished: int, total: int) -> str:

@@ -1,8 +1,8 @@
 """Run many scenarios in parallel worker processes (bench and sweep).
 
-A Job (adaptive_mj.study.job, shared with the Ray backend) names a scenario
+A RunSpec (adaptive_mj.study.job, shared with the Ray backend) names a scenario
 file plus overrides and a seed; each worker loads,
-validates, runs and logs it, and sends back a small JobResult: the summary,
+validates, runs and logs it, and sends back a small RunOutcome: the summary,
 extra metrics computed on the full-rate trajectory, and the trajectory
 decimated to the logging rate (for figures). One run that diverges or fails
 is reported as such; the others go on.
@@ -39,8 +39,8 @@ from typing import Callable, Generator, Iterator, Sequence, cast
 
 from adaptive_mj.sim import interrupt
 from adaptive_mj.errors import Interrupted
-# Job, JobResult and Backend are imported from here by the study's commands, tests and benchmarks
-from adaptive_mj.study.job import (Backend, Job, JobResult, interrupted_note, run_in_worker, run_job,
+# RunSpec, RunOutcome and Backend are imported from here by the study's commands, tests and benchmarks
+from adaptive_mj.study.job import (Backend, RunSpec, RunOutcome, interrupted_note, run_in_worker, run_job,
                                    run_jobs_batched)
 from adaptive_mj.trajectory import Status
 
@@ -106,7 +106,7 @@ def _init_worker(parent_pid: int | None = None) -> None:
         threading.Thread(target=_watch_parent, name="adaptive-mj parent watch", daemon=True).start()
 
 
-def _run_in_pool_worker(job: Job) -> JobResult:
+def _run_in_pool_worker(job: RunSpec) -> RunOutcome:
     """run_in_worker in a pool's worker; one whose parent died meanwhile exits after the run (its log closed)."""
     result = run_in_worker(job)
     if _orphaned():
@@ -154,7 +154,7 @@ def _stop_workers(pool: cf.ProcessPoolExecutor, *, grace: float = STOP_GRACE) ->
     return killed
 
 
-def _unfinished_logs(jobs: Sequence[Job]) -> list[Path]:
+def _unfinished_logs(jobs: Sequence[RunSpec]) -> list[Path]:
     """The logs of `jobs` that exist but were not closed (no MCAP footer: a worker killed in its run wrote them)."""
     from adaptive_mj.log.replay import MCAP_MAGIC  # the last bytes of a closed MCAP file
 
@@ -194,8 +194,9 @@ def session(backend: Backend):
         yield
 
 
-def iter_results(jobs: Sequence[Job], backend: Backend | None = None, *,
-                 on_retry: Callable[[Job, str], None] | None = None) -> Generator[tuple[int, JobResult], None, None]:
+def iter_results(jobs: Sequence[RunSpec], backend: Backend | None = None, *,
+                 on_retry: Callable[[RunSpec, str], None] | None = None
+                 ) -> Generator[tuple[int, RunOutcome], None, None]:
     """(index into `jobs`, result) for each job as it finishes, exactly once per job.
 
     on_retry(job, why) is called when the Ray backend submits a run again (its worker died)."""
@@ -223,7 +224,7 @@ def iter_results(jobs: Sequence[Job], backend: Backend | None = None, *,
 BATCH_RUNS = 256
 
 
-def _iter_batched(jobs: Sequence[Job], nthread: int) -> Iterator[tuple[int, JobResult]]:
+def _iter_batched(jobs: Sequence[RunSpec], nthread: int) -> Iterator[tuple[int, RunOutcome]]:
     """--engine batch: the jobs in groups of BATCH_RUNS, each group's physics in one Batch of nthread threads
     in this process (job.run_jobs_batched)."""
     for g in range(0, len(jobs), BATCH_RUNS):
@@ -238,7 +239,7 @@ def _iter_batched(jobs: Sequence[Job], nthread: int) -> Iterator[tuple[int, JobR
 
 
 @contextmanager
-def stopping_with(results: Generator[tuple[int, JobResult], None, None], total: int, finished: Callable[[], int]):
+def stopping_with(results: Generator[tuple[int, RunOutcome], None, None], total: int, finished: Callable[[], int]):
     """A loop over iter_results' `results` in this block. A stop signal that comes in the loop's own body, between
     two results (interrupt's second delivery lands anywhere), is thrown into the generator at its yield: its workers
     are stopped and its note written there, before the signal goes on (else the note says `finished()` of
@@ -257,18 +258,18 @@ def stopping_with(results: Generator[tuple[int, JobResult], None, None], total: 
         results.close()
 
 
-def run_jobs(jobs: Sequence[Job], *, n_jobs: int = 1, on_done: Callable[[JobResult], None] | None = None,
-             backend: Backend | None = None) -> list[JobResult]:
+def run_jobs(jobs: Sequence[RunSpec], *, n_jobs: int = 1, on_done: Callable[[RunOutcome], None] | None = None,
+             backend: Backend | None = None) -> list[RunOutcome]:
     """Run jobs (on `backend`, default local processes, n_jobs of them); results in the order of `jobs`."""
     backend = backend or Backend(jobs=n_jobs)
-    results: list[JobResult | None] = [None] * len(jobs)
+    results: list[RunOutcome | None] = [None] * len(jobs)
     gen = iter_results(jobs, backend, on_retry=getattr(on_done, "retried", None))
     with stopping_with(gen, len(jobs), lambda: sum(r is not None for r in results)):
         for i, result in gen:
             results[i] = result
             if on_done:
                 on_done(result)
-    return cast("list[JobResult]", results)  # every slot filled: iter_results yields each job once
+    return cast("list[RunOutcome]", results)  # every slot filled: iter_results yields each job once
 
 
 #: Runs submitted ahead per worker process: keeps the workers busy while bounding what the
@@ -276,8 +277,8 @@ def run_jobs(jobs: Sequence[Job], *, n_jobs: int = 1, on_done: Callable[[JobResu
 WINDOW_PER_WORKER = 4
 
 
-def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
-                     on_retry: Callable[[Job, str], None] | None = None) -> Iterator[tuple[int, JobResult]]:
+def _iter_local_pool(jobs: Sequence[RunSpec], n_jobs: int, *, retries: int = 3,
+                     on_retry: Callable[[RunSpec, str], None] | None = None) -> Iterator[tuple[int, RunOutcome]]:
     """Results from n_jobs forked workers as they finish.
 
     A worker that dies (SIGKILL, out of memory) breaks the pool. Runs that had not started go back
@@ -343,20 +344,20 @@ def _iter_local_pool(jobs: Sequence[Job], n_jobs: int, *, retries: int = 3,
             yield i, result
 
 
-def _take(fut: cf.Future, job: Job) -> JobResult:
+def _take(fut: cf.Future, job: RunSpec) -> RunOutcome:
     """The result of a finished future (an error result if the job could not be sent or returned)."""
     try:
         result = fut.result()
     except Exception as exc:  # noqa: BLE001 (the job could not be sent or returned)
-        result = JobResult(job, "error", None, error=f"{type(exc).__name__}: {exc}")
+        result = RunOutcome(job, "error", None, error=f"{type(exc).__name__}: {exc}")
     if result.status == Status.INTERRUPTED:  # a worker was told to stop: stop them all
         raise Interrupted(signal.SIGTERM)
     return result
 
 
-def _put_back_lost(lost: list[int], jobs: Sequence[Job], attempts: list[int], retries: int, queue: deque[int],
+def _put_back_lost(lost: list[int], jobs: Sequence[RunSpec], attempts: list[int], retries: int, queue: deque[int],
                    suspects: deque[int],
-                   on_retry: Callable[[Job, str], None] | None) -> Iterator[tuple[int, JobResult]]:
+                   on_retry: Callable[[RunSpec, str], None] | None) -> Iterator[tuple[int, RunOutcome]]:
     """The runs a broken pool lost (indices into `jobs`): one that had not started goes back to
     `queue` when a started one is there to blame; a started one is charged an attempt and goes to
     `suspects` (run alone next), or, its retries spent, is yielded as an error."""
@@ -374,11 +375,11 @@ def _put_back_lost(lost: list[int], jobs: Sequence[Job], attempts: list[int], re
                 on_retry(job, f"attempt {attempts[i] + 1} of {retries + 1} (a worker process died)")
             suspects.appendleft(i)
         else:
-            yield i, JobResult(job, "error", None, error=f"a worker process died running it (tried "
+            yield i, RunOutcome(job, "error", None, error=f"a worker process died running it (tried "
                                                         f"{attempts[i] + 1} times)")
 
 
-def _worker_context(jobs: Sequence[Job]):
+def _worker_context(jobs: Sequence[RunSpec]):
     """Fork workers from a parent that has compiled the jobs' native callbacks (numba,
     ~2.5 s and ~100 MB each time) so no worker compiles again; spawn where fork is missing.
     Forking is safe here: no control callback is installed between runs, and the
@@ -389,7 +390,7 @@ def _worker_context(jobs: Sequence[Job]):
     return mp.get_context("fork")
 
 
-def _prewarm(jobs: Sequence[Job]) -> None:
+def _prewarm(jobs: Sequence[RunSpec]) -> None:
     """Compile the native controller of each distinct scenario file among the jobs (in this process): the 1-DOF,
     arm and quadrotor callbacks and the analytic plants' compiled loops (loop.compile_native)."""
     import contextlib
@@ -421,7 +422,7 @@ class Progress:
     retried, and the rate. On a terminal a tqdm bar redrawn in place as runs finish (the counts and
     the last run in its postfix); otherwise (a file, a pipe, CI) a plain line at most every
     PLAIN_PROGRESS_EVERY seconds and one at the end, so redirected output holds no carriage returns.
-    Call it with each JobResult; `retried(job, why)` counts a run submitted again (the Ray backend,
+    Call it with each RunOutcome; `retried(job, why)` counts a run submitted again (the Ray backend,
     when a worker died)."""
 
     def __init__(self, total: int, *, label: str = "runs", stream=None, clock: Callable[[], float] | None = None):
@@ -444,7 +445,7 @@ class Progress:
     def _extra(self) -> str:
         return "".join(f", {k} {v}" for k, v in (("failed", self.failed), ("retried", self.n_retried)) if v)
 
-    def __call__(self, result: JobResult) -> None:
+    def __call__(self, result: RunOutcome) -> None:
         self.n += 1
         self.failed += result.status != Status.OK
         now = self.clock()
@@ -461,7 +462,7 @@ class Progress:
             self.stream.write(f"{self._counts(now)} after {now - self.t0:.0f} s; {last}\n")
             self.stream.flush()
 
-    def retried(self, job: Job, why: str) -> None:
+    def retried(self, job: RunSpec, why: str) -> None:
         self.n_retried += 1
         line = f"retrying {job.tag or job.scenario.stem}: {why}"
         if self._bar is not None:

@@ -1,8 +1,8 @@
-"""The Ray backend of bench and sweep: each Job is one Ray task (`--backend ray`), or with
+"""The Ray backend of bench and sweep: each RunSpec is one Ray task (`--backend ray`), or with
 `--engine batch` each task carries up to RUNS_PER_TASK jobs stepped in one mujoco.batch.Batch.
 
     driver ── submit (at most WINDOW_PER_CPU × cluster CPUs in flight) ──► task: run_job on a node
-           ◄── (JobResult, log bytes | None) ──  as each finishes: the log written, the result yielded
+           ◄── (RunOutcome, log bytes | None) ──  as each finishes: the log written, the result yielded
 
 Ray is an optional extra (``pip install -e '.[ray]'``). With no address Ray starts on this
 machine with `jobs` CPUs (and is shut down afterwards); ``--address auto`` or
@@ -43,8 +43,8 @@ from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 from adaptive_mj.errors import AdaptiveMJError, Interrupted
-from adaptive_mj.study.job import (STOP_TIMEOUT, Backend, Job, JobResult, interrupted_note, log_write_error, ray_module,
-                                   run_in_worker, run_jobs_batched)
+from adaptive_mj.study.job import (STOP_TIMEOUT, Backend, RunOutcome, RunSpec, interrupted_note, log_write_error,
+                                   ray_module, run_in_worker, run_jobs_batched)
 from adaptive_mj.trajectory import Status
 
 #: Tasks in flight per CPU of the cluster: enough to keep every worker busy while results come
@@ -60,14 +60,14 @@ def partial_path(log: Path) -> Path:
 
 # --------------------------------------------------------------------------
 # the task (runs on a cluster node)
-def _scratch(job: Job) -> Path:
+def _scratch(job: RunSpec) -> Path:
     """The task's temporary folder on its node: one per job, so a retry on the same node removes
     what a killed attempt left."""
     digest = hashlib.sha256(repr(job).encode()).hexdigest()[:16]
     return Path(tempfile.gettempdir()) / "adaptive-mj-ray" / digest
 
 
-def _task_log(job: Job, logs: str) -> tuple[Path | None, JobResult | None]:
+def _task_log(job: RunSpec, logs: str) -> tuple[Path | None, RunOutcome | None]:
     """Where a task writes job's log (its node's scratch folder with "bytes", NAME.partial with "shared"),
     or the error result that stops it first (its scenario missing on this node, its log already there)."""
     if not job.scenario.is_file():
@@ -75,7 +75,7 @@ def _task_log(job: Job, logs: str) -> tuple[Path | None, JobResult | None]:
 
         why = (f"{job.scenario}: no such file on the Ray node {socket.gethostname()} (every node must see the "
                "scenarios and models at the same paths)")
-        return None, JobResult(job, Status.ERROR, None, error=why)
+        return None, RunOutcome(job, Status.ERROR, None, error=why)
     if job.log is None:
         return None, None
     if logs == "bytes":
@@ -84,13 +84,13 @@ def _task_log(job: Job, logs: str) -> tuple[Path | None, JobResult | None]:
         scratch.mkdir(parents=True)
         return scratch / job.log.name, None
     if job.log.exists():
-        return None, JobResult(job, Status.ERROR, None, error=f"{job.log}: file exists")
+        return None, RunOutcome(job, Status.ERROR, None, error=f"{job.log}: file exists")
     where = partial_path(job.log)
     where.unlink(missing_ok=True)  # left by an attempt whose worker died
     return where, None
 
 
-def _task_collect(job: Job, logs: str, where: Path | None, result: JobResult) -> tuple[JobResult, bytes | None]:
+def _task_collect(job: RunSpec, logs: str, where: Path | None, result: RunOutcome) -> tuple[RunOutcome, bytes | None]:
     """A task's result with the caller's job and log path, and the log's bytes with logs="bytes" (the
     scratch folder removed); with "shared" the log renamed from NAME.partial."""
     data = None
@@ -104,12 +104,12 @@ def _task_collect(job: Job, logs: str, where: Path | None, result: JobResult) ->
     return replace(result, job=job, error=error), data
 
 
-def _task_cleanup(job: Job, logs: str, where: Path | None) -> None:
+def _task_cleanup(job: RunSpec, logs: str, where: Path | None) -> None:
     if where is not None and logs == "bytes":
         shutil.rmtree(where.parent, ignore_errors=True)
 
 
-def run_task(job: Job, logs: str) -> tuple[JobResult, bytes | None]:
+def run_task(job: RunSpec, logs: str) -> tuple[RunOutcome, bytes | None]:
     """One job on a Ray worker: (its result with the caller's job, the log's bytes with logs="bytes").
 
     SIGINT (ray.cancel) and SIGTERM stop the run cleanly: the log is closed as "interrupted"."""
@@ -127,7 +127,7 @@ def run_task(job: Job, logs: str) -> tuple[JobResult, bytes | None]:
         _task_cleanup(job, logs, where)
 
 
-def run_task_batch(jobs: Sequence[Job], logs: str) -> list[tuple[JobResult, bytes | None]]:
+def run_task_batch(jobs: Sequence[RunSpec], logs: str) -> list[tuple[RunOutcome, bytes | None]]:
     """Several jobs on one Ray worker (`--engine batch`): their physics stepped together in one
     mujoco.batch.Batch of one thread (job.run_jobs_batched), each with run_task's result and log. A stop
     signal closes every log of the batch as "interrupted" (a run that had ended keeps its verdict) and
@@ -135,7 +135,7 @@ def run_task_batch(jobs: Sequence[Job], logs: str) -> list[tuple[JobResult, byte
     from adaptive_mj.sim import interrupt
 
     os.environ.setdefault("MUJOCO_GL", "egl")
-    out: list[tuple[JobResult, bytes | None] | None] = [None] * len(jobs)
+    out: list[tuple[RunOutcome, bytes | None] | None] = [None] * len(jobs)
     places: dict[int, Path | None] = {}
     for k, job in enumerate(jobs):
         where, refused = _task_log(job, logs)
@@ -153,7 +153,7 @@ def run_task_batch(jobs: Sequence[Job], logs: str) -> list[tuple[JobResult, byte
                 results = run_jobs_batched([replace(jobs[k], log=places[k]) for k in ks], nthread=1)
         except KeyboardInterrupt as exc:
             why = str(exc) or "interrupted"
-            results = [JobResult(jobs[k], Status.INTERRUPTED, None, error=why) for k in ks]
+            results = [RunOutcome(jobs[k], Status.INTERRUPTED, None, error=why) for k in ks]
         for k, result in zip(ks, results, strict=True):
             out[k] = _task_collect(jobs[k], logs, places[k], result)
     finally:
@@ -230,7 +230,7 @@ def session(backend: Backend):
             ray.shutdown()
 
 
-def _write_log(job: Job, data: bytes) -> str:
+def _write_log(job: RunSpec, data: bytes) -> str:
     """The returned log bytes to job.log (through NAME.partial); "" or the error's one line."""
     log = job.log
     assert log is not None  # a task returns log bytes only for a job with a log (_task_log)
@@ -246,7 +246,7 @@ def _write_log(job: Job, data: bytes) -> str:
     return ""
 
 
-def _write_returned_log(job: Job, result: JobResult, data: bytes | None) -> JobResult:
+def _write_returned_log(job: RunSpec, result: RunOutcome, data: bytes | None) -> RunOutcome:
     """The log bytes that came back with a result (None: none) written to job.log; the result, made
     an error if its log could not be written."""
     if data is None:
@@ -274,8 +274,8 @@ def _units(n: int, backend: Backend, cpus: int) -> list[list[int]]:
     return [list(range(a, min(n, a + size))) for a in range(0, n, size)]
 
 
-def iter_results(jobs: Sequence[Job], backend: Backend, *,
-                 on_retry: Callable[[Job, str], None] | None = None) -> Iterator[tuple[int, JobResult]]:
+def iter_results(jobs: Sequence[RunSpec], backend: Backend, *,
+                 on_retry: Callable[[RunSpec, str], None] | None = None) -> Iterator[tuple[int, RunOutcome]]:
     """(index, result) for each job as it finishes on Ray, exactly once per job (see the module docstring).
     With backend.engine "batch" each task carries several jobs (run_task_batch)."""
     from adaptive_mj.sim import interrupt
@@ -337,18 +337,18 @@ def iter_results(jobs: Sequence[Job], backend: Backend, *,
             ray.shutdown()
 
 
-def _drop_existing(ids: list[int], jobs: Sequence[Job]) -> tuple[list[int], list[tuple[int, JobResult]]]:
+def _drop_existing(ids: list[int], jobs: Sequence[RunSpec]) -> tuple[list[int], list[tuple[int, RunOutcome]]]:
     """(the jobs of a task still to run, an error result for each whose log is already there)."""
     exist = [i for i in ids if (log := jobs[i].log) is not None and log.exists()]
     return ([i for i in ids if i not in exist],
-            [(i, JobResult(jobs[i], "error", None, error=f"{jobs[i].log}: file exists")) for i in exist])
+            [(i, RunOutcome(jobs[i], "error", None, error=f"{jobs[i].log}: file exists")) for i in exist])
 
 
-_Returned = tuple[JobResult, bytes | None]
+_Returned = tuple[RunOutcome, bytes | None]
 
 
-def _task_results(ray, ref, ids: list[int], jobs: Sequence[Job], u: int, attempts: list[int], backend: Backend,
-                  on_retry: Callable[[Job, str], None] | None) -> list[tuple[int, _Returned]] | None:
+def _task_results(ray, ref, ids: list[int], jobs: Sequence[RunSpec], u: int, attempts: list[int], backend: Backend,
+                  on_retry: Callable[[RunSpec, str], None] | None) -> list[tuple[int, _Returned]] | None:
     """What finished task u (carrying jobs[i] for i in ids) sent back: (job index, (result, log bytes)) for
     each of its jobs; a Ray error (its worker or node died) gives None when the task has an attempt left
     (the caller submits it again), an error result for each job when not or when the run itself raised."""
@@ -360,12 +360,12 @@ def _task_results(ray, ref, ids: list[int], jobs: Sequence[Job], u: int, attempt
         if _system_failure(ray, exc) and _retry(ids, jobs, u, attempts, backend, on_retry, why):
             return None
         tried = f" (tried {attempts[u] + 1} times)" if attempts[u] else ""
-        return [(i, (JobResult(jobs[i], "error", None, error=f"the Ray task failed{tried}: {why}"
+        return [(i, (RunOutcome(jobs[i], "error", None, error=f"the Ray task failed{tried}: {why}"
                                + _keep_leftovers(jobs[i], backend)), None)) for i in ids]
 
 
-def _stopped_again(pairs: list[tuple[int, _Returned]], jobs: Sequence[Job], u: int, attempts: list[int],
-                   backend: Backend, on_retry: Callable[[Job, str], None] | None) -> bool:
+def _stopped_again(pairs: list[tuple[int, _Returned]], jobs: Sequence[RunSpec], u: int, attempts: list[int],
+                   backend: Backend, on_retry: Callable[[RunSpec, str], None] | None) -> bool:
     """Task u came back with a run "interrupted": after a stop signal here (Ctrl-C reached the task too)
     its logs are written and errors.Interrupted raised; otherwise (its node stopped it) True when it has
     an attempt left, to be submitted again. False when no run of it was interrupted."""
@@ -383,8 +383,8 @@ def _stopped_again(pairs: list[tuple[int, _Returned]], jobs: Sequence[Job], u: i
                   f"its node stopped it: {stopped[0].error}")
 
 
-def _retry(ids: list[int], jobs: Sequence[Job], u: int, attempts: list[int], backend: Backend,
-           on_retry: Callable[[Job, str], None] | None, why: str) -> bool:
+def _retry(ids: list[int], jobs: Sequence[RunSpec], u: int, attempts: list[int], backend: Backend,
+           on_retry: Callable[[RunSpec, str], None] | None, why: str) -> bool:
     """Whether task u (carrying jobs[i] for i in ids) has an attempt left; if so it is charged one, what its
     last attempt left is removed and on_retry is told why for each job, for the caller to submit it again."""
     if attempts[u] >= backend.retries:
@@ -397,7 +397,7 @@ def _retry(ids: list[int], jobs: Sequence[Job], u: int, attempts: list[int], bac
     return True
 
 
-def _remove_leftovers(job: Job, backend: Backend) -> None:
+def _remove_leftovers(job: RunSpec, backend: Backend) -> None:
     """What a dead or stopped attempt may have left on shared storage: its NAME.partial, or the log it
     renamed before its result was lost (the driver checked that no log was there before the first
     attempt, so whatever is there now came from one)."""
@@ -406,7 +406,7 @@ def _remove_leftovers(job: Job, backend: Backend) -> None:
         job.log.unlink(missing_ok=True)
 
 
-def _keep_leftovers(job: Job, backend: Backend) -> str:
+def _keep_leftovers(job: RunSpec, backend: Backend) -> str:
     """A run given up: what its last attempt wrote on shared storage becomes its log (it reads as
     truncated); the text to add to the error."""
     log = job.log
@@ -422,7 +422,7 @@ def _keep_leftovers(job: Job, backend: Backend) -> str:
     return f"; what its last attempt wrote reads as truncated ({log})"
 
 
-def _stop(ray, pending: dict, units: list[list[int]], jobs: Sequence[Job], backend: Backend, *,
+def _stop(ray, pending: dict, units: list[list[int]], jobs: Sequence[RunSpec], backend: Backend, *,
           timeout: float = STOP_TIMEOUT) -> None:
     """Cancel every outstanding task (a running one closes its logs as "interrupted"), write the
     logs that come back, and force-cancel what has not ended after `timeout` s."""

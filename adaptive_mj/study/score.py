@@ -27,8 +27,8 @@ from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import score_suite as suite
 from adaptive_mj.study import stress
 from adaptive_mj.study.breaking_point import Search, _file_name, search_all
-from adaptive_mj.study.job import RECORD_PREFLIGHT, Job, JobResult
-from adaptive_mj.study.outcome import RunOutcome, passes
+from adaptive_mj.study.job import RECORD_PREFLIGHT, RunSpec, RunOutcome
+from adaptive_mj.study.job import passes
 from adaptive_mj.study.sweep import to_toml
 from adaptive_mj.study.stats import CONFIDENCE, Estimate, cvar, estimate, ranks
 from adaptive_mj.trajectory import Status
@@ -202,22 +202,22 @@ def _param_error(summary: dict | None) -> float:
     return float(np.max(np.abs(eh - th) / scale))
 
 
-def _completed(r: JobResult | None) -> TypeGuard[JobResult]:
+def _completed(r: RunOutcome | None) -> TypeGuard[RunOutcome]:
     """Whether a run finished (ok or failed by its criteria; not crashed, diverged, refused or in error):
-    study.outcome's `passes` with no bound (None: a task not run)."""
+    study.job's `passes` with no bound (None: a task not run)."""
     return r is not None and passes(r)
 
 
-def seed_figures(runs: dict[str, JobResult], bound: float, limits: tuple[float, float],
+def seed_figures(runs: dict[str, RunOutcome], bound: float, limits: tuple[float, float],
                  durations: dict[str, float]) -> dict:
     """The criteria (score_suite.CRITERIA) of one law on one plant for one seed, from its task runs (task name ->
-    JobResult): a dict criterion -> value, plus "success" (0 or 1) and "performance"."""
+    RunOutcome): a dict criterion -> value, plus "success" (0 or 1) and "performance"."""
     tr, ch, hold = runs.get("tracking"), runs.get("change"), runs.get("hold")
     ok = _completed(ch) and all(r is not None and passes(r, tail_bound=bound) for r in (tr, hold))
     out: dict[str, float] = {c.name: math.nan for c in suite.CRITERIA}
     if _completed(tr):
         m = (tr.summary or {})["metrics"]
-        out["tail_error"] = RunOutcome.of(tr).tail_error
+        out["tail_error"] = tr.tail_error
         out["control_rms"] = float(m["control_rms"])
         out["control_tv_rate"] = float(m["control_total_variation"]) / durations["tracking"]
         out["param_error"] = _param_error(tr.summary)
@@ -451,15 +451,15 @@ def _check_builds(p: stress.Plant, law: str, e: Entry) -> None:
                             f"[{_kind(p).name}] table of --gains FILE.toml, or --set law.KEY=V)") from None
 
 
-def task_jobs(pl: Plan, out: Path) -> tuple[list[Job], list[tuple[str, str, str, int]]]:
-    """Every plant × law × task × seed as a Job, and its (plant, label, task, seed)."""
+def task_jobs(pl: Plan, out: Path) -> tuple[list[RunSpec], list[tuple[str, str, str, int]]]:
+    """Every plant × law × task × seed as a RunSpec, and its (plant, label, task, seed)."""
     jobs, keys = [], []
     for p in pl.rows:
         for e in pl.entries[p.name]:
             for task in tasks_of(p):
                 over = task_overrides(p, task, pl.settings.duration(task.name))
                 for k in range(pl.seeds):
-                    jobs.append(Job(stress.scenario_path(task.scenario),
+                    jobs.append(RunSpec(stress.scenario_path(task.scenario),
                                     overrides=(RECORD_PREFLIGHT, *over, *e.overrides), seed=k,
                                     log=out / "logs" / "tasks" / p.name / _file_name(e.label)
                                     / f"{task.name}-seed{k}.mcap",
@@ -595,7 +595,7 @@ def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] 
         margins = search_all(found, seeds=1, steps=pl.settings.steps, logs=out / "logs" / "margins",
                              n_jobs=backend.jobs, backend=backend,
                              on_done=progress_printer(at_most, label="margin runs (at most)"), keep_trajectory=False)
-    task_runs: dict[tuple[str, str, int], dict[str, JobResult]] = {}
+    task_runs: dict[tuple[str, str, int], dict[str, RunOutcome]] = {}
     for (pn, lb, tn, k), r in zip(keys, results, strict=True):
         task_runs.setdefault((pn, lb, k), {})[tn] = r
     cost_of: dict[tuple[str, str], float] = {}

@@ -1,7 +1,7 @@
 """`adaptive-mj sweep`: one scenario over a grid of keys × seeds, in parallel.
 
     --grid exprs ──► parse_grid (one axis each) ──► grid_points ──► each point validated (scenario.load)
-                 ──► one Job per point × seed, each logging to DIR/logs/ ──► parallel.iter_results
+                 ──► one RunSpec per point × seed, each logging to DIR/logs/ ──► parallel.iter_results
                  ──► a row per run as it finishes, appended to DIR/rows.jsonl (the driver keeps only the
                      few columns the summary table and plot need)
                  ──► DIR/sweep.csv, DIR/sweep.json in the planned order, DIR/sweep.png, a table on stdout
@@ -36,7 +36,7 @@ from adaptive_mj.setup import scenario as sc
 from adaptive_mj.errors import AdaptiveMJError, ScenarioError
 from adaptive_mj.report.html import write_html
 from adaptive_mj.report.metrics import TAIL_FRACTION, clean_json, metrics as run_metrics
-from adaptive_mj.study.parallel import (Backend, Job, JobResult, iter_results, progress_printer, session,
+from adaptive_mj.study.parallel import (Backend, RunSpec, RunOutcome, iter_results, progress_printer, session,
                                        stopping_with)
 from adaptive_mj.study.job import RECORD_PREFLIGHT
 from adaptive_mj.study.result import Study, Table
@@ -270,7 +270,7 @@ def flat_metrics(summary: dict | None) -> dict[str, Any]:
     return out
 
 
-def rows(results: Sequence[tuple[dict[str, Any], JobResult]], *, root: Path) -> list[dict[str, Any]]:
+def rows(results: Sequence[tuple[dict[str, Any], RunOutcome]], *, root: Path) -> list[dict[str, Any]]:
     """One row per run: its name (the job's tag), grid values, seed, status, reason (why it diverged or
     failed), the summary's metrics flattened, log (relative to root; "" if the run wrote none)."""
     out = []
@@ -532,8 +532,8 @@ def _validate_points(path: Path, overrides: Sequence[str], points: Sequence[dict
 
 
 def plan(path: Path, points: Sequence[dict[str, Any]], *, seeds: int, overrides: Sequence[str],
-         logs: Path | None) -> list[tuple[dict[str, Any], Job]]:
-    """(grid point, Job) for every point × seed 0..seeds-1, seeds fastest; each job logs to logs/<name>.mcap
+         logs: Path | None) -> list[tuple[dict[str, Any], RunSpec]]:
+    """(grid point, RunSpec) for every point × seed 0..seeds-1, seeds fastest; each job logs to logs/<name>.mcap
     (logs None: no log, the summary row only)."""
     names = short_names(list(points[0]))
     width = max(4, len(str(len(points) * seeds - 1)))
@@ -541,7 +541,7 @@ def plan(path: Path, points: Sequence[dict[str, Any]], *, seeds: int, overrides:
     for p, point in enumerate(points):
         for seed in range(seeds):
             name = run_name(p * seeds + seed, point, seed, names=names, width=width)
-            job = Job(path, overrides=(RECORD_PREFLIGHT, *overrides, *_grid_overrides(point)), seed=seed,
+            job = RunSpec(path, overrides=(RECORD_PREFLIGHT, *overrides, *_grid_overrides(point)), seed=seed,
                       log=None if logs is None else logs / f"{name}.mcap",
                       tag=name, keep_trajectory=False)
             planned.append((point, job))
@@ -752,7 +752,7 @@ def check_manifest(out: Path, manifest: dict) -> None:
                                 "same scenario, --grid, --seeds and --set, or start a new folder")
 
 
-def finished_results(jobs: Sequence[Job]) -> Iterator[tuple[int, JobResult]]:
+def finished_results(jobs: Sequence[RunSpec]) -> Iterator[tuple[int, RunOutcome]]:
     """(index, result) for each job whose log is complete (closed with a summary: ok, failed, crashed
     or diverged), read back from the log; a missing, truncated or interrupted log (or one a dead Ray
     worker left as NAME.partial) is removed so that its run starts afresh."""
@@ -772,7 +772,7 @@ def finished_results(jobs: Sequence[Job]) -> Iterator[tuple[int, JobResult]]:
             logged = None
         ended = (Status.OK, Status.DIVERGED, Status.FAILED, Status.CRASHED)
         if logged is not None and logged.summary is not None and logged.status in ended:
-            yield i, JobResult(job, logged.status, logged.summary)
+            yield i, RunOutcome(job, logged.status, logged.summary)
         else:
             job.log.unlink()
 

@@ -16,7 +16,7 @@ from adaptive_mj.plants import kinds as units  # the units each plant kind decla
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import analysis
 from adaptive_mj.study.job import as_expected
-from adaptive_mj.study.parallel import Job, JobResult
+from adaptive_mj.study.parallel import RunSpec, RunOutcome
 from adaptive_mj.trajectory import Status
 
 matplotlib.use("Agg")
@@ -32,8 +32,8 @@ class SectionReport:
     rows: list[dict] = field(default_factory=list)
 
 
-Analyze = Callable[[dict[str, JobResult], Path], SectionReport]  # (results by tag, output folder) -> report
-Built = tuple[tuple[Job, ...], Analyze]  # what a section module's build gives: its runs and their analysis
+Analyze = Callable[[dict[str, RunOutcome], Path], SectionReport]  # (results by tag, output folder) -> report
+Built = tuple[tuple[RunSpec, ...], Analyze]  # what a section module's build gives: its runs and their analysis
 
 
 @dataclass(frozen=True)
@@ -43,7 +43,7 @@ class Section:
     key: str
     title: str
     claim: str
-    jobs: tuple[Job, ...]
+    jobs: tuple[RunSpec, ...]
     analyze: Analyze
 
 
@@ -86,14 +86,15 @@ def entries() -> list[CatalogueEntry]:
 
 
 # ---------------------------------------------------------------- helpers
-def _job(section: str, variant: str, scenario: str, logs: Path, overrides=(), extras=(), expect: str = "ok") -> Job:
-    """A catalogue run; expect (study.job.Job.expect): "ok", "fail" (a demonstration meant to fail) or "measured"
+def _job(section: str, variant: str, scenario: str, logs: Path, overrides=(), extras=(), expect: str = "ok") -> RunSpec:
+    """A catalogue run; expect (study.job.RunSpec.expect): "ok", "fail" (a demonstration meant to fail) or "measured"
     (a baseline or a sweep point: its verdict is the measurement)."""
-    return Job(scenario=SCN / f"{scenario}.toml", overrides=tuple(overrides), log=logs / f"{section}-{variant}.mcap",
-               tag=f"{section}/{variant}", extras=tuple(extras), expect=expect)
+    return RunSpec(scenario=SCN / f"{scenario}.toml", overrides=tuple(overrides),
+                   log=logs / f"{section}-{variant}.mcap", tag=f"{section}/{variant}", extras=tuple(extras),
+                   expect=expect)
 
 
-def _ok(r: JobResult) -> bool:
+def _ok(r: RunOutcome) -> bool:
     """A run that completed (its verdict "ok" or "failed": both have every row to analyse)."""
     return r.status in (Status.OK, Status.FAILED) and r.trajectory is not None
 
@@ -103,10 +104,10 @@ def _ok(r: JobResult) -> bool:
 SECTION_PLANT = {section: kind.name for kind in units.built_in().values() for section in kind.sections}
 
 
-def _row(section: str, variant: str, r: JobResult, key: str = "", kind: str | None = None) -> dict:
+def _row(section: str, variant: str, r: RunOutcome, key: str = "", kind: str | None = None) -> dict:
     """A row of the main table: section (its plant kind's section name, optionally followed by " §N" where one
-    kind has several sections), the run, its status, what it was declared for (Job.expect) and whether it ended so, its
-    figures in the plant's units (kind: the plant kind, default the section's)."""
+    kind has several sections), the run, its status, what it was declared for (RunSpec.expect) and whether it ended so,
+    its figures in the plant's units (kind: the plant kind, default the section's)."""
     m = (r.summary or {}).get("metrics", {})
     status = r.status if r.status != Status.ERROR else Status.ERROR
     kind = SECTION_PLANT.get(section.split(" §")[0], "") if kind is None else kind
@@ -116,7 +117,7 @@ def _row(section: str, variant: str, r: JobResult, key: str = "", kind: str | No
             "y_unit": units.output_unit(kind), "u_unit": units.control_unit(kind)}
 
 
-def _status_note(results: dict[str, JobResult]) -> str:
+def _status_note(results: dict[str, RunOutcome]) -> str:
     bad = [f"`{tag}`: {r.status}" + (f" ({r.error or (r.summary or {}).get('reason', '')})")
            for tag, r in results.items() if r.status != Status.OK]
     return ("\n\nRuns that did not finish normally: " + "; ".join(bad) + ".\n") if bad else ""
@@ -148,7 +149,7 @@ def _recovery(recovery: float | None, peak: float | None) -> str:
     return f"{recovery:.2f} s"
 
 
-def _final_table(r: JobResult, plant: str) -> str:
+def _final_table(r: RunOutcome, plant: str) -> str:
     if r.summary is None:
         return f"(no result: {r.error})"
     f = r.summary["final"]

@@ -18,7 +18,7 @@ from adaptive_mj.sim import preflight
 if TYPE_CHECKING:
     from adaptive_mj.laws.sliding import SlidingAdaptiveLaw
     from adaptive_mj.laws.slotine_li import SlotineLiLaw
-from adaptive_mj.study.parallel import JobResult
+from adaptive_mj.study.parallel import RunOutcome
 from adaptive_mj.study.sections.common import (Built, SCN, SectionReport, _g, _job, _row, _save, _status_note, plt,
                                                register)
 
@@ -108,7 +108,7 @@ def _pole_text(loop: SampledLoop, T: float) -> str:
     return f"inside the unit circle ({expr} = {abs(1.0 - fig):.3g} < 1{where})"
 
 
-def _identification(r: JobResult, kind: str) -> tuple[str, float | None]:
+def _identification(r: RunOutcome, kind: str) -> tuple[str, float | None]:
     """(text, one number) of the final identification error: the payload's mass (relative) and
     centre of mass for an arm, max_i |θ̂ᵢ − θᵢ| / |θᵢ| otherwise."""
     if r.summary is None:
@@ -193,7 +193,7 @@ def section(quick: bool, logs: Path, duration: float | None = None) -> Built:
 
     def analyze(res, out):
         from adaptive_mj.study.breaking_point import TAIL_BOUND
-        from adaptive_mj.study.outcome import passes
+        from adaptive_mj.study.job import passes
 
         loops = {name: sampled_loop(SCN / f"{name}.toml", dur) for _, name in CONTROL_RATE_PLANTS}
         lines = ["| plant | rate [Hz] | period T | predicted kT/d or max_j K_D T/M_jj | sampled pole | status | "

@@ -12,7 +12,7 @@ from adaptive_mj.setup import scenario as sc
 
 if TYPE_CHECKING:
     from adaptive_mj.plants.protocol import NativePlant
-from adaptive_mj.study.parallel import Job
+from adaptive_mj.study.parallel import RunSpec
 from adaptive_mj.study.sections.common import (Built, SCN, SectionReport, _g, _job, _ok, _row, _save, _status_note, plt,
                                                register)
 
@@ -97,5 +97,5 @@ def section(quick: bool, logs: Path) -> Built:
     return jobs, analyze
 
 
-def _law_k(job: Job) -> float:
+def _law_k(job: RunSpec) -> float:
     return sc.load(job.scenario, overrides=list(job.overrides)).law.k

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import analysis
-from adaptive_mj.study.parallel import Job
+from adaptive_mj.study.parallel import RunSpec
 from adaptive_mj.study.sections.common import (Built, SCN, SectionReport, _g, _job, _ok, _recovery, _row, _save,
                                                _status_note, plt, register)
 
@@ -89,7 +89,7 @@ def section(quick: bool, logs: Path) -> Built:
     return jobs, analyze
 
 
-def _swap_gif(job: Job, t_event: float, out: Path) -> str:
+def _swap_gif(job: RunSpec, t_event: float, out: Path) -> str:
     """A short GIF of the adaptive run around the swap, rendered headless from its log."""
     if job.log is None or not job.log.exists():
         return ""

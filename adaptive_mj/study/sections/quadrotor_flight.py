@@ -12,7 +12,7 @@ import numpy as np
 
 from adaptive_mj.study.job import SUMMARY_LOG_RATE_HZ
 from adaptive_mj.study import flight
-from adaptive_mj.study.outcome import RunOutcome, passes
+from adaptive_mj.study.job import passes
 from adaptive_mj.study.sections.common import (Built, SectionReport, _g, _job, _ok, _row, _save, _status_note, plt,
                                                register)
 
@@ -72,7 +72,7 @@ def _task_figures(r) -> dict:
     fm = r.extras.get("flight_metrics") or {}
     e = np.linalg.norm(tr.y_tilde, axis=1)
     after = tr.t >= SETTLE
-    crashed = RunOutcome.of(r).crashed
+    crashed = r.crashed
     i = tr.names.index("m")
     m_err = (tr.theta_hat[-1, i] - tr.theta[-1, i]) / tr.theta[-1, i]
     J_err = float(np.linalg.norm(tr.theta_hat[-1, 1:7] - tr.theta[-1, 1:7]) / np.linalg.norm(tr.theta[-1, 1:7]))
@@ -84,7 +84,7 @@ def _task_figures(r) -> dict:
 
 def _flown(r) -> bool:
     """A task run with rows to analyse: it completed, or it crashed (its rows up to the crash)."""
-    return _ok(r) or (RunOutcome.of(r).crashed and r.trajectory is not None)
+    return _ok(r) or (r.crashed and r.trajectory is not None)
 
 
 def _tasks(res, out: Path) -> tuple[str, list[dict]]:

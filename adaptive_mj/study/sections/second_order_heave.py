@@ -10,7 +10,7 @@ import numpy as np
 from adaptive_mj.plants.protocol import has_form
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import analysis
-from adaptive_mj.study.parallel import JobResult
+from adaptive_mj.study.parallel import RunOutcome
 from adaptive_mj.study.sections.common import (Built, SCN, SectionReport, _final_table, _g, _job, _ok, _row, _save,
                                                _status_note, _unit, plt, register)
 
@@ -119,7 +119,7 @@ def section(quick: bool, logs: Path) -> Built:
     return jobs, analyze
 
 
-def _lecture_twin_note(r: JobResult, out: Path) -> str:
+def _lecture_twin_note(r: RunOutcome, out: Path) -> str:
     """Why the lecture's numbers end far from the truth: measured V, its dissipation and the estimates."""
     tr = r.trajectory
     if tr is None or len(tr.t) < 3:

@@ -7,14 +7,14 @@ from pathlib import Path
 
 from adaptive_mj.plants import kinds as units  # the units each plant kind declares
 from adaptive_mj.setup import scenario as sc
-from adaptive_mj.study.parallel import Job
+from adaptive_mj.study.parallel import RunSpec
 from adaptive_mj.study.sections.common import Section, SectionReport, _final_table, _g, _ok, _row, _status_note
 
 
 def user_section(paths: list[Path], logs: Path) -> Section:
     """A section of the user's own scenarios (any law: built in, or an installed plugin), each
     run as the catalogue's runs are: logged, summarised, its estimates drawn."""
-    jobs = tuple(Job(scenario=Path(p), log=logs / f"user-{i}-{Path(p).stem}.mcap", tag=f"user/{i}-{Path(p).stem}")
+    jobs = tuple(RunSpec(scenario=Path(p), log=logs / f"user-{i}-{Path(p).stem}.mcap", tag=f"user/{i}-{Path(p).stem}")
                  for i, p in enumerate(paths))
 
     def analyze(res, out):
