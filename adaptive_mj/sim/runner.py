@@ -221,19 +221,29 @@ def execute_batch(scenarios: Sequence[tuple[Scenario, Path | None]], *, nthread:
     mujoco.batch.Batch (adaptive_mj.sim.batch): the same rows, logs and verdicts as execute gives each
     alone. Runs that cannot take the compiled callback, or that need another callback than the first,
     run one by one. An exception (a stop signal) closes every log as loop.run's would."""
+    starts = [start(scn, log_path=log) for scn, log in scenarios]
+    return [st.finish(traj) for st, traj in zip(starts, step_batch(starts, nthread=nthread), strict=True)]
+
+
+def step_batch(starts: Sequence[Started], *, nthread: int = 0) -> list[Trajectory]:
+    """The started runs' physics stepped together in one mujoco.batch.Batch of nthread threads
+    (adaptive_mj.sim.batch.run_batch): their trajectories, in order, each log still open for its verdict
+    (Started.finish). An exception closes every log (settle_batch: a stop signal, also one Python wrapped, as
+    "interrupted", the runs that had ended with their verdict; the Interrupted's `finished` counts those) and goes
+    on."""
     from adaptive_mj.sim.batch import run_batch
 
-    starts = [start(scn, log_path=log) for scn, log in scenarios]
     try:
-        trajs = run_batch([dict(plant=st.setup.plant, law=st.setup.law, reference=st.setup.reference,
-                                sink=st.recorder, **st.kwargs) for st in starts], nthread=nthread)
+        return run_batch([dict(plant=st.setup.plant, law=st.setup.law, reference=st.setup.reference,
+                               sink=st.recorder, **st.kwargs) for st in starts], nthread=nthread)
     except BaseException as exc:
-        stop = interrupt.stop_or(exc)
-        settle_batch(starts, stop)
+        stop = interrupt.stop_or(exc)  # also a stop Python wrapped (sim.interrupt)
+        ended = settle_batch(starts, stop)
+        if isinstance(stop, Interrupted):  # the runs that had ended before the signal count as finished
+            stop.finished = sum(r is not None for r in ended)
         if stop is not exc:
             raise stop from exc
         raise
-    return [st.finish(traj) for st, traj in zip(starts, trajs, strict=True)]
 
 
 def settle_batch(starts: Sequence[Started], exc: BaseException) -> list[RunResult | None]:

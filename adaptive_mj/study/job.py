@@ -16,7 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
-from adaptive_mj.errors import AdaptiveMJError, Interrupted, PreflightRefused
+from adaptive_mj.errors import AdaptiveMJError, PreflightRefused
 from adaptive_mj.sim import interrupt
 from adaptive_mj.trajectory import Status, Trajectory, ending
 
@@ -244,8 +244,7 @@ def run_jobs_batched(jobs: Sequence[RunSpec], *, nthread: int = 0) -> list[RunOu
     threads (runner.execute_batch's pieces): the same logs, summaries and verdicts. A job that cannot be
     set up is an "error" (or "refused") result and the others go on. A stop signal closes every log of
     the group as "interrupted" and comes out as the KeyboardInterrupt."""
-    from adaptive_mj.sim.batch import run_batch
-    from adaptive_mj.sim.runner import settle_batch, start
+    from adaptive_mj.sim.runner import start, step_batch
 
     out: list[RunOutcome | None] = [None] * len(jobs)
     started = {}
@@ -259,17 +258,7 @@ def run_jobs_batched(jobs: Sequence[RunSpec], *, nthread: int = 0) -> list[RunOu
         except OSError as exc:
             out[i] = RunOutcome(job, "error", None, error=log_write_error(job.log, exc))
     ids = list(started)
-    try:
-        trajs = run_batch([dict(plant=st.setup.plant, law=st.setup.law, reference=st.setup.reference,
-                                sink=st.recorder, **st.kwargs) for st in started.values()], nthread=nthread)
-    except BaseException as exc:
-        stop = interrupt.stop_or(exc)  # also a stop Python wrapped (sim.interrupt)
-        ended = settle_batch(list(started.values()), stop)
-        if isinstance(stop, Interrupted):  # the runs that had ended before the signal count as finished
-            stop.finished = sum(r is not None for r in ended)
-        if stop is not exc:
-            raise stop from exc
-        raise
+    trajs = step_batch(list(started.values()), nthread=nthread)
     for i, traj in zip(ids, trajs, strict=True):
         out[i] = _job_result(jobs[i], started[i], traj)
     return [r for r in out if r is not None]
