@@ -19,6 +19,7 @@ h = actuator gear. The payload's mass and inertia are the unknowns.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import mujoco
@@ -32,7 +33,7 @@ from adaptive_mj.plants.attach import compose
 from adaptive_mj.plants.mujoco_plant import (BodyEdits, MujocoPlant, compile_for_scenario, compile_xml_path,
                                              find_joint_and_actuator, scratch_data, spec_from_text, with_userdata)
 from adaptive_mj.laws.kinds import Form
-from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, register
+from adaptive_mj.plants.kinds import ESTIMATES_DRAW, Draw, PlantKind, ScoreTask, StressPlant, register
 from adaptive_mj.plants import sliding_study
 from adaptive_mj.plants.study_spec import Stressor, StudyContext, hold_constant, payload_ratio
 from adaptive_mj.plants import plant_keys
@@ -209,12 +210,16 @@ KIND = register(PlantKind(
     events={ev.PAYLOAD_MASS: "mujoco", ev.CONSTANT_FORCE: None},
     stress=StressPlant("arm", "arm_payload_swap", ("events=[]",), composite="{gain=1.0, filter=2.0}",
                        laws=sliding_study.laws, stressors=study_stressors, hold=hold_constant,
-                       tasks=(ScoreTask("tracking", "arm_payload_swap",
-                                        ("events=[]", "law.initial_estimates={theta_half}")),
+                       tasks=(ScoreTask("tracking", "arm_payload_swap", ("events=[]",),
+                                        draws=(Draw("plant.payload_mass", 0.5, 2.0),
+                                               Draw("reference.amplitudes", 0.75, 1.25),
+                                               Draw("reference.omegas", 0.75, 1.25),
+                                               Draw("reference.phases", 0.0, 2 * math.pi, each=True, add=True),
+                                               ESTIMATES_DRAW)),
                               ScoreTask("change", "arm_payload_swap",
                                         ("events=[{{t={half}, kind='payload_mass', value={payload_x4}}}]",),
                                         extras=("change_response",)),
                               ScoreTask("hold", "arm_payload_swap",
                                         ("events=[]", "reference={{kind='constant', value=0.5}}"), noise_scale=2.0,
-                                        extras=("drift_rate",)))),
+                                        extras=("estimate_drift",)))),
     sections=("payload swap",)))

@@ -29,6 +29,7 @@ stale inside the control callback).
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import mujoco
@@ -41,7 +42,7 @@ from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants.mujoco_plant import (MujocoPlant, compile_for_scenario, compile_xml_path,
                                              find_joint_and_actuator, read_model_file, scratch_data)
 from adaptive_mj.laws.kinds import Form
-from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, register
+from adaptive_mj.plants.kinds import ESTIMATES_DRAW, Draw, PlantKind, ScoreTask, StressPlant, register
 from adaptive_mj.plants import sliding_study
 from adaptive_mj.plants.study_spec import Stressor, StudyContext, hold_constant
 from adaptive_mj.plants import plant_keys
@@ -295,10 +296,14 @@ KIND = register(PlantKind(
     stress=StressPlant("heave", "heave_tracking", ("simulation.initial_state='reference'",),
                        disturbance=(1.0, 1000.0), composite="{gain=3e-4, filter=1.0}",
                        laws=sliding_study.laws, stressors=study_stressors, hold=hold_constant,
-                       tasks=(ScoreTask("tracking", "heave_tracking", ("law.initial_estimates={theta_half}",)),
+                       tasks=(ScoreTask("tracking", "heave_tracking", (),
+                                        draws=(Draw("reference.amplitude", 0.75, 1.25),
+                                               Draw("reference.omega", 0.75, 1.25),
+                                               Draw("reference.phase", 0.0, 2 * math.pi, add=True),
+                                               ESTIMATES_DRAW)),
                               ScoreTask("change", "heave_tracking",
                                         ("simulation.initial_state='reference'", "law.initial_estimates='model'",
                                          "events=[{{t={half}, kind='fluid_density_scale', value=1.1}}]"),
                                         extras=("change_response",)),
-                              ScoreTask("hold", "heave_drift", (), noise_scale=0.0, extras=("drift_rate",)))),
+                              ScoreTask("hold", "heave_drift", (), noise_scale=0.0, extras=("estimate_drift",)))),
     sections=("Lyapunov", "2nd order", "n-th order", "drift", "excitation", "failure")))

@@ -57,18 +57,40 @@ def first_order(plant: PlantSpec, law_order: Any) -> int:
 
 
 @dataclass(frozen=True)
+class Draw:
+    """One quantity of a scorecard task drawn afresh for every seed, the same draw for every law on that seed (a
+    paired comparison): `key`, a scenario key of the task's scenario (reference.*, plant.*), whose value there (a
+    number, or the numbers of a list or a table) is multiplied by a factor drawn uniformly from [lo, hi], or with
+    `add`, has a number drawn from [lo, hi] added (e.g. a phase [rad]); each: a draw per number (else one for them
+    all). The key "law.initial_estimates" draws each parameter's factor on its truth (from the compiled model)."""
+
+    key: str
+    lo: float
+    hi: float
+    each: bool = False
+    add: bool = False
+
+
+#: each parameter's initial estimate drawn between half and twice its truth: every draw lies in the projection
+#: baseline's box [θ/2, 2θ] (adaptive_mj.plants.sliding_study), so no baseline starts outside its own set
+ESTIMATES_DRAW = Draw("law.initial_estimates", 0.5, 2.0)
+
+
+@dataclass(frozen=True)
 class ScoreTask:
     """One task of the scorecard (adaptive_mj.study.score_suite) on a plant kind's row, one run per seed: a bundled
     scenario and its overrides, as templates over the plant's derived numbers ({half}: half the run [s];
     {theta_half}: half the true θ as a law.initial_estimates table; {payload_x4}: four times the scenario's
     plant.payload_mass [kg]; {{ }}: one brace); noise_scale: the plant's nominal noise times this (0: the
-    scenario's own noise); extras: the analyses the task reads (adaptive_mj.study.job.EXTRAS)."""
+    scenario's own noise); extras: the analyses the task reads (adaptive_mj.study.job.EXTRAS); draws: what each
+    seed draws of the task (Draw), applied after the overrides (none: a seed draws only the noise)."""
 
     name: str
     scenario: str
     overrides: tuple[str, ...]
     noise_scale: float = 1.0
     extras: tuple[str, ...] = ()
+    draws: tuple[Draw, ...] = ()
 
 
 @dataclass(frozen=True)

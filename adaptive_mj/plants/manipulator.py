@@ -47,7 +47,7 @@ from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compile_for_
                                              control_callback, new_warnings, scratch_data)
 from adaptive_mj.plants.protocol import Policy
 from adaptive_mj.laws.kinds import Form
-from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, body_param_unit, register
+from adaptive_mj.plants.kinds import Draw, PlantKind, ScoreTask, StressPlant, body_param_unit, register
 from adaptive_mj.plants.study_spec import (LEAK_TIME, Stressor, StudyContext, hold_joints, payload_ratio,
                                            sine_disturbance, surface_noise, theta_table)
 from adaptive_mj.plants import plant_keys
@@ -969,10 +969,11 @@ KIND = register(PlantKind(
         "ur5e", "ur5e_identification", noise_signals=("q", "q_dot"), disturbance=(0.1, 1000.0),
         laws=study_laws, stressors=study_stressors, hold=hold_joints,
         label="the 6-joint arm: the RMS over its joints and the tail's rows, ‖q̃‖'s RMS / √6",
-        tasks=(ScoreTask("tracking", "ur5e_identification", ()),
+        tasks=(ScoreTask("tracking", "ur5e_identification", (),
+                         draws=(Draw("reference.amplitudes", 0.75, 1.25), Draw("reference.omegas", 0.75, 1.25))),
                ScoreTask("change", "ur5e_payload_swap",
                          ("law.initial_estimates='model'",
                           "events=[{{t={half}, kind='payload_swap', payload='sphere'}}]"),
                          extras=("change_response",)),
-               ScoreTask("hold", "ur5e_drift", (), noise_scale=0.0, extras=("drift_rate",)))),
+               ScoreTask("hold", "ur5e_drift", (), noise_scale=0.0, extras=("estimate_drift",)))),
     sections=("manipulator",)))

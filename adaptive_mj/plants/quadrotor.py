@@ -43,7 +43,7 @@ from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants import events as ev
 from adaptive_mj.plants import plant_keys
 from adaptive_mj.plants.airframe import Airframe
-from adaptive_mj.plants.kinds import PlantKind, ScoreTask, StressPlant, register
+from adaptive_mj.plants.kinds import Draw, PlantKind, ScoreTask, StressPlant, register
 from adaptive_mj.plants.study_spec import LEAK_TIME, Stressor, StudyContext, box_table, surface_noise, theta_table
 from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compiled_control, control_callback, new_warnings,
                                              release_data, run_data, scratch_data)
@@ -730,11 +730,13 @@ KIND = register(PlantKind(
     stress=StressPlant("quadrotor", "quadrotor_lemniscate", (), noise_signals=("p", "v"),
                        label="the quadrotor: the RMS over x, y and z, ‖p̃‖'s RMS / √3",
                        laws=study_laws, stressors=study_stressors, hold=study_hold,
-                       tasks=(ScoreTask("tracking", "quadrotor_lemniscate", ()),
+                       tasks=(ScoreTask("tracking", "quadrotor_lemniscate", (),
+                                        draws=(Draw("reference.amplitude", 0.75, 1.25),
+                                               Draw("reference.omega", 0.75, 1.25))),
                               ScoreTask("change", "quadrotor_lemniscate",
                                         ("law.initial_estimates='model'",
                                          "events=[{{t={half}, kind='payload_release'}}]"),
                                         extras=("change_response",)),
                               ScoreTask("hold", "quadrotor_hover_payload", ("law.initial_estimates='model'",),
-                                        extras=("drift_rate",)))),
+                                        extras=("estimate_drift",)))),
     noise_signals=STATE_NAMES, reference_reader=read_reference, reference_builder=build_reference))

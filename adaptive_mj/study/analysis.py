@@ -89,6 +89,21 @@ def drift_rate(traj: Trajectory, setup=None, *, start_fraction: float = 0.2) -> 
     return float(slope * 100.0)
 
 
+def estimate_drift(traj: Trajectory, setup=None, *, start_fraction: float = 0.2) -> float:
+    """Growth of ‖θ̂(t) − θ̂(t0)‖ / ‖θ(t0)‖ per 100 s (dimensionless fraction per 100 s): drift_rate's slope, of the
+    estimates' change relative to the whole parameter vector rather than to each parameter, so that a parameter
+    near zero (an arm's small products of inertia) does not blow the figure up. The scorecard's hold task reads it.
+    """
+    t = traj.t
+    t0 = t[0] + start_fraction * (t[-1] - t[0])
+    rows = t >= t0
+    i0 = int(np.argmax(rows))
+    scale = float(np.linalg.norm(traj.theta[i0]))
+    dev = np.linalg.norm(traj.theta_hat[rows] - traj.theta_hat[i0], axis=1) / (scale if scale > 0 else 1.0)
+    slope = np.polyfit(t[rows] - t0, dev, 1)[0]
+    return float(slope * 100.0)
+
+
 def first_event_time(setup) -> float | None:
     return setup.events[0].t if setup is not None and setup.events else None
 

@@ -64,7 +64,7 @@ FAILURES = (Status.FAILED, Status.CRASHED, Status.DIVERGED)
 
 
 #: The analyses a RunSpec may name (a closed set, so no text from a scenario or log picks a function).
-EXTRAS = ("excitation_index", "excitation_rate", "drift_rate", "swap_response", "lyapunov_check",
+EXTRAS = ("excitation_index", "excitation_rate", "drift_rate", "estimate_drift", "swap_response", "lyapunov_check",
           "manipulator_response", "sudden_failure", "chattering", "change_response", "flight_metrics")
 
 #: Seconds the parent waits, after SIGTERM, for the workers to close their logs and exit.

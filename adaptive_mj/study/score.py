@@ -11,10 +11,12 @@ true parameters (the fixed ones) are marked oracles: a reference, not a competit
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import platform
 import time
+import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence, TypeGuard
@@ -114,6 +116,61 @@ def _kind(p: stress.Plant) -> kinds.PlantKind:
     return stress._kind(p)
 
 
+@functools.cache
+def draws(p: stress.Plant, task: suite.Task, seed: int) -> tuple[tuple[str, ...], dict[str, Any]]:
+    """What seed `seed` draws of `task` on plant row p (ScoreTask.draws): the overrides that apply the draw, and
+    the drawn values by key. The generator is seeded by the suite's version, the plant, the task and the seed
+    alone, so every law meets the same draw on that seed (a paired comparison), on every machine."""
+    if not task.draws:
+        return (), {}
+    rng = np.random.default_rng([suite.SUITE_VERSION, zlib.crc32(p.name.encode()), zlib.crc32(task.name.encode()),
+                                 seed])
+    path = stress.scenario_path(task.scenario)
+    scn = sc.load(path)
+    over: list[str] = []
+    values: dict[str, Any] = {}
+    for d in task.draws:
+        if d.key == "law.initial_estimates":  # on the truth of this draw's plant (its payload drawn before it)
+            from adaptive_mj.setup.build import build
+
+            s = build(sc.load(path, overrides=over))
+            value: Any = {n: float(v) * float(rng.uniform(d.lo, d.hi))
+                          for n, v in zip(s.law.names, s.plant.true_theta(), strict=True)}
+        else:
+            value = _drawn(_base_value(scn, d.key, task), d, rng)
+        values[d.key] = value
+        over.append(f"{d.key}={to_toml(value)}")
+    return tuple(over), values
+
+
+def _base_value(scn: Any, key: str, task: suite.Task) -> Any:
+    """The value of a drawn key in the task's scenario, as loaded (defaults filled): reference.* from its
+    [reference] table, plant.* from its [plant] table; one line when it has none."""
+    section, _, name = key.partition(".")
+    table = {"reference": scn.reference.params, "plant": vars(scn.plant)}.get(section, {})
+    value = table.get(name)
+    if value is None:
+        raise ScenarioError(f"{task.scenario}: the score's task {task.name!r} draws {key}, and the scenario has none "
+                            "(expected a number, or numbers in a list or table)")
+    return value
+
+
+def _drawn(value: Any, d: kinds.Draw, rng: np.random.Generator) -> Any:
+    """`value` (a number, a list or tuple of numbers, or a table of them) with draw d applied: each number times a
+    factor (or plus an offset, d.add) from U[d.lo, d.hi], one for them all or one each (d.each)."""
+    one = float(rng.uniform(d.lo, d.hi))
+
+    def apply(v: Any) -> Any:
+        if isinstance(v, dict):
+            return {k: apply(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [apply(x) for x in v]
+        r = float(rng.uniform(d.lo, d.hi)) if d.each else one
+        return float(v) + r if d.add else float(v) * r
+
+    return apply(value)
+
+
 def tasks_of(p: stress.Plant) -> tuple[suite.Task, ...]:
     """Plant row p's tasks: those derived from a user's scenario (score --scenario), else the suite's."""
     return p.tasks or suite.TASKS[p.name]
@@ -144,7 +201,7 @@ def scenario_row(path: Path, duration: float) -> stress.Plant:
                                               "events=[{{t={half}, kind='payload_mass', value={payload_x4}}}]"),
                         extras=("change_response",)),
              suite.Task("hold", str(path), ("law.initial_estimates='model'", "events=[]", held),
-                        extras=("drift_rate",)))
+                        extras=("estimate_drift",)))
     return stress.user_plant(path, duration, tasks=tasks)
 
 
@@ -191,15 +248,16 @@ def baseline_names(p: stress.Plant) -> list[str]:
 
 
 def _param_error(summary: dict | None) -> float:
+    """‖θ̂ − θ‖ / ‖θ‖ at the end of the run (the whole parameter vector, so that a parameter near zero does not
+    blow the figure up); NaN without estimates."""
     final = (summary or {}).get("final") or {}
     est, true = final.get("theta_hat") or {}, final.get("theta") or {}
     if not true:
         return math.nan
     th = np.array([true[n] for n in true], dtype=float)
     eh = np.array([est.get(n, math.nan) for n in true], dtype=float)
-    scale = np.abs(th)
-    scale = np.where(scale > 0, scale, np.max(scale))
-    return float(np.max(np.abs(eh - th) / scale))
+    scale = float(np.linalg.norm(th))
+    return float(np.linalg.norm(eh - th) / (scale if scale > 0 else 1.0))
 
 
 def _completed(r: RunOutcome | None) -> TypeGuard[RunOutcome]:
@@ -231,12 +289,15 @@ def seed_figures(runs: dict[str, RunOutcome], bound: float, limits: tuple[float,
         if env.size and env[-1] >= bound:
             out["recovery_time"] = left
     if _completed(hold):
-        out["drift_rate"] = abs(float(hold.extras.get("drift_rate", math.nan)))
+        out["drift_rate"] = abs(float(hold.extras.get("estimate_drift", math.nan)))
     norm = normalisers(bound, limits, durations)
-    penalty = 0.0
-    for c in suite.CRITERIA:
-        v = out[c.name]
-        penalty += c.weight * (1.0 if not math.isfinite(v) else min(1.0, max(0.0, v / norm[c.name])))
+    part = {c.name: 1.0 if not math.isfinite(out[c.name]) else min(1.0, max(0.0, out[c.name] / norm[c.name]))
+            for c in suite.CRITERIA}
+    # drift is judged with identification (score_suite.JUDGED_TOGETHER): a still estimate earns nothing when it is
+    # still because the law does not adapt; its penalty is at least the tracking's parameter error's
+    for name, with_ in suite.JUDGED_TOGETHER.items():
+        part[name] = max(part[name], part[with_])
+    penalty = sum(c.weight * part[c.name] for c in suite.CRITERIA)
     out["success"] = 1.0 if ok else 0.0
     out["performance"] = out["success"] * (1.0 - penalty)
     return out
@@ -460,7 +521,7 @@ def task_jobs(pl: Plan, out: Path) -> tuple[list[RunSpec], list[tuple[str, str, 
                 over = task_overrides(p, task, pl.settings.duration(task.name))
                 for k in range(pl.seeds):
                     jobs.append(RunSpec(stress.scenario_path(task.scenario),
-                                    overrides=(RECORD_PREFLIGHT, *over, *e.overrides), seed=k,
+                                    overrides=(RECORD_PREFLIGHT, *over, *draws(p, task, k)[0], *e.overrides), seed=k,
                                     log=out / "logs" / "tasks" / p.name / _file_name(e.label)
                                     / f"{task.name}-seed{k}.mcap",
                                     tag=f"{p.name}/{e.label} {task.name} seed {k}", extras=task.extras,
@@ -530,7 +591,11 @@ def plant_card(pl: Plan, p: stress.Plant, task_runs: dict, margins: list, cost_o
     bound, limits = stress.tail_bound(p), actuator_limits(p)
     plant: dict[str, Any] = {"kind": k.name, "output_unit": k.output_unit, "control_unit": k.control_unit,
                              "tail_bound": bound, "normalisers": normalisers(bound, limits, durations),
-                             "stressors": stressor_text(p, pl.settings.stress_duration), "laws": {}}
+                             "stressors": stressor_text(p, pl.settings.stress_duration), "laws": {},
+                             # each task's distribution (ScoreTask.draws) and what every seed drew of it
+                             "draws": {t.name: {"distribution": [asdict(d) for d in t.draws],
+                                                "seeds": [draws(p, t, k)[1] for k in range(pl.seeds)]}
+                                       for t in tasks_of(p) if t.draws}}
     by_search: dict[tuple[str, str], list] = {}
     for m in margins:
         by_search.setdefault((m.search.label, m.search.stressor.name), []).append(m)

@@ -5,11 +5,15 @@ joins only cards of one version and hash. Change anything here that changes a nu
 Plants: each plant kind that declares a stress-study row (PlantKind.stress: heave, the 1-DOF arm, the UR5e, the
 quadrotor), with its nominal noise and failure bound (PlantKind.nominal_noise, .tail_bound).
 
-Tasks per plant (TASKS), every seed a different noise draw:
-  tracking  the plant's tracking scenario under nominal noise, the estimates from half the truth (the 1-DOF plants:
-            inside every baseline's projection box) or from the scenario's own start (the UR5e: zero): tail RMS
-            error, control RMS and total variation, the final parameter error (the truth from the compiled model);
-            the quadrotor: the lemniscate with its 10 g payload unknown, from the bare airframe's parameters;
+Tasks per plant (TASKS). Every seed draws its own task from the task's distribution (ScoreTask.draws, declared by
+each plant kind beside its keys), and every law meets the same draw on that seed, so laws are compared pair by pair
+(score.draws; the card records the distributions and every seed's draw), and the noise:
+  tracking  the plant's tracking scenario under nominal noise: tail RMS error, control RMS and total variation, the
+            final parameter error (the truth from the compiled model). Drawn: the reference's amplitude and
+            frequency (× U[0.75, 1.25]; the 1-DOF plants also its phases, + U[0, 2π]), on the 1-DOF arm the payload's
+            mass (× U[0.5, 2]) and on the 1-DOF plants each parameter's initial estimate (its truth × U[0.5, 2]:
+            inside every baseline's projection box); the UR5e starts from the scenario's own estimates (zero), the
+            quadrotor (the lemniscate with its 10 g payload unknown) from the bare airframe's parameters;
   change    a parameter change at half the run (heave: the water's density ×1.1; the arms: the payload's mass ×4 or
             the payload swapped; the quadrotor: its payload released), the estimates from the truth: the peak error
             after it and the recovery time;
@@ -23,7 +27,8 @@ payload at 1 s and a rotor's thrust loss), each searched per seed by bisection.
 
 Scores per plant (RealAIGym's form, docs/METRICS.md "Scorecard"):
   performance  S = c_success · (1 − Σ_i w_i · min(1, c_i / n_i)), over CRITERIA (weights w_i sum to 1, the
-               normalisers n_i derived from the plant); c_success = 1 when every task's run finished (no divergence) and
+               normalisers n_i derived from the plant; the drift's term at least the parameter error's:
+               JUDGED_TOGETHER); c_success = 1 when every task's run finished (no divergence) and
                the tracking and hold runs kept their tail RMS error within the plant's bound, else 0;
   robustness   R = the mean over the stressors of where the margin lies in the range searched (0: the low end
                fails; 1: the high end passes; in between on the bisection's own scale, log over a decade or more),
@@ -39,7 +44,7 @@ from dataclasses import asdict, dataclass
 
 from adaptive_mj.plants.kinds import ScoreTask, built_in
 
-SUITE_VERSION = 2  # 2: the quadrotor's row; R over the stressors that apply to a law
+SUITE_VERSION = 3  # 2: the quadrotor's row; R over the stressors that apply to a law; 3: tasks drawn per seed
 
 
 #: One task of the card (its fields: plants.kinds.ScoreTask); each plant kind declares its own beside its keys
@@ -77,10 +82,16 @@ CRITERIA: tuple[Criterion, ...] = (
               "100 × the actuator's limit per s (summed over joints)", 0.10,
               "Σ|Δu| over the tracking run divided by its duration: chattering and noise in u"),
     Criterion("param_error", "tracking", "final parameter error", "-", "1 (100 %)", 0.15,
-              "max_i |θ̂_i − θ_i| / |θ_i| at the end of the tracking run (θ_i = 0: over max |θ|)"),
+              "‖θ̂ − θ‖ / ‖θ‖ at the end of the tracking run"),
     Criterion("drift_rate", "hold", "estimate drift rate", "1/100 s", "1 (100 % per 100 s)", 0.15,
-              "|slope| of ‖(θ̂ − θ̂(t0)) / θ‖ while holding still, per 100 s"),
+              "|slope| of ‖θ̂ − θ̂(t0)‖ / ‖θ‖ while holding still, per 100 s; its penalty is at least the final "
+              "parameter error's (JUDGED_TOGETHER)"),
 )
+
+#: criteria judged together: the first's penalty is at least the second's. A law whose estimates stay still while
+#: holding because it does not adapt at all (a dead-zone wider than the noise, a fixed-parameter law) is not
+#: rewarded for it unless it also identified the parameters in the tracking run.
+JUDGED_TOGETHER = {"drift_rate": "param_error"}
 
 
 @dataclass(frozen=True)
@@ -108,6 +119,7 @@ SUITES = {
 def definitions_hash() -> str:
     """sha256 (first 16 hex digits) of the suite's definitions: version, tasks, criteria, suites."""
     text = json.dumps({"version": SUITE_VERSION, "tasks": {k: [asdict(t) for t in v] for k, v in TASKS.items()},
-                       "criteria": [asdict(c) for c in CRITERIA], "suites": {k: asdict(v) for k, v in SUITES.items()}},
+                       "criteria": [asdict(c) for c in CRITERIA], "together": JUDGED_TOGETHER,
+                       "suites": {k: asdict(v) for k, v in SUITES.items()}},
                       sort_keys=True, ensure_ascii=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
