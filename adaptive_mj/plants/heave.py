@@ -296,7 +296,7 @@ KIND = register(PlantKind(
     stress=StressPlant("heave", "heave_tracking", ("simulation.initial_state='reference'",),
                        disturbance=(1.0, 1000.0), composite="{gain=3e-4, filter=1.0}",
                        laws=sliding_study.laws, stressors=study_stressors, hold=hold_constant,
-                       tasks=(ScoreTask("tracking", "heave_tracking", (),
+                       tasks=(ScoreTask("tracking", "heave_tracking", ("simulation.initial_state='reference'",),
                                         draws=(Draw("reference.amplitude", 0.75, 1.25),
                                                Draw("reference.omega", 0.75, 1.25),
                                                Draw("reference.phase", 0.0, 2 * math.pi, add=True),
