@@ -144,3 +144,14 @@ def test_rank_laws_writes_the_ranks_the_rule_and_the_counts_into_a_plant_entry()
     # constant 0.01 on its two seeds with a value, so it separates too, from both copies
     assert plant["separated_pairs"] == {"performance": 5, "robustness": 2, "pairs": 6}
     assert plant["ranking"] == RANKING == "paired t, 95 %"
+
+
+def test_the_card_s_scoring_paragraph_names_the_rule_and_the_counts_per_plant():
+    from adaptive_mj.study.score_card import formula_text
+
+    data = {"suite": {"steps": 6, "seeds": 3, "confidence": 0.95},
+            "plants": {"heave": {"separated_pairs": {"performance": 12, "robustness": 9, "pairs": 28}},
+                       "arm": {"separated_pairs": {"performance": 3, "robustness": 1, "pairs": 21}}}}
+    text = formula_text(data)
+    assert "Ranks (paired t, 95 %)" in text
+    assert "Pairs that separate: heave S 12 and R 9 of 28; arm S 3 and R 1 of 21." in text
