@@ -32,7 +32,7 @@ from adaptive_mj.study.breaking_point import Search, _file_name, search_all
 from adaptive_mj.study.job import RECORD_PREFLIGHT, RunSpec, RunOutcome
 from adaptive_mj.study.job import passes
 from adaptive_mj.study.sweep import to_toml
-from adaptive_mj.study.stats import CONFIDENCE, Estimate, cvar, estimate, ranks
+from adaptive_mj.study.stats import CONFIDENCE, RANKING, Estimate, cvar, estimate, paired_ranks, separated_pairs
 from adaptive_mj.trajectory import Status
 
 CARD_FORMAT = "adaptive-mj scorecard"
@@ -422,12 +422,19 @@ def card_hash(duration: float) -> str:
 
 
 def rank_laws(plant: dict) -> None:
-    """Each law's ranks on the plant's performance and robustness (adaptive_mj.study.stats.ranks), in place."""
+    """Each law's ranks on the plant's performance and robustness by paired comparison over the seeds
+    (adaptive_mj.study.stats.paired_ranks, on each figure's per-seed "values"; null: no value), in place; the rule
+    in plant["ranking"] and how many pairs of laws separate per score in plant["separated_pairs"]."""
     labels = list(plant["laws"])
+    counts: dict[str, int] = {}
     for score in ("performance", "robustness"):
-        ests = [Estimate.from_dict(plant["laws"][lb]["figures"][score]) for lb in labels]
-        for lb, r in zip(labels, ranks(ests), strict=True):
+        values = [[math.nan if v is None else float(v) for v in plant["laws"][lb]["figures"][score]["values"]]
+                  for lb in labels]
+        for lb, r in zip(labels, paired_ranks(values), strict=True):
             plant["laws"][lb].setdefault("rank", {})[score] = r
+        counts[score] = separated_pairs(values)
+    plant["ranking"] = RANKING
+    plant["separated_pairs"] = {**counts, "pairs": len(labels) * (len(labels) - 1) // 2}
 
 
 @dataclass

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from adaptive_mj.study import score_suite as suite
 from adaptive_mj.study.result import Table
-from adaptive_mj.study.stats import Estimate
+from adaptive_mj.study.stats import RANKING, Estimate
 
 SCORE_COLUMNS = (("performance", "S"), ("robustness", "R"), ("success", "success"))
 
@@ -169,6 +169,16 @@ def figures(card_data: dict, out: Path) -> dict[str, list[Path]]:
     return made
 
 
+def separated_text(data: dict) -> str:
+    """How many pairs of laws separate on S and on R, per plant (score.rank_laws' counts)."""
+    parts = []
+    for pn, plant in data["plants"].items():
+        c = plant.get("separated_pairs")
+        if c is not None:
+            parts.append(f"{pn} S {c['performance']} and R {c['robustness']} of {c['pairs']}")
+    return "; ".join(parts) or "none counted"
+
+
 def formula_text(data: dict) -> str:
     weights = ", ".join(f"{c.name} {c.weight:g} (n: {c.normaliser})" for c in suite.CRITERIA)
     return ("Performance S = c_success · (1 − Σ wᵢ · min(1, cᵢ / nᵢ)) per seed, with the weights and normalisers "
@@ -178,10 +188,13 @@ def formula_text(data: dict) -> str:
             "place in the range searched (0: fails at the low end, 1: passes at the high end; geometric over a "
             "decade or more), each margin found by its own bisection per seed "
             f"({data['suite']['steps']} steps after the two ends). Every figure: the mean over "
-            f"{data['suite']['seeds']} seeds and its {100 * data['suite']['confidence']:g} % Student-t interval; "
-            "a rank is 1 + the number of laws whose interval lies wholly above the law's own: a law ranks below "
-            "another only when the two are separable, and two copies of one law share a rank (not a grouping: A may "
-            "overlap B and C while B and C differ). † a baseline given the true parameters (the fixed and robust "
+            f"{data['suite']['seeds']} seeds and its {100 * data['suite']['confidence']:g} % Student-t interval. "
+            f"Ranks ({RANKING}): every law runs the same seeds, so two laws are compared seed by seed; they are "
+            "separable on S (or R) when the paired t interval of the mean per-seed difference excludes 0 (the seeds' "
+            "common variation cancels; seeds where either has no value are left out of that pair), and a rank is 1 + "
+            "the number of laws separably better: two copies of one law share a rank (not a grouping: A may tie "
+            f"with B and with C while B and C differ). Pairs that separate: {separated_text(data)}. "
+            "† a baseline given the true parameters (the fixed and robust "
             "baselines' nominal θ, σ- and e-modification's leakage target θ₀). cost × mj_step: the "
             "closed loop's time per physics step over bare mj_step on the same model (this machine, the best of "
             "3 timings; not in S). docs/METRICS.md, \"Scorecard\", defines each criterion.")
@@ -235,5 +248,6 @@ def write_card(card) -> None:
     (out / "scorecard.md").write_text("\n".join(head + body), encoding="utf-8")
     html = write_html(out / "scorecard.md")
     text.append("*: the law under test; †: a baseline given the true parameters (it knows the answer); S: performance, "
-                "R: robustness, each the mean [95 % interval]; a rank is 1 + the number of laws separably better")
+                "R: robustness, each the mean [95 % interval]; a rank is 1 + the number of laws separably better "
+                "(paired over the seeds)")
     card.text = "\n".join(text) + f"\n\nscorecard: {out / 'scorecard.md'}\nhtml: {html}\njson: {out / 'scorecard.json'}"
