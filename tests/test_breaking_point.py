@@ -243,13 +243,13 @@ def test_a_value_passes_by_its_search_s_rule():
     with pytest.raises(ValueError, match=r"Search.rule must be one of \('all', 'any'\), got 'most'"):
         Search(HEAVE, "a", (), st, 0.01, rule="most")
 
-    class Run:  # a completed run whose tail is beyond the bound, which its own predicate passes
-        status, extras = "ok", {}
-        summary = {"metrics": {"rms_tracking_error_tail": 0.5}, "reason": ""}
+    from adaptive_mj.study.job import RunOutcome, RunSpec
 
-    assert Search(HEAVE, "a", (), st, 0.01).judged(Run()) == math.inf
-    assert Search(HEAVE, "a", (), st, 0.01, run_passes=lambda r: True).judged(Run()) == 0.5
-    assert Search(HEAVE, "a", (), st, 0.01, run_passes=lambda r: False).judged(Run()) == math.inf
+    # a completed run whose tail is beyond the bound, which its own predicate passes
+    run = RunOutcome(RunSpec(HEAVE), "ok", {"metrics": {"rms_tracking_error_tail": 0.5}, "reason": ""})
+    assert Search(HEAVE, "a", (), st, 0.01).judged(run) == math.inf
+    assert Search(HEAVE, "a", (), st, 0.01, run_passes=lambda r: True).judged(run) == 0.5
+    assert Search(HEAVE, "a", (), st, 0.01, run_passes=lambda r: False).judged(run) == math.inf
 
 
 def test_the_quadrotor_s_when2fail_and_the_heave_breaking_point_come_from_one_search(monkeypatch, tmp_path):
