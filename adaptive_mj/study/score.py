@@ -798,5 +798,5 @@ def merge(paths: Sequence[Path], out: Path | None) -> Scorecard:
         rank_laws(plant)
     card = Scorecard(merged, out)
     write_card(card)
-    write_leaderboard(card, cards)
+    card.text += f"\nleaderboard: {write_leaderboard(card, cards)}"
     return card
