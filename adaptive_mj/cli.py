@@ -153,7 +153,15 @@ def _parser() -> argparse.ArgumentParser:
     sc_.add_argument("--full-logs", action="store_true",
                      help="the margin runs' logs at the scenario's rate (default: their summary and a row per second)")
     sc_.add_argument("--merge", nargs="+", type=Path, metavar="CARD.json",
-                     help="instead of running: join cards of one suite version into one leaderboard")
+                     help="instead of running: join cards of one suite version into one leaderboard "
+                          "(scorecard.json/.md/.html and leaderboard.html)")
+    sc_.add_argument("--verify", type=Path, metavar="CARD.json",
+                     help="instead of running: re-run the card's runs from the specs it records, each bit for bit, "
+                          "and check its figures, scores and ranks against them (exit 1 naming the first that "
+                          "differs)")
+    sc_.add_argument("--sample", type=int, metavar="N",
+                     help="with --verify: re-run N of the card's run records (a law's seed on a plant, or one seed's "
+                          "breaking-point search), picked by the card's own hash (default: all)")
     sc_.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help=JOBS_HELP)
     sc_.add_argument("-o", "--output", type=Path, help="output directory (default: a new folder under logs/)")
     _backend_arguments(sc_)
@@ -432,7 +440,8 @@ def _study(args):
             raise ScenarioError("score: --set needs LAW (the baselines keep their own keys)")
         return api.score(args.law, set=args.overrides, gains=args.gains, against=args.against, suite=args.suite,
                          seeds=args.seeds, plants=args.plants, label=args.label, out=args.output,
-                         full_logs=args.full_logs, merge=args.merge or (), scenarios=args.scenario, **where)
+                         full_logs=args.full_logs, merge=args.merge or (), scenarios=args.scenario,
+                         verify=args.verify, sample=args.sample, **where)
     if args.breaking_point:  # sweep --breaking-point: one key bisected instead of a grid
         if args.grid:
             raise ScenarioError("--breaking-point and --grid cannot be combined (one stressor at a time)")

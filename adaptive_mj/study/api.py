@@ -324,18 +324,31 @@ def score(law: str | None = None, *, set: Overrides = (), gains: str | Path | No
           full_logs: bool = False, cost: bool = True, merge: Sequence[str | Path] = (),
           backend: str | Backend = "local", jobs: int | None = None, address: str | None = None,
           ray_logs: str = "bytes", retries: int = 3, engine: str = "process",
-          scenarios: Sequence[str | Path] = ()):
+          scenarios: Sequence[str | Path] = (), verify: str | Path | None = None, sample: int | None = None):
     """A law scored against the baselines on every plant kind it serves (`adaptive-mj score`): the suite of
     adaptive_mj.study.score_suite (`suite` "quick" or "full"), `seeds` per figure (default the suite's), the law's
     gains per plant kind from `gains` (a TOML file, a table per plant kind) and `set` (law.KEY=V), against every
     baseline or those named in `against`, on every plant it serves or those named in `plants`, or on the users'
     scenario files `scenarios` (each a plant of its own: tracking the scenario as given, a payload change and a
     hold derived from it, the stressors of its plant kind; with `plants` too, both). merge: instead,
-    join these scorecard.json files (one suite version) into one leaderboard. Returns a
-    adaptive_mj.study.score.Scorecard (its data is scorecard.json; .figure(plant, law, name), .rank(...))."""
+    join these scorecard.json files (one suite version) into one leaderboard (and leaderboard.html). Returns a
+    adaptive_mj.study.score.Scorecard (its data is scorecard.json; .figure(plant, law, name), .rank(...)).
+    verify: instead, re-run `sample` of this card's run records (None: all) and check the card against them and
+    against its own per-seed values (adaptive_mj.study.score_verify); returns its Verification (.problems,
+    .exit_code: 0 the card agrees, 1 it does not)."""
     from adaptive_mj.study import score as sc_
     from adaptive_mj.study.score_suite import SUITES
 
+    if verify is not None or sample is not None:
+        from adaptive_mj.study import score_verify
+
+        if verify is None:
+            raise ScenarioError("score: --sample needs --verify CARD.json")
+        if law is not None or merge:
+            raise ScenarioError("score: --verify re-runs a card: give no LAW and no --merge with it")
+        return score_verify.verify(Path(verify), sample=None if sample is None else count("--sample", sample, 0),
+                                   backend=where(backend, jobs=jobs, address=address, ray_logs=ray_logs,
+                                                 retries=retries, engine=engine))
     if merge:
         return sc_.merge([Path(p) for p in merge], None if out is None else Path(out))
     sets = _law_sets(law, set)

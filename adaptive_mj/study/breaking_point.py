@@ -119,6 +119,7 @@ class Evaluation:
     statuses: list[str]
     raw: list[float] = field(default_factory=list)  # per seed, the tail error even beyond the bound
     predicted: list[bool] = field(default_factory=list)  # per seed, the pre-flight check found the loop unstable
+    specs: list[RunSpec] = field(default_factory=list)  # per seed, the run as it was made (its overrides, its log)
 
     @property
     def passes(self) -> bool:
@@ -253,7 +254,7 @@ class _Batches:
         for (i, v), chunk in zip(wanted, chunks, strict=True):
             runs = [r for r in chunk]
             ev = Evaluation(v, [self.searches[i].judged(r) for r in chunk], [r.status for r in chunk],
-                            [o.tail_error for o in runs], [o.predicted_unstable for o in runs])
+                            [o.tail_error for o in runs], [o.predicted_unstable for o in runs], [o.job for o in runs])
             self.margins[i].evaluations.append(ev)
             out.append(ev)
         return out
@@ -272,6 +273,7 @@ class _Batches:
             runs = [r for r in more]
             ev.raw += [o.tail_error for o in runs]
             ev.predicted += [o.predicted_unstable for o in runs]
+            ev.specs += [o.job for o in runs]
 
 
 def search_all(searches: Sequence[Search], *, seeds: int, steps: int, logs: Path, n_jobs: int = 1,

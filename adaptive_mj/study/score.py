@@ -12,8 +12,10 @@ true parameters (the fixed ones) are marked oracles: a reference, not a competit
 from __future__ import annotations
 
 import functools
+import hashlib
 import json
 import math
+import os
 import platform
 import time
 import zlib
@@ -28,7 +30,7 @@ from adaptive_mj.plants import kinds
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.study import score_suite as suite
 from adaptive_mj.study import stress
-from adaptive_mj.study.breaking_point import Search, _file_name, search_all
+from adaptive_mj.study.breaking_point import Margin, Search, _file_name, search_all
 from adaptive_mj.study.job import RECORD_PREFLIGHT, RunSpec, RunOutcome
 from adaptive_mj.study.job import passes
 from adaptive_mj.study.sweep import to_toml
@@ -290,17 +292,21 @@ def seed_figures(runs: dict[str, RunOutcome], bound: float, limits: tuple[float,
             out["recovery_time"] = left
     if _completed(hold):
         out["drift_rate"] = abs(float(hold.extras.get("estimate_drift", math.nan)))
-    norm = normalisers(bound, limits, durations)
-    part = {c.name: 1.0 if not math.isfinite(out[c.name]) else min(1.0, max(0.0, out[c.name] / norm[c.name]))
+    out["success"] = 1.0 if ok else 0.0
+    out["performance"] = performance(out, normalisers(bound, limits, durations))
+    return out
+
+
+def performance(figs: dict, norm: dict) -> float:
+    """S of one seed from its criteria (a value that is not finite counted at its worst) and its "success" (0 or
+    1), with the plant's normalisers `norm` (normalisers); the drift is judged with identification
+    (score_suite.JUDGED_TOGETHER: a still estimate earns nothing when it is still because the law does not adapt,
+    its term at least the parameter error's)."""
+    part = {c.name: 1.0 if not math.isfinite(figs[c.name]) else min(1.0, max(0.0, figs[c.name] / norm[c.name]))
             for c in suite.CRITERIA}
-    # drift is judged with identification (score_suite.JUDGED_TOGETHER): a still estimate earns nothing when it is
-    # still because the law does not adapt; its penalty is at least the tracking's parameter error's
     for name, with_ in suite.JUDGED_TOGETHER.items():
         part[name] = max(part[name], part[with_])
-    penalty = sum(c.weight * part[c.name] for c in suite.CRITERIA)
-    out["success"] = 1.0 if ok else 0.0
-    out["performance"] = out["success"] * (1.0 - penalty)
-    return out
+    return figs["success"] * (1.0 - sum(c.weight * part[c.name] for c in suite.CRITERIA))
 
 
 def normalisers(bound: float, limits: tuple[float, float], durations: dict[str, float]) -> dict[str, float]:
@@ -356,6 +362,67 @@ def compute_ratio(p: stress.Plant, entry: Entry, task: suite.Task, *, seconds: f
     timed(0.01)  # compiles (or loads the cache)
     best = [timed(seconds) for _ in range(COST_REPS)]
     return float(min(b[0] for b in best) / min(b[1] for b in best))
+
+
+# ---------------------------------------------------------------- the card's run specs (score --verify)
+
+
+def _file(path: Path, hashes: dict[Path, str]) -> dict:
+    path = Path(path).resolve()
+    if path not in hashes:
+        hashes[path] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return {"scenario": str(path), "sha256": hashes[path]}
+
+
+def _relative(log: Path | None, out: Path) -> str | None:
+    return None if log is None else os.path.relpath(Path(log).resolve(), Path(out).resolve())
+
+
+def record_specs(out: Path, jobs: Sequence[RunSpec], keys: Sequence[tuple[str, str, str, int]],
+                 margins: Sequence[Margin]) -> dict:
+    """scorecard.json's "specs" (adaptive_mj.study.score_verify re-runs them): its task runs (task_jobs' RunSpecs
+    and their (plant, law, task, seed)) grouped by law and seed, and its searches with their probes (Margin, one
+    seed each), each run's scenario file (absolute path, sha256), overrides, seed and log (relative to the card's
+    folder `out`)."""
+    hashes: dict[Path, str] = {}
+    tasks: dict[tuple[str, str, int], dict] = {}
+    for job, (pn, lb, tn, k) in zip(jobs, keys, strict=True):
+        unit = tasks.setdefault((pn, lb, k), {"plant": pn, "law": lb, "seed": k, "runs": []})
+        unit["runs"].append({"task": tn, **_file(job.scenario, hashes), "overrides": list(job.overrides),
+                             "seed": job.seed, "extras": list(job.extras), "log": _relative(job.log, out)})
+    searches = []
+    for m in margins:
+        s = m.search
+        plant, law = s.label.split("/", 1)
+        probes = [{"value": ev.value, "overrides": list(spec.overrides), "seed": spec.seed,
+                   "log": _relative(spec.log, out), "passes": math.isfinite(tail), "tail": raw, "status": str(st)}
+                  for ev in m.evaluations
+                  for spec, tail, raw, st in zip(ev.specs, ev.tails, ev.raw, ev.statuses, strict=True)]
+        searches.append({"plant": plant, "law": law, "stressor": s.stressor.name, "seed": s.seed,
+                         **_file(s.scenario, hashes), "overrides": list(s.overrides), "tail_bound": s.tail_bound,
+                         "probes": probes})
+    return {"logs": "relative to the card's folder", "tasks": list(tasks.values()), "searches": searches}
+
+
+def relocate_specs(specs: dict, source: Path, out: Path, labels: dict[tuple[str, str], str | None]) -> dict:
+    """A card's specs as a merged card in folder `out` holds them: logs relative to `out` (from `source`, the folder
+    of the card they come from), each law under its merged label (labels: (plant, label) -> the merged card's
+    label, None: a copy the merged card does not keep)."""
+    def moved(log: str | None) -> str | None:
+        return None if log is None else os.path.relpath((Path(source) / log).resolve(), Path(out).resolve())
+
+    out_specs: dict[str, Any] = {"logs": specs.get("logs"), "tasks": [], "searches": []}
+    for kind in ("tasks", "searches"):
+        for unit in specs.get(kind, []):
+            label = labels.get((unit["plant"], unit["law"]), unit["law"])
+            if label is None:
+                continue
+            unit = json.loads(json.dumps(unit))
+            unit["law"] = label
+            for run in unit.get("runs", []) + unit.get("probes", []):
+                run["log"] = moved(run["log"])
+            out_specs[kind].append(unit)
+    return out_specs
 
 
 # ---------------------------------------------------------------- the card
@@ -591,6 +658,34 @@ def stressor_figures(ms: list, st) -> tuple[dict, list[float]]:
             "failure_rate_at_hi": float(np.mean(fails_hi)) if fails_hi else None}, pos
 
 
+#: the figures a law's task runs give, per seed (seed_figures), and robustness from its margins
+TASK_FIGURES = (*(c.name for c in suite.CRITERIA), "success", "performance")
+
+
+def figure(name: str, values: list[float]) -> dict:
+    """A figure on the card: its Estimate over the seeds' `values` (in the figure's domain: 0 to 1 for the scores and
+    success, from 0 for a criterion) and the values themselves."""
+    return {**estimate(values, lowest=0.0, highest=1.0 if name in ("success", "performance", "robustness")
+                       else math.inf).as_dict(), "values": values}
+
+
+def law_figures(per_seed: list[dict], margins: dict[str, list], stressors: Sequence, seeds: int) -> tuple[dict, dict]:
+    """A law's figures on a plant and its stressors' entries: per_seed, each seed's task figures (seed_figures, in
+    seed order); margins, stressor name -> its Margin per seed (in seed order; none: the stressor does not apply
+    to the law, n/a and not in its R); stressors: the plant's (each with name, unit, lo, hi)."""
+    figures = {name: figure(name, [f[name] for f in per_seed]) for name in TASK_FIGURES}
+    st_out, cols = {}, []
+    for st in stressors:
+        ms = margins.get(st.name)
+        if not ms:
+            continue
+        st_out[st.name], pos = stressor_figures(ms, st)
+        cols.append(pos)
+    robust = np.asarray(cols, dtype=float).mean(axis=0) if cols else np.full(seeds, math.nan)
+    figures["robustness"] = figure("robustness", robust.tolist())
+    return figures, st_out
+
+
 def plant_card(pl: Plan, p: stress.Plant, task_runs: dict, margins: list, cost_of: dict) -> dict:
     """The card's entry for plant row p: its units, bound, normalisers, stressors, and every law's figures."""
     k = _kind(p)
@@ -606,23 +701,13 @@ def plant_card(pl: Plan, p: stress.Plant, task_runs: dict, margins: list, cost_o
     by_search: dict[tuple[str, str], list] = {}
     for m in margins:
         by_search.setdefault((m.search.label, m.search.stressor.name), []).append(m)
+    stressors = stress.stressors(p, pl.settings.stress_duration)
     for e in pl.entries[p.name]:
         per_seed = [seed_figures(task_runs.get((p.name, e.label, s), {}), bound, limits, durations)
                     for s in range(pl.seeds)]
-        figures = {name: {**estimate([f[name] for f in per_seed], lowest=0.0,
-                                     highest=1.0 if name in ("success", "performance") else math.inf).as_dict(),
-                          "values": [f[name] for f in per_seed]}
-                   for name in [*(c.name for c in suite.CRITERIA), "success", "performance"]}
-        st_out, cols = {}, []
-        for st in stress.stressors(p, pl.settings.stress_duration):
-            ms = sorted(by_search.get((f"{p.name}/{e.label}", st.name), []), key=lambda m: m.search.seed)
-            if not ms:  # the stressor does not apply to this law (searches): n/a, and not in its R
-                continue
-            st_out[st.name], pos = stressor_figures(ms, st)
-            cols.append(pos)
-        robust = np.asarray(cols, dtype=float).mean(axis=0) if cols else np.full(pl.seeds, math.nan)
-        figures["robustness"] = {**estimate(robust.tolist(), lowest=0.0, highest=1.0).as_dict(),
-                                 "values": robust.tolist()}
+        ms = {st.name: sorted(by_search.get((f"{p.name}/{e.label}", st.name), []), key=lambda m: m.search.seed)
+              for st in stressors}
+        figures, st_out = law_figures(per_seed, ms, stressors, pl.seeds)
         plant["laws"][e.label] = {"tested": e.tested, "oracle": e.oracle, "overrides": list(e.overrides),
                                   "figures": figures, "stressors": st_out, "compute_ratio": cost_of.get((p.name,
                                                                                                         e.label))}
@@ -692,6 +777,7 @@ def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] 
         "runs": {"tasks": len(jobs), "margins": sum(len(ev.tails) for m in margins for ev in m.evaluations),
                  "not_run": not_run(pl),
                  "predicted_unstable": sum(p for m in margins for ev in m.evaluations for p in ev.predicted)},
+        "specs": record_specs(out, jobs, keys, margins),
     }
     data["wall_seconds"] = time.perf_counter() - t0
     card = Scorecard(data, out, exit_code=1 if errors else 0)
@@ -736,7 +822,7 @@ def merge(paths: Sequence[Path], out: Path | None) -> Scorecard:
     several cards with the same figures (a baseline) is kept once; with other figures, each copy is named after its
     card ("dead_zone [card 2]")."""
     from adaptive_mj.sim.runner import new_output_dir
-    from adaptive_mj.study.score_card import write_card
+    from adaptive_mj.study.score_card import write_card, write_leaderboard
 
     if len(paths) < 2:
         raise ScenarioError(f"--merge needs two or more scorecard.json files, got {len(paths)}")
@@ -748,6 +834,7 @@ def merge(paths: Sequence[Path], out: Path | None) -> Scorecard:
                 raise ScenarioError(f"{data['path']}: key 'suite.{key}': expected {first['suite'].get(key)!r} (as in "
                                     f"{first['path']}), got {data['suite'].get(key)!r}; cards of another suite "
                                     "cannot share a leaderboard")
+    out = new_output_dir(out, "score-merged")
     merged = json.loads(json.dumps({k: v for k, v in first.items() if k != "path"}))
     merged["law"] = [c["law"] for c in cards if c.get("law") is not None]
     merged["merged_from"] = [c["path"] for c in cards]
@@ -757,7 +844,9 @@ def merge(paths: Sequence[Path], out: Path | None) -> Scorecard:
     merged["runs"] = {"tasks": sum(r.get("tasks", 0) for r in runs), "margins": sum(r.get("margins", 0) for r in runs),
                       "not_run": [n for r in runs for n in r.get("not_run", [])],
                       "predicted_unstable": sum(r.get("predicted_unstable", 0) for r in runs)}
+    labels: list[dict[tuple[str, str], str | None]] = [{}]  # per card: (plant, label) -> its label here, or None
     for n, data in enumerate(cards[1:], start=2):
+        labels.append({})
         for pn, plant in data["plants"].items():
             target = merged["plants"].setdefault(pn, {**json.loads(json.dumps(plant)), "laws": {}})
             for lb, entry in plant["laws"].items():
@@ -766,8 +855,19 @@ def merge(paths: Sequence[Path], out: Path | None) -> Scorecard:
                     target["laws"][lb] = entry
                 elif have["figures"] != entry["figures"]:
                     target["laws"][f"{lb} [card {n}]"] = entry
+                    labels[-1][(pn, lb)] = f"{lb} [card {n}]"
+                else:  # the same law with the same figures: kept once, with the runs of the card that has it first
+                    labels[-1][(pn, lb)] = None
+    merged.pop("specs", None)
+    if all(isinstance(c.get("specs"), dict) for c in cards):  # older cards: the merged card cannot be re-run
+        parts = [relocate_specs(c["specs"], Path(c["path"]).parent, out, lab)
+                 for c, lab in zip(cards, labels, strict=True)]
+        merged["specs"] = {"logs": "relative to the card's folder",
+                           "tasks": [u for p in parts for u in p["tasks"]],
+                           "searches": [u for p in parts for u in p["searches"]]}
     for plant in merged["plants"].values():
         rank_laws(plant)
-    card = Scorecard(merged, new_output_dir(out, "score-merged"))
+    card = Scorecard(merged, out)
     write_card(card)
+    card.text += f"\nleaderboard: {write_leaderboard(card, cards)}"
     return card

@@ -251,3 +251,48 @@ def write_card(card) -> None:
                 "R: robustness, each the mean [95 % interval]; a rank is 1 + the number of laws separably better "
                 "(paired over the seeds)")
     card.text = "\n".join(text) + f"\n\nscorecard: {out / 'scorecard.md'}\nhtml: {html}\njson: {out / 'scorecard.json'}"
+
+
+def _cell(e: dict | None) -> str:
+    """A law's S and R on one plant, each with its 95 % interval and rank, for the leaderboard page."""
+    if e is None:
+        return "—"
+    f = e["figures"]
+    return (f"S {Estimate.from_dict(f['performance']).text('.3f')} (rank {e['rank']['performance']})<br>"
+            f"R {Estimate.from_dict(f['robustness']).text('.3f')} (rank {e['rank']['robustness']})")
+
+
+def write_leaderboard(card, sources: list[dict]) -> Path:
+    """A merged card's one page: leaderboard.md and leaderboard.html in card.out, a row per law and a column per
+    plant (S and R with their intervals and ranks; † an oracle baseline, given the true parameters), and a link to
+    each source card's scorecard.html (relative to card.out). sources: the cards merged (score.read_card's)."""
+    import os
+
+    from adaptive_mj.report.html import write_html
+
+    data, out = card.data, Path(card.out)
+    plants = list(data["plants"])
+    laws: dict[str, dict] = {}
+    for pn in plants:  # ranked on the first plant, then the laws only the next ones have
+        for lb in _order(data["plants"][pn]):
+            laws.setdefault(lb, {})[pn] = data["plants"][pn]["laws"][lb]
+    s = data["suite"]
+    rows = []
+    for lb, by_plant in laws.items():
+        e = next(iter(by_plant.values()))
+        rows.append({"law": _name(lb, e), **{pn: _cell(by_plant.get(pn)) for pn in plants}})
+    lines = ["# adaptive-mj leaderboard", "",
+             f"Suite `{s['name']}` version {s['version']} (definitions hash `{s['hash']}`), {s['seeds']} seeds; "
+             f"{len(sources)} cards merged. Each cell: S (performance) and R (robustness), the mean [95 % interval] "
+             "over seeds and the rank on that plant (1 + the number of laws separably better); **bold**: a law "
+             "under test; †: a baseline given the true parameters (an oracle: a reference, not a competitor); —: "
+             "not scored on that plant.", "", Table.of(rows, ["law", *plants]).to_markdown(), "", "## Cards", ""]
+    for n, src in enumerate(sources, start=1):
+        html = Path(src["path"]).resolve().parent / "scorecard.html"
+        link = os.path.relpath(html, out.resolve())
+        named = src.get("law") or []
+        title = " and ".join(lw["label"] for lw in (named if isinstance(named, list) else [named])) or "the baselines"
+        lines.append(f"- card {n}: [{title}]({link}) ({src['path']})")
+    md = out / "leaderboard.md"
+    md.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return write_html(md)
