@@ -551,3 +551,26 @@ def test_each_seed_draws_its_task_and_every_law_meets_the_same_draw():
     truth = dict(zip(s.law.names, s.plant.true_theta(), strict=True))
     for name, est in v0["law.initial_estimates"].items():
         assert (est == 0.0 == truth[name]) or 0.5 <= est / truth[name] <= 2.0, name
+
+
+def test_a_criterion_at_its_cap_for_every_adaptive_law_is_named_as_saturated():
+    """score.criteria_spread: each criterion's range of min(1, c/n) over the laws that are not oracles (†), from
+    their means; saturated when every one is at the cap. Hand-made plant: drift at 3 and 2 × its normaliser for both
+    adaptive laws (saturated, whatever the oracle's 0), the tail error at 0.5 and 0.2 of the bound (not)."""
+    from adaptive_mj.study.score import criteria_spread
+    from adaptive_mj.study.score_card import saturated_text
+
+    names = [c.name for c in score_suite.CRITERIA]
+
+    def law(drift: float, tail: float, oracle: bool = False) -> dict:
+        figs = {n: {"mean": 0.0} for n in names}
+        figs["drift_rate"], figs["tail_error"] = {"mean": drift}, {"mean": tail}
+        return {"oracle": oracle, "figures": figs}
+
+    plant = {"normalisers": {**{n: 1.0 for n in names}, "tail_error": 0.01},
+             "laws": {"a": law(3.0, 0.005), "b": law(2.0, 0.002), "truth": law(0.0, 0.0, oracle=True)}}
+    spread = criteria_spread(plant)
+    assert spread["drift_rate"] == {"lo": 1.0, "hi": 1.0, "saturated": True}
+    assert spread["tail_error"] == {"lo": 0.2, "hi": 0.5, "saturated": False}
+    assert saturated_text({"plants": {"p": {**plant, "criteria_spread": spread}}}) == (
+        "At their cap for every adaptive law, so separating none of them: drift_rate on p. ")

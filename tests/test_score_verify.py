@@ -65,8 +65,8 @@ def test_verify_passes_on_a_fresh_card_with_every_run_and_with_a_sample(cards, c
      .__setitem__(0, 0.99), "heave/adaptive: figure.performance.values[0]: card 0.99, re-computed"),
     ("a mean", lambda d: d["plants"]["heave"]["laws"]["fixed_nominal"]["figures"]["robustness"].__setitem__(
         "mean", 0.5), "heave/fixed_nominal: figure.robustness.mean: card 0.5, re-computed"),
-    ("a rank", lambda d: d["plants"]["heave"]["laws"]["adaptive"]["rank"].__setitem__("performance", 1),
-     "heave/adaptive: rank.performance: card 1, re-computed 2"),
+    ("a rank", lambda d: d["plants"]["heave"]["laws"]["adaptive"]["rank"].__setitem__("performance", 99),
+     "heave/adaptive: rank.performance: card 99, re-computed"),
     ("a margin", lambda d: d["plants"]["heave"]["laws"]["adaptive"]["stressors"]["delay"]["margins"].__setitem__(
         0, None), "heave/adaptive: figure.robustness.values[0]"),
 ])

@@ -488,6 +488,22 @@ def card_hash(duration: float) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def criteria_spread(plant: dict) -> dict[str, dict]:
+    """Per criterion, the range of min(1, cᵢ/nᵢ) (its place on its normaliser's scale, 1 at the cap) over the
+    adaptive laws on the plant (every law but the oracle baselines, †), from each law's mean; saturated: every
+    adaptive law at the cap, so the criterion separates none of them (the normalisers are chosen so that no
+    bundled plant has one)."""
+    norm = plant["normalisers"]
+    laws = [e for e in plant["laws"].values() if not e.get("oracle")]
+    out = {}
+    for c in suite.CRITERIA:
+        means = [e["figures"][c.name]["mean"] for e in laws]
+        parts = [1.0 if m is None or not math.isfinite(m) else min(1.0, max(0.0, m / norm[c.name])) for m in means]
+        if parts:
+            out[c.name] = {"lo": min(parts), "hi": max(parts), "saturated": min(parts) >= 1.0}
+    return out
+
+
 def rank_laws(plant: dict) -> None:
     """Each law's ranks on the plant's performance and robustness by paired comparison over the seeds
     (adaptive_mj.study.stats.paired_ranks, on each figure's per-seed "values"; null: no value), in place; the rule
@@ -718,6 +734,7 @@ def plant_card(pl: Plan, p: stress.Plant, task_runs: dict, margins: list, cost_o
         plant["scenario"] = {"file": str(path), "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
                              "tasks": [asdict(t) for t in p.tasks]}
     rank_laws(plant)
+    plant["criteria_spread"] = criteria_spread(plant)
     return plant
 
 
@@ -867,6 +884,7 @@ def merge(paths: Sequence[Path], out: Path | None) -> Scorecard:
                            "searches": [u for p in parts for u in p["searches"]]}
     for plant in merged["plants"].values():
         rank_laws(plant)
+        plant["criteria_spread"] = criteria_spread(plant)
     card = Scorecard(merged, out)
     write_card(card)
     card.text += f"\nleaderboard: {write_leaderboard(card, cards)}"

@@ -194,10 +194,21 @@ def formula_text(data: dict) -> str:
             "common variation cancels; seeds where either has no value are left out of that pair), and a rank is 1 + "
             "the number of laws separably better: two copies of one law share a rank (not a grouping: A may tie "
             f"with B and with C while B and C differ). Pairs that separate: {separated_text(data)}. "
+            f"{saturated_text(data)}"
             "† a baseline given the true parameters (the fixed and robust "
             "baselines' nominal θ, σ- and e-modification's leakage target θ₀). cost × mj_step: the "
             "closed loop's time per physics step over bare mj_step on the same model (this machine, the best of "
             "3 timings; not in S). docs/METRICS.md, \"Scorecard\", defines each criterion.")
+
+
+def saturated_text(data: dict) -> str:
+    """One sentence: the criteria at their cap for every adaptive law on a plant (score.criteria_spread), or that
+    none is."""
+    hits = [f"{c} on {pn}" for pn, plant in data["plants"].items()
+            for c, sp in (plant.get("criteria_spread") or {}).items() if sp["saturated"]]
+    if not hits:
+        return ("No criterion is at its cap (cᵢ ≥ nᵢ) for every adaptive law on a plant: each can separate them. ")
+    return f"At their cap for every adaptive law, so separating none of them: {', '.join(hits)}. "
 
 
 def runs_text(data: dict) -> str:
