@@ -62,7 +62,9 @@ class Draw:
     paired comparison): `key`, a scenario key of the task's scenario (reference.*, plant.*), whose value there (a
     number, or the numbers of a list or a table) is multiplied by a factor drawn uniformly from [lo, hi], or with
     `add`, has a number drawn from [lo, hi] added (e.g. a phase [rad]); each: a draw per number (else one for them
-    all). The key "law.initial_estimates" draws each parameter's factor on its truth (from the compiled model)."""
+    all). The key "law.initial_estimates" draws each parameter's factor on its truth in the task's scenario as
+    bundled (from the compiled model, before any other draw: a drawn payload changes the truth, not the box a
+    projection baseline sets about the scenario's)."""
 
     key: str
     lo: float

@@ -132,10 +132,10 @@ def draws(p: stress.Plant, task: suite.Task, seed: int) -> tuple[tuple[str, ...]
     over: list[str] = []
     values: dict[str, Any] = {}
     for d in task.draws:
-        if d.key == "law.initial_estimates":  # on the truth of this draw's plant (its payload drawn before it)
+        if d.key == "law.initial_estimates":  # on the scenario's own truth, so inside any box set about it
             from adaptive_mj.setup.build import build
 
-            s = build(sc.load(path, overrides=over))
+            s = build(scn)
             value: Any = {n: float(v) * float(rng.uniform(d.lo, d.hi))
                           for n, v in zip(s.law.names, s.plant.true_theta(), strict=True)}
         else:
@@ -342,7 +342,7 @@ def compute_ratio(p: stress.Plant, entry: Entry, task: suite.Task, *, seconds: f
     from adaptive_mj.sim.runner import start
 
     path = stress.scenario_path(task.scenario)
-    over = [*task_overrides(p, task, seconds), *entry.overrides]
+    over = [*task_overrides(p, task, seconds), *draws(p, task, 0)[0], *entry.overrides]  # seed 0's task
 
     def timed(sec: float) -> tuple[float, float]:
         scn = sc.load(path, overrides=[*over, f"simulation.duration={sec!r}"])
