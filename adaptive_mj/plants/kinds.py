@@ -26,6 +26,7 @@ from adaptive_mj.keys import Key, Table
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plugins import scan_built_in
 from adaptive_mj.specs import PlantSpec
+from adaptive_mj.plants.study_spec import BOX as _BOX
 
 if TYPE_CHECKING:
     from adaptive_mj.laws.kinds import MracState
@@ -73,9 +74,9 @@ class Draw:
     add: bool = False
 
 
-#: each parameter's initial estimate drawn between half and twice its truth: every draw lies in the projection
-#: baseline's box [θ/2, 2θ] (adaptive_mj.plants.sliding_study), so no baseline starts outside its own set
-ESTIMATES_DRAW = Draw("law.initial_estimates", 0.5, 2.0)
+#: each parameter's initial estimate drawn between half and twice its truth: within the projection baselines' box
+#: (adaptive_mj.plants.study_spec.BOX), so no baseline starts outside its own set
+ESTIMATES_DRAW = Draw("law.initial_estimates", *_BOX)
 
 
 @dataclass(frozen=True)

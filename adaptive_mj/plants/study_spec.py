@@ -15,6 +15,9 @@ from typing import Any, Callable
 import numpy as np
 
 LEAK_TIME = 5.0  # s: σ = γ_1 / LEAK_TIME; ν = γ_1 / (LEAK_TIME σ_s)
+#: the projection baselines' box on each positive parameter, as factors on its truth: [θ/2, 2θ] (the scorecard draws
+#: the initial estimates within it: kinds.ESTIMATES_DRAW)
+BOX = (0.5, 2.0)
 
 #: a study row's laws: (law label, its overrides), for the context and whether to add composite adaptation
 LawSet = Callable[["StudyContext", bool], list[tuple[str, list[str]]]]
@@ -101,7 +104,7 @@ def theta_table(names, values, *, quoted: bool = False) -> str:
 def box_table(names, values, *, quoted: bool = False) -> str:
     """The box [θ/2, 2θ] on the positive parameters as a law.projection table (quoted: as theta_table)."""
     q = "'" if quoted else ""
-    return "{" + ", ".join(f"{q}{n}{q}=[{0.5 * float(v)!r}, {2.0 * float(v)!r}]"
+    return "{" + ", ".join(f"{q}{n}{q}=[{BOX[0] * float(v)!r}, {BOX[1] * float(v)!r}]"
                            for n, v in zip(names, values, strict=True) if v > 0) + "}"
 
 
