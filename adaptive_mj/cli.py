@@ -143,7 +143,7 @@ def _parser() -> argparse.ArgumentParser:
                      help="the law's keys per plant kind: a table each, e.g. [heave] lambda = 5.0")
     sc_.add_argument("--against", metavar="A,B,...", help="only these baselines (default: all of each plant's)")
     sc_.add_argument("--suite", choices=("quick", "full"), default="quick",
-                     help="quick: 3 seeds, 6 bisection steps, 5 s margin runs (default); full: 5 seeds, 8 steps, 20 s")
+                     help="quick: 5 seeds, 6 bisection steps, 5 s margin runs (default); full: 8 seeds, 8 steps, 20 s")
     sc_.add_argument("--seeds", type=int, help="seeds per figure (default: the suite's)")
     sc_.add_argument("--plants", metavar="P,Q,...", help="only these plants (heave, arm, ur5e, quadrotor)")
     sc_.add_argument("--scenario", action="append", default=[], type=Path, metavar="FILE.toml",
