@@ -577,3 +577,17 @@ def test_a_criterion_at_its_cap_for_every_adaptive_law_is_named_as_saturated():
     assert spread["tail_error"] == {"lo": 0.2, "hi": 0.5, "saturated": False}
     assert saturated_text({"plants": {"p": {**plant, "criteria_spread": spread}}}) == (
         "At their cap for every adaptive law, so separating none of them: drift_rate on p. ")
+
+
+def test_a_seed_s_margin_runs_run_its_drawn_task_from_the_truth():
+    """score.margin_draws: seed k's margin searches carry its tracking task's draw (reference, payload) but not the
+    drawn initial estimates (a margin run starts from the truth, law.initial_estimates='model' in the row's base)."""
+    from adaptive_mj.study.score import draws, margin_draws
+    from adaptive_mj.study.score_suite import TASKS
+
+    arm = {p.name: p for p in stress.plants(5.0)}["arm"]
+    task_over = draws(arm, TASKS["arm"][0], 2)[0]
+    got = margin_draws(arm, 2)
+    assert got == tuple(o for o in task_over if not o.startswith("law.initial_estimates="))
+    assert any(o.startswith("plant.payload_mass=") for o in got) and len(got) == len(task_over) - 1
+    assert margin_draws(arm, 1) != got

@@ -651,9 +651,19 @@ def searches(pl: Plan, *, full_logs: bool) -> list[Search]:
                 if _not_applicable(p, e, st):
                     continue  # n/a: not_run
                 for k in range(pl.seeds):
-                    out.append(Search(path, f"{p.name}/{e.label}", (*p.base, *log_rate, *e.overrides), st,
-                                      stress.tail_bound(p), seed=k))
+                    out.append(Search(path, f"{p.name}/{e.label}", (*p.base, *log_rate, *margin_draws(p, k),
+                                                                    *e.overrides), st, stress.tail_bound(p), seed=k))
     return out
+
+
+def margin_draws(p: stress.Plant, seed: int) -> tuple[str, ...]:
+    """What seed `seed`'s margin runs on plant row p draw: its tracking task's draw (draws), on the row's own
+    scenario where the task runs that scenario, but for the initial estimates (a margin run starts from the truth);
+    nothing where the task runs another scenario."""
+    task = next((t for t in tasks_of(p) if t.name == "tracking"), None)
+    if task is None or stress.scenario_path(task.scenario) != stress.scenario_path(p.scenario):
+        return ()
+    return tuple(o for o in draws(p, task, seed)[0] if not o.startswith("law.initial_estimates="))
 
 
 def stressor_figures(ms: list, st) -> tuple[dict, list[float]]:

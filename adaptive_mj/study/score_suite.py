@@ -20,7 +20,8 @@ each plant kind beside its keys), and every law meets the same draw on that seed
   hold      holding still under noise with the estimates at the truth (the lecture's drift scenario; the
             quadrotor: a take-off and hover with its payload): the estimates' drift rate.
 A crashed run (the quadrotor) has not finished: it fails c_success, whatever its figures.
-Stressors per plant: the breaking-point study's (adaptive_mj.study.stress.stressors: noise, disturbance, delay,
+Stressors per plant (each seed's margins on that seed's drawn task, its estimates at the truth: score.margin_draws):
+the breaking-point study's (adaptive_mj.study.stress.stressors: noise, disturbance, delay,
 control period, and each kind's own: thruster lag, payload ratio, on the UR5e encoder resolution, a differentiated
 velocity's filter, actuator lag and the torque limits; on the quadrotor wind, force, torque, mass added to its
 payload at 1 s and a rotor's thrust loss), each searched per seed by bisection.
