@@ -141,24 +141,6 @@ def test_native_is_chosen_only_where_supported():
     assert tr.status == "ok" and not tr.meta["native"]
 
 
-def test_block_offsets_take_the_struct_s_own_block_over_a_stale_copy_after_it():
-    """A freed struct after the live one can still hold the same array pointers (malloc reuses the
-    arrays' buffer for the new struct): the first place that holds the whole pattern is the struct's.
-    (This made `mujoco_offsets` fail now and then with 'could not place ... unambiguously'.)"""
-    from adaptive_mj.sim.native_context import block_offsets
-
-    mem = np.zeros(4096, dtype=np.uint64)  # 32 kB: the "struct" at its start, a stale copy at word 2000
-    block = ["buffer", "a", "b", "c", "d"]
-    values = {"a": 0x7F00_1234_0000, "b": 0x7F00_1234_0040, "d": 0x7F00_1234_0100}
-    for where in (10, 2000):
-        for i, name in enumerate(block):
-            mem[where + i] = values.get(name, 0x7F00_1234_0000 + i)  # "c" zero-size: shares its neighbour's
-    mem[10 + 3] = mem[2000 + 3] = values["d"]
-    base = mem.ctypes.data
-    out = block_offsets(base, values, block)
-    assert out == {name: 8 * (10 + i) for i, name in enumerate(block)}
-
-
 # -- composite adaptation (laws.composite) on the compiled callback ---------------------------------------------
 
 def _scenario_both(name, overrides):

@@ -10,8 +10,8 @@ through their pointer fields: nothing is reached through an address compiled int
 An MjData whose userdata[0] is 0 (a scratch copy, a fresh MjData) is left alone.
 
 The byte offsets of those pointer fields in mjData/mjModel are a property of the MuJoCo build;
-they are found once per process (struct_offsets) and compiled in as constants, and they are part
-of the cache key, so another MuJoCo build gets its own compiled callback.
+they come from MuJoCo's own introspection (adaptive_mj.sim.mujoco_layout), are compiled in as
+constants, and are part of the cache key, so another MuJoCo build gets its own compiled callback.
 
 Compiling and caching. The callbacks are numba cfuncs with numba's on-disk cache
 (``cache=True``). numba keys a cached function by its own code and closure values, not by the
@@ -23,7 +23,6 @@ by its version and the CPU). Set NUMBA_CACHE_DIR to move the cache.
 """
 from __future__ import annotations
 
-import ctypes
 import hashlib
 import inspect
 import types as pytypes
@@ -41,97 +40,13 @@ if TYPE_CHECKING:
     carray: Any
     iptr: Any
 
-_PAGE = 4096
-
-
-def struct_offsets(base: int, targets: dict[str, int], *, limit: int = 1 << 21) -> dict[str, set[int]]:
-    """Every byte offset, from `base` (the address of a MuJoCo struct), of a pointer field whose value
-    is one of `targets` {name: address}: the struct is read page by page up to the last page
-    after the one where every name has matched (a zero-size array shares its address with the
-    next field, so a name may have several candidates; block_offsets resolves them)."""
-    want = {int(v): k for k, v in targets.items()}
-    if len(want) != len(targets):
-        raise RuntimeError(f"ambiguous struct fields (shared addresses): {sorted(targets)}")
-    keys = np.array(list(want), dtype=np.uint64)
-    out: dict[str, set[int]] = {k: set() for k in targets}
-    page, last = base - base % _PAGE, base + limit
-    while page < last:
-        words = np.frombuffer(ctypes.string_at(page, _PAGE), dtype=np.uint64)
-        for i in np.nonzero(np.isin(words, keys))[0]:
-            off = page + 8 * int(i) - base
-            if off >= 0:
-                out[want[int(words[i])]].add(off)
-        page += _PAGE
-        if all(out.values()):  # every name matched: read one page more (a block can straddle two)
-            last = min(last, page + _PAGE)
-    return out
-
-
-_DATA_FIELDS = ("userdata", "qpos", "qvel", "ctrl", "cdof", "xpos", "xmat", "subtree_com", "cinert")
-_PROBE = ('<mujoco><size nuserdata="1"/><worldbody><body><joint name="j" type="hinge"/><geom size="0.1"/></body>'
-          '</worldbody><actuator><motor joint="j"/></actuator></mujoco>')
-_offsets: dict[str, int] | None = None
-
-
-def pointer_block(struct: str) -> list[str]:
-    """The names of the struct's array pointers in declaration order (MuJoCo's own introspection,
-    shipped with the bindings): the 8-byte fields from `buffer` on, up to the first non-pointer."""
-    from mujoco.introspect import ast_nodes, structs
-
-    fields = structs.STRUCTS[struct].fields
-    names = [f.name for f in fields]
-    out = []
-    for f in fields[names.index("buffer"):]:
-        if not isinstance(f.type, ast_nodes.PointerType):
-            break
-        out.append(f.name)
-    return out
-
-
-def block_offsets(base: int, arrays: dict[str, int], block: list[str]) -> dict[str, int]:
-    """{name: byte offset} of the pointer fields in `block` (consecutive 8-byte pointers, in order)
-    given the addresses `arrays` {name: address} some of them hold. The block's start is the one
-    offset at which every given pointer sits at its place in the order: a zero-size array shares
-    its address with its neighbour, so matching single values is ambiguous, the pattern is not;
-    of several places that hold the whole pattern the first is the struct's (see below)."""
-    cands = struct_offsets(base, arrays)
-    index = {n: i for i, n in enumerate(block)}
-    starts: set[int] | None = None
-    for name, offs in cands.items():
-        here = {off - 8 * index[name] for off in offs}
-        starts = here if starts is None else starts & here
-    if not starts:
-        raise RuntimeError(f"could not place MuJoCo's array pointers {sorted(arrays)} in the struct at {base:#x}")
-    # The live struct's own block is the first match: memory after the struct can hold a stale copy of
-    # the same pointers (a freed struct whose arrays' buffer malloc handed to this one), never before it.
-    start = min(starts)
-    return {n: start + 8 * index[n] for n in block}
-
-
 def mujoco_offsets() -> dict[str, int]:
     """{field: byte offset} of every mjData array pointer, every mjModel array pointer ("model."
-    prefix) and of mjModel.opt.gravity (inline), for this process's MuJoCo (found once)."""
-    global _offsets
-    if _offsets is None:
-        import mujoco
+    prefix) and of mjModel.opt.gravity (inline), for this process's MuJoCo (adaptive_mj.sim.mujoco_layout:
+    MuJoCo's own introspection, behind a version check)."""
+    from adaptive_mj.sim import mujoco_layout
 
-        previous = mujoco.get_mjcb_control()  # a Python callback installed makes compiling fail
-        mujoco.set_mjcb_control(None)
-        try:
-            m = mujoco.MjModel.from_xml_string(_PROBE)
-        finally:
-            mujoco.set_mjcb_control(previous)
-        d = mujoco.MjData(m)
-        data_arrays = {n: getattr(d, n).ctypes.data for n in ("qpos", "qvel", "qacc_warmstart", "ctrl", "qfrc_applied",
-                                                              "xfrc_applied", "qacc", "userdata", "xpos", "xmat")}
-        out = block_offsets(d._address, data_arrays, pointer_block("mjData"))
-        model_arrays = {n: getattr(m, n).ctypes.data for n in ("qpos0", "body_parentid", "body_mass", "dof_armature",
-                                                               "dof_damping", "jnt_qposadr")}
-        in_model = block_offsets(m._address, model_arrays, pointer_block("mjModel"))
-        out.update({f"model.{k}": v for k, v in in_model.items()})
-        out["model.gravity"] = m.opt.gravity.ctypes.data - m._address
-        _offsets = out
-    return _offsets
+    return mujoco_layout.offsets()
 
 
 class Offsets(NamedTuple):

@@ -1,0 +1,98 @@
+"""Cold against warm (issue 51's targets): wall seconds of what a user waits for first, each measured in fresh
+processes with an empty numba cache (cold: NUMBA_CACHE_DIR a new folder) and again with that cache filled (warm),
+with the ratio and the number of compiled variants the cold run left in the cache.
+
+  run           `adaptive-mj run heave_tracking` (the scenario's full length)
+  ur5e_plugin   `adaptive-mj run ur5e_identification` under the multi-joint example law plugin
+                (examples/robust_sl_law, pip-installed; skipped with a note when it is not)
+  bench_quick   `adaptive-mj bench --quick`                  (with --bench)
+  bench         `adaptive-mj bench` (the README's main job)   (with --bench; minutes)
+
+Targets (issue 51): cold `run heave_tracking` <= 10 s; cold first UR5e plugin run <= 20 s; cold bench <= 1.3x
+warm bench. The machine's load is printed beside the figures (os.getloadavg before and after each case): on a
+shared machine the figures are only comparable within one invocation.
+
+Usage: python benchmarks/cold_start.py [--bench] [--only run,ur5e_plugin,bench_quick,bench] [--json FILE]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+PLUGIN = "law={kind='robust_sl', lambda=10.0, kd=50.0, ks=0.0, gamma=0.2}"
+
+
+def plugin_installed(name: str) -> bool:
+    from adaptive_mj.laws.plugin import installed
+
+    return name in installed()
+
+
+CASES: dict[str, list[str]] = {
+    "run": ["run", "heave_tracking"],
+    "ur5e_plugin": ["run", "ur5e_identification", "--set", PLUGIN],
+    "bench_quick": ["bench", "--quick"],
+    "bench": ["bench"],
+}
+
+
+def variants(cache: Path) -> int:
+    """Compiled functions in a numba cache folder: its index files (one per function, each holding its
+    specialisations)."""
+    return sum(1 for _ in cache.rglob("*.nbi"))
+
+
+def timed(args: list[str], env: dict, out: Path) -> float:
+    cmd = [sys.executable, "-m", "adaptive_mj", *args, "-o" if args[0] == "bench" else "--out", str(out)]
+    t0 = time.perf_counter()
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    took = time.perf_counter() - t0
+    if done.returncode not in (0, 1):  # 1: a run or study that reports a failure still ran to its end
+        raise RuntimeError(f"{' '.join(cmd)} exited {done.returncode}: {done.stderr.strip()[-400:]}")
+    return took
+
+
+def cold_warm(name: str) -> dict:
+    with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as logs:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache, ADAPTIVE_MJ_LOGS=logs)
+        load0 = os.getloadavg()[0]
+        cold = timed(CASES[name], env, Path(logs) / "cold")
+        n = variants(Path(cache))
+        warm = timed(CASES[name], env, Path(logs) / "warm")
+        return {"cold_s": cold, "warm_s": warm, "ratio": cold / warm, "variants": n,
+                "load": [round(load0, 2), round(os.getloadavg()[0], 2)]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--bench", action="store_true", help="also `bench --quick` and `bench` (minutes)")
+    ap.add_argument("--only", default="", help="comma-separated cases: " + ", ".join(CASES))
+    ap.add_argument("--json", default="", help="also write the figures to this file")
+    a = ap.parse_args()
+    names = [n for n in a.only.split(",") if n] or ["run", "ur5e_plugin"] + (["bench_quick", "bench"] if a.bench
+                                                                           else [])
+    unknown = [n for n in names if n not in CASES]
+    if unknown:
+        sys.exit(f"cold_start.py: --only: unknown case(s) {unknown}; expected some of {list(CASES)}")
+    out = {"cores": os.cpu_count(), "cases": {}}
+    print(f"{'case':<12} {'cold [s]':>9} {'warm [s]':>9} {'cold/warm':>9} {'variants':>8}  load (1 min) before, after")
+    for name in names:
+        if name == "ur5e_plugin" and not plugin_installed("robust_sl"):
+            print(f"{name:<12} skipped: pip install examples/robust_sl_law first")
+            continue
+        fig = cold_warm(name)
+        out["cases"][name] = fig
+        print(f"{name:<12} {fig['cold_s']:9.1f} {fig['warm_s']:9.1f} {fig['ratio']:9.2f} {fig['variants']:8d}  "
+              f"{fig['load'][0]:.2f}, {fig['load'][1]:.2f}", flush=True)
+    if a.json:
+        Path(a.json).write_text(json.dumps(out, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
