@@ -49,7 +49,8 @@ def variants(cache: Path) -> int:
 
 
 def timed(args: list[str], env: dict, out: Path) -> float:
-    cmd = [sys.executable, "-m", "adaptive_mj", *args, "-o" if args[0] == "bench" else "--out", str(out)]
+    target = out if args[0] == "bench" else out.with_suffix(".mcap")  # bench: a folder; run: a log file
+    cmd = [sys.executable, "-m", "adaptive_mj", *args, "-o", str(target)]
     t0 = time.perf_counter()
     done = subprocess.run(cmd, env=env, capture_output=True, text=True)
     took = time.perf_counter() - t0
