@@ -228,7 +228,7 @@ def read_keys(kind: PlantKind, t: Table, base_dir) -> PlantSpec:
     """plant.* of kind "process" (analytic, twin backend): the tank's physical parameters."""
     head = plant_keys.read_analytic(t)
     values = {field: _number(t, key.name, key.default, bound) for key, field, bound in _TANK_KEYS}
-    tank = Tank(**values)
+    tank = Tank(**{field: float(v) for field, v in values.items() if v is not None})  # every key has a default
     _check_flows(t, tank)
     t.finish()
     return PlantSpec(kind=kind.name, **head, kind_spec=ProcessSpec(tank))
