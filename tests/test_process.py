@@ -24,7 +24,7 @@ SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 ADAPTIVE, FIXED = SCENARIOS / "process_batches.toml", SCENARIOS / "process_batches_fixed.toml"
 BATCH = 10800.0  # [s]: the bundled scenarios' batch (their events at 1, 2 and 3 batches)
 # the tracking bound after each batch's transient (the second half of every batch) [°C]: the adaptive law's
-# measured worst batch is 0.042 °C, the fixed gains' best batch after the first 2.9 °C (docs/THEORY.md)
+# measured worst batch is 0.032 °C, the fixed gains' best batch after the first 2.9 °C (docs/THEORY.md)
 SETTLED_BOUND = 0.5
 #: a shorter run: its first batch event only (the bundled scenarios' later events lie past a short duration)
 SECOND_BATCH = "events=[{t=10800.0, kind='batch', volume=0.42, flow=0.12, feed_temperature=8.0, ua=35.0}]"
