@@ -2,7 +2,7 @@
 parameters that "vary from batch to batch", working conditions that are "usually time-varying").
 
 The energy balance of the stirred-tank heating process (Seborg, Edgar, Mellichamp & Doyle, *Process Dynamics
-and Control*, 4th ed., Wiley 2016, section 2.4, "Stirred-tank heating process: constant holdup"), with one more
+and Control*, 4th ed., Wiley 2016, section 2.4.1, "Stirred-tank heating process: constant holdup"), with one more
 heat flow, the loss through the tank's wall to its surroundings:
 
     ρ V C dT/dt = w C (T_i − T) + U A (T_a − T) + Q
@@ -51,7 +51,6 @@ from adaptive_mj.specs import PlantSpec, Scenario
 WATER_DENSITY = 1000.0  # ρ [kg/m³]
 WATER_HEAT_CAPACITY = 4184.0  # C [J/(kg K)]
 HEATER_POWER = 60e3  # Q_max [W]: the heater's rating (ctrl_range [0, Q_max])
-DEFAULT_TIMESTEP = 1.0  # [s]: the tank's time constant ρVC/(wC + UA) is tens of minutes
 
 
 @dataclass(frozen=True)
@@ -173,10 +172,11 @@ def model_source(scn) -> None:
 def from_scenario(scn, source) -> BuiltPlant:
     """plant.kind = "process": the tank of plant.volume, .flow, .feed_temperature, .ua, .ambient_temperature,
     .liquid_density and .heat_capacity; the heater plant.ctrl_range (default [0, 60 kW]); RK4 (or Euler) at
-    simulation.timestep (default 1 s)."""
+    simulation.timestep (the loader's default for a plant without a model is 1 ms, far shorter than the tank
+    needs: its time constant ρVC/(wC + UA) is tens of minutes, and the bundled scenarios take 2 s)."""
     p, sim, L = scn.plant, scn.simulation, scn.law
     spec = p.kind_spec if isinstance(p.kind_spec, ProcessSpec) else ProcessSpec(Tank())
-    dt = sim.timestep if sim.timestep is not None else DEFAULT_TIMESTEP
+    dt = sim.timestep if sim.timestep is not None else 0.001  # set by the loader for a plant without a model
     ctrl = p.ctrl_range if p.ctrl_range is not None else (0.0, HEATER_POWER)
     integrator = scenario_integrator(scn)
     if L.mrac is not None:  # a law of the MRAC state form (law.kind = "mrac": its reference model)
