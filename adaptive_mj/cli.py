@@ -89,6 +89,10 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--full-logs", action="store_true",
                    help="the breaking-point study's and the quadrotor margin grid's runs log every row (default: "
                         "their summary and a row per second)")
+    b.add_argument("--only", action="append", default=[], metavar="SECTION",
+                   help="run only this section of the catalogue, by its key (repeatable, or KEY,KEY; e.g. first_order, "
+                        "payload_swap, quadrotor; breaking_points: the full bench's study, section 14); a wrong key "
+                        "is refused with the list of them")
     _backend_arguments(b)
 
     sw = add_parser("sweep", help="run a scenario over a grid of keys and seeds, in parallel")
@@ -429,7 +433,8 @@ def _study(args):
         if args.gains is not None and args.law is None:
             raise ScenarioError("--gains needs --law")
         return api.bench(quick=args.quick, scenarios=[_scenario_path(p) for p in args.scenario], out=args.output,
-                         law=args.law, gains=args.gains, set=args.overrides, full_logs=args.full_logs, **where)
+                         law=args.law, gains=args.gains, set=args.overrides, full_logs=args.full_logs,
+                         only=[k for item in args.only for k in item.split(",")] or None, **where)
     if args.command == "stress":
         return api.stress(seeds=args.seeds, steps=args.steps, duration=args.duration, composite=args.composite,
                           out=args.output, law=args.law, set=args.overrides, plants=args.plants, **where)

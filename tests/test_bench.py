@@ -72,6 +72,26 @@ def test_quick_bench_on_a_reduced_catalogue(tmp_path, small_catalogue, capsys):
     assert "section" in printed and "report:" in printed
 
 
+def test_bench_only_runs_the_sections_asked_for_and_refuses_a_key_it_does_not_know(tmp_path, small_catalogue, capsys):
+    """`bench --only KEY` (repeatable, or KEY,KEY): those sections alone, the report saying so; a key that names no
+    section, or the breaking-point study under --quick (which has none), is refused in one line naming the keys."""
+    out = tmp_path / "bench"
+    assert main(["bench", "--quick", "--only", "phase", "-o", str(out), "--jobs", "2"]) == 0
+    report = (out / "report.md").read_text()
+    assert [line for line in report.splitlines() if line.startswith("## ")] == ["## 2. Phase-space view"]
+    assert "**Only the sections asked for** (`--only`): `phase`." in report
+    assert {tag.split("/")[0] for tag in json.loads((out / "summary.json").read_text())} == {"phase"}
+    capsys.readouterr()
+    nope = "--only 'nope': not a section of the bench (sections: first_order, phase, lyapunov, "
+    study = "--only breaking_points: bench --quick runs no breaking-point study\n"
+    for only, says in ((["phase", "nope"], nope), (["phase,breaking_points"], study), (["breaking_points"], study)):
+        assert main(["bench", "--quick", *[a for o in only for a in ("--only", o)], "-o", str(tmp_path / "x")]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"adaptive-mj: error: {says}") and err.count("\n") == 1, err
+        assert says == study or err.endswith(", quadrotor, breaking_points)\n"), err  # every key, the study's last
+    assert not (tmp_path / "x").exists()
+
+
 def test_bench_refuses_a_non_empty_output_dir(tmp_path):
     (tmp_path / "keep.txt").write_text("x")
     assert main(["bench", "--quick", "-o", str(tmp_path)]) == 2

@@ -77,8 +77,29 @@ def test_with_other_threads_running_the_fork_tests_skip_instead_of_ending_the_pr
 
     code = ("import sys, threading, pytest; e = threading.Event(); "
             "threading.Thread(target=e.wait, daemon=True).start(); "
-            f"rc = pytest.main(['-q', '-p', 'no:cacheprovider', '-k', 'not other_threads', {__file__!r}]); "
+            f"rc = pytest.main(['-q', '-p', 'no:cacheprovider', '-k', 'not other_threads and not with_its_parent', "
+            f"{__file__!r}]); "
             "e.set(); sys.exit(rc)")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     assert "1 passed, 5 skipped" in r.stdout, r.stdout[-2000:]
+
+
+def test_the_child_dies_with_its_parent():
+    """A parent killed outright (SIGKILL: no handler of its runs, as at a test's timeout) leaves no child computing on:
+    the child sees it within beside.PARENT_POLL_S and exits."""
+    import subprocess
+    import sys
+
+    from test_signals import alive, assert_gone
+
+    code = ("import time\nfrom adaptive_mj.study.beside import Beside\n"
+            "b = Beside(lambda: time.sleep(600), fork=True)\nprint(b._proc.pid, flush=True)\ntime.sleep(600)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        child = int(proc.stdout.readline())
+        assert alive(child)
+    finally:
+        proc.kill()
+        proc.wait(timeout=60)
+    assert_gone({child}, timeout=5.0)

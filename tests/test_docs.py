@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 FENCE = re.compile(r"^```(\w+)([^\n]*)\n(.*?)^```", re.S | re.M)
 
@@ -63,6 +65,7 @@ def readme_commands() -> list[str]:
     return out
 
 
+@pytest.mark.timeout(1800)  # the README's eight commands, a sweep and the whole bench --quick among them, in turn
 def test_every_readme_command_runs(tmp_path):
     import shlex
 

@@ -124,9 +124,28 @@ def command(root: Path, cwd: Path, *args: str, timeout: float = 300) -> subproce
                           text=True, timeout=timeout)
 
 
+# Every run of `bench --quick` loaded and built (stepped by none) in the installed package: each scenario, model and
+# payload file it reads is found there; prints the number of runs and of scenario files
+CHECK_BENCH_FILES = """
+from pathlib import Path
+import adaptive_mj
+from adaptive_mj.setup import scenario as sc
+from adaptive_mj.setup.build import check
+from adaptive_mj.study.bench_catalogue import catalogue
+jobs = [j for s in catalogue(quick=True, logs=Path("logs")) for j in s.jobs]
+package = Path(adaptive_mj.__file__).parent
+assert all(j.scenario.is_relative_to(package) for j in jobs), [j.scenario for j in jobs]
+sources = {}
+for j in jobs:
+    check(sc.load(j.scenario, overrides=list(j.overrides), seed=j.seed), sources)
+print(len(jobs), len({j.scenario for j in jobs}))
+"""
+
+
 def test_the_installed_command_works_from_any_folder(installed, tmp_path):
-    """list, run, replay --verify and bench --quick from a new folder: the bundled scenarios and models
-    come from the installed package, and logs/ is created in that folder."""
+    """list, run, replay --verify and bench --quick (one section: the wheel is tested, not the bench, which
+    tests/test_docs.py runs in full) from a new folder: the bundled scenarios and models come from the installed
+    package, and logs/ is created in that folder; every run of the whole `bench --quick` finds its files there."""
     where = subprocess.run([str(installed / "bin" / "python"), "-c", "import adaptive_mj, adaptive_mj.data as d; "
                             "print(adaptive_mj.__file__); print(d.MODELS); print(adaptive_mj.__version__)"],
                            cwd=tmp_path, capture_output=True, text=True, check=True,
@@ -146,7 +165,14 @@ def test_the_installed_command_works_from_any_folder(installed, tmp_path):
     r = command(installed, tmp_path, "replay", str(log.relative_to(tmp_path)), "--verify")
     assert r.returncode == 0 and "verify: bit-identical" in r.stdout, r.stdout + r.stderr
 
-    r = command(installed, tmp_path, "bench", "--quick", "--jobs", "2", timeout=600)
+    r = command(installed, tmp_path, "bench", "--quick", "--only", "first_order", "--jobs", "2")
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     (report,) = (tmp_path / "logs").glob("bench-*/report.md")
     assert str(report.relative_to(tmp_path)) in r.stdout
+    assert "## 1. Adaptive control of a first-order system" in report.read_text()
+
+    r = subprocess.run([str(installed / "bin" / "python"), "-c", CHECK_BENCH_FILES], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=300, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
+    assert r.returncode == 0, r.stderr[-2000:]
+    runs, files = map(int, r.stdout.split())
+    assert runs > 200 and files >= 20  # the whole quick catalogue (241 runs, 30 scenario files when written)

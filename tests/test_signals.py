@@ -311,6 +311,35 @@ def test_workers_whose_parent_is_killed_close_their_logs_and_exit(tmp_path):
         assert closed_status(path)["status"] == "interrupted"
 
 
+# A parent holding a pool of study workers (forked, started by parallel._init_worker as every study's are), idle
+# between runs: it prints their pids, then waits
+_IDLE_POOL = textwrap.dedent("""
+    import concurrent.futures as cf, multiprocessing as mp, os, time
+    from adaptive_mj.study import parallel
+
+    pool = cf.ProcessPoolExecutor(2, mp_context=mp.get_context("fork"), initializer=parallel._init_worker,
+                                  initargs=(os.getpid(),))
+    pool.submit(os.getpid).result()  # a fork pool starts all its workers at its first submit
+    print(*sorted(pool._processes), flush=True)
+    time.sleep(600)
+""")
+
+
+def test_idle_workers_whose_parent_is_killed_exit_within_seconds():
+    """SIGKILL to a parent whose workers wait for their next run (in the pool's queue: no run to interrupt): each
+    sees it (parallel._watch_parent) and exits within seconds; none waits on for a job that will never come."""
+    from adaptive_mj.study.parallel import PARENT_POLL_S
+
+    proc = subprocess.Popen([sys.executable, "-c", _IDLE_POOL], cwd=REPO, stdout=subprocess.PIPE, text=True)
+    try:
+        workers = set(map(int, proc.stdout.readline().split()))
+        assert len(workers) == 2 and workers <= children(proc.pid) and all(alive(p) for p in workers)
+    finally:
+        proc.kill()
+        proc.wait(timeout=60)
+    assert_gone(workers, timeout=5.0 + PARENT_POLL_S)
+
+
 def test_a_stop_raised_inside_a_weakref_callback_is_raised_again_in_the_main_code(capfd):
     """Python drops an exception raised inside a weakref callback (printed as "Exception ignored"): a stop signal
     whose handler ran there would be lost, and the process would go on (seen: a bench's worker ran its run to the

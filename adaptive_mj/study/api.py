@@ -257,22 +257,32 @@ def bench(*, quick: bool = False, scenarios: Sequence[str | Path] = (), out: str
           backend: str | Backend = "local", jobs: int | None = None, address: str | None = None,
           ray_logs: str = "bytes", retries: int = 3, engine: str = "process", law: str | None = None,
           gains: str | Path | None = None, set: Overrides = (),  # noqa: A002
-          full_logs: bool = False) -> Study:
+          full_logs: bool = False, only: str | Sequence[str] | None = None) -> Study:
     """The benchmark catalogue (`adaptive-mj bench`): quick: shorter runs, no breaking-point study; full_logs: the
     breaking-point study's runs log every row (default: their summary and a row per second);
     scenarios: your own scenario files (or bundled names), each in a section of its own; law: a law kind
     (built in or a plugin, its keys per plant kind in `gains` and `set`) scored against the baselines in a
-    section of its own (score's quick suite) and added to the breaking-point study. Returns the Study: one
-    row per run of the report's main table (section, run, status, tail, u_rms, u_tv, key)."""
-    from adaptive_mj.study.bench import run_bench
+    section of its own (score's quick suite) and added to the breaking-point study; only: the catalogue's
+    sections to run, by key ("a,b" or a sequence; bench.section_keys(); "breaking_points" is the full bench's study),
+    default all of them. Returns the Study: one row per run of the report's main table (section, run, status,
+    tail, u_rms, u_tv, key)."""
+    from adaptive_mj.study.bench import BREAKING_POINTS, run_bench, section_keys
 
     sets = _law_sets(law, set)
+    keys = _names("--only", only)
+    if keys is not None:
+        known = section_keys()
+        wrong = [k for k in keys if k not in known]
+        if wrong:
+            raise ScenarioError(f"--only {wrong[0]!r}: not a section of the bench (sections: {', '.join(known)})")
+        if quick and BREAKING_POINTS in keys:
+            raise ScenarioError(f"--only {BREAKING_POINTS}: bench --quick runs no breaking-point study")
 
     backend_ = where(backend, jobs=jobs, address=address, ray_logs=ray_logs, retries=retries, engine=engine)
     paths = [scenario_path(p) for p in ([scenarios] if isinstance(scenarios, (str, Path)) else scenarios)]
     return run_bench(quick=bool(quick), scenarios=paths, out=None if out is None else Path(out), backend=backend_,
                      law=law, gains=None if gains is None else Path(gains), sets=tuple(sets),
-                     full_logs=bool(full_logs))
+                     full_logs=bool(full_logs), only=None if keys is None else tuple(dict.fromkeys(keys)))
 
 
 def run_scenario(scenario: str | Path, *, set: Overrides = (), seed: int | None = None,  # noqa: A002

@@ -54,15 +54,30 @@ MAIN_COLUMNS = ("section", "run", "status", "rms err tail", "u rms", "u TV", "ke
 TEXT_LEFT = ("section", "run", "status", "key result")  # the terminal table's text columns (numbers: right)
 
 
+#: `bench --only`'s key for the full bench's breaking-point study (section 14, not a catalogue section)
+BREAKING_POINTS = "breaking_points"
+
+
+def section_keys() -> list[str]:
+    """The keys `bench --only` takes: every catalogue section's (in the report's order) and BREAKING_POINTS."""
+    from adaptive_mj.study.sections.common import entries
+
+    import adaptive_mj.study.bench_catalogue  # noqa: F401 (imported for its sections' registration)
+
+    return [e.key for e in entries()] + [BREAKING_POINTS]
+
+
 def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str | None = None,
-              gains: Path | None = None, sets: tuple[str, ...] = (), full_logs: bool = False) -> Study:
+              gains: Path | None = None, sets: tuple[str, ...] = (), full_logs: bool = False,
+              only: tuple[str, ...] | None = None) -> Study:
     """The bench with options adaptive_mj.study.api.bench has checked: the catalogue (quick: shorter runs,
     no breaking-point study) and a section for the user's scenario files, written to `out`. law: a law kind
     (built in or a plugin) with its `gains` file and --set keys, scored against the baselines in a section of
     its own (adaptive-mj score's quick suite, in `out/score`) and, in the full bench, added to the
     breaking-point study's laws on the plants it serves. full_logs: the breaking-point study's runs log every row
     (default: their summary and a row per second, job.SUMMARY_LOG_RATE_HZ, as do the quadrotor margin grid's; the
-    catalogue's other runs log in full)."""
+    catalogue's other runs log in full). only: the keys of the sections to run (section_keys(); BREAKING_POINTS: the
+    full bench's study), None for all of them."""
     from adaptive_mj.study.bench_catalogue import catalogue
 
     from adaptive_mj.sim.runner import new_output_dir
@@ -82,13 +97,15 @@ def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str |
             check(load(path))
     out = new_output_dir(out, "bench-quick" if quick else "bench")
     sections = catalogue(quick=quick, logs=out / "logs", **({"full_logs": True} if full_logs else {}))
+    if only is not None:
+        sections = [s for s in sections if s.key in only]
     if scenarios:
         from adaptive_mj.study.bench_catalogue import user_section
 
         sections.append(user_section(list(scenarios), out / "logs"))
     jobs = [job for s in sections for job in s.jobs]
     with session(backend):
-        return _bench(quick, out, sections, jobs, backend, scoring, full_logs)
+        return _bench(quick, out, sections, jobs, backend, scoring, full_logs, only)
 
 
 def _number(title: str) -> float:
@@ -135,8 +152,10 @@ def _disk_mb(folder: Path) -> float:
     return sum(f.stat().st_size for f in folder.rglob("*") if f.is_file()) / 1e6 if folder.exists() else 0.0
 
 
-def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = None, full_logs: bool = False) -> Study:
+def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = None, full_logs: bool = False,
+           only: tuple[str, ...] | None = None) -> Study:
     t0 = time.perf_counter()
+    study = not quick and (only is None or BREAKING_POINTS in only)  # the breaking-point study: the full bench's
     results = run_jobs(jobs, backend=backend, on_done=progress_printer(len(jobs)))
     run_seconds = time.perf_counter() - t0
     by_tag = {r.job.tag: r for r in results}
@@ -152,11 +171,11 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
 
     # the full bench: the analyses and figures in a forked process beside the breaking-point study (both cores
     # busy meanwhile, adaptive_mj.study.beside); quick, or where fork is unsafe: here, before it
-    beside = Beside(analyses, fork=None if not quick and backend.kind == "local" else False)
+    beside = Beside(analyses, fork=None if study and backend.kind == "local" else False)
     overlapped = beside.forked
     n_runs = len(results)
     study_seconds = 0.0
-    if quick:
+    if not study:
         parts, rows, analysis_seconds = beside.result()
     else:  # the breaking-point study: its own batches (bisection), a reduced `adaptive-mj stress`
         from adaptive_mj.study.stress import BENCH_SETTINGS, SUMMARY_LOG_RATE_HZ, run_study
@@ -193,18 +212,20 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
               f"the analytic twin, {_where(backend)}. {expectation_text(results)} The {len(results)} catalogue runs "
               f"took {run_seconds:.1f} s, their sections' analyses and figures {analysis_seconds:.1f} s"
               + (" (in a process of their own, beside the breaking-point study)" if overlapped else "")
-              + ("" if quick else f", the breaking-point study {study_seconds:.1f} s")
+              + ("" if not study else f", the breaking-point study {study_seconds:.1f} s")
               + f", the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
               f"every catalogue run's MCAP log is in `logs/`"
-              + ("" if full_logs else " (the quadrotor margin grid's, `logs/quadrotor-margins/`, each its summary and "
-                 "a row per second)")
-              + ("" if quick else ", the breaking-point study's in `stress/logs/`"
+              + ("" if full_logs or not any(s.key == "quadrotor" for s in sections) else
+                 " (the quadrotor margin grid's, `logs/quadrotor-margins/`, each its summary and a row per second)")
+              + ("" if not study else ", the breaking-point study's in `stress/logs/`"
                  + ("" if full_logs else " (each its summary and a row per second: `bench --full-logs` keeps every "
                     "row)"))
               + " (replay with `adaptive-mj replay logs/<run>.mcap --verify`). "
               + f"The logs take {_disk_mb(out / 'logs'):.0f} MB"
-              + ("" if quick else f", the breaking-point study's {_disk_mb(out / 'stress'):.0f} MB") + ".\n\n"
-              f"**Tail**, wherever a table or figure says it: the last {100 * TAIL_FRACTION:g} % of a run "
+              + ("" if not study else f", the breaking-point study's {_disk_mb(out / 'stress'):.0f} MB") + ".\n\n"
+              + ("" if only is None else "**Only the sections asked for** (`--only`): "
+                 + ", ".join(f"`{k}`" for k in only) + ".\n\n")
+              + f"**Tail**, wherever a table or figure says it: the last {100 * TAIL_FRACTION:g} % of a run "
               "(docs/METRICS.md). On an arm of m joints a tail RMS error is the RMS over the joints and the tail's "
               "rows, i.e. the RMS of ‖q̃‖ divided by √m. **u TV** (total variation Σ|Δu|), wherever a table gives "
               "it: over every physics step of the run, not the log's 100 Hz rows (which would give a lower bound "

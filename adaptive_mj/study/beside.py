@@ -6,16 +6,23 @@ are not copied on the way in. It runs fn(), sends its return value back through 
 text and traceback), and exits.
 Where fork is missing, or other threads run in the parent (a fork copies their locks as they stand: a Ray
 session's threads, say), fn() runs in the parent when `result` is asked, as it would without this module.
+The child dies with its parent: a parent killed outright (SIGKILL, a test's timeout) leaves no child computing on
+(it sees it within PARENT_POLL_S, as a study's workers do) nor one blocked sending a result no one reads.
 """
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import signal
 import threading
+import time
 import traceback
 from typing import Any, Callable, Generic, TypeVar
 
 T = TypeVar("T")
+
+#: [s] how often the child looks whether its parent is still there
+PARENT_POLL_S = 0.2
 
 
 def can_fork() -> bool:
@@ -37,7 +44,7 @@ class Beside(Generic[T]):
             return
         ctx = mp.get_context("fork")
         self._recv, send = ctx.Pipe(duplex=False)
-        self._proc = ctx.Process(target=_child, args=(fn, send), daemon=True)
+        self._proc = ctx.Process(target=_child, args=(fn, send, self._recv, os.getpid()), daemon=True)
         self._proc.start()
         send.close()  # the child's end: the parent reads EOF if the child dies before sending
 
@@ -76,14 +83,23 @@ class Beside(Generic[T]):
         self._proc = None
 
 
-def _child(fn: Callable[[], Any], send) -> None:
+def _child(fn: Callable[[], Any], send, recv, parent: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent takes a stop signal and ends this process
+    recv.close()  # the parent's end, inherited: once the parent is gone, a send fails instead of filling the pipe
+    threading.Thread(target=_exit_with, args=(parent,), name="adaptive-mj parent watch", daemon=True).start()
     try:
         value = (True, fn())
     except BaseException as exc:  # told to the parent as text (its class by name), which raises it again
         value = (False, (type(exc).__module__, type(exc).__qualname__, str(exc), traceback.format_exc()))
     send.send(value)
     send.close()
+
+
+def _exit_with(parent: int) -> None:
+    """The child's daemon thread: once the parent is gone (this process now belongs to init or a subreaper), end."""
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(128 + signal.SIGTERM)
 
 
 def _raised(module: str, name: str, text: str, trace: str) -> BaseException:
