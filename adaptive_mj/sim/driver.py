@@ -40,8 +40,8 @@ Block = tuple[np.ndarray, ...]
 
 
 class Steps(Protocol):
-    """What steps a plant a chunk at a time for `chunks`: the compiled controllers (native_context.ContextOwner),
-    PythonSteps and AgentSteps."""
+    """What steps a plant a chunk at a time for `chunks`: the compiled controllers (native_context.ContextOwner,
+    which documents rows_recorded, finish, crash, end_of_chunk and mass_rows), PythonSteps and AgentSteps."""
 
     max_rows: int  # the most physics steps one chunk takes
     theta: np.ndarray  # (n_theta,) the estimate after the steps taken
