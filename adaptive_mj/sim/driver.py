@@ -158,8 +158,8 @@ def chunks(plant: Plant, steps: Steps, rows: Rows, queue: EventQueue, noise: _No
         steps.prepare(n, noise.draw_block(n))
         yield n
         done = steps.rows_recorded()
-        warning = plant.instability()
-        if done < n and warning is not None:  # MuJoCo found the state bad mid-chunk, reset it and stepped on
+        warning = plant.instability() if done < n else None
+        if warning is not None:  # MuJoCo found the state bad mid-chunk, reset it and stepped on
             block = steps.finish(done, partial=True)  # the rows to the step that diverged, as the Python path keeps
             rows.put_block(block, theta_now, done, mass=steps.mass_rows(done))
             t_bad = block[0][-1] if done else t_k
@@ -173,8 +173,9 @@ def chunks(plant: Plant, steps: Steps, rows: Rows, queue: EventQueue, noise: _No
             rows.put_block(tuple(a[:keep] for a in block), theta_now, keep if bad is None else bad)
             return (Status.CRASHED, reason) if bad is None else (Status.DIVERGED, why)
         block = steps.finish(n)
-        x_next = np.concatenate([block[1][1:], plant.observe()[None]])
-        theta_next = np.concatenate([block[5][1:], steps.theta[None]])
+        x_next, theta_next = plant.observe()[None], steps.theta[None]  # what the chunk's last step left
+        if n > 1:
+            x_next, theta_next = np.concatenate([block[1][1:], x_next]), np.concatenate([block[5][1:], theta_next])
         bad, reason = first_divergence(x_next, block[2], theta_next, state_bound)
         if bad is None:
             warning = plant.instability()
@@ -247,10 +248,18 @@ def first_divergence(x_next, u, theta_next, bound: float) -> tuple[int | None, s
 
 
 def _within(a, bound: float) -> bool:
-    """Every entry of the array finite and |v| <= bound (a NaN makes the maximum NaN, which fails the
-    comparison)."""
+    """Every entry of the array finite and |v| <= bound: a few entries (a chunk of one step) as Python floats, more
+    in two reductions (a NaN makes the maximum NaN, which fails the comparison)."""
     a = np.asarray(a)
-    return a.size == 0 or bool(np.isfinite(a).all() and np.abs(a).max() <= bound)
+    if a.size <= _FEW:
+        for v in a.ravel().tolist():
+            if not (math.isfinite(v) and -bound <= v <= bound):
+                return False
+        return True
+    return bool(np.isfinite(a).all() and np.abs(a).max() <= bound)
+
+
+_FEW = 32  # entries below which Python floats are cheaper than numpy's reductions
 
 
 def _what_diverged(x_next, u_k, theta_hat, bound) -> str:
