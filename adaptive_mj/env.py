@@ -21,8 +21,9 @@ episodes are identical. It ends (StepType.LAST) after the run's
 round(duration / dt) physics steps, i.e. ceil(round(duration / dt) / n_sub_steps)
 agent steps (the last one shorter when they do not divide), with discount 1.0
 (a time limit, as in dm_control), or earlier when the run diverges (non-finite state,
-control or estimate, |x_i| > simulation.state_bound, a MuJoCo warning) with
-discount 0.0. MID steps have discount 1.0.
+control or estimate, |x_i| > simulation.state_bound, a MuJoCo warning) or the plant
+ends it (its termination(): a crash, status "crashed"), with discount 0.0. MID steps have
+discount 1.0.
 
 Action: a ``BoundedArray`` of shape (1,) named "u" with the actuator's
 ctrlrange [N or N*m]; on a manipulator (plant.kind = "manipulator", m joints)
@@ -58,7 +59,7 @@ rebuilt with every episode's plant, since it reads that plant's regressor;
 The law as the policy (``law="scenario"`` or a law object): the law runs
 inside MuJoCo's control callback at every evaluation of the dynamics, with the
 estimates staged through the integrator's stages and advanced once per
-physics step by ``loop.ControlStep`` itself (loop.run's Python path; its
+physics step by ``loop.Controller`` itself (loop.run's Python path, driven by ``sim.driver``; its
 native numba path computes the same numbers), so an episode is step for step
 the computation ``adaptive-mj run`` does: the tests find bit-identical rows.
 ``law_policy(env)`` (a ``LawPolicy``) is the other design: the law as an
@@ -93,8 +94,8 @@ from dm_env import specs  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.setup import scenario as scenario_io  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.setup.build import Setup, build  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.errors import ScenarioError  # noqa: E402 (imported after MUJOCO_GL is set above)
-from adaptive_mj.sim.loop import (Controller, ControlStep, EventQueue, Rows, StepRow, divergence,  # noqa: E402 (after MUJOCO_GL is set above)
-                                  plant_order)
+from adaptive_mj.sim.driver import AgentSteps, Drive, PythonSteps  # noqa: E402 (imported after MUJOCO_GL is set above)
+from adaptive_mj.sim.loop import Controller, EventQueue, Rows, _NoiseSource, plant_order  # noqa: E402 (after MUJOCO_GL)
 from adaptive_mj.report.metrics import clean_json, summary as make_summary  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.manipulator import ManipulatorPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
 from adaptive_mj.plants.mujoco_plant import MujocoPlant  # noqa: E402 (imported after MUJOCO_GL is set above)
@@ -323,7 +324,7 @@ class TrackingTask(control.Task):
     def get_termination(self, physics) -> float | None:
         ep = self._episode
         assert ep is not None  # set by initialize_episode, which dm_control's reset calls first
-        if ep.status == Status.DIVERGED:
+        if ep.status in (Status.DIVERGED, Status.CRASHED):
             return DISCOUNT_DIVERGED
         if ep.k >= ep.n_steps:
             return DISCOUNT_TIME_LIMIT
@@ -380,20 +381,19 @@ class _Episode:
         self.state_bound = scn.simulation.state_bound
         self.theta_hat0 = np.asarray(setup.theta_hat0, dtype=float)
         self.events = EventQueue(setup.events, plant.dt)
-        self.noise_std, self.rng = setup.noise_std, setup.rng
-        self.controller = self.step = None
-        if drive:
+        self._noise = _NoiseSource(setup.noise_std, setup.rng, (self.order,) + js)
+        self.controller: Controller | None = None
+        self.steps: PythonSteps | AgentSteps
+        if drive:  # the law: the step adaptive-mj run takes on its Python path
             from adaptive_mj.sim.runner import control_timing
 
             self.controller = Controller(law, setup.reference, self.theta_hat0, plant.ctrl_range, self.order,
                                          plant.stages, plant.dt, js, control_timing(scn, setup), setup.sensors)
-            self.step = ControlStep(plant, self.controller, self.events, state_bound=self.state_bound,
-                                    noise=self._next_noise)
+            self.steps = PythonSteps(plant, self.controller)
             self._policy: Policy = self.controller
-        else:
-            self._policy = lambda t, x: self._u
-        self._u = np.zeros(js) if js else 0.0
-        self.noise = self._draw()  # the noise of the coming physics step
+        else:  # the agent: its held action over the step
+            self.steps = agent = AgentSteps(plant, law, setup.reference, self.theta_hat0, self.order)
+            self._policy = agent.policy
         self.recorder = recorder
         self.sink_every = max(1, round(1.0 / self.dt))  # flush about once per simulated second
         # the rows, their V and the Trajectory: the loop's own (sim.loop.Rows), as adaptive-mj run keeps them; an
@@ -402,7 +402,10 @@ class _Episode:
         self.status, self.reason = Status.OK, ""
         self._criteria, self._preflight, self._verdict = self._verdict_terms(scn, setup, law, drive)
         self.last_reward = 0.0
-        self._apply_due_events()
+        self._ended = False
+        # the run between its steps (adaptive_mj.sim.driver, as adaptive-mj run drives it), one physics step a chunk:
+        # made, it has applied the events due at t = 0 and drawn the first step's noise
+        self.run = Drive(plant, self.steps, self.rows, self.events, self._noise, self.state_bound)
 
     @property
     def k(self) -> int:
@@ -414,26 +417,17 @@ class _Episode:
         if self.recorder is not None and not self.recorder.closed:
             self.recorder.write_rows(*rows)
 
-    def _apply_due_events(self) -> None:
-        """Events due at the coming step's start (t_k >= t_event - dt/2), as loop.run applies
-        them; applied now, before the observation, so an observation at t_k already sees them. The rows
-        so far are flushed first (their V with the model of their own steps), as loop.run does."""
-        if self.events.is_due(self.plant.time):
-            self.rows.flush(self.rows.k)
-        self.events.due(self.plant.time, self.plant, self.recorder)
-
-    def _next_noise(self) -> np.ndarray | None:
-        """The noise of the step that starts now (drawn one step ahead: measured_state shows it)."""
-        noise, self.noise = self.noise, self._draw()
-        return noise
-
-    def _draw(self) -> np.ndarray | None:
-        return self.rng.normal(0.0, self.noise_std) if self.noise_std is not None else None
+    def write_event(self, t: float, label: str) -> None:
+        """The events' sink (applied at the first step with t_k >= t_event - dt/2, before the observation at t_k,
+        as loop.run applies them): the episode's log while it is open."""
+        if self.recorder is not None and not self.recorder.closed:
+            self.recorder.write_event(t, label)
 
     def hold(self, u) -> None:
         """The agent's control for the coming agent step (already clipped): a float [N or N*m],
         or (m,) joint torques [N*m or N] for an arm."""
-        self._u = u
+        assert isinstance(self.steps, AgentSteps)  # the task holds an action only when the agent drives
+        self.steps.u = u
 
     def measured_state(self) -> np.ndarray:
         """(n,)+J the state the law sees at the coming step: true state + that step's noise."""
@@ -441,28 +435,36 @@ class _Episode:
         if self.joint_shape:  # a law called outside the callback (law_policy) reads Y at this state
             assert has_joints(self.plant)  # joint_shape (m,): a plant of joints
             self.plant.update_kinematics()
-        return x + self.noise if self.noise is not None else x
+        noise = self.steps.noise
+        return x + noise if noise is not None else x
 
     def advance(self, n_sub: int) -> None:
-        """Run up to n_sub physics steps; stop early at the episode's end or a divergence."""
+        """Run up to n_sub physics steps (adaptive_mj.sim.driver.Drive, one a chunk), each rewarded with
+        -|y_d - y|^2 * dt at its end; stop early at the episode's end, a divergence or the plant's termination."""
         reward = 0.0
+        plant = self.plant
         try:
-            with self.plant.controlled_by(self._policy):
+            with plant.controlled_by(self._policy):
                 for _ in range(n_sub):
-                    if self.k >= self.n_steps or self.status != Status.OK:
+                    if self.run.done:
                         break
-                    reward += self._one_step()
+                    self.run.advance()
+                    y_tilde = np.asarray(self.reference(plant.time, 0)[0]) - plant.observe()[0]
+                    reward -= float(np.sum(y_tilde * y_tilde)) * self.dt
         except BaseException as exc:
             status = Status.INTERRUPTED if isinstance(exc, KeyboardInterrupt) else Status.FAILED
             self.close_log(status, f"{type(exc).__name__}: {exc}")
             raise
         self.last_reward = reward
-        if self.k >= self.n_steps and self.status == Status.OK:  # the episode ran to its end: its verdict
-            from adaptive_mj.sim.runner import verdict
+        if self.run.done and not self._ended:
+            self._ended = True
+            self.status, self.reason = self.run.status, self.run.reason
+            self.steps.noise = self._noise.draw()  # what an observation after the last step sees, as after any step
+            if self.status == Status.OK:  # the episode ran to its end: its verdict
+                from adaptive_mj.sim.runner import verdict
 
-            traj, self._verdict = verdict(self.scn, self.trajectory(), self._criteria, self._preflight)
-            self.status, self.reason = traj.status, traj.reason
-        if self.k >= self.n_steps or self.status != Status.OK:
+                traj, self._verdict = verdict(self.scn, self.trajectory(), self._criteria, self._preflight)
+                self.status, self.reason = traj.status, traj.reason
             self.close_log(self.status, self.reason)
 
     def _verdict_terms(self, scn: scenario_io.Scenario, setup: Setup, law: Law, drive: bool):
@@ -479,29 +481,6 @@ class _Episode:
         else:
             pre = preflight.Preflight(checked=False, note="not checked: an agent's policy drives the plant")
         return crit, pre, None
-
-    def _one_step(self) -> float:
-        """One physics step, as in loop.run; returns -|y_d - y|^2 * dt at its end."""
-        plant = self.plant
-        if self.step is not None:  # the law: loop.ControlStep, the step adaptive-mj run takes
-            row = self.step.step()
-        else:  # the agent: its held action over the step
-            t_k = plant.time
-            x, theta = plant.observe(), plant.true_theta()
-            ref = self.reference(t_k, self.order)
-            seen = x + self.noise if self.noise is not None else x
-            s = self.law(t_k, seen, ref, self.theta_hat0).s
-            plant.step()
-            self.noise = self._draw()
-            reason = divergence(plant, x, self._u, self.theta_hat0, self.state_bound)
-            row = StepRow(t_k, x, theta, np.full(len(self.theta_hat0), np.nan), self._u, s, ref, reason)
-        self.rows.put(row)
-        if row.reason:
-            self.status, self.reason = Status.DIVERGED, row.reason
-        elif self.k < self.n_steps:
-            self._apply_due_events()
-        y_tilde = np.asarray(self.reference(plant.time, 0)[0]) - plant.observe()[0]
-        return -float(np.sum(y_tilde * y_tilde)) * self.dt
 
     def trajectory(self) -> Trajectory:
         """The episode so far (the rows written to the log on the way, as loop.run writes them)."""

@@ -3,7 +3,7 @@
 Messages name the place (file, key), what was expected and what came, e.g.
 ``scenarios/x.toml: law.gamma must be > 0, got -1``.
 
-A run that diverges is not an exception: divergence is decided per step (adaptive_mj.sim.loop.divergence) and
+A run that diverges is not an exception: divergence is decided per step (adaptive_mj.sim.driver.first_divergence) and
 ends the run as data, a Trajectory with status Status.DIVERGED and the reason (adaptive_mj.trajectory).
 """
 

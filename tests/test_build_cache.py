@@ -16,7 +16,7 @@ from adaptive_mj.plants import arm, heave
 from adaptive_mj.plants.mujoco_plant import compile_spec, layout, scratch_data
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
-from adaptive_mj.sim import loop
+from adaptive_mj.sim.driver import first_divergence
 from adaptive_mj.sim.stage import step_times
 from test_manipulator_runs import SERVO_ARM  # a two-link arm driven by position servos
 
@@ -223,7 +223,9 @@ def test_validated_scenario_cache_keeps_errors_and_the_current_directory_apart(t
 
 
 @pytest.mark.parametrize("bad", ["nan_x", "inf_u", "bound", "nan_theta_next", "none"])
-def test_whole_chunk_divergence_check_agrees_with_the_row_by_row_one(bad):
+def test_the_divergence_check_keeps_the_rows_to_the_first_bad_step(bad):
+    """driver.first_divergence, the one check every path runs (a compiled chunk of many steps, the Python path's
+    chunk of one): the rows kept end at the first step whose next state, control or next estimate is bad."""
     setup = build(sc.load(Path(SCENARIOS / "heave_drift.toml")))
     plant = setup.plant
     n = 50
@@ -239,7 +241,8 @@ def test_whole_chunk_divergence_check_agrees_with_the_row_by_row_one(bad):
         x[40, 0] = 11.0
     elif bad == "nan_theta_next":
         theta_next[1] = math.nan
-    keep, reason = loop.first_divergence(plant, x, u, theta_hat, theta_next, bound)
+    x_next = np.concatenate([x[1:], plant.observe()[None]])
+    keep, reason = first_divergence(x_next, u, np.vstack([theta_hat[1:], theta_next[None]]), bound)
     expected = {"nan_x": 17, "inf_u": 31, "bound": 40, "nan_theta_next": n, "none": None}[bad]
     assert keep == expected
     assert (reason == "") == (bad == "none")

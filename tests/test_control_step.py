@@ -1,4 +1,4 @@
-"""The control step written once (adaptive_mj.sim.loop.ControlStep, adaptive_mj.sim.stage): the
+"""The control step written once (adaptive_mj.sim.stage, driven by adaptive_mj.sim.driver): the
 native callbacks, the Python controller and adaptive_mj.env give the same rows bit for bit in both
 control modes, on the heave vehicle, the 1-DOF arm and the 6-joint arm, with a control delay and an
 event; sampled-data control holds its output and its estimates over each control period; the

@@ -566,7 +566,7 @@ def test_a_signal_during_a_flush_waits_until_its_rows_are_written():
     from adaptive_mj.setup.build import build
     from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
     from adaptive_mj.sim.interrupt import stop_on_signals
-    from adaptive_mj.sim.loop import Rows, StepRow
+    from adaptive_mj.sim.loop import Rows
 
     setup = build(load(SCENARIOS_DIR / "heave_tracking.toml"))
     written = []
@@ -583,10 +583,10 @@ def test_a_signal_during_a_flush_waits_until_its_rows_are_written():
             return np.zeros(len(s))
 
     rows = Rows(setup.plant, SignalInV(), 10, Sink(), 5)
-    row = StepRow(0.0, np.zeros(2), np.ones(3), np.zeros(3), 0.0, 0.0, np.zeros(3), "")
+    row = (np.zeros(1), np.zeros((1, 2)), np.zeros(1), np.zeros(1), np.zeros((1, 3)), np.zeros((1, 3)))  # one step's
     with pytest.raises(Interrupted), stop_on_signals():
         for _ in range(5):
-            rows.put(row)
+            rows.put_block(row, np.ones(3), 1)
     assert written == [(0, 5)] and rows.flushed == 5
 
 

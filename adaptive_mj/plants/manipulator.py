@@ -564,6 +564,7 @@ class ManipulatorPlant(ModelClock, BodyEdits):
     """
 
     order = 2
+    compiled_loop: str | None = "adaptive_mj.sim.native_manipulator"  # protocol.Plant.compiled_loop
     native_owner: object | None = None  # the native controller whose context data points at
 
     def __init__(self, model: mujoco.MjModel, *, unknown="payload", joint_params: bool = False,

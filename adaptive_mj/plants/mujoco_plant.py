@@ -176,6 +176,10 @@ class ModelClock:
     def time(self) -> float:
         return float(self.data.time)
 
+    def termination(self) -> str | None:
+        """None: the plant does not crash (protocol.Plant.termination)."""
+        return None
+
 
 class BodyEdits:
     """What the MuJoCo plants whose events change a body share (`model`, `where` for messages, and their own
@@ -222,6 +226,7 @@ class MujocoPlant(ModelClock):
     first_contact: tuple[float, str] | None = None  # contacts are not tracked on a 1-DOF plant
     joint_limits: np.ndarray | None = None  # a 1-DOF plant's joint is not limited
     native_owner: object | None = None  # the native controller whose context data points at
+    compiled_loop: str | None = "adaptive_mj.sim.native"  # its compiled callback (protocol.Plant.compiled_loop)
 
     def __init__(self, model: mujoco.MjModel, *, joint_id: int, actuator_id: int, form: ModelForm,
                  theta_fn: Callable[[mujoco.MjModel], np.ndarray], where: str):

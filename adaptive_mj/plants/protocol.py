@@ -33,13 +33,18 @@ Optional (a plant that names Plant as its base inherits the default in brackets)
                it knows of (the Lyapunov analysis: adaptive_mj.study.analysis) [None]
   release()    the run is over: hand back what the plant holds for the next run's plant (a MujocoPlant's
                MjData: MujocoPlant.release) [nothing]
-Optional, read where present (getattr: control_shape, termination below; a plant without them is as in brackets):
+  termination()  text of why the run must end now because the vehicle crashed (a quadrotor: "crashed at t = …"),
+               or None; asked after every chunk of physics steps (adaptive_mj.sim.driver: every step on the Python
+               path; a compiled callback says at which step of its chunk); the run, or adaptive_mj.env's episode,
+               ends with status "crashed" [None]
+  compiled_loop  the module of the plant's compiled closed loop, which gives `supported(plant, law)` and
+               `Controller` (adaptive_mj.sim.native for a MujocoPlant, native_manipulator, native_flight,
+               native_analytic, native_twin); adaptive_mj.sim.loop dispatches on it [None: the Python path only]
+Optional, read where present (getattr: control_shape below; a plant without them is as in brackets):
   control_names  the k actuators' names where u is not one entry per joint (a quadrotor: 4 rotor thrusts on
                3 position axes; u is then (k,)) [(): u is shaped like joint_shape]
   state_names  a name per row of x where the rows are not the output's derivatives (a quadrotor's x is
                [p; v; φ; Ω]: the log names its fields by them) [(): y, y', ...]
-  termination()  text of why the run must end now because the vehicle crashed (a quadrotor: "crashed at t = …"),
-               or None; asked after every physics step; the run ends with status "crashed" [None]
 
 `FormPlant`, a 1-DOF plant or twin (joint_shape ()):
   form         the ModelForm d y^(n) = f(x) + φ(x)ᵀp + h(x) u the 1-DOF laws are built on
@@ -129,6 +134,15 @@ class Plant(Protocol):
         """The run is over: hand back what the plant holds for the next run's plant."""
         return None
 
+    def termination(self) -> str | None:
+        """Why the run must end now because the vehicle crashed, or None (asked after every chunk of steps)."""
+        return None
+
+    @property
+    def compiled_loop(self) -> str | None:
+        """The module of the plant's compiled closed loop (its `supported(plant, law)` and `Controller`), or None."""
+        return None
+
 
 class FormPlant(Plant, Protocol):
     """A 1-DOF plant or twin: its structure is a ModelForm."""
@@ -175,12 +189,6 @@ def control_shape(plant: Plant) -> tuple[int, ...]:
     """The shape of the plant's control u: (k,) for k named actuators (control_names), else joint_shape."""
     names = getattr(plant, "control_names", ())
     return (len(names),) if names else tuple(plant.joint_shape)
-
-
-def termination(plant: Plant) -> str | None:
-    """The plant's termination() (a crash), None where it declares none."""
-    ask = getattr(plant, "termination", None)
-    return ask() if ask is not None else None
 
 
 def has_joints(plant: Plant) -> TypeGuard[JointPlant]:

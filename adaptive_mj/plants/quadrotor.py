@@ -226,6 +226,7 @@ class QuadrotorPlant(ModelClock, BodyEdits):
     joint_limits: np.ndarray | None = None
     first_contact: tuple[float, str] | None = None
     native_owner: object | None = None
+    compiled_loop: str | None = "adaptive_mj.sim.native_flight"  # protocol.Plant.compiled_loop
     disturbance: Callable[[float], float] | None = None  # the protocol's; a quadrotor's are events
 
     def __init__(self, model: mujoco.MjModel, *, where: str = "quadrotor model", crash_tilt: float = CRASH_TILT_DEG):

@@ -54,6 +54,10 @@ class PythonStepped:
     def instability(self) -> str | None:
         return None
 
+    def termination(self) -> str | None:
+        """None: an analytic plant does not crash (protocol.Plant.termination)."""
+        return None
+
     def unmodelled_drag(self) -> float | None:
         """None: the twin integrates its own form, nothing acts outside it."""
         return None

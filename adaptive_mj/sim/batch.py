@@ -2,7 +2,7 @@
 stepped together on a thread pool, each run otherwise exactly as `loop.run` drives it.
 
 Each run is set up by `loop.prepare` (its rows, events, noise, native controller and context) and
-driven by `loop.native_steps`, the same generator `loop.run`'s native path drives: before each
+driven by `driver.chunks`, the generator every path drives (adaptive_mj.sim.driver): before each
 chunk the run's events are applied and its callback buffers filled, then it asks for n physics
 steps. Here the runs that ask for the same n are stepped together: each run's MjData state
 (mjSTATE_INTEGRATION: time, qpos, qvel, act, warm start, ctrl, applied forces and `userdata`, whose
@@ -28,7 +28,8 @@ import numpy as np
 
 from adaptive_mj.errors import Interrupted
 from adaptive_mj.plants.mujoco_plant import layout
-from adaptive_mj.sim.loop import PreparedRun, drive, native_steps, prepare
+from adaptive_mj.sim.driver import chunks
+from adaptive_mj.sim.loop import PreparedRun, drive, prepare
 from adaptive_mj.sim.native_context import ContextOwner
 from adaptive_mj.trajectory import Status, Trajectory
 
@@ -94,7 +95,7 @@ def _drive(prepared: list[PreparedRun], ncs: list[ContextOwner], nthread: int, o
         asks: dict[int, int] = {}
         for i, p in enumerate(prepared):
             assert p.nc is not None  # every run here has its native controller (grouped by its callback above)
-            steps[i] = native_steps(p.plant, p.nc, p.rows, p.queue, p.noise, p.state_bound)
+            steps[i] = chunks(p.plant, p.nc, p.rows, p.queue, p.noise, p.state_bound)
             _advance(steps, i, None, asks, results)
         while asks:
             groups: dict[int, list[int]] = defaultdict(list)

@@ -16,9 +16,10 @@ The order of a control step, written once:
 Within the physics step, what happens at each integrator stage ("law … apply", the row's control, the estimates'
 advance at the step's end) is adaptive_mj.sim.stage.control_stage: `Controller` runs it with this path's pieces
 (the Law protocol, the control handed back to the plant), and the compiled callbacks run the same function
-compiled with theirs (adaptive_mj.sim.native_step). `ControlStep.step` runs a physics step around it on the
-Python path (adaptive_mj.env drives it one agent step at a time); the native path runs the callback over chunks of
-steps and does the events, divergence check and rows between chunks, in the same order (`native_steps`).
+compiled with theirs (adaptive_mj.sim.native_step). Between physics steps (events, noise, divergence check, rows,
+the plant's termination) every path is driven by adaptive_mj.sim.driver: the Python path a chunk of one step
+(driver.PythonSteps around `Controller`; adaptive_mj.env drives it one agent step at a time), the native path
+chunks of many steps.
 
 How the estimates are integrated (adaptive_mj.sim.stage): under continuous control the law is
 evaluated at every stage MuJoCo's integrator calls the callback at, with the stage estimate of the
@@ -40,7 +41,7 @@ import importlib
 import math
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, Generator, NamedTuple, Protocol, Sequence
+from typing import TYPE_CHECKING, Callable, Protocol, Sequence
 
 import numpy as np
 
@@ -48,21 +49,19 @@ from adaptive_mj.errors import Interrupted
 from adaptive_mj.laws.common import LawStep
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.plants import Event, plant_order
-from adaptive_mj.plants.protocol import CtrlRange, Plant, control_shape, has_joints, termination
-from adaptive_mj.plants.twin import PythonStepped
+from adaptive_mj.plants.protocol import CtrlRange, Plant, control_shape, has_joints
 from adaptive_mj.sim import stage as st
 from adaptive_mj.sim import interrupt
+from adaptive_mj.sim.driver import Drive, PythonSteps
 from adaptive_mj.sim.interrupt import deferred
 from adaptive_mj.sim.stage import TABLEAU, ControlTiming
 from adaptive_mj.trajectory import Status, Trajectory
 
 if TYPE_CHECKING:
-    from adaptive_mj.plants.protocol import NativePlant
     from adaptive_mj.sim.native_context import ContextOwner
 
-__all__ = ["Event", "ControlTiming", "Controller", "ControlStep", "StepRow", "Sink", "run", "prepare", "PreparedRun",
-           "native_steps", "plant_order",
-           "divergence", "TABLEAU", "NATIVE_CHUNK"]
+__all__ = ["Event", "ControlTiming", "Controller", "Sink", "run", "prepare", "PreparedRun", "drive", "plant_order",
+           "TABLEAU", "NATIVE_CHUNK"]
 
 
 class StepContext:
@@ -106,7 +105,7 @@ def _as_array(a: np.ndarray, shape) -> np.ndarray:
 class Controller:
     """The policy the plant calls at every stage: stage.control_stage (the order of a control step, the one the
     compiled callbacks run too) with this path's pieces: the law through the Law protocol, the control handed
-    back to the plant (which applies it), the row kept for ControlStep. See the module docstring.
+    back to the plant (which applies it), the row kept for driver.PythonSteps. See the module docstring.
 
     theta_hat: (n_theta,) the estimate at the step's start; after each step, step_u (the applied
     control), step_out (the law's LawStep) and step_ref hold what the step's row records."""
@@ -222,7 +221,7 @@ class Controller:
 
     def _record_row(self, ctx: StepContext, io, row: int, u: np.ndarray, theta) -> None:
         """This path's row (stage.control_stage's record_row): the applied control, the law's (held) output and
-        the reference at t_k, for ControlStep.step."""
+        the reference at t_k, for driver.PythonSteps."""
         t, _ = io
         self.step_u, self.step_out, self.step_ref = self._applied, self.held_out, self._ref(t)
 
@@ -235,21 +234,6 @@ class Controller:
                                f"expected {ctx.nstages}")
         if self.filters:
             self.law.step_ends(self.stage_xs, self.stage_us, self.weights, self.h)
-
-
-class StepRow(NamedTuple):
-    """One physics step's row: t [s]; x (n,)+J true state at the step's start; theta (n_theta,) true
-    parameters; theta_hat (n_theta,) estimate at the step's start; u (J) applied control; s (J);
-    ref (n+1,)+J; reason: '' or the divergence found after the step."""
-
-    t: float
-    x: np.ndarray
-    theta: np.ndarray
-    theta_hat: np.ndarray
-    u: float | np.ndarray
-    s: float | np.ndarray
-    ref: np.ndarray
-    reason: str
 
 
 class EventQueue:
@@ -278,33 +262,6 @@ class EventQueue:
         if not self.pending:
             return None
         return max(1, math.ceil((self.pending[0].t - 0.5 * self.dt - t_k) / self.dt))
-
-
-class ControlStep:
-    """The control step on the Python path (see the module docstring): `step()` runs one physics
-    step of `plant` under `controller` and returns its StepRow. adaptive_mj.env drives it one agent
-    step at a time; `run` drives it to the end."""
-
-    def __init__(self, plant: Plant, controller: Controller, events: EventQueue, *, state_bound: float,
-                 noise: Callable[[], np.ndarray | None], sink=None):
-        self.plant, self.controller, self.events = plant, controller, events
-        self.state_bound, self.noise, self.sink = state_bound, noise, sink
-
-    def apply_due_events(self) -> None:
-        self.events.due(self.plant.time, self.plant, self.sink)
-
-    def step(self) -> StepRow:
-        """Events due must have been applied (apply_due_events) before the step's state is read."""
-        plant, ctrl = self.plant, self.controller
-        t_k, x_k, theta = plant.time, plant.observe(), plant.true_theta()
-        theta_hat = ctrl.theta_hat.copy()
-        ctrl.arm(self.noise())
-        plant.step()
-        u, out, ref = ctrl.step_u, ctrl.step_out, ctrl.step_ref
-        assert out is not None and ref is not None  # set at the step's stage 0
-        row = StepRow(t_k, x_k, theta, theta_hat, u, out.s, ref, "")
-        ctrl.finish_step()
-        return row._replace(reason=divergence(plant, x_k, u, ctrl.theta_hat, self.state_bound))
 
 
 class Sink(Protocol):
@@ -364,17 +321,19 @@ def run(plant: Plant, law: Law, reference, *, duration: float, theta_hat0: Seque
 
 
 def drive(r: PreparedRun, law: Law, reference) -> Trajectory:
-    """Run a prepared run to its end on its own: the native callback chunk by chunk, or the Python path."""
+    """Run a prepared run to its end on its own (adaptive_mj.sim.driver.Drive): the native callback chunk by chunk,
+    or the Python path a step at a time."""
     plant = r.plant
     with _interruptible(r.rows.stopped):
         if r.nc is not None:
-            status, reason = _run_native(r.nc.plant, r.nc, r.rows, r.queue, r.noise, r.state_bound)
+            with r.nc.plant.controlled_natively(r.nc.callback), r.nc:
+                status, reason = Drive(plant, r.nc, r.rows, r.queue, r.noise, r.state_bound).run()
         else:
             ctrl = Controller(law, reference, r.theta_hat0, plant.ctrl_range, r.order, plant.stages, plant.dt,
                               plant.joint_shape, r.timing, r.sensors, control_shape(plant))
-            step = ControlStep(plant, ctrl, r.queue, state_bound=r.state_bound, noise=r.noise.draw,
-                               sink=r.rows.sink)
-            status, reason = _run_python(plant, step, r.rows)
+            with plant.controlled_by(ctrl):
+                status, reason = Drive(plant, PythonSteps(plant, ctrl), r.rows, r.queue, r.noise,
+                                       r.state_bound).run()
     return r.result(status, reason)
 
 
@@ -432,82 +391,6 @@ def prepare(plant: Plant, law: Law, reference, *, duration: float, theta_hat0, n
     return PreparedRun(plant, rows, queue, noise, timing, nc, theta_hat0, order, state_bound, sensors)
 
 
-def _run_python(plant: Plant, step: ControlStep, rows: Rows) -> tuple[Status, str]:
-    """Drive the Python control step to the end or the first divergence: (status, reason)."""
-    with plant.controlled_by(step.controller):
-        while rows.k < rows.n:
-            if has_joints(plant) and step.events.is_due(plant.time):
-                rows.flush(rows.k)  # V of the rows so far with the inertia they had, before an event changes it
-            step.apply_due_events()
-            row = step.step()
-            rows.put(row)
-            if row.reason:
-                return Status.DIVERGED, row.reason
-            ended = termination(plant)
-            if ended:
-                return Status.CRASHED, ended
-    return Status.OK, ""
-
-
-def _run_native(plant: NativePlant, nc: ContextOwner, rows: Rows, queue: EventQueue, noise: _NoiseSource,
-                state_bound: float) -> tuple[Status, str]:
-    """Drive the native callback chunk by chunk: (status, reason)."""
-    with plant.controlled_natively(nc.callback), nc:
-        steps = native_steps(plant, nc, rows, queue, noise, state_bound)
-        try:
-            n = next(steps)
-            while True:
-                plant.step_native(n)
-                n = steps.send(None)
-        except StopIteration as done:
-            return done.value
-
-
-def native_steps(plant: Plant, nc: ContextOwner, rows: Rows, queue: EventQueue, noise: _NoiseSource,
-                 state_bound: float) -> Generator[int, None, tuple[Status, str]]:
-    """A native run as a generator: each chunk's events and callback buffers are prepared, then it
-    yields the chunk's step count n and waits for the plant to have stepped n physics steps (one
-    mj_step(nstep=n) here, or a row of a mujoco.batch.Batch in adaptive_mj.sim.batch); it returns
-    (status, reason). The callback must be installed and the run's context bound by the driver."""
-    while rows.k < rows.n:
-        k, t_k = rows.k, plant.time
-        if has_joints(plant) and nc.mass_rows(0) is None and queue.is_due(t_k):
-            rows.flush(k)  # V of the rows so far with the inertia they had (the Python path's order), M not recorded
-        queue.due(t_k, plant, rows.sink)
-        n = min(nc.max_rows, rows.n - k, rows.every - k % rows.every)
-        to_event = queue.steps_to_next(t_k)
-        if to_event is not None:  # stop at the step where the next event applies
-            n = min(n, to_event)
-        theta_now = plant.true_theta()
-        nc.prepare(n, noise.draw_block(n))
-        yield n
-        done = nc.rows_recorded()
-        warning = plant.instability()
-        if done < n and warning is not None:  # MuJoCo found the state bad mid-chunk, reset it and stepped on
-            block = nc.finish(done, partial=True)  # the rows to the step that diverged, as the Python path keeps
-            rows.put_block(block, theta_now, done, mass=nc.mass_rows(done))
-            t_bad = block[0][-1] if done else t_k
-            return Status.DIVERGED, f"{warning} in the step from t={t_bad:.6g} s (MuJoCo reset the state)"
-        crash = nc.crash()  # a plant that crashes (a quadrotor): the rows up to the step that crashed, unless
-        if crash is not None:  # one of them diverged first (the Python path checks that before the crash)
-            keep, reason = crash
-            block = nc.finish(keep + 1, partial=True)  # row `keep`: the state the crashing step left
-            t, x, u, s, ref, th = block
-            bad, why = _first_bad(x[1:keep + 1], u[:keep], th[1:keep + 1], state_bound)
-            rows.put_block(tuple(a[:keep] for a in block), theta_now, keep if bad is None else bad)
-            return (Status.CRASHED, reason) if bad is None else (Status.DIVERGED, why)
-        block = nc.finish(n)
-        bad, reason = first_divergence(plant, block[1], block[2], block[5], nc.theta, state_bound)
-        rows.put_block(block, theta_now, n if bad is None else bad, mass=nc.mass_rows(n))
-        if bad is not None:
-            return Status.DIVERGED, reason
-        nc.end_of_chunk()
-        ended = termination(plant)
-        if ended:
-            return Status.CRASHED, ended
-    return Status.OK, ""
-
-
 def compile_native(plant: Plant, law: Law, reference, theta_hat0) -> bool:
     """Compile (or load from numba's disk cache) the native controller a run of this plant and law would take, and
     run nothing: a parent process does it before it forks its workers, so they do not each compile the same
@@ -527,20 +410,11 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
                        chunk: int = NATIVE_CHUNK) -> ContextOwner | None:
     """The native controller for this run, or None for the Python path (native False, or not supported;
     a law plugin numba cannot compile falls back with one line on stderr)."""
-    make: Callable[..., ContextOwner]
-    if getattr(plant, "state_names", ()):  # a quadrotor: its own compiled callback (the flight kernel inside)
-        from adaptive_mj.sim.native_flight import NativeFlightController as make, supported
-    elif isinstance(plant, PythonStepped):  # an analytic plant: the compiled loop it names where there is one (the
-        # linear plant under MRAC, the twin under the first-order or a sliding law: one compiled call steps a chunk),
-        # else the Python path
-        if plant.compiled_loop is None:
-            return None
-        loop_module = importlib.import_module(plant.compiled_loop)
-        make, supported = loop_module.Controller, loop_module.supported
-    elif plant.joint_shape:  # a manipulator: its own compiled callback (regressor inside)
-        from adaptive_mj.sim.native_manipulator import NativeManipulatorController as make, supported
-    else:
-        from adaptive_mj.sim.native import NativeController as make, supported
+    if plant.compiled_loop is None:  # the plant declares its compiled loop (protocol.Plant.compiled_loop), or none
+        return None
+    loop_module = importlib.import_module(plant.compiled_loop)
+    make: Callable[..., ContextOwner] = loop_module.Controller
+    supported: Callable[[Plant, Law], bool] = loop_module.supported
     if native is None:
         native = supported(plant, law)
     if not native:
@@ -602,15 +476,6 @@ class Rows:
         last = self.segments[-1][1] if self.segments else None
         if last is None or (last is not value and not np.array_equal(last, value)):
             self.segments.append((row, np.array(value, dtype=float)))
-
-    def put(self, row: StepRow) -> None:
-        k = self.k
-        self.t[k], self.x[k], self.u[k], self.s[k], self.ref[k] = row.t, row.x, row.u, row.s, row.ref
-        self.theta_hat[k] = row.theta_hat
-        self.note_theta(k, row.theta)
-        self.k = k + 1
-        if self.k % self.every == 0:
-            self.flush(self.k)
 
     def put_block(self, block, theta: np.ndarray, keep: int, mass: np.ndarray | None = None) -> None:
         """A native chunk's (t, x, u, s, ref, theta_hat) rows, of which the first `keep` count; mass: M(q)
@@ -712,81 +577,3 @@ def _interruptible(stopped: Callable[[str], Trajectory]):
         if interrupted is exc:
             raise
         raise interrupted from exc
-
-
-def first_divergence(plant: Plant, x, u, theta_hat, theta_next, bound):
-    """For a native chunk: (rows to keep, reason) at the first step that diverged, or (None, '').
-
-    Row j's state and estimate are the result of step j-1; the state after the chunk's
-    last step is read from the plant. Mirrors `divergence`, step by step."""
-    n = len(x)
-    x_end = plant.observe()
-    if _block_within(x[1:], bound) and _block_within(x_end, bound) and _block_within(u, math.inf) \
-            and _block_within(theta_hat, math.inf) and _block_within(theta_next, math.inf):
-        warning = plant.instability()  # the common case: nothing diverged, no row to look for
-        if warning:
-            return len(u), f"{warning} (within the {len(u)} steps before t={plant.time:.6g} s)"
-        return None, ""
-    x_next = np.concatenate([x[1:], x_end[None]]).reshape(n, -1)
-    th_next = np.vstack([theta_hat[1:], theta_next[None, :]])
-    u_rows = np.asarray(u).reshape(n, -1)
-    bad = (~np.all(np.isfinite(x_next), axis=1) | ~np.all(np.isfinite(u_rows), axis=1)
-           | ~np.all(np.isfinite(th_next), axis=1) | np.any(np.abs(x_next) > bound, axis=1))
-    if bad.any():
-        j = int(np.argmax(bad))
-        return j + 1, _what_diverged(x_next[j], u[j], th_next[j], bound)
-    warning = plant.instability()
-    if warning:
-        return len(u), f"{warning} (within the {len(u)} steps before t={plant.time:.6g} s)"
-    return None, ""
-
-
-def _first_bad(x_next, u, theta_next, bound) -> tuple[int | None, str]:
-    """(rows to keep, reason) at the first step whose next state, control or estimate is non-finite or out of the
-    bound (`divergence`'s test, row by row: x_next[j] and theta_next[j] are what step j left), or (None, '')."""
-    n = len(u)
-    if n == 0:
-        return None, ""
-    xs, us, ts = np.asarray(x_next).reshape(n, -1), np.asarray(u).reshape(n, -1), np.asarray(theta_next).reshape(n, -1)
-    bad = (~np.all(np.isfinite(xs), axis=1) | ~np.all(np.isfinite(us), axis=1) | ~np.all(np.isfinite(ts), axis=1)
-           | np.any(np.abs(xs) > bound, axis=1))
-    if not bad.any():
-        return None, ""
-    j = int(np.argmax(bad))
-    return j + 1, _what_diverged(x_next[j], u[j], theta_next[j], bound)
-
-
-def _block_within(a: np.ndarray, bound: float) -> bool:
-    """Every entry of the array finite and |v| <= bound: a whole chunk's check in two reductions (a NaN
-    makes the maximum NaN, which fails the comparison)."""
-    a = np.asarray(a)
-    if a.size == 0:
-        return True
-    return bool(np.isfinite(a).all() and np.abs(a).max() <= bound)
-
-
-def _all_within(values, bound: float) -> bool:
-    """Every entry finite and |v| <= bound (plain floats: cheaper than numpy on a few entries)."""
-    for v in values:
-        if not (math.isfinite(v) and -bound <= v <= bound):
-            return False
-    return True
-
-
-def _what_diverged(x_next, u_k, theta_hat, bound) -> str:
-    if not np.all(np.isfinite(x_next)):
-        return f"non-finite state {np.asarray(x_next).tolist()}"
-    if not np.all(np.isfinite(u_k)):
-        return f"non-finite control {np.asarray(u_k).tolist()}"
-    if not np.all(np.isfinite(theta_hat)):
-        return f"non-finite estimate {np.asarray(theta_hat).tolist()}"
-    return f"state {np.asarray(x_next).tolist()} beyond the bound {bound}"
-
-
-def divergence(plant: Plant, x_k, u_k, theta_hat, bound) -> str:
-    """Text naming the first sign of divergence after a step, or ''."""
-    x_next = plant.observe()
-    if not (_all_within(x_next.ravel().tolist(), bound) and _all_within(np.ravel(u_k).tolist(), math.inf)
-            and _all_within(np.ravel(theta_hat).tolist(), math.inf)):
-        return _what_diverged(x_next, u_k, theta_hat, bound)
-    return plant.instability() or ""

@@ -460,3 +460,7 @@ class NativeController(ContextOwner):
         (partial: the first `rows` of a chunk MuJoCo cut short, ContextOwner.rows_recorded)."""
         return recorded_rows(self.context[0], self.buffers["rec"], self.columns, self.n, rows, partial,
                              "native callback")
+
+
+#: what loop._native_controller takes of a compiled loop's module (protocol.Plant.compiled_loop)
+Controller = NativeController

@@ -144,10 +144,16 @@ class ContextOwner:
     theta: np.ndarray
     max_rows: int  # the most physics steps one chunk takes (its buffers' rows)
     in_mujoco = True  # the plant steps in MuJoCo (mj_step calls `callback`); False: an analytic plant's compiled loop
+    steps_apart = False  # a chunk is many steps: a MuJoCo warning after it is the chunk's (adaptive_mj.sim.driver)
 
     def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat), each (rows, ...)."""
         raise NotImplementedError
+
+    def advance(self, rows: int) -> None:
+        """Step the plant `rows` physics steps with the compiled callback (or loop) installed
+        (plant.controlled_natively): the chunk prepare() set up."""
+        self.plant.step_native(rows)
 
     def prepare(self, rows: int, noise: np.ndarray | None) -> None:
         """chunk()'s first half: the buffers and the context set up for the next `rows` steps."""

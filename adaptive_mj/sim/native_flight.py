@@ -295,3 +295,7 @@ class NativeFlightController(ContextOwner):
         self.plant._airborne = bool(self.context[0]["airborne"])
         self.plant._check_crash()
         self.context[0]["airborne"] = int(self.plant._airborne)
+
+
+#: what loop._native_controller takes of a compiled loop's module (protocol.Plant.compiled_loop)
+Controller = NativeFlightController

@@ -737,3 +737,7 @@ class NativeManipulatorController(ContextOwner):
         step (the same numbers ManipulatorPlant.mass_matrices computes from the logged q, without its four
         MuJoCo calls per row)."""
         return self.plant.full_mass(self.buffers["rec_M"][:rows])
+
+
+#: what loop._native_controller takes of a compiled loop's module (protocol.Plant.compiled_loop)
+Controller = NativeManipulatorController
