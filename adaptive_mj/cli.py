@@ -326,7 +326,7 @@ def cmd_list(args) -> int:
 
 def cmd_run(args) -> int:
     from adaptive_mj.setup import scenario as sc
-    from adaptive_mj.sim.runner import execute, reserve_log_path
+    from adaptive_mj.runs.runner import execute, reserve_log_path
 
     overrides = [*([sc.law_swap(args.law)] if args.law else []), *args.overrides,
                  *(["simulation.python_callback=true"] if args.python_callback else []),
@@ -393,7 +393,7 @@ def cmd_replay(args) -> int:
         raise LogFormatError(f"{args.log}: damaged log: {logged.note}")
     code = EXIT_OK if summary["status"] == Status.OK else EXIT_FAILED
     if args.verify:
-        from adaptive_mj.log.verify import verify
+        from adaptive_mj.runs.verify import verify
 
         if logged.model_missing:
             raise LogFormatError(f"{args.log}: --verify needs the model the log embedded, and its attachments were "

@@ -143,7 +143,7 @@ def load(scenario, *, law: Law | str | None = None, log: str | os.PathLike | Non
     if control_timestep is not None:
         n_sub_steps = control.compute_n_steps(control_timestep, physics.timestep())
     if n_sub_steps is None and scn.control.mode == "sampled":  # the agent acts once per control period
-        from adaptive_mj.sim.runner import control_timing
+        from adaptive_mj.runs.runner import control_timing
 
         n_sub_steps = control_timing(scn, setup).steps
     n_sub_steps = 1 if n_sub_steps is None else int(n_sub_steps)
@@ -280,7 +280,7 @@ class TrackingTask(control.Task):
         recorder = None
         if self.log_dir is not None:
             from adaptive_mj.log.record import Recorder
-            from adaptive_mj.sim.runner import log_header, reserve_log_path
+            from adaptive_mj.runs.runner import log_header, reserve_log_path
 
             path = reserve_log_path(self.scenario, directory=self.log_dir)
             recorder = Recorder(path, log_header(self.scenario, setup))
@@ -385,7 +385,7 @@ class _Episode:
         self.controller: Controller | None = None
         self.steps: PythonSteps | AgentSteps
         if drive:  # the law: the step adaptive-mj run takes on its Python path
-            from adaptive_mj.sim.runner import control_timing
+            from adaptive_mj.runs.runner import control_timing
 
             self.controller = Controller(law, setup.reference, self.theta_hat0, plant.ctrl_range, self.order,
                                          plant.stages, plant.dt, js, control_timing(scn, setup), setup.sensors)
@@ -461,7 +461,7 @@ class _Episode:
             self.status, self.reason = self.run.status, self.run.reason
             self.steps.noise = self._noise.draw()  # what an observation after the last step sees, as after any step
             if self.status == Status.OK:  # the episode ran to its end: its verdict
-                from adaptive_mj.sim.runner import verdict
+                from adaptive_mj.runs.runner import verdict
 
                 traj, self._verdict = verdict(self.scn, self.trajectory(), self._criteria, self._preflight)
                 self.status, self.reason = traj.status, traj.reason
@@ -472,7 +472,7 @@ class _Episode:
         (the pre-flight of the law that drives the plant; none for an agent's policy)."""
         from adaptive_mj.setup.success import criteria
         from adaptive_mj.sim import preflight
-        from adaptive_mj.sim.runner import control_timing
+        from adaptive_mj.runs.runner import control_timing
 
         crit = criteria(scn, setup.reference, self.order, tuple(setup.law.names))
         if drive:

@@ -34,7 +34,7 @@ import zstandard
 
 from adaptive_mj.log.record import CDR_HEADER, LogHeader, Recorder, row_fields
 from adaptive_mj.setup import scenario as sc
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 
 REPO = Path(__file__).resolve().parents[1]
 NAMES = ("d", "b", "c")

@@ -387,7 +387,7 @@ def per_run(reps: int, runs: int, cases: str = "") -> dict:
     from adaptive_mj.plants.mujoco_plant import timers_off
     from adaptive_mj.setup.build import build
     from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
-    from adaptive_mj.sim.runner import start
+    from adaptive_mj.runs.runner import start
     from adaptive_mj.study.job import run_job
 
     out: dict = {}

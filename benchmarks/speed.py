@@ -160,7 +160,7 @@ def logged(name: str, steps: int, rate_hz: float | None, extra=()) -> tuple[floa
     """Closed loop with the MCAP recorder as the sink; times run() + close() like `loop` times
     run(), so set-up (model compile, log header) is outside both. Returns (µs/step, bytes)."""
     from adaptive_mj.log.record import Recorder
-    from adaptive_mj.sim.runner import log_header
+    from adaptive_mj.runs.runner import log_header
 
     scn = _scenario(name, steps, [*([f"log.rate_hz={rate_hz!r}"] if rate_hz else []), *extra])
     setup = build(scn)
@@ -202,7 +202,7 @@ PEAK_RSS_CODE = """
 import sys, tempfile
 from pathlib import Path
 from adaptive_mj.setup import scenario as sc
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 scn = sc.load(sys.argv[1], overrides=['simulation.duration=600.0'])
 with tempfile.TemporaryDirectory() as tmp:
     execute(scn, log_path=Path(tmp) / 'run.mcap')

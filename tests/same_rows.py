@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from adaptive_mj.setup import scenario as sc
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 
 FIELDS = ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V")
 

@@ -207,7 +207,7 @@ def test_saturation_aware_adaptation_keeps_a_torque_limited_arm_tracking():
     the identification trajectory: the lecture's law integrates the part of s the saturation causes and
     loses tracking (measured: 0.13 rad tail RMS, wrist_1 at its limit 47 % of the time, 'failed');
     freezing the saturated joints' adaptation tracks (1.7e-3 rad, 10 %, 'ok')."""
-    from adaptive_mj.sim.runner import execute
+    from adaptive_mj.runs.runner import execute
 
     limit = "plant.torque_limit={shoulder_pan=60, shoulder_lift=60, elbow=60, wrist_1=4, wrist_2=4, wrist_3=4}"
     out = {}

@@ -299,7 +299,7 @@ def test_replay_of_a_cut_log_reports_truncated_and_how_much(real_log, tmp_path, 
 # -- output safety --------------------------------------------------------------------------------
 
 def test_scenario_name_cannot_write_outside_the_logs_folder(tmp_path, capsys, monkeypatch):
-    from adaptive_mj.sim import runner
+    from adaptive_mj.runs import runner
 
     monkeypatch.setattr(runner, "LOGS_DIR", tmp_path / "logs")
     scn = tmp_path / "evil.toml"

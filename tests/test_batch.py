@@ -88,7 +88,7 @@ def test_execute_batch_gives_execute_s_summaries_and_logs(tmp_path):
     """runner.execute_batch: the verdict, the summary and every logged message are those of
     runner.execute, run by run (the log's creation time and library versions aside)."""
     from adaptive_mj.log.replay import read_log
-    from adaptive_mj.sim.runner import execute, execute_batch
+    from adaptive_mj.runs.runner import execute, execute_batch
 
     scns = [load(SCENARIOS_DIR / "heave_drift.toml", overrides=["simulation.duration=3", f"law.k={k}"], seed=sd)
             for k, sd in ((150.0, 0), (250.0, 1))]

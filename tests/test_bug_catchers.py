@@ -21,7 +21,7 @@ FIELDS = ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V")
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory):
     """A short 1-DOF log and a short 6-joint log, both ok (exit 0 before the nudge), written once."""
-    from adaptive_mj.sim.runner import execute
+    from adaptive_mj.runs.runner import execute
 
     root = tmp_path_factory.mktemp("verify")
     out = {}
@@ -152,7 +152,7 @@ def test_a_saturation_fraction_exactly_at_its_bound_passes_and_one_ulp_above_fai
 def test_a_run_whose_tail_error_is_its_bound_passes_end_to_end():
     """The bound as a scenario gives it: a run judged against success.tail_rms set to its own measured tail
     error is ok, and against the next float below, failed, naming the criterion."""
-    from adaptive_mj.sim.runner import execute
+    from adaptive_mj.runs.runner import execute
 
     base = ["simulation.duration=0.5", "success.tail_rms=inf"]
     path = scenario.SCENARIOS_DIR / "heave_tracking.toml"

@@ -123,7 +123,7 @@ def _rows(traj):
     ("arm_payload_swap", ["simulation.duration=20.5"], ["events=[]"])])
 def test_a_run_on_a_released_mjdata_gives_the_rows_of_a_new_one(name, first, short, monkeypatch):
     from adaptive_mj.plants import mujoco_plant
-    from adaptive_mj.sim.runner import execute
+    from adaptive_mj.runs.runner import execute
 
     path = SCENARIOS / f"{name}.toml"
     scn = sc.load(path, overrides=["simulation.duration=2", *short], seed=3)
@@ -147,7 +147,7 @@ def test_a_plant_built_outside_a_run_never_takes_a_spare_mjdata(monkeypatch):
     """Only runner.start's plants reuse an ended run's MjData: whoever else builds a plant (dm_env, a user's
     build) gets a new one, whose `.model` is its own model (dm_control's Physics reads data.model)."""
     from adaptive_mj.plants import mujoco_plant
-    from adaptive_mj.sim.runner import execute
+    from adaptive_mj.runs.runner import execute
 
     monkeypatch.setattr(mujoco_plant, "_spare", mujoco_plant.OrderedDict())
     scn = sc.load(SCENARIOS / "heave_drift.toml", overrides=["simulation.duration=0.05"])

@@ -77,7 +77,7 @@ def test_run_refuses_to_overwrite_without_force(tmp_path):
 
 def test_default_log_names_never_overwrite(tmp_path, monkeypatch):
     from adaptive_mj.setup import scenario as sc
-    from adaptive_mj.sim.runner import reserve_log_path
+    from adaptive_mj.runs.runner import reserve_log_path
 
     scn = sc.load(REPO / "scenarios" / "lecture_first_order.toml")
     paths = {reserve_log_path(scn, directory=tmp_path) for _ in range(3)}

@@ -18,7 +18,7 @@ import pytest
 from adaptive_mj import env as amj_env
 from adaptive_mj.errors import ScenarioError
 from adaptive_mj.setup.scenario import SCENARIOS_DIR, load as load_scenario
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 from adaptive_mj.sim.stage import ControlTiming
 
 
@@ -175,7 +175,7 @@ def test_a_second_process_loads_the_compiled_callback_from_the_disk_cache(tmp_pa
 def test_a_single_short_run_takes_the_python_callback_with_the_same_rows():
     """`adaptive-mj run` on a short 1-DOF run skips the compiled callback's ~0.5 s load
     (runner.QUICK_START_MAX_STEPS); a study's run (single=False) and a manipulator stay compiled."""
-    from adaptive_mj.sim.runner import QUICK_START_MAX_STEPS
+    from adaptive_mj.runs.runner import QUICK_START_MAX_STEPS
 
     scn = load_scenario(SCENARIOS_DIR / "heave_tracking.toml", overrides=["simulation.duration=0.3"])
     quick, study = execute(scn, single=True).trajectory, execute(scn).trajectory

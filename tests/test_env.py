@@ -19,7 +19,7 @@ from adaptive_mj.errors import ScenarioError
 from adaptive_mj.sim.loop import run
 from adaptive_mj.report.metrics import metrics
 from adaptive_mj.log.replay import read_log
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 from adaptive_mj.setup.scenario import SCENARIOS_DIR, load as load_scenario
 
 SHORT = ("simulation.duration=0.05",)  # 50 physics steps of 1 ms

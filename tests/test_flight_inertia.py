@@ -14,7 +14,7 @@ from adaptive_mj.laws.flight import GAMMA_J_DEFAULT, J_SLICE, inertia_matrix
 from adaptive_mj.plants.quadrotor import rotvec_into
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 from adaptive_mj.study.api import run_scenario
 
 E1 = np.array([1.0, 0.0, 0.0])

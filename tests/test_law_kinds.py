@@ -247,7 +247,7 @@ def test_a_new_law_kind_lands_by_its_own_module_alone(tmp_path, monkeypatch):
 
     import numpy as np
 
-    from adaptive_mj.sim.runner import execute
+    from adaptive_mj.runs.runner import execute
 
     monkeypatch.setattr(kinds, "_BUILT_IN", kinds.built_in())  # the toy leaves the registry with the test
     path = tmp_path / "toy_pd_law.py"

@@ -18,7 +18,7 @@ from adaptive_mj.log import record
 from adaptive_mj.setup import scenario
 from adaptive_mj.cli import main
 from adaptive_mj.log.replay import read_log
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 from adaptive_mj.trajectory import Status
 
 DATA = Path(__file__).parent / "data"
@@ -304,7 +304,7 @@ def test_a_v_difference_is_explained_only_where_the_old_flush_got_v_wrong():
     computed their V at the flush after the event) are a known difference; any other row is not."""
     from types import SimpleNamespace
 
-    from adaptive_mj.log.verify import _v_before_event
+    from adaptive_mj.runs.verify import _v_before_event
 
     rerun = SimpleNamespace(meta={"dt": 0.001, "events": [(1.25, "payload_swap")]})
     steps = np.arange(300) * 10  # logged every 10th step, t = 0 .. 2.99 s
@@ -321,7 +321,7 @@ def test_verify_names_a_model_that_compiles_to_other_parameters():
     """A log whose true parameters at t = 0 differ from the re-run's (as when another CPU compiled its model)
     is refused before the first step, with both numbers and the distance in ulp, not as a mismatch of the
     control at some row."""
-    from adaptive_mj.log import verify as verify_mod
+    from adaptive_mj.runs import verify as verify_mod
 
     run = read_log(DATA / "heave_tracking_format1.mcap")
     theta = run.trajectory.theta

@@ -10,7 +10,7 @@ from adaptive_mj.study import analysis
 from adaptive_mj.setup import scenario
 from adaptive_mj.setup.build import build
 from adaptive_mj.cli import main
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 
 
 def _run(name, *overrides):

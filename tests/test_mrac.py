@@ -16,7 +16,7 @@ from adaptive_mj.reference import ModelResponse
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
 from adaptive_mj.sim.loop import run
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 from adaptive_mj.study.mrac_breaks import frozen_gain_limit, rohrs_onset
 
 

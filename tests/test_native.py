@@ -147,7 +147,7 @@ def _scenario_both(name, overrides):
     """A bundled scenario run on the Python path and on the native callback, with the runner's own arguments
     (noise, events, the control delay)."""
     from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
-    from adaptive_mj.sim.runner import start
+    from adaptive_mj.runs.runner import start
 
     out = []
     for nat in (False, True):

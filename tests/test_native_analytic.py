@@ -17,7 +17,7 @@ from adaptive_mj.reference import ModelResponse
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
 from adaptive_mj.sim import native_analytic
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 DELAY, ROHRS = SCENARIOS / "mrac_time_delay.toml", SCENARIOS / "rohrs_counterexample.toml"
@@ -160,7 +160,7 @@ def test_a_python_path_log_verifies_on_the_compiled_path(tmp_path, monkeypatch, 
     compiled loop bit for bit: `replay --verify` says so."""
     from adaptive_mj.cli import main
     from adaptive_mj.log.replay import read_log
-    from adaptive_mj.log.verify import verify
+    from adaptive_mj.runs.verify import verify
 
     log = tmp_path / "rohrs.mcap"
     with monkeypatch.context() as m:

@@ -9,7 +9,7 @@ import pytest
 
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.sim import loop
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 
 NOISE = "noise={std={p=0.001, v=0.01, phi=0.001, omega=0.01}, seed=3}"
 FORCES = ("events=[{t=1.0, kind='external_force', force=[0.01, 0, 0], torque=[0, 0, 1e-5]}, "

@@ -189,7 +189,7 @@ def gusty_kind():
 
 def test_a_plant_kind_brings_its_own_event_kind_with_no_table_elsewhere(gusty_kind):
     from adaptive_mj.setup.build import build
-    from adaptive_mj.sim.runner import execute
+    from adaptive_mj.runs.runner import execute
 
     text = (sc.SCENARIOS_DIR / "heave_tracking.toml").read_text()
     gust = ["plant.kind='gusty_heave'", "simulation.duration=0.05",

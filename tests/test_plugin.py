@@ -293,7 +293,7 @@ def test_a_law_numba_cannot_compile_runs_in_python_with_one_line(on_path, capsys
 
 def test_python_callback_flag_forces_the_python_path(on_path):
     from adaptive_mj.setup.scenario import load
-    from adaptive_mj.sim.runner import execute
+    from adaptive_mj.runs.runner import execute
 
     scn = load(SCENARIO, overrides=["simulation.duration=0.2", "simulation.python_callback=true"])
     assert execute(scn).trajectory.meta["native"] is False
@@ -358,7 +358,7 @@ def test_a_plant_plugin_runs_under_a_built_in_law_and_replays(site, tmp_path):
 def test_native_path_runs_a_plant_plugin(on_path, tmp_path):
     from adaptive_mj.setup.build import build
     from adaptive_mj.setup.scenario import load
-    from adaptive_mj.sim.runner import execute
+    from adaptive_mj.runs.runner import execute
 
     scn_path = tmp_path / "cart.toml"
     scn_path.write_text(CART_SCENARIO)

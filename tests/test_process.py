@@ -18,7 +18,7 @@ from adaptive_mj.plants.process import Tank, TankPlant
 from adaptive_mj.plants.twin import Integrator
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 ADAPTIVE, FIXED = SCENARIOS / "process_batches.toml", SCENARIOS / "process_batches_fixed.toml"

@@ -227,7 +227,7 @@ def test_the_scalar_l1_update_is_laws_l1_step():
 ])
 def test_bad_quadrotor_input_is_one_line_naming_the_key(override, words):
     over = [override] + (["law=l1_geometric"] if "a_s" in override or "period" in override else [])
-    from adaptive_mj.sim.runner import execute
+    from adaptive_mj.runs.runner import execute
 
     with pytest.raises(ScenarioError) as exc:
         execute(sc.load(sc.SCENARIOS_DIR / "quadrotor_lemniscate.toml", overrides=over))

@@ -702,7 +702,7 @@ def test_no_input_bytes_escape_as_another_exception(tmp_path):
 def real_log(tmp_path_factory):
     """A 3 s log of a real run: the MuJoCo heave vehicle with sensor noise (model attached)."""
     from adaptive_mj.setup import scenario as sc
-    from adaptive_mj.sim.runner import execute
+    from adaptive_mj.runs.runner import execute
 
     path = tmp_path_factory.mktemp("real") / "heave.mcap"
     scn = sc.load(sc.SCENARIOS_DIR / "heave_tracking.toml",

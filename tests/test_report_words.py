@@ -116,7 +116,7 @@ def test_control_rate_names_the_pre_flight_figure_beside_its_diagonal_one():
     from adaptive_mj.setup.build import build
     from adaptive_mj.setup.success import sampled_positions
     from adaptive_mj.sim import preflight
-    from adaptive_mj.sim.runner import control_timing
+    from adaptive_mj.runs.runner import control_timing
 
     path, T = sc.SCENARIOS_DIR / "ur5e_identification.toml", 0.01  # the section's slowest rate, 100 Hz
     scn = sc.load(path, overrides=["control.mode='sampled'", f"control.period={T!r}"])

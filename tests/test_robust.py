@@ -17,7 +17,7 @@ from adaptive_mj.plants import heave
 from adaptive_mj.plants.twin import lecture_first_order_form
 from adaptive_mj.setup.build import build
 from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 
 RNG = np.random.default_rng(3)  # θ₀ draws
 GAMMA = np.array([0.0025, 0.002, 0.5])

@@ -13,7 +13,7 @@ from adaptive_mj.errors import ModelError, ScenarioError
 from adaptive_mj.plants import nomoto, ship
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 
 RATE_LIMIT = math.radians(15.0)  # [rad/s] the steering gear's, from the model's header
 HARD_OVER = math.radians(35.0)  # [rad]

@@ -411,7 +411,7 @@ def test_a_worker_killed_while_it_sends_a_result_does_not_hang_the_parent():
 # shared 8-byte file, so the test knows how far the run had got when it was killed.
 _TRACED_RUN = textwrap.dedent("""
     import mmap, struct, sys
-    from adaptive_mj.sim import runner
+    from adaptive_mj.runs import runner
     from adaptive_mj.cli import main
 
     with open(sys.argv[1], "r+b") as f:
@@ -476,7 +476,7 @@ def test_run_that_fails_to_start_leaves_no_file(tmp_path, capsys):
 
 
 def test_interrupted_before_the_log_opens_leaves_no_file(tmp_path, capsys, monkeypatch):
-    from adaptive_mj.sim import runner
+    from adaptive_mj.runs import runner
 
     def interrupted_build(scn, **kw):
         raise KeyboardInterrupt
@@ -499,7 +499,7 @@ def test_force_keeps_the_old_log_when_the_new_run_cannot_start(tmp_path, capsys)
 
 
 def test_crash_mid_run_leaves_a_failed_log_that_replay_reports(tmp_path, capsys, monkeypatch):
-    from adaptive_mj.sim import runner
+    from adaptive_mj.runs import runner
 
     run = runner.run
 
@@ -597,7 +597,7 @@ def test_a_stop_between_the_last_step_and_the_verdict_still_closes_the_log(tmp_p
     from adaptive_mj.errors import Interrupted
     from adaptive_mj.setup import scenario as sc
     from adaptive_mj.setup.scenario import SCENARIOS_DIR
-    from adaptive_mj.sim import runner
+    from adaptive_mj.runs import runner
 
     def stopped(*args, **kwargs):
         raise Interrupted(signal.SIGTERM)

@@ -108,7 +108,7 @@ def test_scenario_key_and_log_header(tmp_path):
     log (replay --verify) is bit-identical."""
     from adaptive_mj import run_scenario
     from adaptive_mj.log.replay import read_log
-    from adaptive_mj.log.verify import verify
+    from adaptive_mj.runs.verify import verify
 
     for ev in ("recursive", "regressor"):
         over = ["simulation.duration=0.05"] + ([f"law.evaluation='{ev}'"] if ev == "regressor" else [])

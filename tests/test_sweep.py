@@ -184,7 +184,7 @@ def test_metric_units_follow_the_plant():
 
 
 def test_output_dir_refuses_a_non_empty_folder_and_never_reuses_a_default(tmp_path):
-    from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.runs.runner import new_output_dir
 
     full = tmp_path / "full"
     full.mkdir()

@@ -14,7 +14,7 @@ from adaptive_mj.report.metrics import body_identification
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
 from adaptive_mj.sim import preflight
-from adaptive_mj.sim.runner import control_timing, execute
+from adaptive_mj.runs.runner import control_timing, execute
 from adaptive_mj.sim.stage import ControlTiming
 
 MODELS = sc.SCENARIOS_DIR.parent / "models"

@@ -191,7 +191,7 @@ class SlotineLiLaw(Law):
     evaluation: "recursive" (default): τ = Y π̂ + τ_known and Yᵀ s by the plant's O(n) recursions (the
     regressor's torque(v, w, a, θ) and rate(v, a, s, out), regressor_kernel.rne_law_torque / rne_law_rate),
     Y never formed; "regressor": Y formed whole (slotine_li_output), as before the O(n) form (a log that
-    does not record its law.evaluation re-simulates with it, log.verify). A regressor without torque/rate (a
+    does not record its law.evaluation re-simulates with it, runs.verify). A regressor without torque/rate (a
     plain callable) is evaluated whole.
     """
 

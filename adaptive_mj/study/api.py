@@ -291,10 +291,10 @@ def run_scenario(scenario: str | Path, *, set: Overrides = (), seed: int | None 
     `set` its overrides ({key: value} or --set KEY=VALUE expressions: Overrides), `seed` the noise seed, `law` a
     law kind swapped in (`run --law`),
     `log` a log file to write (True: a new file under logs/, as `run` names it; False: none). Returns a
-    adaptive_mj.sim.runner.RunResult: .trajectory, .summary, .status (the same verdict as `run`, [success]
+    adaptive_mj.runs.runner.RunResult: .trajectory, .summary, .status (the same verdict as `run`, [success]
     applied), .log_path. Bad input raises adaptive_mj.errors.ScenarioError (one line)."""
     from adaptive_mj.setup import scenario as sc
-    from adaptive_mj.sim.runner import execute, reserve_log_path
+    from adaptive_mj.runs.runner import execute, reserve_log_path
 
     sets = overrides_of("set", set)
     if seed is not None:

@@ -80,7 +80,7 @@ def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str |
     full bench's study), None for all of them."""
     from adaptive_mj.study.bench_catalogue import catalogue
 
-    from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.runs.runner import new_output_dir
 
     scoring = None
     if law is not None:  # every option and the law's gains checked before any run (adaptive_mj.study.score.plan)

@@ -216,7 +216,7 @@ def run_job(job: RunSpec) -> RunOutcome:
     """Load, run and log one job (in a worker or in-process)."""
     from adaptive_mj.study import analysis
     from adaptive_mj.setup.build import build
-    from adaptive_mj.sim.runner import execute
+    from adaptive_mj.runs.runner import execute
 
     try:
         scn = _job_scenario(job)
@@ -244,7 +244,7 @@ def run_jobs_batched(jobs: Sequence[RunSpec], *, nthread: int = 0) -> list[RunOu
     threads (runner.execute_batch's pieces): the same logs, summaries and verdicts. A job that cannot be
     set up is an "error" (or "refused") result and the others go on. A stop signal closes every log of
     the group as "interrupted" and comes out as the KeyboardInterrupt."""
-    from adaptive_mj.sim.runner import start, step_batch
+    from adaptive_mj.runs.runner import start, step_batch
 
     out: list[RunOutcome | None] = [None] * len(jobs)
     started = {}

@@ -339,7 +339,7 @@ def compute_ratio(p: stress.Plant, entry: Entry, task: suite.Task, *, seconds: f
 
     from adaptive_mj.setup.build import build
     from adaptive_mj.sim.loop import run
-    from adaptive_mj.sim.runner import start
+    from adaptive_mj.runs.runner import start
 
     path = stress.scenario_path(task.scenario)
     over = [*task_overrides(p, task, seconds), *draws(p, task, 0)[0], *entry.overrides]  # seed 0's task
@@ -757,7 +757,7 @@ def run_score(law: str | None, *, label: str | None = None, sets: Sequence[str] 
     adaptive_mj.study.api.score)."""
     import sys
 
-    from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.runs.runner import new_output_dir
     from adaptive_mj.study.job import Backend
     from adaptive_mj.study.parallel import progress_printer, run_jobs, session
     from adaptive_mj.study.score_card import write_card
@@ -848,7 +848,7 @@ def merge(paths: Sequence[Path], out: Path | None) -> Scorecard:
     """Cards of one suite (version, hash, name and seeds) joined plant by plant into one leaderboard. A law in
     several cards with the same figures (a baseline) is kept once; with other figures, each copy is named after its
     card ("dead_zone [card 2]")."""
-    from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.runs.runner import new_output_dir
     from adaptive_mj.study.score_card import write_card, write_leaderboard
 
     if len(paths) < 2:

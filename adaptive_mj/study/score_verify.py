@@ -43,7 +43,7 @@ from adaptive_mj.study.job import RunOutcome, RunSpec
 from adaptive_mj.study.score import (TASK_FIGURES, actuator_limits, law_figures, performance, rank_laws, read_card,
                                      scenario_row, seed_figures)
 
-#: the trajectory fields compared bit for bit between a re-run's log and the card's (log.verify's)
+#: the trajectory fields compared bit for bit between a re-run's log and the card's (runs.verify's)
 LOG_FIELDS = ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V")
 OLD_CARD = "written before specs were recorded: re-score it"
 

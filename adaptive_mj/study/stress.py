@@ -359,7 +359,7 @@ def run_stress(*, seeds: int, steps: int, duration: float, composite: bool, out:
     """The study with options adaptive_mj.study.api.stress has checked: report.md, report.html and
     margins.csv in `out` (default a new logs/stress-...)."""
     from adaptive_mj.report.html import write_html
-    from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.runs.runner import new_output_dir
     from adaptive_mj.study.parallel import session
 
     out = new_output_dir(out, "stress")

@@ -604,7 +604,7 @@ def run_breaking_point(path: Path, *, point: str, tail_bound: float, seeds: int,
     by bisection (adaptive_mj.study.breaking_point).
     KEY = control.period: LO, HI and every value tried are rounded to whole physics steps of the
     scenario's timestep, each run under control.mode = 'sampled'."""
-    from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.runs.runner import new_output_dir
     from adaptive_mj.study.breaking_point import Search, Stressor, margin_text, search_all
 
     doc, base = _document(path, overrides)
@@ -846,7 +846,7 @@ def write_tables(stream_path: Path, n: int, inputs: dict[str, Any], out: Path, *
 def run_sweep(path: Path, *, grid: Sequence[str], seeds: int, overrides: Sequence[str], metrics: Sequence[str],
               out: Path | None, resume: Path | None, logs: str, backend: Backend) -> Study:
     """The sweep (see the module docstring) with options that adaptive_mj.study.api.sweep has checked."""
-    from adaptive_mj.sim.runner import new_output_dir
+    from adaptive_mj.runs.runner import new_output_dir
 
     doc, base = _document(path, overrides)
     axes = _axes(grid, doc)

@@ -75,7 +75,7 @@ def sampled_loop(scn_path: Path, overrides=()) -> SampledLoop:
     """The SampledLoop of a scenario, every number from the compiled model and the law (see SampledLoop)."""
     from adaptive_mj.setup.build import build
     from adaptive_mj.setup.success import sampled_positions
-    from adaptive_mj.sim.runner import control_timing
+    from adaptive_mj.runs.runner import control_timing
 
     scn = sc.load(scn_path, overrides=list(overrides))
     setup = build(scn)

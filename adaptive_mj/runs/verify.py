@@ -6,7 +6,7 @@ import numpy as np
 
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.plants import ModelSource
-from adaptive_mj.sim.runner import execute
+from adaptive_mj.runs.runner import execute
 
 _FIELDS = ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V")
 #: the law kinds that formed Y whole in a log without a law_evaluation header (laws.slotine_li's kinds)
