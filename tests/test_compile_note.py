@@ -55,15 +55,14 @@ def _said(stderr: str) -> list[str]:
     return [ln for ln in stderr.splitlines() if ln.startswith(("adaptive-mj: compil", "adaptive-mj: waiting"))]
 
 
-def test_a_compile_is_said_with_its_time_and_a_cache_load_is_not(tmp_path):
+def test_a_compile_is_said_with_its_time_and_a_cache_load_is_not(tmp_path, monkeypatch):
     script = tmp_path / "factories.py"
     script.write_text(FACTORY)
     runs = [subprocess.run([sys.executable, str(script)], env=_env(tmp_path / "cache"), capture_output=True,
                            text=True, timeout=300, check=True) for _ in range(3)]
     assert [r.stdout.split() for r in runs] == [["8.0", "18.0"]] * 3
     first = _said(runs[0].stderr)
-    assert first[0] == ("adaptive-mj: compiling a test cfunc: not in numba's cache yet, typically 10-60 s on 2 busy "
-                        "cores")
+    assert first[0] == "adaptive-mj: compiling a test cfunc: not in numba's cache yet, no figure for it yet"
     assert first[1].startswith("adaptive-mj: compiled a test cfunc in ") and first[1].endswith(
         " s of CPU); kept in numba's cache for the next runs")
     assert first[2].startswith("adaptive-mj: compiling a test njit: not in numba's cache yet")  # at its first call
@@ -72,9 +71,11 @@ def test_a_compile_is_said_with_its_time_and_a_cache_load_is_not(tmp_path):
     # the time is kept: the next compile of the kind (another variant) is estimated from it
     from adaptive_mj.sim import compile_note
 
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
     kept = json.loads((tmp_path / "cache" / "adaptive_mj" / "compile-times" / "test-cfunc.json").read_text())
     assert kept["seconds"] > 0
-    assert compile_note.TYPICAL["1-DOF callback"][0] > 0
+    assert compile_note.expectation("another", "test cfunc").startswith("about ")
+    assert compile_note.expectation("another", "1-DOF callback").startswith("typically 12 s of CPU")
 
 
 BROKEN = '''
@@ -184,3 +185,21 @@ def test_after_warmup_a_run_compiles_nothing(tmp_path):
     again = subprocess.run([sys.executable, "-c", code, str(scenario)], env=env, capture_output=True, text=True,
                            timeout=600, check=True)
     assert _said(again.stderr) == [] and "nothing to compile" in again.stdout
+
+
+def test_warmup_refuses_a_bad_jobs_count_in_one_line():
+    r = subprocess.run([sys.executable, "-m", "adaptive_mj", "warmup", "--quick", "--jobs", "0"], env=_env(REPO),
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and r.stderr.strip() == "adaptive-mj: error: --jobs must be an integer >= 1, got 0"
+
+
+def test_numbas_reason_is_its_first_line_that_says_something():
+    from adaptive_mj.sim.compile_note import PluginNotCompiled, _reason, fallback_line
+
+    message = ("Failed in nopython mode pipeline (step: nopython frontend)\n\x1b[1mUnknown attribute 'foo' of type "
+               "float64\n\nFile \"law.py\", line 3:\n<source elided>\nDuring: typing of get attribute at law.py (3)")
+    assert _reason(Exception(message)) == "Unknown attribute 'foo' of type float64"
+    assert fallback_line("x", ValueError("bad\nmore")) == ("adaptive-mj: note: law plugin 'x' could not be compiled "
+                                                          "for the native callback (ValueError: bad); running it "
+                                                          "through the Python callback")
+    assert "(law.py:3: Unknown" in fallback_line("x", PluginNotCompiled("law.py:3: Unknown", remembered=False))

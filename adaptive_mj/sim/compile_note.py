@@ -34,15 +34,10 @@ from typing import Any, Callable, Iterator
 
 PREFIX = "adaptive-mj: "
 
-#: measured cold compiles, the figure said when this machine has none of a kind yet (2 cores shared with other
-#: processes, numba 0.68.1, 2026-12-07; docs/PERFORMANCE.md): seconds, low and high
-TYPICAL: dict[str, tuple[float, float]] = {
-    "1-DOF callback": (11.0, 18.0),
-    "arm callback": (20.0, 60.0),
-    "quadrotor callback": (20.0, 60.0),
-    "linear MRAC chunk": (8.0, 20.0),
-    "twin chunk": (8.0, 20.0),
-}
+#: [s of CPU] a cold compile of each kind, measured (`adaptive-mj warmup --quick --jobs 2` with an empty cache,
+#: numba 0.68.1, 2026-12-07; docs/PERFORMANCE.md): the figure said where this machine has none of its own yet
+TYPICAL_CPU: dict[str, float] = {"1-DOF callback": 12.5, "arm callback": 43.0, "quadrotor callback": 15.0,
+                                 "linear MRAC chunk": 17.0, "twin chunk": 20.0}
 
 #: what this process compiled: (what, seconds), in order (adaptive_mj.study.warmup reports them)
 COMPILED: list[tuple[str, float]] = []
@@ -141,8 +136,9 @@ def expectation(variant: str, kind: str) -> str:
             wall, cpu = last
             of_cpu = f" ({cpu:.0f} s of CPU)" if cpu is not None else ""
             return f"about {wall:.0f} s{of_cpu}, as {source} on this machine"
-    lo, hi = TYPICAL.get(kind, (10.0, 60.0))
-    return f"typically {lo:.0f}-{hi:.0f} s on 2 busy cores"
+    if kind in TYPICAL_CPU:
+        return f"typically {TYPICAL_CPU[kind]:.0f} s of CPU (measured 2026-12-07; longer on a busy machine)"
+    return "no figure for it yet"
 
 
 # -- saying it ---------------------------------------------------------------------------------------------------
@@ -268,7 +264,7 @@ class _Announcing:
 def announcing(numba, what: str, *, kind: str, variant: str):
     """numba for a compiled factory's globals (native_context.unique_factory): its cfunc and njit with cache=True
     say on stderr what they compile (`what`, e.g. "the 1-DOF control callback (...)") and how long it should take
-    (from `variant`'s and `kind`'s last compile here, or TYPICAL), and say nothing when they load from the cache."""
+    (from `variant`'s and `kind`'s last compile here, or TYPICAL_CPU), and say nothing when they load from the cache."""
     return _Announcing(numba, what, kind, variant)
 
 
