@@ -329,11 +329,6 @@ def source_key(*fns: Callable, extra: Iterable = ()) -> int:
     return int(h.hexdigest()[:15], 16) or 1
 
 
-#: the kind of compiled function a factory's module makes, for the compile note (compile_note.announcing) where
-#: its caller names none
-_FACTORY_KINDS = {"adaptive_mj.sim.native_analytic": "linear MRAC chunk", "adaptive_mj.sim.native_twin": "twin chunk"}
-
-
 def unique_factory(factory: Callable, globals_: dict, key: int, *, what: str | None = None,
                    kind: str | None = None) -> Callable:
     """factory (a module-level function defining a cfunc named `callback`) with the given globals,
@@ -356,7 +351,7 @@ def unique_factory(factory: Callable, globals_: dict, key: int, *, what: str | N
                    if isinstance(c, pytypes.CodeType) and c.co_name == "callback" else c for c in code.co_consts)
     code = code.replace(co_consts=consts, co_name=code.co_name + tag, co_qualname=code.co_qualname + tag)
     if "numba" in globals_:
-        kind = kind or _FACTORY_KINDS.get(factory.__module__, factory.__module__)
+        kind = kind or factory.__module__
         globals_ = {**globals_, "numba": announcing(globals_["numba"], what or f"the {kind} (variant {key:x})",
                                                     kind=kind, variant=f"{key:x}")}
     return pytypes.FunctionType(code, globals_, code.co_name)
