@@ -43,6 +43,27 @@ TYPICAL_CPU: dict[str, float] = {"1-DOF callback": 12.5, "arm callback": 43.0, "
 COMPILED: list[tuple[str, float]] = []
 
 
+class VariantBusy(BaseException):
+    """Another process compiles the variant this one needs, and this one was told not to wait (`waiting(False)`:
+    adaptive_mj.study.warmup's workers take another run meanwhile). A BaseException, as KeyboardInterrupt is, so
+    that no `except Exception` on its way (a plugin's fallback to the Python callback) takes it for a failure."""
+
+
+_WAIT = {"wait": True}
+
+
+@contextlib.contextmanager
+def waiting(wait: bool) -> Iterator[None]:
+    """In the block, a compile that another process holds the variant's lock of waits for it (True, the default)
+    or raises VariantBusy at once (False)."""
+    before = _WAIT["wait"]
+    _WAIT["wait"] = wait
+    try:
+        yield
+    finally:
+        _WAIT["wait"] = before
+
+
 def state_dir() -> Path:
     """Where compile times and plugin markers are kept: NUMBA_CACHE_DIR/adaptive_mj when NUMBA_CACHE_DIR is set
     (so a fresh numba cache starts with no memory either), else $XDG_CACHE_HOME/adaptive-mj (~/.cache)."""
@@ -162,6 +183,8 @@ def _variant_lock(variant: str, what: str) -> Iterator[None]:
         try:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
+            if not _WAIT["wait"]:
+                raise VariantBusy(what) from None
             say(f"waiting for another process that compiles {what}")
             fcntl.flock(f, fcntl.LOCK_EX)
         try:
@@ -223,8 +246,12 @@ class _FirstCallSaid:
         if not self.first:
             return self.dispatcher(*args)
         self.first = False
-        return compile_said(lambda: self.dispatcher(*args), self.pyfunc, None, what=self.what, kind=self.kind,
-                            variant=self.variant)
+        try:
+            return compile_said(lambda: self.dispatcher(*args), self.pyfunc, None, what=self.what, kind=self.kind,
+                                variant=self.variant)
+        except VariantBusy:
+            self.first = True  # not compiled: the next call asks again
+            raise
 
     def __getattr__(self, name: str):
         return getattr(self.dispatcher, name)

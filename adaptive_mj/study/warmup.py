@@ -16,7 +16,9 @@ import multiprocessing as mp
 import sys
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
+from collections import deque
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor
+from concurrent.futures import wait as wait_for
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -81,9 +83,10 @@ def _spread(specs: list[Spec]) -> list[Spec]:
     return out
 
 
-def warm_one(spec: Spec) -> tuple[list[tuple[str, float]], str | None]:
+def warm_one(spec: Spec, wait: bool = True) -> tuple[list[tuple[str, float]], str | None]:
     """Set one (scenario, overrides) up and run it WARM_STEPS physics steps, as a bench run would (no log): the
-    variants this compiled ((what, seconds)) and the error's line where it could not be set up."""
+    variants this compiled ((what, seconds)) and the error's line where it could not be set up; BUSY where wait is
+    False and another process compiles the variant it needs (compile_note.VariantBusy)."""
     from adaptive_mj.setup.scenario import load
     from adaptive_mj.sim import compile_note
     from adaptive_mj.sim.loop import run
@@ -93,31 +96,51 @@ def warm_one(spec: Spec) -> tuple[list[tuple[str, float]], str | None]:
     scenario, overrides = spec
     try:
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(
-                compile_note.CompileLines(sys.stderr, plugin_notes=True)):
+                compile_note.CompileLines(sys.stderr, plugin_notes=True)), compile_note.waiting(wait):
             st = start(load(scenario, overrides=list(overrides)))
             plant = st.setup.plant
             run(plant, st.setup.law, st.setup.reference, sink=None,
                 **{**st.kwargs, "duration": WARM_STEPS * plant.dt, "events": ()})
+    except compile_note.VariantBusy:
+        return compile_note.COMPILED[before:], BUSY
     except Exception as exc:  # noqa: BLE001 (a run the bench would report as an error; the warmup goes on)
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
         return compile_note.COMPILED[before:], f"{type(exc).__name__}: {first[:200]}"
     return compile_note.COMPILED[before:], None
 
 
+BUSY = "busy"  # warm_one's answer where another process compiles the variant (it is tried again later, waiting)
+
+
 def warmup(*, quick: bool = False, jobs: int = 1, specs: list[Spec] | None = None) -> Warmup:
     """Compile what the bench needs (quick: `bench --quick`'s runs; specs: these (scenario, overrides) instead) on
-    `jobs` processes; each variant compiled is said on stderr with its time as it is done."""
+    `jobs` processes; each variant compiled is said on stderr with its time as it is done. A run whose variant
+    another process is compiling is put back at the end of the queue (the process takes the next run), and waits
+    for that compile when its turn comes again."""
     specs = bench_specs(quick=quick) if specs is None else specs
     result = Warmup(runs=len(specs), jobs=jobs, quick=quick)
     t0 = time.perf_counter()
+    outcomes: dict[int, tuple[list[tuple[str, float]], str | None]] = {}
     if jobs <= 1:
-        outcomes = map(warm_one, specs)
-        result_list = list(outcomes)
+        outcomes = {i: warm_one(spec) for i, spec in enumerate(specs)}
     else:
         method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
         with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context(method)) as pool:
-            result_list = list(pool.map(warm_one, specs))
-    for (scenario, overrides), (compiled, error) in zip(specs, result_list, strict=True):
+            queue = deque((i, False) for i in range(len(specs)))
+            running: dict = {}
+            while queue or running:
+                while queue and len(running) < jobs:
+                    i, wait = queue.popleft()
+                    running[pool.submit(warm_one, specs[i], wait)] = (i, wait)
+                done, _ = wait_for(running, return_when=FIRST_COMPLETED)
+                for future in done:
+                    i, _ = running.pop(future)
+                    compiled, error = future.result()
+                    if error == BUSY:
+                        queue.append((i, True))
+                    outcomes[i] = (outcomes.get(i, ([], None))[0] + compiled, error)
+    for i, (scenario, overrides) in enumerate(specs):
+        compiled, error = outcomes[i]
         result.compiled.extend(compiled)
         if error is not None:
             result.errors.append((f"{scenario.name} {' '.join(overrides)}".strip(), error))
