@@ -1,4 +1,4 @@
-"""The command line: adaptive-mj list | run | replay.
+"""The command line: adaptive-mj list | run | replay | bench | sweep | stress | score | warmup.
 
 Exit codes: 0 success; 1 the run failed (diverged, failed, a truncated log) or a
 verify mismatch; 2 bad input (a bad scenario, model or log, a bad option);
@@ -94,6 +94,12 @@ def _parser() -> argparse.ArgumentParser:
                         "payload_swap, quadrotor; breaking_points: the full bench's study, section 14); a wrong key "
                         "is refused with the list of them")
     _backend_arguments(b)
+
+    w = add_parser("warmup", help="compile every control callback the bench needs, in parallel, so that the bench "
+                   "and any run of the same plants and laws start from numba's cache")
+    w.add_argument("--quick", action="store_true", help="only what `bench --quick` needs")
+    w.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                   help="worker processes, each compiling a variant (default: all cores)")
 
     sw = add_parser("sweep", help="run a scenario over a grid of keys and seeds, in parallel")
     sw.add_argument("scenario", help="a scenario file, or the name of a bundled one")
@@ -359,6 +365,17 @@ def cmd_run(args) -> int:
     return EXIT_OK if result.summary["status"] == Status.OK else EXIT_FAILED
 
 
+def cmd_warmup(args) -> int:
+    """Compile what the bench needs (adaptive_mj.study.warmup): each variant said on stderr as it compiles, then a
+    line of what was done; exit 1 when a run could not be set up."""
+    from adaptive_mj.study.api import count
+    from adaptive_mj.study.warmup import warmup
+
+    done = warmup(quick=args.quick, jobs=count("--jobs", args.jobs, 1))
+    print(done.text())
+    return EXIT_FAILED if done.errors else EXIT_OK
+
+
 def cmd_replay(args) -> int:
     from adaptive_mj.report.metrics import clean_json, summary as make_summary
     from adaptive_mj.log.replay import read_log
@@ -530,7 +547,7 @@ def _dispatch(args) -> int:
     try:
         if args.command in ("bench", "sweep", "stress", "score"):
             return _print_study(_study(args))
-        return {"list": cmd_list, "run": cmd_run, "replay": cmd_replay}[args.command](args)
+        return {"list": cmd_list, "run": cmd_run, "replay": cmd_replay, "warmup": cmd_warmup}[args.command](args)
     except AdaptiveMJError as exc:
         if args.debug:
             raise

@@ -430,9 +430,9 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
             raise
         import sys
 
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        print(f"adaptive-mj: note: law plugin {plugin.name!r} could not be compiled for the native callback "
-              f"({type(exc).__name__}: {first[:200]}); running it through the Python callback", file=sys.stderr)
+        from adaptive_mj.sim.compile_note import fallback_line
+
+        print(fallback_line(plugin.name, exc), file=sys.stderr)  # the plugin's file and line, numba's reason
         return None
 
 

@@ -33,7 +33,7 @@ from adaptive_mj.laws.protocol import Law
 from adaptive_mj.laws.sliding import SLIDING_GAINS, SlidingArrays, sliding_law_values
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim import native_step
+from adaptive_mj.sim import compile_note, native_step
 from adaptive_mj.sim.native_context import ContextOwner, addr, context_address, inlined, offsets, source_key
 
 if TYPE_CHECKING:
@@ -344,7 +344,13 @@ def compiled(form, plugin=None, composite: bool = False):
                 "record_row": jit_tree(_record_row, inline, tag=tag, **third, **common,
                                        record_columns=jit_tree(record_columns, inline, tag=tag))}
 
-    callback = native_step.compiled_callback(CONTEXT, off, key, pieces)
+    law_name = ("the sliding law with composite adaptation" if composite else "a sliding law" if plugin is None
+                else f"law plugin {plugin.__module__}.{plugin.__qualname__}")
+    what = (f"the 1-DOF control callback (a plant form of order {form.order}, theta = {', '.join(form.names)}; "
+            f"{law_name})")
+    callback = compile_note.plugin_compiled(lambda: native_step.compiled_callback(CONTEXT, off, key, pieces, what=what,
+                                                                     kind="1-DOF callback"),
+                               (plugin,) if plugin is not None else (), key)
     _compiled[mem_key] = callback
     return callback
 

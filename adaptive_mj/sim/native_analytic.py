@@ -211,7 +211,8 @@ def compiled():
     g = {**chunk_factory.__globals__, **common, "numba": numba, "control_stage": step,
          "output": jit_tree(output, inline, tag=tag), "clamp": jit_tree(clamp, inline, tag=tag),
          "plant_rate": jit_tree(plant_rate, inline, tag=tag)}
-    fn = unique_factory(chunk_factory, g, key)(key)
+    fn = unique_factory(chunk_factory, g, key, kind="linear MRAC chunk",
+                        what="the linear plant's chunk stepper under MRAC (the Lyapunov rule)")(key)
     _compiled["linear_mrac"] = fn
     return fn
 

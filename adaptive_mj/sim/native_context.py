@@ -250,12 +250,19 @@ def source_key(*fns: Callable, extra: Iterable = ()) -> int:
     return int(h.hexdigest()[:15], 16) or 1
 
 
-def unique_factory(factory: Callable, globals_: dict, key: int) -> Callable:
+def unique_factory(factory: Callable, globals_: dict, key: int, *, what: str | None = None,
+                   kind: str | None = None) -> Callable:
     """factory (a module-level function defining a cfunc named `callback`) with the given globals,
     its own name and its callback's qualified name made unique by `key`. numba names a compiled
     function's symbols, and its cache files, after the qualified name: two variants of one
     callback (two plant forms) loaded from the cache into one process would otherwise define the
-    same symbol twice, which LLVM refuses (abort)."""
+    same symbol twice, which LLVM refuses (abort).
+
+    The factory's `numba` global is compile_note.announcing's: a compile that is not a load from numba's disk
+    cache is said on stderr, as `what` (e.g. "the 1-DOF control callback (plant form ...; sliding law)") of
+    `kind` (e.g. "1-DOF callback": the last compile of one on this machine gives the estimate)."""
+    from adaptive_mj.sim.compile_note import announcing
+
     tag = f"_{key:x}"
     code = factory.__code__
     if not any(isinstance(c, pytypes.CodeType) and c.co_name == "callback" for c in code.co_consts):
@@ -264,4 +271,8 @@ def unique_factory(factory: Callable, globals_: dict, key: int) -> Callable:
     consts = tuple(c.replace(co_name=c.co_name + tag, co_qualname=code.co_name + tag + ".<locals>." + c.co_name + tag)
                    if isinstance(c, pytypes.CodeType) and c.co_name == "callback" else c for c in code.co_consts)
     code = code.replace(co_consts=consts, co_name=code.co_name + tag, co_qualname=code.co_qualname + tag)
+    if "numba" in globals_:
+        kind = kind or factory.__module__
+        globals_ = {**globals_, "numba": announcing(globals_["numba"], what or f"the {kind} (variant {key:x})",
+                                                    kind=kind, variant=f"{key:x}")}
     return pytypes.FunctionType(code, globals_, code.co_name)

@@ -178,7 +178,9 @@ def compiled():
                 "apply_control": jit_tree(_apply_control, inline, tag=tag, **common),
                 "record_row": jit_tree(_record_row, inline, tag=tag, **common, **shape)}
 
-    _compiled["callback"] = native_step.compiled_callback(CONTEXT, off, key, pieces)
+    _compiled["callback"] = native_step.compiled_callback(
+        CONTEXT, off, key, pieces, what="the quadrotor control callback (the flight laws and L1 filters)",
+        kind="quadrotor callback")
     return _compiled["callback"]
 
 

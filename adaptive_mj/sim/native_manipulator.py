@@ -55,7 +55,7 @@ from adaptive_mj.plants.manipulator import base_map_columns
 from adaptive_mj.plants.regressor_kernel import rne_forward
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim import native_step
+from adaptive_mj.sim import compile_note, native_step
 from adaptive_mj.sim.native import gains_record
 from adaptive_mj.sim.native_context import ContextOwner, addr, context_address, inlined, offsets, source_key
 
@@ -592,7 +592,12 @@ def compiled(plugin=None):
                 "apply_control": jit_tree(_apply_control, inline, tag=tag, **common),
                 "record_row": jit_tree(_record_row, inline, tag=tag, **common)}
 
-    _compiled[mem_key] = native_step.compiled_callback(CONTEXT, off, key, pieces)
+    law_name = ("Slotine-Li or one of its baselines" if plugin is None
+                else f"law plugin {fns[1].__module__}.{fns[1].__qualname__}")
+    what = f"the arm control callback (a kinematic tree's regressor; {law_name})"
+    _compiled[mem_key] = compile_note.plugin_compiled(
+        lambda: native_step.compiled_callback(CONTEXT, off, key, pieces, what=what, kind="arm callback"),
+        (fns[1], fns[0]) if plugin is not None else (), key)
     return _compiled[mem_key]
 
 

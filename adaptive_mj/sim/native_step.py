@@ -114,13 +114,15 @@ def stage_functions(numba, inline, tag: str) -> dict[str, Any]:
     return out
 
 
-def compiled_callback(context_dtype, off, key: int, pieces: Callable[[dict, str], dict[str, Any]]):
+def compiled_callback(context_dtype, off, key: int, pieces: Callable[[dict, str], dict[str, Any]], *,
+                      what: str | None = None, kind: str | None = None):
     """The cfunc of one plant shape and law: control_stage with the shape's pieces, in the callback.
 
     context_dtype: the shape's CONTEXT; off: native_context.Offsets; key: the cache key (native_context.source_key
     over every function compiled in, this module's included); pieces(common, tag) -> {"law_stage",
     "apply_control", "record_row"}: the shape's pieces compiled (common: the globals every compiled function
-    here sees: carray, fptr, iptr, np, the pointer intrinsics and the stage functions, compiled)."""
+    here sees: carray, fptr, iptr, np, the pointer intrinsics and the stage functions, compiled); what, kind: how a
+    compile that is not a load from numba's cache is said (native_context.unique_factory)."""
     import numba
     import numpy as np
     from numba import carray, types
@@ -138,4 +140,4 @@ def compiled_callback(context_dtype, off, key: int, pieces: Callable[[dict, str]
                     **common, **shape)
     g = {**callback_factory.__globals__, **common, "numba": numba, "types": types, "address": address_of(),
          "cptr": pointer(numba.from_dtype(context_dtype)), "control_stage": step}
-    return unique_factory(callback_factory, g, key)(off, key)
+    return unique_factory(callback_factory, g, key, what=what, kind=kind)(off, key)

@@ -265,7 +265,10 @@ def compiled(law_form, plant_form, variant: str, plugin=None):
                     view=jit_tree(native_step.view, inline, tag=tag, **common), **common, **pieces)
     g = {**chunk_factory.__globals__, **common, "numba": numba, "control_stage": step,
          "clamp": jit_tree(clamp, inline, tag=tag), "twin_rate": jit_tree(twin_rate, inline, tag=tag, **plant_fns)}
-    fn = unique_factory(chunk_factory, g, key)(key)
+    law_name = f"law plugin {plugin.__module__}.{plugin.__qualname__}" if plugin is not None else f"the {variant} law"
+    what = (f"the twin's chunk stepper (a plant form of order {plant_form.order}, theta = "
+            f"{', '.join(plant_form.names)}; {law_name})")
+    fn = unique_factory(chunk_factory, g, key, what=what, kind="twin chunk")(key)
     _compiled[mem_key] = fn
     return fn
 

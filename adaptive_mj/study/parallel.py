@@ -394,10 +394,10 @@ def _prewarm(jobs: Sequence[RunSpec]) -> None:
     """Compile the native controller of each distinct scenario file among the jobs (in this process): the 1-DOF,
     arm and quadrotor callbacks and the analytic plants' compiled loops (loop.compile_native)."""
     import contextlib
-    import io
 
     from adaptive_mj.setup import scenario as sc
     from adaptive_mj.setup.build import build
+    from adaptive_mj.sim.compile_note import CompileLines
     from adaptive_mj.sim.loop import compile_native
 
     seen = set()
@@ -407,7 +407,8 @@ def _prewarm(jobs: Sequence[RunSpec]) -> None:
         seen.add(job.scenario)
         try:
             setup = build(sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed))
-            with contextlib.redirect_stderr(io.StringIO()):  # a plugin's "could not be compiled": the worker says it
+            # a compile is said (sim.compile_note); the rest, a plugin's "could not be compiled" too, the worker says
+            with contextlib.redirect_stderr(CompileLines(sys.stderr)):
                 compile_native(setup.plant, setup.law, setup.reference, setup.theta_hat0)
         except Exception as exc:  # noqa: BLE001 (only a head start: the worker runs the job and reports what is wrong)
             interrupt.reraise_stop(exc)  # a stop signal that came while numba compiled, wrapped by Python
