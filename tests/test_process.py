@@ -147,3 +147,19 @@ def test_the_kind_declares_its_keys_event_and_forms():
     assert {e.name for e in kind.events} == {"batch", "constant_force"}
     assert kind.key_names()[3:] == ("volume", "flow", "feed_temperature", "ua", "ambient_temperature",
                                     "liquid_density", "heat_capacity")
+
+
+def test_the_kind_declares_its_own_default_timestep_and_the_loader_takes_it(tmp_path):
+    """A scenario of the process kind that gives no simulation.timestep steps at the kind's 2 s, not the 1 ms of a
+    mechanical plant without a model; one that gives it keeps it."""
+    from adaptive_mj.plants import kinds
+    from adaptive_mj.setup.scenario import load as load_scenario
+
+    text = (SCENARIOS / "process_batches.toml").read_text()
+    assert "timestep = 2.0" in text
+    (tmp_path / "no_dt.toml").write_text(text.replace("timestep = 2.0", ""))
+    assert kinds.lookup("process").default_timestep == 2.0
+    assert load_scenario(tmp_path / "no_dt.toml").simulation.timestep == 2.0
+    (tmp_path / "dt.toml").write_text(text.replace("timestep = 2.0", "timestep = 0.5"))
+    assert load_scenario(tmp_path / "dt.toml").simulation.timestep == 0.5
+    assert kinds.lookup("first_order").default_timestep == 0.001

@@ -177,6 +177,9 @@ class PlantKind:
     noise_signals: tuple[str, ...] = ()
     reference_reader: Callable[[Table], Any] | None = None
     reference_builder: Callable[[Any], Any] | None = None
+    # simulation.timestep when a scenario of this kind gives none and its plant has no model to take it from [s]
+    # (a process whose time constants are hours steps in seconds, not the 1 ms of a mechanical plant)
+    default_timestep: float = 0.001
 
     @property
     def rigid_body(self) -> bool:

@@ -172,11 +172,11 @@ def model_source(scn) -> None:
 def from_scenario(scn, source) -> BuiltPlant:
     """plant.kind = "process": the tank of plant.volume, .flow, .feed_temperature, .ua, .ambient_temperature,
     .liquid_density and .heat_capacity; the heater plant.ctrl_range (default [0, 60 kW]); RK4 (or Euler) at
-    simulation.timestep (the loader's default for a plant without a model is 1 ms, far shorter than the tank
-    needs: its time constant ρVC/(wC + UA) is tens of minutes, and the bundled scenarios take 2 s)."""
+    simulation.timestep (this kind's default, KIND.default_timestep = 2 s: the tank's time constant
+    ρVC/(wC + UA) is tens of minutes)."""
     p, sim, L = scn.plant, scn.simulation, scn.law
     spec = p.kind_spec if isinstance(p.kind_spec, ProcessSpec) else ProcessSpec(Tank())
-    dt = sim.timestep if sim.timestep is not None else 0.001  # set by the loader for a plant without a model
+    dt = sim.timestep if sim.timestep is not None else KIND.default_timestep  # the loader sets it from the kind
     ctrl = p.ctrl_range if p.ctrl_range is not None else (0.0, HEATER_POWER)
     integrator = scenario_integrator(scn)
     if L.mrac is not None:  # a law of the MRAC state form (law.kind = "mrac": its reference model)
@@ -272,4 +272,4 @@ KIND = register(PlantKind(
     params={"d": "J/K", "a": "W/K", "b": "W"},
     default_model=None, doc="a heated stirred tank (Seborg et al.'s energy balance) whose batches change",
     keys=KEYS, reader=read_keys, events={ev.CONSTANT_FORCE: None, BATCH: None}, order=first_order,
-    mrac_state=mrac_state, sections=()))
+    mrac_state=mrac_state, sections=(), default_timestep=2.0))

@@ -371,15 +371,16 @@ def _order(doc: dict, plant: PlantSpec, where: str) -> int:
 
 
 def _simulation(t: _Table, plant: PlantSpec, order: int) -> SimulationSpec:
-    allowed = INTEGRATORS if plant.backend == "mujoco" else ("rk4", "euler")
-    integrator = t.string("integrator", "rk4", choices=allowed)
-    timestep = t.number("timestep", 0.001 if plant.model is None else None, gt=0)
-    duration = t.number("duration", gt=0)
-    if timestep is not None and timestep > duration:
-        raise t.fail("timestep", f"<= simulation.duration ({duration})", timestep)
     from adaptive_mj.plants import kinds as plant_kinds
 
     kind = plant_kinds.lookup(plant.kind)
+    allowed = INTEGRATORS if plant.backend == "mujoco" else ("rk4", "euler")
+    integrator = t.string("integrator", "rk4", choices=allowed)
+    default_dt = (kind.default_timestep if kind is not None else 0.001) if plant.model is None else None
+    timestep = t.number("timestep", default_dt, gt=0)
+    duration = t.number("duration", gt=0)
+    if timestep is not None and timestep > duration:
+        raise t.fail("timestep", f"<= simulation.duration ({duration})", timestep)
     x0: tuple[float, ...] | str | None
     if kind is not None and kind.starts_on_reference:  # e.g. a manipulator's joint positions and velocities
         x0 = t.string("initial_state", "reference", choices=("reference",))
