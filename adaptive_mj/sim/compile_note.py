@@ -295,6 +295,15 @@ def announcing(numba, what: str, *, kind: str, variant: str):
     return _Announcing(numba, what, kind, variant)
 
 
+#: how every compile note begins (`say`'s: compiling, compiled, waiting)
+NOTE_STARTS = (PREFIX + "compil", PREFIX + "waiting")
+
+
+def is_note(line: str) -> bool:
+    """Whether a line of stderr is a compile note (a cold numba cache's: not part of what a run reports)."""
+    return line.startswith(NOTE_STARTS)
+
+
 class CompileLines(io.TextIOBase):
     """A stderr that lets the compile notes through at once (`say`'s: compiling, compiled, waiting; with
     plugin_notes a law plugin's fallback line too) and drops the rest: for work done ahead of the runs that say the
@@ -302,7 +311,7 @@ class CompileLines(io.TextIOBase):
 
     def __init__(self, out, *, plugin_notes: bool = False):
         self.out, self.pending = out, ""
-        self.keep = (PREFIX + "compil", PREFIX + "waiting") + ((PREFIX + "note: law plugin",) if plugin_notes else ())
+        self.keep = NOTE_STARTS + ((PREFIX + "note: law plugin",) if plugin_notes else ())
 
     def write(self, text: str) -> int:
         self.pending += text
