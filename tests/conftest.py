@@ -8,6 +8,13 @@ Conventions used throughout:
 """
 from __future__ import annotations
 
+import os
+
+# A cold numba cache makes a run say what it compiles on stderr (adaptive_mj.sim.compile_note); whether a variant
+# is cached depends on which test ran first, and many tests read a run's stderr line by line. Off here (in this
+# process and every process a test starts); tests/test_compile_note.py turns them on where it tests them.
+os.environ["ADAPTIVE_MJ_COMPILE_NOTES"] = "0"
+
 import mujoco
 import numpy as np
 import pytest

@@ -46,7 +46,8 @@ if __name__ == "__main__":
 
 
 def _env(cache: Path, **extra) -> dict:
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"), **extra)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"),
+               ADAPTIVE_MJ_COMPILE_NOTES="1", **extra)  # the suite turns the notes off (conftest.py): on here
     env["PYTHONPATH"] = os.pathsep.join([str(REPO), *([env["PYTHONPATH"]] if env.get("PYTHONPATH") else [])])
     return env
 
