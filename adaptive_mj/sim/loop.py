@@ -49,7 +49,7 @@ from adaptive_mj.laws.common import LawStep
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.plants import Event, plant_order
 from adaptive_mj.plants.protocol import CtrlRange, Plant, control_shape, has_joints, termination
-from adaptive_mj.plants.twin import PythonStepped
+from adaptive_mj.plants.analytic import AnalyticPlant
 from adaptive_mj.sim import stage as st
 from adaptive_mj.sim import interrupt
 from adaptive_mj.sim.interrupt import deferred
@@ -530,7 +530,7 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
     make: Callable[..., ContextOwner]
     if getattr(plant, "state_names", ()):  # a quadrotor: its own compiled callback (the flight kernel inside)
         from adaptive_mj.sim.native_flight import NativeFlightController as make, supported
-    elif isinstance(plant, PythonStepped):  # an analytic plant: the compiled loop it names where there is one (the
+    elif isinstance(plant, AnalyticPlant):  # an analytic plant: the compiled loop it names where there is one (the
         # linear plant under MRAC, the twin under the first-order or a sliding law: one compiled call steps a chunk),
         # else the Python path
         if plant.compiled_loop is None:

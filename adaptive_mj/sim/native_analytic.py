@@ -2,7 +2,8 @@
 (adaptive_mj.plants.linear.LinearPlant) under direct MRAC with the Lyapunov rule (laws.mrac).
 
 There is no mj_step to call a control callback: one numba function (`chunk_factory`'s) steps a whole chunk of
-physics steps, the plant's classic RK4 with its input delay line exactly as LinearPlant.step writes it, and at
+physics steps, each plants.analytic.analytic_step with the linear plant's kernel (plants.linear: its RK4 with its
+input delay line, the very function LinearPlant.step calls), and at
 each of the four stages runs adaptive_mj.sim.stage.control_stage, the order of a control step that the Python
 controller (adaptive_mj.sim.loop.Controller) runs too, compiled (as adaptive_mj.sim.native_step does for the
 MuJoCo callbacks) with this module's pieces: `_law_stage` (measure y = C x (+ the step's noise), the stage
@@ -33,6 +34,8 @@ import numpy as np
 
 from adaptive_mj.laws.mrac import MRAC_GAINS, mrac_regressor, mrac_values
 from adaptive_mj.laws.protocol import Law
+from adaptive_mj.plants.analytic import analytic_step
+from adaptive_mj.plants.linear import linear_output, linear_params, linear_rate
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import native_step
 from adaptive_mj.sim import stage as stage_code
@@ -60,8 +63,6 @@ CONTEXT = native_step.context_dtype([
     ("gains", _i8), ("alpha", _i8), ("pb", _i8), ("gamma", _i8), ("inv_gamma", _i8), ("theta0", _i8),
     ("rec_t", _i8), ("rec_y", _i8), ("rec_u", _i8), ("rec_s", _i8), ("rec_ref", _i8), ("rec_theta", _i8),
 ])
-
-MAX_STATES = 8  # the plant's order n_x at most (C x summed as form.plain_dot sums it)
 
 
 def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
@@ -114,64 +115,31 @@ def _record_row(ctx, io, row, u, theta):
         rec_th[row * nth + j] = theta[j]
 
 
-def output(C, x):
-    """y = C x (C, x (n_x,)): summed from 0 in order with no fused multiply-add, as form.plain_dot (LinearPlant)."""
-    acc = 0.0
-    for i in range(x.shape[0]):
-        acc += C[i] * x[i]
-    return acc
-
-
-def plant_rate(A, B, x, u, force, ax, out):
-    """out (n_x,) = A x + B (u + force): LinearPlant._rate's arithmetic (A x as numpy's A @ x: np.dot, into ax)."""
-    np.dot(A, x, ax)
-    for i in range(x.shape[0]):
-        out[i] = ax[i] + B[i] * (u + force)
-
-
-def clamp(u, lo, hi):
-    """min(max(u, lo), hi) as Python computes it (a NaN passes; ±inf bounds change nothing)."""
-    v = lo if lo > u else u
-    return hi if hi < v else v
+def _stage_control(ctx, io, stage):
+    """plants.analytic.analytic_step's control, compiled: stage.control_stage (its context counts the stages), the
+    control it hands back (io[1])."""
+    control_stage(ctx, io)  # noqa: F821 (injected: stage.control_stage, compiled)
+    return io[1][0]
 
 
 def chunk_factory(key):
     """The chunk stepper's source, closed over the cache key only (native_context.unique_factory names it apart)."""
 
     @numba.njit(cache=True, nogil=True)  # noqa: F821 (injected)
-    def callback(context, A, B, C, x, ring, dist, lo, hi, rows):
-        """`rows` RK4 steps of x' = A x + B u(t - D h) from the context's state (LinearPlant.step, step by step):
-        x (n_x,) advanced in place; ring (D + 1,) the plant's delay line of stage-0 controls; dist (rows,) the
-        input disturbance of each step; lo, hi the plant's ctrl_range (±inf: none)."""
+    def callback(context, p, x, ring, dist, lo, hi, rows):
+        """`rows` steps of the plant (plants.analytic.analytic_step with the linear plant's kernel, the step
+        LinearPlant.step runs) from the context's state: p (A, B, C); x (n_x,) advanced in place; ring (D + 1,) the
+        plant's delay line of stage-0 controls; dist (rows,) the input disturbance of each step; lo, hi the plant's
+        ctrl_range (±inf: none)."""
         if key == 0:  # never: keeps the cache key in the closure
             return
         ctx = context[0]
         nx = x.shape[0]
-        h = ctx.h
-        D = ctx.in_delay
-        y, ub = np.zeros(1), np.zeros(1)
-        io = (y, ub)
-        xs, ax, ks = np.empty(nx), np.empty(nx), np.empty((4, nx))
+        io = (np.zeros(1), np.zeros(1))
+        xs, ks = np.empty(nx), np.empty((4, nx))
         for r in range(rows):
-            force = dist[r]
-            y[0] = output(C, x)
-            control_stage(ctx, io)  # noqa: F821 (injected: stage.control_stage, compiled)
-            k = ctx.k
-            u = clamp(ub[0], lo, hi)
-            if D > 0:  # the delay line: this step's stage-0 control in, the one of D steps ago held over the step
-                ring[k % (D + 1)] = u
-                u = ring[(k - D) % (D + 1)] if k >= D else 0.0
-            plant_rate(A, B, x, u, force, ax, ks[0])
-            for j in range(1, 4):  # stages t + h/2, t + h/2, t + h on x + (h/2) k1, x + (h/2) k2, x + h k3
-                c = h if j == 3 else h / 2
-                for i in range(nx):
-                    xs[i] = x[i] + c * ks[j - 1, i]
-                y[0] = output(C, xs)
-                control_stage(ctx, io)  # noqa: F821 (injected; with a delay line only the law's stage)
-                plant_rate(A, B, xs, clamp(ub[0], lo, hi) if D == 0 else u, force, ax, ks[j])
-            for i in range(nx):
-                x[i] = x[i] + h / 6 * (ks[0, i] + 2 * ks[1, i] + 2 * ks[2, i] + ks[3, i])
-            ctx.k = k + 1
+            analytic_step(p, x, dist[r], ctx.k, ctx.in_delay, ring, ctx.h, True, lo, hi, ctx, io, xs, ks)
+            ctx.k = ctx.k + 1
 
     return callback
 
@@ -183,8 +151,8 @@ def key_functions() -> tuple:
     """The functions compiled into the chunk stepper (and, through native_context.reached_functions, every function
     they call): the cache key hashes their modules' source, so an edit to any of them compiles afresh."""
     return (chunk_factory, stage_code.control_stage, native_step.view, _law_stage, _apply_control, _record_row,
-            output, plant_rate, clamp, mrac_regressor, mrac_values, stage_code.stage_estimate, stage_code.end_stage,
-            stage_code.advance_estimates)
+            analytic_step, _stage_control, linear_rate, linear_output, mrac_regressor, mrac_values,
+            stage_code.stage_estimate, stage_code.end_stage, stage_code.advance_estimates)
 
 
 def compiled():
@@ -208,55 +176,25 @@ def compiled():
                               "record_row": jit_tree(_record_row, inline, tag=tag, **common)}
     step = jit_tree(stage_code.control_stage, inline, tag=tag,
                     view=jit_tree(native_step.view, inline, tag=tag, **common), **common, **pieces)
-    g = {**chunk_factory.__globals__, **common, "numba": numba, "control_stage": step,
-         "output": jit_tree(output, inline, tag=tag), "clamp": jit_tree(clamp, inline, tag=tag),
-         "plant_rate": jit_tree(plant_rate, inline, tag=tag)}
+    one_step = jit_tree(analytic_step, inline, tag=tag, rate=jit_tree(linear_rate, inline, tag=tag),
+                        observe=jit_tree(linear_output, inline, tag=tag),
+                        control=jit_tree(_stage_control, inline, tag=tag, control_stage=step))
+    g = {**chunk_factory.__globals__, **common, "numba": numba, "analytic_step": one_step}
     fn = unique_factory(chunk_factory, g, key)(key)
     _compiled["linear_mrac"] = fn
     return fn
 
 
-def _gemv_agrees(A: np.ndarray) -> bool:
-    """Whether numba's np.dot(A, x) (the compiled loop's A x) gives numpy's A @ x bit for bit on this machine
-    (both call a BLAS, not necessarily the same library), on a few vectors of this A (the answer kept per A: a
-    study's runs of one plant ask once)."""
-    known = _compiled.setdefault("gemv_agrees", {})
-    key = (A.shape, A.tobytes())
-    if key not in known:
-        known[key] = _gemv_check(A)
-    return known[key]
-
-
-def _gemv_check(A: np.ndarray) -> bool:
-    if "gemv" not in _compiled:
-        import numba
-
-        _compiled["gemv"] = numba.njit(cache=True)(_gemv)
-    rng = np.random.default_rng(0)
-    out = np.empty(A.shape[0])
-    for _ in range(16):
-        v = rng.normal(size=A.shape[0]) * 10.0 ** rng.integers(-3, 4, size=A.shape[0])
-        _compiled["gemv"](A, v, out)
-        if not np.array_equal(A @ v, out):
-            return False
-    return True
-
-
-def _gemv(A, x, out):
-    np.dot(A, x, out)
-
-
 def supported(plant: Plant, law: Law) -> bool:
-    """The compiled analytic loop runs this plant and law: a LinearPlant of order n_x <= MAX_STATES with RK4 (4
-    stages) under MRAC with the Lyapunov rule and no ψ (MracLaw.compiled_form), on a machine where numba's
-    matrix-vector product is numpy's. Anything else (the MIT rule: its filter is Python's) takes the Python
-    path."""
+    """The compiled analytic loop runs this plant and law: a LinearPlant of order n_x <= plants.linear.MAX_STATES
+    with RK4 (4 stages) under MRAC with the Lyapunov rule and no ψ (MracLaw.compiled_form), on a machine where
+    numba's matrix-vector product is numpy's (plants.linear.compiled_supports). Anything else (the MIT rule: its
+    filter is Python's) takes the Python path."""
     from adaptive_mj.laws.mrac import MracLaw
     from adaptive_mj.plants.linear import LinearPlant
 
     return (isinstance(plant, LinearPlant) and isinstance(law, MracLaw) and law.compiled_form
-            and law.order == 1 and plant.stages == 4 and plant.A.shape[0] <= MAX_STATES
-            and _gemv_agrees(np.ascontiguousarray(plant.A)))
+            and law.order == 1 and plant.kernel.supports(plant))
 
 
 class AnalyticLoop(ContextOwner):
@@ -388,8 +326,7 @@ class NativeAnalyticController(AnalyticLoop):
         step count where LinearPlant.step would."""
         plant = self.plant
         plant.x = np.ascontiguousarray(plant.x, dtype=np.float64)
-        self._kernel(self.context, plant.A, plant.B, plant.C, plant.x, plant._ring, self.dist, self.lo, self.hi,
-                     rows)
+        self._kernel(self.context, linear_params(plant), plant.x, plant._ring, self.dist, self.lo, self.hi, rows)
         c = self.context[0]
         plant._t, plant._k = float(c["t"]), int(c["k"])
 

@@ -3,7 +3,8 @@ integrated without MuJoCo under the lecture's first-order law (laws.first_order)
 law plugin (laws.plugin).
 
 There is no mj_step to call a control callback: one numba function (`chunk_factory`'s) steps a whole chunk of
-physics steps, the twin's classic RK4 (or its semi-implicit Euler) exactly as TwinPlant.step writes it, and at
+physics steps, each plants.analytic.analytic_step with the twin's kernel (plants.twin: its classic RK4 or its
+semi-implicit Euler, the very function TwinPlant.step calls), and at
 each stage runs adaptive_mj.sim.stage.control_stage, the order of a control step that the Python controller
 (adaptive_mj.sim.loop.Controller) runs too, compiled (as adaptive_mj.sim.native_step does for the MuJoCo
 callbacks) with this module's pieces: `_law_stage` (measure the stage's x + the step's noise, the stage estimate,
@@ -13,8 +14,8 @@ noise, divergence and rows between chunks), the plant's step_native(n) calling t
 
 The law's form and the plant's form are compiled apart (a law may be designed on another model than the twin
 integrates): the law's φ, f, h into the law (the names native._builtin_law and native._plugin_law call), the
-plant's into `twin_rate`, ModelForm.highest_derivative's arithmetic in its order (φ·p summed from 0 with no
-fused multiply-add, as form.plain_dot sums it). The references at the stage times are evaluated in Python before
+plant's into plants.twin.twin_rate, ModelForm.highest_derivative's arithmetic in its order (φ·p summed from 0 with
+no fused multiply-add, as form.plain_dot sums it). The references at the stage times are evaluated in Python before
 each chunk, vectorised (stage.stage_references: TwinPlant.step's stage times t + h/2, t + h are the same numbers),
 and so are the steps' external forces (force_offset + disturbance(t), TwinPlant.step's arithmetic).
 tests/test_native_twin.py shows the two paths give the same rows bit for bit.
@@ -35,10 +36,12 @@ from adaptive_mj.laws.first_order import FIRST_ORDER_GAINS, first_order_values
 from adaptive_mj.laws.plugin import PLUGIN_GAINS
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.laws.sliding import SLIDING_GAINS, sliding_law_values
+from adaptive_mj.plants.analytic import analytic_step, clamp
 from adaptive_mj.plants.protocol import Plant
+from adaptive_mj.plants.twin import twin_params, twin_rate, twin_state
 from adaptive_mj.sim import native, native_step
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native_analytic import AnalyticLoop, clamp
+from adaptive_mj.sim.native_analytic import AnalyticLoop
 from adaptive_mj.sim.native_context import inlined, source_key, unique_factory
 
 if TYPE_CHECKING:
@@ -55,9 +58,6 @@ if TYPE_CHECKING:
     h_fn: Any
     control_stage: Any
     stage_estimate: Any
-    plant_phi: Any
-    plant_f: Any
-    plant_h: Any
     record_columns: Any
 
 _i8, _f8 = np.int64, np.float64
@@ -131,20 +131,11 @@ def _record_row(ctx, io, row, u, theta):
         rec[o + col.theta + j] = theta[j]
 
 
-def twin_rate(x, u, theta, force, d_known, out):
-    """out (n,) = x' of the twin at state x (n,) under u and the external force [N or N m]: x[1:], then
-    y^(n) = (f + φ·p + h u + force) / d (ModelForm.highest_derivative, its operations in its order; θ = [d, p]
-    or, d_known, θ = p and d = 1), the plant's form (plant_phi, plant_f, plant_h: globals)."""
-    n = x.shape[0]
-    for i in range(n - 1):
-        out[i] = x[i + 1]
-    first = 0 if d_known else 1
-    d = 1.0 if d_known else theta[0]
-    phi = plant_phi(x)  # noqa: F821 (injected)
-    dot = 0.0
-    for j in range(phi.shape[0]):
-        dot += phi[j] * theta[first + j]
-    out[n - 1] = (plant_f(x) + dot + plant_h(x) * u + force) / d  # noqa: F821 (injected)
+def _stage_control(ctx, io, stage):
+    """plants.analytic.analytic_step's control, compiled: stage.control_stage (its context counts the stages), the
+    control it hands back (io[1])."""
+    control_stage(ctx, io)  # noqa: F821 (injected: stage.control_stage, compiled)
+    return io[1][0]
 
 
 def chunk_factory(key):
@@ -153,38 +144,20 @@ def chunk_factory(key):
     compiled in two processes could define one symbol)."""
 
     @numba.njit(cache=True, nogil=True)  # noqa: F821 (injected)
-    def callback(context, x, theta, dist, lo, hi, d_known, rows):
-        """`rows` steps of the twin from the context's state (TwinPlant.step, step by step): x (n,) advanced in
-        place; theta the plant's true θ; dist (rows,) the external force of each step; lo, hi the plant's
-        ctrl_range (±inf: none); d_known: the plant's form has d = 1. RK4 with 4 stages, else semi-implicit Euler."""
+    def callback(context, p, x, dist, lo, hi, rows):
+        """`rows` steps of the twin (plants.analytic.analytic_step with the twin's kernel, the step TwinPlant.step
+        runs) from the context's state: p (θ, d_known) the plant's twin_params; x (n,) advanced in place; dist
+        (rows,) the external force of each step; lo, hi the plant's ctrl_range (±inf: none). RK4 with 4 stages,
+        else semi-implicit Euler."""
         if key == 0:  # never: keeps the cache key in the closure
             return
         ctx = context[0]
         n = x.shape[0]
-        h = ctx.h
+        io = (np.zeros(n), np.zeros(1))
+        xs, ks, ring = np.empty(n), np.empty((4, n)), np.zeros(1)
         rk4 = ctx.nstages == 4
-        xs, ub = np.empty(n), np.zeros(1)
-        io = (xs, ub)
-        ks = np.empty((4, n))
         for r in range(rows):
-            force = dist[r]
-            for i in range(n):
-                xs[i] = x[i]
-            control_stage(ctx, io)  # noqa: F821 (injected: stage.control_stage, compiled)
-            twin_rate(xs, clamp(ub[0], lo, hi), theta, force, d_known, ks[0])
-            if rk4:
-                for j in range(1, 4):  # stages t + h/2, t + h/2, t + h on x + (h/2) k1, x + (h/2) k2, x + h k3
-                    c = h if j == 3 else h / 2
-                    for i in range(n):
-                        xs[i] = x[i] + c * ks[j - 1, i]
-                    control_stage(ctx, io)  # noqa: F821 (injected)
-                    twin_rate(xs, clamp(ub[0], lo, hi), theta, force, d_known, ks[j])
-                for i in range(n):
-                    x[i] = x[i] + h / 6 * (ks[0, i] + 2 * ks[1, i] + 2 * ks[2, i] + ks[3, i])
-            else:  # the highest derivative first, then each lower one with the freshly updated value
-                x[n - 1] = x[n - 1] + h * ks[0, n - 1]
-                for i in range(n - 2, -1, -1):
-                    x[i] = x[i] + h * x[i + 1]
+            analytic_step(p, x, dist[r], 0, 0, ring, ctx.h, rk4, lo, hi, ctx, io, xs, ks)
 
     return callback
 
@@ -197,7 +170,8 @@ def key_functions() -> tuple:
     every function they call): the cache key hashes their modules' source, so an edit to any of them compiles
     afresh."""
     return (chunk_factory, stage_code.control_stage, native_step.view, _law_stage, _first_order_law, _apply_control,
-            _record_row, twin_rate, clamp, native.record_columns, native._builtin_law, native._plugin_law,
+            _record_row, analytic_step, _stage_control, twin_rate, twin_state, clamp, native.record_columns,
+            native._builtin_law, native._plugin_law,
             first_order_values, sliding_law_values, plugin_rate, stage_code.stage_estimate, stage_code.end_stage,
             stage_code.advance_estimates)
 
@@ -263,25 +237,24 @@ def compiled(law_form, plant_form, variant: str, plugin=None):
                                record_columns=jit_tree(native.record_columns, inline, tag=tag), **common)}
     step = jit_tree(stage_code.control_stage, inline, tag=tag,
                     view=jit_tree(native_step.view, inline, tag=tag, **common), **common, **pieces)
-    g = {**chunk_factory.__globals__, **common, "numba": numba, "control_stage": step,
-         "clamp": jit_tree(clamp, inline, tag=tag), "twin_rate": jit_tree(twin_rate, inline, tag=tag, **plant_fns)}
+    one_step = jit_tree(analytic_step, inline, tag=tag, rate=jit_tree(twin_rate, inline, tag=tag, **plant_fns),
+                        observe=jit_tree(twin_state, inline, tag=tag),
+                        control=jit_tree(_stage_control, inline, tag=tag, control_stage=step))
+    g = {**chunk_factory.__globals__, **common, "numba": numba, "analytic_step": one_step}
     fn = unique_factory(chunk_factory, g, key)(key)
     _compiled[mem_key] = fn
     return fn
 
 
-MAX_ORDER = 3  # the twin's order n at most (the forms a plant gives: the heave vehicle's lag is order 3)
-
-
 def supported(plant: Plant, law: Law) -> bool:
     """The twin's compiled loop runs this plant and law: a TwinPlant whose compiled_loop is this module (not
-    plants.wing_rock.MracWingRock, whose law is MRAC: compiled_loop None) of order
-    <= MAX_ORDER with RK4 (4 stages) or Euler (1), under the first-order law, a sliding law or a law plugin with a
-    form of the plant's order (laws' `native`; composite adaptation and every other law take the Python path)."""
+    plants.wing_rock.MracWingRock, whose law is MRAC: compiled_loop None) of order <= plants.twin.MAX_ORDER with
+    RK4 (4 stages) or Euler (1), under the first-order law, a sliding law or a law plugin with a form of the plant's
+    order (laws' `native`; composite adaptation and every other law take the Python path)."""
     from adaptive_mj.plants.twin import TwinPlant
 
     return (isinstance(plant, TwinPlant) and plant.compiled_loop == __name__ and plant.stages in (1, 4)
-            and plant.order <= MAX_ORDER and _law_variant(law) is not None
+            and plant.kernel.supports(plant) and _law_variant(law) is not None
             and getattr(getattr(law, "form", None), "order", None) == plant.order)
 
 
@@ -335,7 +308,6 @@ class NativeTwinController(AnalyticLoop):
         self.lo, self.hi = float(lo), float(hi)
         self.stage_offsets = np.asarray(stage_code.TABLEAU[nst][0])  # RK4: c_i = a_i (see stage.TABLEAU)
         self.dist = np.zeros(max_rows)
-        self.d_known = plant.form.d_name is None
         self.context = self.new_context(CONTEXT, n=n, nth=nth, nst=nst, h=plant.dt, control=control)
 
     def prepare(self, rows: int, noise: np.ndarray | None) -> None:
@@ -354,8 +326,7 @@ class NativeTwinController(AnalyticLoop):
         step count where TwinPlant.step would."""
         plant = self.plant
         plant.x = np.ascontiguousarray(plant.x, dtype=np.float64)
-        theta = np.ascontiguousarray(plant.form_theta, dtype=np.float64)
-        self._kernel(self.context, plant.x, theta, self.dist, self.lo, self.hi, self.d_known, rows)
+        self._kernel(self.context, twin_params(plant), plant.x, self.dist, self.lo, self.hi, rows)
         c = self.context[0]
         plant.moved_to(float(c["t"]), rows)
 
