@@ -5,9 +5,12 @@ A kind's dynamics are an `AnalyticKernel`: plain array functions (its rate, the 
 observation, the state the law sees) over a tuple of the plant's parameters. `analytic_step` is one physics step
 of any such plant, RK4 (or semi-implicit Euler) with the plant's input delay line and the step's external force:
 the Python path (`AnalyticPlant.step`) calls it with the kind's functions and the run's policy bound
-(numba_util.with_globals), and the compiled loops (adaptive_mj.sim.native_analytic, native_twin) compile the same
-function with the same functions and the control stage (stage.control_stage) bound, so both paths do the same
-operations in the same order, bit for bit (tests/test_native_analytic.py, tests/test_native_twin.py).
+(numba_util.with_globals), and the compiled chunk (adaptive_mj.sim.native_chunk) compiles the same function with
+the same functions and the control stage (stage.control_stage) bound, so both paths do the same operations in the
+same order, bit for bit (tests/test_native_analytic.py, tests/test_native_twin.py, tests/test_analytic_kernel.py).
+
+A new analytic kind subclasses AnalyticPlant and sets `kernel` to its AnalyticKernel; adaptive_mj.sim runs it
+compiled where the run's law has a compiled form (sim.native_chunk.supported), on the Python path otherwise.
 Nothing here imports mujoco or numba.
 """
 from __future__ import annotations
@@ -33,8 +36,8 @@ def _any_plant(plant) -> bool:
 @dataclass(frozen=True)
 class AnalyticKernel:
     """What an analytic plant kind declares beside its code, for both paths (AnalyticPlant.step and the compiled
-    loops, adaptive_mj.sim.native_analytic and native_twin). All functions but `params`, `functions` and
-    `supports` are plain array code (numba compiles them; no Python objects, no allocation needed):
+    chunk, adaptive_mj.sim.native_chunk). All functions but `params`, `functions` and `supports` are plain array
+    code (numba compiles them; no Python objects, no allocation needed):
 
     name: the kind's name (in the compiled chunk's cache key and messages).
     params(plant) -> tuple: the plant's parameters as the rate and observation read them (arrays and numbers),
@@ -64,18 +67,18 @@ def clamp(u, lo, hi):
 # The names analytic_step calls that each path binds (see analytic_step); unbound, they say so.
 def rate(p, x, u, force, out):
     """The kind's rate (AnalyticKernel.rate; bound by each path)."""
-    raise NotImplementedError("analytic_step runs with the kind's functions bound (AnalyticPlant, sim)")
+    raise NotImplementedError("analytic_step runs with the kind's functions bound (AnalyticPlant, sim.native_chunk)")
 
 
 def observe(p, x, y):
     """The kind's observation (AnalyticKernel.observe; bound by each path)."""
-    raise NotImplementedError("analytic_step runs with the kind's functions bound (AnalyticPlant, sim)")
+    raise NotImplementedError("analytic_step runs with the kind's functions bound (AnalyticPlant, sim.native_chunk)")
 
 
 def control(ctx, io, stage):
     """The control at integrator stage `stage` for the observation io[0] (bound by each path: the run's policy on
     the Python path, stage.control_stage compiled)."""
-    raise NotImplementedError("analytic_step runs with its control bound (AnalyticPlant, sim)")
+    raise NotImplementedError("analytic_step runs with its control bound (AnalyticPlant, sim.native_chunk)")
 
 
 def analytic_step(p, x, force, k, delay, ring, h, rk4, lo, hi, ctx, io, xs, ks):
@@ -127,13 +130,12 @@ class AnalyticPlant:
     """What the plants stepped without MuJoCo share: their kind's kernel (`kernel`, an AnalyticKernel), the state
     x (n_x,), the time and step count, the input delay line, the external force (force_offset + disturbance(t)),
     the control limits, a control policy (t, y) -> u installed for the length of a run (protocol.Plant
-    .controlled_by) and `step`, one analytic_step. `compiled_loop` names the module of the plant's compiled loop
-    (its `supported(plant, law)` and `Controller`), which steps the same plant chunk by chunk through
-    controlled_natively/step_native and leaves it where `step` would (moved_to); None: none. A subclass sets in its
-    __init__: dt, x, ctrl_range, and delay_steps where it has an input delay (then init_steps)."""
+    .controlled_by) and `step`, one analytic_step. The compiled chunk (adaptive_mj.sim.native_chunk) steps the
+    same plant chunk by chunk through controlled_natively/step_native and leaves it where `step` would
+    (moved_to). A subclass sets in its __init__: dt, x, ctrl_range, and delay_steps where it has an input delay
+    (then init_steps)."""
 
     kernel: ClassVar[AnalyticKernel]
-    compiled_loop: str | None = None
     dt: float
     x: np.ndarray
     ctrl_range: tuple[float, float] | None = None

@@ -16,11 +16,11 @@ the plant is driven over step k by the control computed at stage 0 of step k - D
 step (zero before t = τ): an exact delay line of D steps on a zero-order-held input.
 
 The step is plants.analytic.analytic_step with this kind's kernel (KERNEL: linear_rate, linear_output), on both
-paths. Compiled: under MRAC with the Lyapunov rule (laws.mrac) the run is stepped by adaptive_mj.sim.native_analytic,
-one numba function per chunk of steps that runs the same analytic_step and the law's stages
-(stage.control_stage), bit for bit (tests/test_native_analytic.py): loop._run_native calls step_native(n). The MIT
-rule (its sensitivity filter), simulation.python_callback = true, and any law the compiled loop does not know take
-the Python path: `step`, the policy called at each stage.
+paths. Compiled: under MRAC with the Lyapunov rule (laws.mrac) the run is stepped by the analytic chunk engine
+(adaptive_mj.sim.native_chunk), one numba function per chunk of steps that runs the same analytic_step and the
+law's stages (stage.control_stage), bit for bit (tests/test_native_analytic.py): loop._run_native calls
+step_native(n). The MIT rule (its sensitivity filter), simulation.python_callback = true, and any law the engine
+does not compile take the Python path: `step`, the policy called at each stage.
 """
 from __future__ import annotations
 
@@ -95,7 +95,7 @@ MAX_STATES = 8  # the order n_x of a plant the compiled chunk runs, at most
 
 
 def compiled_supports(plant: LinearPlant) -> bool:
-    """The compiled loop runs a plant of order n_x <= MAX_STATES with RK4 on a machine where numba's
+    """The compiled chunk runs a plant of order n_x <= MAX_STATES with RK4 on a machine where numba's
     matrix-vector product is numpy's (gemv_agrees)."""
     return plant.stages == 4 and plant.A.shape[0] <= MAX_STATES and gemv_agrees(np.ascontiguousarray(plant.A))
 
@@ -104,7 +104,7 @@ _GEMV: dict = {}
 
 
 def gemv_agrees(A: np.ndarray) -> bool:
-    """Whether numba's np.dot(A, x) (the compiled loop's A x) gives numpy's np.dot(A, x) bit for bit on this
+    """Whether numba's np.dot(A, x) (the compiled chunk's A x) gives numpy's np.dot(A, x) bit for bit on this
     machine (both call a BLAS, not necessarily the same library), on a few vectors of this A (the answer kept per
     A: a study's runs of one plant ask once)."""
     known = _GEMV.setdefault("agrees", {})
@@ -143,7 +143,6 @@ class LinearPlant(AnalyticPlant):
     A (n, n), B (n,), C (n,); dt: step [s]; delay_steps: D >= 0; ctrl_range: (lo, hi) or None."""
 
     kernel = KERNEL
-    compiled_loop = "adaptive_mj.sim.native_analytic"
     joint_shape: tuple[int, ...] = ()
     joint_names: tuple[str, ...] = ()
     first_contact: tuple[float, str] | None = None

@@ -80,7 +80,7 @@ def twin_state(p, x, y):
         y[i] = x[i]
 
 
-MAX_ORDER = 3  # the twin's order n at most in the compiled loop (the heave vehicle's lag is order 3)
+MAX_ORDER = 3  # the twin's order n at most in the compiled chunk (the heave vehicle's lag is order 3)
 
 
 def _form_functions(plant: TwinPlant) -> dict:
@@ -107,7 +107,6 @@ class TwinPlant(AnalyticPlant):
     first_contact: tuple[float, str] | None = None  # no contacts in the analytic twin
     joint_limits: np.ndarray | None = None  # a 1-DOF plant's joint is not limited
     kernel = KERNEL
-    compiled_loop: str | None = "adaptive_mj.sim.native_twin"
 
     def __init__(self, form: ModelForm, theta, *, dt: float, integrator: Integrator = Integrator.RK4,
                  ctrl_range: tuple[float, float] | None = None, x0=None):

@@ -36,7 +36,6 @@ itself (adaptive_mj.sim.native, laws.composite), the quadrotor's L1 filters like
 """
 from __future__ import annotations
 
-import importlib
 import math
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -530,13 +529,8 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
     make: Callable[..., ContextOwner]
     if getattr(plant, "state_names", ()):  # a quadrotor: its own compiled callback (the flight kernel inside)
         from adaptive_mj.sim.native_flight import NativeFlightController as make, supported
-    elif isinstance(plant, AnalyticPlant):  # an analytic plant: the compiled loop it names where there is one (the
-        # linear plant under MRAC, the twin under the first-order or a sliding law: one compiled call steps a chunk),
-        # else the Python path
-        if plant.compiled_loop is None:
-            return None
-        loop_module = importlib.import_module(plant.compiled_loop)
-        make, supported = loop_module.Controller, loop_module.supported
+    elif isinstance(plant, AnalyticPlant):  # an analytic plant: the chunk engine compiles the kernel its kind declares
+        from adaptive_mj.sim.native_chunk import ChunkController as make, supported
     elif plant.joint_shape:  # a manipulator: its own compiled callback (regressor inside)
         from adaptive_mj.sim.native_manipulator import NativeManipulatorController as make, supported
     else:
