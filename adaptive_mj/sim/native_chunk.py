@@ -15,8 +15,8 @@ chunk by chunk like the MuJoCo callbacks (events, noise, divergence and rows bet
 step_native(n) calling this controller's `advance`.
 
 The laws it compiles (`law_kernel`, each with one signature law(x, r, θ̂_i, gains, arrays, lower, upper, rate)
--> (u, s), its gains a record and its arrays passed as arrays, no addresses): MRAC with the Lyapunov rule and no ψ
-(laws.mrac: mrac_regressor, mrac_values), the lecture's first-order law (laws.first_order.first_order_values),
+-> (u, s): its gains record passed as a record, its arrays end to end in one buffer): MRAC with the Lyapunov rule
+and no ψ (laws.mrac: mrac_regressor, mrac_values), the lecture's first-order law (laws.first_order.first_order_values),
 the sliding laws (laws.sliding.sliding_law_values) and a law plugin's function (laws.plugin, then
 laws.common.plugin_rate), each the arithmetic its Python law calls; every other law (the MIT rule, composite
 adaptation, MRAC with ψ) takes the Python path. The law's form (φ, f, h of the model it is designed on) and the
@@ -26,8 +26,10 @@ Before each chunk Python evaluates the reference at the stage times (a reference
 reference.ModelResponse: its scalar calls' bits, vectorised; any other: stage.stage_references, vectorised) and
 the external force per step (force_offset + disturbance(t), AnalyticPlant.step_force's arithmetic). The context
 record (CONTEXT: stage.control_stage's fields, then this engine's) holds the run's state and its buffers'
-addresses; the compiled function is cached on disk (numba cache=True) under a key of every source it compiles in
-(native_context.source_key). tests/test_native_analytic.py, tests/test_native_twin.py and
+addresses (read as arrays through native_step.view: views without a reference count, which arrays carried in a
+tuple through the inlined pieces would pay at every access, 3-5x the chunk's time per step); the compiled
+function is cached on disk (numba cache=True) under a key of every source it compiles in (native_context
+.source_key). tests/test_native_analytic.py, tests/test_native_twin.py and
 tests/test_analytic_kernel.py (a kind declared in the test alone) show both paths give the same rows bit for bit.
 """
 from __future__ import annotations
@@ -56,36 +58,40 @@ from adaptive_mj.sim.stage import control_stage, stage_estimate
 
 _i8, _f8 = np.int64, np.float64
 #: the engine's context fields after native_step.STAGE_CONTEXT: the law's order n (the observation's length), the
-#: plant's control limits [lo, hi] (±inf: none) and its input delay (in_delay whole steps)
-CONTEXT = native_step.context_dtype([("n", _i8), ("lo", _f8), ("hi", _f8), ("in_delay", _i8)])
-
-#: the order of the buffers a chunk hands the pieces (io[2]): the references (rows · stages, n+1), the noise
-#: (rows, n), the measured state (n,), the stage estimate (n_theta,), the law's s held (1,), the row records
-#: (rows, record_columns' width), the law's gains record (1,) and the law's arrays (a tuple)
-REF, NOISE, SEEN, TH, S_HOLD, REC, GAINS, ARRAYS = range(8)
+#: plant's control limits [lo, hi] (±inf: none), its input delay (in_delay whole steps); the buffers (addresses:
+#: read through native_step.view, no reference counts in the loop): ref (rows · stages, n+1) the references, noise
+#: (rows, n), seen (n,) the measured state, th (n_theta,) the stage estimate, s_hold (1,) the law's s held, rec
+#: (rows, record_columns' width) the rows, law (nlaw,) the law's arrays end to end (law_of)
+CONTEXT = native_step.context_dtype([
+    ("n", _i8), ("lo", _f8), ("hi", _f8), ("in_delay", _i8),
+    ("ref", _i8), ("noise", _i8), ("seen", _i8), ("th", _i8), ("s_hold", _i8), ("rec", _i8), ("law", _i8),
+    ("nlaw", _i8),
+])
 
 
 # --- the pieces of stage.control_stage, and the control of analytic_step --------------------------------------
 def law_kernel(x, r, th, g, a, lower, upper, rate):
+    # x (n,) the measured state, r (n+1,) the reference, th (n_theta,) the stage estimate, g the gains record, a the
+    # law's arrays end to end (nlaw,), lower, upper the box, rate (n_theta,) out: returns (u, s)
     """The law at a stage (bound per variant: _mrac_law, _first_order_law, _sliding_law, _plugin_law)."""
     raise NotImplementedError("the chunk engine binds the law's kernel (native_chunk.compiled)")
 
 
 def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
     """The law at a stage (stage.control_stage's law_stage): the stage's observation io[0] + the step's noise, the
-    stage estimate θ̂_i, the law on the stage's reference, u clamped into [lo, hi] as Python's min(max(u, lo), hi)
-    and held with s (u_hold, s_hold), the rate into ctx.rate."""
-    y, b = io[0], io[2]
-    n = ctx.n
+    stage estimate θ̂_i, the law on the stage's reference (its gains record io[2]), u clamped into [lo, hi] as
+    Python's min(max(u, lo), hi) and held with s (u_hold, s_hold), the rate into ctx.rate."""
+    y = io[0]
+    n, nth = ctx.n, ctx.nth
     r0 = (row * ctx.nstages + stage) * (n + 1)
-    r = b[REF][r0:r0 + n + 1]
-    noise, seen, th = b[NOISE], b[SEEN], b[TH]
+    r = view(ctx.ref, r0 + n + 1)[r0:r0 + n + 1]
+    noise, seen, th = view(ctx.noise, (row + 1) * n), view(ctx.seen, n), view(ctx.th, nth)
     for i in range(n):
         seen[i] = y[i] + noise[row * n + i]
     stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)
-    u, s = law_kernel(seen, r, th, b[GAINS][0], b[ARRAYS], lower, upper, view(ctx.rate, ctx.nth))
+    u, s = law_kernel(seen, r, th, io[2], view(ctx.law, ctx.nlaw), lower, upper, view(ctx.rate, nth))
     view(ctx.u_hold, 1)[0] = clamp(u, ctx.lo, ctx.hi)
-    b[S_HOLD][0] = s
+    view(ctx.s_hold, 1)[0] = s
 
 
 def _apply_control(ctx, io, row, u):
@@ -97,17 +103,17 @@ def _record_row(ctx, io, row, u, theta):
     """The step's row at stage 0 in the record buffer's named columns (native.record_columns): t, the observation
     at the step's start (io[0], before noise), the applied u, the held s, the reference at t_k and θ̂ at the step's
     start."""
-    b = io[2]
     n, nth = ctx.n, ctx.nth
     col = record_columns(n, nth)
-    rec, ref = b[REC], b[REF]
+    rec = view(ctx.rec, (row + 1) * col.width)
     r0 = row * ctx.nstages * (n + 1)
+    ref = view(ctx.ref, r0 + n + 1)
     o = row * col.width
     rec[o + col.t] = ctx.t
     for i in range(n):
         rec[o + col.x + i] = io[0][i]
     rec[o + col.u] = u[0]
-    rec[o + col.s] = b[S_HOLD][0]
+    rec[o + col.s] = view(ctx.s_hold, 1)[0]
     for i in range(n + 1):
         rec[o + col.ref + i] = ref[r0 + i]
     for j in range(nth):
@@ -140,48 +146,60 @@ def user_law(x, r, th, phi, f, h, params, rate):
 
 
 def _mrac_law(x, r, th, g, a, lower, upper, rate):
-    """MRAC, the Lyapunov rule without ψ (MracLaw's arithmetic: laws.mrac.mrac_regressor, mrac_values); a = (α,
-    P b_n, Γ, 1/Γ, θ₀, ω (scratch), a zero vector (n_theta,)); s as the law logs it, -eᵀP b_n."""
-    alpha, pb, gamma, inv_gamma, theta0, omega, dummy = a
+    """MRAC, the Lyapunov rule without ψ (MracLaw's arithmetic: laws.mrac.mrac_regressor, mrac_values); a = [α (n),
+    P b_n (n), Γ, 1/Γ, θ₀, ω (scratch), zeros (n_theta each)]; s as the law logs it, -eᵀP b_n."""
+    n, nth = x.shape[0], th.shape[0]
+    alpha, pb = a[0:n], a[n:2 * n]
+    o = 2 * n
+    gamma, inv_gamma, theta0 = a[o:o + nth], a[o + nth:o + 2 * nth], a[o + 2 * nth:o + 3 * nth]
+    omega, dummy = a[o + 3 * nth:o + 4 * nth], a[o + 4 * nth:o + 5 * nth]
     mrac_regressor(x, r, alpha, g.beta, dummy[:0], omega)
     u, s = mrac_values(x, r, th, omega, dummy, pb, gamma, inv_gamma, g.sign_b, False, g.always, g.dz_width,
                        g.dz_on_s, g.sigma, g.e_mod, theta0, lower, upper, rate)
     return u, -s
 
 
+def _form_arrays(a, n, nth):
+    """A form law's arrays (a = [the surface's coefficients (n), Γ (n_theta), θ₀ (n_theta), a plugin's parameters])
+    as (coefficients, Γ, θ₀, parameters)."""
+    return a[0:n], a[n:n + nth], a[n + nth:n + 2 * nth], a[n + 2 * nth:]
+
+
 def _first_order_law(x, r, th, g, a, lower, upper, rate):
-    """The lecture's first-order law (laws.first_order.first_order_values); a = (unused, Γ, θ₀, unused)."""
-    return first_order_values(x, r, th, g, a[1], a[2], lower, upper, phi_fn(x), f_fn(x), h_fn(x), rate)
+    """The lecture's first-order law (laws.first_order.first_order_values)."""
+    _, gamma, theta0, _ = _form_arrays(a, x.shape[0], th.shape[0])
+    return first_order_values(x, r, th, g, gamma, theta0, lower, upper, phi_fn(x), f_fn(x), h_fn(x), rate)
 
 
 def _sliding_law(x, r, th, g, a, lower, upper, rate):
-    """A sliding law (laws.sliding.sliding_law_values); a = (the surface's coefficients, Γ, θ₀, unused)."""
-    u, s, _ = sliding_law_values(x, r, th, g, SlidingArrays(a[0], a[1], a[2], lower, upper), phi_fn(x), f_fn(x),
-                                 h_fn(x), rate)
+    """A sliding law (laws.sliding.sliding_law_values)."""
+    coeffs, gamma, theta0, _ = _form_arrays(a, x.shape[0], th.shape[0])
+    u, s, _ = sliding_law_values(x, r, th, g, SlidingArrays(coeffs, gamma, theta0, lower, upper), phi_fn(x),
+                                 f_fn(x), h_fn(x), rate)
     return u, s
 
 
 def _plugin_law(x, r, th, g, a, lower, upper, rate):
     """A law plugin's function (laws.plugin: law(x, ref, theta, phi, f, h, params, rate) -> (u, s)), then the
-    shared modifications every plugin gets (laws.common.plugin_rate), as PluginLaw does in Python; a = (unused, Γ,
-    θ₀, the plugin's parameters)."""
-    u, s = user_law(x, r, th, phi_fn(x), f_fn(x), h_fn(x), a[3], rate)
+    shared modifications every plugin gets (laws.common.plugin_rate), as PluginLaw does in Python."""
+    _, gamma, theta0, params = _form_arrays(a, x.shape[0], th.shape[0])
+    u, s = user_law(x, r, th, phi_fn(x), f_fn(x), h_fn(x), params, rate)
     s_abs = abs(s)
     signal = s_abs if g.dz_on_s else abs(r[0] - x[0])
-    plugin_rate(rate, th, s_abs, signal, g.adapt, g.dz_width, g.sigma, g.e_mod, a[2], a[1], lower, upper)
+    plugin_rate(rate, th, s_abs, signal, g.adapt, g.dz_width, g.sigma, g.e_mod, theta0, gamma, lower, upper)
     return float(u), float(s)
 
 
 @dataclass(frozen=True)
 class LawKernel:
     """A law as the engine compiles it: its kernel function (law_kernel's signature), its gains record (1,) of
-    `dtype`, its arrays, its box (lower, upper), the form its φ, f, h come from (None: MRAC's) and a plugin's
-    function."""
+    `dtype`, its arrays end to end (the layout its kernel reads), its box (lower, upper), the form its φ, f, h come
+    from (None: MRAC's) and a plugin's function."""
 
     fn: Callable
     dtype: np.dtype
     gains: np.ndarray
-    arrays: tuple
+    arrays: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
     form: ModelForm | None = None
@@ -201,15 +219,15 @@ def law_of(law: Law, plant: Plant) -> LawKernel | None:
         if not law.compiled_form:
             return None
         p = law.native_arrays()
-        arrays = tuple(_f64(p[k]) for k in ("alpha", "pb", "gamma", "inv_gamma", "theta0")) + (np.zeros(nth),
-                                                                                               np.zeros(nth))
+        arrays = np.concatenate([_f64(p[k]) for k in ("alpha", "pb", "gamma", "inv_gamma", "theta0")]
+                                + [np.zeros(2 * nth)])
         return LawKernel(_mrac_law, MRAC_GAINS, p["gains"], arrays, _f64(p["lower"]), _f64(p["upper"]))
     form = getattr(law, "form", None)
     if form is None or form.order != plant_order(plant):
         return None
     if isinstance(law, FirstOrderAdaptiveLaw):
         p = law.native_arrays()
-        arrays = (np.zeros(1), _f64(p["gamma"]), _f64(p["theta0"]), np.zeros(1))
+        arrays = np.concatenate([np.zeros(law.order), _f64(p["gamma"]), _f64(p["theta0"])])
         return LawKernel(_first_order_law, FIRST_ORDER_GAINS, p["gains"], arrays, _f64(p["lower"]),
                          _f64(p["upper"]), form)
     if not law.native:
@@ -218,7 +236,8 @@ def law_of(law: Law, plant: Plant) -> LawKernel | None:
     if p.get("composite") is not None:
         return None
     plugin = p.get("plugin_law")
-    arrays = (_f64(p["coeffs"]), _f64(p["gamma"]), _f64(p["theta0"]), _f64(p.get("plugin_params", np.zeros(1))))
+    params = _f64(p.get("plugin_params", np.zeros(0))).reshape(-1)
+    arrays = np.concatenate([_f64(p["coeffs"]).reshape(-1)[:law.order], _f64(p["gamma"]), _f64(p["theta0"]), params])
     return LawKernel(_sliding_law if plugin is None else _plugin_law, SLIDING_GAINS if plugin is None else
                      PLUGIN_GAINS, p["gains"], arrays, _f64(p["lower"]), _f64(p["upper"]), form, plugin)
 
@@ -235,15 +254,15 @@ def chunk_factory(njit, key):
     `callback`, apart per variant: every variant of one kind and law has the same argument types)."""
 
     @njit(cache=True, nogil=True)
-    def callback(context, p, x, ring, dist, k0, bufs, rows):
+    def callback(context, p, x, ring, dist, k0, gains, rows):
         """`rows` analytic steps of the plant from the context's state: x (n_x,) advanced in place; p the kind's
         params; ring (D + 1,) the plant's delay line; dist (rows,) the external force of each step; k0 the plant's
-        step count; bufs the pieces' buffers (REF ... ARRAYS)."""
+        step count; gains the law's (1,) gains record."""
         if key == 0:  # never: keeps the cache key in the closure
             return
         ctx = context[0]
         nx = x.shape[0]
-        io = (np.zeros(ctx.n), np.zeros(1), bufs)
+        io = (np.zeros(ctx.n), np.zeros(1), gains[0])
         xs, ks = np.empty(nx), np.empty((4, nx))
         rk4 = ctx.nstages == 4
         for r in range(rows):
@@ -259,8 +278,9 @@ def key_functions() -> tuple:
     """The functions compiled into every variant (and, through native_context.reached_functions, every function
     they call): the cache key hashes their modules' source, so an edit to any of them compiles afresh."""
     return (chunk_factory, analytic_step, _stage_control, control_stage, view, _law_stage, _apply_control,
-            _record_row, record_columns, _mrac_law, _first_order_law, _sliding_law, _plugin_law, mrac_values,
-            first_order_values, sliding_law_values, plugin_rate, stage_code.end_stage, stage_code.advance_estimates)
+            _record_row, record_columns, _mrac_law, _form_arrays, _first_order_law, _sliding_law, _plugin_law,
+            mrac_values, first_order_values, sliding_law_values, plugin_rate, stage_code.end_stage,
+            stage_code.advance_estimates)
 
 
 def _code(fn: Callable) -> tuple:
@@ -343,12 +363,11 @@ class ChunkController(ContextOwner):
         self.buffers = {
             "theta": _f64(np.array(theta_hat0, dtype=float).reshape(nth)), "rsum": np.zeros(nth),
             "prev": np.zeros(nth), "rate": np.zeros(nth), "lower": lk.lower, "upper": lk.upper,
-            "u_hold": np.zeros(1), "delayed": np.zeros(1), "ring": np.zeros((control.delay + 1, 1))}
+            "u_hold": np.zeros(1), "delayed": np.zeros(1), "ring": np.zeros((control.delay + 1, 1)),
+            "ref": np.zeros(max_rows * nst * (n + 1)), "noise": np.zeros(max_rows * n), "seen": np.zeros(n),
+            "th": np.zeros(nth), "s_hold": np.zeros(1), "rec": np.zeros(max_rows * self.columns.width),
+            "law": lk.arrays}
         self.theta = self.buffers["theta"]
-        # the pieces' buffers, in the order REF ... ARRAYS
-        self.bufs: tuple[Any, ...] = (np.zeros(max_rows * nst * (n + 1)), np.zeros(max_rows * n), np.zeros(n),
-                                      np.zeros(nth), np.zeros(1), np.zeros(max_rows * self.columns.width), self.gains,
-                                      lk.arrays)
         self.stage_offsets = np.asarray(stage_code.TABLEAU[nst][0])  # RK4: c_i = a_i (see stage.TABLEAU)
         self.dist = np.zeros(max_rows)
         inc, weights = stage_code.TABLEAU[nst]
@@ -361,7 +380,7 @@ class ChunkController(ContextOwner):
         c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
         for name, buf in self.buffers.items():
             c[name] = addr(buf)
-        c["nbox"] = len(lk.lower)
+        c["nbox"], c["nlaw"] = len(lk.lower), len(lk.arrays)
         self.context = ctx
 
     def prepare(self, rows: int, noise: np.ndarray | None) -> None:
@@ -375,8 +394,8 @@ class ChunkController(ContextOwner):
             refs = np.moveaxis(np.asarray(scalar_rows(times, n)), 1, 0)[which]
         else:
             t, refs = stage_code.stage_references(self.reference, plant.time, h, rows, self.stage_offsets, n)
-        self.bufs[REF][: rows * self.nst * (n + 1)] = refs.ravel()
-        self.bufs[NOISE][: rows * n] = 0.0 if noise is None else noise.ravel()
+        self.buffers["ref"][: rows * self.nst * (n + 1)] = refs.ravel()
+        self.buffers["noise"][: rows * n] = 0.0 if noise is None else noise.ravel()
         if plant.disturbance is None:  # AnalyticPlant.step_force's arithmetic (the offset + 0.0 without one)
             self.dist[:rows] = plant.force_offset + 0.0
         else:
@@ -390,7 +409,7 @@ class ChunkController(ContextOwner):
         step count where AnalyticPlant.step would."""
         plant = self.plant
         plant.x = np.ascontiguousarray(plant.x, dtype=np.float64)
-        self._chunk(self.context, self.kernel.params(plant), plant.x, plant._ring, self.dist, plant._k, self.bufs,
+        self._chunk(self.context, self.kernel.params(plant), plant.x, plant._ring, self.dist, plant._k, self.gains,
                     rows)
         plant.moved_to(float(self.context[0]["t"]), rows)
 
@@ -398,7 +417,7 @@ class ChunkController(ContextOwner):
         """The rows recorded over the `rows` steps just taken: t (rows,) [s], x (rows, n) the observation at each
         step's start, u (rows,) applied, s (rows,), ref (rows, n+1), theta_hat (rows, n_theta) at each step's
         start."""
-        return recorded_rows(self.context[0], self.bufs[REC], self.columns, self.n, rows, partial,
+        return recorded_rows(self.context[0], self.buffers["rec"], self.columns, self.n, rows, partial,
                              f"the analytic chunk engine ({self.kernel.name})")
 
     def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
