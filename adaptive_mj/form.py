@@ -20,7 +20,7 @@ import numpy as np
 
 def plain_dot(a: np.ndarray, b: np.ndarray) -> float:
     """a · b for two (m,) vectors, summed from index 0 with one rounding per product and per sum: the compiled
-    loops' order (adaptive_mj.sim.native_twin.twin_rate), so that both paths give the same bits on every machine.
+    loops' order (adaptive_mj.plants.twin.twin_rate), so that both paths give the same bits on every machine.
     numpy's `a @ b` hands the sum to BLAS, whose kernel depends on the CPU (OpenBLAS fuses the multiply and add on
     AVX-512: one ulp apart from this in about a quarter of draws)."""
     acc = 0.0

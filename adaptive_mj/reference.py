@@ -200,7 +200,7 @@ class ModelResponse:
     def scalar_rows(self, t, order: int) -> np.ndarray:
         """(order+1, T): [y_m, ..., y_m^(order)] at each of the times t (T,) [s], bit for bit what T calls
         `self(float(t_i), order)` give, in one vectorised pass (the compiled analytic loop's references,
-        adaptive_mj.sim.native_analytic). An array call of __call__ is not that: numpy multiplies complex
+        adaptive_mj.sim.native_chunk). An array call of __call__ is not that: numpy multiplies complex
         arrays with fused multiply-adds, complex scalars without, so here every complex product is written
         out in real arrays as numpy's scalar arithmetic computes it ((a+bi)(c+di) = (ac - bd) + (ad + bc)i,
         a complex times a real component by component); the constants (1jω)^k G(jω) and c_j λ_j^k are the

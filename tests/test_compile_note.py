@@ -177,7 +177,8 @@ def test_after_warmup_a_run_compiles_nothing(tmp_path):
                           timeout=600, check=True)
     said = _said(warm.stderr)
     assert len(said) == 2 and "compiled" in said[1]
-    assert said[0].startswith("adaptive-mj: compiling the twin's chunk stepper (a plant form of order 1, theta = ")
+    assert said[0].startswith(
+        "adaptive-mj: compiling the twin plant's chunk stepper (a plant form of order 1, theta = ")
     assert "1 variant compiled" in warm.stdout
     run = subprocess.run([sys.executable, "-m", "adaptive_mj", "run", "lecture_first_order", "--set",
                           "simulation.duration=6.0", "-o", str(tmp_path / "x.mcap")], env=env, capture_output=True,

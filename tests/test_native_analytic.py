@@ -1,4 +1,4 @@
-"""The compiled loop of the linear plant under MRAC (adaptive_mj.sim.native_analytic) gives the Python path's rows
+"""The compiled chunk of the linear plant under MRAC (adaptive_mj.sim.native_chunk) gives the Python path's rows
 bit for bit (np.array_equal, not allclose), its status and reason too; what it does not run falls back to the
 Python path; the law's shared arithmetic (laws.mrac.mrac_values) is the numpy expressions it replaced, bit for
 bit; the reference model's vectorised rows are its scalar calls' (reference.ModelResponse.scalar_rows)."""
@@ -16,7 +16,8 @@ from adaptive_mj.laws.mrac import MracLaw, Rule
 from adaptive_mj.reference import ModelResponse
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
-from adaptive_mj.sim import native_analytic
+from adaptive_mj.plants import linear
+from adaptive_mj.sim import native_chunk
 from adaptive_mj.runs.runner import execute
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
@@ -86,7 +87,7 @@ def test_python_callback_forces_the_python_path():
     traj = run_scenario(ROHRS, ["simulation.duration=1"], python=True)
     assert traj.meta["native"] is False
     setup = build(sc.load(ROHRS))
-    assert native_analytic.supported(setup.plant, setup.law)
+    assert native_chunk.supported(setup.plant, setup.law)
 
 
 def test_mrac_values_are_the_numpy_expressions_it_replaced():
@@ -164,7 +165,7 @@ def test_a_python_path_log_verifies_on_the_compiled_path(tmp_path, monkeypatch, 
 
     log = tmp_path / "rohrs.mcap"
     with monkeypatch.context() as m:
-        m.setattr(native_analytic, "supported", lambda plant, law: False)
+        m.setattr(native_chunk, "supported", lambda plant, law: False)
         result = execute(sc.load(ROHRS, overrides=["simulation.duration=25"]), log_path=log)
     assert result.trajectory.meta["native"] is False and str(result.trajectory.status) == "diverged"
     ok, message = verify(read_log(log))
@@ -175,15 +176,16 @@ def test_a_python_path_log_verifies_on_the_compiled_path(tmp_path, monkeypatch, 
 
 def test_the_cache_key_follows_every_compiled_source():
     """The compiled stepper's cache key hashes the modules of everything it compiles in, however deep: the law's
-    arithmetic (mrac_values → common.modify_rate, dead_zone_open), the step's order (stage.control_stage → clip_into)
-    and the stepper itself."""
+    arithmetic (mrac_values → common.modify_rate, dead_zone_open), the step's order (stage.control_stage → clip_into),
+    the plant's step (plants.analytic.analytic_step) and kernel (plants.linear) and the stepper itself."""
     import inspect
 
     from adaptive_mj.sim.native_context import reached_functions
 
-    fns = reached_functions(*native_analytic.key_functions())
+    fns = reached_functions(*native_chunk.key_functions(), linear.KERNEL.rate, linear.KERNEL.observe)
     names = {fn.__name__ for fn in fns}
     assert {"mrac_values", "mrac_regressor", "modify_rate", "dead_zone_open", "clip_into", "control_stage",
-            "end_stage", "accumulate_rate", "delay_slot"} <= names
+            "end_stage", "accumulate_rate", "delay_slot", "analytic_step", "linear_rate"} <= names
     files = {Path(inspect.getsourcefile(fn) or "").name for fn in fns}
-    assert {"mrac.py", "common.py", "stage.py", "native_analytic.py", "native_step.py"} <= files
+    assert {"mrac.py", "common.py", "stage.py", "native_chunk.py", "native_step.py", "analytic.py",
+            "linear.py"} <= files

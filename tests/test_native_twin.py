@@ -1,4 +1,4 @@
-"""The twin's compiled loop (adaptive_mj.sim.native_twin) gives the Python path's rows bit for bit (np.array_equal,
+"""The twin's compiled chunk (adaptive_mj.sim.native_chunk) gives the Python path's rows bit for bit (np.array_equal,
 not allclose), its status and reason too, under the first-order law, the sliding laws and their modifications;
 what it does not run falls back to the Python path; the first-order law's shared arithmetic
 (laws.first_order.first_order_values) is the numpy expression it replaced; numba_util.scalar_power compiles to
@@ -17,7 +17,7 @@ from adaptive_mj.laws.first_order import FirstOrderGains, first_order_values
 from adaptive_mj.numba_util import scalar_power
 from adaptive_mj.setup import scenario as sc
 from adaptive_mj.setup.build import build
-from adaptive_mj.sim import native_twin
+from adaptive_mj.sim import native_chunk
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 
@@ -86,7 +86,7 @@ def test_what_it_does_not_run_falls_back_to_python():
     _same("lecture_heave", ["simulation.duration=1", "law.composite={gain=1.0, filter=2.0}"], native=False)
     _same("wing_rock_mrac", ["simulation.duration=1", "events=[]"], native=False)
     setup = build(sc.load(SCENARIOS / "wing_rock_mrac.toml"))
-    assert not native_twin.supported(setup.plant, setup.law)
+    assert not native_chunk.supported(setup.plant, setup.law)
 
 
 def test_first_order_values_is_the_expression_it_replaced():
@@ -139,8 +139,8 @@ def test_each_variant_is_named_apart():
     names = set()
     for name in ("lecture_phase_space", "lecture_first_order", "lecture_heave"):
         setup = build(sc.load(SCENARIOS / f"{name}.toml"))
-        law = setup.law
-        fn = native_twin.compiled(law.form, setup.plant.form, native_twin._law_variant(law))
+        plant = setup.plant
+        fn = native_chunk.compiled(plant.kernel, plant.kernel.functions(plant), native_chunk.law_of(setup.law, plant))
         names.add(fn.py_func.__qualname__)
         assert fn.py_func.__qualname__.startswith("chunk_factory_") and ".callback_" in fn.py_func.__qualname__
     assert len(names) == 3

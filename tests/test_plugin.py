@@ -260,7 +260,7 @@ def test_plugin_runs_natively_and_matches_its_python_path(on_path):
 
 def test_plugin_runs_compiled_on_the_twin_bit_for_bit(on_path):
     """The plugin's scenario on the analytic twin (plant.backend = "twin"): the twin's compiled loop
-    (adaptive_mj.sim.native_twin) runs the plugin's function and gives the Python path's rows bit for bit."""
+    (adaptive_mj.sim.native_chunk) runs the plugin's function and gives the Python path's rows bit for bit."""
     from adaptive_mj import run
     from adaptive_mj.setup.build import build
     from adaptive_mj.setup.scenario import load

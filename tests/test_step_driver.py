@@ -85,15 +85,13 @@ def test_every_plant_kind_declares_its_compiled_loop():
     from adaptive_mj.plants.mujoco_plant import MujocoPlant
     from adaptive_mj.plants.quadrotor import QuadrotorPlant
     from adaptive_mj.plants.twin import TwinPlant
-    from adaptive_mj.plants.wing_rock import MracWingRock
 
     expected = {MujocoPlant: "native", ManipulatorPlant: "native_manipulator", QuadrotorPlant: "native_flight",
-                LinearPlant: "native_analytic", TwinPlant: "native_twin"}
+                LinearPlant: "native_chunk", TwinPlant: "native_chunk"}
     for cls, module in expected.items():
         assert cls.compiled_loop == f"adaptive_mj.sim.{module}", cls
         loop_module = importlib.import_module(cls.compiled_loop)
         assert callable(loop_module.supported) and isinstance(loop_module.Controller, type)
-    assert MracWingRock.compiled_loop is None
 
 
 def test_an_episode_ends_on_the_plant_s_termination():

@@ -10,7 +10,7 @@ With a common.Modification: p̂' -= (σ + ν|x̃|)(p̂ - p₀)/gamma, projected 
 This is the n = 1 sliding law with d = 1 known and s = x̃; it is kept as its
 own class because it is the lecture's first example, written in its notation. Its arithmetic is
 `first_order_values`, plain loops that the Python class calls and the analytic twin's compiled loop
-(adaptive_mj.sim.native_twin) compiles.
+(adaptive_mj.sim.native_chunk) compiles.
 """
 from __future__ import annotations
 
@@ -113,7 +113,7 @@ class FirstOrderAdaptiveLaw(Law):
         return LawStep(float(u), rate, float(x_tilde), float(ref[1]))
 
     def native_arrays(self) -> dict[str, Any]:
-        """What the twin's compiled loop (adaptive_mj.sim.native_twin) takes of this law, by name: "gains", the
+        """What the analytic chunk engine (adaptive_mj.sim.native_chunk) takes of this law, by name: "gains", the
         FIRST_ORDER_GAINS record, and the arrays gamma, theta0, lower, upper (n_p,)."""
         return {"gains": self.gains.record(), "gamma": self.gamma, "theta0": self._theta0, "lower": self._lower,
                 "upper": self._upper}

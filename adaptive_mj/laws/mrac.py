@@ -29,7 +29,7 @@ The gains γ here are adaptation *rates* (the textbooks' Γ), unlike the lecture
 (laws.common.Modification) are applied with Γ: θ̂' -= (σ + ν|s|) Γ (θ̂ - θ₀), projection the same.
 
 Plain array code; no mujoco. The law's arithmetic is mrac_regressor and mrac_values, plain loops that MracLaw
-calls in Python and adaptive_mj.sim.native_analytic compiles: on the linear plant (adaptive_mj.plants.linear) the
+calls in Python and adaptive_mj.sim.native_chunk compiles: on the linear plant (adaptive_mj.plants.linear) the
 Lyapunov rule runs compiled, bit for bit the Python path's rows; the MIT rule (its filter) and the wing-rock
 plant (adaptive_mj.plants.wing_rock, its ψ) run on the Python path.
 """
@@ -109,7 +109,7 @@ def mrac_regressor(x, ref, alpha, beta, psi, omega):
     """ω = [x_1..x_n; r; ψ] into omega (n_theta,) in place, and r = (y_m^(n) + αᵀx_m) / β returned [unit of r].
     x: (≥ n,) the measured state; ref: (n+1,) [y_m, ..., y_m^(n)]; alpha: (n,); psi: (len ψ,) ψ(x), evaluated
     by the caller. Plain loops (αᵀx_m summed from 0 in order, as numpy's dot of a few entries does, bit for
-    bit): MracLaw calls it in Python, adaptive_mj.sim.native_analytic compiled."""
+    bit): MracLaw calls it in Python, adaptive_mj.sim.native_chunk compiled."""
     n = alpha.shape[0]
     acc = 0.0
     for i in range(n):
@@ -133,7 +133,7 @@ def mrac_values(x, ref, theta, omega, omega_f, pb, gamma, inv_gamma, sign_b, mit
     tangent cone (common.modify_rate with 1/Γ = inv_gamma as the stiffness). theta: (n_theta,) the stage estimate;
     gamma: (n_theta,) rates; theta0, lower, upper: (n_theta,) the modification's arrays. Plain loops, every dot
     summed from 0 in order (numpy's dot of a few entries gives the same bits): MracLaw calls it in Python and
-    adaptive_mj.sim.native_analytic compiles it."""
+    adaptive_mj.sim.native_chunk compiles it."""
     n = pb.shape[0]
     u = 0.0
     for i in range(theta.shape[0]):
@@ -224,7 +224,7 @@ class MracLaw(Law):
         return LawStep(u, rate, -s, float(ref[self.order]))
 
     def native_arrays(self) -> dict[str, Any]:
-        """What the compiled analytic loop (adaptive_mj.sim.native_analytic) takes of this law, by name: its
+        """What the analytic chunk engine (adaptive_mj.sim.native_chunk) takes of this law, by name: its
         scalars as one MRAC_GAINS record ("gains") and its arrays: alpha (n,), pb (n,), gamma and 1/gamma,
         theta0, lower, upper (n_theta,). The Lyapunov rule without ψ only (`compiled_form`)."""
         _, _, theta0, lower, upper = self._mod

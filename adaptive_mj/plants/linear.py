@@ -15,11 +15,13 @@ delay each stage's control drives that stage; with plant.input_delay = τ = D h 
 the plant is driven over step k by the control computed at stage 0 of step k - D, held over the
 step (zero before t = τ): an exact delay line of D steps on a zero-order-held input.
 
-Compiled: under MRAC with the Lyapunov rule (laws.mrac) the run is stepped by adaptive_mj.sim.native_analytic,
-one numba function per chunk of steps that runs this integration, its delay line and the law's stages
-(stage.control_stage) with the same arithmetic in the same order, bit for bit (tests/test_native_analytic.py):
-loop._run_native calls step_native(n). The MIT rule (its sensitivity filter), simulation.python_callback = true,
-and any law the compiled loop does not know take the Python path: `step`, the policy called at each stage.
+The step is plants.analytic.analytic_step with this kind's kernel (KERNEL: linear_rate, linear_output), on both
+paths. Compiled: under MRAC with the Lyapunov rule (laws.mrac) the run is stepped by the analytic chunk engine
+(adaptive_mj.sim.native_chunk), one numba function per chunk of steps that runs the same analytic_step and the
+law's stages (stage.control_stage), bit for bit (tests/test_native_analytic.py): the step driver
+(adaptive_mj.sim.driver) calls step_native(n). The MIT rule (its sensitivity filter),
+simulation.python_callback = true, and any law the engine does not compile take the Python path: `step`, the
+policy called at each stage.
 """
 from __future__ import annotations
 
@@ -28,10 +30,9 @@ from typing import Callable
 import numpy as np
 
 from adaptive_mj.errors import ScenarioError
-from adaptive_mj.form import plain_dot
 from adaptive_mj.plants import BuiltPlant
 from adaptive_mj.plants.protocol import Plant, Policy
-from adaptive_mj.plants.twin import PythonStepped
+from adaptive_mj.plants.analytic import AnalyticKernel, AnalyticPlant
 from adaptive_mj.laws.kinds import Form, MracState
 from adaptive_mj.plants.kinds import PlantKind, first_order, register
 from adaptive_mj.plants import plant_keys
@@ -68,20 +69,86 @@ def first_order_part(num, den) -> tuple[float, float]:
     return float(-den[1] / den[0]), float(num[0] / den[0])
 
 
-class LinearPlant(PythonStepped):
+def linear_params(plant: LinearPlant) -> tuple:
+    """(A (n_x, n_x), B (n_x,), C (n_x,)): what linear_rate and linear_output read."""
+    return plant.A, plant.B, plant.C
+
+
+def linear_rate(p, x, u, force, out):
+    """out (n_x,) = A x + B (u + force): A x as numpy's A @ x (np.dot: the BLAS matrix-vector product, the same
+    call compiled; `gemv_agrees` checks the two agree on the run's A), then B (u + force) added entry by entry."""
+    A, B = p[0], p[1]
+    np.dot(A, x, out)
+    for i in range(x.shape[0]):
+        out[i] = out[i] + B[i] * (u + force)
+
+
+def linear_output(p, x, y):
+    """y (1,) = [C x], summed from 0 in order with no fused multiply-add (form.plain_dot's sum)."""
+    C = p[2]
+    acc = 0.0
+    for i in range(x.shape[0]):
+        acc += C[i] * x[i]
+    y[0] = acc
+
+
+MAX_STATES = 8  # the order n_x of a plant the compiled chunk runs, at most
+
+
+def compiled_supports(plant: LinearPlant) -> bool:
+    """The compiled chunk runs a plant of order n_x <= MAX_STATES with RK4 on a machine where numba's
+    matrix-vector product is numpy's (gemv_agrees)."""
+    return plant.stages == 4 and plant.A.shape[0] <= MAX_STATES and gemv_agrees(np.ascontiguousarray(plant.A))
+
+
+_GEMV: dict = {}
+
+
+def gemv_agrees(A: np.ndarray) -> bool:
+    """Whether numba's np.dot(A, x) (the compiled chunk's A x) gives numpy's np.dot(A, x) bit for bit on this
+    machine (both call a BLAS, not necessarily the same library), on a few vectors of this A (the answer kept per
+    A: a study's runs of one plant ask once)."""
+    known = _GEMV.setdefault("agrees", {})
+    key = (A.shape, A.tobytes())
+    if key not in known:
+        if "gemv" not in _GEMV:
+            import numba
+
+            _GEMV["gemv"] = numba.njit(cache=True)(_gemv)
+        rng = np.random.default_rng(0)
+        ours, theirs = np.empty(A.shape[0]), np.empty(A.shape[0])
+        agree = True
+        for _ in range(16):
+            v = rng.normal(size=A.shape[0]) * 10.0 ** rng.integers(-3, 4, size=A.shape[0])
+            _GEMV["gemv"](A, v, ours)
+            _gemv(A, v, theirs)
+            agree = agree and np.array_equal(ours, theirs)
+        known[key] = agree
+    return known[key]
+
+
+def _gemv(A, x, out):
+    np.dot(A, x, out)
+
+
+#: the linear plant's dynamics, for both paths (plants.analytic.AnalyticKernel)
+KERNEL = AnalyticKernel("linear", params=linear_params, rate=linear_rate, observe=linear_output,
+                        supports=compiled_supports)
+
+
+class LinearPlant(AnalyticPlant):
     """x' = A x + B u(t - D dt), y = C x (see the module docstring). A FormPlant-like 1-DOF plant
     whose law-facing state is [y] (order 1) and whose "true parameters" are given by the caller in
     the law's coordinates (names, theta: MRAC's ideal gains for the modelled part).
 
     A (n, n), B (n,), C (n,); dt: step [s]; delay_steps: D >= 0; ctrl_range: (lo, hi) or None."""
 
+    kernel = KERNEL
     joint_shape: tuple[int, ...] = ()
     joint_names: tuple[str, ...] = ()
     first_contact: tuple[float, str] | None = None
-    compiled_loop = "adaptive_mj.sim.native_analytic"
     joint_limits: np.ndarray | None = None  # a 1-DOF plant's joint is not limited
     order = 1
-    stages = 4
 
     def __init__(self, A, B, C, *, dt: float, names: tuple[str, ...], theta, delay_steps: int = 0,
                  ctrl_range: tuple[float, float] | None = None):
@@ -96,67 +163,26 @@ class LinearPlant(PythonStepped):
         self.force_offset = 0.0  # a constant input disturbance, added to u
         self.disturbance: Callable[[float], float] | None = None
         self.x = np.zeros(self.A.shape[0])
-        self._t = 0.0
         self._policy: Policy | None = None
-        self._ring = np.zeros(self.delay_steps + 1)  # the stage-0 controls of the last D + 1 steps
-        self._k = 0
-        self._force = 0.0  # the input disturbance held over the current step
+        self.init_steps(1)
 
     @property
     def form(self):
         raise AttributeError("a linear plant has no ModelForm: law.kind = 'mrac' is its law")
 
-    @property
-    def time(self) -> float:
-        return self._t
-
     def set_state(self, x0) -> None:
         """x0: [y0]; the internal state is the least-norm x with C x = y0."""
         y0 = float(np.asarray(x0, dtype=float).reshape(-1)[0])
         self.x = y0 * self.C / float(self.C @ self.C)
-        self._t, self._k = 0.0, 0
-        self._ring[:] = 0.0
+        self.restart()
 
     def observe(self) -> np.ndarray:
-        return np.array([plain_dot(self.C, self.x)])  # the compiled loop's sum (native_analytic.output)
+        y = np.empty(1)
+        linear_output(linear_params(self), self.x, y)
+        return y
 
     def true_theta(self) -> np.ndarray:
         return self._theta
-
-    def _control(self, t: float, x: np.ndarray) -> float:
-        if self._policy is None:
-            raise RuntimeError("LinearPlant.step outside controlled_by(policy)")
-        u = float(self._policy(t, np.array([plain_dot(self.C, x)])))
-        if self.ctrl_range is not None:
-            u = min(max(u, self.ctrl_range[0]), self.ctrl_range[1])
-        return u
-
-    def _rate(self, x: np.ndarray, u: float) -> np.ndarray:
-        return self.A @ x + self.B * (u + self._force)
-
-    def step(self) -> None:
-        h, t, x = self.dt, self._t, self.x
-        self._force = self.force_offset + (self.disturbance(t) if self.disturbance is not None else 0.0)
-        u0 = self._control(t, x)
-        if self.delay_steps == 0:
-            k1 = self._rate(x, u0)
-            k2 = self._rate(x + h / 2 * k1, self._control(t + h / 2, x + h / 2 * k1))
-            k3 = self._rate(x + h / 2 * k2, self._control(t + h / 2, x + h / 2 * k2))
-            k4 = self._rate(x + h * k3, self._control(t + h, x + h * k3))
-        else:
-            D = self.delay_steps
-            self._ring[self._k % (D + 1)] = u0
-            held = self._ring[(self._k - D) % (D + 1)] if self._k >= D else 0.0
-            k1 = self._rate(x, held)
-            self._control(t + h / 2, x + h / 2 * k1)  # the law's stages (its estimates integrate by RK4)
-            k2 = self._rate(x + h / 2 * k1, held)
-            self._control(t + h / 2, x + h / 2 * k2)
-            k3 = self._rate(x + h / 2 * k2, held)
-            self._control(t + h, x + h * k3)
-            k4 = self._rate(x + h * k3, held)
-        self.x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        self._t = t + h
-        self._k += 1
 
 
 # --- built from a scenario ------------------------------------------------------

@@ -24,10 +24,10 @@ conductance U A (the wetted area, fouling); the [[events]] kind "batch" sets the
 
 Analytic (MuJoCo has no chemistry): the tank is a TwinPlant (plants.twin) of this form, RK4 at the scenario's
 timestep, so the lecture's sliding laws (at n = 1: s = ỹ, u = d̂ ẏ_d − φ p̂ + k ỹ, p̂' = −φ s/γ, d̂' = ẏ_d s/γ: the
-first-order law with the unknown d adapted too) run on it compiled, through the twin's compiled loop
-(adaptive_mj.sim.native_twin), and `fixed_nominal` (the same law, θ̂ frozen) is the fixed-gain baseline. Under MRAC
-(law.kind = "mrac", order 1) the true parameters are MRAC's ideal gains, the heat b a matched constant term
-(MracTank); that runs on the Python path, as MRAC on the wing-rock plant does.
+first-order law with the unknown d adapted too) run on it compiled, through the analytic chunk engine
+(adaptive_mj.sim.native_chunk, with the twin's kernel), and `fixed_nominal` (the same law, θ̂ frozen) is the
+fixed-gain baseline. Under MRAC (law.kind = "mrac", order 1) the true parameters are MRAC's ideal gains, the
+heat b a matched constant term (MracTank); that runs on the Python path, as MRAC on the wing-rock plant does.
 """
 from __future__ import annotations
 

@@ -38,8 +38,9 @@ Optional (a plant that names Plant as its base inherits the default in brackets)
                path; a compiled callback says at which step of its chunk); the run, or adaptive_mj.env's episode,
                ends with status "crashed" [None]
   compiled_loop  the module of the plant's compiled closed loop, which gives `supported(plant, law)` and
-               `Controller` (adaptive_mj.sim.native for a MujocoPlant, native_manipulator, native_flight,
-               native_analytic, native_twin); adaptive_mj.sim.loop dispatches on it [None: the Python path only]
+               `Controller` (adaptive_mj.sim.native for a MujocoPlant, native_manipulator, native_flight; native_chunk
+               for every plants.analytic.AnalyticPlant); adaptive_mj.sim.loop dispatches on it [None: the
+               Python path only]
 Optional, read where present (getattr: control_shape below; a plant without them is as in brackets):
   control_names  the k actuators' names where u is not one entry per joint (a quadrotor: 4 rotor thrusts on
                3 position axes; u is then (k,)) [(): u is shaped like joint_shape]

@@ -13,14 +13,14 @@ It also hosts the lecture's first-order example x' = sin x - a x + b x² + u.
 """
 from __future__ import annotations
 
-import contextlib
 import enum
-from typing import TYPE_CHECKING, Callable, Iterator
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from adaptive_mj.form import ModelForm
 from adaptive_mj.plants import BuiltPlant
+from adaptive_mj.plants.analytic import AnalyticKernel, AnalyticPlant
 from adaptive_mj.plants.protocol import Plant, Policy
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants.kinds import PlantKind, first_order, register
@@ -38,61 +38,66 @@ class Integrator(enum.Enum):
     EULER = "euler"
 
 
-class PythonStepped:
-    """What the plants stepped without MuJoCo (the twin, the linear plant) share: no MuJoCo warnings, a control
-    policy (t, x) -> u installed for the length of a run (protocol.Plant.controlled_by), and the hook of a
-    compiled loop. `compiled_loop` names the module of the plant's compiled closed loop (its `supported(plant,
-    law)` and `Controller`: adaptive_mj.sim.native_analytic for the linear plant under MRAC's Lyapunov rule,
-    adaptive_mj.sim.native_twin for the twin under the first-order or a sliding law); loop._native_controller
-    asks it whether it runs this plant under the run's law, and then drives it chunk by chunk through
-    controlled_natively/step_native like a MuJoCo plant. Every other run is stepped here, in Python (`step`)."""
-
-    _policy: Policy | None = None
-    _advance: Callable[[int], None] | None = None  # the compiled loop's chunk (controlled_natively)
-    compiled_loop: str | None = None  # the module of this plant's compiled loop, or None: none
-
-    def instability(self) -> str | None:
-        return None
-
-    def termination(self) -> str | None:
-        """None: an analytic plant does not crash (protocol.Plant.termination)."""
-        return None
-
-    def unmodelled_drag(self) -> float | None:
-        """None: the twin integrates its own form, nothing acts outside it."""
-        return None
-
-    def release(self) -> None:
-        """Nothing to hand back (no MjData)."""
-        return None
-
-    @contextlib.contextmanager
-    def controlled_by(self, policy: Policy) -> Iterator[None]:
-        self._policy = policy
-        try:
-            yield
-        finally:
-            self._policy = None
-
-    @contextlib.contextmanager
-    def controlled_natively(self, advance: Callable[[int], None]) -> Iterator[None]:
-        """For the length of a compiled run: step_native(n) calls advance(n) (the compiled loop's controller,
-        which steps this plant n steps in one compiled call)."""
-        self._advance = advance
-        try:
-            yield
-        finally:
-            self._advance = None
-
-    def step_native(self, nstep: int) -> None:
-        """nstep physics steps under the compiled loop (controlled_natively): the same steps as `step`, bit for
-        bit (tests/test_native_analytic.py, tests/test_native_twin.py)."""
-        if self._advance is None:
-            raise RuntimeError(f"{type(self).__name__}.step_native outside controlled_natively(advance)")
-        self._advance(nstep)
+def twin_params(plant: TwinPlant) -> tuple:
+    """(θ (n_theta,) of the form the twin integrates, d_known: the form has d = 1): what twin_rate reads."""
+    return np.ascontiguousarray(plant.form_theta, dtype=np.float64), plant.form.d_name is None
 
 
-class TwinPlant(PythonStepped):
+# The plant form's functions twin_rate calls, bound per plant (KERNEL.functions); unbound, they say so.
+def plant_phi(x):
+    raise NotImplementedError("twin_rate runs with the plant's form bound (KERNEL.functions)")
+
+
+def plant_f(x):
+    raise NotImplementedError("twin_rate runs with the plant's form bound (KERNEL.functions)")
+
+
+def plant_h(x):
+    raise NotImplementedError("twin_rate runs with the plant's form bound (KERNEL.functions)")
+
+
+def twin_rate(p, x, u, force, out):
+    """out (n,) = x' of the twin at state x (n,) under u and the external force [N or N m]: x[1:], then
+    y^(n) = (f + φ·p + h u + force) / d (ModelForm.highest_derivative, its operations in its order: φ·p summed
+    from 0 with no fused multiply-add, as form.plain_dot sums it; θ = [d, p] or, d_known, θ = p and d = 1), the
+    plant's form (plant_phi, plant_f, plant_h)."""
+    theta, d_known = p
+    n = x.shape[0]
+    for i in range(n - 1):
+        out[i] = x[i + 1]
+    first = 0 if d_known else 1
+    d = 1.0 if d_known else theta[0]
+    phi = plant_phi(x)
+    dot = 0.0
+    for j in range(phi.shape[0]):
+        dot += phi[j] * theta[first + j]
+    out[n - 1] = (plant_f(x) + dot + plant_h(x) * u + force) / d
+
+
+def twin_state(p, x, y):
+    """y (n,) = x: the law sees the twin's state."""
+    for i in range(x.shape[0]):
+        y[i] = x[i]
+
+
+MAX_ORDER = 3  # the twin's order n at most in the compiled chunk (the heave vehicle's lag is order 3)
+
+
+def _form_functions(plant: TwinPlant) -> dict:
+    form = plant.form
+    return {"plant_phi": form.phi, "plant_f": form.f, "plant_h": form.h}
+
+
+def _compiled_supports(plant: TwinPlant) -> bool:
+    return plant.stages in (1, 4) and plant.order <= MAX_ORDER
+
+
+#: the twin's dynamics, for both paths (plants.analytic.AnalyticKernel)
+KERNEL = AnalyticKernel("twin", params=twin_params, rate=twin_rate, observe=twin_state, functions=_form_functions,
+                        supports=_compiled_supports)
+
+
+class TwinPlant(AnalyticPlant):
     """form: the plant's structure; theta: (n_theta,) true parameters;
     dt: step [s]; ctrl_range: (lo, hi) or None; x0: (n,) initial state.
     A FormPlant (adaptive_mj.plants.protocol)."""
@@ -101,7 +106,7 @@ class TwinPlant(PythonStepped):
     joint_names: tuple[str, ...] = ()
     first_contact: tuple[float, str] | None = None  # no contacts in the analytic twin
     joint_limits: np.ndarray | None = None  # a 1-DOF plant's joint is not limited
-    compiled_loop: str | None = "adaptive_mj.sim.native_twin"
+    kernel = KERNEL
 
     def __init__(self, form: ModelForm, theta, *, dt: float, integrator: Integrator = Integrator.RK4,
                  ctrl_range: tuple[float, float] | None = None, x0=None):
@@ -111,12 +116,10 @@ class TwinPlant(PythonStepped):
         self.integrator = Integrator(integrator)
         self.ctrl_range = ctrl_range
         self.x = np.zeros(form.order) if x0 is None else np.array(x0, dtype=float)
-        self._t = 0.0
-        self._step_index = 0
         self._policy: Policy | None = None
         self.force_offset = 0.0  # constant external force, enters like h*u [N or N*m]
         self.disturbance: Callable[[float], float] | None = None  # t -> external force, at each step's start
-        self._force = 0.0
+        self.init_steps(form.order)
 
     @property
     def order(self) -> int:
@@ -133,14 +136,9 @@ class TwinPlant(PythonStepped):
         """Policy calls per step: 4 under RK4, else 1."""
         return 4 if self.integrator is Integrator.RK4 else 1
 
-    @property
-    def time(self) -> float:
-        return self._t
-
     def set_state(self, x0) -> None:
         self.x = np.array(x0, dtype=float)
-        self._t = 0.0
-        self._step_index = 0
+        self.restart()
 
     def observe(self) -> np.ndarray:
         return self.x.copy()
@@ -156,42 +154,6 @@ class TwinPlant(PythonStepped):
     def form_theta(self) -> np.ndarray:
         """(n_theta,) θ of the form this plant integrates (its true parameters; a subclass may name others)."""
         return self._theta
-
-    def moved_to(self, t: float, steps: int) -> None:
-        """The compiled loop (adaptive_mj.sim.native_twin) stepped `steps` steps and left the time at t [s]."""
-        self._t = t
-        self._step_index += steps
-
-    def _rate(self, t: float, x: np.ndarray) -> np.ndarray:
-        if self._policy is None:
-            raise RuntimeError("TwinPlant.step outside controlled_by(policy)")
-        u = self._policy(t, x)
-        if self.ctrl_range is not None:
-            u = min(max(u, self.ctrl_range[0]), self.ctrl_range[1])
-        dx = np.empty_like(x)
-        dx[:-1] = x[1:]
-        dx[-1] = self.form.highest_derivative(x, u, self._theta, external=self._force)
-        return dx
-
-    def step(self) -> None:
-        h, t, x = self.dt, self._t, self.x
-        self._force = self.force_offset + (self.disturbance(t) if self.disturbance is not None else 0.0)
-        if self.integrator is Integrator.RK4:
-            k1 = self._rate(t, x)
-            k2 = self._rate(t + h / 2, x + h / 2 * k1)
-            k3 = self._rate(t + h / 2, x + h / 2 * k2)
-            k4 = self._rate(t + h, x + h * k3)
-            self.x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        else:
-            dx = self._rate(t, x)
-            new = x.copy()
-            new[-1] = x[-1] + h * dx[-1]
-            for i in range(len(x) - 2, -1, -1):
-                new[i] = x[i] + h * new[i + 1]
-            self.x = new
-        # time as MuJoCo keeps it: one addition of h per step
-        self._t = t + h
-        self._step_index += 1
 
 
 def lecture_first_order_form() -> ModelForm:

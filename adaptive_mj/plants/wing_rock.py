@@ -63,8 +63,6 @@ class MracWingRock(TwinPlant):
     reference model's alpha (2,) and beta; a flight-condition event (set_true_theta with form θ)
     moves them."""
 
-    compiled_loop = None  # MRAC on the wing-rock plant runs on the Python path (ψ is a Python function)
-
     def __init__(self, theta, *, alpha, beta: float, dt: float, integrator, ctrl_range):
         super().__init__(form(), theta, dt=dt, integrator=integrator, ctrl_range=ctrl_range)
         self.alpha, self.beta = np.asarray(alpha, dtype=float), float(beta)

@@ -1,8 +1,9 @@
 """The closed loop: one definition of a control step, driven on the Python path (the policy inside
 MuJoCo's control callback, or an analytic twin's stages), on the native path (a compiled
 callback, adaptive_mj.sim.native / native_manipulator / native_flight; for an analytic plant, a compiled chunk of
-the plant's own steps: the linear plant under MRAC's Lyapunov rule, adaptive_mj.sim.native_analytic, and the
-analytic twin under the first-order or a sliding law, adaptive_mj.sim.native_twin) and by adaptive_mj.env. The
+the plant's own steps, adaptive_mj.sim.native_chunk, built from the kernel its kind declares: the linear plant
+under MRAC's Lyapunov rule, the analytic twin and the process tank under the first-order or a sliding law) and by
+adaptive_mj.env; each plant names its compiled loop (protocol.Plant.compiled_loop). The
 native path is taken wherever the plant and law have one (`_native_controller`; else, and with
 simulation.python_callback = true, the Python path): what is compiled is the MuJoCo plants' sliding laws,
 composite adaptation and law plugins, the arms' and the quadrotor's laws, the linear plant with MRAC and the twin

@@ -112,7 +112,7 @@ def record_columns(n: int, nth: int) -> RecordColumns:
 def recorded_rows(context, rec: np.ndarray, col: RecordColumns, n: int, rows: int, partial: bool,
                   what: str) -> tuple[np.ndarray, ...]:
     """The rows a compiled loop recorded over the `rows` steps just taken (this module's callback, or the analytic
-    twin's loop, sim.native_twin: the same record layout), copied out of its record buffer `rec` (flat, float64):
+    chunk engine, sim.native_chunk: the same record layout), copied out of its record buffer `rec` (flat, float64):
     t (rows,) [s], x (rows, n) the true state at each step's start, u (rows,) applied, s (rows,), ref (rows, n+1),
     theta_hat (rows, n_theta) at each step's start. context: the run's context record, whose row and stage must
     say the loop took exactly `rows` whole steps (unless partial: the first `rows` of a chunk cut short,
