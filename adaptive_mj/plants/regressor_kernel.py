@@ -588,33 +588,30 @@ def rne_law_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col
     """rne_torque for a law's estimates θ (n_params,): the standard parameters π = B θ first when has_base (B by
     columns: column c's entries bval[p] in rows bidx[p], p in [bptr[c], bptr[c + 1])), else π = θ (pi unused).
     tau (nv,) = Y θ + τ_known, Y the law's regressor (Y_standard B with a base map)."""
+    params = theta
     if has_base != 0:
         for i in range(pi.shape[0]):
             pi[i] = 0.0
         for c in range(theta.shape[0]):
             for p in range(bptr[c], bptr[c + 1]):
                 pi[bidx[p]] += bval[p] * theta[c]
-        rne_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp, dof_col_coul,
-                   arm_known, damp_known, coulomb_eps, cdof, xpos, xmat, subtree_com, cinert, gravity, v, w, a, pi,
-                   tau, scratch)
-    else:
-        rne_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp, dof_col_coul,
-                   arm_known, damp_known, coulomb_eps, cdof, xpos, xmat, subtree_com, cinert, gravity, v, w, a, theta,
-                   tau, scratch)
+        params = pi
+    # one call site: rne_torque is inlined into the compiled callback once, not once per branch (half the compile)
+    rne_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp, dof_col_coul,
+               arm_known, damp_known, coulomb_eps, cdof, xpos, xmat, subtree_com, cinert, gravity, v, w, a, params,
+               tau, scratch)
 
 
 def rne_law_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp, dof_col_coul, coulomb_eps,
                  cdof, xpos, xmat, subtree_com, v, a, s, has_base, bptr, bidx, bval, rate_std, rate, scratch):
     """rne_rate for a law: rate (n_params,) = Yᵀ s, Y the law's regressor (with a base map Bᵀ (Y_standardᵀ s),
     through rate_std (n_standard,)); after rne_law_torque at the same state."""
+    # one call site, as in rne_law_torque: rne_rate compiled in once
+    rne_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp, dof_col_coul, coulomb_eps,
+             cdof, xpos, xmat, subtree_com, v, a, s, rate_std if has_base != 0 else rate, scratch)
     if has_base != 0:
-        rne_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp, dof_col_coul, coulomb_eps,
-                 cdof, xpos, xmat, subtree_com, v, a, s, rate_std, scratch)
         for c in range(rate.shape[0]):
             acc = 0.0
             for p in range(bptr[c], bptr[c + 1]):
                 acc += bval[p] * rate_std[bidx[p]]
             rate[c] = acc
-    else:
-        rne_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp, dof_col_coul, coulomb_eps,
-                 cdof, xpos, xmat, subtree_com, v, a, s, rate, scratch)

@@ -35,9 +35,10 @@ from typing import Any, Callable, Iterator
 PREFIX = "adaptive-mj: "
 
 #: [s of CPU] a cold compile of each kind, measured (`adaptive-mj warmup --quick --jobs 2` with an empty cache,
-#: numba 0.68.1, 2026-12-07; docs/PERFORMANCE.md): the figure said where this machine has none of its own yet
-TYPICAL_CPU: dict[str, float] = {"1-DOF callback": 12.5, "arm callback": 43.0, "quadrotor callback": 15.0,
-                                 "linear MRAC chunk": 17.0, "twin chunk": 20.0}
+#: numba 0.68.1, 2026-12-07; the MuJoCo callbacks and the projection re-measured variant by variant after issue 51's
+#: item 4, bullet 1; docs/PERFORMANCE.md): the figure said where this machine has none of its own yet
+TYPICAL_CPU: dict[str, float] = {"1-DOF callback": 7.5, "arm callback": 24.0, "quadrotor callback": 12.5,
+                                 "projection": 3.5, "linear MRAC chunk": 17.0, "twin chunk": 20.0}
 
 #: what this process compiled: (what, seconds), in order (adaptive_mj.study.warmup reports them)
 COMPILED: list[tuple[str, float]] = []

@@ -53,6 +53,7 @@ from adaptive_mj.plants import Event, plant_order
 from adaptive_mj.plants.protocol import CtrlRange, Plant, control_shape, has_joints
 from adaptive_mj.sim import stage as st
 from adaptive_mj.sim import interrupt
+from adaptive_mj.sim import native_step
 from adaptive_mj.sim.driver import Drive, PythonSteps
 from adaptive_mj.sim.interrupt import deferred
 from adaptive_mj.sim.stage import TABLEAU, ControlTiming
@@ -422,8 +423,11 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
         return None
     try:
         if sensors is not None:
-            return make(plant, law, reference, theta_hat0, chunk, control=timing, sensors=sensors)
-        return make(plant, law, reference, theta_hat0, chunk, control=timing)
+            nc = make(plant, law, reference, theta_hat0, chunk, control=timing, sensors=sensors)
+        else:
+            nc = make(plant, law, reference, theta_hat0, chunk, control=timing)
+        native_step.projection_ready(nc.context)  # a run with the physically consistent projection: compiled once
+        return nc
     except Exception as exc:  # a user's law numba cannot compile: say why, run it in Python
         interrupt.reraise_stop(exc)  # a stop signal that came while numba compiled, wrapped by Python
         plugin = law.installed

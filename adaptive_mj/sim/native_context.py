@@ -187,6 +187,9 @@ class ContextOwner:
     def bind(self) -> None:
         """Point the plant's MjData at this run's context (the newest run on an MjData owns it); the
         plant holds the owner, so the context lives as long as the MjData can reach it."""
+        from adaptive_mj.sim.native_step import projection_ready
+
+        projection_ready(self.context)  # the projection compiled where this run has one (at its first bind)
         bind_context(self.plant.data, self.context)
         self.plant.native_owner = self
 

@@ -512,6 +512,20 @@ def _no_recursive_rate(ctx, th, rate, s_norm, adapting, lower, upper):
     return
 
 
+def _no_law_torque(parent, dofadr, dofnum, rootid, body_col, body_known, dof_col_arm, dof_col_damp, dof_col_coul,
+                   arm_known, damp_known, coulomb_eps, cdof, xpos, xmat, subtree_com, cinert, gravity, v, w, a, theta,
+                   has_base, bptr, bidx, bval, pi, tau, scratch):
+    """A plugin law's variant: the O(n) recursions (regressor_kernel.rne_law_torque) are never run (ctx.recursive
+    = 0), so they are not compiled into it (about 40 % of the arm callback's compile)."""
+    return
+
+
+def _no_law_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_damp, dof_col_coul, coulomb_eps,
+                 cdof, xpos, xmat, subtree_com, v, a, s, has_base, bptr, bidx, bval, rate_std, rate, scratch):
+    """A plugin law's variant: regressor_kernel.rne_law_rate is never run (ctx.recursive = 0; _no_law_torque)."""
+    return
+
+
 def _plugin_point(ctx, x, r, s, qd_r, qdd_r):
     """A JointLawPlugin's point(x, ref, params, v, w, a): where the regressor is evaluated. Returns (v, w, a)."""
     v = carray(fptr(ctx.vpt), ctx.nv)  # noqa: F821 (injected)
@@ -551,9 +565,9 @@ def compiled(plugin=None):
     key = source_key(*fns, native_step.callback_factory, stage_code.control_stage, _law_stage, _apply_control,
                      _record_row, _regressor, reference_terms, slotine_li_output, _builtin_point, _builtin_output,
                      _regressor_output, _builtin_recursive_output, _builtin_recursive_rate, _no_recursive_output,
-                     _no_recursive_rate, slotine_li_torque_output, slotine_li_rate_output, rk.rne_law_torque,
-                     rk.rne_law_rate, rk.rne_torque, rk.rne_rate, rk.rne_forward, rk._force_add, rk._bilinear_grad,
-                     rk._cinert_scalars, rk._cross, _plugin_point, _plugin_output, plugin_rate,
+                     _no_recursive_rate, _no_law_torque, _no_law_rate, slotine_li_torque_output, slotine_li_rate_output,
+                     rk.rne_law_torque, rk.rne_law_rate, rk.rne_torque, rk.rne_rate, rk.rne_forward, rk._force_add,
+                     rk._bilinear_grad, rk._cinert_scalars, rk._cross, _plugin_point, _plugin_output, plugin_rate,
                      stage_code.stage_estimate, stage_code.end_stage, stage_code.sense, context_address,
                      extra=(off, numba.__version__, str(SLOTINE_LI_GAINS), str(PLUGIN_GAINS)))
 
@@ -564,6 +578,9 @@ def compiled(plugin=None):
         common = {**common, "MODE_PD_GRAVITY": MODE_PD_GRAVITY, "RNE_SCRATCH": rk.RNE_SCRATCH,
                   # the law reads its gains through a pointer of
                   "gains_ptr": pointer(numba.from_dtype(SLOTINE_LI_GAINS if plugin is None else PLUGIN_GAINS))}
+        # Slotine–Li's O(n) recursions (ctx.recursive: a built-in law's evaluation "recursive"; a plugin needs Y)
+        recursions: dict[str, Any] = {"law_torque": jit_tree(rk.rne_law_torque, numba.njit, tag=tag, inner=inline),
+                      "law_rate": jit_tree(rk.rne_law_rate, numba.njit, tag=tag, inner=inline)}
         if plugin is None:
             law_point = jit_tree(_builtin_point, inline, tag=tag,
                                  ref_terms=jit_tree(reference_terms, inline, tag=tag), **common)
@@ -581,12 +598,12 @@ def compiled(plugin=None):
                                   **common)
             recursive_output = jit_tree(_no_recursive_output, inline, tag=tag, **common)
             recursive_rate = jit_tree(_no_recursive_rate, inline, tag=tag, **common)
+            recursions = {"law_torque": jit_tree(_no_law_torque, inline, tag=tag),
+                          "law_rate": jit_tree(_no_law_rate, inline, tag=tag)}
         regressor_output = jit_tree(_regressor_output, numba.njit, tag=tag,
                                     regressor=jit_tree(_regressor, numba.njit, tag=tag, inner=inline),
                                     law_output=law_output, **common)
-        return {"law_stage": jit_tree(_law_stage, numba.njit, tag=tag, regressor_output=regressor_output,
-                                      law_torque=jit_tree(rk.rne_law_torque, numba.njit, tag=tag, inner=inline),
-                                      law_rate=jit_tree(rk.rne_law_rate, numba.njit, tag=tag, inner=inline),
+        return {"law_stage": jit_tree(_law_stage, numba.njit, tag=tag, regressor_output=regressor_output, **recursions,
                                       law_recursive_output=recursive_output, law_recursive_rate=recursive_rate,
                                       law_point=law_point, **common),
                 "apply_control": jit_tree(_apply_control, inline, tag=tag, **common),
@@ -693,6 +710,8 @@ class NativeManipulatorController(ContextOwner):
         c["nparams"] = len(buf["params"])
         c["has_base"] = int(B is not None)
         c["recursive"] = int(bool(p.get("recursive", False)))
+        if c["recursive"] and "plugin_law" in p:  # its variant has no recursions compiled in (_no_law_torque)
+            raise ValueError("a law plugin's arm callback evaluates the regressor whole, not Slotine-Li's recursions")
         c["mode"], c["period_steps"], c["delay"], c["period"] = control.mode, control.steps, d, control.period
         c["h"] = plant.dt
         c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights

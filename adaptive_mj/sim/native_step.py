@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     fptr: Any
     context_address: Any
     control_stage: Any
+    project_bodies: Any
 
 _i8, _f8 = np.int64, np.float64
 #: the context fields every shape's record holds because stage.control_stage and end_stage read them (its
@@ -91,21 +92,121 @@ def view(a, shape):
     return carray(fptr(a), shape)  # noqa: F821 (injected)
 
 
+#: the symbol of the process's one int64 cell holding the address of the compiled projection (projection_cell)
+PROJECTION_SYMBOL = "adaptive_mj_project_bodies_address"
 _PROJECTION: dict = {}
+
+
+def projection_cell():
+    """The int64 cell (ctypes, one per process) that the compiled code reads the projection's address from, by the
+    symbol PROJECTION_SYMBOL: registered with LLVM's symbol table before any variant that names it is compiled or
+    loaded from numba's cache (its machine code keeps the symbol, resolved when it is loaded: no address of this
+    process is compiled in). 0 until projection_ready() puts the compiled projection there."""
+    if "cell" not in _PROJECTION:
+        import ctypes
+
+        from llvmlite import binding as ll
+
+        cell = ctypes.c_int64(0)
+        ll.add_symbol(PROJECTION_SYMBOL, ctypes.addressof(cell))
+        _PROJECTION["cell"] = cell
+    return _PROJECTION["cell"]
+
+
+def _projection_factory(key):
+    """The physically consistent projection (laws.pseudo_inertia.project_bodies) as a C function of its own,
+    (theta, n_theta, record, record length, offset): compiled once on a machine (numba's cache, keyed by `key`,
+    the source of what it compiles in), loaded by a run that needs it (projection_ready)."""
+
+    @numba.cfunc(types.void(types.CPointer(types.float64), types.int64, types.CPointer(types.float64),  # noqa: F821
+                            types.int64, types.int64), nogil=True, cache=True)  # noqa: F821 (injected)
+    def callback(theta, n, record, length, offset):
+        if key == 0:  # never: keeps the cache key in the closure
+            return
+        project_bodies(carray(theta, n), carray(record, length), offset)  # noqa: F821 (injected)
+
+    return callback
+
+
+def projection_ready(context: np.ndarray) -> None:
+    """Before a run whose context says its box goes on past n_theta (nbox > nth: a physically consistent projection's
+    record, laws.common.clip_into): the projection compiled (or loaded) and its address in projection_cell(). A run
+    without one compiles nothing here."""
+    names = context.dtype.names or ()
+    if "nbox" not in names or int(context[0]["nbox"]) <= int(context[0]["nth"]) or "cfunc" in _PROJECTION:
+        return
+    import numba
+    from numba import carray, types
+
+    from adaptive_mj.laws import pseudo_inertia
+    from adaptive_mj.numba_util import jit_tree
+    from adaptive_mj.sim.native_context import source_key, unique_factory
+
+    key = source_key(pseudo_inertia.project_bodies, _projection_factory, extra=(numba.__version__,))
+    g = {**_projection_factory.__globals__, "numba": numba, "types": types, "carray": carray,
+         "project_bodies": jit_tree(pseudo_inertia.project_bodies, numba.njit)}
+    fn = unique_factory(_projection_factory, g, key, what="the physically consistent projection",
+                        kind="projection")(key)
+    _PROJECTION["cfunc"] = fn
+    projection_cell().value = fn.address
+
+
+def project_indirect():
+    """A numba intrinsic project(theta, record, offset) (C-contiguous float64 arrays, an integer offset): calls the
+    compiled projection at the address in projection_cell() (numba_util's pointer intrinsics do the same with an
+    address in the context). So the projection's eigen-solver and iteration are compiled once on a machine, not into
+    every variant, and only where a run needs them."""
+    if "intrinsic" in _PROJECTION:
+        return _PROJECTION["intrinsic"]
+    from llvmlite import ir
+    from numba import types
+    from numba.extending import intrinsic
+
+    projection_cell()
+
+    @intrinsic
+    def project(typingctx, theta, record, offset):
+        if not (isinstance(theta, types.Array) and isinstance(record, types.Array) and theta.layout == "C"
+                and record.layout == "C" and theta.dtype == types.float64 and record.dtype == types.float64
+                and isinstance(offset, types.Integer)):
+            return None
+        sig = types.void(theta, record, offset)
+
+        def codegen(context, builder, signature, args):
+            i64, dptr = ir.IntType(64), ir.DoubleType().as_pointer()
+            th = context.make_array(signature.args[0])(context, builder, args[0])
+            rc = context.make_array(signature.args[1])(context, builder, args[1])
+            mod = builder.module
+            cell = mod.globals.get(PROJECTION_SYMBOL)
+            if cell is None:
+                cell = ir.GlobalVariable(mod, i64, PROJECTION_SYMBOL)
+            fnty = ir.FunctionType(ir.VoidType(), [dptr, i64, dptr, i64, i64])
+            address = builder.load(cell)
+            off = context.cast(builder, args[2], signature.args[2], types.int64)
+            # 0: no projection_ready() in this process (a controller made outside sim.loop): nothing rather than a
+            # call to address 0 (every MuJoCo controller readies it when it binds, sim.loop for every kind)
+            with builder.if_then(builder.icmp_unsigned("!=", address, ir.Constant(i64, 0))):
+                fp = builder.inttoptr(address, fnty.as_pointer())
+                builder.call(fp, [th.data, builder.extract_value(th.shape, 0), rc.data,
+                                  builder.extract_value(rc.shape, 0), off])
+            return context.get_dummy_value()
+
+        return sig, codegen
+
+    _PROJECTION["intrinsic"] = project
+    return project
 
 
 def stage_functions(numba, inline, tag: str) -> dict[str, Any]:
     """STAGE_FUNCTIONS compiled for one callback variant (inlined into it), except the physically consistent
-    projection (laws.pseudo_inertia.project_bodies, which clip_into calls): compiled once per process as a function
-    of its own and called, not inlined, so its eigen-solver and iteration are not compiled again into every
-    variant at each of clip_into's call sites (that made a cold compile of each callback several times slower)."""
+    projection (laws.pseudo_inertia.project_bodies, which clip_into calls): a C function of its own, compiled once
+    on a machine and only for a run that needs it (projection_ready), called through its address
+    (project_indirect), so its eigen-solver and iteration are compiled into no variant (they were 2-2.5 s of CPU of
+    each variant's cold compile)."""
     from adaptive_mj.laws import common as law_common
-    from adaptive_mj.laws import pseudo_inertia
     from adaptive_mj.numba_util import jit_tree
 
-    if "project_bodies" not in _PROJECTION:
-        _PROJECTION["project_bodies"] = jit_tree(pseudo_inertia.project_bodies, numba.njit)
-    clip = jit_tree(law_common.clip_into, inline, tag=tag, project_bodies=_PROJECTION["project_bodies"])
+    clip = jit_tree(law_common.clip_into, inline, tag=tag, project_bodies=project_indirect())
     out = {name: jit_tree(getattr(stage_code, name), inline, tag=tag) for name in STAGE_FUNCTIONS
            if name not in ("stage_estimate", "advance_estimates", "end_stage")}
     out["stage_estimate"] = jit_tree(stage_code.stage_estimate, inline, tag=tag, clip_into=clip)
