@@ -359,6 +359,9 @@ REVIEWED = {
         "scan_built_in's package is a fixed name its two callers pass: adaptive_mj.plants or adaptive_mj.laws",
     ("adaptive_mj/plugins.py", 'importlib.import_module(f"{package}.{info.name}")'):
         "the modules of that package itself (pkgutil over its own folder)",
+    ("adaptive_mj/sim/loop.py", "importlib.import_module(plant.compiled_loop)"):
+        "a plant class's own declared attribute (protocol.Plant.compiled_loop: the module name its class states, "
+        "e.g. AnalyticPlant's adaptive_mj.sim.native_chunk), never scenario text",
     ("adaptive_mj/plants/kinds.py", "importlib.import_module(self.module)"):
         "a built-in kind's module is the __name__ of the module that registered it, never scenario text",
 }
