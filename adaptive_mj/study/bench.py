@@ -16,6 +16,7 @@ from adaptive_mj.study.beside import Beside
 from adaptive_mj.study.job import RunOutcome, as_expected
 from adaptive_mj.study.parallel import Backend, progress_printer, run_jobs, session
 from adaptive_mj.study.result import Study, Table
+from adaptive_mj.study.sections.quadrotor_flight import MARGIN_LOGS
 from adaptive_mj.trajectory import Status
 
 
@@ -215,8 +216,8 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
               + ("" if not study else f", the breaking-point study {study_seconds:.1f} s")
               + f", the whole bench {elapsed:.1f} s wall time. Every number below was measured in this run; "
               f"every catalogue run's MCAP log is in `logs/`"
-              + ("" if full_logs or not any(s.key == "quadrotor" for s in sections) else
-                 " (the quadrotor margin grid's, `logs/quadrotor-margins/`, each its summary and a row per second)")
+              + ("" if full_logs or not (out / "logs" / MARGIN_LOGS).is_dir() else
+                 f" (the quadrotor margin grid's, `logs/{MARGIN_LOGS}/`, each its summary and a row per second)")
               + ("" if not study else ", the breaking-point study's in `stress/logs/`"
                  + ("" if full_logs else " (each its summary and a row per second: `bench --full-logs` keeps every "
                     "row)"))

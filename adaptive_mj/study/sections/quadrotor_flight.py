@@ -38,6 +38,10 @@ CLAIM = ("aircraft are among the systems whose dynamics change with configuratio
          "wind is flown by the same law, which must adapt to it.")
 
 
+#: the folder, under the bench's logs/, of the margin grid's runs (the report's header names it where it is there)
+MARGIN_LOGS = "quadrotor-margins"
+
+
 @register(18, "quadrotor", TITLE, CLAIM)
 def section(quick: bool, logs: Path, duration: float | None = None, full_logs: bool = False) -> Built:
     """The tasks (every law on each), and the margins on a grid (quick: 8 levels, 1 seed; full: 12, 2 seeds);
@@ -55,7 +59,7 @@ def section(quick: bool, logs: Path, duration: float | None = None, full_logs: b
     extra = [f"simulation.duration={min(duration, flight.RUN_SECONDS)}"] if duration is not None else []
     if not full_logs:
         extra.append(f"log.rate_hz={SUMMARY_LOG_RATE_HZ!r}")
-    margin_jobs = tuple(flight.grid_jobs(found, levels, seeds, logs / "quadrotor-margins", extra))
+    margin_jobs = tuple(flight.grid_jobs(found, levels, seeds, logs / MARGIN_LOGS, extra))
 
     def analyze(res, out):
         text, rows = _tasks(res, out)
