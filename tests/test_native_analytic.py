@@ -176,13 +176,15 @@ def test_a_python_path_log_verifies_on_the_compiled_path(tmp_path, monkeypatch, 
 
 def test_the_cache_key_follows_every_compiled_source():
     """The compiled stepper's cache key hashes the modules of everything it compiles in, however deep: the law's
-    arithmetic (mrac_values → common.modify_rate, dead_zone_open), the step's order (stage.control_stage → clip_into),
-    the plant's step (plants.analytic.analytic_step) and kernel (plants.linear) and the stepper itself."""
+    kernel, declared beside its kind, and its arithmetic (laws.mrac.mrac_kernel → mrac_values → common.modify_rate,
+    dead_zone_open), the step's order (stage.control_stage → clip_into), the plant's step
+    (plants.analytic.analytic_step) and kernel (plants.linear) and the stepper itself."""
     import inspect
 
+    from adaptive_mj.laws.mrac import mrac_kernel
     from adaptive_mj.sim.native_context import reached_functions
 
-    fns = reached_functions(*native_chunk.key_functions(), linear.KERNEL.rate, linear.KERNEL.observe)
+    fns = reached_functions(*native_chunk.key_functions(mrac_kernel), linear.KERNEL.rate, linear.KERNEL.observe)
     names = {fn.__name__ for fn in fns}
     assert {"mrac_values", "mrac_regressor", "modify_rate", "dead_zone_open", "clip_into", "control_stage",
             "end_stage", "accumulate_rate", "delay_slot", "analytic_step", "linear_rate"} <= names

@@ -135,6 +135,10 @@ class CompositeSlidingLaw(SlidingAdaptiveLaw):
         """The sliding law's (SlidingAdaptiveLaw.native_params) and "composite": (κ, λ_f)."""
         return {**super().native_params(), "composite": (self.kappa, self.filter_rate)}
 
+    def chunk_kernel(self, order: int) -> None:
+        """None: the analytic chunk engine has no filters (the Python path runs it there)."""
+        return None
+
     def step_ends(self, xs, us, weights, h: float) -> None:
         """After a physics step: xs, us the measured stage states (n,) and applied controls the
         controller saw, weights the integrator's b_i, h the step [s]."""

@@ -24,6 +24,7 @@ from adaptive_mj.form import ModelForm
 from adaptive_mj.keys import Table
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, Gains, LawStep, Modification, as_gamma,
                                      dead_zone_open, modify_rate, record_dtype)
+from adaptive_mj.laws.kernel import LawKernel, f64, f_fn, form_arrays, form_law_arrays, h_fn, phi_fn
 from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, Law, SurfaceFeedback
 from adaptive_mj.laws.sliding import model_law_keys, read_model_law
@@ -72,6 +73,14 @@ def first_order_values(x, ref, theta, gains, gamma, theta0, lower, upper, phi, f
     return u, x_tilde
 
 
+def first_order_kernel(x, r, th, g, a, lower, upper, rate):
+    """The lecture's first-order law as the chunk engine compiles it (laws.kernel's signature: first_order_values
+    with φ, f, h of the law's form); g a FIRST_ORDER_GAINS record, a = [zeros (n), Γ, θ₀] (laws.kernel
+    .form_arrays)."""
+    _, gamma, theta0, _ = form_arrays(a, x.shape[0], th.shape[0])
+    return first_order_values(x, r, th, g, gamma, theta0, lower, upper, phi_fn(x), f_fn(x), h_fn(x), rate)
+
+
 class FirstOrderAdaptiveLaw(Law):
     """form: order-1 ModelForm with d_name=None (h is honoured; the lecture has h = 1).
 
@@ -117,6 +126,16 @@ class FirstOrderAdaptiveLaw(Law):
         FIRST_ORDER_GAINS record, and the arrays gamma, theta0, lower, upper (n_p,)."""
         return {"gains": self.gains.record(), "gamma": self.gamma, "theta0": self._theta0, "lower": self._lower,
                 "upper": self._upper}
+
+    def chunk_kernel(self, order: int) -> LawKernel | None:
+        """Its compiled form (laws.kernel: first_order_kernel over `native_arrays`) on a plant of its form's
+        order; None on another."""
+        if self.form.order != order:
+            return None
+        p = self.native_arrays()
+        return LawKernel(first_order_kernel, FIRST_ORDER_GAINS, p["gains"],
+                         form_law_arrays(np.zeros(self.order), p["gamma"], p["theta0"]), f64(p["lower"]),
+                         f64(p["upper"]), self.form, what="the first-order law")
 
     def lyapunov(self, s, theta_hat, theta, *, M: np.ndarray | None = None) -> np.ndarray:
         """V = ½ x̃² + ½ sum_i gamma_i p̃_i²."""

@@ -46,6 +46,7 @@ from adaptive_mj.keys import Key, Table
 from adaptive_mj.laws import law_keys as shared
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, Gains, LawStep, Modification, as_gamma,
                                      dead_zone_open, modify_rate, record_dtype)
+from adaptive_mj.laws.kernel import LawKernel, f64
 from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, Law
 from adaptive_mj.specs import LawSpec, MracSpec, PlantSpec
@@ -153,6 +154,21 @@ def mrac_values(x, ref, theta, omega, omega_f, pb, gamma, inv_gamma, sign_b, mit
     return u, s
 
 
+def mrac_kernel(x, r, th, g, a, lower, upper, rate):
+    """MRAC with the Lyapunov rule and no ψ as the chunk engine compiles it (laws.kernel's signature; MracLaw's
+    arithmetic: mrac_regressor, mrac_values); g an MRAC_GAINS record; a = [α (n), P b_n (n), Γ, 1/Γ, θ₀, ω
+    (scratch), zeros (n_theta each)]; s as the law logs it, -eᵀP b_n."""
+    n, nth = x.shape[0], th.shape[0]
+    alpha, pb = a[0:n], a[n:2 * n]
+    o = 2 * n
+    gamma, inv_gamma, theta0 = a[o:o + nth], a[o + nth:o + 2 * nth], a[o + 2 * nth:o + 3 * nth]
+    omega, dummy = a[o + 3 * nth:o + 4 * nth], a[o + 4 * nth:o + 5 * nth]
+    mrac_regressor(x, r, alpha, g.beta, dummy[:0], omega)
+    u, s = mrac_values(x, r, th, omega, dummy, pb, gamma, inv_gamma, g.sign_b, False, g.always, g.dz_width,
+                       g.dz_on_s, g.sigma, g.e_mod, theta0, lower, upper, rate)
+    return u, -s
+
+
 class MracLaw(Law):
     """Direct MRAC (see the module docstring).
 
@@ -231,6 +247,17 @@ class MracLaw(Law):
         return {"gains": self._scalars.record(), "alpha": self.alpha, "pb": self.pb, "gamma": self.gamma,
                 "inv_gamma": self._inv_gamma,
                 "theta0": theta0, "lower": lower, "upper": upper}
+
+    def chunk_kernel(self, order: int) -> LawKernel | None:
+        """Its compiled form (laws.kernel: mrac_kernel over `native_arrays`) where it has one (`compiled_form`);
+        None otherwise (the Python path). MRAC reads no model form: any plant order."""
+        if not self.compiled_form:
+            return None
+        p = self.native_arrays()
+        arrays = np.concatenate([f64(p[k]) for k in ("alpha", "pb", "gamma", "inv_gamma", "theta0")]
+                                + [np.zeros(2 * len(self.names))])
+        return LawKernel(mrac_kernel, MRAC_GAINS, p["gains"], arrays, f64(p["lower"]), f64(p["upper"]),
+                         what="MRAC, the Lyapunov rule")
 
     @property
     def compiled_form(self) -> bool:

@@ -63,6 +63,7 @@ from adaptive_mj.errors import PluginError
 from adaptive_mj.form import ModelForm
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
                                      Gains, plugin_rate, record_dtype)
+from adaptive_mj.laws.kernel import LawKernel, f64, f_fn, form_arrays, form_law_arrays, h_fn, phi_fn, user_law
 from adaptive_mj.laws.protocol import Box, Feedback, Law
 from adaptive_mj.plugins import Installed, discover
 
@@ -213,16 +214,18 @@ PLUGIN_GAINS = record_dtype(PluginGains)
 
 
 class _PluginBase(Law):
-    """What the 1-DOF and the multi-joint plugin laws share: the plugin, its params, the shared
-    modifications, the Lyapunov hook and the native flag."""
+    """What the 1-DOF and the multi-joint kernel laws share (a plugin's, and a built-in kind's written to the
+    plugin interface): the declaration (a LawPlugin), its params, the shared modifications, the Lyapunov hook and
+    the native flag."""
 
-    installed: Installed[LawPlugin]
+    installed: Installed[LawPlugin] | None = None  # where a plugin comes from; None: a built-in kind's
     native = True  # set False to force the Python callback (simulation.python_callback)
 
-    def _setup(self, installed: Installed[LawPlugin], names, params: np.ndarray, shared: Shared | None,
-               modification: Modification | None):
+    def _setup(self, plugin: LawPlugin, names, params: np.ndarray, shared: Shared | None,
+               modification: Modification | None, *, kind: str, installed: Installed[LawPlugin] | None = None):
         self.installed = installed
-        self.plugin = installed.plugin
+        self.plugin = plugin
+        self.kind = kind
         self.names = tuple(names)
         self.params = np.ascontiguousarray(params, dtype=float)
         self.adapt = bool(self.plugin.adapts)
@@ -236,8 +239,9 @@ class _PluginBase(Law):
 
     def _error(self, t: float, exc: Exception) -> PluginError:
         inst = self.installed
-        return PluginError(f"law plugin {inst.name!r} ({inst.distribution} {inst.version}) raised at t = {t:.6g} s: "
-                           f"{type(exc).__name__}: {exc}")
+        who = (f"law plugin {inst.name!r} ({inst.distribution} {inst.version})" if inst is not None
+               else f"law kind {self.kind!r}")
+        return PluginError(f"{who} raised at t = {t:.6g} s: {type(exc).__name__}: {exc}")
 
     def _shared_rate(self, rate: np.ndarray, theta_hat: np.ndarray, s_abs: float, e_abs: float) -> None:
         sh = self.shared
@@ -270,14 +274,35 @@ class _PluginBase(Law):
                              np.asarray(theta, dtype=float), self.params, M), dtype=float)
 
 
-class PluginLaw(_PluginBase):
-    """A plugin's law on a 1-DOF plant, with the loop's law interface (laws.protocol.Law);
-    ``native_params`` hands the function and its parameters to the native callback
-    (adaptive_mj.sim.native)."""
+def plugin_kernel(x, r, th, g, a, lower, upper, rate):
+    """A 1-DOF law function in the plugin form (laws.kernel.user_law: law(x, ref, theta, phi, f, h, params, rate)
+    -> (u, s), a plugin's or a built-in KernelLaw's) as the chunk engine compiles it (laws.kernel's signature),
+    then the shared modifications every such law gets (laws.common.plugin_rate), as KernelLaw does in Python; g a
+    PLUGIN_GAINS record, a = [zeros (n), Γ, θ₀, the law's params] (laws.kernel.form_arrays)."""
+    _, gamma, theta0, params = form_arrays(a, x.shape[0], th.shape[0])
+    u, s = user_law(x, r, th, phi_fn(x), f_fn(x), h_fn(x), params, rate)
+    s_abs = abs(s)
+    signal = s_abs if g.dz_on_s else abs(r[0] - x[0])
+    plugin_rate(rate, th, s_abs, signal, g.adapt, g.dz_width, g.sigma, g.e_mod, theta0, gamma, lower, upper)
+    return float(u), float(s)
 
-    def __init__(self, installed: Installed[LawPlugin], form: ModelForm, params: np.ndarray, *,
-                 shared: Shared | None = None, modification: Modification | None = None):
-        self._setup(installed, form.names, params, shared, modification)
+
+class KernelLaw(_PluginBase):
+    """A 1-DOF law whose law is a plain-array function in the plugin form (a LawPlugin's `law`: the module
+    docstring), with the loop's law interface (laws.protocol.Law) and the shared modifications every plugin gets.
+    A built-in law kind's builder returns one (docs/ADDING_A_LAW.md): it runs compiled as a plugin's law does, in
+    MuJoCo's 1-DOF callback (``native_params``: "plugin_law", adaptive_mj.sim.native) and in the analytic chunk
+    engine (``chunk_kernel``: plugin_kernel). PluginLaw is the same law of an installed plugin.
+
+    plugin: the declaration (its law, keys, adapts, lyapunov, gain, feedback); form: the plant's ModelForm; params:
+    the declared keys' values laid out as LawPlugin.layout says; kind: its law.kind (for messages)."""
+
+    def __init__(self, plugin: LawPlugin, form: ModelForm, params: np.ndarray, *, kind: str,
+                 shared: Shared | None = None, modification: Modification | None = None,
+                 installed: Installed[LawPlugin] | None = None):
+        if isinstance(plugin, JointLawPlugin):
+            raise TypeError("a JointLawPlugin's law is a JointKernelLaw's (a plant of joints), not a 1-DOF KernelLaw")
+        self._setup(plugin, form.names, params, shared, modification, kind=kind, installed=installed)
         self.form = form
         self.order = form.order
 
@@ -288,6 +313,20 @@ class PluginLaw(_PluginBase):
         return {"plugin_law": self.plugin.law, "plugin_params": self.params, "gains": self.gains().record(),
                 "coeffs": np.zeros(self.order), "gamma": sh.gamma, "theta0": sh.theta0, "lower": sh.lower,
                 "upper": sh.upper}
+
+    def chunk_kernel(self, order: int) -> LawKernel | None:
+        """Its compiled form in the analytic chunk engine (laws.kernel: plugin_kernel over the function and
+        `native_params`) on a plant of its form's order; None on another, or when its `native` is off."""
+        if not self.native or self.form.order != order:
+            return None
+        p = self.native_params()
+        fn = self.plugin.law
+        who = (f"law plugin {fn.__module__}.{fn.__qualname__}" if self.installed is not None
+               else f"law kind {self.kind!r} ({fn.__module__}.{fn.__qualname__})")
+        return LawKernel(plugin_kernel, PLUGIN_GAINS, p["gains"],
+                         form_law_arrays(f64(p["coeffs"]).reshape(-1)[:self.order], p["gamma"], p["theta0"],
+                                         p["plugin_params"]),
+                         f64(p["lower"]), f64(p["upper"]), self.form, fn, what=who)
 
     def __call__(self, t: float, x: np.ndarray, ref: np.ndarray, theta_hat: np.ndarray) -> LawStep:
         form = self.form
@@ -300,20 +339,38 @@ class PluginLaw(_PluginBase):
         return LawStep(float(u), rate, float(s), math.nan)
 
 
-class JointPluginLaw(_PluginBase):
+class PluginLaw(KernelLaw):
+    """An installed plugin's law on a 1-DOF plant (a KernelLaw of its LawPlugin; `installed` says where it comes
+    from, which the log records); ``native_params`` hands the function and its parameters to the native callback
+    (adaptive_mj.sim.native), ``chunk_kernel`` to the analytic chunk engine."""
+
+    def __init__(self, installed: Installed[LawPlugin], form: ModelForm, params: np.ndarray, *,
+                 shared: Shared | None = None, modification: Modification | None = None):
+        super().__init__(installed.plugin, form, params, kind=installed.name, shared=shared, modification=modification,
+                         installed=installed)
+
+
+class JointKernelLaw(_PluginBase):
     """A JointLawPlugin's law on a plant of m joints (adaptive_mj.plants.manipulator), with the loop's law
-    interface; regressor(v, w, a) -> (Y (m, n_theta), τ_known (m,)) is the plant's, at its current q.
-    ``native_params`` hands the functions and parameters to adaptive_mj.sim.native_manipulator."""
+    interface; regressor(v, w, a) -> (Y (m, n_theta), τ_known (m,)) is the plant's, at its current q. A built-in
+    kind's (installed None) runs on the Python path: the arm callback (adaptive_mj.sim.native_manipulator) takes
+    a multi-joint law function from an installed plugin's law only, JointPluginLaw (docs/ADDING_A_LAW.md)."""
 
     order = 2
+    native = False  # the arm callback compiles a JointPluginLaw's functions only (see the class docstring)
 
-    def __init__(self, installed: Installed[LawPlugin], regressor, names, m: int, params: np.ndarray, *,
-                 shared: Shared | None = None, modification: Modification | None = None):
-        self._setup(installed, names, params, shared, modification)
+    def __init__(self, plugin: LawPlugin, regressor, names, m: int, params: np.ndarray, *, kind: str,
+                 shared: Shared | None = None, modification: Modification | None = None,
+                 installed: Installed[LawPlugin] | None = None):
+        if not isinstance(plugin, JointLawPlugin):
+            raise TypeError("a JointKernelLaw's declaration is a JointLawPlugin (point and law)")
+        self._setup(plugin, names, params, shared, modification, kind=kind, installed=installed)
         self.regressor = regressor
         self.m = int(m)
 
     def native_params(self) -> dict[str, Any]:
+        """Its parameters, "gains" and the shared modifications' arrays (_PluginBase.native_params), and the
+        functions: "plugin_law" and "plugin_point" (adaptive_mj.sim.native_manipulator)."""
         plugin = self.plugin
         assert isinstance(plugin, JointLawPlugin)
         return {**super().native_params(), "plugin_law": plugin.law, "plugin_point": plugin.point}
@@ -331,6 +388,18 @@ class JointPluginLaw(_PluginBase):
             raise self._error(t, exc) from exc
         self._shared_rate(rate, theta_hat, joint_norm(s), tracking_error_norm(x, ref))
         return LawStep(u, rate, s, a)
+
+
+class JointPluginLaw(JointKernelLaw):
+    """An installed JointLawPlugin's law (a JointKernelLaw of it; `installed` says where it comes from, which the
+    log records); ``native_params`` hands the functions and parameters to adaptive_mj.sim.native_manipulator."""
+
+    native = True
+
+    def __init__(self, installed: Installed[LawPlugin], regressor, names, m: int, params: np.ndarray, *,
+                 shared: Shared | None = None, modification: Modification | None = None):
+        super().__init__(installed.plugin, regressor, names, m, params, kind=installed.name, shared=shared,
+                         modification=modification, installed=installed)
 
 
 def joint_norm(v) -> float:

@@ -31,6 +31,10 @@ Optional (the default in brackets):
   native_params()  the numbers that callback takes (a dict, by name; a 1-DOF law's scalar gains as one
                record under "gains", read by field name: laws.sliding.SlidingGains, laws.plugin.PluginGains)
                [none: raises]
+  chunk_kernel(order)  the law's compiled form in the analytic chunk engine (adaptive_mj.sim.native_chunk) on a
+               plant of output order `order`: a laws.kernel.LawKernel, its kernel declared beside the law's kind
+               (laws.mrac, laws.first_order, laws.sliding, laws.plugin's KernelLaw), or None [None: the Python
+               path]
   adapt        the estimates move (False: a fixed-parameter baseline) [True]
   feedback()   the law's feedback on its tracking error, as the pre-flight check
                (adaptive_mj.sim.preflight) and the analyses (adaptive_mj.study.analysis) read it: a
@@ -46,6 +50,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from adaptive_mj.laws.common import LawStep
+from adaptive_mj.laws.kernel import LawKernel
 from adaptive_mj.plugins import Installed
 
 Box = tuple[np.ndarray, np.ndarray]
@@ -128,6 +133,10 @@ class Law(Protocol):
     def native_params(self) -> dict[str, Any]:
         """The numbers the compiled callback takes (asked only when `native`)."""
         raise TypeError(f"{type(self).__name__} has no compiled form (its native is False)")
+
+    def chunk_kernel(self, order: int) -> LawKernel | None:
+        """The law's compiled form in the analytic chunk engine on a plant of output order `order`, or None."""
+        return None
 
     def feedback(self) -> Feedback | None:
         """The law's feedback gains (SurfaceFeedback, JointFeedback), or None where it declares none."""

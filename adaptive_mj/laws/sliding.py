@@ -29,6 +29,7 @@ from adaptive_mj.keys import Key, Table
 from adaptive_mj.laws import law_keys as shared
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, LawStep, Modification, as_gamma,
                                      Gains, dead_zone_open, modify_rate, record_dtype)
+from adaptive_mj.laws.kernel import LawKernel, f64, f_fn, form_arrays, form_law_arrays, h_fn, phi_fn
 from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, Law, SurfaceFeedback
 from adaptive_mj.specs import LawSpec, PlantSpec
@@ -161,6 +162,16 @@ def _check_gains(form: ModelForm, lam: float, k: float) -> None:
         raise ValueError(f"k must be finite and >= 0, got {k}")
 
 
+def sliding_kernel(x, r, th, g, a, lower, upper, rate):
+    """A sliding law as the chunk engine compiles it (laws.kernel's signature: sliding_law_values with φ, f, h of
+    the law's form); g a SLIDING_GAINS record, a = [the surface's coefficients (n), Γ, θ₀] (laws.kernel
+    .form_arrays)."""
+    coeffs, gamma, theta0, _ = form_arrays(a, x.shape[0], th.shape[0])
+    u, s, _ = sliding_law_values(x, r, th, g, SlidingArrays(coeffs, gamma, theta0, lower, upper), phi_fn(x),
+                                 f_fn(x), h_fn(x), rate)
+    return u, s
+
+
 class _SlidingBase(Law):
     """What the three sliding laws share: the surface, and the call into `sliding_law`."""
 
@@ -208,6 +219,16 @@ class _SlidingBase(Law):
         """What the native (numba) callback takes: "gains", the SLIDING_GAINS record of `gains()` (read by
         name through its address), and the arrays of `arrays()` by their names."""
         return {"gains": self.gains().record(), **self.arrays()._asdict()}
+
+    def chunk_kernel(self, order: int) -> LawKernel | None:
+        """Its compiled form (laws.kernel: sliding_kernel over `native_params`) on a plant of its form's order;
+        None on another, or when its `native` is off."""
+        if not self.native or self.form.order != order:
+            return None
+        p = self.native_params()
+        return LawKernel(sliding_kernel, SLIDING_GAINS, p["gains"],
+                         form_law_arrays(f64(p["coeffs"]).reshape(-1)[:self.order], p["gamma"], p["theta0"]),
+                         f64(p["lower"]), f64(p["upper"]), self.form, what="a sliding law")
 
     def feedback(self) -> SurfaceFeedback:
         """k on s, λ, and the gain of the linearised velocity feedback k + K/Φ (robust sliding) with the

@@ -14,13 +14,16 @@ sim.native.record_columns: one writer here, one reader, sim.native.recorded_rows
 chunk by chunk like the MuJoCo callbacks (events, noise, divergence and rows between chunks), the plant's
 step_native(n) calling this controller's `advance`.
 
-The laws it compiles (`law_kernel`, each with one signature law(x, r, θ̂_i, gains, arrays, lower, upper, rate)
--> (u, s): its gains record passed as a record, its arrays end to end in one buffer): MRAC with the Lyapunov rule
-and no ψ (laws.mrac: mrac_regressor, mrac_values), the lecture's first-order law (laws.first_order.first_order_values),
-the sliding laws (laws.sliding.sliding_law_values) and a law plugin's function (laws.plugin, then
-laws.common.plugin_rate), each the arithmetic its Python law calls; every other law (the MIT rule, composite
-adaptation, MRAC with ψ) takes the Python path. The law's form (φ, f, h of the model it is designed on) and the
-plant's (what the twin integrates) are compiled apart.
+The law it compiles is the one the law object declares beside its kind (laws.protocol.Law.chunk_kernel: a
+laws.kernel.LawKernel, found by declaration, with no list of law classes here): its kernel, with one signature
+law(x, r, θ̂_i, gains, arrays, lower, upper, rate) -> (u, s) (`law_kernel`: its gains record passed as a record, its
+arrays end to end in one buffer), bound per variant with the law form's φ, f, h and a law function in the plugin
+form (laws.kernel's placeholders). The built-in ones: MRAC with the Lyapunov rule and no ψ (laws.mrac.mrac_kernel),
+the lecture's first-order law (laws.first_order.first_order_kernel), the sliding laws (laws.sliding.sliding_kernel)
+and a law function in the plugin form, a plugin's or a built-in kind's (laws.plugin.plugin_kernel: PluginLaw,
+KernelLaw), each the arithmetic its Python law calls; a law that declares none (the MIT rule, composite
+adaptation, MRAC with ψ, a law in plain Python) takes the Python path. The law's form (φ, f, h of the model it is
+designed on) and the plant's (what the twin integrates) are compiled apart.
 
 Before each chunk Python evaluates the reference at the stage times (a reference with `scalar_rows`,
 reference.ModelResponse: its scalar calls' bits, vectorised; any other: stage.stage_references, vectorised) and
@@ -34,18 +37,12 @@ tests/test_analytic_kernel.py (a kind declared in the test alone) show both path
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
 
-from adaptive_mj.form import ModelForm
-from adaptive_mj.laws.common import plugin_rate
-from adaptive_mj.laws.first_order import FIRST_ORDER_GAINS, FirstOrderAdaptiveLaw, first_order_values
-from adaptive_mj.laws.mrac import MRAC_GAINS, MracLaw, mrac_regressor, mrac_values
-from adaptive_mj.laws.plugin import PLUGIN_GAINS
+from adaptive_mj.laws.kernel import LawKernel, f64
 from adaptive_mj.laws.protocol import Law
-from adaptive_mj.laws.sliding import SLIDING_GAINS, SlidingArrays, sliding_law_values
 from adaptive_mj.plants import plant_order
 from adaptive_mj.plants.analytic import AnalyticKernel, AnalyticPlant, analytic_step, clamp
 from adaptive_mj.plants.protocol import Plant
@@ -73,7 +70,7 @@ CONTEXT = native_step.context_dtype([
 def law_kernel(x, r, th, g, a, lower, upper, rate):
     # x (n,) the measured state, r (n+1,) the reference, th (n_theta,) the stage estimate, g the gains record, a the
     # law's arrays end to end (nlaw,), lower, upper the box, rate (n_theta,) out: returns (u, s)
-    """The law at a stage (bound per variant: _mrac_law, _first_order_law, _sliding_law, _plugin_law)."""
+    """The law at a stage (bound per variant: the kernel the law declares, laws.kernel.LawKernel.fn)."""
     raise NotImplementedError("the chunk engine binds the law's kernel (native_chunk.compiled)")
 
 
@@ -127,119 +124,11 @@ def _stage_control(ctx, io, stage):
     return io[1][0]
 
 
-# --- the laws ---------------------------------------------------------------------------------------------------
-# The law form's functions the laws call, bound per variant; unbound, they say so.
-def phi_fn(x):
-    raise NotImplementedError("the chunk engine binds the law's form (native_chunk.compiled)")
-
-
-def f_fn(x):
-    raise NotImplementedError("the chunk engine binds the law's form (native_chunk.compiled)")
-
-
-def h_fn(x):
-    raise NotImplementedError("the chunk engine binds the law's form (native_chunk.compiled)")
-
-
-def user_law(x, r, th, phi, f, h, params, rate):
-    raise NotImplementedError("the chunk engine binds the plugin's law (native_chunk.compiled)")
-
-
-def _mrac_law(x, r, th, g, a, lower, upper, rate):
-    """MRAC, the Lyapunov rule without ψ (MracLaw's arithmetic: laws.mrac.mrac_regressor, mrac_values); a = [α (n),
-    P b_n (n), Γ, 1/Γ, θ₀, ω (scratch), zeros (n_theta each)]; s as the law logs it, -eᵀP b_n."""
-    n, nth = x.shape[0], th.shape[0]
-    alpha, pb = a[0:n], a[n:2 * n]
-    o = 2 * n
-    gamma, inv_gamma, theta0 = a[o:o + nth], a[o + nth:o + 2 * nth], a[o + 2 * nth:o + 3 * nth]
-    omega, dummy = a[o + 3 * nth:o + 4 * nth], a[o + 4 * nth:o + 5 * nth]
-    mrac_regressor(x, r, alpha, g.beta, dummy[:0], omega)
-    u, s = mrac_values(x, r, th, omega, dummy, pb, gamma, inv_gamma, g.sign_b, False, g.always, g.dz_width,
-                       g.dz_on_s, g.sigma, g.e_mod, theta0, lower, upper, rate)
-    return u, -s
-
-
-def _form_arrays(a, n, nth):
-    """A form law's arrays (a = [the surface's coefficients (n), Γ (n_theta), θ₀ (n_theta), a plugin's parameters])
-    as (coefficients, Γ, θ₀, parameters)."""
-    return a[0:n], a[n:n + nth], a[n + nth:n + 2 * nth], a[n + 2 * nth:]
-
-
-def _first_order_law(x, r, th, g, a, lower, upper, rate):
-    """The lecture's first-order law (laws.first_order.first_order_values)."""
-    _, gamma, theta0, _ = _form_arrays(a, x.shape[0], th.shape[0])
-    return first_order_values(x, r, th, g, gamma, theta0, lower, upper, phi_fn(x), f_fn(x), h_fn(x), rate)
-
-
-def _sliding_law(x, r, th, g, a, lower, upper, rate):
-    """A sliding law (laws.sliding.sliding_law_values)."""
-    coeffs, gamma, theta0, _ = _form_arrays(a, x.shape[0], th.shape[0])
-    u, s, _ = sliding_law_values(x, r, th, g, SlidingArrays(coeffs, gamma, theta0, lower, upper), phi_fn(x),
-                                 f_fn(x), h_fn(x), rate)
-    return u, s
-
-
-def _plugin_law(x, r, th, g, a, lower, upper, rate):
-    """A law plugin's function (laws.plugin: law(x, ref, theta, phi, f, h, params, rate) -> (u, s)), then the
-    shared modifications every plugin gets (laws.common.plugin_rate), as PluginLaw does in Python."""
-    _, gamma, theta0, params = _form_arrays(a, x.shape[0], th.shape[0])
-    u, s = user_law(x, r, th, phi_fn(x), f_fn(x), h_fn(x), params, rate)
-    s_abs = abs(s)
-    signal = s_abs if g.dz_on_s else abs(r[0] - x[0])
-    plugin_rate(rate, th, s_abs, signal, g.adapt, g.dz_width, g.sigma, g.e_mod, theta0, gamma, lower, upper)
-    return float(u), float(s)
-
-
-@dataclass(frozen=True)
-class LawKernel:
-    """A law as the engine compiles it: its kernel function (law_kernel's signature), its gains record (1,) of
-    `dtype`, its arrays end to end (the layout its kernel reads), its box (lower, upper), the form its φ, f, h come
-    from (None: MRAC's) and a plugin's function."""
-
-    fn: Callable
-    dtype: np.dtype
-    gains: np.ndarray
-    arrays: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    form: ModelForm | None = None
-    plugin: Callable | None = None
-
-
-def _f64(a) -> np.ndarray:
-    return np.ascontiguousarray(a, dtype=np.float64)
-
-
+# --- the law -----------------------------------------------------------------------------------------------------
 def law_of(law: Law, plant: Plant) -> LawKernel | None:
-    """The compiled form of `law` on `plant`, or None (the Python path): MRAC with the Lyapunov rule and no ψ
-    (MracLaw.compiled_form), the first-order law, a sliding law or a law plugin (``law.native``, not composite
-    adaptation) on a form of the plant's order."""
-    nth = len(law.names)
-    if isinstance(law, MracLaw):
-        if not law.compiled_form:
-            return None
-        p = law.native_arrays()
-        arrays = np.concatenate([_f64(p[k]) for k in ("alpha", "pb", "gamma", "inv_gamma", "theta0")]
-                                + [np.zeros(2 * nth)])
-        return LawKernel(_mrac_law, MRAC_GAINS, p["gains"], arrays, _f64(p["lower"]), _f64(p["upper"]))
-    form = getattr(law, "form", None)
-    if form is None or form.order != plant_order(plant):
-        return None
-    if isinstance(law, FirstOrderAdaptiveLaw):
-        p = law.native_arrays()
-        arrays = np.concatenate([np.zeros(law.order), _f64(p["gamma"]), _f64(p["theta0"])])
-        return LawKernel(_first_order_law, FIRST_ORDER_GAINS, p["gains"], arrays, _f64(p["lower"]),
-                         _f64(p["upper"]), form)
-    if not law.native:
-        return None
-    p = law.native_params()
-    if p.get("composite") is not None:
-        return None
-    plugin = p.get("plugin_law")
-    params = _f64(p.get("plugin_params", np.zeros(0))).reshape(-1)
-    arrays = np.concatenate([_f64(p["coeffs"]).reshape(-1)[:law.order], _f64(p["gamma"]), _f64(p["theta0"]), params])
-    return LawKernel(_sliding_law if plugin is None else _plugin_law, SLIDING_GAINS if plugin is None else
-                     PLUGIN_GAINS, p["gains"], arrays, _f64(p["lower"]), _f64(p["upper"]), form, plugin)
+    """The compiled form of `law` on `plant`, as the law declares it beside its kind (laws.protocol.Law
+    .chunk_kernel: a laws.kernel.LawKernel, or None for the Python path), on the plant's order."""
+    return law.chunk_kernel(plant_order(plant))
 
 
 def supported(plant: Plant, law: Law) -> bool:
@@ -274,13 +163,12 @@ def chunk_factory(njit, key):
 _compiled: dict = {}
 
 
-def key_functions() -> tuple:
-    """The functions compiled into every variant (and, through native_context.reached_functions, every function
-    they call): the cache key hashes their modules' source, so an edit to any of them compiles afresh."""
+def key_functions(*law_fns: Callable) -> tuple:
+    """The functions compiled into a variant (and, through native_context.reached_functions, every function they
+    call): the engine's own and `law_fns`, the law's kernel (LawKernel.fn: its module and what it calls, however
+    deep); the cache key hashes their modules' source, so an edit to any of them compiles afresh."""
     return (chunk_factory, analytic_step, _stage_control, control_stage, view, _law_stage, _apply_control,
-            _record_row, record_columns, _mrac_law, _form_arrays, _first_order_law, _sliding_law, _plugin_law,
-            mrac_values, first_order_values, sliding_law_values, plugin_rate, stage_code.end_stage,
-            stage_code.advance_estimates)
+            _record_row, record_columns, stage_code.end_stage, stage_code.advance_estimates, *law_fns)
 
 
 def _code(fn: Callable) -> tuple:
@@ -291,8 +179,8 @@ def compiled(kernel: AnalyticKernel, functions: dict[str, Callable], lk: LawKern
     """The chunk stepper for one kind's kernel (with its per-plant `functions`) and one law (in memory per process,
     on disk across processes)."""
     law_fns = (lk.form.phi, lk.form.f, lk.form.h) if lk.form is not None else ()
-    fns = (kernel.rate, kernel.observe, *functions.values(), *law_fns, *((lk.plugin,) if lk.plugin else ()))
-    mem_key = (kernel.name, lk.fn.__name__, tuple(functions)) + tuple(_code(fn) for fn in fns)
+    fns = (kernel.rate, kernel.observe, *functions.values(), *law_fns, *((lk.user_law,) if lk.user_law else ()))
+    mem_key = (kernel.name, lk.fn.__name__, tuple(functions)) + tuple(_code(fn) for fn in (*fns, lk.fn))
     if mem_key in _compiled:
         return _compiled[mem_key]
     import numba
@@ -300,7 +188,7 @@ def compiled(kernel: AnalyticKernel, functions: dict[str, Callable], lk: LawKern
 
     from adaptive_mj.numba_util import jit_tree, pointer
 
-    key = source_key(*fns, *key_functions(), extra=(numba.__version__, str(CONTEXT), str(lk.dtype), kernel.name,
+    key = source_key(*fns, *key_functions(lk.fn), extra=(numba.__version__, str(CONTEXT), str(lk.dtype), kernel.name,
                                                      lk.fn.__name__, tuple(functions)))
     tag = f"_{key:x}"
     inline = inlined(numba)
@@ -313,8 +201,8 @@ def compiled(kernel: AnalyticKernel, functions: dict[str, Callable], lk: LawKern
     if lk.form is not None:
         forms = {name: jit_tree(fn, inline, tag=tag)
                  for name, fn in zip(("phi_fn", "f_fn", "h_fn"), law_fns, strict=True)}
-    if lk.plugin is not None:
-        forms["user_law"] = jit_tree(lk.plugin, inline, tag=tag)
+    if lk.user_law is not None:
+        forms["user_law"] = jit_tree(lk.user_law, inline, tag=tag)
     law = jit_tree(lk.fn, inline, tag=tag, **forms)
     pieces: dict[str, Any] = {
         "law_stage": jit_tree(_law_stage, inline, tag=tag, seen=seen, law_kernel=law, view=compiled_view, **common),
@@ -338,11 +226,7 @@ def compiled(kernel: AnalyticKernel, functions: dict[str, Callable], lk: LawKern
 
 def _described(kernel: AnalyticKernel, lk: LawKernel) -> tuple[str, str]:
     """What a compile note calls this variant, and its kind (compile_note.TYPICAL_CPU's key)."""
-    if lk.plugin is not None:
-        law = f"law plugin {lk.plugin.__module__}.{lk.plugin.__qualname__}"
-    else:
-        law = {"_mrac_law": "MRAC, the Lyapunov rule", "_first_order_law": "the first-order law",
-               "_sliding_law": "a sliding law"}.get(lk.fn.__name__, lk.fn.__name__)
+    law = lk.what or f"{lk.fn.__module__}.{lk.fn.__qualname__}"
     if lk.form is None:
         return f"the {kernel.name} plant's chunk stepper ({law})", "linear MRAC chunk"
     form = lk.form
@@ -379,7 +263,7 @@ class ChunkController(ContextOwner):
         self.columns = record_columns(n, nth)
         self.gains = gains_record(lk.gains, lk.dtype)
         self.buffers = {
-            "theta": _f64(np.array(theta_hat0, dtype=float).reshape(nth)), "rsum": np.zeros(nth),
+            "theta": f64(np.array(theta_hat0, dtype=float).reshape(nth)), "rsum": np.zeros(nth),
             "prev": np.zeros(nth), "rate": np.zeros(nth), "lower": lk.lower, "upper": lk.upper,
             "u_hold": np.zeros(1), "delayed": np.zeros(1), "ring": np.zeros((control.delay + 1, 1)),
             "ref": np.zeros(max_rows * nst * (n + 1)), "noise": np.zeros(max_rows * n), "seen": np.zeros(n),
