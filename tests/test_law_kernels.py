@@ -127,3 +127,59 @@ def test_each_built_in_kernel_lives_beside_its_kind(name):
     assert lk.fn.__module__ == kinds.built_in()[scn.law.kind].module == type(setup.law).__module__
     source = Path(native_chunk.__file__).read_text()
     assert "isinstance(law" not in source and "from adaptive_mj.laws.mrac" not in source
+
+
+# --- a built-in multi-joint kind written to the plugin interface: the Python path for now -------------------------
+ROBUST_SL = Path(__file__).resolve().parent.parent / "examples" / "robust_sl_law" / "robust_sl_law.py"
+
+
+@pytest.fixture
+def joint_toy_kind(monkeypatch):
+    """The example multi-joint plugin's declaration (examples/robust_sl_law) as a built-in kind of this test."""
+    import importlib.util
+
+    from adaptive_mj.laws.plugin import JointKernelLaw
+
+    spec = importlib.util.spec_from_file_location("robust_sl_law_toy", ROBUST_SL)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+
+    def read(t, kind, plant, order):
+        law_order = shared.read_order(t, plant, order)
+        params = {"lambda": t.number("lambda", gt=0), "kd": t.number("kd", ge=0)}
+        gamma = shared.read_gamma(t)
+        initial = shared.read_estimates(t, "initial_estimates")
+        t.finish()
+        return LawSpec(kind=kind, order=law_order, lam=None, k=0.0, gamma=gamma, dead_zone=None,
+                       initial_estimates=initial, nominal=None, K=None, boundary_layer=None, params=params)
+
+    def build_law(ctx):
+        rb = ctx.rigid_body()
+        gamma = as_gamma(ctx.gamma(rb.names), len(rb.names))
+        params = np.array([ctx.law.params["lambda"], ctx.law.params["kd"], 1.0, 0.05, *gamma])
+        sh = Shared.of(len(rb.names), gamma=gamma, modification=ctx.modification)
+        return JointKernelLaw(module.LAW, rb.regressor, rb.names, rb.m, params, kind=ctx.law.kind, shared=sh,
+                              modification=ctx.modification)
+
+    kind = LawKind("toy_joint_kernel", frozenset({Form.RIGID_BODY}), True, "robust Slotine-Li (a test's toy)",
+                   keys=(shared.KIND, shared.ORDER, Key("lambda", "number", bounds="> 0", required=True),
+                         Key("kd", "number", bounds=">= 0", required=True), shared.GAMMA_REQUIRED,
+                         shared.INITIAL_ESTIMATES),
+                   read=read, build=build_law, module=__name__)
+    monkeypatch.setattr(kinds, "_BUILT_IN", kinds.built_in())
+    kinds.register(kind)
+    return kind
+
+
+def test_a_built_in_multi_joint_kind_of_plain_array_code_runs_on_the_python_path(joint_toy_kind):
+    """A JointKernelLaw (a built-in kind's multi-joint law function, no plugin installed) runs, on the Python path:
+    the arm callback (sim/native_manipulator.py) compiles an installed plugin's JointPluginLaw only. When it takes
+    any law's "plugin_point"/"plugin_law" (native_params), JointKernelLaw.native turns on and this run is compiled."""
+    from adaptive_mj.runs.runner import execute
+
+    scn = sc.load(SCENARIOS / "ur5e_drift.toml", overrides=["law.kind='toy_joint_kernel'", "simulation.duration=0.05"])
+    result = execute(scn)
+    traj = result.trajectory
+    assert traj.meta["native"] is False and str(traj.status) == "ok" and len(traj.t) == 50
+    assert np.all(np.isfinite(traj.u)) and np.all(np.isfinite(traj.V))  # V: the declaration's lyapunov
