@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from adaptive_mj.study import bench_catalogue
+from adaptive_mj.study import bench, bench_catalogue
 from adaptive_mj.cli import main
 
 
@@ -70,6 +70,24 @@ def test_quick_bench_on_a_reduced_catalogue(tmp_path, small_catalogue, capsys):
     assert "1 failing as meant" in report and "| failed (unexpected) |" in report and "diverged (as meant)" in report
     printed = capsys.readouterr().out
     assert "section" in printed and "report:" in printed
+    # the terminal says what the report's headline says, and marks every run that is not ok with what it was for
+    assert f"{len(unexpected)} unexpected (" in printed and "ended as expected" in printed
+    assert bench.STATUS_LEGEND in printed
+    lines = printed.split(bench.STATUS_LEGEND)[0].splitlines()
+    head = next(i for i, line in enumerate(lines) if line.lstrip().startswith("section"))
+    a, b = lines[head].index("status"), lines[head].index("rms err tail")  # the status column (text: left-aligned)
+    statuses = [line[a:b].strip() for line in lines[head + 2:] if line.strip()]
+    assert len(statuses) == len(summary) and "ok" in statuses
+    assert all(s == "ok" or s.endswith(("(as meant)", "(measured)", "(unexpected)")) for s in statuses), statuses
+
+
+def test_every_status_but_an_expected_ok_is_marked_with_what_the_run_was_for():
+    rows = {("ok", "ok", True): "ok", ("failed", "ok", False): "failed (unexpected)",
+            ("failed", "fail", True): "failed (as meant)", ("diverged", "fail", True): "diverged (as meant)",
+            ("ok", "fail", False): "ok (unexpected)", ("failed", "measured", None): "failed (measured)",
+            ("crashed", "measured", None): "crashed (measured)", ("ok", "measured", None): "ok"}
+    for (status, expect, as_expected), shown in rows.items():
+        assert bench.status_text({"status": status, "expect": expect, "as_expected": as_expected}) == shown
 
 
 def test_bench_only_runs_the_sections_asked_for_and_refuses_a_key_it_does_not_know(tmp_path, small_catalogue, capsys):

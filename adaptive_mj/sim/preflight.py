@@ -267,7 +267,9 @@ def gravity_line(plant: Plant, reference, duration: float, order: int) -> str:
             f"(q_d = {q[i, j]:.4g}), past its actuator's limit [{lo[j]:.4g}, {hi[j]:.4g}]{unit}"
             + (" (N on a slide joint)" if plant.joint_names else "")
             + (f", and {others} other joint(s) short" if others > 0 else "")
-            + ": no law can follow this reference (is a mass too large, e.g. plant.payload_mass in grams as kg?)")
+            + ": no law can hold the arm still there, and where the reference dwells the run saturates (a pre-flight"
+            " figure from the model at t = 0, not the run's verdict; is a mass too large, e.g. plant.payload_mass in"
+            " grams as kg?)")
 
 
 def _attitude_check(plant: Plant, feedback: AirframeFeedback, h: float, limit: float) -> dict:

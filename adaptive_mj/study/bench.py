@@ -30,12 +30,21 @@ def _fmt(v, spec=".3g") -> str:
 
 def status_text(r: dict) -> str:
     """A row's status as the tables show it: "(unexpected)" after a run that did not end as declared
-    (RunSpec.expect), "(as meant)" after a demonstration that failed as it was meant to."""
+    (RunSpec.expect), "(as meant)" after a demonstration that failed as it was meant to, "(measured)" after a
+    measured run that is not ok (a baseline, a sweep point or a margin probe: its verdict is the result). A plain
+    status is an ok run meant to be ok, so no failure in the table goes unexplained (STATUS_LEGEND)."""
     if r.get("as_expected") is False:
         return f"{r['status']} (unexpected)"
     if r.get("as_expected") and r["status"] != Status.OK:
         return f"{r['status']} (as meant)"
+    if r.get("expect") == "measured" and r["status"] != Status.OK:
+        return f"{r['status']} (measured)"
     return str(r["status"])
+
+
+#: what status_text's marks mean, printed under the terminal's table
+STATUS_LEGEND = ("(as meant): a demonstration of a failure mode, declared to fail; (measured): a baseline, sweep "
+                 "point or margin probe whose verdict is the result; (unexpected): did not end as declared")
 
 
 def main_table(rows: list[dict]) -> Table:
@@ -243,7 +252,8 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
                            "error": r.error, "summary": r.summary, "extras": r.extras}
                for r in results}
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=_json_default), encoding="utf-8")
-    text = (main_table(rows).to_text(left=TEXT_LEFT, rule=True)
+    text = (main_table(rows).to_text(left=TEXT_LEFT, rule=True) + f"\n{STATUS_LEGEND}\n\n"
+            + expectation_text(results).replace("**", "")
             + f"\n\nreport: {out / 'report.md'}  ({n_runs} runs, {elapsed:.1f} s)\nhtml: {out / 'report.html'}")
     return Study("bench", out, 0 if not failed else 1, out / "report.md", out / "report.html", text,
                  info={"runs": n_runs, "seconds": elapsed}, load_rows=lambda: rows,
