@@ -212,6 +212,25 @@ def _scenario_path(arg: str) -> Path:
     return scenario_path(arg)
 
 
+def _print_identification(ident: dict | None) -> None:
+    """The summary's "identification" (report.identification) in one line: identified, off (with the error),
+    and which parameters the reference did not excite over the tail."""
+    if not ident:
+        return
+    rel = ident.get("relative_error") or {}
+    parts = []
+    if ident.get("identified"):
+        parts.append("identified " + ", ".join(ident["identified"]))
+    if ident.get("off"):
+        parts.append("off " + ", ".join(f"{n} {100 * rel[n]:.3g} %" for n in ident["off"]))
+    if "not_excited" in ident:
+        parts.append(("not excited by the reference over the tail (their estimates say nothing): "
+                      + ", ".join(ident["not_excited"])) if ident["not_excited"] else
+                     f"every parameter excited over the tail (index {ident['excitation_index']:.2g})")
+    if parts:
+        print(f"  identification (within {100 * ident['tolerance']:g} % of the truth): " + "; ".join(parts))
+
+
 def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, note: str = "",
                    kind: str | None = None) -> None:
     if as_json:
@@ -260,6 +279,7 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
                 print(f"    over the tail (last {100 * TAIL_FRACTION:g} %, mean [min, max]): mass "
                       f"{rng('mass_error_percent')} %, centre of mass {rng('com_error_mm', unit='mm')}, inertia "
                       f"{rng('inertia_error', unit='kg m²')}")
+    _print_identification(summary.get("identification"))
     final = summary["final"]
     unit = functools.partial(units.param_unit, kind)
     parts = [f"{n} {f(final['theta_hat'][n], unit(n))} (true {f(final['theta'][n], unit(n))})"

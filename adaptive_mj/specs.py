@@ -122,7 +122,9 @@ class SuccessSpec:
     actuator may spend at its limit. preflight: what a failed pre-flight check does when the sampled loop's
     fastest mode is past the integrator's or the hold's stability limit (adaptive_mj.sim.preflight): "warn" (one
     line, the run goes on), "refuse" (`run --strict`: no run) or "record" (the run goes on, the check's result in
-    its summary only: a study's runs, which are judged by their outcome whatever the law)."""
+    its summary only: a study's runs, which are judged by their outcome whatever the law). physical: the run
+    fails when the final estimate of a body's ten standard parameters is no possible body (a negative mass, a
+    pseudo-inertia that is not positive semidefinite: report.metrics.body_identification)."""
 
     tail_rms: float | None = None
     tail_fraction: float = 0.05
@@ -130,6 +132,7 @@ class SuccessSpec:
     param_error: float | dict[str, float] | None = None
     saturation: float = 0.2
     preflight: str = "warn"
+    physical: bool = False
 
 
 PREFLIGHT_ACTIONS = ("warn", "refuse", "record")

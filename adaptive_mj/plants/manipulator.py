@@ -700,6 +700,19 @@ class ManipulatorPlant(ModelClock, BodyEdits):
             out[i] = d.qfrc_bias - d.qfrc_passive
         return out
 
+    def regressor_rows(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """(N, m, n_theta) the regressor Y(q, q̇, q̇, q̈) of the law's parameters (base ones with a base map) at rows
+        (q, q̇, q̈) (N, m): what the motion excites (report.identification, along the reference); a scratch
+        MjData, the run's untouched."""
+        d = scratch_data(self.model)
+        reg = Regressor(self.model, d, self.layout, self.base_map)
+        out = np.empty((len(q), self.m, len(self.names)))
+        for i in range(len(q)):
+            d.qpos[self._qadr], d.qvel[:] = q[i], qd[i]
+            mujoco.mj_fwdPosition(self.model, d)
+            out[i] = reg(qd[i], qd[i], qdd[i])[0]
+        return out
+
     def following_controls(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
         """(N, m) the joint torques [N·m, N on a slide] that make the arm follow rows (q, q̇, q̈) (N, m) exactly:
         MuJoCo's inverse dynamics (mj_inverse's qfrc_inverse: M q̈ + bias − passive), in the units of ctrl_range

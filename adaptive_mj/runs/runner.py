@@ -261,6 +261,32 @@ def settle_batch(starts: Sequence[Started], exc: BaseException) -> list[RunResul
     return out
 
 
+def identification_of(setup: Setup, traj: Trajectory) -> dict | None:
+    """What the run identified (report.identification), or None for a run that estimates nothing: each
+    parameter's final relative error against its truth, and, where the plant (`regressor_rows`: the manipulators)
+    or the law's model form gives the regressor, which parameters the reference does not excite over the tail."""
+    from adaptive_mj.form import ModelForm
+    from adaptive_mj.report import identification as ident
+    from adaptive_mj.report.metrics import tail_mask
+    from adaptive_mj.setup.success import reference_rows
+
+    if not len(traj) or not traj.names:
+        return None
+    tail = traj.t[tail_mask(traj)]
+    rows = None
+    if len(tail):
+        ts = ident.tail_times(float(tail[0]), float(tail[-1]))
+        plant, form = setup.plant, getattr(setup.law, "form", None)
+        by_plant = getattr(plant, "regressor_rows", None)
+        if by_plant is not None and tuple(getattr(plant, "names", ())) == tuple(traj.names):
+            r = reference_rows(setup.reference, ts, 2)  # (3, N, m): q_d, q̇_d, q̈_d
+            rows = by_plant(r[0], r[1], r[2])
+        elif isinstance(form, ModelForm) and tuple(form.names) == tuple(traj.names):
+            r = reference_rows(setup.reference, ts, form.order)  # (n+1, N, 1)
+            rows = ident.form_rows(form, r[:, :, 0].T)
+    return ident.identification(traj.names, traj.theta_hat[-1], traj.theta[-1], rows)
+
+
 @dataclass
 class Started:
     """One run built, checked and its log opened (runner.start), waiting for its trajectory."""
@@ -279,6 +305,9 @@ class Started:
         try:
             with deferred():  # a stop signal during the verdict waits until the log is closed with it
                 traj, result = verdict(self.scn, traj, self.crit, self.pre)
+                ident = identification_of(self.setup, traj)
+                if ident is not None:
+                    result["identification"] = clean_json(ident)
                 if self.recorder is not None:
                     self.recorder.close(traj.status, traj.reason, result)
         finally:

@@ -425,7 +425,8 @@ def _success(t: _Table) -> SuccessSpec:
                        tail_floor=t.number("tail_floor", d.tail_floor, gt=0),
                        param_error=param_error,
                        saturation=t.number("saturation", d.saturation, ge=0),
-                       preflight=t.string("preflight", d.preflight, choices=PREFLIGHT_ACTIONS))
+                       preflight=t.string("preflight", d.preflight, choices=PREFLIGHT_ACTIONS),
+                       physical=t.boolean("physical", d.physical))
     if spec.saturation > 1:
         raise t.fail("saturation", "a fraction of the run's time in [0, 1]", spec.saturation)
     t.finish()
