@@ -146,11 +146,10 @@ def test_the_suggested_kd_table_makes_the_user_arm_pass_the_preflight(tmp_path):
     path = _user_ur5e(tmp_path)
     pre = _check(sc.load(path))
     assert not pre.ok and pre.fixes[0].startswith("law.kd = {")
-    table = pre.fixes[0].split("law.kd = ")[1].split(" (the other")[0]
+    table = pre.fixes[0].split("law.kd = ")[1].split(" (lowered")[0]
     names = build(sc.load(path)).plant.joint_names
-    given = dict(item.split(" = ") for item in table.strip("{}").split(", "))
-    kd = "{" + ", ".join(f"{j} = {given.get(j, '50.0')}" for j in names) + "}"
-    fixed = _check(sc.load(path, overrides=[f"law.kd={kd}"]))
+    assert [item.split(" = ")[0] for item in table.strip("{}").split(", ")] == list(names)  # every joint named
+    fixed = _check(sc.load(path, overrides=[f"law.kd={table}"]))  # pasted as printed
     assert fixed.ok and fixed.figure < 0.95 * fixed.limit, fixed.figure
     # the armature fix, written into the model file
     import re

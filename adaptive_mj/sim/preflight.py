@@ -154,8 +154,12 @@ def _arm_check(plant: JointPlant, feedback: JointFeedback, q: np.ndarray, h: flo
     target = 0.9 * limit / h - float(feedback.lam.max())
     if target > 0:
         table = _kd_within(M, feedback.kd, target)
-        fixes.append("law.kd = {" + ", ".join(f"{plant.joint_names[i]} = {k:.3g}" for i, k in sorted(table.items()))
-                     + "} (the other joints as they are)")
+        kd = np.broadcast_to(np.asarray(feedback.kd, dtype=float), (len(plant.joint_names),))
+        # every joint, so that it pastes as --set law.kd={...} (a table must name each joint): the lowered ones
+        # and the others at their present gain
+        fixes.append("law.kd = {" + ", ".join(f"{name} = {table.get(i, kd[i]):.4g}"
+                                              for i, name in enumerate(plant.joint_names)) + "}"
+                     + (" (lowered: " + ", ".join(plant.joint_names[i] for i in sorted(table)) + ")" if table else ""))
     fixes.append(f"a timestep or control.period <= {0.9 * limit / rate:.3g} s")
     armature = _armature_within(M, feedback.kd, target) if target > 0 else {}
     if armature:
