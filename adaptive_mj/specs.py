@@ -80,6 +80,9 @@ class ManipulatorSpec:
     base_parameters: bool
     servo_to_torque: bool
     forcerange: float | dict[str, float] | None = None
+    # plant.fixed_joints: joints welded at their reference position, with the tendons, joint equalities and
+    # actuators that use them (a gripper's fingers; plants.manipulator.fix_joints)
+    fixed_joints: tuple[str, ...] = ()
     # joint friction and actuator lag (plant.damping, .frictionloss, .actuator_lag: a number for every
     # joint or {joint = number}; None keeps the model's), and the regressor's friction columns
     friction: "JointFrictionSpec" = field(default_factory=lambda: JointFrictionSpec())
