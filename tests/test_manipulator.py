@@ -253,7 +253,8 @@ def test_an_arm_with_a_gripper_is_refused_once_for_every_reason_with_a_fix_that_
     scenario.write_text('schema_version = 1\n[plant]\nkind = "manipulator"\nmodel = "gripper_arm.xml"\n'
                         'payload = "tool_offset"\nunknown = "payload"\n[simulation]\nduration = 1.0\n'
                         '[reference]\nkind = "joint_sum_of_sines"\ncenter = { shoulder = 0.3, elbow = 0.5 }\n'
-                        'amplitudes = { shoulder = [0.2], elbow = [0.2] }\nomegas = { shoulder = [1.0], elbow = [1.3] }\n'
+                        'amplitudes = { shoulder = [0.2], elbow = [0.2] }\n'
+                        'omegas = { shoulder = [1.0], elbow = [1.3] }\n'
                         '[law]\nkind = "slotine_li"\nlambda = 10.0\nkd = 5.0\ngamma = 0.2\n')
     assert main(["run", str(scenario), "-o", str(tmp_path / "a.mcap")]) == 2
     err = capsys.readouterr().err.strip()
