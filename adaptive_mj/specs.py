@@ -112,6 +112,9 @@ class SimulationSpec:
     state_bound: float
     control_delay: int = 0  # whole physics steps between computing a control and applying it
     python_callback: bool = False  # force the Python control callback (debugging a law), not the native one
+    # what the run says of its integrator against the model's own (setup.scenario: kept when the scenario names
+    # none, said when the scenario's replaces it); "" when nothing is to be said
+    integrator_note: str = ""
 
 
 @dataclass(frozen=True)

@@ -189,7 +189,7 @@ def test_servo_to_torque_rebuilds_position_servos():
     spec = mujoco.MjSpec.from_string(TEST_ARM.replace(
         '<motor joint="j4"/>', '<position name="servo4" joint="j4" kp="10" forcerange="-3 3"/>'))
     notes = mp.servo_to_torque(spec)
-    assert notes == ["actuator 'servo4': servo rebuilt as a torque motor, |tau| <= [-3, 3] N*m"]
+    assert notes == ["plant.servo_to_torque: servo(s) rebuilt as torque motors: 'servo4' |tau| <= [-3, 3] N*m"]
     plant = mp.ManipulatorPlant(spec.compile(), unknown="all")
     assert plant.ctrl_range[0][3] == -3 and plant.ctrl_range[1][3] == 3
     spec = mujoco.MjSpec.from_string(TEST_ARM.replace(
@@ -280,3 +280,33 @@ def test_an_arm_with_a_gripper_is_refused_once_for_every_reason_with_a_fix_that_
     assert "note: plant.fixed_joints: joint(s) ['finger1', 'finger2'] fixed" in out.err
     with pytest.raises(ModelError, match=r"plant\.fixed_joints: no joint named 'thumb'.*'finger1'"):
         mp.fix_joints(mujoco.MjSpec.from_string(GRIPPER_ARM), ("thumb",))
+
+
+def test_the_model_s_own_integrator_is_kept_unless_the_scenario_names_one_and_a_change_is_said(tmp_path):
+    """A Menagerie arm declares <option integrator="implicitfast"/>: a scenario that names none keeps it (it was
+    silently replaced by rk4) and says so once; one that names another says that it replaces the model's."""
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.setup.build import build
+
+    (tmp_path / "arm.xml").write_text(GRIPPER_ARM.replace('integrator="RK4"', 'integrator="implicitfast"'))
+    text = ('schema_version = 1\n[plant]\nkind = "manipulator"\nmodel = "arm.xml"\npayload = "none"\n'
+            'unknown = "all"\nfixed_joints = ["finger1", "finger2"]\n[simulation]\nduration = 1.0\n'
+            '[reference]\nkind = "joint_sum_of_sines"\ncenter = { shoulder = 0.3, elbow = 0.5 }\n'
+            'amplitudes = { shoulder = [0.2], elbow = [0.2] }\nomegas = { shoulder = [1.0], elbow = [1.3] }\n'
+            '[law]\nkind = "slotine_li"\nlambda = 10.0\nkd = 5.0\ngamma = 0.2\n')
+    (tmp_path / "mine.toml").write_text(text)
+    scn = sc.load(tmp_path / "mine.toml")
+    setup = build(scn)
+    assert scn.simulation.integrator == "implicitfast"
+    assert setup.plant.model.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    said = [n for n in setup.notes if "integrator" in n]
+    assert said == ["simulation.integrator: the model's own 'implicitfast' (the scenario names none; without one "
+                    "in the model: 'rk4')"]
+    scn = sc.load(tmp_path / "mine.toml", overrides=["simulation.integrator='rk4'"])
+    setup = build(scn)
+    assert setup.plant.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
+    assert [n for n in setup.notes if "integrator" in n] == [
+        "simulation.integrator = 'rk4' replaces the model's own 'implicitfast'"]
+    (tmp_path / "arm.xml").write_text(GRIPPER_ARM.replace(' integrator="RK4"', ''))  # none declared: rk4, unsaid
+    scn = sc.load(tmp_path / "mine.toml")
+    assert scn.simulation.integrator == "rk4" and scn.simulation.integrator_note == ""

@@ -355,3 +355,22 @@ def test_a_vanished_mass_estimate_has_an_undefined_centre_of_mass_not_a_huge_one
     _print_summary(clean_json(summary), as_json=False, kind="manipulator")
     line = [x for x in capsys.readouterr().out.splitlines() if "identified p" in x][0]
     assert f"centre of mass undefined (estimated mass {mass:.3g} kg)," in line and "mm" not in line, line
+
+
+def test_a_note_or_warning_is_one_write_of_one_whole_line(monkeypatch):
+    """A study's workers share stderr; print's two writes (text, then newline) let another worker's line land
+    between them, and two sweep workers' notes came out merged on one line. runner.say writes each line whole."""
+    from adaptive_mj.runs import runner
+
+    writes = []
+
+    class Stream:
+        def write(self, text):
+            writes.append(text)
+
+        def flush(self):
+            writes.append("<flush>")
+
+    monkeypatch.setattr("sys.stderr", Stream())
+    runner.say("mine.toml (0001-k=2-seed0): note: something")
+    assert writes == ["mine.toml (0001-k=2-seed0): note: something\n", "<flush>"]

@@ -274,7 +274,7 @@ def servo_to_torque(spec, forcerange: float | dict[str, float] | None = None) ->
         raise ModelError(f"plant.servo_to_torque: {len(missing)} servo(s) have no forcerange to limit the torque "
                          f"motor each becomes: {', '.join(missing)}; give plant.forcerange = L (|tau| <= L [N m] "
                          "on every joint) or a table {joint = L, ...}, or a forcerange in the MJCF")
-    notes = []
+    rebuilt = []
     for act, (lo, hi, whence) in zip(servos, limits, strict=True):
         act.gaintype = mujoco.mjtGain.mjGAIN_FIXED
         act.gainprm = np.zeros_like(act.gainprm)
@@ -287,9 +287,9 @@ def servo_to_torque(spec, forcerange: float | dict[str, float] | None = None) ->
         if whence:
             act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
             act.forcerange = [lo, hi]
-        notes.append(f"actuator {act.name!r}: servo rebuilt as a torque motor, |tau| <= [{lo:g}, {hi:g}] N*m"
-                     + whence)
-    return notes
+        rebuilt.append(f"{act.name!r} |tau| <= [{lo:g}, {hi:g}] N*m" + whence)
+    # one note for the run, not one per servo (a Menagerie arm has seven)
+    return ["plant.servo_to_torque: servo(s) rebuilt as torque motors: " + ", ".join(rebuilt)] if rebuilt else []
 
 
 # --- joint friction and actuator lag, as MjSpec edits (plant.damping, .frictionloss, .actuator_lag) ---

@@ -338,6 +338,13 @@ class Started:
             self.recorder.close(Status.FAILED, f"{type(exc).__name__}: {exc}", {})
 
 
+def say(line: str) -> None:
+    """One line on stderr in one write, flushed: a study's worker processes share the stream, and print's two
+    writes (the text, then the newline) let another worker's line land between them (two lines merged)."""
+    sys.stderr.write(line + "\n")
+    sys.stderr.flush()
+
+
 def start(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None,
           single: bool = False, label: str = "") -> Started:
     """Build `scn`, say its notes, check it before flight and open its log (see execute). The plant may
@@ -348,7 +355,7 @@ def start(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | 
     plant = setup.plant
     where = f"{scn.source} ({label})" if label else str(scn.source)
     for note in setup.notes:  # model edits the scenario asked for: said on the terminal and kept in the log
-        print(f"{where}: note: {note}", file=sys.stderr)
+        say(f"{where}: note: {note}")
     timing = control_timing(scn, setup)
     pre = preflight_of(scn, setup, timing, where=where)
     crit = criteria(scn, setup.reference, plant_order(plant), tuple(setup.law.names))
@@ -380,11 +387,11 @@ def preflight_of(scn: Scenario, setup: Setup, timing: ControlTiming, *, where: s
     if scn.success.preflight == "record":  # a study's run: judged by its outcome, the check in its summary
         return pre
     for line in pre.outside + pre.plant_lines:
-        print(f"{where}: warning: {line}", file=sys.stderr)
+        say(f"{where}: warning: {line}")
     for failed in ([pre.line()] if not pre.ok else []) + [line for line in (pre.gravity, pre.following) if line]:
         if scn.success.preflight == "refuse":
             raise PreflightRefused(f"{where}: refused (success.preflight = 'refuse'): {failed}")
-        print(f"{where}: warning: {failed}", file=sys.stderr)
+        say(f"{where}: warning: {failed}")
     return pre
 
 
