@@ -105,7 +105,8 @@ def test_position_servo_arm_runs_through_servo_to_torque(tmp_path, capsys):
     from adaptive_mj.log.replay import read_log
 
     run = read_log(log)
-    assert run.header["notes"][0].startswith("plant.servo_to_torque: servo(s) rebuilt as torque motors: 'shoulder_servo'")
+    assert run.header["notes"][0].startswith(
+        "plant.servo_to_torque: servo(s) rebuilt as torque motors: 'shoulder_servo'")
     tail = np.sqrt(np.mean(run.trajectory.joint_errors[run.trajectory.t >= 6.0] ** 2, axis=0))
     assert tail.max() < 1e-3, tail
     assert main(["replay", str(log), "--verify"]) == 0
