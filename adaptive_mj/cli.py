@@ -536,6 +536,9 @@ def main(argv: list[str] | None = None) -> int:
     from adaptive_mj.sim.interrupt import stop_on_signals
 
     args = _parser().parse_args(argv)
+    from adaptive_mj.notes import show_on_stderr
+
+    show_on_stderr()  # a run's notes and warnings (the "adaptive_mj" logger) on stderr, one whole line each
     missing = gl_library_missing(os.environ.get("MUJOCO_GL"))
     if missing:  # before anything imports mujoco, which would end in PyOpenGL's traceback
         print(f"adaptive-mj: error: {missing}", file=sys.stderr)

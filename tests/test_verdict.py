@@ -359,8 +359,11 @@ def test_a_vanished_mass_estimate_has_an_undefined_centre_of_mass_not_a_huge_one
 
 def test_a_note_or_warning_is_one_write_of_one_whole_line(monkeypatch):
     """A study's workers share stderr; print's two writes (text, then newline) let another worker's line land
-    between them, and two sweep workers' notes came out merged on one line. runner.say writes each line whole."""
-    from adaptive_mj.runs import runner
+    between them, and two sweep workers' notes came out merged on one line. The command line's handler of the
+    "adaptive_mj" logger writes each line whole, to the stderr of the moment."""
+    import logging
+
+    from adaptive_mj.notes import LineHandler
 
     writes = []
 
@@ -372,5 +375,29 @@ def test_a_note_or_warning_is_one_write_of_one_whole_line(monkeypatch):
             writes.append("<flush>")
 
     monkeypatch.setattr("sys.stderr", Stream())
-    runner.say("mine.toml (0001-k=2-seed0): note: something")
-    assert writes == ["mine.toml (0001-k=2-seed0): note: something\n", "<flush>"]
+    LineHandler().emit(logging.LogRecord("adaptive_mj", logging.INFO, "", 0, "mine.toml (0001-seed0): note: x", (),
+                                         None))
+    assert writes == ["mine.toml (0001-seed0): note: x\n", "<flush>"]
+
+
+def test_run_scenario_says_its_warnings_through_logging_and_is_silent_by_default(capsys, caplog):
+    """From Python a run's notes and warnings go through the "adaptive_mj" logger: nothing on stderr unless the
+    application asks (here pytest's caplog), and the command line prints them (tested above)."""
+    import logging
+
+    from adaptive_mj.notes import log
+    from adaptive_mj.study.api import run_scenario
+
+    saved = (log.handlers[:], log.level, log.propagate)
+    log.handlers[:] = [h for h in log.handlers if type(h).__name__ != "LineHandler"]  # as a fresh interpreter has
+    log.setLevel(logging.NOTSET)
+    log.propagate = True
+    try:
+        with caplog.at_level(logging.INFO, logger="adaptive_mj"):
+            r = run_scenario("arm_payload_swap", set=["plant.payload_mass=500", *ARM_SHORT])
+        assert r.status == "failed"
+        assert capsys.readouterr().err == ""
+        warned = {rec.getMessage() for rec in caplog.records if rec.levelno == logging.WARNING}  # (caplog may hold
+        assert len(warned) == 1 and "gravity alone at the reference needs" in warned.pop()  # a record twice)
+    finally:
+        log.handlers[:], log.level, log.propagate = saved

@@ -5,9 +5,9 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
+import logging
 import os
 import platform
-import sys
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -20,6 +20,7 @@ from adaptive_mj.plants import ModelSource
 from adaptive_mj.plants.mujoco_plant import reusing_run_data
 from adaptive_mj.setup.build import Setup, build
 from adaptive_mj.errors import AdaptiveMJError, Interrupted, PreflightRefused, ScenarioError
+from adaptive_mj.notes import say
 from adaptive_mj.sim.loop import limits_meta, plant_order, run
 from adaptive_mj.sim.stage import ControlTiming
 from adaptive_mj.report.metrics import clean_json, summary as make_summary
@@ -338,11 +339,6 @@ class Started:
             self.recorder.close(Status.FAILED, f"{type(exc).__name__}: {exc}", {})
 
 
-def say(line: str) -> None:
-    """One line on stderr in one write, flushed: a study's worker processes share the stream, and print's two
-    writes (the text, then the newline) let another worker's line land between them (two lines merged)."""
-    sys.stderr.write(line + "\n")
-    sys.stderr.flush()
 
 
 def start(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None,
@@ -387,11 +383,11 @@ def preflight_of(scn: Scenario, setup: Setup, timing: ControlTiming, *, where: s
     if scn.success.preflight == "record":  # a study's run: judged by its outcome, the check in its summary
         return pre
     for line in pre.outside + pre.plant_lines:
-        say(f"{where}: warning: {line}")
+        say(f"{where}: warning: {line}", logging.WARNING)
     for failed in ([pre.line()] if not pre.ok else []) + [line for line in (pre.gravity, pre.following) if line]:
         if scn.success.preflight == "refuse":
             raise PreflightRefused(f"{where}: refused (success.preflight = 'refuse'): {failed}")
-        say(f"{where}: warning: {failed}")
+        say(f"{where}: warning: {failed}", logging.WARNING)
     return pre
 
 
