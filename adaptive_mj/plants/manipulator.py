@@ -181,7 +181,7 @@ def _tendon_joints(model: mujoco.MjModel) -> set[int]:
 
 def _equality_joints(model: mujoco.MjModel) -> set[int]:
     """The joints (ids) the model's joint equality constraints tie."""
-    out = set()
+    out: set[int] = set()
     for e in range(model.neq):
         if model.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT:
             out.update(int(i) for i in (model.eq_obj1id[e], model.eq_obj2id[e]) if i >= 0)
