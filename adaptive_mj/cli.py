@@ -93,6 +93,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="run only this section of the catalogue, by its key (repeatable, or KEY,KEY; e.g. first_order, "
                         "payload_swap, quadrotor; breaking_points: the full bench's study, section 14); a wrong key "
                         "is refused with the list of them")
+    b.add_argument("--results", type=Path, metavar="FILE.md",
+                   help="also write the measured-results page (results.md in the output folder) to FILE.md, e.g. "
+                        "docs/RESULTS.md")
     _backend_arguments(b)
 
     w = add_parser("warmup", help="compile every control callback the bench needs, in parallel, so that the bench "
@@ -471,7 +474,8 @@ def _study(args):
             raise ScenarioError("--gains needs --law")
         return api.bench(quick=args.quick, scenarios=[_scenario_path(p) for p in args.scenario], out=args.output,
                          law=args.law, gains=args.gains, set=args.overrides, full_logs=args.full_logs,
-                         only=[k for item in args.only for k in item.split(",")] or None, **where)
+                         only=[k for item in args.only for k in item.split(",")] or None, results=args.results,
+                         **where)
     if args.command == "stress":
         return api.stress(seeds=args.seeds, steps=args.steps, duration=args.duration, composite=args.composite,
                           out=args.output, law=args.law, set=args.overrides, plants=args.plants, **where)

@@ -81,6 +81,27 @@ def test_quick_bench_on_a_reduced_catalogue(tmp_path, small_catalogue, capsys):
     assert all(s == "ok" or s.endswith(("(as meant)", "(measured)", "(unexpected)")) for s in statuses), statuses
 
 
+def test_the_results_page_is_written_from_the_run_and_its_numbers_are_summary_json_s(tmp_path, small_catalogue):
+    """bench --results FILE (docs/RESULTS.md in the repository): the page the docs link to, written from the run
+    itself; every run's tail error on it is the one summary.json holds, formatted as the main table formats it."""
+    import re
+
+    out, page = tmp_path / "bench", tmp_path / "RESULTS.md"
+    assert main(["bench", "--quick", "-o", str(out), "--jobs", "2", "--results", str(page)]) == 0
+    text = page.read_text()
+    assert text == (out / "results.md").read_text()
+    assert text.startswith("# Measured results\n\nWritten by `adaptive-mj bench --quick --results docs/RESULTS.md` on ")
+    assert re.search(r"on 20\d\d-\d\d-\d\d \d\d:\d\d UTC: adaptive-mj ", text) and "ended as expected" in text
+    summary = json.loads((out / "summary.json").read_text())
+    rows = [line.split(" | ") for line in text.splitlines() if line.startswith("| ") and not line.startswith(
+        ("| run |", "|---"))]
+    assert len(rows) == len(summary)
+    measured = sorted("n/a" if v is None else format(v, ".3g") for v in (
+        ((e.get("summary") or {}).get("metrics") or {}).get("rms_tracking_error_tail") for e in summary.values()))
+    assert sorted(row[2].split(" ")[0] for row in rows) == measured  # (a row's run label is not its tag)
+    assert sorted(row[1].split(" ")[0] for row in rows) == sorted(e["status"] for e in summary.values())
+
+
 def test_every_status_but_an_expected_ok_is_marked_with_what_the_run_was_for():
     rows = {("ok", "ok", True): "ok", ("failed", "ok", False): "failed (unexpected)",
             ("failed", "fail", True): "failed (as meant)", ("diverged", "fail", True): "diverged (as meant)",
