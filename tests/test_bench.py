@@ -206,3 +206,18 @@ def test_full_bench_runs_the_analyses_beside_the_breaking_point_study(tmp_path, 
         assert (out / "figures" / f"{fig}.png").stat().st_size > 10_000
     assert ("(in a process of their own, beside the breaking-point study)" in report) == can_fork()
     assert "diverged run: diverged" in report
+
+
+def test_the_bench_s_progress_counts_runs_not_ok_and_of_them_the_unexpected_not_failed_526():
+    """The bench's progress said "failed 526" of runs most of which failed as meant or are measurements: where runs
+    declare what they are for, it says how many are not ok and how many of those did not end as declared."""
+    import io
+    from pathlib import Path
+
+    from adaptive_mj.study.parallel import RunOutcome, RunSpec, progress_printer
+
+    stream = io.StringIO()
+    update = progress_printer(4, stream=stream, clock=lambda: 0.0)
+    for expect, status in (("ok", "ok"), ("fail", "diverged"), ("measured", "failed"), ("ok", "failed")):
+        update(RunOutcome(RunSpec(Path("x.toml"), tag=f"{expect}-{status}", expect=expect), status, None))
+    assert stream.getvalue().startswith("4/4 runs done, not ok 3 (1 unexpected), ")
