@@ -1,7 +1,7 @@
-"""The native closed loop for manipulators: the Slotine–Li law (and its baselines) with
-the plant's regressor kernel, compiled by numba into one C control callback that MuJoCo
-calls at every stage of every physics step (adaptive_mj.sim.native does the same for the
-1-DOF plants).
+"""The multi-joint arms' kernel (plants.manipulator.ManipulatorPlant): the Slotine–Li law (and its baselines, or a
+multi-joint law plugin) with the plant's regressor, compiled by numba into the C control callback that MuJoCo calls
+at every stage of every physics step (the one generic controller, adaptive_mj.sim.native_mujoco, builds and drives
+it from `KERNEL`, this kind's declaration).
 
 At each stage the callback does what loop.Controller + SlotineLiLaw do in Python, with the
 stage functions of adaptive_mj.sim.stage (the same source, compiled; sampled-data control
@@ -24,19 +24,12 @@ error compares ‖q̃‖, a plain sum here and np.linalg.norm in Python, with it
 Cost on the 6-joint UR5e with an unknown payload, RK4: about 1.6-1.7x a bare mj_step
 (the Python path: ~60-80x); most of the difference is the regressor, see below.
 
-The callback finds its run through mjData.userdata: the context block CONTEXT (named fields)
-holds the run's state, settings and the addresses of its buffers, and MjData's and MjModel's
-own arrays are read through the pointers MuJoCo hands the callback (adaptive_mj.sim.native_context).
-Nothing run-specific is compiled in, so the callback is cached on disk and loaded by every
-process, and several runs (each on its own MjData) can be stepped in one process. The callback
-ignores an MjData without a context (a scratch copy), calls past the step's stages (an extra
-mj_forward) and calls past the chunk's rows: ctrl is left as it is.
-
-The order of the step is not here: both compiled callbacks are adaptive_mj.sim.native_step's one
-`control_stage`, into which this module compiles its three pieces: `_law_stage` (the regressor of a
+The order of the step is not here: every compiled callback is adaptive_mj.sim.native_step's one
+`control_stage`, into which this kind's three pieces are compiled: `_law_stage` (the regressor of a
 kinematic tree read from MjData's kinematics, the law's point and output), `_apply_control` (τ / gear,
-the disturbance torques) and `_record_row` (the row and M(q)). The 1-DOF plants bring their own
-(a ModelForm's phi/f/h on [q, q'], any ODE-shaped plant, plugins included).
+the disturbance torques) and `_record_row` (the row, and M(q) in the row's extra columns). Nothing here imports
+adaptive_mj.sim or numba at import time: `carray`, `fptr`, `iptr`, the pointer intrinsics, the stage functions and
+the law's pieces are globals the generic controller injects.
 """
 from __future__ import annotations
 
@@ -48,32 +41,19 @@ import numpy as np
 from adaptive_mj.laws.common import plugin_rate
 from adaptive_mj.laws.plugin import PLUGIN_GAINS, joint_norm, tracking_error_norm
 from adaptive_mj.laws.slotine_li import SLOTINE_LI_GAINS, SlotineLiArrays
-from adaptive_mj.laws.protocol import Law
 from adaptive_mj.numba_util import jit_tree
 from adaptive_mj.plants import regressor_kernel as rk
-from adaptive_mj.plants.manipulator import base_map_columns
+from adaptive_mj.plants.mujoco_kernel import (KernelRun, KernelVariant, MujocoKernel, RowShapes, gains_record,
+                                              row_columns)
 from adaptive_mj.plants.regressor_kernel import rne_forward
-from adaptive_mj.plants.protocol import Plant
-from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim import compile_note, native_step
-from adaptive_mj.sim.native import gains_record
-from adaptive_mj.sim.native_context import ContextOwner, addr, context_address, inlined, offsets, source_key
 
 if TYPE_CHECKING:
-    from adaptive_mj.plants.manipulator import ManipulatorPlant
-
-    # the globals compiled() injects into the callback and _law_stage (numba, numba.types, carray, the
-    # pointer intrinsics, the stage functions, the compiled regressor and law pieces); declared for the
-    # type checker only
-    numba: Any
-    types: Any
+    # the globals the generic controller injects into the pieces (carray, the pointer intrinsics, the stage
+    # functions, the compiled regressor and law pieces); declared for the type checker only
     carray: Any
-    address: Any
-    cptr: Any
     fptr: Any
     iptr: Any
     pointer_at: Any
-    law_stage: Any
     regressor: Any
     regressor_output: Any
     law_torque: Any
@@ -86,29 +66,19 @@ if TYPE_CHECKING:
     ref_terms: Any
     output: Any
     law_point: Any
-    law_output: Any
     user_point: Any
     user_law: Any
     gains_ptr: Any
     stage_estimate: Any
-    accumulate_rate: Any
-    advance_estimates: Any
-    is_sample_step: Any
-    period_ends: Any
-    delay_slot: Any
-    end_stage: Any
     sense: Any
-    SAMPLED: int
+    MODE_PD_GRAVITY: int
 
 _i8, _f8 = np.int64, np.float64
-# The context block a run's MjData points at (userdata[0], see adaptive_mj.sim.native_context):
-# run state, settings, and the addresses of the run's buffers and of the regressor's static arrays.
-CONTEXT = native_step.context_dtype([  # after stage.control_stage's fields (native_step.STAGE_CONTEXT)
+#: this kind's context fields (after sim.native_step.STAGE_CONTEXT and the generic controller's own): the run's
+#: settings, and the addresses of its buffers and of the regressor's static arrays
+CONTEXT = (
     # settings
     ("nv", _i8), ("nbody", _i8), ("nstd", _i8), ("nq", _i8), ("nu", _i8), ("maxrows", _i8), ("has_base", _i8),
-    # the law's scalar gains: the address of its record (laws.slotine_li.SLOTINE_LI_GAINS, or
-    # laws.plugin.PLUGIN_GAINS for a multi-joint plugin), read by name
-    ("gains", _i8),
     # the regressor's static arrays
     ("parent", _i8), ("dofadr", _i8), ("dofnum", _i8), ("rootid", _i8), ("body_col", _i8), ("body_known", _i8),
     ("col_arm", _i8), ("col_damp", _i8), ("need", _i8), ("bptr", _i8), ("bidx", _i8), ("bval", _i8),
@@ -117,24 +87,28 @@ CONTEXT = native_step.context_dtype([  # after stage.control_stage's fields (nat
     ("qadr", _i8), ("act", _i8), ("gear", _i8), ("lo", _i8), ("hi", _i8), ("lam", _i8), ("kd", _i8),
     ("gamma", _i8), ("theta0", _i8),
     # work buffers
-    ("th", _i8), ("x", _i8), ("s", _i8), ("qd_r", _i8), ("qdd_r", _i8), ("zero", _i8), ("u", _i8), ("s_hold", _i8),
+    ("x", _i8), ("s", _i8), ("qd_r", _i8), ("qdd_r", _i8), ("zero", _i8), ("u", _i8),
     ("y_std", _i8), ("y", _i8), ("tau_known", _i8), ("ref", _i8), ("noise", _i8), ("scratch", _i8),
     # sensors (stage.sense), disturbance torques and saturation-aware adaptation
     ("diff", _i8), ("has_dist", _i8), ("alpha", _f8), ("sense_period", _f8),
     ("quantum", _i8), ("q_prev", _i8), ("v_est", _i8), ("q_true", _i8), ("dist", _i8), ("sat_lo", _i8),
     ("sat_hi", _i8),
-    # records (one row per physics step)
-    ("rec_t", _i8), ("rec_x", _i8), ("rec_u", _i8), ("rec_s", _i8), ("rec_ref", _i8), ("rec_theta", _i8),
-    ("nM", _i8), ("rec_M", _i8),  # MuJoCo's sparse M(q) at each step's start (mjData.M), for V
+    # the size of MuJoCo's sparse M(q) (mjData.M), recorded at each step's start in the row's extra columns
+    ("nM", _i8),
     # a multi-joint law plugin (laws.plugin.JointLawPlugin): its point's v and its params (nparams,)
     ("vpt", _i8), ("params", _i8), ("nparams", _i8),
     # Slotine–Li in O(n) (laws.slotine_li, evaluation "recursive"): 1 when on; π = B θ̂ (nstd,), Yᵀ s in the
     # standard parameters (nstd,), the s the rate takes (nv,)
     ("recursive", _i8), ("pi_std", _i8), ("rate_std", _i8), ("s_rate", _i8),
-])
+)
 
 MODE_PD_GRAVITY = 2  # laws.slotine_li.Mode.PD_GRAVITY (the regressor at v = w = a = 0)
-_compiled: dict = {}
+
+
+def _columns(nv, nth, nM):
+    """The arm's row layout (plants.mujoco_kernel.row_columns): t, x = [q; q̇] (2, nv), τ (nv,), s (nv,), the
+    reference (3, nv), θ̂ (nth,), then M(q) (nM,) as MuJoCo stores it (the extra record columns)."""
+    return row_columns(2 * nv, nv, nv, 3 * nv, nth, nM)
 
 
 # --- the regressor kernel, specialised -------------------------------------------
@@ -344,33 +318,33 @@ def _apply_control(ctx, io, row, u):
             qfrc[j] = dist[row, j]
 
 
+
 def _record_row(ctx, io, row, u, theta):
-    """This shape's row (adaptive_mj.sim.native_step): t, true x = [q; q̇], u, s, ref, θ̂ at the step's start, and
-    M(q) as MuJoCo computed it for this stage (mj_forward at the step's start), for V = ½ sᵀMs + ...: copied, not
-    recomputed per row in Python (plants.manipulator.ManipulatorPlant.full_mass)."""
+    """This shape's row (adaptive_mj.sim.native_step) in the record buffer's named columns (_columns): t, true
+    x = [q; q̇], u, s, ref, θ̂ at the step's start, and M(q) as MuJoCo computed it for this stage (mj_forward at the
+    step's start), for V = ½ sᵀMs + ...: copied, not recomputed per row in Python
+    (plants.manipulator.ManipulatorPlant.full_mass)."""
     base, mbase, off = io
-    nv, nth, maxrows, nst = ctx.nv, ctx.nth, ctx.maxrows, ctx.nstages
+    nv, nth, maxrows, nst, nM = ctx.nv, ctx.nth, ctx.maxrows, ctx.nstages, ctx.nM
     qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)  # noqa: F821 (injected)
     qvel = carray(fptr(pointer_at(base, off.qvel)), nv)  # noqa: F821 (injected)
     qadr, s_hold = carray(iptr(ctx.qadr), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
     r = carray(fptr(ctx.ref), (maxrows * nst, 3, nv))[row * nst]  # noqa: F821 (injected)
-    carray(fptr(ctx.rec_t), maxrows)[row] = ctx.t  # noqa: F821 (injected)
-    rx = carray(fptr(ctx.rec_x), (maxrows, 2, nv))  # noqa: F821 (injected)
-    ru, rs = carray(fptr(ctx.rec_u), (maxrows, nv)), carray(fptr(ctx.rec_s), (maxrows, nv))  # noqa: F821 (injected)
-    rref, rth = carray(fptr(ctx.rec_ref), (maxrows, 3, nv)), carray(fptr(ctx.rec_theta), (maxrows, nth))  # noqa: F821,E501 (injected globals; one carray per line)
+    col = _columns(nv, nth, nM)
+    rec = carray(fptr(ctx.rec), (maxrows, col.width))[row]  # noqa: F821 (injected)
+    rec[col.t] = ctx.t
     for j in range(nv):
-        rx[row, 0, j] = qpos[qadr[j]]
-        rx[row, 1, j] = qvel[j]
-        ru[row, j] = u[j]
-        rs[row, j] = s_hold[j]
+        rec[col.x + j] = qpos[qadr[j]]
+        rec[col.x + nv + j] = qvel[j]
+        rec[col.u + j] = u[j]
+        rec[col.s + j] = s_hold[j]
         for k in range(3):
-            rref[row, k, j] = r[k, j]
+            rec[col.ref + k * nv + j] = r[k, j]
     for i in range(nth):
-        rth[row, i] = theta[i]
-    nM = ctx.nM
-    rM, Md = carray(fptr(ctx.rec_M), (maxrows, nM)), carray(fptr(pointer_at(base, off.M)), nM)  # noqa: F821,E501 (injected globals; one carray per line)
+        rec[col.theta + i] = theta[i]
+    Md = carray(fptr(pointer_at(base, off.M)), nM)  # noqa: F821 (injected)
     for k in range(nM):
-        rM[row, k] = Md[k]
+        rec[col.extra + k] = Md[k]
 
 
 def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
@@ -545,42 +519,37 @@ def _plugin_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper):
                 carray(fptr(ctx.theta0), nth), carray(fptr(ctx.gamma), nth), lower, upper)  # noqa: F821 (injected)
 
 
-def compiled(plugin=None):
-    """The control callback (a numba cfunc): in memory once per process, on disk across processes.
 
-    plugin: None for Slotine–Li and its baselines, or (point, law) of a JointLawPlugin (laws.plugin),
-    compiled the same way into the same step."""
+def plugin_functions(law):
+    """(point, law) of a multi-joint law plugin for `variant`, or None for Slotine–Li and its baselines."""
+    p = law.native_params() if law.installed is not None else {}
+    return (p["plugin_point"], p["plugin_law"]) if "plugin_point" in p else None
+
+
+def variant(plant, law) -> KernelVariant:
+    """The callback variant for the law: Slotine–Li and its baselines, or (point, law) of a JointLawPlugin
+    (laws.plugin) compiled the same way into the same step."""
+    from adaptive_mj.laws.slotine_li import (reference_terms, slotine_li_output, slotine_li_rate_output,
+                                             slotine_li_torque_output)
+
+    plugin = plugin_functions(law)
     fns = () if plugin is None else tuple(plugin)
     mem_key = ("callback",) + tuple((fn.__code__, tuple(c.cell_contents for c in (fn.__closure__ or ())))
                                     for fn in fns)
-    if mem_key in _compiled:
-        return _compiled[mem_key]
-    import numba
 
-    from adaptive_mj.laws.slotine_li import (reference_terms, slotine_li_output, slotine_li_rate_output,
-                                             slotine_li_torque_output)
-    from adaptive_mj.numba_util import pointer
-
-    off = offsets()
-    key = source_key(*fns, native_step.callback_factory, stage_code.control_stage, _law_stage, _apply_control,
-                     _record_row, _regressor, reference_terms, slotine_li_output, _builtin_point, _builtin_output,
-                     _regressor_output, _builtin_recursive_output, _builtin_recursive_rate, _no_recursive_output,
-                     _no_recursive_rate, _no_law_torque, _no_law_rate, slotine_li_torque_output, slotine_li_rate_output,
-                     rk.rne_law_torque, rk.rne_law_rate, rk.rne_torque, rk.rne_rate, rk.rne_forward, rk._force_add,
-                     rk._bilinear_grad, rk._cinert_scalars, rk._cross, _plugin_point, _plugin_output, plugin_rate,
-                     stage_code.stage_estimate, stage_code.end_stage, stage_code.sense, context_address,
-                     extra=(off, numba.__version__, str(SLOTINE_LI_GAINS), str(PLUGIN_GAINS)))
-
-    def pieces(common: dict[str, Any], tag: str) -> dict[str, Any]:
+    def pieces(common: dict[str, Any], tag: str, inline) -> dict[str, Any]:
         """This shape's law_stage (the regressor compiled apart, the law's point and output inlined into it),
         apply_control and record_row."""
-        inline = inlined(numba)
+        import numba
+
+        from adaptive_mj.numba_util import pointer
+
         common = {**common, "MODE_PD_GRAVITY": MODE_PD_GRAVITY, "RNE_SCRATCH": rk.RNE_SCRATCH,
                   # the law reads its gains through a pointer of
                   "gains_ptr": pointer(numba.from_dtype(SLOTINE_LI_GAINS if plugin is None else PLUGIN_GAINS))}
         # Slotine–Li's O(n) recursions (ctx.recursive: a built-in law's evaluation "recursive"; a plugin needs Y)
         recursions: dict[str, Any] = {"law_torque": jit_tree(rk.rne_law_torque, numba.njit, tag=tag, inner=inline),
-                      "law_rate": jit_tree(rk.rne_law_rate, numba.njit, tag=tag, inner=inline)}
+                                      "law_rate": jit_tree(rk.rne_law_rate, numba.njit, tag=tag, inner=inline)}
         if plugin is None:
             law_point = jit_tree(_builtin_point, inline, tag=tag,
                                  ref_terms=jit_tree(reference_terms, inline, tag=tag), **common)
@@ -591,10 +560,10 @@ def compiled(plugin=None):
             recursive_rate = jit_tree(_builtin_recursive_rate, inline, tag=tag,
                                       rate_output=jit_tree(slotine_li_rate_output, inline, tag=tag), **common)
         else:
-            point, law = plugin
+            point, user = plugin
             law_point = jit_tree(_plugin_point, inline, tag=tag, user_point=jit_tree(point, inline, tag=tag),
                                  **common)
-            law_output = jit_tree(_plugin_output, inline, tag=tag, user_law=jit_tree(law, inline, tag=tag),
+            law_output = jit_tree(_plugin_output, inline, tag=tag, user_law=jit_tree(user, inline, tag=tag),
                                   **common)
             recursive_output = jit_tree(_no_recursive_output, inline, tag=tag, **common)
             recursive_rate = jit_tree(_no_recursive_rate, inline, tag=tag, **common)
@@ -611,28 +580,29 @@ def compiled(plugin=None):
 
     law_name = ("Slotine-Li or one of its baselines" if plugin is None
                 else f"law plugin {fns[1].__module__}.{fns[1].__qualname__}")
-    what = f"the arm control callback (a kinematic tree's regressor; {law_name})"
-    _compiled[mem_key] = compile_note.plugin_compiled(
-        lambda: native_step.compiled_callback(CONTEXT, off, key, pieces, what=what, kind="arm callback"),
-        (fns[1], fns[0]) if plugin is not None else (), key)
-    return _compiled[mem_key]
+    return KernelVariant(
+        mem_key=mem_key,
+        key_functions=fns + (_law_stage, _apply_control, _record_row, _regressor, reference_terms,
+                             slotine_li_output, _builtin_point, _builtin_output, _regressor_output,
+                             _builtin_recursive_output, _builtin_recursive_rate, _no_recursive_output,
+                             _no_recursive_rate, _no_law_torque, _no_law_rate, slotine_li_torque_output,
+                             slotine_li_rate_output, rk.rne_law_torque, rk.rne_law_rate, rk.rne_torque, rk.rne_rate,
+                             rk.rne_forward, rk._force_add, rk._bilinear_grad, rk._cinert_scalars, rk._cross,
+                             _plugin_point, _plugin_output, plugin_rate, _columns),
+        key_extra=(str(SLOTINE_LI_GAINS), str(PLUGIN_GAINS)),
+        pieces=pieces,
+        what=f"the arm control callback (a kinematic tree's regressor; {law_name})", kind="arm callback",
+        plugins=(fns[1], fns[0]) if plugin is not None else ())
 
 
-def plugin_functions(law: Law):
-    """(point, law) of a multi-joint law plugin for `compiled`, or None for Slotine–Li and its baselines."""
-    p = law.native_params() if law.installed is not None else {}
-    return (p["plugin_point"], p["plugin_law"]) if "plugin_point" in p else None
-
-
-def supported(plant: Plant, law: Law) -> bool:
+def supported(plant, law) -> bool:
     """Native path for manipulators: a ManipulatorPlant (the callback reads its joint addresses and
     regressor arrays) compiled with a userdata slot, a Slotine–Li law (or baseline: the callback
     compiles slotine_li_output) using that plant's regressor, RK4 or a one-stage integrator."""
+    from adaptive_mj.laws.plugin import JointPluginLaw
     from adaptive_mj.laws.slotine_li import SlotineLiLaw
     from adaptive_mj.plants.manipulator import ManipulatorPlant
     from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS
-
-    from adaptive_mj.laws.plugin import JointPluginLaw
 
     if not (isinstance(plant, ManipulatorPlant) and isinstance(law, (SlotineLiLaw, JointPluginLaw)) and law.native):
         return False
@@ -641,127 +611,78 @@ def supported(plant: Plant, law: Law) -> bool:
             and plant.model.nuserdata >= USERDATA_SLOTS)
 
 
-class NativeManipulatorController(ContextOwner):
-    """Owns the context and buffers of one native manipulator run and steps the plant chunk by chunk
-    (the interface of adaptive_mj.sim.native.NativeController). plant: a ManipulatorPlant; law: one
-    `supported` accepts."""
+def setup(plant, law, control, sensors, max_rows: int) -> KernelRun:
+    """The run's buffers (the regressor's static arrays, the law's arrays, the work buffers) and context values."""
+    from adaptive_mj.plants.manipulator import base_map_columns
 
-    plant: ManipulatorPlant
-
-    def __init__(self, plant: Plant, law: Law, reference, theta_hat0, max_rows: int, *,
-                 control: stage_code.ControlTiming | None = None, sensors: stage_code.Sensors | None = None):
-        from adaptive_mj.plants.manipulator import ManipulatorPlant
-
-        if not isinstance(plant, ManipulatorPlant):
-            raise TypeError(f"the native manipulator callback drives a ManipulatorPlant, got a {type(plant).__name__}")
-        self.plant, self.law, self.reference = plant, law, reference
-        control = control if control is not None else stage_code.ControlTiming(period=plant.dt)
-        self.callback = compiled(plugin_functions(law))
-        model, reg = plant.model, plant.regressor
-        nv, nb = int(model.nv), int(model.nbody)
-        nth, nstd = len(law.names), int(reg.n_standard)
-        self.m, self.nth, self.nst, self.max_rows = nv, nth, plant.stages, int(max_rows)
-        p = law.native_params()
-        inc, weights = stage_code.TABLEAU[self.nst]
-        self.stage_offsets = np.asarray(inc)  # RK4: c_i = a_i (see stage.TABLEAU)
-        f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731 (a short local converter)
-        i64 = lambda a: np.ascontiguousarray(a, dtype=np.int64)  # noqa: E731 (a short local converter)
-        self.theta = f64(np.array(theta_hat0, dtype=float).reshape(nth))
-        lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (np.full(nv, -np.inf), np.full(nv, np.inf))
-        rows, d = self.max_rows, control.delay
-        buf = {  # everything the callback reaches by address: held here for the run's lifetime
-            "parent": i64(reg.parent), "dofadr": i64(reg.dofadr), "dofnum": i64(reg.dofnum),
-            "rootid": i64(reg.rootid), "body_col": i64(reg.body_col), "body_known": i64(reg.body_known),
-            "col_arm": i64(reg.col_arm), "col_damp": i64(reg.col_damp), "col_coul": i64(reg.col_coul),
-            "qadr": i64(plant._qadr), "act": i64(plant._act), "gear": f64(plant._gear),
-            "lo": f64(np.broadcast_to(lo, (nv,))), "hi": f64(np.broadcast_to(hi, (nv,))),
-            "lam": f64(p.get("lam", np.zeros(nv))), "kd": f64(p.get("kd", np.zeros(nv))), "gamma": f64(p["gamma"]),
-            "theta0": f64(p["theta0"]), "lower": f64(p["lower"]), "upper": f64(p["upper"]),
-            "theta": self.theta, "rsum": np.zeros(nth), "prev": np.zeros(nth), "th": np.zeros(nth),
-            "x": np.zeros((2, nv)), "s": np.zeros(nv), "qd_r": np.zeros(nv), "qdd_r": np.zeros(nv),
-            "zero": np.zeros(nv), "u": np.zeros(nv), "u_hold": np.zeros(nv), "s_hold": np.zeros(nv),
-            "delayed": np.zeros(nv), "ring": np.zeros((d + 1, nv)), "rate": np.zeros(nth),
-            "y_std": np.zeros((nv, nstd)), "y": np.zeros((nv, nth)), "tau_known": np.zeros(nv),
-            "scratch": np.zeros(rk.RNE_SCRATCH * nb), "pi_std": np.zeros(max(nstd, 1)),
-            "rate_std": np.zeros(max(nstd, 1)), "s_rate": np.zeros(nv),
-            "ref": np.zeros((rows * self.nst, 3, nv)), "noise": np.zeros((rows, 2, nv)),
-            "rec_t": np.zeros(rows), "rec_x": np.zeros((rows, 2, nv)), "rec_u": np.zeros((rows, nv)),
-            "rec_s": np.zeros((rows, nv)), "rec_ref": np.zeros((rows, 3, nv)), "rec_theta": np.zeros((rows, nth)),
-            "rec_M": np.zeros((rows, max(model.nM, 1))),
-            "quantum": f64(sensors.quantum if sensors is not None else np.zeros(nv)), "q_prev": np.zeros(nv),
-            "v_est": np.zeros(nv), "q_true": np.zeros(nv), "dist": np.zeros((rows, nv)),
-            "sat_lo": f64(p.get("sat_lo", np.full(nv, -np.inf))), "sat_hi": f64(p.get("sat_hi", np.full(nv, np.inf))),
-            "vpt": np.zeros(nv), "params": f64(p.get("plugin_params", np.zeros(1))),
-        }
-        B = reg.base_map
-        if B is None and nstd != nth:
-            raise ValueError(f"the law has {nth} parameters, the regressor {nstd}")
-        buf.update(base_map_columns(B, nstd, nth))
-        self.buffers = buf
-        ctx = np.zeros(1, dtype=CONTEXT)
-        c = ctx[0]
-        for name, arr in buf.items():
-            c[name] = addr(arr)
-        c["nstages"], c["nv"], c["m"], c["nbody"], c["nth"], c["nstd"] = self.nst, nv, nv, nb, nth, nstd
-        c["nbox"] = len(buf["lower"])
-        c["nq"], c["nu"], c["maxrows"], c["nM"] = model.nq, model.nu, rows, model.nM
-        self.gains = gains_record(p["gains"], SLOTINE_LI_GAINS if "plugin_law" not in p else PLUGIN_GAINS)
-        c["gains"] = self.gains.ctypes.data  # held by self for the run's lifetime
-        c["nparams"] = len(buf["params"])
-        c["has_base"] = int(B is not None)
-        c["recursive"] = int(bool(p.get("recursive", False)))
-        if c["recursive"] and "plugin_law" in p:  # its variant has no recursions compiled in (_no_law_torque)
-            raise ValueError("a law plugin's arm callback evaluates the regressor whole, not Slotine-Li's recursions")
-        c["mode"], c["period_steps"], c["delay"], c["period"] = control.mode, control.steps, d, control.period
-        c["h"] = plant.dt
-        c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
-        c["coulomb_eps"] = reg.coulomb_eps
-        c["sense_period"] = control.period if control.sampled else plant.dt
-        c["diff"] = int(sensors is not None and sensors.differentiated)
-        c["alpha"] = sensors.alpha(c["sense_period"]) if sensors is not None else 0.0
-        c["has_dist"] = int(plant.joint_disturbance is not None)
-        self.context = ctx
-        self.bind()
-
-    def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
-        """Step `rows` physics steps; return (t (rows,), x (rows, 2, m), u (rows, m), s (rows, m),
-        ref (rows, 3, m), theta_hat (rows, n_params)): each row the state, reference and θ̂ at
-        the step's start and the clamped τ applied during it."""
-        self.prepare(rows, noise)
-        self.plant.step_native(rows)
-        return self.finish(rows)
-
-    def prepare(self, rows: int, noise: np.ndarray | None) -> None:
-        """Set the buffers and the context up for the next `rows` physics steps (then the plant steps)."""
-        if not 0 < rows <= self.max_rows:
-            raise ValueError(f"rows must be in 1..{self.max_rows}, got {rows}")
-        plant, m, nst, h = self.plant, self.m, self.nst, self.plant.dt
-        t, refs = stage_code.stage_references(self.reference, plant.time, h, rows, self.stage_offsets, 2)
-        b = self.buffers
-        b["ref"][: rows * nst] = refs
-        b["noise"][:rows] = 0.0 if noise is None else np.asarray(noise, dtype=float).reshape(rows, 2, m)
-        if plant.joint_disturbance is not None:
-            b["dist"][:rows] = plant.joint_disturbance.rows(t)
-        c = self.context[0]
-        c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
-        self.bind()
-
-    def finish(self, rows: int, *, partial: bool = False) -> tuple[np.ndarray, ...]:
-        """The rows the callback recorded over the `rows` steps just taken (see chunk; partial: the first `rows`
-        of a chunk MuJoCo cut short, ContextOwner.rows_recorded)."""
-        c, b = self.context[0], self.buffers
-        done = int(c["row"])
-        if not partial and (done != rows or c["stage"] != 0):
-            raise RuntimeError(f"native callback ran {done} steps (stage {int(c['stage'])}), expected {rows}")
-        return (b["rec_t"][:rows].copy(), b["rec_x"][:rows].copy(), b["rec_u"][:rows].copy(),
-                b["rec_s"][:rows].copy(), b["rec_ref"][:rows].copy(), b["rec_theta"][:rows].copy())
-
-    def mass_rows(self, rows: int) -> np.ndarray:
-        """(rows, m, m) M(q) at the start of each of the `rows` steps just taken, as MuJoCo computed it in the
-        step (the same numbers ManipulatorPlant.mass_matrices computes from the logged q, without its four
-        MuJoCo calls per row)."""
-        return self.plant.full_mass(self.buffers["rec_M"][:rows])
+    model, reg = plant.model, plant.regressor
+    nv, nb = int(model.nv), int(model.nbody)
+    nth, nstd = len(law.names), int(reg.n_standard)
+    p = law.native_params()
+    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731 (a short local converter)
+    i64 = lambda a: np.ascontiguousarray(a, dtype=np.int64)  # noqa: E731 (a short local converter)
+    lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (np.full(nv, -np.inf), np.full(nv, np.inf))
+    rows, nst = max_rows, plant.stages
+    buf = {  # everything the callback reaches by address: held by the controller for the run's lifetime
+        "parent": i64(reg.parent), "dofadr": i64(reg.dofadr), "dofnum": i64(reg.dofnum),
+        "rootid": i64(reg.rootid), "body_col": i64(reg.body_col), "body_known": i64(reg.body_known),
+        "col_arm": i64(reg.col_arm), "col_damp": i64(reg.col_damp), "col_coul": i64(reg.col_coul),
+        "qadr": i64(plant._qadr), "act": i64(plant._act), "gear": f64(plant._gear),
+        "lo": f64(np.broadcast_to(lo, (nv,))), "hi": f64(np.broadcast_to(hi, (nv,))),
+        "lam": f64(p.get("lam", np.zeros(nv))), "kd": f64(p.get("kd", np.zeros(nv))), "gamma": f64(p["gamma"]),
+        "theta0": f64(p["theta0"]), "lower": f64(p["lower"]), "upper": f64(p["upper"]),
+        "x": np.zeros((2, nv)), "s": np.zeros(nv), "qd_r": np.zeros(nv), "qdd_r": np.zeros(nv),
+        "zero": np.zeros(nv), "u": np.zeros(nv),
+        "y_std": np.zeros((nv, nstd)), "y": np.zeros((nv, nth)), "tau_known": np.zeros(nv),
+        "scratch": np.zeros(rk.RNE_SCRATCH * nb), "pi_std": np.zeros(max(nstd, 1)),
+        "rate_std": np.zeros(max(nstd, 1)), "s_rate": np.zeros(nv),
+        "ref": np.zeros((rows * nst, 3, nv)), "noise": np.zeros((rows, 2, nv)),
+        "quantum": f64(sensors.quantum if sensors is not None else np.zeros(nv)), "q_prev": np.zeros(nv),
+        "v_est": np.zeros(nv), "q_true": np.zeros(nv), "dist": np.zeros((rows, nv)),
+        "sat_lo": f64(p.get("sat_lo", np.full(nv, -np.inf))), "sat_hi": f64(p.get("sat_hi", np.full(nv, np.inf))),
+        "vpt": np.zeros(nv), "params": f64(p.get("plugin_params", np.zeros(1))),
+    }
+    B = reg.base_map
+    if B is None and nstd != nth:
+        raise ValueError(f"the law has {nth} parameters, the regressor {nstd}")
+    buf.update(base_map_columns(B, nstd, nth))
+    gains = gains_record(p["gains"], SLOTINE_LI_GAINS if "plugin_law" not in p else PLUGIN_GAINS)
+    recursive = int(bool(p.get("recursive", False)))
+    if recursive and "plugin_law" in p:  # its variant has no recursions compiled in (_no_law_torque)
+        raise ValueError("a law plugin's arm callback evaluates the regressor whole, not Slotine-Li's recursions")
+    sense_period = control.period if control.sampled else plant.dt
+    fields = {"nv": nv, "nbody": nb, "nstd": nstd, "nq": model.nq, "nu": model.nu, "maxrows": rows, "nM": model.nM,
+              "nparams": len(buf["params"]), "has_base": int(B is not None), "recursive": recursive,
+              "coulomb_eps": reg.coulomb_eps, "sense_period": sense_period,
+              "diff": int(sensors is not None and sensors.differentiated),
+              "alpha": sensors.alpha(sense_period) if sensors is not None else 0.0,
+              "has_dist": int(plant.joint_disturbance is not None)}
+    return KernelRun(buf, fields, gains, m=nv, rows=RowShapes((2, nv), (nv,), (nv,), (3, nv), nth, int(model.nM)),
+                     ref_order=2, s_width=nv)
 
 
-#: what loop._native_controller takes of a compiled loop's module (protocol.Plant.compiled_loop)
-Controller = NativeManipulatorController
+def prepare(controller, rows: int, noise, t, refs) -> None:
+    """The chunk's references, noise and disturbance torques into the run's buffers."""
+    plant, b, m = controller.plant, controller.buffers, controller.m
+    b["ref"][: rows * controller.nst] = refs
+    b["noise"][:rows] = 0.0 if noise is None else np.asarray(noise, dtype=float).reshape(rows, 2, m)
+    if plant.joint_disturbance is not None:
+        b["dist"][:rows] = plant.joint_disturbance.rows(t)
+
+
+def mass_rows(controller, rows: int) -> np.ndarray:
+    """(rows, m, m) M(q) at the start of each of the `rows` steps just taken, as MuJoCo computed it in the step (the
+    row's extra columns: the same numbers ManipulatorPlant.mass_matrices computes from the logged q, without its
+    four MuJoCo calls per row)."""
+    return controller.plant.full_mass(np.ascontiguousarray(controller.extra_rows(rows)))
+
+
+def _plant_type() -> type:
+    from adaptive_mj.plants.manipulator import ManipulatorPlant
+
+    return ManipulatorPlant
+
+
+#: the multi-joint arms' kernel spec (plants.manipulator.ManipulatorPlant.mujoco_kernel)
+KERNEL = MujocoKernel(name="arm", plant_type=_plant_type, context=CONTEXT, supported=supported, variant=variant,
+                      setup=setup, prepare=prepare, mass_rows=mass_rows)

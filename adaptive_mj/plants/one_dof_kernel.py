@@ -1,8 +1,8 @@
-"""The native closed loop for 1-DOF plants: the sliding law (`laws.sliding.sliding_law`, with composite
-adaptation `laws.composite` in a variant of its own, or a law plugin's function) and the plant's regressor
-functions, compiled with numba into a C control callback that MuJoCo calls without the GIL; physics
-advances with mj_step(m, d, nstep) in chunks, and Python only works between chunks (events, noise, logging,
-divergence checks).
+"""The 1-DOF MuJoCo plants' kernel (plants.mujoco_plant.MujocoPlant: the heave vehicle, with its thruster lag of
+order 3 too, the pendulum arm, the ship): the sliding law (`laws.sliding.sliding_law`, with composite adaptation
+`laws.composite` in a variant of its own, or a law plugin's function) and the plant's regressor functions, compiled
+with numba into the C control callback that MuJoCo calls without the GIL (the one generic controller,
+adaptive_mj.sim.native_mujoco, builds and drives it from `KERNEL`, this kind's declaration).
 
 At every call the callback runs adaptive_mj.sim.stage.control_stage, the step's order that the Python
 controller (adaptive_mj.sim.loop.Controller) runs too, compiled (adaptive_mj.sim.native_step) with this module's
@@ -13,40 +13,29 @@ MuJoCo has just computed for the stage, the operations of plants.heave.HeavePlan
 The references at the stage times t_k + c_i h are evaluated in Python, vectorised, before each chunk (MuJoCo's
 stage times are reproduced bit for bit).
 
-The callback finds its run through mjData.userdata (adaptive_mj.sim.native_context): the context
-block `CONTEXT` (named fields) holds the run's settings, its state (stage, row, the held control)
-and the addresses of its buffers. Nothing is compiled in but the law, the plant's form and
-MuJoCo's struct layout, so the compiled callback is cached on disk and reused by every process.
-tests/test_native.py shows the Python and native paths give the same rows bit for bit.
+Nothing is compiled in but the law, the plant's form and MuJoCo's struct layout, so the compiled callback is
+cached on disk and reused by every process. tests/test_native.py shows the Python and native paths give the same
+rows bit for bit. Nothing here imports adaptive_mj.sim or numba at import time: `carray`, `fptr`, the pointer
+intrinsics, the stage functions and the law are globals the generic controller injects.
 """
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from adaptive_mj.laws.common import plugin_rate
 from adaptive_mj.laws.composite import composite_rate, filter_gain, filter_step, stage_sums
 from adaptive_mj.laws.plugin import PLUGIN_GAINS
-from adaptive_mj.laws.protocol import Law
 from adaptive_mj.laws.sliding import SLIDING_GAINS, SlidingArrays, sliding_law_values
-from adaptive_mj.plants.protocol import Plant
-from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim import compile_note, native_step
-from adaptive_mj.sim.native_context import ContextOwner, addr, context_address, inlined, offsets, source_key
+from adaptive_mj.plants.mujoco_kernel import (KernelRun, KernelVariant, MujocoKernel, RowShapes, gains_record,
+                                              record_columns)
 
 if TYPE_CHECKING:
-    from adaptive_mj.plants.mujoco_plant import MujocoPlant
-
-    # the globals compiled() injects into the callback and the laws below (numba, numba.types, carray,
-    # the pointer intrinsics, the law, the form's functions, the stage functions); declared for the
-    # type checker only
-    numba: Any
-    types: Any
+    # the globals the generic controller injects into the pieces and the laws below (carray, the pointer
+    # intrinsics, the law, the form's functions, the stage functions); declared for the type checker only
     carray: Any
-    address: Any
-    cptr: Any
     fptr: Any
     pointer_at: Any
     law: Any
@@ -56,27 +45,18 @@ if TYPE_CHECKING:
     f_fn: Any
     h_fn: Any
     stage_estimate: Any
-    accumulate_rate: Any
-    advance_estimates: Any
-    is_sample_step: Any
-    period_ends: Any
-    delay_slot: Any
-    end_stage: Any
     applied: Any
     acceleration: Any
     applied_now: Any
-    SAMPLED: int
 
 _i8, _f8 = np.int64, np.float64
-CONTEXT = native_step.context_dtype([  # after stage.control_stage's fields (native_step.STAGE_CONTEXT)
+#: this kind's context fields (after sim.native_step.STAGE_CONTEXT and the generic controller's own)
+CONTEXT = (
     # settings
     ("n", _i8), ("qadr", _i8), ("dadr", _i8), ("act", _i8), ("has_dist", _i8), ("lo", _f8), ("hi", _f8),
-    # the law's scalar gains: the address of its record (laws.sliding.SLIDING_GAINS, or laws.plugin.PLUGIN_GAINS
-    # for a plugin law), read by name
-    ("gains", _i8),
     # buffers (addresses)
-    ("ref", _i8), ("noise", _i8), ("rec", _i8), ("th", _i8), ("coeffs", _i8), ("gamma", _i8), ("theta0", _i8),
-    ("params", _i8), ("xbuf", _i8), ("s_hold", _i8), ("dist", _i8),
+    ("ref", _i8), ("noise", _i8), ("coeffs", _i8), ("gamma", _i8), ("theta0", _i8),
+    ("params", _i8), ("xbuf", _i8), ("dist", _i8),
     # composite adaptation (laws.composite; the composite variant only): κ, the filters' gain 1 − e^(−λ_f h), and
     # buffers (n_theta + 1,): the filters z = [z_a, z_φ, z_τ], the pending step [y' at its start, φ̄, τ̄], and the
     # stage's [φ, f, h] (the law's, for the sums when the stage's control is applied)
@@ -86,42 +66,7 @@ CONTEXT = native_step.context_dtype([  # after stage.control_stage's fields (nat
     # actuator_gainprm rows; applied_row: the external force the step's row reads, as the Python path's observe()
     # does before the step (the force the step before held)
     ("act_adr", _i8), ("body", _i8), ("gear_w", _i8), ("gain_w", _i8), ("applied_row", _f8),
-])
-_compiled: dict = {}
-
-
-class RecordColumns(NamedTuple):
-    """Where each quantity of a step's row lies in the callback's record buffer (first column of each; width:
-    the row's length): t, x (n), u, s, ref (n+1), θ̂ (n_theta). One definition for the callback that writes
-    the rows and NativeController.finish that reads them."""
-
-    t: int
-    x: int
-    u: int
-    s: int
-    ref: int
-    theta: int
-    width: int
-
-
-def record_columns(n: int, nth: int) -> RecordColumns:
-    """The record layout of a plant of order n with n_theta parameters (compiled into the callback too)."""
-    return RecordColumns(0, 1, 1 + n, 2 + n, 3 + n, 4 + 2 * n, 4 + 2 * n + nth)
-
-
-def recorded_rows(context, rec: np.ndarray, col: RecordColumns, n: int, rows: int, partial: bool,
-                  what: str) -> tuple[np.ndarray, ...]:
-    """The rows a compiled loop recorded over the `rows` steps just taken (this module's callback, or the analytic
-    chunk engine, sim.native_chunk: the same record layout), copied out of its record buffer `rec` (flat, float64):
-    t (rows,) [s], x (rows, n) the true state at each step's start, u (rows,) applied, s (rows,), ref (rows, n+1),
-    theta_hat (rows, n_theta) at each step's start. context: the run's context record, whose row and stage must
-    say the loop took exactly `rows` whole steps (unless partial: the first `rows` of a chunk cut short,
-    ContextOwner.rows_recorded); what: the loop's name in the error otherwise."""
-    if not partial and (int(context["row"]) != rows or int(context["stage"]) != 0):
-        raise RuntimeError(f"{what} ran {int(context['row'])} steps (stage {int(context['stage'])}), expected {rows}")
-    r = rec[: rows * col.width].reshape(rows, col.width)
-    return (r[:, col.t].copy(), r[:, col.x:col.x + n].copy(), r[:, col.u].copy(), r[:, col.s].copy(),
-            r[:, col.ref:col.ref + n + 1].copy(), r[:, col.theta:].copy())
+)
 
 
 def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
@@ -280,45 +225,28 @@ def _plugin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rate
     return float(u), float(s)
 
 
-def gains_record(record: np.ndarray, dtype: np.dtype) -> np.ndarray:
-    """A law's gains record as the callback reads it: a (1,) C-contiguous array of `dtype` exactly (the compiled
-    code reads its fields at that dtype's offsets), checked."""
-    if record.dtype != dtype or record.shape != (1,) or not record.flags.c_contiguous:
-        raise TypeError(f"a law's native gains must be a (1,) record array of {dtype}, got {record.dtype} "
-                        f"{record.shape}")
-    return record
 
-
-def compiled(form, plugin=None, composite: bool = False):
-    """The cfunc for one plant form and law (in memory per process, on disk across processes).
-
-    plugin: None for the built-in sliding laws (laws.sliding.sliding_law), or a plugin's law
-    function (adaptive_mj.laws.plugin), compiled with numba the same way; composite: the sliding
-    law with composite adaptation (laws.composite, _composite_law), a variant of its own."""
+def variant(plant, law) -> KernelVariant:
+    """The callback variant for the plant's form and the law: the built-in sliding law, its composite variant
+    (laws.composite, _composite_law) or a plugin's law function (adaptive_mj.laws.plugin), each compiled the same
+    way (in memory per process, on disk across processes)."""
+    p = law.native_params()
+    plugin = p.get("plugin_law")
+    composite = p.get("composite") is not None
+    form = plant.form
     if composite and plugin is not None:
         raise ValueError("composite adaptation is a built-in sliding law's, not a plugin's")
     fns = (form.phi, form.f, form.h) + ((plugin,) if plugin is not None else ())
     mem_key = (composite,) + tuple((fn.__code__, tuple(c.cell_contents for c in (fn.__closure__ or ())))
                                    for fn in fns)
-    if mem_key in _compiled:
-        return _compiled[mem_key]
-    import numba
 
-    from adaptive_mj.numba_util import jit_tree, pointer
-
-    off = offsets()
-    key = source_key(*fns, native_step.callback_factory, stage_code.control_stage, _law_stage, _apply_control,
-                     _record_row, _acceleration, _applied_now, _builtin_law, _plugin_law, _composite_law,
-                     _composite_applied, _no_filters,
-                     sliding_law_values, plugin_rate, record_columns, stage_code.stage_estimate,
-                     stage_code.end_stage, context_address,
-                     extra=(off, numba.__version__, str(SLIDING_GAINS), str(PLUGIN_GAINS),
-                            "composite" if composite else "plain"))
-
-    def pieces(common: dict[str, Any], tag: str) -> dict[str, Any]:
+    def pieces(common: dict[str, Any], tag: str, inline) -> dict[str, Any]:
         """This shape's law_stage (the form's functions and the law inlined into it), apply_control and
         record_row."""
-        inline = inlined(numba)
+        import numba
+
+        from adaptive_mj.numba_util import jit_tree, pointer
+
         forms: dict[str, Any] = {name: jit_tree(fn, inline, tag=tag)
                                  for name, fn in (("phi_fn", form.phi), ("f_fn", form.f), ("h_fn", form.h))}
         applied = jit_tree(_no_filters, inline, tag=tag)
@@ -346,24 +274,26 @@ def compiled(form, plugin=None, composite: bool = False):
 
     law_name = ("the sliding law with composite adaptation" if composite else "a sliding law" if plugin is None
                 else f"law plugin {plugin.__module__}.{plugin.__qualname__}")
-    what = (f"the 1-DOF control callback (a plant form of order {form.order}, theta = {', '.join(form.names)}; "
-            f"{law_name})")
-    callback = compile_note.plugin_compiled(lambda: native_step.compiled_callback(CONTEXT, off, key, pieces, what=what,
-                                                                     kind="1-DOF callback"),
-                               (plugin,) if plugin is not None else (), key)
-    _compiled[mem_key] = callback
-    return callback
+    return KernelVariant(
+        mem_key=mem_key,
+        key_functions=fns + (_law_stage, _apply_control, _record_row, _acceleration, _applied_now, _builtin_law,
+                             _plugin_law, _composite_law, _composite_applied, _no_filters, sliding_law_values,
+                             plugin_rate, record_columns),
+        key_extra=(str(SLIDING_GAINS), str(PLUGIN_GAINS), "composite" if composite else "plain"),
+        pieces=pieces,
+        what=(f"the 1-DOF control callback (a plant form of order {form.order}, theta = {', '.join(form.names)}; "
+              f"{law_name})"),
+        kind="1-DOF callback", plugins=(plugin,) if plugin is not None else ())
 
 
-def supported(plant: Plant, law: Law) -> bool:
+def supported(plant, law) -> bool:
     """Native path: a 1-DOF MuJoCo plant (a MujocoPlant: the callback reads its joint and actuator
     addresses) of order 2 (its state is [q, q'], which the callback reads directly), or of order 3 where
     the plant says where its third state is read (MujocoPlant.native_third_state: the lagged heave
-    vehicle), compiled with a
-    userdata slot, a law the callback compiles (``law.native``: a sliding law, the sliding law with composite
-    adaptation (laws.composite: its filters live in the context's buffers, the composite variant of the callback;
-    continuous control only, as on the Python path) or a law plugin). A time-varying disturbance is evaluated
-    per step in Python when a chunk is prepared and written into qfrc_applied by the callback."""
+    vehicle), compiled with a userdata slot, a law the callback compiles (``law.native``: a sliding law, the sliding
+    law with composite adaptation (laws.composite: its filters live in the context's buffers, the composite variant
+    of the callback; continuous control only, as on the Python path) or a law plugin). A time-varying disturbance
+    is evaluated per step in Python when a chunk is prepared and written into qfrc_applied by the callback."""
     from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS, MujocoPlant
 
     return (isinstance(plant, MujocoPlant)
@@ -372,101 +302,61 @@ def supported(plant: Plant, law: Law) -> bool:
             and plant.model.nuserdata >= USERDATA_SLOTS)
 
 
-class NativeController(ContextOwner):
-    """Owns the context and buffers of one native run and steps the plant chunk by chunk.
-
-    plant: a MujocoPlant; law: one `supported` accepts. control: the run's ControlTiming
-    (adaptive_mj.sim.loop): mode, period in physics steps, delay."""
-
-    plant: MujocoPlant
-
-    def __init__(self, plant: Plant, law: Law, reference, theta_hat0, max_rows: int, *,
-                 control: stage_code.ControlTiming | None = None):
-        from adaptive_mj.plants.mujoco_plant import MujocoPlant
-
-        if not isinstance(plant, MujocoPlant):
-            raise TypeError(f"the native 1-DOF callback drives a MujocoPlant, got a {type(plant).__name__}")
-        self.plant, self.law, self.reference = plant, law, reference
-        self.max_rows = int(max_rows)
-        control = control if control is not None else stage_code.ControlTiming(period=plant.dt)
-        p = law.native_params()
-        plugin = p.get("plugin_law")
-        composite = p.get("composite")  # (κ, λ_f): the sliding law with composite adaptation (laws.composite)
-        if composite is not None and control.sampled:
-            raise ValueError("composite adaptation runs under continuous control only")
-        self.gains = gains_record(p["gains"], SLIDING_GAINS if plugin is None else PLUGIN_GAINS)
-        self.callback = compiled(plant.form, plugin=plugin, composite=composite is not None)
-        n, nth = plant.form.order, len(law.names)
-        self.n, self.nth, self.nst = n, nth, plant.stages
-        self.columns = record_columns(n, nth)
-        self.ncol = self.columns.width
-        f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731 (a short local converter)
-        self.buffers = {
-            "theta": f64(np.array(theta_hat0, dtype=float).reshape(nth)), "rsum": np.zeros(nth),
-            "prev": np.zeros(nth), "th": np.zeros(nth), "rate": np.zeros(nth), "coeffs": f64(p["coeffs"]),
-            "gamma": f64(p["gamma"]), "theta0": f64(p["theta0"]), "lower": f64(p["lower"]), "upper": f64(p["upper"]),
-            "ring": np.zeros((control.delay + 1, 1)), "params": f64(p.get("plugin_params", np.zeros(1))),
-            "u_hold": np.zeros(1), "s_hold": np.zeros(1), "delayed": np.zeros(1),
-            "ref": np.zeros(max_rows * self.nst * (n + 1)), "noise": np.zeros(max_rows * n),
-            "rec": np.zeros(max_rows * self.ncol), "xbuf": np.zeros(n), "dist": np.zeros(max_rows),
-            "zf": np.zeros(nth + 1), "fpend": np.zeros(nth + 1), "fval": np.zeros(nth + 1),  # composite's filters
-        }
-        self.theta = self.buffers["theta"]
-        lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (-math.inf, math.inf)
-        inc, weights = stage_code.TABLEAU[self.nst]
-        self.stage_offsets = np.asarray(inc)  # RK4: c_i = a_i (see stage.TABLEAU)
-        ctx = np.zeros(1, dtype=CONTEXT)
-        c = ctx[0]
-        c["nstages"], c["n"], c["m"], c["nth"], c["h"], c["lo"], c["hi"] = self.nst, n, 1, nth, plant.dt, lo, hi
-        c["qadr"], c["dadr"], c["act"] = plant._qadr, plant._dadr, plant.actuator_id
-        c["delay"], c["mode"], c["period_steps"], c["period"] = control.delay, control.mode, control.steps, \
-            control.period
-        c["has_dist"] = int(plant.disturbance is not None)
-        if n == 3:  # y'' read as the plant's measure does (_acceleration)
-            if plant.native_third_state is None:
-                raise ValueError(f"the native callback reads the third state of the heave vehicle with its thruster "
-                                 f"lag only, not of a {type(plant).__name__}")
-            c["act_adr"], c["body"] = plant.native_third_state
-            c["gear_w"], c["gain_w"] = plant.model.actuator_gear.shape[1], plant.model.actuator_gainprm.shape[1]
-        c["inc"][:len(inc)], c["weights"][:len(weights)] = inc, weights
-        c["gains"] = self.gains.ctypes.data  # the law's record (kept alive by self.gains)
-        for name, buf in self.buffers.items():
-            c[name] = addr(buf)
-        c["nbox"] = len(self.buffers["lower"])
-        if composite is not None:  # κ and the filters' gain, as CompositeSlidingLaw.step_begins computes it
-            c["kappa"], c["fgain"] = float(composite[0]), filter_gain(float(composite[1]), plant.dt)
-        self.context = ctx
-        self.bind()
-
-    def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:
-        """Step `rows` physics steps; return (t, x, u, s, ref, theta_hat) rows, each (rows, ...)."""
-        self.prepare(rows, noise)
-        self.plant.step_native(rows)
-        return self.finish(rows)
-
-    def prepare(self, rows: int, noise: np.ndarray | None) -> None:
-        """Set the buffers and the context up for the next `rows` physics steps (then the plant steps)."""
-        plant, n, h = self.plant, self.n, self.plant.dt
-        t, refs = stage_code.stage_references(self.reference, plant.time, h, rows, self.stage_offsets, n)
-        self.buffers["ref"][: rows * self.nst * (n + 1)] = refs.ravel()
-        self.buffers["noise"][: rows * n] = 0.0 if noise is None else noise.ravel()
-        if plant.disturbance is not None:  # the Python path's force per step (MujocoPlant.step), the same arithmetic
-            dist = self.buffers["dist"]
-            for k in range(rows):
-                force = plant.force_offset
-                force += plant.disturbance(float(t[k]))
-                dist[k] = force
-        c = self.context[0]
-        c["stage"], c["row"], c["rows"], c["t"] = 0, 0, rows, t[0]
-        c["applied_row"] = plant.data.qfrc_applied[plant._dadr]  # what the first row's y'' reads (_record_row)
-        self.bind()
-
-    def finish(self, rows: int, *, partial: bool = False) -> tuple[np.ndarray, ...]:
-        """The rows the callback recorded over the `rows` steps just taken: (t, x, u, s, ref, theta_hat)
-        (partial: the first `rows` of a chunk MuJoCo cut short, ContextOwner.rows_recorded)."""
-        return recorded_rows(self.context[0], self.buffers["rec"], self.columns, self.n, rows, partial,
-                             "native callback")
+def setup(plant, law, control, sensors, max_rows: int) -> KernelRun:
+    """The run's buffers and context values: the law's arrays and gains, the joint's and actuator's addresses,
+    the references', noise's and disturbance's buffers, the composite filters, order 3's addresses."""
+    p = law.native_params()
+    plugin = p.get("plugin_law")
+    composite = p.get("composite")  # (κ, λ_f): the sliding law with composite adaptation (laws.composite)
+    if composite is not None and control.sampled:
+        raise ValueError("composite adaptation runs under continuous control only")
+    gains = gains_record(p["gains"], SLIDING_GAINS if plugin is None else PLUGIN_GAINS)
+    n, nth, nst = plant.form.order, len(law.names), plant.stages
+    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731 (a short local converter)
+    buffers = {
+        "coeffs": f64(p["coeffs"]), "gamma": f64(p["gamma"]), "theta0": f64(p["theta0"]), "lower": f64(p["lower"]),
+        "upper": f64(p["upper"]), "params": f64(p.get("plugin_params", np.zeros(1))),
+        "ref": np.zeros(max_rows * nst * (n + 1)), "noise": np.zeros(max_rows * n), "xbuf": np.zeros(n),
+        "dist": np.zeros(max_rows),
+        "zf": np.zeros(nth + 1), "fpend": np.zeros(nth + 1), "fval": np.zeros(nth + 1),  # composite's filters
+    }
+    lo, hi = plant.ctrl_range if plant.ctrl_range is not None else (-math.inf, math.inf)
+    fields: dict[str, Any] = {"n": n, "lo": lo, "hi": hi, "qadr": plant._qadr, "dadr": plant._dadr,
+                              "act": plant.actuator_id, "has_dist": int(plant.disturbance is not None)}
+    if n == 3:  # y'' read as the plant's measure does (_acceleration)
+        if plant.native_third_state is None:
+            raise ValueError(f"the native callback reads the third state of the heave vehicle with its thruster "
+                             f"lag only, not of a {type(plant).__name__}")
+        fields["act_adr"], fields["body"] = plant.native_third_state
+        fields["gear_w"], fields["gain_w"] = plant.model.actuator_gear.shape[1], plant.model.actuator_gainprm.shape[1]
+    if composite is not None:  # κ and the filters' gain, as CompositeSlidingLaw.step_begins computes it
+        fields["kappa"], fields["fgain"] = float(composite[0]), filter_gain(float(composite[1]), plant.dt)
+    return KernelRun(buffers, fields, gains, m=1, rows=RowShapes((n,), (), (), (n + 1,), nth), ref_order=n,
+                     s_width=1)
 
 
-#: what loop._native_controller takes of a compiled loop's module (protocol.Plant.compiled_loop)
-Controller = NativeController
+def prepare(controller, rows: int, noise, t, refs) -> None:
+    """The chunk's references, noise and disturbance (the Python path's force per step, MujocoPlant.step, the
+    same arithmetic) into the run's buffers, and the force the first row's y'' reads (_record_row)."""
+    plant, b = controller.plant, controller.buffers
+    n = plant.form.order
+    b["ref"][: rows * controller.nst * (n + 1)] = refs.ravel()
+    b["noise"][: rows * n] = 0.0 if noise is None else noise.ravel()
+    if plant.disturbance is not None:
+        dist = b["dist"]
+        for k in range(rows):
+            force = plant.force_offset
+            force += plant.disturbance(float(t[k]))
+            dist[k] = force
+    controller.context[0]["applied_row"] = plant.data.qfrc_applied[plant._dadr]
+
+
+def _plant_type() -> type:
+    from adaptive_mj.plants.mujoco_plant import MujocoPlant
+
+    return MujocoPlant
+
+
+#: the 1-DOF MuJoCo plants' kernel spec (plants.mujoco_plant.MujocoPlant.mujoco_kernel)
+KERNEL = MujocoKernel(name="1-DOF", plant_type=_plant_type, context=CONTEXT, supported=supported, variant=variant,
+                      setup=setup, prepare=prepare)
