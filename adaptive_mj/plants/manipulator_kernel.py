@@ -66,6 +66,7 @@ if TYPE_CHECKING:
     ref_terms: Any
     output: Any
     law_point: Any
+    law_output: Any
     user_point: Any
     user_law: Any
     gains_ptr: Any
