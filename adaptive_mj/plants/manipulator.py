@@ -424,7 +424,7 @@ class Regressor:
         return out
 
     def static_args(self):
-        """The model arrays the kernel takes, in its order (also used by adaptive_mj.sim.native)."""
+        """The model arrays the kernel takes, in its order (also used by adaptive_mj.plants.one_dof_kernel)."""
         m = self.model
         return (self.parent, self.dofadr, self.dofnum, self.rootid, self.body_col, self.body_known,
                 self.col_arm, self.col_damp, self.col_coul, m.dof_armature, m.dof_damping, self.coulomb_eps)

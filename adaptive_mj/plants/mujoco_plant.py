@@ -282,8 +282,8 @@ class MujocoPlant(ModelClock):
 
     @property
     def native_third_state(self) -> tuple[int, int] | None:
-        """Where the compiled 1-DOF callback (adaptive_mj.sim.native) reads a third state as `measure` does: (the
-        thrust state's address in act, the body's id) on the heave vehicle with its thruster lag; None elsewhere."""
+        """Where the compiled 1-DOF callback (adaptive_mj.plants.one_dof_kernel) reads a third state as `measure`
+        does: (the thrust state's address in act, the body's id) on the heave vehicle with its thruster lag; None elsewhere."""
         return None
 
     def observe(self) -> np.ndarray:
@@ -321,7 +321,7 @@ class MujocoPlant(ModelClock):
 
     @contextlib.contextmanager
     def controlled_natively(self, cfunc) -> Iterator[None]:
-        """Install a compiled (numba cfunc) control callback for the block (see adaptive_mj.sim.native)."""
+        """Install a compiled (numba cfunc) control callback for the block (see adaptive_mj.plants.one_dof_kernel)."""
         with compiled_control(cfunc):
             yield
 

@@ -322,10 +322,11 @@ class QuadrotorPlant(ModelClock, BodyEdits):
         return new_warnings(self.data, self._warning_total0, self._warnings0)
 
     def crashed(self, text: str, *, airborne: bool) -> None:
-        """The compiled callback found a crash (adaptive_mj.sim.native_flight): termination() says so from now on."""
+        """The compiled callback found a crash (adaptive_mj.plants.quadrotor_kernel): termination() says so from now
+        on."""
         self._crash, self._airborne = text, airborne
 
-    # --- the native path's (adaptive_mj.sim.native_flight) ------------------------------
+    # --- the native path's (adaptive_mj.plants.quadrotor_kernel) ------------------------------
     @contextlib.contextmanager
     def controlled_natively(self, cfunc) -> Iterator[None]:
         with compiled_control(cfunc):
