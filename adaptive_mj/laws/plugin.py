@@ -200,8 +200,9 @@ class Shared:
 @dataclass(frozen=True)
 class PluginGains(Gains):
     """The scalars of the shared modifications a compiled 1-DOF plugin law reads by name
-    (adaptive_mj.plants.one_dof_kernel reads them as fields of a PLUGIN_GAINS record, through its address): the dead-zone's width and whether its
-    signal is |s| (else |ỹ|), σ, ν, and whether the law adapts (laws.common.plugin_rate)."""
+    (adaptive_mj.plants.one_dof_kernel reads them as fields of a PLUGIN_GAINS record, through its address): the
+    dead-zone's width and whether its signal is |s| (else |ỹ|), σ, ν, and whether the law adapts
+    (laws.common.plugin_rate)."""
 
     dz_width: float
     sigma: float

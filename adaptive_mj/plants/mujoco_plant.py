@@ -283,7 +283,8 @@ class MujocoPlant(ModelClock):
     @property
     def native_third_state(self) -> tuple[int, int] | None:
         """Where the compiled 1-DOF callback (adaptive_mj.plants.one_dof_kernel) reads a third state as `measure`
-        does: (the thrust state's address in act, the body's id) on the heave vehicle with its thruster lag; None elsewhere."""
+        does: (the thrust state's address in act, the body's id) on the heave vehicle with its thruster lag; None
+        elsewhere."""
         return None
 
     def observe(self) -> np.ndarray:
