@@ -34,7 +34,7 @@ the law's pieces are globals the generic controller injects.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -43,36 +43,27 @@ from adaptive_mj.laws.plugin import PLUGIN_GAINS, joint_norm, tracking_error_nor
 from adaptive_mj.laws.slotine_li import SLOTINE_LI_GAINS, SlotineLiArrays
 from adaptive_mj.numba_util import jit_tree
 from adaptive_mj.plants import regressor_kernel as rk
-from adaptive_mj.plants.mujoco_kernel import (KernelRun, KernelVariant, MujocoKernel, RowShapes, gains_record,
-                                              row_columns)
+from adaptive_mj.plants.mujoco_kernel import (Injected, KernelRun, KernelVariant, MujocoKernel, RowShapes, carray, fptr,
+                                              gains_record, iptr, pointer_at, row_columns, sense, stage_estimate)
 from adaptive_mj.plants.regressor_kernel import rne_forward
 
-if TYPE_CHECKING:
-    # the globals the generic controller injects into the pieces (carray, the pointer intrinsics, the stage
-    # functions, the compiled regressor and law pieces); declared for the type checker only
-    carray: Any
-    fptr: Any
-    iptr: Any
-    pointer_at: Any
-    regressor: Any
-    regressor_output: Any
-    law_torque: Any
-    law_rate: Any
-    law_recursive_output: Any
-    law_recursive_rate: Any
-    torque_output: Any
-    rate_output: Any
-    RNE_SCRATCH: int
-    ref_terms: Any
-    output: Any
-    law_point: Any
-    law_output: Any
-    user_point: Any
-    user_law: Any
-    gains_ptr: Any
-    stage_estimate: Any
-    sense: Any
-    MODE_PD_GRAVITY: int
+# the names the generic controller injects when it compiles this kind's pieces (plants.mujoco_kernel.Injected)
+regressor = Injected("regressor")  # _regressor, compiled
+regressor_output = Injected("regressor_output")  # _regressor_output, compiled
+law_torque = Injected("law_torque")  # regressor_kernel.rne_law_torque (or _no_law_torque), compiled
+law_rate = Injected("law_rate")  # regressor_kernel.rne_law_rate (or _no_law_rate), compiled
+law_recursive_output = Injected("law_recursive_output")  # _builtin_recursive_output (or _no_recursive_output), compiled
+law_recursive_rate = Injected("law_recursive_rate")  # _builtin_recursive_rate (or _no_recursive_rate), compiled
+torque_output = Injected("torque_output")  # laws.slotine_li.slotine_li_torque_output, compiled
+rate_output = Injected("rate_output")  # laws.slotine_li.slotine_li_rate_output, compiled
+ref_terms = Injected("ref_terms")  # laws.slotine_li.reference_terms, compiled
+output = Injected("output")  # laws.slotine_li.slotine_li_output, compiled
+law_point = Injected("law_point")  # _builtin_point or _plugin_point, compiled
+law_output = Injected("law_output")  # _builtin_output or _plugin_output, compiled
+user_point = Injected("user_point")  # a multi-joint law plugin's point, compiled
+user_law = Injected("user_law")  # a multi-joint law plugin's law, compiled
+gains_ptr = Injected("gains_ptr")  # an address as a pointer to the law's gains record
+RNE_SCRATCH = rk.RNE_SCRATCH  # the regressor's scratch per body (injected with the same value)
 
 _i8, _f8 = np.int64, np.float64
 #: this kind's context fields (after sim.native_step.STAGE_CONTEXT and the generic controller's own): the run's
@@ -308,13 +299,13 @@ def _apply_control(ctx, io, row, u):
     step's disturbance torques into qfrc_applied, held over its stages."""
     base, mbase, off = io
     nv = ctx.nv
-    ctrl = carray(fptr(pointer_at(base, off.ctrl)), ctx.nu)  # noqa: F821 (injected)
-    act, gear = carray(iptr(ctx.act), nv), carray(fptr(ctx.gear), nv)  # noqa: F821 (injected)
+    ctrl = carray(fptr(pointer_at(base, off.ctrl)), ctx.nu)
+    act, gear = carray(iptr(ctx.act), nv), carray(fptr(ctx.gear), nv)
     for j in range(nv):
         ctrl[act[j]] = u[j] / gear[j]
     if ctx.has_dist != 0:
-        qfrc = carray(fptr(pointer_at(base, off.qfrc_applied)), nv)  # noqa: F821 (injected)
-        dist = carray(fptr(ctx.dist), (ctx.maxrows, nv))  # noqa: F821 (injected)
+        qfrc = carray(fptr(pointer_at(base, off.qfrc_applied)), nv)
+        dist = carray(fptr(ctx.dist), (ctx.maxrows, nv))
         for j in range(nv):
             qfrc[j] = dist[row, j]
 
@@ -327,12 +318,12 @@ def _record_row(ctx, io, row, u, theta):
     (plants.manipulator.ManipulatorPlant.full_mass)."""
     base, mbase, off = io
     nv, nth, maxrows, nst, nM = ctx.nv, ctx.nth, ctx.maxrows, ctx.nstages, ctx.nM
-    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)  # noqa: F821 (injected)
-    qvel = carray(fptr(pointer_at(base, off.qvel)), nv)  # noqa: F821 (injected)
-    qadr, s_hold = carray(iptr(ctx.qadr), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
-    r = carray(fptr(ctx.ref), (maxrows * nst, 3, nv))[row * nst]  # noqa: F821 (injected)
+    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)
+    qvel = carray(fptr(pointer_at(base, off.qvel)), nv)
+    qadr, s_hold = carray(iptr(ctx.qadr), nv), carray(fptr(ctx.s_hold), nv)
+    r = carray(fptr(ctx.ref), (maxrows * nst, 3, nv))[row * nst]
     col = _columns(nv, nth, nM)
-    rec = carray(fptr(ctx.rec), (maxrows, col.width))[row]  # noqa: F821 (injected)
+    rec = carray(fptr(ctx.rec), (maxrows, col.width))[row]
     rec[col.t] = ctx.t
     for j in range(nv):
         rec[col.x + j] = qpos[qadr[j]]
@@ -343,7 +334,7 @@ def _record_row(ctx, io, row, u, theta):
             rec[col.ref + k * nv + j] = r[k, j]
     for i in range(nth):
         rec[col.theta + i] = theta[i]
-    Md = carray(fptr(pointer_at(base, off.M)), nM)  # noqa: F821 (injected)
+    Md = carray(fptr(pointer_at(base, off.M)), nM)
     for k in range(nM):
         rec[col.extra + k] = Md[k]
 
@@ -353,55 +344,55 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
     regressor on the live MjData, τ clamped into u_hold (and s into s_hold), the rate into ctx.rate."""
     base, mbase, off = io
     nv, nb, nth, nstd = ctx.nv, ctx.nbody, ctx.nth, ctx.nstd
-    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)  # noqa: F821 (injected)
-    qvel = carray(fptr(pointer_at(base, off.qvel)), nv)  # noqa: F821 (injected)
-    r = carray(fptr(ctx.ref), (ctx.maxrows * ctx.nstages, 3, nv))[row * ctx.nstages + stage]  # noqa: F821 (injected)
+    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)
+    qvel = carray(fptr(pointer_at(base, off.qvel)), nv)
+    r = carray(fptr(ctx.ref), (ctx.maxrows * ctx.nstages, 3, nv))[row * ctx.nstages + stage]
     off_cdof, off_xpos, off_xmat, off_subcom, off_cinert = off.cdof, off.xpos, off.xmat, off.subtree_com, off.cinert
     off_arm, off_damp, off_gravity = off.dof_armature, off.dof_damping, off.gravity
-    th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
-    x = carray(fptr(ctx.x), (2, nv))  # noqa: F821 (injected)
-    s, qd_r, qdd_r = carray(fptr(ctx.s), nv), carray(fptr(ctx.qd_r), nv), carray(fptr(ctx.qdd_r), nv)  # noqa: F821 (injected)
-    noise = carray(fptr(ctx.noise), (ctx.maxrows, 2, nv))  # noqa: F821 (injected)
-    qadr, q_true = carray(iptr(ctx.qadr), nv), carray(fptr(ctx.q_true), nv)  # noqa: F821 (injected)
+    th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)
+    x = carray(fptr(ctx.x), (2, nv))
+    s, qd_r, qdd_r = carray(fptr(ctx.s), nv), carray(fptr(ctx.qd_r), nv), carray(fptr(ctx.qdd_r), nv)
+    noise = carray(fptr(ctx.noise), (ctx.maxrows, 2, nv))
+    qadr, q_true = carray(iptr(ctx.qadr), nv), carray(fptr(ctx.q_true), nv)
     for j in range(nv):
         q_true[j] = qpos[qadr[j]]
-    sense(q_true, qvel, noise[row], carray(fptr(ctx.quantum), nv), ctx.diff != 0, stage == 0,  # noqa: F821 (injected)
-          ctx.step == 0, ctx.alpha, ctx.sense_period, carray(fptr(ctx.q_prev), nv),  # noqa: F821 (injected)
-          carray(fptr(ctx.v_est), nv), x)  # noqa: F821 (injected)
-    stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
-    v, w, a = law_point(ctx, x, r, s, qd_r, qdd_r)  # noqa: F821 (injected: where the regressor is evaluated)
-    Y_std, tau_known = carray(fptr(ctx.y_std), (nv, nstd)), carray(fptr(ctx.tau_known), nv)  # noqa: F821 (injected)
-    cdof, xpos = carray(fptr(pointer_at(base, off_cdof)), (nv, 6)), carray(fptr(pointer_at(base, off_xpos)), (nb, 3))  # noqa: F821,E501 (injected globals; one carray per line)
-    xmat, subcom = carray(fptr(pointer_at(base, off_xmat)), (nb, 9)), carray(fptr(pointer_at(base, off_subcom)), (nb, 3))  # noqa: F821,E501 (injected globals; one carray per line)
-    cinert = carray(fptr(pointer_at(base, off_cinert)), (nb, 10))  # noqa: F821 (injected)
-    gravity = carray(fptr(mbase + off_gravity), 3)  # noqa: F821 (injected)
-    arm, damp = carray(fptr(pointer_at(mbase, off_arm)), nv), carray(fptr(pointer_at(mbase, off_damp)), nv)  # noqa: F821 (injected)
-    parent, dofadr = carray(iptr(ctx.parent), nb), carray(iptr(ctx.dofadr), nb)  # noqa: F821 (injected)
-    dofnum, rootid = carray(iptr(ctx.dofnum), nb), carray(iptr(ctx.rootid), nb)  # noqa: F821 (injected)
-    body_col, body_known = carray(iptr(ctx.body_col), nb), carray(iptr(ctx.body_known), nb)  # noqa: F821 (injected)
-    col_arm, col_damp = carray(iptr(ctx.col_arm), nv), carray(iptr(ctx.col_damp), nv)  # noqa: F821 (injected)
-    col_coul, eps = carray(iptr(ctx.col_coul), nv), ctx.coulomb_eps  # noqa: F821 (injected)
-    scratch, need = carray(fptr(ctx.scratch), RNE_SCRATCH * nb), carray(iptr(ctx.need), nstd)  # noqa: F821 (injected)
-    u = carray(fptr(ctx.u), nv)  # noqa: F821 (injected)
+    sense(q_true, qvel, noise[row], carray(fptr(ctx.quantum), nv), ctx.diff != 0, stage == 0,
+          ctx.step == 0, ctx.alpha, ctx.sense_period, carray(fptr(ctx.q_prev), nv),
+          carray(fptr(ctx.v_est), nv), x)
+    stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)
+    v, w, a = law_point(ctx, x, r, s, qd_r, qdd_r)
+    Y_std, tau_known = carray(fptr(ctx.y_std), (nv, nstd)), carray(fptr(ctx.tau_known), nv)
+    cdof, xpos = carray(fptr(pointer_at(base, off_cdof)), (nv, 6)), carray(fptr(pointer_at(base, off_xpos)), (nb, 3))  # noqa: E501 (one carray per line)
+    xmat, subcom = carray(fptr(pointer_at(base, off_xmat)), (nb, 9)), carray(fptr(pointer_at(base, off_subcom)), (nb, 3))  # noqa: E501 (one carray per line)
+    cinert = carray(fptr(pointer_at(base, off_cinert)), (nb, 10))
+    gravity = carray(fptr(mbase + off_gravity), 3)
+    arm, damp = carray(fptr(pointer_at(mbase, off_arm)), nv), carray(fptr(pointer_at(mbase, off_damp)), nv)
+    parent, dofadr = carray(iptr(ctx.parent), nb), carray(iptr(ctx.dofadr), nb)
+    dofnum, rootid = carray(iptr(ctx.dofnum), nb), carray(iptr(ctx.rootid), nb)
+    body_col, body_known = carray(iptr(ctx.body_col), nb), carray(iptr(ctx.body_known), nb)
+    col_arm, col_damp = carray(iptr(ctx.col_arm), nv), carray(iptr(ctx.col_damp), nv)
+    col_coul, eps = carray(iptr(ctx.col_coul), nv), ctx.coulomb_eps
+    scratch, need = carray(fptr(ctx.scratch), RNE_SCRATCH * nb), carray(iptr(ctx.need), nstd)
+    u = carray(fptr(ctx.u), nv)
     if ctx.recursive != 0:  # Slotine–Li in O(n): Y is never formed
-        bptr, bidx = carray(iptr(ctx.bptr), nth + 1), carray(iptr(ctx.bidx), 1 << 30)  # noqa: F821 (injected)
-        bval = carray(fptr(ctx.bval), 1 << 30)  # noqa: F821 (injected)
-        law_torque(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, col_coul, arm, damp,  # noqa: F821 (injected)
+        bptr, bidx = carray(iptr(ctx.bptr), nth + 1), carray(iptr(ctx.bidx), 1 << 30)
+        bval = carray(fptr(ctx.bval), 1 << 30)
+        law_torque(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, col_coul, arm, damp,
                    eps, cdof, xpos, xmat, subcom, cinert, gravity, v, w, a, th, ctx.has_base, bptr, bidx, bval,
-                   carray(fptr(ctx.pi_std), max(nstd, 1)), tau_known, scratch)  # noqa: F821 (injected)
-        s_rate = carray(fptr(ctx.s_rate), nv)  # noqa: F821 (injected)
-        adapting, s_norm = law_recursive_output(ctx, x, r, tau_known, s, u, s_rate, lower, upper)  # noqa: F821 (injected)
+                   carray(fptr(ctx.pi_std), max(nstd, 1)), tau_known, scratch)
+        s_rate = carray(fptr(ctx.s_rate), nv)
+        adapting, s_norm = law_recursive_output(ctx, x, r, tau_known, s, u, s_rate, lower, upper)
         if adapting:
-            law_rate(parent, dofadr, dofnum, rootid, body_col, col_arm, col_damp, col_coul, eps, cdof, xpos,  # noqa: F821 (injected)
+            law_rate(parent, dofadr, dofnum, rootid, body_col, col_arm, col_damp, col_coul, eps, cdof, xpos,
                      xmat, subcom, v, a, s_rate, ctx.has_base, bptr, bidx, bval,
-                     carray(fptr(ctx.rate_std), max(nstd, 1)), rate, scratch)  # noqa: F821 (injected)
-        law_recursive_rate(ctx, th, rate, s_norm, adapting, lower, upper)  # noqa: F821 (injected)
+                     carray(fptr(ctx.rate_std), max(nstd, 1)), rate, scratch)
+        law_recursive_rate(ctx, th, rate, s_norm, adapting, lower, upper)
     else:
-        regressor_output(ctx, x, r, v, w, a, th, s, u, rate, lower, upper, parent, dofadr, dofnum, rootid, body_col,  # noqa: F821,E501 (injected)
+        regressor_output(ctx, x, r, v, w, a, th, s, u, rate, lower, upper, parent, dofadr, dofnum, rootid, body_col,
                          body_known, col_arm, col_damp, col_coul, arm, damp, eps, cdof, xpos, xmat, subcom, cinert,
                          gravity, Y_std, tau_known, scratch, need)
-    lo, hi = carray(fptr(ctx.lo), nv), carray(fptr(ctx.hi), nv)  # noqa: F821 (injected)
-    u_hold, s_hold = carray(fptr(ctx.u_hold), nv), carray(fptr(ctx.s_hold), nv)  # noqa: F821 (injected)
+    lo, hi = carray(fptr(ctx.lo), nv), carray(fptr(ctx.hi), nv)
+    u_hold, s_hold = carray(fptr(ctx.u_hold), nv), carray(fptr(ctx.s_hold), nv)
     for j in range(nv):
         v = u[j]
         if v < lo[j]:
@@ -418,12 +409,12 @@ def _regressor_output(ctx, x, r, v, w, a, th, s, u, rate, lower, upper, parent, 
     """The regressor form: Y formed whole (the specialised kernel, then Y = Y_std B with a base map), then the
     law's output on it (Slotine–Li's slotine_li_output or a plugin's law)."""
     nv, nth = ctx.nv, ctx.nth
-    regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, col_coul, arm, damp, eps,  # noqa: F821,E501 (injected)
+    regressor(parent, dofadr, dofnum, rootid, body_col, body_known, col_arm, col_damp, col_coul, arm, damp, eps,
               cdof, xpos, xmat, subcom, cinert, gravity, v, w, a, Y_std, tau_known, scratch, need)
     if ctx.has_base != 0:  # Y = Y_std B, B stored by columns as (pointer, row index, value)
-        Y = carray(fptr(ctx.y), (nv, nth))  # noqa: F821 (injected)
-        bptr, bidx = carray(iptr(ctx.bptr), nth + 1), carray(iptr(ctx.bidx), 1 << 30)  # noqa: F821 (injected)
-        bval = carray(fptr(ctx.bval), 1 << 30)  # noqa: F821 (injected)
+        Y = carray(fptr(ctx.y), (nv, nth))
+        bptr, bidx = carray(iptr(ctx.bptr), nth + 1), carray(iptr(ctx.bidx), 1 << 30)
+        bval = carray(fptr(ctx.bval), 1 << 30)
         for j in range(nv):
             for c in range(nth):
                 acc = 0.0
@@ -432,16 +423,16 @@ def _regressor_output(ctx, x, r, v, w, a, th, s, u, rate, lower, upper, parent, 
                 Y[j, c] = acc
     else:
         Y = Y_std
-    law_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper)  # noqa: F821 (injected)
+    law_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper)
 
 
 def _builtin_point(ctx, x, r, s, qd_r, qdd_r):
     """Slotine–Li's point: s, q̇_r, q̈_r (reference_terms) and the regressor at (q̇, q̇_r, q̈_r); PD + gravity's at
     v = w = a = 0. Returns (v, w, a)."""
     nv = ctx.nv
-    ref_terms(x, r, carray(fptr(ctx.lam), nv), s, qd_r, qdd_r)  # noqa: F821 (injected)
-    if carray(gains_ptr(ctx.gains), 1)[0].mode == MODE_PD_GRAVITY:  # noqa: F821 (injected)
-        zero = carray(fptr(ctx.zero), nv)  # noqa: F821 (injected)
+    ref_terms(x, r, carray(fptr(ctx.lam), nv), s, qd_r, qdd_r)
+    if carray(gains_ptr(ctx.gains), 1)[0].mode == MODE_PD_GRAVITY:
+        zero = carray(fptr(ctx.zero), nv)
         return zero, zero, zero
     return x[1], qd_r, qdd_r
 
@@ -449,32 +440,32 @@ def _builtin_point(ctx, x, r, s, qd_r, qdd_r):
 def _builtin_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper):
     """slotine_li_output with the law's gains read by name from its SLOTINE_LI_GAINS record (at the context's
     `gains` address) and its arrays by name (τ unclamped into u, the rate into rate)."""
-    gains = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
+    gains = carray(gains_ptr(ctx.gains), 1)[0]
     e_norm = tracking_error_norm(x, r) if not gains.dz_on_s else 0.0
-    arrays = SlotineLiArrays(carray(fptr(ctx.kd), ctx.nv), carray(fptr(ctx.gamma), ctx.nth),  # noqa: F821 (injected)
-                             carray(fptr(ctx.theta0), ctx.nth), lower, upper,  # noqa: F821 (injected)
-                             carray(fptr(ctx.sat_lo), ctx.nv), carray(fptr(ctx.sat_hi), ctx.nv))  # noqa: F821 (injected)
-    output(Y, tau_known, th, s, e_norm, gains, arrays, u, rate)  # noqa: F821 (injected)
+    arrays = SlotineLiArrays(carray(fptr(ctx.kd), ctx.nv), carray(fptr(ctx.gamma), ctx.nth),
+                             carray(fptr(ctx.theta0), ctx.nth), lower, upper,
+                             carray(fptr(ctx.sat_lo), ctx.nv), carray(fptr(ctx.sat_hi), ctx.nv))
+    output(Y, tau_known, th, s, e_norm, gains, arrays, u, rate)
 
 
 def _builtin_recursive_output(ctx, x, r, tau_model, s, u, s_rate, lower, upper):
     """slotine_li_torque_output (the O(n) form's τ and the s the rate takes), the gains read by name from the
     SLOTINE_LI_GAINS record, the arrays by name. Returns (adapting, ‖s‖)."""
-    gains = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
+    gains = carray(gains_ptr(ctx.gains), 1)[0]
     e_norm = tracking_error_norm(x, r) if not gains.dz_on_s else 0.0
-    arrays = SlotineLiArrays(carray(fptr(ctx.kd), ctx.nv), carray(fptr(ctx.gamma), ctx.nth),  # noqa: F821 (injected)
-                             carray(fptr(ctx.theta0), ctx.nth), lower, upper,  # noqa: F821 (injected)
-                             carray(fptr(ctx.sat_lo), ctx.nv), carray(fptr(ctx.sat_hi), ctx.nv))  # noqa: F821 (injected)
-    return torque_output(tau_model, s, e_norm, gains, arrays, u, s_rate)  # noqa: F821 (injected)
+    arrays = SlotineLiArrays(carray(fptr(ctx.kd), ctx.nv), carray(fptr(ctx.gamma), ctx.nth),
+                             carray(fptr(ctx.theta0), ctx.nth), lower, upper,
+                             carray(fptr(ctx.sat_lo), ctx.nv), carray(fptr(ctx.sat_hi), ctx.nv))
+    return torque_output(tau_model, s, e_norm, gains, arrays, u, s_rate)
 
 
 def _builtin_recursive_rate(ctx, th, rate, s_norm, adapting, lower, upper):
     """slotine_li_rate_output: θ' = Γ⁻¹ Yᵀ s (or 0), then the modifications."""
-    gains = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
-    arrays = SlotineLiArrays(carray(fptr(ctx.kd), ctx.nv), carray(fptr(ctx.gamma), ctx.nth),  # noqa: F821 (injected)
-                             carray(fptr(ctx.theta0), ctx.nth), lower, upper,  # noqa: F821 (injected)
-                             carray(fptr(ctx.sat_lo), ctx.nv), carray(fptr(ctx.sat_hi), ctx.nv))  # noqa: F821 (injected)
-    rate_output(rate, th, s_norm, adapting, gains, arrays)  # noqa: F821 (injected)
+    gains = carray(gains_ptr(ctx.gains), 1)[0]
+    arrays = SlotineLiArrays(carray(fptr(ctx.kd), ctx.nv), carray(fptr(ctx.gamma), ctx.nth),
+                             carray(fptr(ctx.theta0), ctx.nth), lower, upper,
+                             carray(fptr(ctx.sat_lo), ctx.nv), carray(fptr(ctx.sat_hi), ctx.nv))
+    rate_output(rate, th, s_norm, adapting, gains, arrays)
 
 
 def _no_recursive_output(ctx, x, r, tau_model, s, u, s_rate, lower, upper):
@@ -503,8 +494,8 @@ def _no_law_rate(parent, dofadr, dofnum, rootid, body_col, dof_col_arm, dof_col_
 
 def _plugin_point(ctx, x, r, s, qd_r, qdd_r):
     """A JointLawPlugin's point(x, ref, params, v, w, a): where the regressor is evaluated. Returns (v, w, a)."""
-    v = carray(fptr(ctx.vpt), ctx.nv)  # noqa: F821 (injected)
-    user_point(x, r, carray(fptr(ctx.params), ctx.nparams), v, qd_r, qdd_r)  # noqa: F821 (injected)
+    v = carray(fptr(ctx.vpt), ctx.nv)
+    user_point(x, r, carray(fptr(ctx.params), ctx.nparams), v, qd_r, qdd_r)
     return v, qd_r, qdd_r
 
 
@@ -512,12 +503,12 @@ def _plugin_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper):
     """A JointLawPlugin's law(x, ref, theta, Y, tau_known, params, u, s, rate), then the shared modifications
     (laws.common.plugin_rate with ‖s‖ and ‖q̃‖), as laws.plugin.JointPluginLaw does in Python."""
     nth = ctx.nth
-    user_law(x, r, th, Y, tau_known, carray(fptr(ctx.params), ctx.nparams), u, s, rate)  # noqa: F821 (injected)
-    shared = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected: the PLUGIN_GAINS record)
+    user_law(x, r, th, Y, tau_known, carray(fptr(ctx.params), ctx.nparams), u, s, rate)
+    shared = carray(gains_ptr(ctx.gains), 1)[0]
     s_abs = joint_norm(s)
     signal = s_abs if shared.dz_on_s else tracking_error_norm(x, r)
     plugin_rate(rate, th, s_abs, signal, shared.adapt, shared.dz_width, shared.sigma, shared.e_mod,
-                carray(fptr(ctx.theta0), nth), carray(fptr(ctx.gamma), nth), lower, upper)  # noqa: F821 (injected)
+                carray(fptr(ctx.theta0), nth), carray(fptr(ctx.gamma), nth), lower, upper)
 
 
 

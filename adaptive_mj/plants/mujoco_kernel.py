@@ -118,6 +118,32 @@ class KernelVariant:
     plugins: tuple = ()
 
 
+class Injected:
+    """A name a kind's compiled pieces call that the generic controller injects into their globals (numba's carray,
+    the pointer intrinsics, the stage functions, the law's compiled pieces: sim.native_step.compiled_callback): a
+    module-level stand-in, so the pieces' source names it. Called unbound it says so; numba refuses to compile it, as
+    it refused an undefined name."""
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        raise NotImplementedError(f"{self.name} is injected when the kind's callback is compiled "
+                                  f"(adaptive_mj.sim.native_mujoco)")
+
+    def __repr__(self) -> str:
+        return f"Injected({self.name!r})"
+
+
+# what sim.native_step.compiled_callback injects into every kind's pieces (its `common`)
+carray = Injected("carray")  # numba.carray
+fptr = Injected("fptr")  # an int64 address as a float64 pointer
+iptr = Injected("iptr")  # an int64 address as an int64 pointer
+pointer_at = Injected("pointer_at")  # the pointer stored at an address + offset (sim.native_context.pointer_at)
+stage_estimate = Injected("stage_estimate")  # sim.stage.stage_estimate, compiled
+sense = Injected("sense")  # sim.stage.sense, compiled
+
+
 def _nothing(controller) -> None:
     return None
 

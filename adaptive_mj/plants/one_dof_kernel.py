@@ -21,7 +21,7 @@ intrinsics, the stage functions and the law are globals the generic controller i
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -29,25 +29,19 @@ from adaptive_mj.laws.common import plugin_rate
 from adaptive_mj.laws.composite import composite_rate, filter_gain, filter_step, stage_sums
 from adaptive_mj.laws.plugin import PLUGIN_GAINS
 from adaptive_mj.laws.sliding import SLIDING_GAINS, SlidingArrays, sliding_law_values
-from adaptive_mj.plants.mujoco_kernel import (KernelRun, KernelVariant, MujocoKernel, RowShapes, gains_record,
-                                              record_columns)
+from adaptive_mj.plants.mujoco_kernel import (Injected, KernelRun, KernelVariant, MujocoKernel, RowShapes, carray, fptr,
+                                              gains_record, pointer_at, record_columns, stage_estimate)
 
-if TYPE_CHECKING:
-    # the globals the generic controller injects into the pieces and the laws below (carray, the pointer
-    # intrinsics, the law, the form's functions, the stage functions); declared for the type checker only
-    carray: Any
-    fptr: Any
-    pointer_at: Any
-    law: Any
-    user_law: Any
-    gains_ptr: Any
-    phi_fn: Any
-    f_fn: Any
-    h_fn: Any
-    stage_estimate: Any
-    applied: Any
-    acceleration: Any
-    applied_now: Any
+# the names the generic controller injects when it compiles this kind's pieces (plants.mujoco_kernel.Injected)
+law = Injected("law")  # the law (_builtin_law, _composite_law or _plugin_law), compiled
+user_law = Injected("user_law")  # a law plugin's function, compiled
+gains_ptr = Injected("gains_ptr")  # an address as a pointer to the law's gains record
+phi_fn = Injected("phi_fn")  # the plant form's φ, compiled
+f_fn = Injected("f_fn")  # the plant form's f, compiled
+h_fn = Injected("h_fn")  # the plant form's h, compiled
+applied = Injected("applied")  # the law's `applied` (_composite_applied or _no_filters), compiled
+acceleration = Injected("acceleration")  # _acceleration, compiled
+applied_now = Injected("applied_now")  # _applied_now, compiled
 
 _i8, _f8 = np.int64, np.float64
 #: this kind's context fields (after sim.native_step.STAGE_CONTEXT and the generic controller's own)
@@ -75,22 +69,22 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
     into [lo, hi] and held with s (u_hold, s_hold (1,)), the rate into ctx.rate."""
     base, mbase, off = io
     n, nth, nst = ctx.n, ctx.nth, ctx.nstages
-    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.qadr + 1)  # noqa: F821 (injected)
-    qvel = carray(fptr(pointer_at(base, off.qvel)), ctx.dadr + 1)  # noqa: F821 (injected)
-    th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
+    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.qadr + 1)
+    qvel = carray(fptr(pointer_at(base, off.qvel)), ctx.dadr + 1)
+    th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)
     r0 = (row * nst + stage) * (n + 1)
-    r = carray(fptr(ctx.ref), r0 + n + 1)[r0:r0 + n + 1]  # noqa: F821 (injected)
-    noise = carray(fptr(ctx.noise), (row + 1) * n)  # noqa: F821 (injected)
-    x = carray(fptr(ctx.xbuf), n)  # noqa: F821 (injected)
+    r = carray(fptr(ctx.ref), r0 + n + 1)[r0:r0 + n + 1]
+    noise = carray(fptr(ctx.noise), (row + 1) * n)
+    x = carray(fptr(ctx.xbuf), n)
     x[0] = qpos[ctx.qadr] + noise[row * n]
     x[1] = qvel[ctx.dadr] + noise[row * n + 1]
     if n == 3:  # y'' under the force this step applies (the Python path sets it before mj_step)
-        x[2] = acceleration(ctx, base, mbase, off, applied_now(ctx, base, off, row)) + noise[row * n + 2]  # noqa: F821
-    stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
-    u, s = law(x, r, th, ctx, carray(fptr(ctx.coeffs), n), carray(fptr(ctx.gamma), nth),  # noqa: F821 (injected)
-               carray(fptr(ctx.theta0), nth), lower, upper, carray(fptr(ctx.params), 1 << 30), rate)  # noqa: F821,E501 (injected globals; one carray per line)
-    carray(fptr(ctx.u_hold), 1)[0] = min(max(u, ctx.lo), ctx.hi)  # noqa: F821 (injected)
-    carray(fptr(ctx.s_hold), 1)[0] = s  # noqa: F821 (injected)
+        x[2] = acceleration(ctx, base, mbase, off, applied_now(ctx, base, off, row)) + noise[row * n + 2]
+    stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)
+    u, s = law(x, r, th, ctx, carray(fptr(ctx.coeffs), n), carray(fptr(ctx.gamma), nth),
+               carray(fptr(ctx.theta0), nth), lower, upper, carray(fptr(ctx.params), 1 << 30), rate)  # noqa: E501 (one carray per line)
+    carray(fptr(ctx.u_hold), 1)[0] = min(max(u, ctx.lo), ctx.hi)
+    carray(fptr(ctx.s_hold), 1)[0] = s
 
 
 def _apply_control(ctx, io, row, u):
@@ -98,11 +92,11 @@ def _apply_control(ctx, io, row, u):
     external force (force_offset + disturbance(t), prepared per chunk) into qfrc_applied, held over its stages;
     then the law's `applied` (the composite law's sums; nothing for the others)."""
     base, mbase, off = io
-    applied(ctx, u)  # noqa: F821 (injected)
-    carray(fptr(pointer_at(base, off.ctrl)), ctx.act + 1)[ctx.act] = u[0]  # noqa: F821 (injected)
+    applied(ctx, u)
+    carray(fptr(pointer_at(base, off.ctrl)), ctx.act + 1)[ctx.act] = u[0]
     if ctx.has_dist != 0:
-        qfrc = carray(fptr(pointer_at(base, off.qfrc_applied)), ctx.dadr + 1)  # noqa: F821 (injected)
-        qfrc[ctx.dadr] = carray(fptr(ctx.dist), row + 1)[row]  # noqa: F821 (injected)
+        qfrc = carray(fptr(pointer_at(base, off.qfrc_applied)), ctx.dadr + 1)
+        qfrc[ctx.dadr] = carray(fptr(ctx.dist), row + 1)[row]
 
 
 def _record_row(ctx, io, row, u, theta):
@@ -110,21 +104,21 @@ def _record_row(ctx, io, row, u, theta):
     t, true x = [q, q'], u, s, ref (n+1,), θ̂ at the step's start."""
     base, mbase, off = io
     n, nth = ctx.n, ctx.nth
-    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.qadr + 1)  # noqa: F821 (injected)
-    qvel = carray(fptr(pointer_at(base, off.qvel)), ctx.dadr + 1)  # noqa: F821 (injected)
+    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.qadr + 1)
+    qvel = carray(fptr(pointer_at(base, off.qvel)), ctx.dadr + 1)
     r0 = row * ctx.nstages * (n + 1)
-    r = carray(fptr(ctx.ref), r0 + n + 1)[r0:r0 + n + 1]  # noqa: F821 (injected)
-    col = record_columns(n, nth)  # noqa: F821 (injected: the row's named columns)
-    rec = carray(fptr(ctx.rec), (row + 1) * col.width)  # noqa: F821 (injected)
+    r = carray(fptr(ctx.ref), r0 + n + 1)[r0:r0 + n + 1]
+    col = record_columns(n, nth)
+    rec = carray(fptr(ctx.rec), (row + 1) * col.width)
     o = row * col.width
     rec[o + col.t] = ctx.t
     rec[o + col.x] = qpos[ctx.qadr]
     rec[o + col.x + 1] = qvel[ctx.dadr]
     if n == 3:  # y'' as observe() reads it before the step: under the force the step before applied
-        rec[o + col.x + 2] = acceleration(ctx, base, mbase, off, ctx.applied_row)  # noqa: F821 (injected)
-        ctx.applied_row = applied_now(ctx, base, off, row)  # noqa: F821 (injected)
+        rec[o + col.x + 2] = acceleration(ctx, base, mbase, off, ctx.applied_row)
+        ctx.applied_row = applied_now(ctx, base, off, row)
     rec[o + col.u] = u[0]
-    rec[o + col.s] = carray(fptr(ctx.s_hold), 1)[0]  # noqa: F821 (injected)
+    rec[o + col.s] = carray(fptr(ctx.s_hold), 1)[0]
     for i in range(n + 1):
         rec[o + col.ref + i] = r[i]
     for j in range(nth):
@@ -136,8 +130,8 @@ def _applied_now(ctx, base, off, row):
     callback writes it into qfrc_applied in _apply_control, after the law's first stage) or the constant one
     (qfrc_applied as MujocoPlant.native_prestep left it)."""
     if ctx.has_dist != 0:
-        return carray(fptr(ctx.dist), row + 1)[row]  # noqa: F821 (injected)
-    return carray(fptr(pointer_at(base, off.qfrc_applied)), ctx.dadr + 1)[ctx.dadr]  # noqa: F821 (injected)
+        return carray(fptr(ctx.dist), row + 1)[row]
+    return carray(fptr(pointer_at(base, off.qfrc_applied)), ctx.dadr + 1)[ctx.dadr]
 
 
 def _acceleration(ctx, base, mbase, off, applied):
@@ -145,13 +139,13 @@ def _acceleration(ctx, base, mbase, off, applied):
     same operations in the same order: (gear·gain·act + qfrc_passive − qfrc_bias + applied) / (mass + armature),
     the forces MuJoCo computed for this stage, `applied` the external force [N]."""
     a, dof, b = ctx.act, ctx.dadr, ctx.body
-    gear = carray(fptr(pointer_at(mbase, off.actuator_gear)), (a + 1) * ctx.gear_w)[a * ctx.gear_w]  # noqa: F821
-    gain = carray(fptr(pointer_at(mbase, off.actuator_gainprm)), (a + 1) * ctx.gain_w)[a * ctx.gain_w]  # noqa: F821
-    act = carray(fptr(pointer_at(base, off.act)), ctx.act_adr + 1)[ctx.act_adr]  # noqa: F821 (injected)
-    passive = carray(fptr(pointer_at(base, off.qfrc_passive)), dof + 1)[dof]  # noqa: F821 (injected)
-    bias = carray(fptr(pointer_at(base, off.qfrc_bias)), dof + 1)[dof]  # noqa: F821 (injected)
-    mass = carray(fptr(pointer_at(mbase, off.body_mass)), b + 1)[b]  # noqa: F821 (injected)
-    armature = carray(fptr(pointer_at(mbase, off.dof_armature)), dof + 1)[dof]  # noqa: F821 (injected)
+    gear = carray(fptr(pointer_at(mbase, off.actuator_gear)), (a + 1) * ctx.gear_w)[a * ctx.gear_w]
+    gain = carray(fptr(pointer_at(mbase, off.actuator_gainprm)), (a + 1) * ctx.gain_w)[a * ctx.gain_w]
+    act = carray(fptr(pointer_at(base, off.act)), ctx.act_adr + 1)[ctx.act_adr]
+    passive = carray(fptr(pointer_at(base, off.qfrc_passive)), dof + 1)[dof]
+    bias = carray(fptr(pointer_at(base, off.qfrc_bias)), dof + 1)[dof]
+    mass = carray(fptr(pointer_at(mbase, off.body_mass)), b + 1)[b]
+    armature = carray(fptr(pointer_at(mbase, off.dof_armature)), dof + 1)[dof]
     force = gear * gain * act + passive - bias + applied
     return force / (mass + armature)
 
@@ -160,9 +154,9 @@ def _builtin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rat
     """laws.sliding.sliding_law_values with the law's gains read by name from its SLIDING_GAINS record (at the
     context's `gains` address) and its arrays by name (the plant's functions are called here, as globals, so
     no function is passed as a value: numba could not cache that)."""
-    gains = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
+    gains = carray(gains_ptr(ctx.gains), 1)[0]
     u, s, _ = sliding_law_values(x, r, th, gains, SlidingArrays(coeffs, gamma, theta0, lower, upper),
-                                 phi_fn(x), f_fn(x), h_fn(x), rate)  # noqa: F821 (injected)
+                                 phi_fn(x), f_fn(x), h_fn(x), rate)
     return u, s
 
 
@@ -172,9 +166,9 @@ def _composite_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, r
     .filter_step; from the second step on) and the new step's pending sums start from y' measured now; then the
     sliding law (_builtin_law's), and from the second step on the composite correction of its rate
     (laws.composite.composite_rate). The stage's φ, f, h are kept in ctx.fval for _composite_applied."""
-    gains = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
+    gains = carray(gains_ptr(ctx.gains), 1)[0]
     nz = ctx.nth + 1
-    z, pending = carray(fptr(ctx.zf), nz), carray(fptr(ctx.fpend), nz)  # noqa: F821 (injected)
+    z, pending = carray(fptr(ctx.zf), nz), carray(fptr(ctx.fpend), nz)
     v = x[ctx.n - 1]
     if ctx.stage == 0:
         if ctx.step > 0:
@@ -182,8 +176,8 @@ def _composite_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, r
         for j in range(nz):
             pending[j] = 0.0
         pending[0] = v
-    phi, f, h = phi_fn(x), f_fn(x), h_fn(x)  # noqa: F821 (injected)
-    fval = carray(fptr(ctx.fval), nz)  # noqa: F821 (injected)
+    phi, f, h = phi_fn(x), f_fn(x), h_fn(x)
+    fval = carray(fptr(ctx.fval), nz)
     n_p = phi.shape[0]
     for j in range(n_p):
         fval[j] = phi[j]
@@ -200,9 +194,9 @@ def _composite_applied(ctx, u):
     """The composite law's `applied` (_apply_control): the stage's φ, f, h (ctx.fval) and its applied control u[0]
     into the step's pending sums with the stage's weight b_i (laws.composite.stage_sums)."""
     nz = ctx.nth + 1
-    fval = carray(fptr(ctx.fval), nz)  # noqa: F821 (injected)
+    fval = carray(fptr(ctx.fval), nz)
     n_p = nz - 2
-    stage_sums(carray(fptr(ctx.fpend), nz), ctx.weights[ctx.stage], fval[:n_p], fval[n_p], fval[n_p + 1],  # noqa: F821
+    stage_sums(carray(fptr(ctx.fpend), nz), ctx.weights[ctx.stage], fval[:n_p], fval[n_p], fval[n_p + 1],
                u[0])
 
 
@@ -216,8 +210,8 @@ def _plugin_law(x, r, th, ctx, coeffs, gamma, theta0, lower, upper, params, rate
     shared modifications every plugin gets (laws.common.plugin_rate: a baseline's rate is zero, the
     dead-zone, the leakage and the projection), as PluginLaw does in Python; their scalars read by name from
     the law's PLUGIN_GAINS record (at the context's `gains` address)."""
-    u, s = user_law(x, r, th, phi_fn(x), f_fn(x), h_fn(x), params, rate)  # noqa: F821 (injected)
-    shared = carray(gains_ptr(ctx.gains), 1)[0]  # noqa: F821 (injected)
+    u, s = user_law(x, r, th, phi_fn(x), f_fn(x), h_fn(x), params, rate)
+    shared = carray(gains_ptr(ctx.gains), 1)[0]
     s_abs = abs(s)
     signal = s_abs if shared.dz_on_s else abs(r[0] - x[0])
     plugin_rate(rate, th, s_abs, signal, shared.adapt, shared.dz_width, shared.sigma, shared.e_mod, theta0, gamma,

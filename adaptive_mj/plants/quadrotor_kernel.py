@@ -18,24 +18,19 @@ the kernel's functions are globals the generic controller injects.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from adaptive_mj.laws import flight_kernel
-from adaptive_mj.plants.mujoco_kernel import KernelRun, KernelVariant, MujocoKernel, RowShapes, row_columns
+from adaptive_mj.plants.mujoco_kernel import (Injected, KernelRun, KernelVariant, MujocoKernel, RowShapes, carray, fptr,
+                                              iptr, pointer_at, row_columns, stage_estimate)
 
-if TYPE_CHECKING:
-    # injected by the generic controller: numba's carray and the pointer intrinsics, the stage functions, the kernel
-    carray: Any
-    fptr: Any
-    iptr: Any
-    pointer_at: Any
-    stage_estimate: Any
-    flight_law: Any
-    measure_into: Any
-    crash_check: Any
-    l1_update: Any
+# the names the generic controller injects when it compiles this kind's pieces (plants.mujoco_kernel.Injected)
+flight_law = Injected("flight_law")  # laws.flight_kernel.flight_law, compiled
+measure_into = Injected("measure_into")  # plants.quadrotor.measure_into, compiled
+crash_check = Injected("crash_check")  # plants.quadrotor.crash_check, compiled
+l1_update = Injected("l1_update")  # laws.flight_kernel.l1_update, compiled
 
 _i8, _f8 = np.int64, np.float64
 #: this kind's context fields (after sim.native_step.STAGE_CONTEXT and the generic controller's own)
@@ -64,40 +59,40 @@ def _columns(nth):
 def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
     """This shape's law at a stage (adaptive_mj.sim.native_step; see the module docstring)."""
     base, mbase, off = io
-    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)  # noqa: F821 (injected)
-    qvel = carray(fptr(pointer_at(base, off.qvel)), ctx.nv)  # noqa: F821 (injected)
+    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)
+    qvel = carray(fptr(pointer_at(base, off.qvel)), ctx.nv)
     qa, da = ctx.qadr, ctx.dadr
-    x = carray(fptr(ctx.x), (4, 3))  # noqa: F821 (injected)
-    measure_into(qpos, qvel, qa, da, x)  # noqa: F821 (injected)
-    noise = carray(fptr(ctx.noise), (ctx.maxrows, 4, 3))  # noqa: F821 (injected)
+    x = carray(fptr(ctx.x), (4, 3))
+    measure_into(qpos, qvel, qa, da, x)
+    noise = carray(fptr(ctx.noise), (ctx.maxrows, 4, 3))
     for i in range(4):
         for j in range(3):
             x[i, j] = x[i, j] + noise[row, i, j]
     nth = ctx.nth
-    th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)  # noqa: F821 (injected)
-    stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)  # noqa: F821 (injected)
-    P = carray(fptr(ctx.P), flight_kernel.P_SIZE)  # noqa: F821 (injected)
-    tmp = carray(fptr(ctx.tmp), flight_kernel.TMP_SIZE)  # noqa: F821 (injected)
+    th, rate = carray(fptr(ctx.th), nth), carray(fptr(ctx.rate), nth)
+    stage_estimate(theta, prev, ctx.inc[stage], ctx.h, lower, upper, th)
+    P = carray(fptr(ctx.P), flight_kernel.P_SIZE)
+    tmp = carray(fptr(ctx.tmp), flight_kernel.TMP_SIZE)
     if P[flight_kernel.P_L1] != 0.0 and stage == 0:  # L1: the last step's update (the Python path's step_ends)
-        z_hat, x_prev = carray(fptr(ctx.z_hat), 6), carray(fptr(ctx.x_prev), (4, 3))  # noqa: F821 (injected)
+        z_hat, x_prev = carray(fptr(ctx.z_hat), 6), carray(fptr(ctx.x_prev), (4, 3))
         if ctx.step == 0:
             for i in range(3):
                 z_hat[i] = x[1, i]
                 z_hat[3 + i] = x[3, i]
         else:
-            l1_update(x_prev, carray(fptr(ctx.u_prev), 4), th, P, carray(fptr(ctx.A), (4, 4)),  # noqa: F821
-                      P[flight_kernel.P_AS], P[flight_kernel.P_WC], ctx.h, z_hat, carray(fptr(ctx.sigma), 6),  # noqa: F821
-                      carray(fptr(ctx.aug), 6), carray(fptr(ctx.R), (3, 3)), tmp)  # noqa: F821
+            l1_update(x_prev, carray(fptr(ctx.u_prev), 4), th, P, carray(fptr(ctx.A), (4, 4)),
+                      P[flight_kernel.P_AS], P[flight_kernel.P_WC], ctx.h, z_hat, carray(fptr(ctx.sigma), 6),
+                      carray(fptr(ctx.aug), 6), carray(fptr(ctx.R), (3, 3)), tmp)
         for i in range(4):
             for j in range(3):
                 x_prev[i, j] = x[i, j]
-    r = carray(fptr(ctx.ref), (ctx.maxrows * ctx.nstages, 5, 3))[row * ctx.nstages + stage]  # noqa: F821
-    u, s = carray(fptr(ctx.u), 4), carray(fptr(ctx.s), 3)  # noqa: F821 (injected)
-    flight_law(x, r, th, carray(fptr(ctx.P), flight_kernel.P_SIZE), carray(fptr(ctx.G), (4, nth)),  # noqa: F821
-               carray(fptr(ctx.Ainv), (4, 4)), carray(fptr(ctx.aug), 6), carray(fptr(ctx.R), (3, 3)),  # noqa: F821
-               carray(fptr(ctx.F), 3), tmp, u, s, rate)  # noqa: F821 (injected)
-    lo, hi = carray(fptr(ctx.lo), 4), carray(fptr(ctx.hi), 4)  # noqa: F821 (injected)
-    u_hold, s_hold = carray(fptr(ctx.u_hold), 4), carray(fptr(ctx.s_hold), 3)  # noqa: F821 (injected)
+    r = carray(fptr(ctx.ref), (ctx.maxrows * ctx.nstages, 5, 3))[row * ctx.nstages + stage]
+    u, s = carray(fptr(ctx.u), 4), carray(fptr(ctx.s), 3)
+    flight_law(x, r, th, carray(fptr(ctx.P), flight_kernel.P_SIZE), carray(fptr(ctx.G), (4, nth)),
+               carray(fptr(ctx.Ainv), (4, 4)), carray(fptr(ctx.aug), 6), carray(fptr(ctx.R), (3, 3)),
+               carray(fptr(ctx.F), 3), tmp, u, s, rate)
+    lo, hi = carray(fptr(ctx.lo), 4), carray(fptr(ctx.hi), 4)
+    u_hold, s_hold = carray(fptr(ctx.u_hold), 4), carray(fptr(ctx.s_hold), 3)
     for i in range(4):
         u_hold[i] = min(max(u[i], lo[i]), hi[i])
     for i in range(3):
@@ -107,9 +102,9 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
 def _apply_control(ctx, io, row, u):
     """This shape's "apply": the four thrusts into their actuators' ctrl."""
     base, mbase, off = io
-    ctrl = carray(fptr(pointer_at(base, off.ctrl)), ctx.nu)  # noqa: F821 (injected)
-    act = carray(iptr(ctx.act), 4)  # noqa: F821 (injected)
-    u_prev = carray(fptr(ctx.u_prev), 4)  # noqa: F821 (injected)
+    ctrl = carray(fptr(pointer_at(base, off.ctrl)), ctx.nu)
+    act = carray(iptr(ctx.act), 4)
+    u_prev = carray(fptr(ctx.u_prev), 4)
     for i in range(4):
         ctrl[act[i]] = u[i]
         if ctx.stage == 0:  # the step's applied thrusts, for L1's update at the next step
@@ -124,11 +119,11 @@ def _record_row(ctx, io, row, u, theta):
     before it, and checks them for divergence with this row's state)."""
     base, mbase, off = io
     maxrows, nth = ctx.maxrows, ctx.nth
-    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)  # noqa: F821 (injected)
-    qvel = carray(fptr(pointer_at(base, off.qvel)), ctx.nv)  # noqa: F821 (injected)
+    qpos = carray(fptr(pointer_at(base, off.qpos)), ctx.nq)
+    qvel = carray(fptr(pointer_at(base, off.qvel)), ctx.nv)
     qa, da = ctx.qadr, ctx.dadr
     if ctx.crash_code == 0:
-        code, value, airborne = crash_check(qpos[qa + 2], qpos[qa + 3], qpos[qa + 4], qpos[qa + 5],  # noqa: F821
+        code, value, airborne = crash_check(qpos[qa + 2], qpos[qa + 3], qpos[qa + 4], qpos[qa + 5],
                                             qpos[qa + 6], ctx.airborne != 0, ctx.z0, ctx.clearance, ctx.cos_tilt)
         ctx.airborne = 1 if airborne else 0
         if code != 0 and ctx.step > 0:
@@ -138,11 +133,11 @@ def _record_row(ctx, io, row, u, theta):
             ctx.rows = row + 1  # this step's stages still run; every later call is left alone
     col = _columns(nth)
     first = ctx.rec + 8 * row * col.width  # the row's first column's address (8 bytes a column)
-    rec = carray(fptr(first), col.width)  # noqa: F821 (injected)
+    rec = carray(fptr(first), col.width)
     rec[col.t] = ctx.t
-    measure_into(qpos, qvel, ctx.qadr, ctx.dadr, carray(fptr(first + 8 * col.x), (4, 3)))  # noqa: F821 (injected)
-    r = carray(fptr(ctx.ref), (maxrows * ctx.nstages, 5, 3))[row * ctx.nstages]  # noqa: F821 (injected)
-    s_hold = carray(fptr(ctx.s_hold), 3)  # noqa: F821 (injected)
+    measure_into(qpos, qvel, ctx.qadr, ctx.dadr, carray(fptr(first + 8 * col.x), (4, 3)))
+    r = carray(fptr(ctx.ref), (maxrows * ctx.nstages, 5, 3))[row * ctx.nstages]
+    s_hold = carray(fptr(ctx.s_hold), 3)
     for i in range(4):
         rec[col.u + i] = u[i]
     for i in range(3):
