@@ -11,7 +11,8 @@ scenario whose plant offers the form the law serves: adaptive_mj.laws.kinds). No
 code: the law must be installed (docs/ADDING_A_LAW.md walks through two complete packages).
 
 Each law is plain functions over arrays and floats, so that it can be compiled with numba into MuJoCo's
-native control callback (adaptive_mj.sim.native, .native_manipulator) and run at built-in speed:
+native control callback (adaptive_mj.plants.one_dof_kernel, .manipulator_kernel, built by
+adaptive_mj.sim.native_mujoco) and run at built-in speed:
 
 1-DOF (``LawPlugin``, the shape of the built-in ``laws.sliding.sliding_law``):
 
@@ -198,9 +199,10 @@ class Shared:
 
 @dataclass(frozen=True)
 class PluginGains(Gains):
-    """The scalars of the shared modifications a compiled 1-DOF plugin law reads by name (adaptive_mj.sim.native
-    reads them as fields of a PLUGIN_GAINS record, through its address): the dead-zone's width and whether its
-    signal is |s| (else |ỹ|), σ, ν, and whether the law adapts (laws.common.plugin_rate)."""
+    """The scalars of the shared modifications a compiled 1-DOF plugin law reads by name
+    (adaptive_mj.plants.one_dof_kernel reads them as fields of a PLUGIN_GAINS record, through its address): the
+    dead-zone's width and whether its signal is |s| (else |ỹ|), σ, ν, and whether the law adapts
+    (laws.common.plugin_rate)."""
 
     dz_width: float
     sigma: float
@@ -251,7 +253,7 @@ class _PluginBase(Law):
 
     def native_params(self) -> dict[str, Any]:
         """Its parameters, "gains" (the PLUGIN_GAINS record of `gains()`) and the shared modifications' arrays by
-        name (a multi-joint plugin's, for adaptive_mj.sim.native_manipulator; PluginLaw's own for the 1-DOF)."""
+        name (a multi-joint plugin's, for adaptive_mj.plants.manipulator_kernel; PluginLaw's own for the 1-DOF)."""
         sh = self.shared
         return {"plugin_params": self.params, "gains": self.gains().record(), "theta0": sh.theta0,
                 "lower": sh.lower, "upper": sh.upper, "gamma": sh.gamma}
@@ -273,7 +275,7 @@ class _PluginBase(Law):
 class PluginLaw(_PluginBase):
     """A plugin's law on a 1-DOF plant, with the loop's law interface (laws.protocol.Law);
     ``native_params`` hands the function and its parameters to the native callback
-    (adaptive_mj.sim.native)."""
+    (adaptive_mj.plants.one_dof_kernel)."""
 
     def __init__(self, installed: Installed[LawPlugin], form: ModelForm, params: np.ndarray, *,
                  shared: Shared | None = None, modification: Modification | None = None):
@@ -282,8 +284,8 @@ class PluginLaw(_PluginBase):
         self.order = form.order
 
     def native_params(self) -> dict[str, Any]:
-        """What adaptive_mj.sim.native needs: the function and its parameters, "gains" (the PLUGIN_GAINS record
-        of `gains()`) and the shared modifications' arrays by name (coeffs: the sliding law's, unused)."""
+        """What adaptive_mj.plants.one_dof_kernel needs: the function and its parameters, "gains" (the PLUGIN_GAINS
+        record of `gains()`) and the shared modifications' arrays by name (coeffs: the sliding law's, unused)."""
         sh = self.shared
         return {"plugin_law": self.plugin.law, "plugin_params": self.params, "gains": self.gains().record(),
                 "coeffs": np.zeros(self.order), "gamma": sh.gamma, "theta0": sh.theta0, "lower": sh.lower,
@@ -303,7 +305,7 @@ class PluginLaw(_PluginBase):
 class JointPluginLaw(_PluginBase):
     """A JointLawPlugin's law on a plant of m joints (adaptive_mj.plants.manipulator), with the loop's law
     interface; regressor(v, w, a) -> (Y (m, n_theta), τ_known (m,)) is the plant's, at its current q.
-    ``native_params`` hands the functions and parameters to adaptive_mj.sim.native_manipulator."""
+    ``native_params`` hands the functions and parameters to adaptive_mj.plants.manipulator_kernel."""
 
     order = 2
 

@@ -33,7 +33,7 @@ import functools
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, ClassVar, Iterator
 
 import mujoco
 import numpy as np
@@ -43,7 +43,8 @@ from adaptive_mj.disturbance import JointDisturbance
 from adaptive_mj.errors import ModelError
 from adaptive_mj.numba_util import jit_tree, with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
-from adaptive_mj.plants import BuiltPlant, ModelSource
+from adaptive_mj.plants import BuiltPlant, ModelSource, manipulator_kernel
+from adaptive_mj.plants.mujoco_kernel import MujocoKernel
 from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compile_for_scenario_with, compiled_control,
                                              control_callback, new_warnings, scratch_data)
 from adaptive_mj.plants.protocol import Policy
@@ -517,7 +518,7 @@ class Regressor:
         return out
 
     def static_args(self):
-        """The model arrays the kernel takes, in its order (also used by adaptive_mj.sim.native)."""
+        """The model arrays the kernel takes, in its order (also used by adaptive_mj.plants.one_dof_kernel)."""
         m = self.model
         return (self.parent, self.dofadr, self.dofnum, self.rootid, self.body_col, self.body_known,
                 self.col_arm, self.col_damp, self.col_coul, m.dof_armature, m.dof_damping, self.coulomb_eps)
@@ -658,7 +659,8 @@ class ManipulatorPlant(ModelClock, BodyEdits):
     """
 
     order = 2
-    compiled_loop: str | None = "adaptive_mj.sim.native_manipulator"  # protocol.Plant.compiled_loop
+    compiled_loop: str | None = "adaptive_mj.sim.native_mujoco"  # protocol.Plant.compiled_loop
+    mujoco_kernel: ClassVar[MujocoKernel] = manipulator_kernel.KERNEL  # its kernel spec (plants/manipulator_kernel.py)
     native_owner: object | None = None  # the native controller whose context data points at
 
     def __init__(self, model: mujoco.MjModel, *, unknown="payload", joint_params: bool = False,

@@ -416,7 +416,7 @@ def fallback_line(name: str, exc: BaseException) -> str:
 
 
 def plugin_compiled(build: Callable[[], Any], plugin_fns: tuple[Callable, ...], key: int):
-    """build() (a callback variant's compile, native.compiled's and native_manipulator.compiled's) as it is where
+    """build() (a callback variant's compile, sim.native_mujoco.compiled's) as it is where
     no law plugin is compiled in (plugin_fns empty). With one, numba's error becomes PluginNotCompiled, naming the
     plugin's file and line and numba's reason, and is remembered under the variant's key (its cache key, key: it
     hashes the plugin's source and numba's version), so that a later run raises it at once instead of compiling
