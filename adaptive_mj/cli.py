@@ -93,6 +93,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="run only this section of the catalogue, by its key (repeatable, or KEY,KEY; e.g. first_order, "
                         "payload_swap, quadrotor; breaking_points: the full bench's study, section 14); a wrong key "
                         "is refused with the list of them")
+    b.add_argument("--results", type=Path, metavar="FILE.md",
+                   help="also write the measured-results page (results.md in the output folder) to FILE.md, e.g. "
+                        "docs/RESULTS.md")
     _backend_arguments(b)
 
     w = add_parser("warmup", help="compile every control callback the bench needs, in parallel, so that the bench "
@@ -212,6 +215,25 @@ def _scenario_path(arg: str) -> Path:
     return scenario_path(arg)
 
 
+def _print_identification(ident: dict | None) -> None:
+    """The summary's "identification" (report.identification) in one line: identified, off (with the error),
+    and which parameters the reference did not excite over the tail."""
+    if not ident:
+        return
+    rel = ident.get("relative_error") or {}
+    parts = []
+    if ident.get("identified"):
+        parts.append("identified " + ", ".join(ident["identified"]))
+    if ident.get("off"):
+        parts.append("off " + ", ".join(f"{n} {100 * rel[n]:.3g} %" for n in ident["off"]))
+    if "not_excited" in ident:
+        parts.append(("not excited by the reference over the tail (their estimates say nothing): "
+                      + ", ".join(ident["not_excited"])) if ident["not_excited"] else
+                     f"every parameter excited over the tail (index {ident['excitation_index']:.2g})")
+    if parts:
+        print(f"  identification (within {100 * ident['tolerance']:g} % of the truth): " + "; ".join(parts))
+
+
 def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, note: str = "",
                    kind: str | None = None) -> None:
     if as_json:
@@ -260,6 +282,7 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
                 print(f"    over the tail (last {100 * TAIL_FRACTION:g} %, mean [min, max]): mass "
                       f"{rng('mass_error_percent')} %, centre of mass {rng('com_error_mm', unit='mm')}, inertia "
                       f"{rng('inertia_error', unit='kg m²')}")
+    _print_identification(summary.get("identification"))
     final = summary["final"]
     unit = functools.partial(units.param_unit, kind)
     parts = [f"{n} {f(final['theta_hat'][n], unit(n))} (true {f(final['theta'][n], unit(n))})"
@@ -451,7 +474,8 @@ def _study(args):
             raise ScenarioError("--gains needs --law")
         return api.bench(quick=args.quick, scenarios=[_scenario_path(p) for p in args.scenario], out=args.output,
                          law=args.law, gains=args.gains, set=args.overrides, full_logs=args.full_logs,
-                         only=[k for item in args.only for k in item.split(",")] or None, **where)
+                         only=[k for item in args.only for k in item.split(",")] or None, results=args.results,
+                         **where)
     if args.command == "stress":
         return api.stress(seeds=args.seeds, steps=args.steps, duration=args.duration, composite=args.composite,
                           out=args.output, law=args.law, set=args.overrides, plants=args.plants, **where)
@@ -516,6 +540,9 @@ def main(argv: list[str] | None = None) -> int:
     from adaptive_mj.sim.interrupt import stop_on_signals
 
     args = _parser().parse_args(argv)
+    from adaptive_mj.notes import show_on_stderr
+
+    show_on_stderr()  # a run's notes and warnings (the "adaptive_mj" logger) on stderr, one whole line each
     missing = gl_library_missing(os.environ.get("MUJOCO_GL"))
     if missing:  # before anything imports mujoco, which would end in PyOpenGL's traceback
         print(f"adaptive-mj: error: {missing}", file=sys.stderr)

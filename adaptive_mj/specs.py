@@ -80,6 +80,9 @@ class ManipulatorSpec:
     base_parameters: bool
     servo_to_torque: bool
     forcerange: float | dict[str, float] | None = None
+    # plant.fixed_joints: joints welded at their reference position, with the tendons, joint equalities and
+    # actuators that use them (a gripper's fingers; plants.manipulator.fix_joints)
+    fixed_joints: tuple[str, ...] = ()
     # joint friction and actuator lag (plant.damping, .frictionloss, .actuator_lag: a number for every
     # joint or {joint = number}; None keeps the model's), and the regressor's friction columns
     friction: "JointFrictionSpec" = field(default_factory=lambda: JointFrictionSpec())
@@ -109,6 +112,9 @@ class SimulationSpec:
     state_bound: float
     control_delay: int = 0  # whole physics steps between computing a control and applying it
     python_callback: bool = False  # force the Python control callback (debugging a law), not the native one
+    # what the run says of its integrator against the model's own (setup.scenario: kept when the scenario names
+    # none, said when the scenario's replaces it); "" when nothing is to be said
+    integrator_note: str = ""
 
 
 @dataclass(frozen=True)
@@ -122,7 +128,9 @@ class SuccessSpec:
     actuator may spend at its limit. preflight: what a failed pre-flight check does when the sampled loop's
     fastest mode is past the integrator's or the hold's stability limit (adaptive_mj.sim.preflight): "warn" (one
     line, the run goes on), "refuse" (`run --strict`: no run) or "record" (the run goes on, the check's result in
-    its summary only: a study's runs, which are judged by their outcome whatever the law)."""
+    its summary only: a study's runs, which are judged by their outcome whatever the law). physical: the run
+    fails when the final estimate of a body's ten standard parameters is no possible body (a negative mass, a
+    pseudo-inertia that is not positive semidefinite: report.metrics.body_identification)."""
 
     tail_rms: float | None = None
     tail_fraction: float = 0.05
@@ -130,6 +138,7 @@ class SuccessSpec:
     param_error: float | dict[str, float] | None = None
     saturation: float = 0.2
     preflight: str = "warn"
+    physical: bool = False
 
 
 PREFLIGHT_ACTIONS = ("warn", "refuse", "record")

@@ -9,8 +9,9 @@ with the ratio and the number of compiled variants the cold run left in the cach
   bench         `adaptive-mj bench` (the README's main job)   (with --bench; minutes)
 
 Targets (issue 51): cold `run heave_tracking` <= 10 s; cold first UR5e plugin run <= 20 s; cold bench <= 1.3x
-warm bench. The machine's load is printed beside the figures (os.getloadavg before and after each case): on a
-shared machine the figures are only comparable within one invocation.
+warm bench. CPU seconds (user + system, the command's and its workers') are printed beside the wall seconds:
+on a loaded machine they are the figures to compare. The machine's load is printed beside the figures
+(os.getloadavg before and after each case): on a shared machine the figures are only comparable within one invocation.
 
 Usage: python benchmarks/cold_start.py [--bench] [--only run,ur5e_plugin,bench_quick,bench] [--json FILE]
 """
@@ -19,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -48,25 +50,30 @@ def variants(cache: Path) -> int:
     return sum(1 for _ in cache.rglob("*.nbi"))
 
 
-def timed(args: list[str], env: dict, out: Path) -> float:
+def timed(args: list[str], env: dict, out: Path) -> tuple[float, float]:
+    """(wall [s], CPU [s]: user + system of the command and every process it waited for) of one command."""
     target = out if args[0] == "bench" else out.with_suffix(".mcap")  # bench: a folder; run: a log file
     cmd = [sys.executable, "-m", "adaptive_mj", *args, "-o", str(target)]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     done = subprocess.run(cmd, env=env, capture_output=True, text=True)
     took = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     if done.returncode not in (0, 1):  # 1: a run or study that reports a failure still ran to its end
         raise RuntimeError(f"{' '.join(cmd)} exited {done.returncode}: {done.stderr.strip()[-400:]}")
-    return took
+    return took, cpu
 
 
 def cold_warm(name: str) -> dict:
     with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as logs:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache, ADAPTIVE_MJ_LOGS=logs)
         load0 = os.getloadavg()[0]
-        cold = timed(CASES[name], env, Path(logs) / "cold")
+        cold, cold_cpu = timed(CASES[name], env, Path(logs) / "cold")
         n = variants(Path(cache))
-        warm = timed(CASES[name], env, Path(logs) / "warm")
-        return {"cold_s": cold, "warm_s": warm, "ratio": cold / warm, "variants": n,
+        warm, warm_cpu = timed(CASES[name], env, Path(logs) / "warm")
+        return {"cold_s": cold, "warm_s": warm, "ratio": cold / warm, "variants": n, "cold_cpu_s": cold_cpu,
+                "warm_cpu_s": warm_cpu, "cpu_ratio": cold_cpu / warm_cpu,
                 "load": [round(load0, 2), round(os.getloadavg()[0], 2)]}
 
 
@@ -82,14 +89,16 @@ def main() -> None:
     if unknown:
         sys.exit(f"cold_start.py: --only: unknown case(s) {unknown}; expected some of {list(CASES)}")
     out = {"cores": os.cpu_count(), "cases": {}}
-    print(f"{'case':<12} {'cold [s]':>9} {'warm [s]':>9} {'cold/warm':>9} {'variants':>8}  load (1 min) before, after")
+    print(f"{'case':<12} {'cold [s]':>9} {'warm [s]':>9} {'cold/warm':>9} {'variants':>8} {'CPU cold':>9} "
+          f"{'CPU warm':>9} {'cold/warm':>9}  load (1 min) before, after")
     for name in names:
         if name == "ur5e_plugin" and not plugin_installed("robust_sl"):
             print(f"{name:<12} skipped: pip install examples/robust_sl_law first")
             continue
         fig = cold_warm(name)
         out["cases"][name] = fig
-        print(f"{name:<12} {fig['cold_s']:9.1f} {fig['warm_s']:9.1f} {fig['ratio']:9.2f} {fig['variants']:8d}  "
+        print(f"{name:<12} {fig['cold_s']:9.1f} {fig['warm_s']:9.1f} {fig['ratio']:9.2f} {fig['variants']:8d} "
+              f"{fig['cold_cpu_s']:9.1f} {fig['warm_cpu_s']:9.1f} {fig['cpu_ratio']:9.2f}  "
               f"{fig['load'][0]:.2f}, {fig['load'][1]:.2f}", flush=True)
     if a.json:
         Path(a.json).write_text(json.dumps(out, indent=1) + "\n")

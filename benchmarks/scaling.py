@@ -11,7 +11,9 @@
             loop shape (submit window, ray.wait, ray.get)
   study     a --study-runs study of 2 s runs through `adaptive-mj sweep` (local, 2 jobs):
             wall time, runs/s, and the driver's peak RSS (VmHWM, polled) for it and for a
-            study 10× smaller (bounded memory: the two should be close)
+            study 10× smaller (bounded memory: the two should be close); against the bare-stepping limit
+            and the closed loop's own ceiling (issue 51: the same runs compiled, only their mj_step calls
+            timed, 2 processes at once), each measured just before and just after the study
   batch     issue 20: simulation-steps per second for the heave vehicle, the 1-DOF arm and the
             6-joint arm at nsim --batch-sims (100, 1000, 10^4): the bare-stepping limit (a Batch
             of the model with no law, 2 threads); run_batch (built runs, unlogged); the batched
@@ -318,12 +320,45 @@ def bare_limit(n: int, jobs: int = 2, sample: int = 1000, timers: bool = True) -
     return {"sample_runs": jobs * sample, "sample_wall_s": wall, "limit_s": wall * n / (jobs * sample)}
 
 
+def _closed_loop_runs(args) -> float:
+    """In a worker process: `runs` of the study's 2-s heave_drift runs (its law.k grid and seeds), each compiled
+    and unlogged (run_job); returns the seconds spent inside their mj_step calls only (the physics with the
+    compiled law in MuJoCo's control callback: the closed loop with no Python between chunks)."""
+    from adaptive_mj.study.job import RunSpec, run_job
+    from adaptive_mj.setup.scenario import SCENARIOS_DIR
+
+    first, runs, points = args
+    jobs = [RunSpec(SCENARIOS_DIR / "heave_drift.toml", seed=i,
+                    overrides=(f"simulation.duration={STUDY_SECONDS!r}",
+                               f"law.k={100.0 + 200.0 * (i % points) / max(points - 1, 1)!r}"),
+                    log=None, keep_trajectory=False) for i in range(first, first + runs)]
+    with _timed_mj_step() as stepping:
+        for job in jobs:
+            run_job(job)
+    return stepping[0]
+
+
+def closed_loop_limit(n: int, jobs: int = 2, sample: int = 500, points: int = 100) -> dict:
+    """The closed loop's own ceiling for study(n) (issue 51's target): `jobs` processes at once, each running
+    `sample` of the study's runs compiled and timing only their mj_step calls (_closed_loop_runs); the ceiling for
+    n runs is n / (jobs · sample) times the processes' mean stepping time (both cores busy, as in the study)."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("fork")
+    with ctx.Pool(jobs) as pool:
+        pool.map(_closed_loop_runs, [(0, 2, points)] * jobs)  # imports, the callback loaded: warm
+        totals = pool.map(_closed_loop_runs, [(k * sample, sample, points) for k in range(jobs)])
+    return {"sample_runs": jobs * sample, "stepping_s": totals,
+            "limit_s": statistics.mean(totals) * n / (jobs * sample)}
+
+
 def study(n: int, jobs: int = 2, backend: str = "local", engine: str = "process", logs: str = "all") -> dict:
     """`adaptive-mj sweep` over n 2-s runs of heave_drift (noise: the seeds differ); driver peak RSS; and the
     bare-stepping limit of the same runs measured just before and just after it (bare_limit, their mean), so
     the ratio limit / wall is taken at the machine's load of the moment.
     engine: --engine (process or batch); logs: --logs (all, or summary: the table only)."""
     before, before_off = bare_limit(n, jobs), bare_limit(n, jobs, timers=False)
+    loop_before = closed_loop_limit(n, jobs)
     points = 100 if n >= 1000 else 10
     seeds = n // points
     folder = Path(tempfile.mkdtemp(prefix="scaling-study-"))
@@ -347,13 +382,17 @@ def study(n: int, jobs: int = 2, backend: str = "local", engine: str = "process"
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     after, after_off = bare_limit(n, jobs), bare_limit(n, jobs, timers=False)
+    loop_after = closed_loop_limit(n, jobs)
+    loop = 0.5 * (loop_before["limit_s"] + loop_after["limit_s"])
     limit = 0.5 * (before["limit_s"] + after["limit_s"])
     limit_off = 0.5 * (before_off["limit_s"] + after_off["limit_s"])
     return {"backend": backend, "engine": engine, "logs": logs, "runs": points * seeds, "rows": lines, "wall_s": wall,
             "runs_per_s": points * seeds / wall, "driver_peak_rss_mb": max(rss) / 1024 if rss else None,
             "logs_mb": size / 2**20, "bare_limit_s": limit, "bare_limit_before_after_s": [before["limit_s"],
                                                                                          after["limit_s"]],
-            "to_limit": limit / wall, "bare_limit_timers_off_s": limit_off, "to_limit_timers_off": limit_off / wall}
+            "to_limit": limit / wall, "bare_limit_timers_off_s": limit_off, "to_limit_timers_off": limit_off / wall,
+            "closed_loop_limit_s": loop, "closed_loop_before_after_s": [loop_before["limit_s"], loop_after["limit_s"]],
+            "to_closed_loop": loop / wall}
 
 
 def _batch_spec(name: str, overrides: list[str]) -> dict:
@@ -675,7 +714,10 @@ def main() -> None:
                   f"{s['bare_limit_s']:.1f} s (before/after {s['bare_limit_before_after_s'][0]:.1f}/"
                   f"{s['bare_limit_before_after_s'][1]:.1f}): {s['to_limit']:.2f}x the bare-stepping limit; with "
                   f"MuJoCo's timers off (as the runs step) {s['bare_limit_timers_off_s']:.1f} s: "
-                  f"{s['to_limit_timers_off']:.2f}x")
+                  f"{s['to_limit_timers_off']:.2f}x; the closed loop's own ceiling (the same runs compiled, only "
+                  f"their mj_step calls timed) {s['closed_loop_limit_s']:.1f} s (before/after "
+                  f"{s['closed_loop_before_after_s'][0]:.1f}/{s['closed_loop_before_after_s'][1]:.1f}): "
+                  f"{s['to_closed_loop']:.2f}x")
     print_batch(res.get("batch", {}))
     print_ray_nodes(res.get("ray_nodes"))
     print_per_run(res.get("per_run"))

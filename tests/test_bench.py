@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from adaptive_mj.study import bench_catalogue
+from adaptive_mj.study import bench, bench_catalogue
 from adaptive_mj.cli import main
 
 
@@ -70,6 +70,45 @@ def test_quick_bench_on_a_reduced_catalogue(tmp_path, small_catalogue, capsys):
     assert "1 failing as meant" in report and "| failed (unexpected) |" in report and "diverged (as meant)" in report
     printed = capsys.readouterr().out
     assert "section" in printed and "report:" in printed
+    # the terminal says what the report's headline says, and marks every run that is not ok with what it was for
+    assert f"{len(unexpected)} unexpected (" in printed and "ended as expected" in printed
+    assert bench.STATUS_LEGEND in printed
+    lines = printed.split(bench.STATUS_LEGEND)[0].splitlines()
+    head = next(i for i, line in enumerate(lines) if line.lstrip().startswith("section"))
+    a, b = lines[head].index("status"), lines[head].index("rms err tail")  # the status column (text: left-aligned)
+    statuses = [line[a:b].strip() for line in lines[head + 2:] if line.strip()]
+    assert len(statuses) == len(summary) and "ok" in statuses
+    assert all(s == "ok" or s.endswith(("(as meant)", "(measured)", "(unexpected)")) for s in statuses), statuses
+
+
+def test_the_results_page_is_written_from_the_run_and_its_numbers_are_summary_json_s(tmp_path, small_catalogue):
+    """bench --results FILE (docs/RESULTS.md in the repository): the page the docs link to, written from the run
+    itself; every run's tail error on it is the one summary.json holds, formatted as the main table formats it."""
+    import re
+
+    out, page = tmp_path / "bench", tmp_path / "RESULTS.md"
+    assert main(["bench", "--quick", "-o", str(out), "--jobs", "2", "--results", str(page)]) == 0
+    text = page.read_text()
+    assert text == (out / "results.md").read_text()
+    assert text.startswith("# Measured results\n\nWritten by `adaptive-mj bench --quick --results docs/RESULTS.md` on ")
+    assert re.search(r"on 20\d\d-\d\d-\d\d \d\d:\d\d UTC: adaptive-mj ", text) and "ended as expected" in text
+    summary = json.loads((out / "summary.json").read_text())
+    rows = [line.split(" | ") for line in text.splitlines() if line.startswith("| ") and not line.startswith(
+        ("| run |", "|---"))]
+    assert len(rows) == len(summary)
+    measured = sorted("n/a" if v is None else format(v, ".3g") for v in (
+        ((e.get("summary") or {}).get("metrics") or {}).get("rms_tracking_error_tail") for e in summary.values()))
+    assert sorted(row[2].split(" ")[0] for row in rows) == measured  # (a row's run label is not its tag)
+    assert sorted(row[1].split(" ")[0] for row in rows) == sorted(e["status"] for e in summary.values())
+
+
+def test_every_status_but_an_expected_ok_is_marked_with_what_the_run_was_for():
+    rows = {("ok", "ok", True): "ok", ("failed", "ok", False): "failed (unexpected)",
+            ("failed", "fail", True): "failed (as meant)", ("diverged", "fail", True): "diverged (as meant)",
+            ("ok", "fail", False): "ok (unexpected)", ("failed", "measured", None): "failed (measured)",
+            ("crashed", "measured", None): "crashed (measured)", ("ok", "measured", None): "ok"}
+    for (status, expect, as_expected), shown in rows.items():
+        assert bench.status_text({"status": status, "expect": expect, "as_expected": as_expected}) == shown
 
 
 def test_bench_only_runs_the_sections_asked_for_and_refuses_a_key_it_does_not_know(tmp_path, small_catalogue, capsys):
@@ -167,3 +206,18 @@ def test_full_bench_runs_the_analyses_beside_the_breaking_point_study(tmp_path, 
         assert (out / "figures" / f"{fig}.png").stat().st_size > 10_000
     assert ("(in a process of their own, beside the breaking-point study)" in report) == can_fork()
     assert "diverged run: diverged" in report
+
+
+def test_the_bench_s_progress_counts_runs_not_ok_and_of_them_the_unexpected_not_failed_526():
+    """The bench's progress said "failed 526" of runs most of which failed as meant or are measurements: where runs
+    declare what they are for, it says how many are not ok and how many of those did not end as declared."""
+    import io
+    from pathlib import Path
+
+    from adaptive_mj.study.parallel import RunOutcome, RunSpec, progress_printer
+
+    stream = io.StringIO()
+    update = progress_printer(4, stream=stream, clock=lambda: 0.0)
+    for expect, status in (("ok", "ok"), ("fail", "diverged"), ("measured", "failed"), ("ok", "failed")):
+        update(RunOutcome(RunSpec(Path("x.toml"), tag=f"{expect}-{status}", expect=expect), status, None))
+    assert stream.getvalue().startswith("4/4 runs done, not ok 3 (1 unexpected), ")

@@ -277,3 +277,27 @@ def test_the_quadrotor_s_when2fail_and_the_heave_breaking_point_come_from_one_se
     assert s.when2fail() == (when2fail.margin, when2fail.first_fail)
     assert not any(s.evaluations[when2fail.first_fail]) and any(s.evaluations[when2fail.margin])
     assert len(list(tmp_path.rglob("*.mcap"))) == 2 * len(s.evaluations)  # shared: each value and seed run once
+
+
+def test_laws_in_the_same_open_bracket_are_named_as_not_told_apart():
+    """The bench's study bisects 2 steps, so on the UR5e every law's delay margin came out "0 (next 50)": the report
+    names such groups as not told apart at this resolution, and leaves out brackets closed to neighbouring values
+    (a real tie), searches the range ends (failing at its low end, passing at its high end) and laws whose brackets
+    differ."""
+    delay = Stressor("delay", lambda v: [], 0, 200, integer=True, unit="steps")
+    noise = Stressor("noise", lambda v: [], 0.0, 1.0)
+
+    def m(label, st, lo, hi):
+        return Margin(Search(HEAVE, label, (), st, 0.01), lo, hi)
+
+    margins = [m("ur5e/adaptive", delay, 0, 50), m("ur5e/sigma", delay, 0, 50), m("ur5e/pd", delay, 50, 100),
+               m("heave/adaptive", delay, 7, 8), m("heave/sigma", delay, 7, 8),  # closed: a tie, not a question
+               m("heave/adaptive", noise, 0.25, 0.5), m("heave/sigma", noise, 0.25, 0.5),
+               m("arm/adaptive", noise, None, 0.0), m("arm/sigma", noise, None, 0.0),  # both fail at the low end
+               m("arm/adaptive", delay, 200, None), m("arm/sigma", delay, 200, None)]  # both pass the high end
+    text = stress.unseparated_text(margins, steps=2)
+    assert text.startswith("**Not told apart at this resolution** (2 bisection steps")
+    assert "ur5e delay [0, 50): adaptive, sigma" in text and "pd" not in text
+    assert "heave noise [0.25, 0.5): adaptive, sigma" in text and "heave delay" not in text
+    assert "arm" not in text  # the range ends those searches, not the resolution
+    assert stress.unseparated_text([m("ur5e/adaptive", delay, 0, 50), m("ur5e/pd", delay, 50, 100)], steps=2) == ""

@@ -297,7 +297,7 @@ def test_a_6_joint_edit_answered_by_the_compile_cache_gives_its_notes_and_refusa
     path.write_text(SERVO_SCENARIO)
     first, second = (build(sc.load(path)) for _ in range(2))
     assert first.notes and first.notes == second.notes
-    assert first.notes[0].startswith("actuator 'shoulder_servo': servo rebuilt")
+    assert first.notes[0].startswith("plant.servo_to_torque: servo(s) rebuilt as torque motors: 'shoulder_servo'")
     _same_model(first.plant.model, second.plant.model)
     for _ in range(2):
         with pytest.raises(ScenarioError, match=r"plant\.torque_limit names joint 'wrist_9'"):

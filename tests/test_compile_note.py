@@ -206,3 +206,42 @@ def test_numbas_reason_is_its_first_line_that_says_something():
                                                           "for the native callback (ValueError: bad); running it "
                                                           "through the Python callback")
     assert "(law.py:3: Unknown" in fallback_line("x", PluginNotCompiled("law.py:3: Unknown", remembered=False))
+
+
+DICT_LAW = '''
+def law(x, ref, theta, phi, f, h, params, rate):
+    s = (ref[1] - x[1]) + 5.0 * (ref[0] - x[0])
+    gains = dict(k=params[0], lam=5.0)  # a Python dict of gains: numba cannot type it
+    for j in range(rate.shape[0]):
+        rate[j] = 0.0
+    return (theta[0] * ref[2] - f + gains["k"] * s) / h, s
+'''
+
+
+def test_a_plugin_law_with_a_python_dict_is_named_by_its_file_and_the_dict_s_line(tmp_path, monkeypatch):
+    """Issue 53: a plugin whose law keeps its gains in a Python dict got "(TypingError: Failed in nopython mode
+    pipeline (step: nopython frontend))", no file, no line. numba's error on it names the file and the dict's line,
+    with numba's reason in one line."""
+    import importlib
+
+    import numba
+    import numpy as np
+    import pytest
+    from numba.core.errors import NumbaError
+
+    from adaptive_mj.sim.compile_note import PluginNotCompiled, fallback_line, plugin_failed
+
+    (tmp_path / "dict_law.py").write_text(DICT_LAW)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
+    module = importlib.import_module("dict_law")
+    z = np.zeros(3)
+    with pytest.raises(NumbaError) as info:
+        numba.njit(module.law)(z, z, z, z, 0.0, 1.0, np.ones(1), np.zeros(3))
+    failed = plugin_failed(info.value, (module.law,), "dict-law-test")
+    line = next(i for i, text in enumerate(DICT_LAW.splitlines(), 1) if "dict(k=" in text)
+    assert isinstance(failed, PluginNotCompiled)
+    assert failed.where_why.startswith(f"{tmp_path / 'dict_law.py'}:{line}: No implementation of function "
+                                       "Function(<class 'dict'>)")
+    said = fallback_line("dicts", failed)
+    assert "\n" not in said and f"dict_law.py:{line}: " in said and "nopython mode pipeline" not in said

@@ -104,11 +104,11 @@ def test_runs_and_laws_in_one_process_one_after_the_other():
 
 def test_a_scratch_mjdata_is_left_alone_by_the_native_callback():
     from adaptive_mj.setup.build import build
-    from adaptive_mj.sim import native
+    from adaptive_mj.sim import native_mujoco
 
     scn = load_scenario(SCENARIOS_DIR / "heave_tracking.toml", overrides=["simulation.duration=0.1"])
     s = build(scn)
-    nc = native.NativeController(s.plant, s.law, s.reference, s.theta_hat0, 10)
+    nc = native_mujoco.Controller(s.plant, s.law, s.reference, s.theta_hat0, 10)
     other = mujoco.MjData(s.plant.model)  # userdata[0] = 0: no context
     with s.plant.controlled_natively(nc.callback):
         mujoco.mj_step(s.plant.model, other, nstep=5)
@@ -161,9 +161,12 @@ def test_struct_offsets_find_every_pointer_of_a_real_model():
 
 def test_a_second_process_loads_the_compiled_callback_from_the_disk_cache(tmp_path):
     code = textwrap.dedent("""
+        from adaptive_mj.laws import SlidingAdaptiveLaw
         from adaptive_mj.plants import heave
-        from adaptive_mj.sim import native
-        print(native.compiled(heave.load().form).cache_hits)
+        from adaptive_mj.sim import native_mujoco
+        p = heave.load()
+        law = SlidingAdaptiveLaw(p.form, lam=5.0, k=200.0, gamma=[1.0] * len(p.form.names))
+        print(native_mujoco.compiled(p.mujoco_kernel, p.mujoco_kernel.variant(p, law)).cache_hits)
     """)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
     hits = [subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
@@ -195,13 +198,15 @@ def test_the_step_order_is_written_once():
     import inspect
     import re
 
-    from adaptive_mj.sim import loop, native, native_manipulator, native_step, stage
+    from adaptive_mj.plants import manipulator_kernel, one_dof_kernel, quadrotor_kernel
+    from adaptive_mj.sim import loop, native_chunk, native_mujoco, native_step, stage
     from adaptive_mj.setup.scenario import SCENARIOS_DIR, load
     from adaptive_mj.setup.build import build
 
     s = build(load(SCENARIOS_DIR / "heave_tracking.toml", overrides=["simulation.duration=0.01"]))
     ctrl = loop.Controller(s.law, s.reference, s.theta_hat0, s.plant.ctrl_range, 2, s.plant.stages, s.plant.dt)
     assert ctrl._stage.__code__ is stage.control_stage.__code__
-    for module in (loop, native, native_manipulator, native_step):
+    for module in (loop, native_mujoco, native_chunk, native_step, one_dof_kernel, manipulator_kernel,
+                   quadrotor_kernel):
         calls = re.findall(r"\b(delay_slot|accumulate_rate|end_stage|is_sample_step)\(", inspect.getsource(module))
         assert calls == [], f"{module.__name__} calls {calls}: the step's order belongs to stage.control_stage"

@@ -149,8 +149,8 @@ def test_first_order_law_dead_zone_boundary(on, x, ref):
 
 # ----------------------------------------------------------------- the compiled laws
 def _compiled(fn, numba):
-    """fn compiled as adaptive_mj.sim.native* compile the laws: every plain function it calls
-    through its module globals (recursively) replaced by its numba version."""
+    """fn compiled as the compiled callbacks (sim.native_mujoco, sim.native_chunk) compile the laws: every plain
+    function it calls through its module globals (recursively) replaced by its numba version."""
     replace = {name: _compiled(fn.__globals__[name], numba) for name in fn.__code__.co_names
                if isinstance(fn.__globals__.get(name), types.FunctionType)}
     return numba.njit(types.FunctionType(fn.__code__, {**fn.__globals__, **replace}, fn.__name__))

@@ -69,7 +69,7 @@ def test_record_dtype_takes_scalars_only():
 
 def test_the_native_callback_refuses_a_record_of_another_layout():
     from adaptive_mj.plants import heave
-    from adaptive_mj.sim.native import NativeController
+    from adaptive_mj.sim.native_mujoco import Controller as NativeController
 
     plant = heave.load()
     law = SlidingAdaptiveLaw(plant.form, lam=5.0, k=200.0, gamma=GAMMA)

@@ -2,8 +2,8 @@
 compiled paths find it by declaration: the analytic chunk engine (adaptive_mj.sim.native_chunk) asks the law object,
 with no list of law classes. A built-in law kind whose law is plain array code in the plugin form
 (laws.plugin.KernelLaw) runs compiled as a plugin's law does: a toy kind registered in this test alone runs compiled
-on a MuJoCo plant (the heave vehicle, adaptive_mj.sim.native's 1-DOF callback) and on an analytic plant (the heave
-vehicle's twin, the chunk engine), its rows bit for bit the Python path's (simulation.python_callback)."""
+on a MuJoCo plant (the heave vehicle, adaptive_mj.plants.one_dof_kernel's 1-DOF callback) and on an analytic plant
+(the heave vehicle's twin, the chunk engine), its rows bit for bit the Python path's (simulation.python_callback)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -174,8 +174,9 @@ def joint_toy_kind(monkeypatch):
 
 def test_a_built_in_multi_joint_kind_of_plain_array_code_runs_on_the_python_path(joint_toy_kind):
     """A JointKernelLaw (a built-in kind's multi-joint law function, no plugin installed) runs, on the Python path:
-    the arm callback (sim/native_manipulator.py) compiles an installed plugin's JointPluginLaw only. When it takes
-    any law's "plugin_point"/"plugin_law" (native_params), JointKernelLaw.native turns on and this run is compiled."""
+    the arm callback (plants/manipulator_kernel.py: plugin_functions, supported) compiles an installed plugin's
+    JointPluginLaw only. When it takes any law's "plugin_point"/"plugin_law" (native_params), JointKernelLaw.native
+    turns on and this run is compiled."""
     from adaptive_mj.runs.runner import execute
 
     scn = sc.load(SCENARIOS / "ur5e_drift.toml", overrides=["law.kind='toy_joint_kernel'", "simulation.duration=0.05"])

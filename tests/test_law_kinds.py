@@ -21,6 +21,22 @@ def test_scenarios_md_shows_the_registry_table():
         "output between its <!-- law-kinds --> markers")
 
 
+def test_the_readme_shows_the_registry_s_plants_and_the_laws_that_serve_them():
+    text = (REPO / "README.md").read_text()
+    block = re.search(r"<!-- plants-laws -->\n(.*?)\n<!-- /plants-laws -->", text, re.S)
+    assert block is not None and block.group(1) == plant_kinds.plants_table(), (
+        "the README's plants-laws block is not the registry's: write plant_kinds.plants_table() (printed by "
+        "`python -m adaptive_mj.plants.kinds`) between its <!-- plants-laws --> markers")
+    assert "| `process` |" in block.group(1) and "`mrac`" in block.group(1)  # every kind, each law where it serves
+
+
+def test_the_readme_is_a_front_door():
+    """Issue 53: the first command within the first 40 lines, at most about 1,500 words."""
+    text = (REPO / "README.md").read_text()
+    first = next(i for i, line in enumerate(text.splitlines()) if line.startswith("python3 -m venv"))
+    assert first < 40 and len(text.split()) <= 1500, (first, len(text.split()))
+
+
 def test_every_built_in_law_kind_is_documented_with_its_keys_table():
     """Each built-in kind is named in docs/SCENARIOS.md's [law] tables (a kind added to the registry but not
     to the docs fails here)."""

@@ -189,7 +189,7 @@ def test_servo_to_torque_rebuilds_position_servos():
     spec = mujoco.MjSpec.from_string(TEST_ARM.replace(
         '<motor joint="j4"/>', '<position name="servo4" joint="j4" kp="10" forcerange="-3 3"/>'))
     notes = mp.servo_to_torque(spec)
-    assert notes == ["actuator 'servo4': servo rebuilt as a torque motor, |tau| <= [-3, 3] N*m"]
+    assert notes == ["plant.servo_to_torque: servo(s) rebuilt as torque motors: 'servo4' |tau| <= [-3, 3] N*m"]
     plant = mp.ManipulatorPlant(spec.compile(), unknown="all")
     assert plant.ctrl_range[0][3] == -3 and plant.ctrl_range[1][3] == 3
     spec = mujoco.MjSpec.from_string(TEST_ARM.replace(
@@ -220,3 +220,93 @@ def test_slotine_li_lyapunov_non_increasing_and_tracks():
     assert traj.V[-1] < 0.1 * traj.V[0]
     e = traj.joint_errors
     assert np.sqrt(np.mean(e[-500:] ** 2, axis=0)).max() < 3e-3
+
+
+GRIPPER_ARM = """<mujoco model="gripper_arm"><option timestep="0.001" integrator="RK4"/>
+<worldbody><body name="link1"><joint name="shoulder" type="hinge" axis="0 1 0" armature="0.1"/>
+  <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="1"/>
+  <body name="link2" pos="0.3 0 0"><joint name="elbow" type="hinge" axis="0 1 0" armature="0.1"/>
+    <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="0.8"/>
+    <body name="hand" pos="0.3 0 0"><geom type="box" size="0.02 0.04 0.02" mass="0.3"/>
+      <body name="left_finger" pos="0.03 0.02 0"><joint name="finger1" type="slide" axis="0 1 0" range="0 0.04"/>
+        <geom type="box" size="0.01 0.005 0.02" mass="0.02"/></body>
+      <body name="right_finger" pos="0.03 -0.02 0"><joint name="finger2" type="slide" axis="0 -1 0" range="0 0.04"/>
+        <geom type="box" size="0.01 0.005 0.02" mass="0.02"/></body>
+    </body></body></body></worldbody>
+<tendon><fixed name="split"><joint joint="finger1" coef="0.5"/><joint joint="finger2" coef="0.5"/></fixed></tendon>
+<equality><joint joint1="finger1" joint2="finger2" polycoef="0 1 0 0 0"/></equality>
+<actuator><motor name="m_shoulder" joint="shoulder"/><motor name="m_elbow" joint="elbow"/>
+  <position name="grip" tendon="split" kp="100"/></actuator></mujoco>"""
+
+
+def test_an_arm_with_a_gripper_is_refused_once_for_every_reason_with_a_fix_that_pastes(tmp_path, capsys):
+    """A Panda-like arm (a tendon and an equality coupling two unactuated finger joints, no site `tip`): one line
+    with all four reasons, numbered; the suggested plant.fixed_joints pastes as printed, and with it (and the
+    payload site named) the arm is a manipulator: the fingers welded, the tendon, the equality and the grip's
+    actuator gone, said in one note."""
+    import re
+
+    from adaptive_mj.cli import main
+
+    (tmp_path / "gripper_arm.xml").write_text(GRIPPER_ARM)
+    scenario = tmp_path / "mine.toml"
+    scenario.write_text('schema_version = 1\n[plant]\nkind = "manipulator"\nmodel = "gripper_arm.xml"\n'
+                        'payload = "tool_offset"\nunknown = "payload"\n[simulation]\nduration = 1.0\n'
+                        '[reference]\nkind = "joint_sum_of_sines"\ncenter = { shoulder = 0.3, elbow = 0.5 }\n'
+                        'amplitudes = { shoulder = [0.2], elbow = [0.2] }\n'
+                        'omegas = { shoulder = [1.0], elbow = [1.3] }\n'
+                        '[law]\nkind = "slotine_li"\nlambda = 10.0\nkd = 5.0\ngamma = 0.2\n')
+    assert main(["run", str(scenario), "-o", str(tmp_path / "a.mcap")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "for 4 reasons: (1) no site named 'tip'" in err, err
+    for reason in ("(2) the model has 1 tendon(s)", "(3) the model has 1 equality constraint(s)",
+                   "(4) joint(s) ['finger1', 'finger2'] have no actuator"):
+        assert reason in err, (reason, err)
+    fix = re.search(r"--set '(plant\.fixed_joints=\[[^]]*\])'", err)
+    assert fix is not None and fix.group(1) == 'plant.fixed_joints=["finger1", "finger2"]', err
+    # pasted as printed, with the payload at a site the model has: the refusals are gone
+    spec = mujoco.MjSpec.from_string(GRIPPER_ARM)
+    notes = mp.fix_joints(spec, ("finger1", "finger2"))
+    model = spec.compile()
+    assert mp.refusals(model) == [] and (model.njnt, model.nu, model.ntendon, model.neq) == (2, 2, 0, 0)
+    assert notes == ["plant.fixed_joints: joint(s) ['finger1', 'finger2'] fixed at their reference position "
+                     "(removed with them: tendon(s) ['split'], 1 equality constraint(s), actuator(s) ['grip'])"]
+    plant = mp.ManipulatorPlant(model, unknown="all")
+    assert plant.joint_names == ("shoulder", "elbow") and len(plant.names) == 10 * 5  # the hand, the welded fingers
+    assert main(["run", str(scenario), "-o", str(tmp_path / "b.mcap"), "--set", fix.group(1),
+                 "--set", "plant.payload='none'", "--set", "plant.unknown='all'", "--set", "simulation.duration=0.05",
+                 "--set", "simulation.python_callback=true"]) in (0, 1)
+    out = capsys.readouterr()
+    assert "note: plant.fixed_joints: joint(s) ['finger1', 'finger2'] fixed" in out.err
+    with pytest.raises(ModelError, match=r"plant\.fixed_joints: no joint named 'thumb'.*'finger1'"):
+        mp.fix_joints(mujoco.MjSpec.from_string(GRIPPER_ARM), ("thumb",))
+
+
+def test_the_model_s_own_integrator_is_kept_unless_the_scenario_names_one_and_a_change_is_said(tmp_path):
+    """A Menagerie arm declares <option integrator="implicitfast"/>: a scenario that names none keeps it (it was
+    silently replaced by rk4) and says so once; one that names another says that it replaces the model's."""
+    from adaptive_mj.setup import scenario as sc
+    from adaptive_mj.setup.build import build
+
+    (tmp_path / "arm.xml").write_text(GRIPPER_ARM.replace('integrator="RK4"', 'integrator="implicitfast"'))
+    text = ('schema_version = 1\n[plant]\nkind = "manipulator"\nmodel = "arm.xml"\npayload = "none"\n'
+            'unknown = "all"\nfixed_joints = ["finger1", "finger2"]\n[simulation]\nduration = 1.0\n'
+            '[reference]\nkind = "joint_sum_of_sines"\ncenter = { shoulder = 0.3, elbow = 0.5 }\n'
+            'amplitudes = { shoulder = [0.2], elbow = [0.2] }\nomegas = { shoulder = [1.0], elbow = [1.3] }\n'
+            '[law]\nkind = "slotine_li"\nlambda = 10.0\nkd = 5.0\ngamma = 0.2\n')
+    (tmp_path / "mine.toml").write_text(text)
+    scn = sc.load(tmp_path / "mine.toml")
+    setup = build(scn)
+    assert scn.simulation.integrator == "implicitfast"
+    assert setup.plant.model.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    said = [n for n in setup.notes if "integrator" in n]
+    assert said == ["simulation.integrator: the model's own 'implicitfast' (the scenario names none; without one "
+                    "in the model: 'rk4')"]
+    scn = sc.load(tmp_path / "mine.toml", overrides=["simulation.integrator='rk4'"])
+    setup = build(scn)
+    assert setup.plant.model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
+    assert [n for n in setup.notes if "integrator" in n] == [
+        "simulation.integrator = 'rk4' replaces the model's own 'implicitfast'"]
+    (tmp_path / "arm.xml").write_text(GRIPPER_ARM.replace(' integrator="RK4"', ''))  # none declared: rk4, unsaid
+    scn = sc.load(tmp_path / "mine.toml")
+    assert scn.simulation.integrator == "rk4" and scn.simulation.integrator_note == ""

@@ -99,12 +99,14 @@ def test_position_servo_arm_runs_through_servo_to_torque(tmp_path, capsys):
     log = tmp_path / "arm.mcap"
     assert main(["run", str(good), "-o", str(log)]) == 0
     captured = capsys.readouterr()
-    assert "note: actuator 'shoulder_servo': servo rebuilt as a torque motor, |tau| <= [-40, 40] N*m" in captured.err
+    assert ("note: plant.servo_to_torque: servo(s) rebuilt as torque motors: 'shoulder_servo' |tau| <= [-40, 40] N*m"
+            in captured.err) and captured.err.count("servo(s) rebuilt") == 1  # one note for the run
     assert "tail rms per joint [rad]: shoulder" in captured.out
     from adaptive_mj.log.replay import read_log
 
     run = read_log(log)
-    assert run.header["notes"][0].startswith("actuator 'shoulder_servo': servo rebuilt")
+    assert run.header["notes"][0].startswith(
+        "plant.servo_to_torque: servo(s) rebuilt as torque motors: 'shoulder_servo'")
     tail = np.sqrt(np.mean(run.trajectory.joint_errors[run.trajectory.t >= 6.0] ** 2, axis=0))
     assert tail.max() < 1e-3, tail
     assert main(["replay", str(log), "--verify"]) == 0

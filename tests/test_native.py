@@ -6,7 +6,7 @@ import pytest
 
 from adaptive_mj import run
 
-from adaptive_mj.sim import native
+from adaptive_mj.sim import native_mujoco as native
 from adaptive_mj.laws import DeadZone, DeadZoneOn, FixedNominalLaw, Law, RobustSlidingLaw, SlidingAdaptiveLaw
 from adaptive_mj.sim.loop import Event
 from adaptive_mj.plants import arm, heave
@@ -208,8 +208,8 @@ def test_composite_native_is_chosen_and_refuses_sampled_control():
     law = CompositeSlidingLaw(p.form, lam=5, k=200, gamma=GAMMA, kappa=1.0, filter_rate=2.0)
     assert native.supported(p, law)
     with pytest.raises(ValueError, match="continuous control only"):
-        native.NativeController(p, law, Cosine(), [0, 0, 0], 10,
-                                control=ControlTiming.of(p.dt, mode="sampled", period=2 * p.dt))
+        native.Controller(p, law, Cosine(), [0, 0, 0], 10,
+                          control=ControlTiming.of(p.dt, mode="sampled", period=2 * p.dt))
 
 
 # -- order 3: the heave vehicle with its thruster lag (y'' from the thrust state and MuJoCo's forces) ---------

@@ -1,4 +1,5 @@
-"""The quadrotor's compiled callback (adaptive_mj.sim.native_flight) against the Python callback: the same rows,
+"""The quadrotor's compiled callback (plants/quadrotor_kernel.py, driven by adaptive_mj.sim.native_mujoco) against
+the Python callback: the same rows,
 bit for bit, for the three flight laws (L1's filters included), through noise, a control delay, sampled-data
 control, events that change forces, wind and mass, the robust modifications, and crashes (mid-chunk and at a
 chunk's end)."""

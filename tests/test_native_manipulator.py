@@ -12,7 +12,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from adaptive_mj.sim import native_manipulator as nm
+from adaptive_mj.plants import manipulator_kernel as nm
+from adaptive_mj.sim.native_mujoco import MujocoController
 from adaptive_mj.laws import DeadZone, DeadZoneOn, Modification
 from adaptive_mj.laws.slotine_li import Mode, SlotineLiLaw
 from adaptive_mj.sim.loop import run
@@ -82,7 +83,7 @@ def _setup(mode=Mode.ADAPTIVE, unknown="payload", base=False, euler=False, limit
 def _native(plant, law, ref, theta0, duration, *, chunk=250, noise_std=None, rng=None, between=None):
     """loop.run's native branch (no events): chunks of `chunk` rows, rows concatenated."""
     n = int(round(duration / plant.dt))
-    nc = nm.NativeManipulatorController(plant, law, ref, theta0, chunk)
+    nc = MujocoController(plant, law, ref, theta0, chunk)
     parts = []
     with plant.controlled_natively(nc.callback):
         k = 0
@@ -203,7 +204,7 @@ def test_two_controllers_interleaved():
     """The tables follow the controller whose chunk runs (the newest is bound at construction)."""
     kws = [dict(euler=True), dict(mode=Mode.COMPUTED_TORQUE, euler=True)]
     runs = [_setup(**kw) for kw in kws]
-    ctrls = [nm.NativeManipulatorController(p, law, ref, th0, 100) for p, law, ref, th0 in runs]
+    ctrls = [MujocoController(p, law, ref, th0, 100) for p, law, ref, th0 in runs]
     out = [[], []]
     with runs[0][0].controlled_natively(ctrls[0].callback):
         for _ in range(3):

@@ -107,7 +107,7 @@ def test_control_rate_names_the_pre_flight_figure_beside_its_diagonal_one():
     μh = 4.96, with no word between them. The pre-flight's figure, recomputed here from the compiled model by its
     definition (mj_fullM, armature included, at the check's 64 points of the reference: T · (max λ(M⁻¹K_D) + max Λ)),
     is what the check prints and the section's coupled figure plus λT; the section's sentence names it beside the
-    diagonal figure, and the README quotes both as they are printed."""
+    diagonal figure, and docs/GUIDE.md quotes both as they are printed."""
     from pathlib import Path
 
     import mujoco
@@ -147,7 +147,7 @@ def test_control_rate_names_the_pre_flight_figure_beside_its_diagonal_one():
     words = control_rate._preflight_words(arm, T)
     assert (f"its warning's μh = {pre.figure:.3g} (the coupled figure {worst * T:.3g} plus λT = {lam.max() * T:.3g}), "
             f"not the table's diagonal figure {diagonal:.3g}") in words
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[1] / "docs" / "GUIDE.md").read_text()  # the README's guide
     assert f"(μh = {pre.figure:.3g} > 2)" in readme and f"K_D T/M_jj ({diagonal:.3g} on {arm.figure(T)[1]}" in readme
     assert f"T · (max λ(M⁻¹K_D) + max Λ) = {worst * T:.3g} + {lam.max() * T:.3g}" in readme
 

@@ -1,5 +1,6 @@
 """The step driver (adaptive_mj.sim.driver): what happens between physics steps is written once. No module outside
-adaptive_mj/sim/ steps a plant (a plant's own step definitions apart); every plant kind declares its compiled loop;
+adaptive_mj/sim/ steps a plant (a plant's own step definitions apart); every plant kind declares its compiled loop
+(each MuJoCo kind its kernel spec beside its code, one generic controller for them all);
 adaptive_mj.env ends an episode on the plant's termination as a run ends."""
 from __future__ import annotations
 
@@ -86,12 +87,61 @@ def test_every_plant_kind_declares_its_compiled_loop():
     from adaptive_mj.plants.quadrotor import QuadrotorPlant
     from adaptive_mj.plants.twin import TwinPlant
 
-    expected = {MujocoPlant: "native", ManipulatorPlant: "native_manipulator", QuadrotorPlant: "native_flight",
+    expected = {MujocoPlant: "native_mujoco", ManipulatorPlant: "native_mujoco", QuadrotorPlant: "native_mujoco",
                 LinearPlant: "native_chunk", TwinPlant: "native_chunk"}
     for cls, module in expected.items():
         assert cls.compiled_loop == f"adaptive_mj.sim.{module}", cls
         loop_module = importlib.import_module(cls.compiled_loop)
         assert callable(loop_module.supported) and isinstance(loop_module.Controller, type)
+
+
+def _defining_modules(kernel) -> set[str]:
+    """The modules defining a MuJoCo kernel spec's functions: its hooks and the pieces and laws compiled into its
+    callback (the functions of its variants' cache keys)."""
+    import dataclasses
+    import types
+
+    fns = [getattr(kernel, f.name) for f in dataclasses.fields(kernel)]
+    return {fn.__module__ for fn in fns if isinstance(fn, types.FunctionType) and fn.__name__ != "<lambda>"}
+
+
+def test_each_mujoco_kind_declares_its_kernel_beside_its_code_and_one_controller_serves_all():
+    """Issue 51, item 2: each MuJoCo plant kind (the 1-DOF MujocoPlant, the arms, the quadrotor) declares its kernel
+    spec (plants.mujoco_kernel.MujocoKernel) in a module beside its code, under adaptive_mj/plants/ (or laws/), never
+    sim/; the one generic controller (sim.native_mujoco) compiles and drives every one of them: each kind's bundled
+    scenario runs compiled through it, no other compiled MuJoCo controller module is left in sim/."""
+    from adaptive_mj.plants.manipulator import ManipulatorPlant
+    from adaptive_mj.plants.mujoco_kernel import MujocoKernel
+    from adaptive_mj.plants.mujoco_plant import MujocoPlant
+    from adaptive_mj.plants.quadrotor import QuadrotorPlant
+    from adaptive_mj.runs.runner import execute
+    from adaptive_mj.setup.build import build
+    from adaptive_mj.setup.scenario import load
+    from adaptive_mj.sim import loop, native_mujoco
+    from adaptive_mj.sim.stage import ControlTiming
+
+    kinds = {MujocoPlant: ("one_dof_kernel", "heave_tracking"), ManipulatorPlant: ("manipulator_kernel", "ur5e_drift"),
+             QuadrotorPlant: ("quadrotor_kernel", "quadrotor_lemniscate")}
+    for cls, (module, scenario) in kinds.items():
+        kernel = cls.mujoco_kernel
+        assert isinstance(kernel, MujocoKernel) and cls.compiled_loop == "adaptive_mj.sim.native_mujoco", cls
+        assert kernel.plant_type() is cls
+        defined = _defining_modules(kernel)
+        assert f"adaptive_mj.plants.{module}" in defined, (cls, defined)
+        assert all(m.startswith(("adaptive_mj.plants.", "adaptive_mj.laws.")) for m in defined), (cls, defined)
+        s = build(load(SCENARIOS_DIR / f"{scenario}.toml", overrides=["simulation.duration=0.01", "events=[]"]))
+        assert type(s.plant).mujoco_kernel is kernel and native_mujoco.supported(s.plant, s.law), scenario
+        variant = kernel.variant(s.plant, s.law)
+        assert not [fn for fn in variant.key_functions if fn.__module__.startswith("adaptive_mj.sim")], scenario
+        nc = loop._native_controller(s.plant, s.law, s.reference, np.asarray(s.theta_hat0, dtype=float),
+                                     ControlTiming(period=s.plant.dt), None, chunk=5)
+        assert type(nc) is native_mujoco.MujocoController and nc.kernel is kernel, scenario
+        nc.__exit__(None, None, None)
+        traj = execute(load(SCENARIOS_DIR / f"{scenario}.toml",
+                            overrides=["simulation.duration=0.01", "events=[]"])).trajectory
+        assert traj.meta["native"] is True, scenario
+    left = sorted(p.name for p in (PACKAGE / "sim").glob("native*.py"))
+    assert left == ["native_chunk.py", "native_context.py", "native_mujoco.py", "native_step.py"], left
 
 
 def test_an_episode_ends_on_the_plant_s_termination():

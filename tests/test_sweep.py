@@ -113,6 +113,68 @@ def test_grid_points_is_the_product_first_axis_slowest():
     assert sweep.grid_points([("a", [0.5])]) == [{"a": 0.5}]
 
 
+def test_a_law_scoped_axis_expands_only_under_its_own_law():
+    """--grid law.kind=sliding_adaptive,robust_sliding --grid law.robust_sliding.K=0,5,20: the scoped axis reaches
+    only robust_sliding's runs (scenario._scoped_law_keys), so sliding_adaptive runs once, not three times."""
+    axes = [("law.kind", ["sliding_adaptive", "robust_sliding"]), ("law.robust_sliding.K", [0.0, 5.0, 20.0]),
+            ("law.k", [100, 200])]
+    assert sweep.scoped_axes(axes) == {"law.robust_sliding.K": "robust_sliding"}
+    points = sweep.grid_points(axes)
+    assert points == [
+        {"law.kind": "sliding_adaptive", "law.robust_sliding.K": None, "law.k": 100},
+        {"law.kind": "sliding_adaptive", "law.robust_sliding.K": None, "law.k": 200},
+        {"law.kind": "robust_sliding", "law.robust_sliding.K": 0.0, "law.k": 100},
+        {"law.kind": "robust_sliding", "law.robust_sliding.K": 0.0, "law.k": 200},
+        {"law.kind": "robust_sliding", "law.robust_sliding.K": 5.0, "law.k": 100},
+        {"law.kind": "robust_sliding", "law.robust_sliding.K": 5.0, "law.k": 200},
+        {"law.kind": "robust_sliding", "law.robust_sliding.K": 20.0, "law.k": 100},
+        {"law.kind": "robust_sliding", "law.robust_sliding.K": 20.0, "law.k": 200}]
+    # the unscoped point gives no override for the scoped axis, and its run name leaves it out
+    assert sweep._grid_overrides(points[0]) == ["law=sliding_adaptive", "law.k=100"]
+    assert sweep._grid_overrides(points[4]) == ["law=robust_sliding", "law.robust_sliding.K=5.0", "law.k=100"]
+    names = sweep.short_names(list(points[0]))
+    assert sweep.run_name(0, points[0], 0, names=names) == "0000-kind=sliding_adaptive-k=100-seed0"
+    assert sweep.label(None) == "-"
+    # a law.X.key axis is scoped only when X is one of the swept kinds (law.gamma.J is a per-parameter table)
+    assert sweep.scoped_axes([("law.kind", ["a", "b"]), ("law.gamma.J", [1, 2])]) == {}
+    assert sweep.scoped_axes([("law.robust_sliding.K", [1, 2])]) == {}  # no law.kind axis: the product as before
+    assert len(sweep.grid_points([("law.kind", ["a", "b"]), ("law.c.K", [1, 2])])) == 4
+
+
+def test_a_law_scoped_sweep_runs_each_law_s_own_points_only(tmp_path, capsys):
+    """End to end: 1 + 2 points, not 2 × 2; the CSV leaves the other law's axis empty."""
+    out = tmp_path / "out"
+    code = main(["sweep", "heave_tracking", "--grid", "law.kind=sliding_adaptive,robust_sliding", "--grid",
+                     "law.robust_sliding.K=0,2", "--set", "simulation.duration=1", "--set", "law.lambda=5.0",
+                 "--set", "law.k=200.0", "--set", "law.robust_sliding.boundary_layer=0.05", "--set",
+                 "success.tail_rms=inf", "--jobs", "1", "-o", str(out)])
+    assert code == 0, capsys.readouterr()
+    table = list(csv.DictReader((out / "sweep.csv").open()))
+    assert [(r["law.kind"], r["law.robust_sliding.K"]) for r in table] == [
+        ("sliding_adaptive", ""), ("robust_sliding", "0"), ("robust_sliding", "2")]
+    assert {r["status"] for r in table} == {"ok"}
+    assert (out / "sweep.png").stat().st_size > 5_000
+
+
+def test_a_categorical_axis_is_plotted_as_categories_without_lines(tmp_path, monkeypatch):
+    """A sweep over law kinds (a category first) draws markers at the categories, with no line joining them and
+    the min-max band as error bars; a numeric axis keeps its line."""
+    import matplotlib.figure
+
+    drawn = []
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: drawn.append(fig))
+    table = [{"law.kind": kind, "law.k": k, "seed": seed, "status": "ok", "rms_tracking_error_tail": 0.1 * k + seed}
+             for kind in ("a", "b", "c") for k in (1.0, 2.0) for seed in (0, 1)]
+    sweep.plot_sweep(table, ["law.kind", "law.k"], ["rms_tracking_error_tail"], tmp_path / "cat.png")
+    sweep.plot_sweep(table, ["law.k", "law.kind"], ["rms_tracking_error_tail"], tmp_path / "num.png")
+    cat, num = (fig.axes[0] for fig in drawn)
+    data = [line for line in cat.get_lines() if len(line.get_xdata()) == 3]  # one series: the three categories
+    assert data and all(line.get_linestyle() == "None" for line in data)
+    assert [t.get_text() for t in cat.get_xticklabels()] == ["a", "b", "c"]
+    assert cat.collections  # the error bars
+    assert any(line.get_linestyle() == "-" and len(line.get_xdata()) == 2 for line in num.get_lines())
+
+
 @pytest.mark.parametrize("value", [1, -2.5, 1 / 3, 1e-300, True, "sine", 'a "quoted" str', [1.0, 2],
                                    {"y": 0.01, "y_dot": 0.1}, {"J": [1, {"b": False}]}])
 def test_grid_values_round_trip_through_their_toml_text(value):

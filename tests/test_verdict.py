@@ -146,11 +146,10 @@ def test_the_suggested_kd_table_makes_the_user_arm_pass_the_preflight(tmp_path):
     path = _user_ur5e(tmp_path)
     pre = _check(sc.load(path))
     assert not pre.ok and pre.fixes[0].startswith("law.kd = {")
-    table = pre.fixes[0].split("law.kd = ")[1].split(" (the other")[0]
+    table = pre.fixes[0].split("law.kd = ")[1].split(" (lowered")[0]
     names = build(sc.load(path)).plant.joint_names
-    given = dict(item.split(" = ") for item in table.strip("{}").split(", "))
-    kd = "{" + ", ".join(f"{j} = {given.get(j, '50.0')}" for j in names) + "}"
-    fixed = _check(sc.load(path, overrides=[f"law.kd={kd}"]))
+    assert [item.split(" = ")[0] for item in table.strip("{}").split(", ")] == list(names)  # every joint named
+    fixed = _check(sc.load(path, overrides=[f"law.kd={table}"]))  # pasted as printed
     assert fixed.ok and fixed.figure < 0.95 * fixed.limit, fixed.figure
     # the armature fix, written into the model file
     import re
@@ -298,7 +297,7 @@ def test_a_payload_gravity_cannot_hold_is_warned_then_refused_with_strict(name, 
     err = capsys.readouterr().err
     assert "Traceback" not in err and err.count("\n") == 1, err
     assert "refused (success.preflight = 'refuse'): pre-flight: gravity alone at the reference needs" in err
-    assert "past its actuator's limit" in err and not log.exists()
+    assert "past its actuator's limit" in err and "not the run's verdict" in err and not log.exists()
     assert main(["run", name, "-o", str(log), *sets]) == 1
     err = capsys.readouterr().err
     warnings = [line for line in err.splitlines() if "gravity alone" in line]
@@ -356,3 +355,49 @@ def test_a_vanished_mass_estimate_has_an_undefined_centre_of_mass_not_a_huge_one
     _print_summary(clean_json(summary), as_json=False, kind="manipulator")
     line = [x for x in capsys.readouterr().out.splitlines() if "identified p" in x][0]
     assert f"centre of mass undefined (estimated mass {mass:.3g} kg)," in line and "mm" not in line, line
+
+
+def test_a_note_or_warning_is_one_write_of_one_whole_line(monkeypatch):
+    """A study's workers share stderr; print's two writes (text, then newline) let another worker's line land
+    between them, and two sweep workers' notes came out merged on one line. The command line's handler of the
+    "adaptive_mj" logger writes each line whole, to the stderr of the moment."""
+    import logging
+
+    from adaptive_mj.notes import LineHandler
+
+    writes = []
+
+    class Stream:
+        def write(self, text):
+            writes.append(text)
+
+        def flush(self):
+            writes.append("<flush>")
+
+    monkeypatch.setattr("sys.stderr", Stream())
+    LineHandler().emit(logging.LogRecord("adaptive_mj", logging.INFO, "", 0, "mine.toml (0001-seed0): note: x", (),
+                                         None))
+    assert writes == ["mine.toml (0001-seed0): note: x\n", "<flush>"]
+
+
+def test_run_scenario_says_its_warnings_through_logging_and_is_silent_by_default(capsys, caplog):
+    """From Python a run's notes and warnings go through the "adaptive_mj" logger: nothing on stderr unless the
+    application asks (here pytest's caplog), and the command line prints them (tested above)."""
+    import logging
+
+    from adaptive_mj.notes import log
+    from adaptive_mj.study.api import run_scenario
+
+    saved = (log.handlers[:], log.level, log.propagate)
+    log.handlers[:] = [h for h in log.handlers if type(h).__name__ != "LineHandler"]  # as a fresh interpreter has
+    log.setLevel(logging.NOTSET)
+    log.propagate = True
+    try:
+        with caplog.at_level(logging.INFO, logger="adaptive_mj"):
+            r = run_scenario("arm_payload_swap", set=["plant.payload_mass=500", *ARM_SHORT])
+        assert r.status == "failed"
+        assert capsys.readouterr().err == ""
+        warned = {rec.getMessage() for rec in caplog.records if rec.levelno == logging.WARNING}  # (caplog may hold
+        assert len(warned) == 1 and "gravity alone at the reference needs" in warned.pop()  # a record twice)
+    finally:
+        log.handlers[:], log.level, log.propagate = saved

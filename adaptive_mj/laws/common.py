@@ -35,7 +35,7 @@ def record_dtype(cls: type) -> np.dtype:
     """The numpy structured dtype of a dataclass of scalars (fields annotated float, bool or int), one
     field per dataclass field, by name and in its order. A law's gains dataclass is the contract by name
     between the law and its compiled code: the Python path reads the dataclass's attributes, the compiled
-    callback the same names as fields of a record of this dtype (adaptive_mj.sim.native reads it through
+    callback the same names as fields of a record of this dtype (adaptive_mj.plants.one_dof_kernel reads it through
     its address)."""
     out = []
     for f in dataclasses.fields(cls):
@@ -79,7 +79,7 @@ def dead_zone_open(signal: float, width: float) -> bool:
 
     The one place the boundary is decided: DeadZone.adapting, laws.sliding.sliding_law,
     laws.slotine_li.slotine_li_output and the first-order law call it (the laws as a
-    module global, so that adaptive_mj.sim.native* compiles it with them: plain scalar
+    module global, so that adaptive_mj.sim.native_mujoco compiles it with them: plain scalar
     code, numba nopython)."""
     return abs(signal) >= width
 

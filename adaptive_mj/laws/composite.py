@@ -34,7 +34,7 @@ filter state is two arrays: z = [z_a, z_φ (n_p), z_τ] and the pending step [y^
 This law keeps filter state between calls (``has_filters``, laws.protocol). On the Python callback
 path loop.Controller resets it, calls step_begins(x) with the measured state at the start of each
 step and step_ends(stage states, stage controls, weights, h) at its end. It is also ``native``: the
-compiled 1-DOF callback (adaptive_mj.sim.native, its composite variant) keeps z and the pending step
+compiled 1-DOF callback (adaptive_mj.plants.one_dof_kernel, its composite variant) keeps z and the pending step
 in its buffers, adds each stage to the sums when it applies the stage's control and advances the
 filters at each step's first stage, calling the same functions: the same rows bit for bit
 (tests/test_native.py). Continuous control only (the loop refuses sampled-data control with filters).
@@ -109,7 +109,7 @@ class CompositeSlidingLaw(SlidingAdaptiveLaw):
     filter_rate: λ_f > 0 [1/s]. The other arguments as SlidingAdaptiveLaw.
     """
 
-    native = True  # adaptive_mj.sim.native compiles it (continuous control, a 1-DOF MuJoCo plant)
+    native = True  # adaptive_mj.plants.one_dof_kernel compiles it (continuous control, a 1-DOF MuJoCo plant)
     has_filters = True  # the Python path: the loop calls reset, step_begins and step_ends (laws.protocol)
 
     def __init__(self, form: ModelForm, *, lam: float, k: float, gamma, kappa: float, filter_rate: float,

@@ -148,7 +148,8 @@ class FlightLaw:
         return None
 
     def native_params(self) -> dict:
-        """What the compiled callback takes: P, G, the allocation and its inverse (adaptive_mj.sim.native_flight)."""
+        """What the compiled callback takes: P, G, the allocation and its inverse
+        (adaptive_mj.plants.quadrotor_kernel)."""
         return {"P": self.P, "G": self.G, "Ainv": self.Ainv, "A": self.airframe.allocation}
 
     def feedback(self) -> AirframeFeedback:
@@ -181,7 +182,7 @@ class L1GeometricLaw(FlightLaw):
     state measured at the step's start and the thrusts applied over it: T_s = the physics step), so the
     augmentation is held over each step's stages. Continuous control only (its filters integrate per step). The
     compiled callback makes the same update at the next step's first stage, before the law runs
-    (adaptive_mj.sim.native_flight)."""
+    (adaptive_mj.plants.quadrotor_kernel)."""
 
     a_s: float = -5.0
     w_c: float = 5.0

@@ -11,7 +11,8 @@ scenario whose plant offers the form the law serves: adaptive_mj.laws.kinds). No
 code: the law must be installed (docs/ADDING_A_LAW.md walks through two complete packages).
 
 Each law is plain functions over arrays and floats, so that it can be compiled with numba into MuJoCo's
-native control callback (adaptive_mj.sim.native, .native_manipulator) and run at built-in speed:
+native control callback (adaptive_mj.plants.one_dof_kernel, .manipulator_kernel, built by
+adaptive_mj.sim.native_mujoco) and run at built-in speed:
 
 1-DOF (``LawPlugin``, the shape of the built-in ``laws.sliding.sliding_law``):
 
@@ -199,9 +200,10 @@ class Shared:
 
 @dataclass(frozen=True)
 class PluginGains(Gains):
-    """The scalars of the shared modifications a compiled 1-DOF plugin law reads by name (adaptive_mj.sim.native
-    reads them as fields of a PLUGIN_GAINS record, through its address): the dead-zone's width and whether its
-    signal is |s| (else |ỹ|), σ, ν, and whether the law adapts (laws.common.plugin_rate)."""
+    """The scalars of the shared modifications a compiled 1-DOF plugin law reads by name
+    (adaptive_mj.plants.one_dof_kernel reads them as fields of a PLUGIN_GAINS record, through its address): the
+    dead-zone's width and whether its signal is |s| (else |ỹ|), σ, ν, and whether the law adapts
+    (laws.common.plugin_rate)."""
 
     dz_width: float
     sigma: float
@@ -255,7 +257,7 @@ class _PluginBase(Law):
 
     def native_params(self) -> dict[str, Any]:
         """Its parameters, "gains" (the PLUGIN_GAINS record of `gains()`) and the shared modifications' arrays by
-        name (a multi-joint plugin's, for adaptive_mj.sim.native_manipulator; PluginLaw's own for the 1-DOF)."""
+        name (a multi-joint plugin's, for adaptive_mj.plants.manipulator_kernel; PluginLaw's own for the 1-DOF)."""
         sh = self.shared
         return {"plugin_params": self.params, "gains": self.gains().record(), "theta0": sh.theta0,
                 "lower": sh.lower, "upper": sh.upper, "gamma": sh.gamma}
@@ -291,8 +293,8 @@ class KernelLaw(_PluginBase):
     """A 1-DOF law whose law is a plain-array function in the plugin form (a LawPlugin's `law`: the module
     docstring), with the loop's law interface (laws.protocol.Law) and the shared modifications every plugin gets.
     A built-in law kind's builder returns one (docs/ADDING_A_LAW.md): it runs compiled as a plugin's law does, in
-    MuJoCo's 1-DOF callback (``native_params``: "plugin_law", adaptive_mj.sim.native) and in the analytic chunk
-    engine (``chunk_kernel``: plugin_kernel). PluginLaw is the same law of an installed plugin.
+    MuJoCo's 1-DOF callback (``native_params``: "plugin_law", adaptive_mj.plants.one_dof_kernel) and in the
+    analytic chunk engine (``chunk_kernel``: plugin_kernel). PluginLaw is the same law of an installed plugin.
 
     plugin: the declaration (its law, keys, adapts, lyapunov, gain, feedback); form: the plant's ModelForm; params:
     the declared keys' values laid out as LawPlugin.layout says; kind: its law.kind (for messages)."""
@@ -307,8 +309,8 @@ class KernelLaw(_PluginBase):
         self.order = form.order
 
     def native_params(self) -> dict[str, Any]:
-        """What adaptive_mj.sim.native needs: the function and its parameters, "gains" (the PLUGIN_GAINS record
-        of `gains()`) and the shared modifications' arrays by name (coeffs: the sliding law's, unused)."""
+        """What adaptive_mj.plants.one_dof_kernel needs: the function and its parameters, "gains" (the PLUGIN_GAINS
+        record of `gains()`) and the shared modifications' arrays by name (coeffs: the sliding law's, unused)."""
         sh = self.shared
         return {"plugin_law": self.plugin.law, "plugin_params": self.params, "gains": self.gains().record(),
                 "coeffs": np.zeros(self.order), "gamma": sh.gamma, "theta0": sh.theta0, "lower": sh.lower,
@@ -342,7 +344,7 @@ class KernelLaw(_PluginBase):
 class PluginLaw(KernelLaw):
     """An installed plugin's law on a 1-DOF plant (a KernelLaw of its LawPlugin; `installed` says where it comes
     from, which the log records); ``native_params`` hands the function and its parameters to the native callback
-    (adaptive_mj.sim.native), ``chunk_kernel`` to the analytic chunk engine."""
+    (adaptive_mj.plants.one_dof_kernel), ``chunk_kernel`` to the analytic chunk engine."""
 
     def __init__(self, installed: Installed[LawPlugin], form: ModelForm, params: np.ndarray, *,
                  shared: Shared | None = None, modification: Modification | None = None):
@@ -353,7 +355,7 @@ class PluginLaw(KernelLaw):
 class JointKernelLaw(_PluginBase):
     """A JointLawPlugin's law on a plant of m joints (adaptive_mj.plants.manipulator), with the loop's law
     interface; regressor(v, w, a) -> (Y (m, n_theta), τ_known (m,)) is the plant's, at its current q. A built-in
-    kind's (installed None) runs on the Python path: the arm callback (adaptive_mj.sim.native_manipulator) takes
+    kind's (installed None) runs on the Python path: the arm callback (adaptive_mj.plants.manipulator_kernel) takes
     a multi-joint law function from an installed plugin's law only, JointPluginLaw (docs/ADDING_A_LAW.md)."""
 
     order = 2
@@ -370,7 +372,7 @@ class JointKernelLaw(_PluginBase):
 
     def native_params(self) -> dict[str, Any]:
         """Its parameters, "gains" and the shared modifications' arrays (_PluginBase.native_params), and the
-        functions: "plugin_law" and "plugin_point" (adaptive_mj.sim.native_manipulator)."""
+        functions: "plugin_law" and "plugin_point" (adaptive_mj.plants.manipulator_kernel)."""
         plugin = self.plugin
         assert isinstance(plugin, JointLawPlugin)
         return {**super().native_params(), "plugin_law": plugin.law, "plugin_point": plugin.point}
@@ -392,7 +394,7 @@ class JointKernelLaw(_PluginBase):
 
 class JointPluginLaw(JointKernelLaw):
     """An installed JointLawPlugin's law (a JointKernelLaw of it; `installed` says where it comes from, which the
-    log records); ``native_params`` hands the functions and parameters to adaptive_mj.sim.native_manipulator."""
+    log records); ``native_params`` hands the functions and parameters to adaptive_mj.plants.manipulator_kernel."""
 
     native = True
 

@@ -26,8 +26,8 @@ Optional (the default in brackets):
                law saw, the integrator's weights b_i and the step h [s] [nothing]
   installed    where a law plugin comes from (adaptive_mj.plugins.Installed; the log records it)
                [None: not a plugin]
-  native       a compiled control callback can run it (adaptive_mj.sim.native for 1-DOF plants,
-               native_manipulator for Slotine–Li) [False: the Python callback]
+  native       a compiled control callback can run it (adaptive_mj.plants.one_dof_kernel for 1-DOF plants,
+               manipulator_kernel for Slotine–Li) [False: the Python callback]
   native_params()  the numbers that callback takes (a dict, by name; a 1-DOF law's scalar gains as one
                record under "gains", read by field name: laws.sliding.SlidingGains, laws.plugin.PluginGains)
                [none: raises]

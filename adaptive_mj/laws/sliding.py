@@ -52,7 +52,7 @@ def sliding_terms(coeffs: np.ndarray, x: np.ndarray, ref: np.ndarray) -> tuple[f
 
     s = sum_i c_i ỹ^(i);  ṡ_r = y_d^(n) + sum_{i>=1} c_{i-1} ỹ^(i).
     Written as scalar loops so the same code also compiles with numba
-    (adaptive_mj.sim.native) for MuJoCo's native control callback.
+    (adaptive_mj.plants.one_dof_kernel) for MuJoCo's native control callback.
     """
     n: int = coeffs.shape[0]
     s = 0.0
@@ -73,7 +73,7 @@ class SlidingGains(Gains):
     when dz_on_s, else on |ỹ| (common.dead_zone_open); K, boundary_layer: the robust term K sat(s/Φ)
     (K = 0: none); sigma, e_mod: the leakage (common.modify_rate); sat_lo, sat_hi: the actuator's limits
     [u] for saturation-aware adaptation, which is on when freeze; adapt: the estimates move (False for the
-    baselines). The Python path passes this object; the compiled callback (adaptive_mj.sim.native) reads
+    baselines). The Python path passes this object; the compiled callback (adaptive_mj.plants.one_dof_kernel) reads
     the same names as fields of a SLIDING_GAINS record (`record()`), through its address."""
 
     k: float
@@ -121,7 +121,7 @@ def sliding_law(x, ref, theta, gains: SlidingGains, arrays: SlidingArrays, form:
         u = h^-1 (d̂ ṡ_r - f - phi p̂ + k s [+ K sat(s/Phi)])
         d̂' = ṡ_r s / gamma_d,   p̂' = -phi^T s / gamma_p   [- (σ + ν|s|)(θ̂ - θ₀)/γ, projected]
 
-    The Python laws below call it; adaptive_mj.sim.native compiles sliding_law_values, its body.
+    The Python laws below call it; adaptive_mj.plants.one_dof_kernel compiles sliding_law_values, its body.
     """
     return sliding_law_values(x, ref, theta, gains, arrays, form.phi(x), form.f(x), form.h(x), rate)
 
@@ -176,7 +176,7 @@ class _SlidingBase(Law):
     """What the three sliding laws share: the surface, and the call into `sliding_law`."""
 
     adapt = True
-    native = True  # adaptive_mj.sim.native compiles sliding_law
+    native = True  # adaptive_mj.plants.one_dof_kernel compiles sliding_law
 
     def __init__(self, form: ModelForm, *, lam: float, k: float):
         _check_gains(form, lam, k)

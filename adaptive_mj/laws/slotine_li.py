@@ -66,7 +66,7 @@ def reference_terms(x, ref, lam, s, qd_r, qdd_r):
 @dataclass(frozen=True)
 class SlotineLiGains(Gains):
     """Slotine–Li's scalar gains and switches, by name: what `slotine_li_output` (and the compiled callback's
-    point, adaptive_mj.sim.native_manipulator) read of them.
+    point, adaptive_mj.plants.manipulator_kernel) read of them.
 
     mode: Mode (ADAPTIVE, COMPUTED_TORQUE, PD_GRAVITY: where the regressor is evaluated); adapt: the estimates
     move (ADAPTIVE only); dz_width: the dead-zone's width [rad/s on ‖s‖, rad on ‖q̃‖] (0: none), on ‖s‖ when
@@ -196,7 +196,7 @@ class SlotineLiLaw(Law):
     """
 
     order = 2
-    native = True  # adaptive_mj.sim.native_manipulator compiles slotine_li_output
+    native = True  # adaptive_mj.plants.manipulator_kernel compiles slotine_li_output
 
     def __init__(self, regressor, names, m: int, *, lam, kd, gamma=1.0, dead_zone: DeadZone | None = None,
                  mode: Mode = Mode.ADAPTIVE, modification: Modification | None = None,
@@ -246,7 +246,7 @@ class SlotineLiLaw(Law):
                                sat_hi=self.hi)
 
     def native_params(self) -> dict[str, Any]:
-        """What adaptive_mj.sim.native_manipulator needs: "gains" (the SLOTINE_LI_GAINS record of `gains()`), Λ and
+        """What adaptive_mj.plants.manipulator_kernel needs: "gains" (the SLOTINE_LI_GAINS record of `gains()`), Λ and
         the arrays by name."""
         return {"gains": self.gains().record(), "lam": self.lam, "recursive": self.recursive,
                 **self.arrays()._asdict()}

@@ -94,20 +94,26 @@ def analytic_step(p, x, force, k, delay, ring, h, rk4, lo, hi, ctx, io, xs, ks):
     the observation buffer); xs (n_x,), ks (4, n_x): scratch."""
     n = x.shape[0]
     y = io[0]
-    observe(p, x, y)
-    u = clamp(control(ctx, io, 0), lo, hi)
-    if delay > 0:  # the delay line: this step's stage-0 control in, the one of D steps ago held over the step
-        ring[k % (delay + 1)] = u
-        u = ring[(k - delay) % (delay + 1)] if k >= delay else 0.0
-    rate(p, x, u, force, ks[0])
-    if rk4:
-        for j in range(1, 4):
+    u = 0.0
+    # one call site each of observe, control and rate (compiled, each is inlined where it is called: two sites
+    # would compile the whole control stage twice); stage 0 on a copy of x, the same values
+    for j in range(4 if rk4 else 1):
+        if j == 0:
+            for i in range(n):
+                xs[i] = x[i]
+        else:
             c = h if j == 3 else h / 2
             for i in range(n):
                 xs[i] = x[i] + c * ks[j - 1, i]
-            observe(p, xs, y)
-            v = clamp(control(ctx, io, j), lo, hi)
-            rate(p, xs, v if delay == 0 else u, force, ks[j])
+        observe(p, xs, y)
+        v = clamp(control(ctx, io, j), lo, hi)
+        if j == 0:
+            if delay > 0:  # the delay line: this step's stage-0 control in, the one of D steps ago held over the step
+                ring[k % (delay + 1)] = v
+                v = ring[(k - delay) % (delay + 1)] if k >= delay else 0.0
+            u = v
+        rate(p, xs, v if delay == 0 else u, force, ks[j])
+    if rk4:
         for i in range(n):
             x[i] = x[i] + h / 6 * (ks[0, i] + 2 * ks[1, i] + 2 * ks[2, i] + ks[3, i])
     else:

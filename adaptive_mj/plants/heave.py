@@ -174,7 +174,7 @@ class HeavePlant(MujocoPlant):
     @property
     def native_third_state(self) -> tuple[int, int] | None:
         """(the thrust state's address in act, the body's id) for order 3: the compiled callback computes y'' as
-        `measure` does (adaptive_mj.sim.native._acceleration); None for order 2."""
+        `measure` does (adaptive_mj.plants.one_dof_kernel._acceleration); None for order 2."""
         return (self._act_adr, self.body_id) if self.form.order == 3 and self._act_adr >= 0 else None
 
     def measure(self, d, x) -> None:

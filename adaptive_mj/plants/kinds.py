@@ -367,7 +367,27 @@ def docs_table() -> str:
     return "\n".join(lines)
 
 
+def plants_table() -> str:
+    """The built-in plant kinds and the built-in laws that serve each (laws.kinds.serving: by form, and a law
+    made for some plant kinds only on those), as the README shows them (tests/test_law_kinds.py keeps the two
+    equal): the adaptive laws, then the baselines."""
+    from adaptive_mj.laws.kinds import BUILT_IN, serving
+
+    lines = ["| plant.kind | what it is | adaptive laws | baselines |", "|---|---|---|---|"]
+    for p in built_in().values():
+        laws = serving(p.name, p.forms, BUILT_IN)
+        adaptive = ", ".join(f"`{n}`" for n in laws if BUILT_IN[n].adaptive)
+        fixed = ", ".join(f"`{n}`" for n in laws if not BUILT_IN[n].adaptive)
+        doc = p.doc.replace("|", "\\|")  # a | in a formula is no column
+        lines.append(f"| `{p.name}` | {doc} | {adaptive} | {fixed} |")
+    return "\n".join(lines)
+
+
 if __name__ == "__main__":  # `python -m adaptive_mj.plants.kinds`: the law-kinds block of docs/SCENARIOS.md
     from adaptive_mj.plants.kinds import docs_table as table  # the registry the plant modules fill, not __main__'s
 
     print(table())
+    print("\n(the README's plants block:)\n")
+    from adaptive_mj.plants.kinds import plants_table
+
+    print(plants_table())

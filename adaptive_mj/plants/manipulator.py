@@ -29,10 +29,11 @@ are current.
 from __future__ import annotations
 
 import contextlib
+import functools
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, ClassVar, Iterator
 
 import mujoco
 import numpy as np
@@ -42,7 +43,8 @@ from adaptive_mj.disturbance import JointDisturbance
 from adaptive_mj.errors import ModelError
 from adaptive_mj.numba_util import jit_tree, with_globals as _with_globals
 from adaptive_mj.plants import regressor_kernel as rk
-from adaptive_mj.plants import BuiltPlant, ModelSource
+from adaptive_mj.plants import BuiltPlant, ModelSource, manipulator_kernel
+from adaptive_mj.plants.mujoco_kernel import MujocoKernel
 from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compile_for_scenario_with, compiled_control,
                                              control_callback, new_warnings, scratch_data)
 from adaptive_mj.plants.protocol import Policy
@@ -69,68 +71,161 @@ def _is_lag(model, a: int) -> bool:
     return int(model.actuator_dyntype[a]) in {int(d) for d in LAG_DYNTYPES} and bool(model.actuator_dynprm[a, 0] > 0)
 
 
-def check_supported(model: mujoco.MjModel, where: str) -> None:  # noqa: C901 (one check per unsupported feature)
-    """Refuse, with one line, what the manipulator regressor does not cover."""
+def check_supported(model: mujoco.MjModel, where: str) -> None:
+    """Refuse, in one line, everything the manipulator regressor does not cover (refusals): every reason at once,
+    numbered, each with its fix."""
+    reasons = refusals(model)
+    if reasons:
+        raise ModelError(refusal_text(where, reasons))
+
+
+def refusal_text(where: str, reasons: list[str]) -> str:
+    """One line: `where` cannot be driven as a manipulator, and why (each reason with its fix)."""
+    if len(reasons) == 1:
+        return f"{where}: {reasons[0]}"
+    return (f"{where}: cannot be driven as a manipulator, for {len(reasons)} reasons: "
+            + "; ".join(f"({i}) {r}" for i, r in enumerate(reasons, 1)))
+
+
+def _toml_names(names) -> str:
+    return "[" + ", ".join(f'"{n}"' for n in names) + "]"
+
+
+def refusals(model: mujoco.MjModel) -> list[str]:  # noqa: C901 (one check per unsupported feature)
+    """What the manipulator regressor does not cover in `model`, each reason with its fix ([] when it covers all).
+    Unactuated joints, and the tendons and equality constraints among them (a gripper's fingers), get one fix:
+    plant.fixed_joints (fix_joints), printed as it pastes."""
+    out: list[str] = []
+    jname = functools.partial(_name, model, mujoco.mjtObj.mjOBJ_JOINT)
     for j in range(model.njnt):
         t = mujoco.mjtJoint(model.jnt_type[j])
         if t not in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
             kind = t.name.removeprefix("mjJNT_").lower()
-            raise ModelError(f"{where}: joint {_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)!r} is a {kind} joint; "
-                             "the manipulator plant supports only hinge and slide joints on a fixed base "
-                             "(replace it, or weld a floating base to the world)")
-        if model.jnt_stiffness[j] != 0:
-            raise ModelError(f"{where}: joint {_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)!r} has stiffness "
-                             f"{model.jnt_stiffness[j]:g}, which the regressor does not cover; set it to 0")
+            out.append(f"joint {jname(j)!r} is a {kind} joint; the manipulator plant supports only hinge and slide "
+                       "joints on a fixed base (replace it, or weld a floating base to the world)")
+        elif model.jnt_stiffness[j] != 0:
+            out.append(f"joint {jname(j)!r} has stiffness {model.jnt_stiffness[j]:g}, which the regressor does not "
+                       "cover; set it to 0")
     if model.nv == 0:
-        raise ModelError(f"{where}: the model has no joints; the manipulator plant needs a tree of hinge/slide joints")
+        return [*out, "the model has no joints; the manipulator plant needs a tree of hinge/slide joints"]
     # dof_frictionloss is accepted: MuJoCo's dry friction (a constraint), unmodelled unless the layout has
     # Coulomb columns (friction_params), see the module docstring
     for j in np.nonzero(np.any(model.dof_dampingpoly != 0, axis=1))[0][:1]:
-        raise ModelError(f"{where}: joint {_name(model, mujoco.mjtObj.mjOBJ_JOINT, model.dof_jntid[j])!r} has "
-                         f"nonlinear damping (polynomial terms {model.dof_dampingpoly[j].tolist()}); the regressor "
-                         "covers linear damping only; give damping one value")
-    if model.ntendon:
-        raise ModelError(f"{where}: the model has {model.ntendon} tendon(s); the manipulator plant needs each "
-                         "joint driven by its own motor, with no tendons")
-    if model.neq:
-        raise ModelError(f"{where}: the model has {model.neq} equality constraint(s), which the regressor does "
-                         "not cover; remove them")
-    if np.any(model.body_gravcomp != 0):
-        raise ModelError(f"{where}: gravcomp is set on a body; the manipulator regressor models full gravity; "
-                         "set gravcomp to 0")
-    if model.opt.density != 0 or model.opt.viscosity != 0:
-        raise ModelError(f"{where}: fluid forces (option density/viscosity) are not covered by the manipulator "
-                         "regressor; set them to 0")
+        out.append(f"joint {jname(model.dof_jntid[j])!r} has nonlinear damping (polynomial terms "
+                   f"{model.dof_dampingpoly[j].tolist()}); the regressor covers linear damping only; give damping "
+                   "one value")
     driven = np.full(model.nv, -1)
+    actuators: list[str] = []
     for a in range(model.nu):
         aname = _name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
         if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT:
-            raise ModelError(f"{where}: actuator {aname!r} does not drive a joint directly (tendon, site or "
-                             "coupled transmission); the manipulator plant needs one motor per joint")
+            if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_TENDON:  # a tendon's actuator goes with its tendon
+                actuators.append(f"actuator {aname!r} does not drive a joint directly (site or coupled "
+                                 "transmission); the manipulator plant needs one motor per joint")
+            continue
         if (model.actuator_gaintype[a] != mujoco.mjtGain.mjGAIN_FIXED
                 or model.actuator_biastype[a] != mujoco.mjtBias.mjBIAS_NONE
                 or not (model.actuator_dyntype[a] == mujoco.mjtDyn.mjDYN_NONE or _is_lag(model, a))):
-            raise ModelError(f"{where}: actuator {aname!r} is not a torque <motor> (it has a bias, a gain "
-                             "function or dynamics, e.g. a position servo); set plant.servo_to_torque = true to "
-                             "rebuild servos as torque motors limited to their forcerange")
-        if model.actuator_gainprm[a, 0] != 1.0:
-            raise ModelError(f"{where}: actuator {aname!r} has gain {model.actuator_gainprm[a, 0]:g}; the "
-                             "manipulator plant needs torque = gear * ctrl (a <motor>, or gainprm 1)")
+            actuators.append(f"actuator {aname!r} is not a torque <motor> (it has a bias, a gain function or "
+                             "dynamics, e.g. a position servo); set plant.servo_to_torque = true to rebuild servos "
+                             "as torque motors limited to their forcerange")
+        elif model.actuator_gainprm[a, 0] != 1.0:
+            actuators.append(f"actuator {aname!r} has gain {model.actuator_gainprm[a, 0]:g}; the manipulator plant "
+                             "needs torque = gear * ctrl (a <motor>, or gainprm 1)")
         dof = int(model.jnt_dofadr[model.actuator_trnid[a, 0]])
         if driven[dof] >= 0:
-            raise ModelError(f"{where}: joint {_name(model, mujoco.mjtObj.mjOBJ_JOINT, model.dof_jntid[dof])!r} "
-                             "is driven by more than one actuator; the manipulator plant needs exactly one each")
+            actuators.append(f"joint {jname(model.dof_jntid[dof])!r} is driven by more than one actuator; the "
+                             "manipulator plant needs exactly one each")
         driven[dof] = a
-    missing = [_name(model, mujoco.mjtObj.mjOBJ_JOINT, model.dof_jntid[j]) for j in range(model.nv) if driven[j] < 0]
-    if missing:
-        raise ModelError(f"{where}: joint(s) {missing} have no actuator; the manipulator plant needs every joint "
-                         "actuated (fix the unactuated joints in the MJCF, or add a <motor>)")
+    unactuated = [jname(model.dof_jntid[j]) for j in range(model.nv) if driven[j] < 0]
+    coupled = sorted({jname(j) for j in _tendon_joints(model) | _equality_joints(model)}
+                     - {jname(model.dof_jntid[j]) for j in range(model.nv) if driven[j] >= 0})
+    fixable = list(dict.fromkeys([*unactuated, *coupled]))
+    fix = (f" (if they are a gripper's: --set 'plant.fixed_joints={_toml_names(fixable)}' welds them at their "
+           "reference position and drops the tendons, equality constraints and actuators that use them)"
+           if fixable else "")
+    if model.ntendon:
+        out.append(f"the model has {model.ntendon} tendon(s); the manipulator plant needs each joint driven by its "
+                   "own motor, with no tendons" + fix)
+    if model.neq:
+        out.append(f"the model has {model.neq} equality constraint(s), which the regressor does not cover; remove "
+                   "them" + fix)
+    if np.any(model.body_gravcomp != 0):
+        out.append("gravcomp is set on a body; the manipulator regressor models full gravity; set gravcomp to 0")
+    if model.opt.density != 0 or model.opt.viscosity != 0:
+        out.append("fluid forces (option density/viscosity) are not covered by the manipulator regressor; set them "
+                   "to 0")
+    out.extend(actuators)
+    if unactuated:
+        out.append(f"joint(s) {unactuated} have no actuator; the manipulator plant needs every joint actuated (add "
+                   "a <motor>, or fix the unactuated joints" + (fix.replace(" (if they are", ": if they are")[:-1]
+                                                                if fix else "") + ")")
     gear = model.actuator_gear[:, 0]
     bad_gear = [f"{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)!r} (gear {gear[a]:g})" for a in range(model.nu)
-                if not (np.isfinite(gear[a]) and gear[a] != 0)]
+                if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT and not (np.isfinite(gear[a])
+                                                                                  and gear[a] != 0)]
     if bad_gear:
-        raise ModelError(f"{where}: actuator(s) {', '.join(bad_gear)} cannot drive their joint: the joint torque is "
-                         "gear * ctrl, so the law's torque needs a finite, nonzero gear (set gear, e.g. gear=\"1\")")
+        out.append(f"actuator(s) {', '.join(bad_gear)} cannot drive their joint: the joint torque is gear * ctrl, so "
+                   "the law's torque needs a finite, nonzero gear (set gear, e.g. gear=\"1\")")
+    return out
+
+
+def _tendon_joints(model: mujoco.MjModel) -> set[int]:
+    """The joints (ids) the model's fixed tendons couple."""
+    out = set()
+    for t in range(model.ntendon):
+        for w in range(model.tendon_adr[t], model.tendon_adr[t] + model.tendon_num[t]):
+            if model.wrap_type[w] == mujoco.mjtWrap.mjWRAP_JOINT:
+                out.add(int(model.wrap_objid[w]))
+    return out
+
+
+def _equality_joints(model: mujoco.MjModel) -> set[int]:
+    """The joints (ids) the model's joint equality constraints tie."""
+    out: set[int] = set()
+    for e in range(model.neq):
+        if model.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT:
+            out.update(int(i) for i in (model.eq_obj1id[e], model.eq_obj2id[e]) if i >= 0)
+    return out
+
+
+def fix_joints(spec, names: tuple[str, ...]) -> list[str]:
+    """plant.fixed_joints: each named joint removed from `spec` (its body welded to its parent at the joint's
+    reference position), with the tendons that wrap it, the joint equality constraints that name it and the
+    actuators that drive it or those tendons (a gripper's fingers, their coupling and their motor). Returns the
+    note saying what was removed; a name the model does not have is a ModelError naming the key and the joints."""
+    if not names:
+        return []
+    model = spec.compile()
+    jid = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j): j for j in range(model.njnt)}
+    unknown = [n for n in names if n not in jid]
+    if unknown:
+        raise ModelError(f"plant.fixed_joints: no joint named {unknown[0]!r} in the model (its joints: "
+                         f"{[n for n in jid if n]})")
+    fixed = {jid[n] for n in names}
+    tendons = [t for t in range(model.ntendon)
+               if any(model.wrap_type[w] == mujoco.mjtWrap.mjWRAP_JOINT and int(model.wrap_objid[w]) in fixed
+                      for w in range(model.tendon_adr[t], model.tendon_adr[t] + model.tendon_num[t]))]
+    eqs = [e for e in range(model.neq) if model.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT
+           and ({int(model.eq_obj1id[e]), int(model.eq_obj2id[e])} & fixed)]
+    acts = [a for a in range(model.nu)
+            if (model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT and int(model.actuator_trnid[a, 0]) in fixed)
+            or (model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_TENDON and int(model.actuator_trnid[a, 0])
+                in tendons)]
+    # spec.actuators / equalities / tendons are in the compiled model's order; delete the users first
+    for element in ([spec.actuators[a] for a in acts] + [spec.equalities[e] for e in eqs]
+                    + [spec.tendons[t] for t in tendons] + [spec.joint(n) for n in names]):
+        spec.delete(element)
+    named = functools.partial(_name, model)
+    parts = [f"joint(s) {list(names)} fixed at their reference position"]
+    if tendons:
+        parts.append(f"tendon(s) {[named(mujoco.mjtObj.mjOBJ_TENDON, t) for t in tendons]}")
+    if eqs:
+        parts.append(f"{len(eqs)} equality constraint(s)")
+    if acts:
+        parts.append(f"actuator(s) {[named(mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in acts]}")
+    return ["plant.fixed_joints: " + parts[0] + (" (removed with them: " + ", ".join(parts[1:]) + ")"
+                                                 if len(parts) > 1 else "")]
 
 
 def _is_servo(act) -> bool:
@@ -180,7 +275,7 @@ def servo_to_torque(spec, forcerange: float | dict[str, float] | None = None) ->
         raise ModelError(f"plant.servo_to_torque: {len(missing)} servo(s) have no forcerange to limit the torque "
                          f"motor each becomes: {', '.join(missing)}; give plant.forcerange = L (|tau| <= L [N m] "
                          "on every joint) or a table {joint = L, ...}, or a forcerange in the MJCF")
-    notes = []
+    rebuilt = []
     for act, (lo, hi, whence) in zip(servos, limits, strict=True):
         act.gaintype = mujoco.mjtGain.mjGAIN_FIXED
         act.gainprm = np.zeros_like(act.gainprm)
@@ -193,9 +288,9 @@ def servo_to_torque(spec, forcerange: float | dict[str, float] | None = None) ->
         if whence:
             act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
             act.forcerange = [lo, hi]
-        notes.append(f"actuator {act.name!r}: servo rebuilt as a torque motor, |tau| <= [{lo:g}, {hi:g}] N*m"
-                     + whence)
-    return notes
+        rebuilt.append(f"{act.name!r} |tau| <= [{lo:g}, {hi:g}] N*m" + whence)
+    # one note for the run, not one per servo (a Menagerie arm has seven)
+    return ["plant.servo_to_torque: servo(s) rebuilt as torque motors: " + ", ".join(rebuilt)] if rebuilt else []
 
 
 # --- joint friction and actuator lag, as MjSpec edits (plant.damping, .frictionloss, .actuator_lag) ---
@@ -423,7 +518,7 @@ class Regressor:
         return out
 
     def static_args(self):
-        """The model arrays the kernel takes, in its order (also used by adaptive_mj.sim.native)."""
+        """The model arrays the kernel takes, in its order (also used by adaptive_mj.plants.one_dof_kernel)."""
         m = self.model
         return (self.parent, self.dofadr, self.dofnum, self.rootid, self.body_col, self.body_known,
                 self.col_arm, self.col_damp, self.col_coul, m.dof_armature, m.dof_damping, self.coulomb_eps)
@@ -564,7 +659,8 @@ class ManipulatorPlant(ModelClock, BodyEdits):
     """
 
     order = 2
-    compiled_loop: str | None = "adaptive_mj.sim.native_manipulator"  # protocol.Plant.compiled_loop
+    compiled_loop: str | None = "adaptive_mj.sim.native_mujoco"  # protocol.Plant.compiled_loop
+    mujoco_kernel: ClassVar[MujocoKernel] = manipulator_kernel.KERNEL  # its kernel spec (plants/manipulator_kernel.py)
     native_owner: object | None = None  # the native controller whose context data points at
 
     def __init__(self, model: mujoco.MjModel, *, unknown="payload", joint_params: bool = False,
@@ -700,6 +796,19 @@ class ManipulatorPlant(ModelClock, BodyEdits):
             out[i] = d.qfrc_bias - d.qfrc_passive
         return out
 
+    def regressor_rows(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """(N, m, n_theta) the regressor Y(q, q̇, q̇, q̈) of the law's parameters (base ones with a base map) at rows
+        (q, q̇, q̈) (N, m): what the motion excites (report.identification, along the reference); a scratch
+        MjData, the run's untouched."""
+        d = scratch_data(self.model)
+        reg = Regressor(self.model, d, self.layout, self.base_map)
+        out = np.empty((len(q), self.m, len(self.names)))
+        for i in range(len(q)):
+            d.qpos[self._qadr], d.qvel[:] = q[i], qd[i]
+            mujoco.mj_fwdPosition(self.model, d)
+            out[i] = reg(qd[i], qd[i], qdd[i])[0]
+        return out
+
     def following_controls(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
         """(N, m) the joint torques [N·m, N on a slide] that make the arm follow rows (q, q̇, q̈) (N, m) exactly:
         MuJoCo's inverse dynamics (mj_inverse's qfrc_inverse: M q̈ + bias − passive), in the units of ctrl_range
@@ -771,10 +880,40 @@ class ManipulatorPlant(ModelClock, BodyEdits):
 
 # --- built from a scenario ------------------------------------------------------
 def model_source(scn) -> ModelSource | None:
-    """plant.model with plant.payload attached at plant.site (as for the 1-DOF arm)."""
+    """plant.model with plant.payload attached at plant.site (as for the 1-DOF arm). A model with no such site is
+    refused with every other reason the plant would refuse it for in the same line (refusals of the bare arm,
+    after plant.fixed_joints and plant.servo_to_torque), not one reason per attempt."""
     from adaptive_mj.plants import arm
 
-    return arm.model_source(scn)
+    try:
+        return arm.model_source(scn)
+    except ModelError as exc:
+        p = scn.plant
+        where = str(p.model)
+        text = str(exc)
+        if p.payload is None or not text.startswith(f"{where}: "):
+            raise
+        others = _bare_refusals(scn)
+        if not others:
+            raise
+        raise ModelError(refusal_text(where, [text[len(where) + 2:], *others])) from None
+
+
+def _bare_refusals(scn) -> list[str]:
+    """refusals of plant.model without its payload, after the scenario's model edits ([] where it cannot be
+    compiled: the payload's error is said alone)."""
+    from adaptive_mj.plants.arm import build_arm_xml
+
+    p = scn.plant
+    try:
+        xml, assets = build_arm_xml(arm=p.model, payload=None, payload_mass=None, site=p.site)
+        spec = mujoco.MjSpec.from_string(xml, assets=dict(assets))
+        fix_joints(spec, p.manipulator.fixed_joints)
+        if p.manipulator.servo_to_torque:
+            servo_to_torque(spec, p.manipulator.forcerange)
+        return refusals(spec.compile())
+    except (ModelError, ValueError):
+        return []
 
 
 def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
@@ -792,6 +931,10 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
         """(notes, refusals) of the edit; returned, not only said, so that a compile the cache answers
         (compile_spec_with) gives them as well."""
         notes: list[str] = []
+        try:  # first: the fixed joints' actuators are no servos to rebuild
+            notes.extend(fix_joints(spec, p.manipulator.fixed_joints))
+        except ModelError as exc:
+            return notes, [f"{scn.source}: {exc}"]
         if p.manipulator.servo_to_torque:
             try:
                 notes.extend(servo_to_torque(spec, p.manipulator.forcerange))
@@ -806,7 +949,8 @@ def from_scenario(scn, source: ModelSource | None) -> BuiltPlant:
         return notes, []
 
     # what the edit does is fixed by these values (repr: some are dicts {joint: number})
-    key = ("manipulator", repr((p.manipulator.servo_to_torque, p.manipulator.forcerange, fr.damping,
+    key = ("manipulator", repr((p.manipulator.fixed_joints, p.manipulator.servo_to_torque, p.manipulator.forcerange,
+                                fr.damping,
                                 fr.frictionloss, fr.actuator_lag, fr.torque_limit, exact)), scn.source)
     model, model_xml, (notes, bad_keys) = compile_for_scenario_with(scn, source, edit=edit, edit_key=key)
     if bad_keys:
@@ -825,6 +969,8 @@ OWN_KEYS = (
     Key("joint_params", "boolean", default=False, doc="also estimate each joint's armature and damping"),
     Key("base_parameters", "boolean", default=False, doc="reduce the parameters to a base (identifiable) set"),
     Key("servo_to_torque", "boolean", default=False, doc="rebuild position servos as torque motors"),
+    Key("fixed_joints", "array of joint names", default=(), doc="joints welded at their reference position, with "
+        "the tendons, equalities and actuators that use them (a gripper's fingers)"),
     Key("forcerange", "number, or table {joint or actuator = number}", "N m", None, "> 0",
         "with servo_to_torque: the rebuilt servos' torque limit"),
     Key("damping", _PER_JOINT, "N m s/rad", None, ">= 0", "viscous joint damping (default: the model's)"),
@@ -860,9 +1006,12 @@ def manipulator_keys(t: Table, payload: str | None) -> ManipulatorSpec:
             raise t.fail("unknown", "'all' or an array of body names when there is no payload (plant.payload "
                                     "is 'none')", unknown)
     servo = t.boolean("servo_to_torque", False)
+    fixed = t.get("fixed_joints", [])
+    if not isinstance(fixed, list) or not all(isinstance(v, str) and v for v in fixed):
+        raise t.fail("fixed_joints", "an array of joint names", fixed)
     return ManipulatorSpec(unknown=unknown, joint_params=t.boolean("joint_params", False),
                            base_parameters=t.boolean("base_parameters", False),
-                           servo_to_torque=servo, forcerange=forcerange(t, servo))
+                           servo_to_torque=servo, forcerange=forcerange(t, servo), fixed_joints=tuple(fixed))
 
 
 def forcerange(t: Table, servo_to_torque: bool) -> float | dict[str, float] | None:

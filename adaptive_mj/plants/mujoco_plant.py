@@ -12,14 +12,15 @@ import copy
 import operator
 from collections import OrderedDict
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, ClassVar, Iterator
 
 import mujoco
 import numpy as np
 
 from adaptive_mj.errors import AdaptiveMJError, ModelError, ScenarioError
 from adaptive_mj.form import ModelForm
-from adaptive_mj.plants import ModelSource
+from adaptive_mj.plants import ModelSource, one_dof_kernel
+from adaptive_mj.plants.mujoco_kernel import MujocoKernel
 
 Policy = Callable[[float, np.ndarray], float]
 
@@ -226,7 +227,8 @@ class MujocoPlant(ModelClock):
     first_contact: tuple[float, str] | None = None  # contacts are not tracked on a 1-DOF plant
     joint_limits: np.ndarray | None = None  # a 1-DOF plant's joint is not limited
     native_owner: object | None = None  # the native controller whose context data points at
-    compiled_loop: str | None = "adaptive_mj.sim.native"  # its compiled callback (protocol.Plant.compiled_loop)
+    compiled_loop: str | None = "adaptive_mj.sim.native_mujoco"  # its compiled callback (protocol.Plant.compiled_loop)
+    mujoco_kernel: ClassVar[MujocoKernel] = one_dof_kernel.KERNEL  # the kind's kernel spec (plants/one_dof_kernel.py)
 
     def __init__(self, model: mujoco.MjModel, *, joint_id: int, actuator_id: int, form: ModelForm,
                  theta_fn: Callable[[mujoco.MjModel], np.ndarray], where: str):
@@ -280,8 +282,9 @@ class MujocoPlant(ModelClock):
 
     @property
     def native_third_state(self) -> tuple[int, int] | None:
-        """Where the compiled 1-DOF callback (adaptive_mj.sim.native) reads a third state as `measure` does: (the
-        thrust state's address in act, the body's id) on the heave vehicle with its thruster lag; None elsewhere."""
+        """Where the compiled 1-DOF callback (adaptive_mj.plants.one_dof_kernel) reads a third state as `measure`
+        does: (the thrust state's address in act, the body's id) on the heave vehicle with its thruster lag; None
+        elsewhere."""
         return None
 
     def observe(self) -> np.ndarray:
@@ -319,7 +322,7 @@ class MujocoPlant(ModelClock):
 
     @contextlib.contextmanager
     def controlled_natively(self, cfunc) -> Iterator[None]:
-        """Install a compiled (numba cfunc) control callback for the block (see adaptive_mj.sim.native)."""
+        """Install a compiled (numba cfunc) control callback for the block (see adaptive_mj.plants.one_dof_kernel)."""
         with compiled_control(cfunc):
             yield
 

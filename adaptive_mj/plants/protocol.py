@@ -38,7 +38,8 @@ Optional (a plant that names Plant as its base inherits the default in brackets)
                path; a compiled callback says at which step of its chunk); the run, or adaptive_mj.env's episode,
                ends with status "crashed" [None]
   compiled_loop  the module of the plant's compiled closed loop, which gives `supported(plant, law)` and
-               `Controller` (adaptive_mj.sim.native for a MujocoPlant, native_manipulator, native_flight; native_chunk
+               `Controller` (adaptive_mj.sim.native_mujoco for every MuJoCo kind, which declares its
+               `mujoco_kernel`; native_chunk
                for every plants.analytic.AnalyticPlant); adaptive_mj.sim.loop dispatches on it [None: the
                Python path only]
 Optional, read where present (getattr: control_shape below; a plant without them is as in brackets):
@@ -57,7 +58,7 @@ Optional, read where present (getattr: control_shape below; a plant without them
   update_kinematics()  bring what the regressor reads to the current q (a law evaluated outside
                the control callback)
 
-`NativePlant`, a MuJoCo plant a compiled control callback can drive (adaptive_mj.sim.native*):
+`NativePlant`, a MuJoCo plant a compiled control callback can drive (adaptive_mj.sim.native_mujoco):
   model, data  its MjModel and MjData
   native_owner the native controller whose context its MjData points at, or None
   controlled_natively(cfunc)  a context manager: the compiled cfunc is MuJoCo's control callback

@@ -30,7 +30,7 @@ import contextlib
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, ClassVar, Iterator
 
 import mujoco
 import numpy as np
@@ -41,7 +41,8 @@ from adaptive_mj.keys import Key
 from adaptive_mj.laws.kinds import Form
 from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants import events as ev
-from adaptive_mj.plants import plant_keys
+from adaptive_mj.plants import plant_keys, quadrotor_kernel
+from adaptive_mj.plants.mujoco_kernel import MujocoKernel
 from adaptive_mj.plants.airframe import Airframe
 from adaptive_mj.plants.kinds import Draw, PlantKind, ScoreTask, StressPlant, register
 from adaptive_mj.plants.study_spec import LEAK_TIME, Stressor, StudyContext, box_table, surface_noise, theta_table
@@ -226,7 +227,8 @@ class QuadrotorPlant(ModelClock, BodyEdits):
     joint_limits: np.ndarray | None = None
     first_contact: tuple[float, str] | None = None
     native_owner: object | None = None
-    compiled_loop: str | None = "adaptive_mj.sim.native_flight"  # protocol.Plant.compiled_loop
+    compiled_loop: str | None = "adaptive_mj.sim.native_mujoco"  # protocol.Plant.compiled_loop
+    mujoco_kernel: ClassVar[MujocoKernel] = quadrotor_kernel.KERNEL  # its kernel spec (plants/quadrotor_kernel.py)
     disturbance: Callable[[float], float] | None = None  # the protocol's; a quadrotor's are events
 
     def __init__(self, model: mujoco.MjModel, *, where: str = "quadrotor model", crash_tilt: float = CRASH_TILT_DEG):
@@ -320,10 +322,11 @@ class QuadrotorPlant(ModelClock, BodyEdits):
         return new_warnings(self.data, self._warning_total0, self._warnings0)
 
     def crashed(self, text: str, *, airborne: bool) -> None:
-        """The compiled callback found a crash (adaptive_mj.sim.native_flight): termination() says so from now on."""
+        """The compiled callback found a crash (adaptive_mj.plants.quadrotor_kernel): termination() says so from now
+        on."""
         self._crash, self._airborne = text, airborne
 
-    # --- the native path's (adaptive_mj.sim.native_flight) ------------------------------
+    # --- the native path's (adaptive_mj.plants.quadrotor_kernel) ------------------------------
     @contextlib.contextmanager
     def controlled_natively(self, cfunc) -> Iterator[None]:
         with compiled_control(cfunc):

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from adaptive_mj.laws import pseudo_inertia
 from adaptive_mj.trajectory import Trajectory
 
 TAIL_FRACTION = 0.25  # "tail" = the last 25% of the run's duration
@@ -61,7 +62,7 @@ def metrics(traj: Trajectory) -> dict:
         if ident and tail.any():
             spread = body_identification(traj.names, traj.theta_hat[tail], traj.theta[tail])
             for body, e in ident.items():  # the last sample, and the tail's mean [min, max] beside it
-                e["tail"] = {k: _spread(v) for k, v in spread[body].items() if k != "com_undefined"}
+                e["tail"] = {k: _spread(v) for k, v in spread[body].items() if k not in ("com_undefined", "impossible")}
             out["identification"] = ident
     out.update(saturation_metrics(traj))
     return out
@@ -124,11 +125,31 @@ def body_identification(names, estimate, truth) -> dict:
         last_est, last_true = est[-1, 0], true[-1, 0]
         undefined = "" if defined[-1] else (f"undefined (estimated mass {last_est:.3g} kg)" if last_true != 0
                                             else "undefined (true mass 0 kg)")
+        finite = np.all(np.isfinite(est), axis=1)  # a diverged run's last rows: no eigenvalues (its status says why)
+        eig = np.full((len(est), 4), math.nan)
+        if finite.any():  # (N, 4) ascending: the estimate's pseudo-inertia
+            eig[finite] = pseudo_inertia.eigenvalues(est[finite], [0])[..., 0, :]
+        with np.errstate(invalid="ignore"):
+            possible = pseudo_inertia.is_physical(eig[:, 0], np.sum(np.abs(eig), axis=1)) | ~finite
         fig = {"mass_error_percent": mass, "com_error_mm": com_err, "inertia_error": i_err,
-               "inertia_error_relative": i_rel}
+               "inertia_error_relative": i_rel, "pseudo_inertia_min_eigenvalue": eig[:, 0],
+               "not_physical": (~possible).astype(float)}
         out[body] = {k: (v if rows else float(v[0])) for k, v in fig.items()}
         out[body]["com_undefined"] = undefined
+        out[body]["impossible"] = _impossible(est[-1, 0], float(eig[-1, 0]), bool(possible[-1]))
     return out
+
+
+def _impossible(mass: float, lowest: float, possible: bool) -> str:
+    """Why a body's estimate (its last row) is no body at all, or "" (a possible one): a negative mass, or a
+    pseudo-inertia that is not positive semidefinite (no distribution of mass has those ten parameters, e.g. a
+    principal moment above the sum of the other two)."""
+    if mass < 0:
+        return f"a negative mass ({mass:.3g} kg)"
+    if not possible:
+        return (f"its pseudo-inertia is not positive semidefinite (smallest eigenvalue {lowest:.3g}): no distribution "
+                "of mass has these parameters")
+    return ""
 
 
 def saturation_fraction(traj: Trajectory) -> np.ndarray | None:
@@ -195,15 +216,18 @@ def summary(name: str, traj: Trajectory, *, steps: int | None = None) -> dict:
         }
     else:
         last = {"t": 0.0, "q": [], "qd": [], "theta_hat": {}, "theta": {}}
+    m = metrics(traj)
+    impossible = [f"the estimate of body {body} at the end is no possible body: {e['impossible']}"
+                  for body, e in (m.get("identification") or {}).items() if e.get("impossible")]
     return {
         "scenario": name,
         "status": traj.status,
         "reason": traj.reason,
         "duration": steps * dt,
         "steps": steps,
-        "metrics": metrics(traj),
+        "metrics": m,
         "final": last,
-        "warnings": [*traj.meta.get("warnings", ()), *joint_limit_warnings(traj)],
+        "warnings": [*traj.meta.get("warnings", ()), *joint_limit_warnings(traj), *impossible],
     }
 
 

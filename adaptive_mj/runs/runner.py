@@ -5,9 +5,9 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
+import logging
 import os
 import platform
-import sys
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -20,6 +20,7 @@ from adaptive_mj.plants import ModelSource
 from adaptive_mj.plants.mujoco_plant import reusing_run_data
 from adaptive_mj.setup.build import Setup, build
 from adaptive_mj.errors import AdaptiveMJError, Interrupted, PreflightRefused, ScenarioError
+from adaptive_mj.notes import say
 from adaptive_mj.sim.loop import limits_meta, plant_order, run
 from adaptive_mj.sim.stage import ControlTiming
 from adaptive_mj.report.metrics import clean_json, summary as make_summary
@@ -261,6 +262,32 @@ def settle_batch(starts: Sequence[Started], exc: BaseException) -> list[RunResul
     return out
 
 
+def identification_of(setup: Setup, traj: Trajectory) -> dict | None:
+    """What the run identified (report.identification), or None for a run that estimates nothing: each
+    parameter's final relative error against its truth, and, where the plant (`regressor_rows`: the manipulators)
+    or the law's model form gives the regressor, which parameters the reference does not excite over the tail."""
+    from adaptive_mj.form import ModelForm
+    from adaptive_mj.report import identification as ident
+    from adaptive_mj.report.metrics import tail_mask
+    from adaptive_mj.setup.success import reference_rows
+
+    if not len(traj) or not traj.names:
+        return None
+    tail = traj.t[tail_mask(traj)]
+    rows = None
+    if len(tail):
+        ts = ident.tail_times(float(tail[0]), float(tail[-1]))
+        plant, form = setup.plant, getattr(setup.law, "form", None)
+        by_plant = getattr(plant, "regressor_rows", None)
+        if by_plant is not None and tuple(getattr(plant, "names", ())) == tuple(traj.names):
+            r = reference_rows(setup.reference, ts, 2)  # (3, N, m): q_d, q̇_d, q̈_d
+            rows = by_plant(r[0], r[1], r[2])
+        elif isinstance(form, ModelForm) and tuple(form.names) == tuple(traj.names):
+            r = reference_rows(setup.reference, ts, form.order)  # (n+1, N, 1)
+            rows = ident.form_rows(form, r[:, :, 0].T)
+    return ident.identification(traj.names, traj.theta_hat[-1], traj.theta[-1], rows)
+
+
 @dataclass
 class Started:
     """One run built, checked and its log opened (runner.start), waiting for its trajectory."""
@@ -279,6 +306,9 @@ class Started:
         try:
             with deferred():  # a stop signal during the verdict waits until the log is closed with it
                 traj, result = verdict(self.scn, traj, self.crit, self.pre)
+                ident = identification_of(self.setup, traj)
+                if ident is not None:
+                    result["identification"] = clean_json(ident)
                 if self.recorder is not None:
                     self.recorder.close(traj.status, traj.reason, result)
         finally:
@@ -309,6 +339,8 @@ class Started:
             self.recorder.close(Status.FAILED, f"{type(exc).__name__}: {exc}", {})
 
 
+
+
 def start(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | None = None,
           single: bool = False, label: str = "") -> Started:
     """Build `scn`, say its notes, check it before flight and open its log (see execute). The plant may
@@ -319,7 +351,7 @@ def start(scn: Scenario, *, log_path: Path | None = None, source: ModelSource | 
     plant = setup.plant
     where = f"{scn.source} ({label})" if label else str(scn.source)
     for note in setup.notes:  # model edits the scenario asked for: said on the terminal and kept in the log
-        print(f"{where}: note: {note}", file=sys.stderr)
+        say(f"{where}: note: {note}")
     timing = control_timing(scn, setup)
     pre = preflight_of(scn, setup, timing, where=where)
     crit = criteria(scn, setup.reference, plant_order(plant), tuple(setup.law.names))
@@ -351,11 +383,11 @@ def preflight_of(scn: Scenario, setup: Setup, timing: ControlTiming, *, where: s
     if scn.success.preflight == "record":  # a study's run: judged by its outcome, the check in its summary
         return pre
     for line in pre.outside + pre.plant_lines:
-        print(f"{where}: warning: {line}", file=sys.stderr)
+        say(f"{where}: warning: {line}", logging.WARNING)
     for failed in ([pre.line()] if not pre.ok else []) + [line for line in (pre.gravity, pre.following) if line]:
         if scn.success.preflight == "refuse":
             raise PreflightRefused(f"{where}: refused (success.preflight = 'refuse'): {failed}")
-        print(f"{where}: warning: {failed}", file=sys.stderr)
+        say(f"{where}: warning: {failed}", logging.WARNING)
     return pre
 
 

@@ -120,7 +120,8 @@ def build(scn: Scenario, *, source: ModelSource | None = None) -> Setup:
     rng = np.random.default_rng(scn.noise.seed)
     return Setup(plant=plant, law=law, reference=reference, theta_hat0=theta_hat0, noise_std=std,
                  rng=rng, events=[_event(e, scn, source) for e in scn.events], source=source,
-                 model_xml=built.model_xml, notes=built.notes, sensors=sensors)
+                 model_xml=built.model_xml, sensors=sensors,
+                 notes=(*built.notes, *([scn.simulation.integrator_note] if scn.simulation.integrator_note else [])))
 
 
 def row_bytes(plant: Plant, law: Law) -> int:

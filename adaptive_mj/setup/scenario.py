@@ -375,7 +375,14 @@ def _simulation(t: _Table, plant: PlantSpec, order: int) -> SimulationSpec:
 
     kind = plant_kinds.lookup(plant.kind)
     allowed = INTEGRATORS if plant.backend == "mujoco" else ("rk4", "euler")
-    integrator = t.string("integrator", "rk4", choices=allowed)
+    own = model_integrator(plant.model) if plant.backend == "mujoco" and plant.model is not None else None
+    integrator = t.string("integrator", own or "rk4", choices=allowed)
+    note = ""
+    if own is not None and integrator != own:
+        note = f"simulation.integrator = {integrator!r} replaces the model's own {own!r}"
+    elif own is not None and "integrator" not in t.data and own != "rk4":
+        note = (f"simulation.integrator: the model's own {own!r} (the scenario names none; without one in the "
+                "model: 'rk4')")
     default_dt = (kind.default_timestep if kind is not None else 0.001) if plant.model is None else None
     timestep = t.number("timestep", default_dt, gt=0)
     duration = t.number("duration", gt=0)
@@ -397,7 +404,34 @@ def _simulation(t: _Table, plant: PlantSpec, order: int) -> SimulationSpec:
     python_callback = t.boolean("python_callback", False)
     t.finish()
     return SimulationSpec(integrator=integrator, timestep=timestep, duration=duration, initial_state=x0,
-                          state_bound=bound, control_delay=delay, python_callback=python_callback)
+                          state_bound=bound, control_delay=delay, python_callback=python_callback,
+                          integrator_note=note)
+
+
+_OPTION_INTEGRATOR = re.compile(r"<option\b[^>]*?\bintegrator\s*=\s*[\"']([A-Za-z0-9]+)[\"']", re.IGNORECASE)
+
+
+def model_integrator(model: Path | str) -> str | None:
+    """The integrator the MJCF file `model` declares in its <option> (as simulation.integrator names it: "rk4",
+    "euler", "implicit", "implicitfast"), or None where it declares none (MuJoCo's default, Euler, is then not
+    taken: the scenario's default "rk4" is) or cannot be read. Read once per file version."""
+    path = Path(model)
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return _declared_integrator(str(path), (st.st_mtime_ns, st.st_size))
+
+
+@functools.lru_cache(maxsize=64)
+def _declared_integrator(path: str, stamp: tuple[int, int]) -> str | None:
+    try:
+        text = Path(path).read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return None
+    found = _OPTION_INTEGRATOR.search(text)
+    name = found.group(1).lower() if found else None
+    return name if name in INTEGRATORS else None
 
 
 def _control(t: _Table, sim: SimulationSpec) -> ControlSpec:
@@ -425,7 +459,8 @@ def _success(t: _Table) -> SuccessSpec:
                        tail_floor=t.number("tail_floor", d.tail_floor, gt=0),
                        param_error=param_error,
                        saturation=t.number("saturation", d.saturation, ge=0),
-                       preflight=t.string("preflight", d.preflight, choices=PREFLIGHT_ACTIONS))
+                       preflight=t.string("preflight", d.preflight, choices=PREFLIGHT_ACTIONS),
+                       physical=t.boolean("physical", d.physical))
     if spec.saturation > 1:
         raise t.fail("saturation", "a fraction of the run's time in [0, 1]", spec.saturation)
     t.finish()

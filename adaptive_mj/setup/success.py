@@ -32,11 +32,12 @@ class Criteria:
     tail_rule: str
     param_error: dict[str, float] = field(default_factory=dict)
     saturation: float = 1.0
+    physical: bool = False
 
     def describe(self) -> dict:
         """The criteria as JSON-ready data (the summary's "success")."""
         return {"tail_rms": list(self.tail_rms), "tail_rule": self.tail_rule,
-                "param_error": dict(self.param_error), "saturation": self.saturation}
+                "param_error": dict(self.param_error), "saturation": self.saturation, "physical": self.physical}
 
 
 def reference_rows(reference, ts: np.ndarray, order: int) -> np.ndarray:
@@ -117,7 +118,8 @@ def criteria(scn: Scenario, reference, order: int, param_names: tuple[str, ...])
         params = {n: float(spec.param_error) for n in param_names}
     else:
         params = {}
-    return Criteria(tail_rms=tail, tail_rule=rule, param_error=params, saturation=spec.saturation)
+    return Criteria(tail_rms=tail, tail_rule=rule, param_error=params, saturation=spec.saturation,
+                    physical=spec.physical)
 
 
 def _relative_error(estimate: float | None, truth: float | None) -> float:
@@ -151,6 +153,11 @@ def judge(summary: dict, c: Criteria, *, unit: str = "") -> list[str]:
             where = f" on {joint}" if joint else ""
             missed.append(f"time at the actuator limit{where} {100 * frac:.3g} % > {100 * c.saturation:.3g} % "
                           "(success.saturation)")
+    if c.physical:
+        for body, e in (m.get("identification") or {}).items():
+            if e.get("impossible"):
+                missed.append(f"the final estimate of body {body} is no possible body: {e['impossible']} "
+                              "(success.physical)")
     return missed
 
 

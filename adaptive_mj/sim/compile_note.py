@@ -36,9 +36,10 @@ PREFIX = "adaptive-mj: "
 
 #: [s of CPU] a cold compile of each kind, measured (`adaptive-mj warmup --quick --jobs 2` with an empty cache,
 #: numba 0.68.1, 2026-12-07; the MuJoCo callbacks and the projection re-measured variant by variant after issue 51's
-#: item 4, bullet 1; docs/PERFORMANCE.md): the figure said where this machine has none of its own yet
+#: item 4, bullet 1, the analytic chunks after analytic_step compiled the control stage once, at load 8-12;
+#: docs/PERFORMANCE.md): the figure said where this machine has none of its own yet
 TYPICAL_CPU: dict[str, float] = {"1-DOF callback": 7.5, "arm callback": 24.0, "quadrotor callback": 12.5,
-                                 "projection": 3.5, "linear MRAC chunk": 17.0, "twin chunk": 20.0}
+                                 "projection": 3.5, "linear MRAC chunk": 10.0, "twin chunk": 12.0}
 
 #: what this process compiled: (what, seconds), in order (adaptive_mj.study.warmup reports them)
 COMPILED: list[tuple[str, float]] = []
@@ -415,7 +416,7 @@ def fallback_line(name: str, exc: BaseException) -> str:
 
 
 def plugin_compiled(build: Callable[[], Any], plugin_fns: tuple[Callable, ...], key: int):
-    """build() (a callback variant's compile, native.compiled's and native_manipulator.compiled's) as it is where
+    """build() (a callback variant's compile, sim.native_mujoco.compiled's) as it is where
     no law plugin is compiled in (plugin_fns empty). With one, numba's error becomes PluginNotCompiled, naming the
     plugin's file and line and numba's reason, and is remembered under the variant's key (its cache key, key: it
     hashes the plugin's source and numba's version), so that a later run raises it at once instead of compiling

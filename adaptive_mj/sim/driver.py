@@ -6,7 +6,7 @@
 `chunks` is that order as a generator: it yields each chunk's step count n and waits until the plant has stepped
 n physics steps; it returns (status, reason). Who steps the plant differs, nothing else does:
   - `Drive` steps it through the chunk's own `Steps` (`Steps.advance`): a compiled callback over n steps
-    (adaptive_mj.sim.native*, their ContextOwner), an analytic plant's compiled loop, or the Python path, a chunk
+    (adaptive_mj.sim.native_mujoco, a ContextOwner), an analytic plant's compiled loop, or the Python path, a chunk
     of one step (`PythonSteps`: the law in the Python control callback, adaptive_mj.sim.loop.Controller);
     loop.run drives a run to its end with it, adaptive_mj.env one physics step at a time (the agent's held
     control is `AgentSteps`);

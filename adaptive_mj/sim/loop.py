@@ -1,6 +1,7 @@
 """The closed loop: one definition of a control step, driven on the Python path (the policy inside
 MuJoCo's control callback, or an analytic twin's stages), on the native path (a compiled
-callback, adaptive_mj.sim.native / native_manipulator / native_flight; for an analytic plant, a compiled chunk of
+callback, adaptive_mj.sim.native_mujoco, built from the kind's kernel spec (plants.one_dof_kernel,
+manipulator_kernel, quadrotor_kernel); for an analytic plant, a compiled chunk of
 the plant's own steps, adaptive_mj.sim.native_chunk, built from the kernel its kind declares: the linear plant
 under MRAC's Lyapunov rule, the analytic twin and the process tank under the first-order or a sliding law) and by
 adaptive_mj.env; each plant names its compiled loop (protocol.Plant.compiled_loop). The
@@ -34,7 +35,8 @@ has every stage estimate and every θ̂_{k+1} clipped into its box. A law with f
 ``law.step_ends(xs, us, weights, h)``) is reset when the controller is made, told the measured state
 at each step's start, and given the stage states, stage controls and RK4 weights of each step once it
 is done (continuous control only); on the native path the 1-DOF callback runs the composite law's filters
-itself (adaptive_mj.sim.native, laws.composite), the quadrotor's L1 filters likewise (native_flight).
+itself (adaptive_mj.plants.one_dof_kernel, laws.composite), the quadrotor's L1 filters likewise
+(plants.quadrotor_kernel).
 """
 from __future__ import annotations
 
@@ -68,7 +70,7 @@ __all__ = ["Event", "ControlTiming", "Controller", "Sink", "run", "prepare", "Pr
 
 class StepContext:
     """The Python path's context for stage.control_stage: the fields a compiled callback's context record has
-    (adaptive_mj.sim.native.CONTEXT, native_manipulator.CONTEXT), as attributes, its buffers as arrays.
+    (the kinds' CONTEXT: plants.one_dof_kernel, plants.manipulator_kernel), as attributes, its buffers as arrays.
     theta (n_theta,): the estimate at the step's start, advanced in place at each step's end (or control
     period's); u_hold (m,): the law's clamped control, held; rows: the steps armed so far (Controller.arm)."""
 

@@ -10,7 +10,8 @@ compiled with the kind's rate and observation and, as its control at each stage,
 .control_stage (the order of a control step, the one the Python controller, loop.Controller, runs) with this
 module's pieces: `_law_stage` (the observation + the step's noise, the stage estimate, the law, u clamped and held
 with s), `_apply_control` (u handed back to the step) and `_record_row` (the step's row, in the record layout of
-sim.native.record_columns: one writer here, one reader, sim.native.recorded_rows). loop.native_steps drives it
+plants.mujoco_kernel.record_columns, the one row layout of every compiled loop: one writer here, one reader,
+sim.native_step.recorded_rows). loop.native_steps drives it
 chunk by chunk like the MuJoCo callbacks (events, noise, divergence and rows between chunks), the plant's
 step_native(n) calling this controller's `advance`.
 
@@ -45,12 +46,12 @@ from adaptive_mj.laws.kernel import LawKernel, f64
 from adaptive_mj.laws.protocol import Law
 from adaptive_mj.plants import plant_order
 from adaptive_mj.plants.analytic import AnalyticKernel, AnalyticPlant, analytic_step, clamp
+from adaptive_mj.plants.mujoco_kernel import RowShapes, gains_record, record_columns
 from adaptive_mj.plants.protocol import Plant
 from adaptive_mj.sim import native_step
 from adaptive_mj.sim import stage as stage_code
-from adaptive_mj.sim.native import gains_record, record_columns, recorded_rows
 from adaptive_mj.sim.native_context import ContextOwner, addr, inlined, source_key, unique_factory
-from adaptive_mj.sim.native_step import view
+from adaptive_mj.sim.native_step import recorded_rows, view
 from adaptive_mj.sim.stage import control_stage, stage_estimate
 
 _i8, _f8 = np.int64, np.float64
@@ -97,9 +98,9 @@ def _apply_control(ctx, io, row, u):
 
 
 def _record_row(ctx, io, row, u, theta):
-    """The step's row at stage 0 in the record buffer's named columns (native.record_columns): t, the observation
-    at the step's start (io[0], before noise), the applied u, the held s, the reference at t_k and θ̂ at the step's
-    start."""
+    """The step's row at stage 0 in the record buffer's named columns (plants.mujoco_kernel.record_columns): t, the
+    observation at the step's start (io[0], before noise), the applied u, the held s, the reference at t_k and θ̂ at
+    the step's start."""
     n, nth = ctx.n, ctx.nth
     col = record_columns(n, nth)
     rec = view(ctx.rec, (row + 1) * col.width)
@@ -261,6 +262,7 @@ class ChunkController(ContextOwner):
         n, nth, nst = plant_order(plant), len(law.names), plant.stages
         self.n, self.nth, self.nst = n, nth, nst
         self.columns = record_columns(n, nth)
+        self.shapes = RowShapes((n,), (), (), (n + 1,), nth)
         self.gains = gains_record(lk.gains, lk.dtype)
         self.buffers = {
             "theta": f64(np.array(theta_hat0, dtype=float).reshape(nth)), "rsum": np.zeros(nth),
@@ -319,7 +321,7 @@ class ChunkController(ContextOwner):
         """The rows recorded over the `rows` steps just taken: t (rows,) [s], x (rows, n) the observation at each
         step's start, u (rows,) applied, s (rows,), ref (rows, n+1), theta_hat (rows, n_theta) at each step's
         start."""
-        return recorded_rows(self.context[0], self.buffers["rec"], self.columns, self.n, rows, partial,
+        return recorded_rows(self.context[0], self.buffers["rec"], self.columns, self.shapes, rows, partial,
                              f"the analytic chunk engine ({self.kernel.name})")
 
     def chunk(self, rows: int, noise: np.ndarray | None) -> tuple[np.ndarray, ...]:

@@ -172,7 +172,8 @@ class ContextOwner:
         return int(c["row"]) + (1 if int(c["stage"]) != 0 else 0)
 
     def crash(self) -> tuple[int, str] | None:
-        """(rows to keep, reason) where the plant crashed in the chunk just stepped (native_flight), else None."""
+        """(rows to keep, reason) where the plant crashed in the chunk just stepped (plants.quadrotor_kernel), else
+        None."""
         return None
 
     def end_of_chunk(self) -> None:

@@ -1,5 +1,5 @@
-"""The compiled control callback of both native paths (the 1-DOF plants: adaptive_mj.sim.native; the
-multi-joint arms: adaptive_mj.sim.native_manipulator): MuJoCo calls it at every stage of its integrator, and it
+"""The compiled control callback of every MuJoCo plant kind (built from the kind's kernel spec by the generic
+controller, adaptive_mj.sim.native_mujoco): MuJoCo calls it at every stage of its integrator, and it
 runs adaptive_mj.sim.stage.control_stage, the one definition of a control step's order that the Python path
 (adaptive_mj.sim.loop.Controller) runs too, compiled with the plant shape's pieces:
     law_stage      measure x (+ noise), the stage estimate, the law, u clamped and held: the shape's own (a
@@ -58,6 +58,28 @@ def context_dtype(own: list) -> np.dtype:
     if clash:
         raise ValueError(f"context fields {clash} are STAGE_CONTEXT's already")
     return np.dtype(STAGE_CONTEXT + list(own))
+
+
+def recorded_rows(context, rec: np.ndarray, col, shapes, rows: int, partial: bool,
+                  what: str) -> tuple[np.ndarray, ...]:
+    """The rows a compiled loop recorded over the `rows` steps just taken, in the one row layout
+    (plants.mujoco_kernel.row_columns: every MuJoCo kind's callback and the analytic chunk engine, sim.native_chunk),
+    copied out of its record buffer `rec` (flat, float64; col: its RecordColumns): t (rows,) [s], x (rows, *shapes.x)
+    the true state at each step's start, u (rows, *shapes.u) applied, s (rows, *shapes.s), ref (rows, *shapes.ref),
+    theta_hat (rows, n_theta) at each step's start (shapes: plants.mujoco_kernel.RowShapes). context: the run's
+    context record, whose row and stage must say the loop took exactly `rows` whole steps (unless partial: the
+    first `rows` of a chunk cut short, ContextOwner.rows_recorded); what: the loop's name in the error otherwise."""
+    if not partial and (int(context["row"]) != rows or int(context["stage"]) != 0):
+        raise RuntimeError(f"{what} ran {int(context['row'])} steps (stage {int(context['stage'])}), expected {rows}")
+    r = rec[: rows * col.width].reshape(rows, col.width)
+
+    def take(first: int, shape: tuple) -> np.ndarray:
+        if shape == ():
+            return r[:, first].copy()
+        return r[:, first:first + int(np.prod(shape, dtype=np.int64))].reshape((rows,) + tuple(shape)).copy()
+
+    return (r[:, col.t].copy(), take(col.x, shapes.x), take(col.u, shapes.u), take(col.s, shapes.s),
+            take(col.ref, shapes.ref), r[:, col.theta:col.extra].copy())
 
 
 #: the stage functions (adaptive_mj.sim.stage) compiled into every callback and its pieces

@@ -154,8 +154,12 @@ def _arm_check(plant: JointPlant, feedback: JointFeedback, q: np.ndarray, h: flo
     target = 0.9 * limit / h - float(feedback.lam.max())
     if target > 0:
         table = _kd_within(M, feedback.kd, target)
-        fixes.append("law.kd = {" + ", ".join(f"{plant.joint_names[i]} = {k:.3g}" for i, k in sorted(table.items()))
-                     + "} (the other joints as they are)")
+        kd = np.broadcast_to(np.asarray(feedback.kd, dtype=float), (len(plant.joint_names),))
+        # every joint, so that it pastes as --set law.kd={...} (a table must name each joint): the lowered ones
+        # and the others at their present gain
+        fixes.append("law.kd = {" + ", ".join(f"{name} = {table.get(i, kd[i]):.4g}"
+                                              for i, name in enumerate(plant.joint_names)) + "}"
+                     + (" (lowered: " + ", ".join(plant.joint_names[i] for i in sorted(table)) + ")" if table else ""))
     fixes.append(f"a timestep or control.period <= {0.9 * limit / rate:.3g} s")
     armature = _armature_within(M, feedback.kd, target) if target > 0 else {}
     if armature:
@@ -267,7 +271,9 @@ def gravity_line(plant: Plant, reference, duration: float, order: int) -> str:
             f"(q_d = {q[i, j]:.4g}), past its actuator's limit [{lo[j]:.4g}, {hi[j]:.4g}]{unit}"
             + (" (N on a slide joint)" if plant.joint_names else "")
             + (f", and {others} other joint(s) short" if others > 0 else "")
-            + ": no law can follow this reference (is a mass too large, e.g. plant.payload_mass in grams as kg?)")
+            + ": no law can hold the arm still there, and where the reference dwells the run saturates (a pre-flight"
+            " figure from the model at t = 0, not the run's verdict; is a mass too large, e.g. plant.payload_mass in"
+            " grams as kg?)")
 
 
 def _attitude_check(plant: Plant, feedback: AirframeFeedback, h: float, limit: float) -> dict:

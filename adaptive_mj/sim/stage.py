@@ -1,6 +1,6 @@
 """The pieces of one control step that run at every call of the control callback, as plain
 array code: the Python controller (adaptive_mj.sim.loop) calls them as they are, and the
-compiled callbacks (adaptive_mj.sim.native, adaptive_mj.sim.native_manipulator) call the same
+compiled callbacks (adaptive_mj.sim.native_mujoco from the kinds' kernels) call the same
 functions compiled by numba. Nothing here imports mujoco or numba.
 
 Continuous control (``control.mode = "continuous"``, the lecture's): the law is evaluated at
@@ -124,7 +124,7 @@ def end_stage(ctx, stage, theta, rsum, lower, upper, sampled):
     """A compiled callback's stage is done: the next stage, or at the end of the physics step the estimates
     advanced once (continuous control: every step, by h; sampled-data control: at the end of each control
     period, by the period) and the run's row, step and time moved on. ctx: either callback's context record
-    (adaptive_mj.sim.native.CONTEXT, native_manipulator.CONTEXT: the fields stage, row, step, t, h, period,
+    (the kinds' CONTEXT: plants.one_dof_kernel, plants.manipulator_kernel: the fields stage, row, step, t, h, period,
     period_steps, nstages are the same in both); stage: the stage just evaluated; theta, rsum, lower, upper
     (n_theta,). The one definition of the step's end for both compiled callbacks."""
     stage += 1

@@ -15,7 +15,7 @@ result (Study.exit_code 1), not an exception.
 
 Every argument after the scenario is keyword-only. `backend`: "local" (worker processes on this
 machine, `jobs` of them, default every core; engine "batch": mujoco.batch in this process) or "ray"
-(`address`, `ray_logs`, `retries`: see README "Studies that outgrow one machine").
+(`address`, `ray_logs`, `retries`: see docs/GUIDE.md "Studies that outgrow one machine").
 """
 from __future__ import annotations
 
@@ -257,9 +257,12 @@ def bench(*, quick: bool = False, scenarios: Sequence[str | Path] = (), out: str
           backend: str | Backend = "local", jobs: int | None = None, address: str | None = None,
           ray_logs: str = "bytes", retries: int = 3, engine: str = "process", law: str | None = None,
           gains: str | Path | None = None, set: Overrides = (),  # noqa: A002
-          full_logs: bool = False, only: str | Sequence[str] | None = None) -> Study:
-    """The benchmark catalogue (`adaptive-mj bench`): quick: shorter runs, no breaking-point study; full_logs: the
-    breaking-point study's runs log every row (default: their summary and a row per second);
+          full_logs: bool = False, only: str | Sequence[str] | None = None,
+          results: str | Path | None = None) -> Study:
+    """The benchmark catalogue (`adaptive-mj bench`): results: a file to write the measured-results page to
+    (docs/RESULTS.md in the repository; bench.results_page, also `results.md` in the output folder); quick:
+    shorter runs, no breaking-point study; full_logs: the breaking-point study's runs log every row (default: their
+    summary and a row per second);
     scenarios: your own scenario files (or bundled names), each in a section of its own; law: a law kind
     (built in or a plugin, its keys per plant kind in `gains` and `set`) scored against the baselines in a
     section of its own (score's quick suite) and added to the breaking-point study; only: the catalogue's
@@ -282,7 +285,8 @@ def bench(*, quick: bool = False, scenarios: Sequence[str | Path] = (), out: str
     paths = [scenario_path(p) for p in ([scenarios] if isinstance(scenarios, (str, Path)) else scenarios)]
     return run_bench(quick=bool(quick), scenarios=paths, out=None if out is None else Path(out), backend=backend_,
                      law=law, gains=None if gains is None else Path(gains), sets=tuple(sets),
-                     full_logs=bool(full_logs), only=None if keys is None else tuple(dict.fromkeys(keys)))
+                     full_logs=bool(full_logs), only=None if keys is None else tuple(dict.fromkeys(keys)),
+                     results=None if results is None else Path(results))
 
 
 def run_scenario(scenario: str | Path, *, set: Overrides = (), seed: int | None = None,  # noqa: A002

@@ -30,12 +30,21 @@ def _fmt(v, spec=".3g") -> str:
 
 def status_text(r: dict) -> str:
     """A row's status as the tables show it: "(unexpected)" after a run that did not end as declared
-    (RunSpec.expect), "(as meant)" after a demonstration that failed as it was meant to."""
+    (RunSpec.expect), "(as meant)" after a demonstration that failed as it was meant to, "(measured)" after a
+    measured run that is not ok (a baseline, a sweep point or a margin probe: its verdict is the result). A plain
+    status is an ok run meant to be ok, so no failure in the table goes unexplained (STATUS_LEGEND)."""
     if r.get("as_expected") is False:
         return f"{r['status']} (unexpected)"
     if r.get("as_expected") and r["status"] != Status.OK:
         return f"{r['status']} (as meant)"
+    if r.get("expect") == "measured" and r["status"] != Status.OK:
+        return f"{r['status']} (measured)"
     return str(r["status"])
+
+
+#: what status_text's marks mean, printed under the terminal's table
+STATUS_LEGEND = ("(as meant): a demonstration of a failure mode, declared to fail; (measured): a baseline, sweep "
+                 "point or margin probe whose verdict is the result; (unexpected): did not end as declared")
 
 
 def main_table(rows: list[dict]) -> Table:
@@ -70,7 +79,7 @@ def section_keys() -> list[str]:
 
 def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str | None = None,
               gains: Path | None = None, sets: tuple[str, ...] = (), full_logs: bool = False,
-              only: tuple[str, ...] | None = None) -> Study:
+              only: tuple[str, ...] | None = None, results: Path | None = None) -> Study:
     """The bench with options adaptive_mj.study.api.bench has checked: the catalogue (quick: shorter runs,
     no breaking-point study) and a section for the user's scenario files, written to `out`. law: a law kind
     (built in or a plugin) with its `gains` file and --set keys, scored against the baselines in a section of
@@ -78,7 +87,8 @@ def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str |
     breaking-point study's laws on the plants it serves. full_logs: the breaking-point study's runs log every row
     (default: their summary and a row per second, job.SUMMARY_LOG_RATE_HZ, as do the quadrotor margin grid's; the
     catalogue's other runs log in full). only: the keys of the sections to run (section_keys(); BREAKING_POINTS: the
-    full bench's study), None for all of them."""
+    full bench's study), None for all of them. results: a file to write the measured results page to (results_page;
+    `results.md` in `out` is written in any case)."""
     from adaptive_mj.study.bench_catalogue import catalogue
 
     from adaptive_mj.runs.runner import new_output_dir
@@ -106,7 +116,7 @@ def run_bench(*, quick: bool, scenarios: list, out, backend: Backend, law: str |
         sections.append(user_section(list(scenarios), out / "logs"))
     jobs = [job for s in sections for job in s.jobs]
     with session(backend):
-        return _bench(quick, out, sections, jobs, backend, scoring, full_logs, only)
+        return _bench(quick, out, sections, jobs, backend, scoring, full_logs, only, results)
 
 
 def _number(title: str) -> float:
@@ -148,13 +158,68 @@ def expectation_text(results: list[RunOutcome]) -> str:
                    f"margin probes: {sum(r.status == Status.OK for r in measured)} of them ok).")
 
 
+def _git_commit() -> str:
+    """The repository's commit the bench ran from (short hash, "+dirty" with local changes), or "" outside a git
+    checkout (an installed wheel)."""
+    import subprocess
+
+    here = Path(__file__).resolve().parent
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here, capture_output=True, text=True,
+                              timeout=10)
+        if head.returncode != 0:
+            return ""
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+                               capture_output=True, text=True, timeout=10)
+        return head.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
+    except (OSError, subprocess.SubprocessError):
+        return ""
+
+
+def results_page(rows: list[dict], results: list[RunOutcome], *, quick: bool, elapsed: float, n_runs: int,
+                 where: str) -> str:
+    """docs/RESULTS.md as the bench writes it from its own run (`results.md` in its folder; `bench --results FILE`
+    copies it): when and on what it ran, the headline (how many runs ended as declared), then per section its main
+    table's rows (status, tail RMS error with its unit, the key result): every number measured in that run, none
+    typed by hand."""
+    import datetime
+    import platform
+
+    import mujoco
+
+    from adaptive_mj import __version__
+
+    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    commit = _git_commit()
+    lines = ["# Measured results", "",
+             f"Written by `adaptive-mj bench{' --quick' if quick else ''} --results docs/RESULTS.md` on {now}: "
+             f"adaptive-mj {__version__}" + (f" (commit {commit})" if commit else "") + f", mujoco "
+             f"{mujoco.__version__}, Python {platform.python_version()}, {where}; {n_runs} runs in {elapsed:.0f} s "
+             "wall time. Every figure below was measured in that run; the bench's report (`report.md`, "
+             "`report.html`, beside this page's copy in its folder) has each section's analysis and figures. Run "
+             "the same command to measure them on your machine.", "",
+             expectation_text(results).replace("**", ""), "",
+             f"Status marks: {STATUS_LEGEND}. Tail: the last {100 * TAIL_FRACTION:g} % of a run (docs/METRICS.md).",
+             ""]
+    sections = list(dict.fromkeys(r["section"] for r in rows))
+    for section in sections:
+        lines += [f"## {section}", "", "| run | status | tail RMS error | key result |", "|---|---|---|---|"]
+        for r in (r for r in rows if r["section"] == section):
+            unit = r.get("y_unit", "")
+            tail = _fmt(r.get("tail")) + (f" {unit}" if r.get("tail") is not None and unit and unit != "-" else "")
+            key = str(r.get("key", "")).replace("|", "\\|").replace("\n", " ")
+            lines.append(f"| {r['run']} | {status_text(r)} | {tail} | {key} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
 def _disk_mb(folder: Path) -> float:
     """[MB] what the files under `folder` take (10⁶ bytes)."""
     return sum(f.stat().st_size for f in folder.rglob("*") if f.is_file()) / 1e6 if folder.exists() else 0.0
 
 
 def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = None, full_logs: bool = False,
-           only: tuple[str, ...] | None = None) -> Study:
+           only: tuple[str, ...] | None = None, results_file: Path | None = None) -> Study:
     t0 = time.perf_counter()
     study = not quick and (only is None or BREAKING_POINTS in only)  # the breaking-point study: the full bench's
     results = run_jobs(jobs, backend=backend, on_done=progress_printer(len(jobs)))
@@ -243,7 +308,12 @@ def _bench(quick: bool, out, sections, jobs, backend, scoring: dict | None = Non
                            "error": r.error, "summary": r.summary, "extras": r.extras}
                for r in results}
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=_json_default), encoding="utf-8")
-    text = (main_table(rows).to_text(left=TEXT_LEFT, rule=True)
+    page = results_page(rows, results, quick=quick, elapsed=elapsed, n_runs=n_runs, where=_where(backend))
+    (out / "results.md").write_text(page, encoding="utf-8")
+    if results_file is not None:  # `bench --results docs/RESULTS.md`: the measured results the docs link to
+        Path(results_file).write_text(page, encoding="utf-8")
+    text = (main_table(rows).to_text(left=TEXT_LEFT, rule=True) + f"\n{STATUS_LEGEND}\n\n"
+            + expectation_text(results).replace("**", "")
             + f"\n\nreport: {out / 'report.md'}  ({n_runs} runs, {elapsed:.1f} s)\nhtml: {out / 'report.html'}")
     return Study("bench", out, 0 if not failed else 1, out / "report.md", out / "report.html", text,
                  info={"runs": n_runs, "seconds": elapsed}, load_rows=lambda: rows,

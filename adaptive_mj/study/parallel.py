@@ -40,7 +40,7 @@ from typing import Callable, Generator, Iterator, Sequence, cast
 from adaptive_mj.sim import interrupt
 from adaptive_mj.errors import Interrupted
 # RunSpec, RunOutcome and Backend are imported from here by the study's commands, tests and benchmarks
-from adaptive_mj.study.job import (Backend, RunSpec, RunOutcome, interrupted_note, run_in_worker, run_job,
+from adaptive_mj.study.job import (Backend, RunSpec, RunOutcome, as_expected, interrupted_note, run_in_worker, run_job,
                                    run_jobs_batched)
 from adaptive_mj.trajectory import Status
 
@@ -431,7 +431,8 @@ class Progress:
         self.stream = stream or sys.stderr
         self.clock = clock or time.monotonic
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.n = self.failed = self.n_retried = 0
+        self.n = self.failed = self.n_retried = self.unexpected = 0
+        self.declared = False  # some run declared it is meant to fail or is a measurement (the bench's catalogue)
         self.t0 = self.last = self.clock()
         self._bar = None
         if self.tty:
@@ -444,11 +445,20 @@ class Progress:
         return f"{self.n}/{self.total} {self.label} done{self._extra()}, {rate:.1f}/min"
 
     def _extra(self) -> str:
-        return "".join(f", {k} {v}" for k, v in (("failed", self.failed), ("retried", self.n_retried)) if v)
+        """", failed N, retried M"; where runs declare what they are for (RunSpec.expect: the bench), the runs not
+        ok are not all failures: ", not ok N (U unexpected)"."""
+        if self.declared:
+            counts = (("not ok", f"{self.failed} ({self.unexpected} unexpected)" if self.failed else 0),
+                      ("retried", self.n_retried))
+        else:
+            counts = (("failed", self.failed), ("retried", self.n_retried))
+        return "".join(f", {k} {v}" for k, v in counts if v)
 
     def __call__(self, result: RunOutcome) -> None:
         self.n += 1
         self.failed += result.status != Status.OK
+        self.declared = self.declared or result.job.expect != "ok"
+        self.unexpected += as_expected(result) is False
         now = self.clock()
         last = f"last: {result.job.tag or result.job.scenario.stem} ({result.status})"
         if self._bar is not None:

@@ -279,6 +279,36 @@ def _cell(margin: Margin) -> str:
     return margin_text(margin) + ("<br>" + ", ".join(extra) if extra else "")
 
 
+def unseparated_text(margins: Sequence[Margin], *, steps: int) -> str:
+    """One sentence naming, per plant and stressor, the laws this study's resolution cannot tell apart: two or more
+    laws whose searches ended in the same bracket (margin, next failing value) with a gap left open (a bracket
+    closed to neighbouring values is as fine as the stressor goes; a search that failed at the range's low end or
+    passed at its high end is ended by the range). "" when there is none. steps: the study's bisection steps (the
+    sentence says how to get more)."""
+    groups: dict[tuple[str, str, float, float], list[str]] = {}
+    for m in margins:
+        plant, _, law = m.search.label.partition("/")
+        st = m.search.stressor
+        if m.margin is None or m.first_fail is None:
+            continue  # failed at the low end or passed at the high end: the range, not the resolution, ends it
+        if (st.integer and m.first_fail - m.margin <= 1) or (st.step > 0 and st.steps_between(m.margin,
+                                                                                             m.first_fail) <= 1):
+            continue  # closed as far as the stressor goes (breaking_point's own stop): a real tie
+        groups.setdefault((plant, m.search.stressor.name, m.margin, m.first_fail), []).append(law or plant)
+    ties = [(key, laws) for key, laws in groups.items() if len(laws) > 1]
+    if not ties:
+        return ""
+    parts = [f"{plant} {name} {margin_text_of(lo, hi)}: {', '.join(laws)}" for (plant, name, lo, hi), laws in ties]
+    return (f"**Not told apart at this resolution** ({steps} bisection steps; the same bracket, which their "
+            f"margins may lie anywhere in): " + "; ".join(parts) + ". `adaptive-mj stress --steps N` with a larger N "
+            "(each step halves a bracket) separates them or shows a tie.")
+
+
+def margin_text_of(margin: float, first_fail: float) -> str:
+    """A bracket in words: "[margin, first_fail)"."""
+    return f"[{margin:g}, {first_fail:g})"
+
+
 def preflight_text(margins: Sequence[Margin]) -> str:
     """One sentence: how many of the study's runs the pre-flight check predicted unstable, and how many of those
     failed when run (every probe is run, whatever the law: job.RECORD_PREFLIGHT)."""
@@ -349,7 +379,8 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
             "apply to that plant. Every run's log is in `logs/`"
             + ("" if log_rate_hz is None else f" (its summary and a row every {1 / log_rate_hz:g} s; the margins "
                "come from the full-rate rows)") + ". " + preflight_text(margins) + "\n\n"
-            + table(margins, seeds=seeds).to_markdown())
+            + table(margins, seeds=seeds).to_markdown()
+            + ("\n\n" + unseparated_text(margins, steps=steps) if unseparated_text(margins, steps=steps) else ""))
     return margins, text, wall
 
 

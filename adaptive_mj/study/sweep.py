@@ -196,10 +196,32 @@ def parse_grid(expr: str, doc: dict) -> tuple[str, list[Any]]:
     return key, _explicit(raw, expr=expr)
 
 
+def scoped_axes(axes: Sequence[tuple[str, Sequence[Any]]]) -> dict[str, str]:
+    """{axis key: the law kind it belongs to} for the law-scoped axes, `law.<kind>.<key>` where <kind> is a value of
+    a law.kind axis (scenario._scoped_law_keys: such a key reaches only that law's runs)."""
+    kinds = {str(v) for key, values in axes if key == "law.kind" for v in values}
+    return {key: key.split(".")[1] for key, _ in axes
+            if key.startswith("law.") and key.count(".") >= 2 and key.split(".")[1] in kinds}
+
+
 def grid_points(axes: Sequence[tuple[str, Sequence[Any]]]) -> list[dict[str, Any]]:
-    """The product of the axes, first axis slowest: [{key: value, ...}, ...]."""
+    """The product of the axes, first axis slowest: [{key: value, ...}, ...]. A law-scoped axis (scoped_axes:
+    `--grid law.kind=a,b --grid law.b.K=0,5,20`) expands only under its own law: at another law's points its value
+    is None (not applied, shown as "-"), and the points that would repeat one another are left out (law a runs
+    once, not three times)."""
     keys = [key for key, _ in axes]
-    return [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*(values for _, values in axes))]
+    points = [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*(values for _, values in axes))]
+    scoped = scoped_axes(axes)
+    if not scoped:
+        return points
+    out, seen = [], set()
+    for point in points:
+        kept = {k: (None if k in scoped and scoped[k] != str(point["law.kind"]) else v) for k, v in point.items()}
+        signature = json.dumps([repr(v) for v in kept.values()])
+        if signature not in seen:
+            seen.add(signature)
+            out.append(kept)
+    return out
 
 
 # --------------------------------------------------------------------------
@@ -221,7 +243,10 @@ def to_toml(value: Any) -> str:
 
 
 def label(value: Any) -> str:
-    """A short readable text for a grid value: 4 significant digits for floats."""
+    """A short readable text for a grid value: 4 significant digits for floats; "-" for a law-scoped axis at
+    another law's point (None: grid_points)."""
+    if value is None:
+        return "-"
     if isinstance(value, float):
         return f"{value:.4g}"
     if isinstance(value, str):
@@ -237,7 +262,7 @@ def short_names(keys: Sequence[str]) -> dict[str, str]:
 
 def run_name(index: int, point: dict[str, Any], seed: int, *, names: dict[str, str], width: int = 4) -> str:
     """E.g. 0007-payload_mass=1.36-seed2 (characters unsafe in file names become _)."""
-    parts = [f"{names[k]}={label(v)}" for k, v in point.items()]
+    parts = [f"{names[k]}={label(v)}" for k, v in point.items() if v is not None]
     text = re.sub(r"[^A-Za-z0-9._=+-]+", "_", "-".join(parts))[:80]
     return f"{index:0{width}d}-{text}-seed{seed}"
 
@@ -412,17 +437,24 @@ def plot_sweep(table: Sequence[dict[str, Any]], keys: Sequence[str], metrics: Se
             series.setdefault(", ".join(label(st.point[k]) for k in others), []).append(st)
         for i, (name, sts) in enumerate(series.items()):
             sts = sorted(sts, key=x_of)
-            xs = [x_of(st) for st in sts]
+            # categories: each series a little apart, so that markers at one category do not hide each other
+            dodge = 0.0 if numeric_x else (i - (len(series) - 1) / 2) * min(0.3 / len(series), 0.1)
+            xs = [x_of(st) + dodge for st in sts]
             mean = np.array([st.mean for st in sts])
             lo, hi = np.array([st.lo for st in sts]), np.array([st.hi for st in sts])
             color = f"C{i % 10}"
-            ax.plot(xs, mean, "o-", color=color, lw=1.5, ms=4, label=name or "mean")
+            # a categorical axis (law kinds, names): markers only, no line through the categories as if continuous
+            ax.plot(xs, mean, "o-" if numeric_x else "o", color=color, lw=1.5, ms=4 if numeric_x else 6,
+                    label=name or "mean")
             failed = [(x, st.mean) for x, st in zip(xs, sts, strict=True) if st.failed_only]
             if failed:  # no ok run there: the failed runs' numbers, drawn hollow
                 ax.plot(*zip(*failed, strict=True), "o", color=color, ms=9, mfc="white", mew=1.5, zorder=3)
-            if seeds > 1:
+            if seeds > 1 and numeric_x:
                 ax.fill_between(xs, lo, hi, color=color, alpha=0.2, lw=0)
-            bad = [x_of(st) for st in sts if st.n_ok < st.n]
+            elif seeds > 1:  # the min-max band of a category as an error bar at its marker
+                ax.errorbar(xs, mean, yerr=[np.maximum(mean - lo, 0), np.maximum(hi - mean, 0)], fmt="none",
+                            ecolor=color, elinewidth=1.5, capsize=4, alpha=0.6)
+            bad = [x_of(st) + dodge for st in sts if st.n_ok < st.n]
             if bad:
                 ax.plot(bad, [0.03] * len(bad), "x", color=color, ms=9, mew=2.5, clip_on=False,
                         transform=blended_transform_factory(ax.transData, ax.transAxes))
@@ -512,9 +544,10 @@ def _metrics(requested: Sequence[str]) -> list[str]:
 
 def _grid_overrides(point: dict[str, Any]) -> list[str]:
     """A grid point as overrides; a law.kind axis swaps the whole law (scenario.law_swap: that law's
-    defaults plus the --set law.* keys), so laws with other keys can share a sweep."""
+    defaults plus the --set law.* keys), so laws with other keys can share a sweep; a law-scoped axis at another
+    law's point (None: grid_points) gives none."""
     return [sc.law_swap(str(value)) if key == "law.kind" else f"{key}={to_toml(value)}"
-            for key, value in point.items()]
+            for key, value in point.items() if value is not None]
 
 
 def _validate_points(path: Path, overrides: Sequence[str], points: Sequence[dict[str, Any]]) -> None:

@@ -24,7 +24,7 @@ def _failure_variants(quick: bool) -> list[tuple[str, list[str]]]:
                 ("sigma", ["law.sigma=1e-3"]),
                 ("e_modification", ["law.e_modification=0.1"]),
                 ("projection", [f"law.projection={{d=[{0.5 * d!r}, {2.0 * d!r}]}}"])]
-    if not quick:  # 200 s of physics on the compiled callback (sim.native's composite variant)
+    if not quick:  # 200 s of physics on the compiled callback (the 1-DOF kernel's composite variant)
         variants.append(("composite", ["law.composite={gain=1e-4, filter=2.0}"]))
     return variants
 
