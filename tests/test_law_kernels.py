@@ -129,7 +129,7 @@ def test_each_built_in_kernel_lives_beside_its_kind(name):
     assert "isinstance(law" not in source and "from adaptive_mj.laws.mrac" not in source
 
 
-# --- a built-in multi-joint kind written to the plugin interface: the Python path for now -------------------------
+# --- a built-in multi-joint kind written to the plugin interface: compiled like a plugin's ------------------------
 ROBUST_SL = Path(__file__).resolve().parent.parent / "examples" / "robust_sl_law" / "robust_sl_law.py"
 
 
@@ -172,15 +172,10 @@ def joint_toy_kind(monkeypatch):
     return kind
 
 
-def test_a_built_in_multi_joint_kind_of_plain_array_code_runs_on_the_python_path(joint_toy_kind):
-    """A JointKernelLaw (a built-in kind's multi-joint law function, no plugin installed) runs, on the Python path:
-    the arm callback (plants/manipulator_kernel.py: plugin_functions, supported) compiles an installed plugin's
-    JointPluginLaw only. When it takes any law's "plugin_point"/"plugin_law" (native_params), JointKernelLaw.native
-    turns on and this run is compiled."""
-    from adaptive_mj.runs.runner import execute
-
-    scn = sc.load(SCENARIOS / "ur5e_drift.toml", overrides=["law.kind='toy_joint_kernel'", "simulation.duration=0.05"])
-    result = execute(scn)
-    traj = result.trajectory
-    assert traj.meta["native"] is False and str(traj.status) == "ok" and len(traj.t) == 50
+def test_a_built_in_multi_joint_kind_of_plain_array_code_runs_compiled_bit_for_bit(joint_toy_kind):
+    """A JointKernelLaw (a built-in kind's multi-joint law function, no plugin installed) runs compiled in the arm
+    callback as an installed plugin's does (plants/manipulator_kernel.py: plugin_functions, supported take any
+    JointKernelLaw's native_params), every row the Python path's bit for bit."""
+    traj = same_rows(SCENARIOS / "ur5e_drift.toml", ["law.kind='toy_joint_kernel'", "simulation.duration=0.2"])
+    assert str(traj.status) == "ok" and len(traj.t) == 200
     assert np.all(np.isfinite(traj.u)) and np.all(np.isfinite(traj.V))  # V: the declaration's lyapunov

@@ -82,11 +82,18 @@ def test_wing_rock_sliding_law_and_divergence_at_the_same_row():
 
 
 def test_what_it_does_not_run_falls_back_to_python():
-    """Composite adaptation and MRAC on the wing-rock twin take the Python path (same rows: it is that path)."""
+    """Composite adaptation takes the Python path (same rows: it is that path)."""
     _same("lecture_heave", ["simulation.duration=1", "law.composite={gain=1.0, filter=2.0}"], native=False)
-    _same("wing_rock_mrac", ["simulation.duration=1", "events=[]"], native=False)
+
+
+def test_mrac_with_matched_terms_runs_compiled_bit_for_bit():
+    """MRAC on the wing-rock twin, its matched terms ψ = [|x1| x2, |x2| x2, x1³] compiled in (laws.mrac
+    .mrac_psi_kernel; it ran on the Python path before), through its flight-condition event: every row the Python
+    path's."""
     setup = build(sc.load(SCENARIOS / "wing_rock_mrac.toml"))
-    assert not native_chunk.supported(setup.plant, setup.law)
+    assert native_chunk.supported(setup.plant, setup.law) and setup.law.psi is not None
+    traj = _same("wing_rock_mrac", ["simulation.duration=32"])  # its event at 30 s
+    assert traj.meta["native"] is True
 
 
 def test_first_order_values_is_the_expression_it_replaced():

@@ -102,17 +102,20 @@ def test_compiled_and_python_paths_give_the_same_rows(path):
     same_rows(path, ["simulation.duration=11000", SECOND_BATCH])
 
 
-def test_mrac_on_the_tank_runs_on_the_python_path_with_the_ideal_gains():
+MRAC_ON_THE_TANK = [
+    "law={kind='mrac', model=[0.002], gamma={k_y=0.01, k_r=0.01, k_heat=1.0}, initial_estimates='model'}",
+    "reference={kind='reference_model', offset=67.5, amplitudes=[7.5], omegas=[0.0006]}",
+    "simulation.duration=21600", SECOND_BATCH]
+
+
+def test_mrac_on_the_tank_runs_compiled_with_the_ideal_gains():
     """law.kind = "mrac" (order 1): the true parameters are MRAC's ideal gains for the tank at each batch (b the
-    matched constant heat); it runs on the Python path and follows its reference model after each batch."""
+    matched constant heat, ψ = 1, compiled in: laws.mrac.mrac_psi_kernel); it runs through the analytic chunk
+    engine, every row the Python path's, and follows its reference model after each batch."""
     from adaptive_mj.laws.mrac import ideal_gains
 
-    scn = sc.load(ADAPTIVE, overrides=[
-        "law={kind='mrac', model=[0.002], gamma={k_y=0.01, k_r=0.01, k_heat=1.0}, initial_estimates='model'}",
-        "reference={kind='reference_model', offset=67.5, amplitudes=[7.5], omegas=[0.0006]}",
-        "simulation.duration=21600", SECOND_BATCH])
-    traj = execute(scn).trajectory
-    assert traj.meta["native"] is False and traj.names == ("k_y", "k_r", "k_heat")
+    traj = same_rows(ADAPTIVE, MRAC_ON_THE_TANK)
+    assert traj.meta["native"] is True and traj.names == ("k_y", "k_r", "k_heat")
     second = Tank(volume=0.42, flow=0.12, feed_temperature=8.0, ua=35.0)
     ideal = ideal_gains([-second.a / second.d], 1.0 / second.d, [second.b / second.d], [0.002], 0.002)
     assert np.allclose(traj.theta[-1], ideal, rtol=1e-12)

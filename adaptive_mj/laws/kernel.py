@@ -38,7 +38,8 @@ class LawKernel:
     """A law as the chunk engine compiles it: `fn` its kernel (the module docstring's signature), `dtype` and
     `gains` its gains record ((1,) of that dtype), `arrays` its arrays end to end, its box (`lower`, `upper`,
     (n_theta,) each), the `form` its φ, f, h come from (None: a kernel that calls none, MRAC's), `user_law` the
-    law-plugin-form function it calls (None: none) and `what`, the law in words for the compile note."""
+    law-plugin-form function it calls (None: none), `what`, the law in words for the compile note, and `psi`, MRAC's
+    matched terms ψ(x) (None: none), bound as psi_fn."""
 
     fn: Callable
     dtype: np.dtype
@@ -49,6 +50,7 @@ class LawKernel:
     form: ModelForm | None = None
     user_law: Callable | None = None
     what: str = ""
+    psi: Callable | None = None  # MRAC's matched nonlinear terms ψ(x) (plain array code), bound as psi_fn
 
 
 def f64(a) -> np.ndarray:
@@ -70,6 +72,11 @@ def f_fn(x):
 def h_fn(x):
     """h(x) of the law's form (bound per variant)."""
     raise NotImplementedError("the chunk engine binds the law's form (adaptive_mj.sim.native_chunk.compiled)")
+
+
+def psi_fn(x):
+    """ψ(x) of MRAC's matched nonlinear terms (bound per variant: LawKernel.psi)."""
+    raise NotImplementedError("the chunk engine binds the law's matched terms (adaptive_mj.sim.native_chunk.compiled)")
 
 
 def user_law(x, r, th, phi, f, h, params, rate):

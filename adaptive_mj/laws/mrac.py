@@ -30,8 +30,9 @@ The gains γ here are adaptation *rates* (the textbooks' Γ), unlike the lecture
 
 Plain array code; no mujoco. The law's arithmetic is mrac_regressor and mrac_values, plain loops that MracLaw
 calls in Python and adaptive_mj.sim.native_chunk compiles: on the linear plant (adaptive_mj.plants.linear) the
-Lyapunov rule runs compiled, bit for bit the Python path's rows; the MIT rule (its filter) and the wing-rock
-plant (adaptive_mj.plants.wing_rock, its ψ) run on the Python path.
+Lyapunov rule runs compiled, bit for bit the Python path's rows, and so it does with matched terms ψ (the
+wing-rock plant, the stirred tank: mrac_psi_kernel, the plant's ψ compiled in); the MIT rule (its filter) runs on
+the Python path.
 """
 from __future__ import annotations
 
@@ -46,7 +47,7 @@ from adaptive_mj.keys import Key, Table
 from adaptive_mj.laws import law_keys as shared
 from adaptive_mj.laws.common import (NO_MODIFICATION, DeadZone, DeadZoneOn, Gains, LawStep, Modification, as_gamma,
                                      dead_zone_open, modify_rate, record_dtype)
-from adaptive_mj.laws.kernel import LawKernel, f64
+from adaptive_mj.laws.kernel import LawKernel, f64, psi_fn
 from adaptive_mj.laws.kinds import BuildContext, Form, LawKind, register
 from adaptive_mj.laws.protocol import Box, Law
 from adaptive_mj.specs import LawSpec, MracSpec, PlantSpec
@@ -169,6 +170,20 @@ def mrac_kernel(x, r, th, g, a, lower, upper, rate):
     return u, -s
 
 
+def mrac_psi_kernel(x, r, th, g, a, lower, upper, rate):
+    """mrac_kernel with the plant's matched nonlinear terms ψ(x) in the regressor (ω = [x; r; ψ(x)]; psi_fn: the
+    law's ψ, bound per variant, plain array code): MRAC on the wing-rock plant and the stirred tank, compiled."""
+    n, nth = x.shape[0], th.shape[0]
+    alpha, pb = a[0:n], a[n:2 * n]
+    o = 2 * n
+    gamma, inv_gamma, theta0 = a[o:o + nth], a[o + nth:o + 2 * nth], a[o + 2 * nth:o + 3 * nth]
+    omega, dummy = a[o + 3 * nth:o + 4 * nth], a[o + 4 * nth:o + 5 * nth]
+    mrac_regressor(x, r, alpha, g.beta, psi_fn(x), omega)
+    u, s = mrac_values(x, r, th, omega, dummy, pb, gamma, inv_gamma, g.sign_b, False, g.always, g.dz_width,
+                       g.dz_on_s, g.sigma, g.e_mod, theta0, lower, upper, rate)
+    return u, -s
+
+
 class MracLaw(Law):
     """Direct MRAC (see the module docstring).
 
@@ -197,7 +212,7 @@ class MracLaw(Law):
         self.beta, self.sign_b, self.rule = float(beta), float(sign_b), Rule(rule)
         if self.rule is Rule.MIT and order != 1:
             raise ValueError("the MIT rule is written for order 1 (its sensitivity filter is α_0/(p + α_0))")
-        self.psi = psi
+        self.psi, self.psi_names = psi, tuple(psi_names)
         self.gamma = as_gamma(gamma, len(self.names))
         self.b_abs = float(b_abs)
         self.dead_zone = dead_zone
@@ -256,14 +271,19 @@ class MracLaw(Law):
         p = self.native_arrays()
         arrays = np.concatenate([f64(p[k]) for k in ("alpha", "pb", "gamma", "inv_gamma", "theta0")]
                                 + [np.zeros(2 * len(self.names))])
+        if self.psi is not None:  # its matched terms compiled in (their function: plain array code)
+            return LawKernel(mrac_psi_kernel, MRAC_GAINS, p["gains"], arrays, f64(p["lower"]), f64(p["upper"]),
+                             what="MRAC, the Lyapunov rule, matched terms " + ", ".join(self.psi_names),
+                             psi=self.psi)
         return LawKernel(mrac_kernel, MRAC_GAINS, p["gains"], arrays, f64(p["lower"]), f64(p["upper"]),
                          what="MRAC, the Lyapunov rule")
 
     @property
     def compiled_form(self) -> bool:
         """Whether the compiled analytic loop runs this law: the Lyapunov rule (the MIT rule's filter is stepped in
-        Python), no matched nonlinear terms ψ (a Python callable), no physically consistent projection."""
-        return self.rule is Rule.LYAPUNOV and self.psi is None and not self.modification.bodies
+        Python), no physically consistent projection; matched nonlinear terms ψ are compiled in (the plant's ψ
+        function is plain array code: mrac_psi_kernel)."""
+        return self.rule is Rule.LYAPUNOV and not self.modification.bodies
 
     # --- the MIT rule's sensitivity filter (loop: law.has_filters) -----------------------------
     def reset(self) -> None:

@@ -355,11 +355,11 @@ class PluginLaw(KernelLaw):
 class JointKernelLaw(_PluginBase):
     """A JointLawPlugin's law on a plant of m joints (adaptive_mj.plants.manipulator), with the loop's law
     interface; regressor(v, w, a) -> (Y (m, n_theta), τ_known (m,)) is the plant's, at its current q. A built-in
-    kind's (installed None) runs on the Python path: the arm callback (adaptive_mj.plants.manipulator_kernel) takes
-    a multi-joint law function from an installed plugin's law only, JointPluginLaw (docs/ADDING_A_LAW.md)."""
+    kind's (installed None) and an installed plugin's (JointPluginLaw) run compiled alike: the arm callback
+    (adaptive_mj.plants.manipulator_kernel) compiles the functions native_params hands it (docs/ADDING_A_LAW.md)."""
 
     order = 2
-    native = False  # the arm callback compiles a JointPluginLaw's functions only (see the class docstring)
+    native = True  # plain array code: compiled into the arm callback (plants.manipulator_kernel.plugin_functions)
 
     def __init__(self, plugin: LawPlugin, regressor, names, m: int, params: np.ndarray, *, kind: str,
                  shared: Shared | None = None, modification: Modification | None = None,

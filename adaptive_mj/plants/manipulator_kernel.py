@@ -514,7 +514,9 @@ def _plugin_output(ctx, x, r, Y, tau_known, th, s, u, rate, lower, upper):
 
 def plugin_functions(law):
     """(point, law) of a multi-joint law plugin for `variant`, or None for Slotine–Li and its baselines."""
-    p = law.native_params() if law.installed is not None else {}
+    from adaptive_mj.laws.plugin import JointKernelLaw
+
+    p = law.native_params() if isinstance(law, JointKernelLaw) else {}  # an installed plugin's or a built-in kind's
     return (p["plugin_point"], p["plugin_law"]) if "plugin_point" in p else None
 
 
@@ -591,12 +593,12 @@ def supported(plant, law) -> bool:
     """Native path for manipulators: a ManipulatorPlant (the callback reads its joint addresses and
     regressor arrays) compiled with a userdata slot, a Slotine–Li law (or baseline: the callback
     compiles slotine_li_output) using that plant's regressor, RK4 or a one-stage integrator."""
-    from adaptive_mj.laws.plugin import JointPluginLaw
+    from adaptive_mj.laws.plugin import JointKernelLaw
     from adaptive_mj.laws.slotine_li import SlotineLiLaw
     from adaptive_mj.plants.manipulator import ManipulatorPlant
     from adaptive_mj.plants.mujoco_plant import USERDATA_SLOTS
 
-    if not (isinstance(plant, ManipulatorPlant) and isinstance(law, (SlotineLiLaw, JointPluginLaw)) and law.native):
+    if not (isinstance(plant, ManipulatorPlant) and isinstance(law, (SlotineLiLaw, JointKernelLaw)) and law.native):
         return False
     return (plant.stages in (1, 4) and law.regressor is plant.regressor
             and len(law.names) == len(plant.names) and int(law.m) == int(plant.m)

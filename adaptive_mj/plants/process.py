@@ -27,7 +27,7 @@ timestep, so the lecture's sliding laws (at n = 1: s = ỹ, u = d̂ ẏ_d − φ
 first-order law with the unknown d adapted too) run on it compiled, through the analytic chunk engine
 (adaptive_mj.sim.native_chunk, with the twin's kernel), and `fixed_nominal` (the same law, θ̂ frozen) is the
 fixed-gain baseline. Under MRAC (law.kind = "mrac", order 1) the true parameters are MRAC's ideal gains, the
-heat b a matched constant term (MracTank); that runs on the Python path, as MRAC on the wing-rock plant does.
+heat b a matched constant term (MracTank), compiled through the same engine (ψ = 1 compiled in).
 """
 from __future__ import annotations
 
@@ -125,10 +125,8 @@ class TankPlant(TwinPlant):
 class MracTank(TankPlant):
     """The tank as direct MRAC (law.kind = "mrac", order 1) sees it: ẏ = −(a/d) y + (1/d)(u + b), the heat b a
     matched constant term ψ = 1; its true parameters are MRAC's ideal gains [k_y, k_r, k_heat] for the law's
-    reference model (alpha, beta), recomputed after a batch. Python path (compiled_loop None: the compiled MRAC
-    loop takes the linear plant only)."""
-
-    compiled_loop = None
+    reference model (alpha, beta), recomputed after a batch. Compiled through the analytic chunk engine like the
+    tank under the sliding laws (MRAC with its matched term: laws.mrac.mrac_psi_kernel)."""
 
     def __init__(self, tank: Tank, *, alpha, beta: float, dt: float, integrator,
                  ctrl_range: tuple[float, float] | None):

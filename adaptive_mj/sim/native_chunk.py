@@ -19,11 +19,12 @@ The law it compiles is the one the law object declares beside its kind (laws.pro
 laws.kernel.LawKernel, found by declaration, with no list of law classes here): its kernel, with one signature
 law(x, r, θ̂_i, gains, arrays, lower, upper, rate) -> (u, s) (`law_kernel`: its gains record passed as a record, its
 arrays end to end in one buffer), bound per variant with the law form's φ, f, h and a law function in the plugin
-form (laws.kernel's placeholders). The built-in ones: MRAC with the Lyapunov rule and no ψ (laws.mrac.mrac_kernel),
-the lecture's first-order law (laws.first_order.first_order_kernel), the sliding laws (laws.sliding.sliding_kernel)
-and a law function in the plugin form, a plugin's or a built-in kind's (laws.plugin.plugin_kernel: PluginLaw,
-KernelLaw), each the arithmetic its Python law calls; a law that declares none (the MIT rule, composite
-adaptation, MRAC with ψ, a law in plain Python) takes the Python path. The law's form (φ, f, h of the model it is
+form (laws.kernel's placeholders). The built-in ones: MRAC with the Lyapunov rule (laws.mrac.mrac_kernel; with
+matched terms ψ, mrac_psi_kernel, ψ bound as psi_fn), the lecture's first-order law
+(laws.first_order.first_order_kernel), the sliding laws (laws.sliding.sliding_kernel) and a law function in the
+plugin form, a plugin's or a built-in kind's (laws.plugin.plugin_kernel: PluginLaw, KernelLaw), each the
+arithmetic its Python law calls; a law that declares none (the MIT rule, composite
+adaptation, a law in plain Python) takes the Python path. The law's form (φ, f, h of the model it is
 designed on) and the plant's (what the twin integrates) are compiled apart.
 
 Before each chunk Python evaluates the reference at the stage times (a reference with `scalar_rows`,
@@ -180,7 +181,8 @@ def compiled(kernel: AnalyticKernel, functions: dict[str, Callable], lk: LawKern
     """The chunk stepper for one kind's kernel (with its per-plant `functions`) and one law (in memory per process,
     on disk across processes)."""
     law_fns = (lk.form.phi, lk.form.f, lk.form.h) if lk.form is not None else ()
-    fns = (kernel.rate, kernel.observe, *functions.values(), *law_fns, *((lk.user_law,) if lk.user_law else ()))
+    fns = (kernel.rate, kernel.observe, *functions.values(), *law_fns, *((lk.user_law,) if lk.user_law else ()),
+           *((lk.psi,) if lk.psi else ()))
     mem_key = (kernel.name, lk.fn.__name__, tuple(functions)) + tuple(_code(fn) for fn in (*fns, lk.fn))
     if mem_key in _compiled:
         return _compiled[mem_key]
@@ -204,6 +206,8 @@ def compiled(kernel: AnalyticKernel, functions: dict[str, Callable], lk: LawKern
                  for name, fn in zip(("phi_fn", "f_fn", "h_fn"), law_fns, strict=True)}
     if lk.user_law is not None:
         forms["user_law"] = jit_tree(lk.user_law, inline, tag=tag)
+    if lk.psi is not None:
+        forms["psi_fn"] = jit_tree(lk.psi, inline, tag=tag)
     law = jit_tree(lk.fn, inline, tag=tag, **forms)
     pieces: dict[str, Any] = {
         "law_stage": jit_tree(_law_stage, inline, tag=tag, seen=seen, law_kernel=law, view=compiled_view, **common),
