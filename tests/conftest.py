@@ -99,8 +99,10 @@ def tail_rms():
 # (an empty numba cache), go first here, longest first; every other file follows in xdist's order (most tests
 # first). Only the order changes: every test runs as before, and a file still runs whole on one worker.
 LONG_FILES = ("test_run_scenario.py", "test_ray.py", "test_docs.py", "test_plugin.py", "test_score.py", "test_sweep.py",
-              "test_arm_conditions.py", "test_packaging.py", "test_verdict.py", "test_build_cache.py",
-              "test_native_manipulator.py", "test_bench.py")
+              "test_native.py", "test_analytic_kernel.py", "test_native_manipulator.py", "test_native_twin.py",
+              "test_arm_conditions.py", "test_compile_note.py", "test_packaging.py", "test_twin.py",
+              "test_score_verify.py", "test_quadrotor_studies.py", "test_verdict.py", "test_build_cache.py",
+              "test_bench.py")
 
 
 def pytest_configure(config):
