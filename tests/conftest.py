@@ -90,3 +90,29 @@ def tail_rms():
         return float(np.sqrt(np.mean(traj.y_tilde[sel] ** 2)))
 
     return _tail
+
+
+# The order in which pytest-xdist hands the test files to its workers (`-n auto --dist loadfile`: one file at a time
+# to whichever worker has run out of work). xdist's own order is by the number of tests in a file, so a file of a
+# few long tests (the README's commands, the wheel's venv, every bundled scenario run twice) came last and left one
+# worker running it alone for minutes while the other had finished. The longest files, measured on a fresh clone
+# (an empty numba cache), go first here, longest first; every other file follows in xdist's order (most tests
+# first). Only the order changes: every test runs as before, and a file still runs whole on one worker.
+LONG_FILES = ("test_run_scenario.py", "test_ray.py", "test_docs.py", "test_plugin.py", "test_score.py", "test_sweep.py",
+              "test_native.py", "test_analytic_kernel.py", "test_native_manipulator.py", "test_native_twin.py",
+              "test_arm_conditions.py", "test_compile_note.py", "test_packaging.py", "test_twin.py",
+              "test_score_verify.py", "test_quadrotor_studies.py", "test_verdict.py", "test_build_cache.py",
+              "test_bench.py")
+
+
+def pytest_configure(config):
+    if hasattr(config.option, "loadscopereorder"):  # pytest-xdist is there: keep the order given below
+        config.option.loadscopereorder = False
+
+
+def pytest_collection_modifyitems(config, items):
+    counts: dict[str, int] = {}
+    for item in items:
+        counts[str(item.path)] = counts.get(str(item.path), 0) + 1
+    first = {name: i for i, name in enumerate(LONG_FILES)}
+    items.sort(key=lambda item: (first.get(item.path.name, len(first)), -counts[str(item.path)], str(item.path)))
