@@ -367,6 +367,7 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
     runs = sum(len(e.tails) for m in margins for e in m.evaluations)
     screened = ("" if seeds == 1 else " (a value's other seeds run where its first passed: a value fails when "
                 "any seed fails; the first failing value runs on every seed)")
+    untold = unseparated_text(margins, steps=steps)  # the laws this resolution cannot tell apart, if any
     text = (f"{len(searches)} breaking-point searches (plant × law × stressor), {seeds} seeds per value{screened}, "
             f"the two ends and {steps} bisection steps: {runs} runs of {duration:g} s in {wall:.0f} s. "
             f"A run fails when it diverges, crashes or its tail RMS ỹ exceeds {_bounds_text(searches)}; the tail "
@@ -380,7 +381,7 @@ def run_study(out: Path, *, seeds: int, steps: int, composite: bool, n_jobs: int
             + ("" if log_rate_hz is None else f" (its summary and a row every {1 / log_rate_hz:g} s; the margins "
                "come from the full-rate rows)") + ". " + preflight_text(margins) + "\n\n"
             + table(margins, seeds=seeds).to_markdown()
-            + ("\n\n" + unseparated_text(margins, steps=steps) if unseparated_text(margins, steps=steps) else ""))
+            + ("\n\n" + untold if untold else ""))
     return margins, text, wall
 
 
