@@ -48,6 +48,70 @@ def load_registries() -> None:
             arraymath.ensure_blas = real
 
 
+#: the line of numba's InlineWorker.inline_ir (its copy_ir) that shared_inline_copies changes the meaning of
+INLINE_COPY_SOURCE = "new_block = copy.deepcopy(the_ir.blocks[block_label])"
+_inline_copies: dict[str, Any] = {}
+
+
+def shared_inline_copies() -> bool:
+    """Make numba's inliner copy a function's IR with one deepcopy memo for all its blocks; True where it does.
+
+    numba inlines a function compiled with inline="always" (adaptive_mj.sim.native_context.inlined: every piece of a
+    compiled controller) by copying the callee's IR twice (InlineWorker.inline_ir's copy_ir), each block with its
+    own ``copy.deepcopy``. All blocks of a function share one Scope, which holds every variable of the function, so
+    each block's copy copies the whole scope again: the copy grows as blocks x variables, and it was two thirds of
+    a controller's compile (3.4 of 5.3 s of CPU for the heave vehicle's callback, numba 0.68.1). Here the blocks of
+    one copy_ir call share one memo, as one deepcopy of the whole IR would: the copy has the original's structure
+    (one scope for all blocks) rather than one scope per block. The IR, and so the machine code, is the same
+    (tests/test_numba_util.py compares the compiled code with and without it).
+
+    Installed only where numba's inline_ir still copies as this reads it (the line INLINE_COPY_SOURCE in its
+    source; read on numba 0.68.1); elsewhere numba is left as it is (False) and compiles as before, only slower.
+    A memo lives from one FunctionIR.copy (copy_ir's first step) to the next, and only for blocks of one scope,
+    so two copies never share an object. ADAPTIVE_MJ_SHARED_INLINE_COPIES=0 in the environment leaves numba as it
+    is."""
+    if "installed" in _inline_copies:
+        return _inline_copies["installed"]
+    import os
+
+    if os.environ.get("ADAPTIVE_MJ_SHARED_INLINE_COPIES", "1") == "0":  # numba as it is (a check, or a way out)
+        _inline_copies["installed"] = False
+        return False
+    import copy
+    import inspect
+
+    from numba.core import inline_closurecall, ir
+
+    try:
+        readable = INLINE_COPY_SOURCE in inspect.getsource(inline_closurecall.InlineWorker.inline_ir)
+    except (OSError, TypeError, AttributeError):
+        readable = False
+    if not readable or getattr(inline_closurecall, "copy", None) is not copy:
+        _inline_copies["installed"] = False
+        return False
+    state: dict[str, Any] = {"scope": None, "memo": None}
+    real_copy = ir.FunctionIR.copy
+
+    def function_ir_copy(self):
+        state["scope"] = state["memo"] = None  # copy_ir starts: a new memo for its blocks
+        return real_copy(self)
+
+    def deepcopy(x, memo=None, _nil=None):
+        if memo is None and isinstance(x, ir.Block):
+            if state["memo"] is None or state["scope"] is not x.scope:
+                state["scope"], state["memo"] = x.scope, {}
+            memo = state["memo"]
+        return copy.deepcopy(x, memo)
+
+    shim = pytypes.ModuleType("copy", "the copy module as numba's inliner sees it (numba_util.shared_inline_copies)")
+    shim.__dict__.update({k: v for k, v in vars(copy).items() if not k.startswith("__")})
+    vars(shim)["deepcopy"] = deepcopy
+    ir.FunctionIR.copy = function_ir_copy  # type: ignore[method-assign]
+    inline_closurecall.copy = shim
+    _inline_copies["installed"] = True
+    return True
+
+
 def with_globals(fn, **replace):
     """The same function (same code object) seeing some globals replaced, e.g. by their numba versions."""
     return pytypes.FunctionType(fn.__code__, {**fn.__globals__, **replace}, fn.__name__, fn.__defaults__,
@@ -69,6 +133,7 @@ def jit_tree(fn: Callable, njit: Callable, *, tag: str = "", seen: dict | None =
     inner: the njit for the functions fn calls (recursively), when not njit itself (e.g. inlined into fn
     while fn is compiled apart: adaptive_mj.sim.native_context.inlined)."""
     load_registries()
+    shared_inline_copies()
     seen = {} if seen is None else seen
     if id(fn) in seen:
         return seen[id(fn)]
