@@ -46,6 +46,20 @@ def _no_leaked_control_callback():
 
 
 @pytest.fixture
+def notes_on_stderr():
+    """The "adaptive_mj" logger's notes and warnings on stderr, as the command line shows them (adaptive_mj.notes:
+    from Python they go where logging sends them, nowhere by default); the logger as it was afterwards."""
+    from adaptive_mj import notes
+
+    handlers, level, propagate = list(notes.log.handlers), notes.log.level, notes.log.propagate
+    notes.show_on_stderr()
+    yield
+    notes.log.handlers[:] = handlers
+    notes.log.setLevel(level)
+    notes.log.propagate = propagate
+
+
+@pytest.fixture
 def heave_gains() -> dict:
     return dict(HEAVE_GAINS)
 

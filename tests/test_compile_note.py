@@ -35,8 +35,15 @@ def lazy_factory(key):
 
 
 if __name__ == "__main__":
+    import sys
+
     import numba
     from numba import types
+
+    if "--python-default" not in sys.argv:  # as the command line does; from Python the notes are logging's
+        from adaptive_mj.notes import show_on_stderr
+
+        show_on_stderr()
 
     g = {**globals(), "numba": numba, "types": types}
     f = unique_factory(factory, g, 7, what="a test cfunc", kind="test cfunc")(7)
@@ -69,6 +76,11 @@ def test_a_compile_is_said_with_its_time_and_a_cache_load_is_not(tmp_path, monke
     assert first[2].startswith("adaptive-mj: compiling a test njit: not in numba's cache yet")  # at its first call
     assert first[3].startswith("adaptive-mj: compiled a test njit in ") and len(first) == 4
     assert _said(runs[1].stderr) == [] and _said(runs[2].stderr) == []  # loaded from the cache: nothing said
+    # from Python, with logging as it comes: the same compiles, nothing said (the "adaptive_mj" logger's notes)
+    quiet = subprocess.run([sys.executable, str(script), "--python-default"], env=_env(tmp_path / "cache2"),
+                           capture_output=True, text=True, timeout=300, check=True)
+    assert quiet.stdout.split() == ["8.0", "18.0"] and quiet.stderr == ""
+    assert list((tmp_path / "cache2").rglob("*.nbi"))  # it did compile
     # the time is kept: the next compile of the kind (another variant) is estimated from it
     from adaptive_mj.sim import compile_note
 
@@ -100,8 +112,11 @@ RUN_BROKEN = textwrap.dedent('''
     import json, sys, time
     import numpy as np
     from adaptive_mj import run
+    from adaptive_mj.notes import show_on_stderr
     from adaptive_mj.setup.build import build
     from adaptive_mj.setup.scenario import load
+
+    show_on_stderr()  # the notes on stderr, as on the command line (from Python they are logging's)
 
     scn = load(sys.argv[1], overrides=["law={kind='broken', k=200.0, initial_estimates={d=37.0, b=60.0, c=1.0}}"])
     s = build(scn)
@@ -168,7 +183,9 @@ def test_after_warmup_a_run_compiles_nothing(tmp_path):
     code = textwrap.dedent('''
         import sys
         from pathlib import Path
+        from adaptive_mj.notes import show_on_stderr
         from adaptive_mj.study.warmup import warmup
+        show_on_stderr()  # as `adaptive-mj warmup` does
         print(warmup(specs=[(Path(sys.argv[1]), ())], jobs=1, quick=True).text())
     ''')
     scenario = REPO / "scenarios" / "lecture_first_order.toml"

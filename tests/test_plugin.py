@@ -276,7 +276,7 @@ def test_plugin_runs_compiled_on_the_twin_bit_for_bit(on_path):
     assert np.abs(py.theta_hat[-1] - py.theta_hat[0]).max() > 0  # it adapts
 
 
-def test_a_law_numba_cannot_compile_runs_in_python_with_one_line(on_path, capsys):
+def test_a_law_numba_cannot_compile_runs_in_python_with_one_line(on_path, capsys, notes_on_stderr):
     from adaptive_mj import run
     from adaptive_mj.setup.build import build
     from adaptive_mj.setup.scenario import load

@@ -80,7 +80,7 @@ def test_a_vehicle_too_heavy_to_fly_crashes_and_the_run_ends_crashed():
     assert res.trajectory.t[-1] < 1.5  # it ended at the crash, not at 5 s
 
 
-def test_the_pre_flight_check_says_what_cannot_fly_before_the_first_step(capsys):
+def test_the_pre_flight_check_says_what_cannot_fly_before_the_first_step(capsys, notes_on_stderr):
     """Too heavy to hover, and an attitude rate gain the 2 ms RK4 step cannot integrate: one line each on stderr,
     with the figures and the fix; the run's summary carries them."""
     res = run_scenario("quadrotor_lemniscate", set=["plant.payload_mass=0.05", "simulation.duration=0.5"])

@@ -27,10 +27,11 @@ import io
 import json
 import os
 import re
-import sys
 import time
 from pathlib import Path
 from typing import Any, Callable, Iterator
+
+from adaptive_mj import notes
 
 PREFIX = "adaptive-mj: "
 
@@ -76,13 +77,14 @@ def state_dir() -> Path:
 
 
 def say(text: str) -> None:
-    """One line on stderr, written at once (two processes' lines do not interleave); nothing when the environment
-    sets ADAPTIVE_MJ_COMPILE_NOTES=0 (the test suite does, but for the tests of these notes: its other tests read
-    a run's stderr line by line, and whether a variant is cached depends on which test ran first)."""
+    """One note (INFO) through the "adaptive_mj" logger (adaptive_mj.notes): on the command line one line on
+    stderr, written at once (two processes' lines do not interleave); from Python where the application's logging
+    sends it, nowhere by default. Nothing when the environment sets ADAPTIVE_MJ_COMPILE_NOTES=0 (the test suite
+    does, but for the tests of these notes: its other tests read a run's stderr line by line, and whether a variant
+    is cached depends on which test ran first)."""
     if os.environ.get("ADAPTIVE_MJ_COMPILE_NOTES", "1") == "0":
         return
-    sys.stderr.write(PREFIX + text + "\n")
-    sys.stderr.flush()
+    notes.say(PREFIX + text)
 
 
 # -- is it in numba's disk cache? ------------------------------------------------------------------------------

@@ -435,11 +435,12 @@ def _native_controller(plant: Plant, law: Law, reference, theta_hat0, timing: Co
         plugin = law.installed
         if plugin is None:
             raise
-        import sys
+        import logging
 
+        from adaptive_mj import notes
         from adaptive_mj.sim.compile_note import fallback_line
 
-        print(fallback_line(plugin.name, exc), file=sys.stderr)  # the plugin's file and line, numba's reason
+        notes.say(fallback_line(plugin.name, exc), logging.WARNING)  # the plugin's file and line, numba's reason
         return None
 
 
