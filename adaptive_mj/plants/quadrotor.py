@@ -353,25 +353,22 @@ class QuadrotorPlant(ModelClock, BodyEdits):
         """RotorPy's rotor drag (airframe.rotor_drag_into, compiled as the native callback compiles it) at d's state,
         controls and the model's wind, into d.qfrc_applied's free-joint entries; nothing where the model declares
         no rotor drag. Called inside the control callback, after the controls are written."""
-        af = self.airframe
-        if not af.has_drag:
-            return
-        m = self.model
+        if self.airframe.has_drag:
+            self._rotor_drag_into(d, d.qfrc_applied)
+
+    def _rotor_drag_into(self, d: mujoco.MjData, qfrc: np.ndarray) -> None:
+        af, m = self.airframe, self.model
         drag_kernel()(d.qvel, af.qvel, d.xmat[af.body], d.ctrl, d.act, m.actuator_gainprm, af.actuators, af.act,
-                      self.ctrl_range[0], self.ctrl_range[1], af.rotors, m.opt.wind, af.drag, d.qfrc_applied)
+                      self.ctrl_range[0], self.ctrl_range[1], af.rotors, m.opt.wind, af.drag, qfrc)
 
     def rotor_wrench(self, d: mujoco.MjData | None = None) -> np.ndarray:
         """(6,) the rotor drag at d's state and thrusts (default: the plant's MjData) as the free joint's generalized
         force: the force [N] in the world frame, the moment [N m] about the body's origin in the body frame
         (airframe.rotor_drag_into); d is left as it was."""
-        d = self.data if d is None else d
-        af = self.airframe
         out = np.zeros(self.model.nv)
-        if af.has_drag:
-            m = self.model
-            drag_kernel()(d.qvel, af.qvel, d.xmat[af.body], d.ctrl, d.act, m.actuator_gainprm, af.actuators, af.act,
-                          self.ctrl_range[0], self.ctrl_range[1], af.rotors, m.opt.wind, af.drag, out)
-        return out[af.qvel:af.qvel + 6].copy()
+        if self.airframe.has_drag:
+            self._rotor_drag_into(self.data if d is None else d, out)
+        return out[self.airframe.qvel:self.airframe.qvel + 6].copy()
 
     def step(self) -> None:
         """One mj_step with the external force and torque held; then the crash check."""
