@@ -116,20 +116,22 @@ def test_off_by_default_and_the_stiffness_and_lyapunov_follow_the_key():
 
 
 def test_the_lemniscate_with_the_rigid_payload_flies_with_the_inertia_adapted():
-    """Measured (docs/THEORY.md, "The inertia"): with the default γ_j the run is ok and tracks as the law without
-    it does (tail RMS 4.2 mm, 4.3 mm without), Ĵ stays bounded and positive definite and moves slowly; it is not
-    identified on this trajectory: Ĵxx rises (through the truth with a faster γ_j) while Ĵyy does not, the
-    roll-correlated part of a moment the model leaves out (the air: MuJoCo's fluid model on the fuselage)."""
+    """Measured (docs/THEORY.md, "The inertia", measured under MuJoCo's former fluid model; re-measured here with
+    RotorPy's rotor drag and motor lag, issue 52): with the default γ_j the run is ok and tracks as the law without
+    it does (‖p̃‖'s tail RMS 20.4 mm either way, most of it the rotor drag's velocity-proportional force, which the
+    law's constant d̂ cannot follow; 4.2 mm under the fluid model), Ĵ stays bounded and positive definite and moves
+    slowly (10.7 % in 20 s); it is not identified on this trajectory: Ĵxx rises toward the truth while Ĵyy does
+    not, the roll-correlated part of a moment the model leaves out."""
     res = run_scenario("quadrotor_lemniscate", set=["law.adapt_inertia=true"])
     tr = res.trajectory
     assert GAMMA_J_DEFAULT == 1e4
-    assert res.status == "ok" and res.summary["metrics"]["rms_tracking_error_norm_tail"] < 0.005
+    assert res.status == "ok" and res.summary["metrics"]["rms_tracking_error_norm_tail"] < 0.025
     J0, J1, J = inertia_matrix(tr.theta_hat[0]), inertia_matrix(tr.theta_hat[-1]), inertia_matrix(tr.theta[-1])
     assert np.linalg.eigvalsh(J1).min() > 0
-    assert np.linalg.norm(J1 - J0) / np.linalg.norm(J0) < 0.1
+    assert np.linalg.norm(J1 - J0) / np.linalg.norm(J0) < 0.15
     start, end = (np.linalg.norm(Jh - J) / np.linalg.norm(J) for Jh in (J0, J1))
     assert start == pytest.approx(0.183, abs=1e-3)
-    assert end < start  # measured 0.164, by Ĵxx alone (see the docstring)
+    assert end < start  # measured 0.140, by Ĵxx alone (see the docstring)
     assert J1[0, 0] > J0[0, 0] and abs(J1[1, 1] - J0[1, 1]) < 0.1 * (J[1, 1] - J0[1, 1])
 
 

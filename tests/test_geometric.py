@@ -77,6 +77,7 @@ def test_the_allocation_read_from_the_model_is_mujoco_s_own_wrench():
     for _ in range(5):
         thrusts = rng.uniform(0.0, frame.thrust_max)
         frame.apply(d, thrusts)
+        d.act[frame.act] = thrusts  # the motor lag's activations at the thrusts (the lag's steady state)
         mujoco.mj_forward(m, d)  # at rest and level: body and world frames coincide
         wrench = np.concatenate([[d.qfrc_actuator[frame.qvel + 2]], d.qfrc_actuator[frame.qvel + 3:frame.qvel + 6]])
         np.testing.assert_allclose(frame.allocation @ thrusts, wrench, rtol=1e-12, atol=1e-15)

@@ -11,7 +11,7 @@ from adaptive_mj.errors import ScenarioError
 from adaptive_mj.laws import flight_kernel as fk
 from adaptive_mj.laws import geometric as geo
 from adaptive_mj.laws import l1
-from adaptive_mj.laws.flight import inertia_matrix, rotation
+from adaptive_mj.laws.flight import KX_DEFAULT, inertia_matrix, rotation
 from adaptive_mj.log.record import LOG_FORMAT_VERSION
 from adaptive_mj.log.replay import read_log
 from adaptive_mj.plants.airframe import Airframe
@@ -36,7 +36,7 @@ def test_hover_with_a_payload_the_law_was_not_told_of_identifies_its_weight():
     """Take-off and hover with an unknown 10 g payload. At hover the mass and a vertical force are one unknown (w = g
     e₃: only m̂ g − d̂_z enters the thrust), and that is what the adaptive law identifies: to 1e-6 of the loaded
     vehicle's weight after 10 s, the height to 1e-6 m; m̂ alone within 1 % (the rest is in d̂_z). The geometric
-    baseline at the bare 30 g hangs Δm g / k_x below."""
+    baseline at the bare 30 g hangs Δm g / k_x,z below (k_x,z = 0.45 N/m, RotorPy's z gain: 0.218 m)."""
     res = run_scenario("quadrotor_hover_payload", set=["simulation.duration=10"])
     th, m = res.trajectory.theta_hat[-1], res.trajectory.theta[-1, 0]
     assert res.status == "ok"
@@ -47,17 +47,18 @@ def test_hover_with_a_payload_the_law_was_not_told_of_identifies_its_weight():
     base = run_scenario("quadrotor_hover_payload", set=["simulation.duration=10"], law="geometric")
     assert base.status == "failed" and "tail RMS tracking error on z" in base.summary["reason"]
     sag = -base.trajectory.y_tilde[-1, 2]  # y_d − y: the vehicle is below
-    assert sag == pytest.approx(-M_PAYLOAD * G / 0.195, rel=0.01)
+    assert sag == pytest.approx(-M_PAYLOAD * G / KX_DEFAULT[2], rel=0.01)
 
 
 @pytest.mark.parametrize("law, tracks", [("geometric_adaptive", True), ("l1_geometric", True), ("geometric", False)])
 def test_the_lemniscate_is_tracked_by_the_adaptive_laws_and_not_by_the_baseline(law, tracks):
+    """The baseline at the bare mass sags Δm g / k_x,z = 0.218 m under the unknown 10 g payload (tail 0.222 m)."""
     res = run_scenario("quadrotor_lemniscate", set=["simulation.duration=12"], law=law)
     tail = res.summary["metrics"]["rms_tracking_error_norm_tail"]
     if tracks:
-        assert res.status == "ok" and tail < 0.02
+        assert res.status == "ok" and tail < 0.025
     else:
-        assert res.status == "failed" and tail > 0.3
+        assert res.status == "failed" and tail > 0.2
 
 
 def test_the_released_payload_is_recovered_from():
@@ -172,20 +173,22 @@ def test_the_scalar_kernel_is_the_geometric_and_adaptive_laws_written_with_numpy
     law = build(scn).law
     A = law.airframe.allocation
     rng = np.random.default_rng(3)
-    gains = geo.Gains(0.195, 0.12, 7.8e-3, 6.7e-4)
+    gains = geo.Gains(np.array([0.195, 0.21, 0.45]), np.array([0.12, 0.13, 0.27]), 7.8e-3, 6.7e-4)  # per axis
     for _ in range(50):
         x, ref, th = _random_case(rng)
         R, J = rotation(x[2]), inertia_matrix(th)
         for mode in (fk.MODE_GEOMETRIC, fk.MODE_ADAPTIVE):
             P = law.P.copy()
-            P[fk.P_MODE], P[fk.P_KX], P[fk.P_KV], P[fk.P_KR], P[fk.P_KW] = mode, *gains
+            P[fk.P_MODE], P[fk.P_KR], P[fk.P_KW] = mode, gains.kR, gains.kW
+            P[fk.P_KX:fk.P_KX + 3], P[fk.P_KV:fk.P_KV + 3] = gains.kx, gains.kv
+            P[fk.P_C:fk.P_C + 3], P[fk.P_K:fk.P_K + 3] = [1.6, 1.7, 1.8], [0.12, 0.11, 0.27]
             u, s, rate = _kernel(x, ref, th, P, law.G, law.Ainv, np.zeros(6))
             e1 = np.array([1.0, 0, 0])
             if mode == fk.MODE_GEOMETRIC:
                 cmd = geo.geometric(x[0], x[1], R, x[3], ref[:4], e1, gains, th[0], J, G, th[10:13])
             else:
-                c = P[fk.P_C]
-                mass_gains = geo.MassGains(c, P[fk.P_K], 1 / law.G[0, 0], 1 / law.G[0, 7])
+                c = P[fk.P_C:fk.P_C + 3]
+                mass_gains = geo.MassGains(c, P[fk.P_K:fk.P_K + 3], 1 / law.G[0, 0], 1 / law.G[0, 7])
                 force = geo.adaptive_force(x[0], x[1], ref[:3], th[0], th[7:10], mass_gains, G)
                 cmd = geo.attitude(force.F, R, x[3], e1, gains, J, th[0] * ref[3], th[10:13])
                 np.testing.assert_allclose(rate[[0, 7, 8, 9]], [force.m_rate, *force.d_rate], rtol=1e-12, atol=1e-18)
@@ -235,10 +238,19 @@ def test_bad_quadrotor_input_is_one_line_naming_the_key(override, words):
     assert "\n" not in msg and "quadrotor_lemniscate.toml" in msg and words in msg, msg
 
 
+def payload_limit() -> float:
+    """[N] one rotor's thrust limit, from the compiled model."""
+    from adaptive_mj.plants import quadrotor
+
+    return float(quadrotor.load().airframe.thrust_max[0])
+
+
 def test_the_margins_bracket_the_payload_each_law_can_carry(tmp_path):
-    """The bisection (adaptive_mj.study.flight) on the payload: the geometric law at the bare mass fails as its
-    sag Δm g / k_x nears AdaptiveQuadBench's 1 m (Δm = k_x / g = 19.9 g; the figure-eight's own error adds to it,
-    so a little before), the adaptive law carries more; every bracket has its margin below its when2fail, and the
+    """The bisection (adaptive_mj.study.flight) on the payload: the geometric law at the bare mass would reach
+    AdaptiveQuadBench's 1 m of sag Δm g / k_x,z only at Δm = k_x,z / g = 45.9 g (RotorPy's z gain, 0.45 N/m), past
+    the 28.6 g the rotors can lift beyond the bare 30 g: it fails near that limit instead (the figure-eight needs
+    thrust to spare), and so does the adaptive law (within the search's resolution of the geometric law's): this
+    margin measures the rotors, not the laws (issue 52); every bracket has its margin below its when2fail, and the
     seeds' verdicts are what the searches read."""
     from adaptive_mj.study import flight
 
@@ -247,9 +259,11 @@ def test_the_margins_bracket_the_payload_each_law_can_carry(tmp_path):
                            logs=tmp_path, n_jobs=2)
     geo, ada = found
     g_margin, g_fail = geo.margin()
-    assert g_margin is not None and g_fail is not None and 0.8 * 0.195 / G < g_margin < g_fail <= 0.195 / G
-    a_margin, _ = ada.margin()
-    assert a_margin is not None and a_margin >= g_fail  # it survives where the geometric law failed
+    lift = 4 * payload_limit() / G - M_BARE  # [kg] what the rotors lift beyond the bare vehicle
+    assert KX_DEFAULT[2] / G > lift
+    assert g_margin is not None and g_fail is not None and 0.8 * lift < g_margin < g_fail <= lift
+    a_margin, a_fail = ada.margin()  # measured: 24.2 g and 25.4 g (the geometric law: 25.4 g and 26.7 g)
+    assert a_margin is not None and 0.8 * lift < a_margin < lift  # the rotors' limit, not the law, decides
     for s in found:
         lo, hi = s.when2fail()
         assert hi is not None and (lo is None or lo < hi) and s.margin()[0] <= hi

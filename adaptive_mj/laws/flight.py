@@ -10,12 +10,17 @@ estimate unless law.adapt_inertia: then Ĵ too, by the Slotine–Li law on SO(3)
 feeds the desired body rate Ω_d forward from the reference's jerk (Lee 2010's e_Ω = Ω − RᵀR_dΩ_d, with Ω̇_d = 0;
 with law.adapt_inertia Ω̇_d from its snap).
 
-The sliding variable logged as s (3,) [m/s] is the translational surface s = e_v + c e_x (c = k_x/k_v for the
-geometric baseline and L1, law.lambda for the adaptive law), with V = ½ m sᵀs (+ ½ m̃²/γ_m + ½ ‖d̃‖²/γ_d when
+The position gains are per axis x, y, z (law.kx, law.kv, law.lambda and law.k: one number for every axis, or three),
+RotorPy's by default: its SE3Control's kp_pos = (6.5, 6.5, 15) 1/s² and kd_pos = (4, 4, 9) 1/s times the 0.03 kg
+Crazyflie (rotorpy/controllers/quadrotor_control.py at 9b760b8), so z is stiffer than x and y.
+
+The sliding variable logged as s (3,) [m/s] is the translational surface s = e_v + c e_x (c = k_x/k_v per axis for
+the geometric baseline and L1, law.lambda for the adaptive law), with V = ½ m sᵀs (+ ½ m̃²/γ_m + ½ ‖d̃‖²/γ_d when
 adapting): the translational Lyapunov function the adaptive law's proof uses (docs/THEORY.md, "The quadrotor").
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -75,7 +80,7 @@ class FlightLaw:
 
     airframe: AirframeView
     gains: geo.Gains
-    c: float
+    c: np.ndarray  # (3,) [1/s] the surface's slope per axis
     names: tuple[str, ...] = ()
     order: int = 4
     has_filters: bool = False
@@ -86,7 +91,7 @@ class FlightLaw:
     gamma: np.ndarray = field(default_factory=lambda: np.ones(13))
     c_R: float = 0.0
     mode: float = fk.MODE_GEOMETRIC
-    k: float = 0.0
+    k: np.ndarray = field(default_factory=lambda: np.zeros(3))  # (3,) [N s/m] the adaptive law's gain on s per axis
     adapt_inertia: bool = False
     dead_zone: DeadZone | None = None
     modification: Modification | None = None
@@ -96,8 +101,10 @@ class FlightLaw:
         self.names = tuple(self.airframe.names)
         n = len(self.names)
         P = np.zeros(fk.P_SIZE)
-        P[fk.P_MODE], P[fk.P_C], P[fk.P_K], P[fk.P_G] = self.mode, self.c, self.k, self.airframe.gravity
-        P[fk.P_KX], P[fk.P_KV], P[fk.P_KR], P[fk.P_KW] = self.gains
+        P[fk.P_MODE], P[fk.P_G] = self.mode, self.airframe.gravity
+        P[fk.P_KR], P[fk.P_KW] = self.gains.kR, self.gains.kW
+        for at, v in ((fk.P_KX, self.gains.kx), (fk.P_KV, self.gains.kv), (fk.P_C, self.c), (fk.P_K, self.k)):
+            P[at:at + 3] = np.broadcast_to(np.asarray(v, dtype=float), (3,))
         dz = self.dead_zone
         P[fk.P_DZ_WIDTH] = dz.width if dz is not None else 0.0
         P[fk.P_DZ_ON_S] = 1.0 if dz is None or dz.on.value == "s" else 0.0
@@ -221,12 +228,22 @@ class L1GeometricLaw(FlightLaw):
 
 # --- the law kinds: keys, readers, builders -----------------------------------------------
 GAMMA_J_DEFAULT = 1e4  # measured on the lemniscate: docs/THEORY.md, "The inertia"
-KX = Key("kx", "number", "N/m", 0.195, "> 0", "position gain k_x (geometric, l1_geometric)")
-KV = Key("kv", "number", "N s/m", 0.12, "> 0", "velocity gain k_v (geometric, l1_geometric)")
+# RotorPy's SE3Control position gains (kp_pos = (6.5, 6.5, 15) 1/s², kd_pos = (4, 4, 9) 1/s; quadrotor_control.py at
+# 9b760b8) times its Crazyflie's 0.03 kg: per axis x, y, z
+KX_DEFAULT = (0.195, 0.195, 0.45)  # [N/m]
+KV_DEFAULT = (0.12, 0.12, 0.27)  # [N s/m]
+KX = Key("kx", "number or array [x, y, z]", "N/m", KX_DEFAULT, "> 0",
+         "position gain k_x per axis (geometric, l1_geometric; one number: every axis)")
+KV = Key("kv", "number or array [x, y, z]", "N s/m", KV_DEFAULT, "> 0",
+         "velocity gain k_v per axis (geometric, l1_geometric; one number: every axis)")
 KR = Key("kR", "number", "N m/rad", 7.8e-3, "> 0", "attitude gain k_R")
 KW = Key("kW", "number", "N m s/rad", 6.7e-4, "> 0", "body-rate gain k_Omega")
-LAMBDA = Key("lambda", "number", "1/s", 1.625, "> 0", "the surface's slope c: s = e_v + c e_x")
-K = Key("k", "number", "N s/m", 0.12, "> 0", "the gain on s in the force law F = m_hat w - d_hat - k s")
+# the adaptive law's k s = k e_v + k c e_x matches the geometric law's k_v e_v + k_x e_x: c = k_x/k_v, k = k_v per axis
+LAMBDA = Key("lambda", "number or array [x, y, z]", "1/s",
+             tuple(x / v for x, v in zip(KX_DEFAULT, KV_DEFAULT, strict=True)), "> 0",
+             "the surface's slope c per axis: s = e_v + c e_x (one number: every axis)")
+K = Key("k", "number or array [x, y, z]", "N s/m", KV_DEFAULT, "> 0",
+        "the gain on s per axis in the force law F = m_hat w - d_hat - k s (one number: every axis)")
 GAMMA_M = Key("gamma_m", "number", "m² kg⁻¹ s⁻²", 100.0, "> 0",
               "the mass estimate's adaptation stiffness (rate = -s.w / gamma_m)")
 GAMMA_D = Key("gamma_d", "number", "m/N", 20.0, "> 0",
@@ -243,6 +260,18 @@ W_C = Key("w_c", "number", "rad/s", 5.0, "> 0", "the L1 low-pass filter's cut-of
 
 ATTITUDE_KEYS = (KR, KW)
 
+#: the position gains' defaults before issue 52 (one number on every axis: RotorPy's x/y gains reused on z). A log
+#: written then is re-simulated with them (adaptive_mj.runs.verify), for the keys its scenario left to the default.
+FORMER_DEFAULTS = {"kx": 0.195, "kv": 0.12, "lambda": 1.625, "k": 0.12}
+
+
+def former_gain_overrides(kind: str, set_keys: set[str]) -> list[str]:
+    """The --set expressions that give law kind `kind` (a flight law's) the position gains it had by default before
+    issue 52, for its keys not in set_keys (the keys its scenario or overrides set); [] for any other kind."""
+    own = {"geometric": GEOMETRIC_OWN, "l1_geometric": L1_OWN, "geometric_adaptive": ADAPTIVE_OWN}.get(kind, ())
+    return [f"law.{key.name}={FORMER_DEFAULTS[key.name]!r}" for key in own
+            if key.name in FORMER_DEFAULTS and key.name not in set_keys]
+
 
 def _read(own: tuple[Key, ...], *, adaptive: bool):
     def read(t, kind: str, plant, order: int) -> LawSpec:
@@ -250,6 +279,8 @@ def _read(own: tuple[Key, ...], *, adaptive: bool):
         for key in own:
             if key.type == "boolean":
                 params[key.name] = t.boolean(key.name, key.default)
+            elif key in PER_AXIS:
+                params[key.name] = _per_axis(t, key)
             elif key.name == "a_s":  # the predictor's pole: < 0
                 params[key.name] = t.number(key.name, key.default)
                 if not params[key.name] < 0:
@@ -261,20 +292,50 @@ def _read(own: tuple[Key, ...], *, adaptive: bool):
         nominal = shared.read_estimates(t, "nominal")
         robust = shared.read_robust(t, kind, adaptive=adaptive, composite=False, presets=())
         t.finish()
-        return LawSpec(kind=kind, order=4, lam=params.get("lambda"), k=float(params.get("k", 0.0)), gamma=None,
+        # LawSpec's scalar λ and k: the largest axis' (what sizes the dead-zone's noise in ‖s‖, and the studies')
+        lam = max(params["lambda"]) if "lambda" in params else None
+        return LawSpec(kind=kind, order=4, lam=lam, k=float(max(params.get("k", (0.0,)))), gamma=None,
                        dead_zone=dead_zone, initial_estimates=initial, nominal=nominal, K=None, boundary_layer=None,
                        robust=robust, params=params)
 
     return read
 
 
+PER_AXIS = (KX, KV, LAMBDA, K)
+
+
+def _per_axis(t, key: Key) -> tuple[float, float, float]:
+    """A per-axis gain: one number (every axis) or three (x, y, z), each > 0; absent: the key's default."""
+    v = t.data.get(key.name)
+    if isinstance(v, (list, tuple)):
+        vals = t.numbers(key.name, None)
+        if vals is None or len(vals) != 3:
+            raise t.fail(key.name, "a number or 3 numbers (x, y, z)", v)
+    else:
+        one = t.number(key.name, None)
+        if one is None:  # absent: the key's default
+            return tuple(key.default)
+        vals = (one,) * 3
+    for a in vals:
+        if not (math.isfinite(a) and a > 0):
+            raise t.fail(key.name, "> 0 on every axis", list(vals))
+    return (float(vals[0]), float(vals[1]), float(vals[2]))
+
+
 def _gains(p: dict) -> geo.Gains:
-    return geo.Gains(p.get("kx", KX.default), p.get("kv", KV.default), p["kR"], p["kW"])
+    return geo.Gains(np.array(p.get("kx", KX.default), dtype=float), np.array(p.get("kv", KV.default), dtype=float),
+                     p["kR"], p["kW"])
+
+
+def _slope(gains: geo.Gains) -> np.ndarray:
+    """(3,) c = k_x/k_v per axis [1/s]."""
+    return np.asarray(gains.kx, dtype=float) / np.asarray(gains.kv, dtype=float)
 
 
 def _build_geometric(ctx: BuildContext):
     p = ctx.law.params or {}
-    return GeometricLaw(ctx.airframe(), _gains(p), p["kx"] / p["kv"])
+    gains = _gains(p)
+    return GeometricLaw(ctx.airframe(), gains, _slope(gains))
 
 
 def _build_adaptive(ctx: BuildContext):
@@ -287,13 +348,15 @@ def _build_adaptive(ctx: BuildContext):
     inertia = bool(p["adapt_inertia"])
     if inertia:
         gamma[J_SLICE] = p["gamma_j"]
-    return GeometricAdaptiveLaw(af, _gains(p), p["lambda"], gamma=gamma, k=p["k"], dead_zone=ctx.dead_zone(),
+    return GeometricAdaptiveLaw(af, _gains(p), np.array(p["lambda"], dtype=float), gamma=gamma,
+                                k=np.array(p["k"], dtype=float), dead_zone=ctx.dead_zone(),
                                 modification=ctx.modification, c_R=p["c_r"], adapt_inertia=inertia)
 
 
 def _build_l1(ctx: BuildContext):
     p = ctx.law.params or {}
-    return L1GeometricLaw(ctx.airframe(), _gains(p), p["kx"] / p["kv"], a_s=p["a_s"], w_c=p["w_c"])
+    gains = _gains(p)
+    return L1GeometricLaw(ctx.airframe(), gains, _slope(gains), a_s=p["a_s"], w_c=p["w_c"])
 
 
 def _keys(own: tuple[Key, ...], adaptive: bool) -> tuple[Key, ...]:

@@ -13,7 +13,7 @@ flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
   Ainv (4, 4)  the inverse of the airframe's allocation: thrusts = Ainv @ [f, M]
   aug (6,)   the L1 filtered estimate C σ̂ = [acceleration (3) m/s², angular acceleration (3) rad/s²] (zeros: none)
   u (4,)     out: the rotor thrusts [N], unclipped
-  s (3,)     out: s = e_v + c e_x [m/s]
+  s (3,)     out: s = e_v + c e_x [m/s] (c per axis)
   rate (13,) out: θ̂' (zero but for m, d and τ under the adaptive law, and Ĵ's six entries with law.adapt_inertia)
 """
 from __future__ import annotations
@@ -23,10 +23,13 @@ import math
 from adaptive_mj.laws.common import modify_rate
 
 # P's layout: the law's numbers, one float64 array (the native callback reads it by address)
-P_MODE, P_KX, P_KV, P_KR, P_KW, P_C, P_K, P_G = range(8)
-P_DZ_WIDTH, P_DZ_ON_S, P_SIGMA, P_EMOD, P_ADAPT, P_L1, P_AS, P_WC, P_CR = range(8, 17)
-P_ADAPT_J = 17  # the adaptive law adapts the inertia (law.adapt_inertia): the Slotine–Li attitude moment
-P_SIZE = 18
+P_MODE, P_KR, P_KW, P_G = range(4)
+P_DZ_WIDTH, P_DZ_ON_S, P_SIGMA, P_EMOD, P_ADAPT, P_L1, P_AS, P_WC, P_CR = range(4, 13)
+P_ADAPT_J = 13  # the adaptive law adapts the inertia (law.adapt_inertia): the Slotine–Li attitude moment
+# per axis x, y, z (three slots each, P[P_KX + i]): the position and velocity gains k_x, k_v [N/m, N s/m], the
+# surface's slope c [1/s] (s = e_v + c e_x) and the adaptive law's gain k on s [N s/m]
+P_KX, P_KV, P_C, P_K = 14, 17, 20, 23
+P_SIZE = 26
 TMP_SIZE = 24  # the scratch tmp's length (flight_law, l1_update; the native callback's buffer)
 MODE_GEOMETRIC, MODE_ADAPTIVE = 0.0, 1.0
 
@@ -106,19 +109,20 @@ def translation_rates(x, r, s, s_abs, w, P, G, rate) -> bool:
 def flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
     """One evaluation (module docstring); R (3, 3), F (3,) and tmp (TMP_SIZE,) are scratch."""
     rodrigues(x[2], R)
-    g, c = P[P_G], P[P_C]
+    g = P[P_G]
     m = th[0]
     adaptive = P[P_MODE] == MODE_ADAPTIVE
-    for i in range(3):
+    for i in range(3):  # the gains per axis: c, k, k_x, k_v of axis i
+        c = P[P_C + i]
         ex = x[0, i] - r[0, i]
         ev = x[1, i] - r[1, i]
         s[i] = ev + c * ex
         if adaptive:  # F = m̂ w − d̂ − k s, w = a_d − c e_v + g e₃
             w = r[2, i] - c * ev + (g if i == 2 else 0.0)
             tmp[i] = w
-            F[i] = m * w - th[7 + i] - P[P_K] * s[i]
+            F[i] = m * w - th[7 + i] - P[P_K + i] * s[i]
         else:  # F = −k_x e_x − k_v e_v + m g e₃ + m a_d
-            F[i] = -P[P_KX] * ex - P[P_KV] * ev + (m * g if i == 2 else 0.0) + m * r[2, i]
+            F[i] = -P[P_KX + i] * ex - P[P_KV + i] * ev + (m * g if i == 2 else 0.0) + m * r[2, i]
     for j in range(rate.shape[0]):
         rate[j] = 0.0
     s_abs = math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])

@@ -32,10 +32,10 @@ def vee(S: np.ndarray) -> np.ndarray:
 
 
 class Gains(NamedTuple):
-    """k_x [N/m], k_v [N s/m], k_R [N m/rad], k_Ω [N m s/rad]."""
+    """k_x [N/m], k_v [N s/m] (a number, or (3,) per axis x, y, z), k_R [N m/rad], k_Ω [N m s/rad]."""
 
-    kx: float
-    kv: float
+    kx: float | np.ndarray
+    kv: float | np.ndarray
     kR: float
     kW: float
 
@@ -61,12 +61,13 @@ def geometric(p: np.ndarray, v: np.ndarray, R: np.ndarray, W: np.ndarray, ref: n
 
 
 class MassGains(NamedTuple):
-    """The translational adaptive law's gains: c [1/s] the surface slope, k [N s/m] the gain on s, gamma_m
+    """The translational adaptive law's gains: c [1/s] the surface slope, k [N s/m] the gain on s (each a number or
+    (3,) per axis), gamma_m
     [kg² s/m² ... as m̂' = −γ_m sᵀw is in kg/s] the mass estimate's rate gain and gamma_d [N s/m ... Δ̂' = γ_Δ s in
     N/s] the disturbance force estimate's."""
 
-    c: float
-    k: float
+    c: float | np.ndarray
+    k: float | np.ndarray
     gamma_m: float
     gamma_d: float
 

@@ -9,6 +9,7 @@ angular velocity in the local frame).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import mujoco
@@ -33,6 +34,13 @@ class Airframe:
     thrust_max: np.ndarray
     actuators: np.ndarray
     allocation: np.ndarray
+    act: np.ndarray
+    drag: np.ndarray
+
+    @property
+    def has_drag(self) -> bool:
+        """Whether the model declares rotor drag (its k_eta > 0 and k_d or k_z > 0)."""
+        return bool(self.drag[0] > 0 and (self.drag[1] > 0 or self.drag[2] > 0))
 
     @classmethod
     def of_model(cls, model: mujoco.MjModel, body: str = "quad") -> "Airframe":
@@ -68,8 +76,15 @@ class Airframe:
             tmax.append(float(model.actuator_ctrlrange[a, 1]))
         r = np.asarray(rotors)
         A = np.vstack([np.ones(4), r[:, 1], -r[:, 0], np.asarray(yaw)])  # M = Σ r_i × (0, 0, f_i) + yaw_i f_i e_z
+        act = np.array([int(model.actuator_actadr[a]) if model.actuator_dyntype[a] != mujoco.mjtDyn.mjDYN_NONE
+                        else -1 for a in acts], dtype=np.int64)
+        for a, adr in zip(acts, act, strict=True):
+            if adr >= 0 and (model.actuator_dyntype[a] != mujoco.mjtDyn.mjDYN_FILTER or model.actuator_actearly[a]):
+                raise ValueError(f"actuator {a}: a rotor's dynamics must be none or a first-order filter "
+                                 "(dyntype=\"filter\", actearly false)")
         return cls(b, int(model.jnt_qposadr[j]), int(model.jnt_dofadr[j]), float(model.body_subtreemass[b]),
-                   inertia, r, np.asarray(yaw), np.asarray(tmax), np.asarray(acts), A)
+                   inertia, r, np.asarray(yaw), np.asarray(tmax), np.asarray(acts, dtype=np.int64), A, act,
+                   rotor_coefficients(model))
 
     def state(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(p, v, R, Ω) of the free body: world position [m] and velocity [m/s], body-to-world R, body rate
@@ -88,3 +103,73 @@ class Airframe:
     def apply(self, data: mujoco.MjData, thrusts: np.ndarray) -> None:
         """Write rotor thrusts (4,) [N] into the actuators' controls."""
         data.ctrl[self.actuators] = thrusts
+
+
+DRAG_NAMES = ("k_eta", "k_d", "k_z")  # the model's <numeric> rotor coefficients (models/quadrotor.xml)
+
+
+def rotor_coefficients(model: mujoco.MjModel) -> np.ndarray:
+    """(3,) [k_eta, k_d, k_z] from the model's <custom><numeric> of those names: k_eta [N/(rad/s)²] the thrust
+    coefficient (thrust = k_eta ω²), k_d and k_z [N/(rad m/s²)] RotorPy's rotor drag coefficients. Zeros (no rotor
+    drag) where the model declares none; a model declaring some must declare k_eta > 0."""
+    out = np.zeros(3)
+    found = False
+    for i, name in enumerate(DRAG_NAMES):
+        n = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
+        if n >= 0:
+            found = True
+            out[i] = float(model.numeric_data[model.numeric_adr[n]])
+    if found and not (out[0] > 0 and out[1] >= 0 and out[2] >= 0):
+        raise ValueError(f"rotor drag needs <numeric> k_eta > 0 and k_d, k_z >= 0, got {list(out)}")
+    return out
+
+
+def rotor_drag_into(qvel, dadr, xmat, ctrl, act, gainprm, acts, actadr, lo, hi, rotors, wind, drag, qfrc):
+    """RotorPy's rotor drag (rotorpy/vehicles/multirotor.py, Multirotor.compute_body_wrench, at 9b760b8), written
+    as the free joint's generalized force into qfrc[dadr:dadr + 6]: with the body's air-relative velocity in the
+    body frame b = Rᵀ(v − wind) and each hub's u_i = b + Ω × r_i, rotor i's drag (its "H force") acts at its hub,
+
+        H_i = −ω_i (k_d u_x, k_d u_y, k_z u_z),   ω_i = √(T_i / k_eta),
+
+    and the wrench is F = Σ H_i (qfrc[dadr:dadr + 3] = R F, world frame [N]) and the moment about the body's origin
+    Σ r_i × H_i (qfrc[dadr + 3:dadr + 6], body frame [N m]: the free joint's rotational dofs are the body's axes), as
+    RotorPy sums r_i × (T_i + H_i) about its centre of mass. T_i [N] is the rotor's thrust now: gain · act (a
+    lagged rotor, actadr[i] >= 0) or gain · ctrl clamped into [lo, hi] (what MuJoCo applies in the stage).
+
+    qvel (nv,) [m/s, rad/s]; xmat (9,) the body's rotation, row-major (MjData.xmat[body]); ctrl (nu,), act (na,),
+    gainprm (nu, 10) MuJoCo's; acts (4,), actadr (4,) the rotors' actuator ids and activation addresses; lo, hi
+    (4,) [N]; rotors (4, 3) the hubs in the body frame [m]; wind (3,) [m/s] the air's velocity, world frame;
+    drag (3,) [k_eta, k_d, k_z]. Plain scalar code: the Python callback runs it compiled by numba as the native
+    callback does, so the two paths apply the same bits. At zero airspeed and rate it is exactly zero."""
+    ax, ay, az = qvel[dadr] - wind[0], qvel[dadr + 1] - wind[1], qvel[dadr + 2] - wind[2]
+    bx = xmat[0] * ax + xmat[3] * ay + xmat[6] * az
+    by = xmat[1] * ax + xmat[4] * ay + xmat[7] * az
+    bz = xmat[2] * ax + xmat[5] * ay + xmat[8] * az
+    wx, wy, wz = qvel[dadr + 3], qvel[dadr + 4], qvel[dadr + 5]
+    k_eta, k_d, k_z = drag[0], drag[1], drag[2]
+    fx = fy = fz = mx = my = mz = 0.0
+    for i in range(4):
+        a = acts[i]
+        if actadr[i] >= 0:
+            c = act[actadr[i]]
+        else:
+            c = min(max(ctrl[a], lo[i]), hi[i])
+        thrust = gainprm[a, 0] * c
+        w = math.sqrt(thrust / k_eta) if thrust > 0.0 else 0.0
+        rx, ry, rz = rotors[i, 0], rotors[i, 1], rotors[i, 2]
+        ux = bx + (wy * rz - wz * ry)
+        uy = by + (wz * rx - wx * rz)
+        uz = bz + (wx * ry - wy * rx)
+        hx, hy, hz = -w * k_d * ux, -w * k_d * uy, -w * k_z * uz
+        fx += hx
+        fy += hy
+        fz += hz
+        mx += ry * hz - rz * hy
+        my += rz * hx - rx * hz
+        mz += rx * hy - ry * hx
+    qfrc[dadr] = xmat[0] * fx + xmat[1] * fy + xmat[2] * fz
+    qfrc[dadr + 1] = xmat[3] * fx + xmat[4] * fy + xmat[5] * fz
+    qfrc[dadr + 2] = xmat[6] * fx + xmat[7] * fy + xmat[8] * fz
+    qfrc[dadr + 3] = mx
+    qfrc[dadr + 4] = my
+    qfrc[dadr + 5] = mz

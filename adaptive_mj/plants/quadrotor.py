@@ -43,7 +43,7 @@ from adaptive_mj.plants import BuiltPlant, ModelSource
 from adaptive_mj.plants import events as ev
 from adaptive_mj.plants import plant_keys, quadrotor_kernel
 from adaptive_mj.plants.mujoco_kernel import MujocoKernel
-from adaptive_mj.plants.airframe import Airframe
+from adaptive_mj.plants.airframe import Airframe, rotor_drag_into
 from adaptive_mj.plants.kinds import Draw, PlantKind, ScoreTask, StressPlant, register
 from adaptive_mj.plants.study_spec import LEAK_TIME, Stressor, StudyContext, box_table, surface_noise, theta_table
 from adaptive_mj.plants.mujoco_plant import (BodyEdits, ModelClock, compiled_control, control_callback, new_warnings,
@@ -60,6 +60,26 @@ PARAM_UNITS = {"m": "kg", **{n: "kg m²" for n in INERTIA_NAMES}, "dx": "N", "dy
                "ty": "N m", "tz": "N m"}
 CRASH_TILT_DEG = 80.0  # plant.crash_tilt's default [deg]
 AIRBORNE_RISE = 0.05  # [m] above its start the vehicle counts as airborne: down to the ground after is a crash
+
+
+_DRAG: list = []
+
+
+def drag_kernel() -> Callable:
+    """airframe.rotor_drag_into compiled by numba (cached on disk), or the plain function where numba is missing:
+    the same arithmetic as the native callback's (plants.quadrotor_kernel)."""
+    if not _DRAG:
+        try:
+            import functools
+
+            import numba
+
+            from adaptive_mj.numba_util import jit_tree
+
+            _DRAG.append(jit_tree(rotor_drag_into, functools.partial(numba.njit, cache=True), tag="_drag"))
+        except ImportError:  # pragma: no cover - numba is a dependency; a bare checkout still runs, slowly
+            _DRAG.append(rotor_drag_into)
+    return _DRAG[0]
 
 
 def rotvec_into(qw, qx, qy, qz, out):
@@ -208,7 +228,8 @@ def rigid_inertia(model: mujoco.MjModel, root: int) -> tuple[float, np.ndarray, 
 class QuadrotorSpec:
     """plant.* keys of kind "quadrotor" beyond the shared ones: crash_tilt [deg], the tilt past which the run ends
     crashed; rotor_time_constant τ [s] of a first-order lag on every rotor's thrust that the laws do not model
-    (None: none); wind (3,) [m/s] the air's velocity from t = 0 (None: the model's)."""
+    (None: the model's own, RotorPy's τ_m = 0.005 s on the bundled quadrotor; 0: no lag); wind (3,) [m/s] the air's
+    velocity from t = 0 (None: the model's)."""
 
     crash_tilt: float = CRASH_TILT_DEG
     rotor_time_constant: float | None = None
@@ -269,12 +290,27 @@ class QuadrotorPlant(ModelClock, BodyEdits):
         d.qpos[af.qpos + 3:af.qpos + 7] = quaternion(x0[2])
         d.qvel[af.qvel:af.qvel + 3] = x0[1]
         d.qvel[af.qvel + 3:af.qvel + 6] = x0[3]
+        self._trim_rotors()
         with control_callback(None):
             mujoco.mj_forward(m, d)
         self._crash = None
         self._z0 = float(x0[0, 2])
         # in the air from the start (AIRBORNE_RISE above where it would rest), or once it has risen that much
         self._airborne = self._z0 > self.clearance + AIRBORNE_RISE
+
+    def _trim_rotors(self) -> None:
+        """Lagged rotors (a filter's activation) start at the thrusts that hold the vehicle's weight level, as
+        RotorPy's vehicle starts at its hover rotor speed: act = the allocation's inverse of [m g, 0, 0, 0] (m the
+        true mass with the payload), clipped into [0, T_max], over each rotor's gain (a weakened rotor's efficiency)
+        -- not at zero thrust, which would drop a vehicle that starts on its reference."""
+        af, m, d = self.airframe, self.model, self.data
+        if not np.any(af.act >= 0):
+            return
+        weight = float(self.true_theta()[0]) * float(-m.opt.gravity[2])
+        trim = af.thrusts(weight, np.zeros(3))
+        for i, adr in enumerate(af.act):
+            if adr >= 0:
+                d.act[adr] = trim[i] / m.actuator_gainprm[af.actuators[i], 0]
 
     def measure(self, d: mujoco.MjData, x: np.ndarray) -> None:
         """Fill x (4, 3) from MjData (inside the control callback)."""
@@ -299,16 +335,40 @@ class QuadrotorPlant(ModelClock, BodyEdits):
 
     @contextlib.contextmanager
     def controlled_by(self, policy) -> Iterator[None]:
-        """policy(t, x (4, 3)) -> the four thrusts (4,) [N], inside MuJoCo's control callback (each RK4 stage)."""
-        acts, measure = self.airframe.actuators, self.measure
+        """policy(t, x (4, 3)) -> the four thrusts (4,) [N], inside MuJoCo's control callback (each RK4 stage); then
+        the rotors' drag at that stage's state and thrusts into qfrc_applied (apply_rotor_drag), which MuJoCo adds
+        to the stage's forces after the callback returns."""
+        acts, measure, drag = self.airframe.actuators, self.measure, self.apply_rotor_drag
         x = np.empty((4, 3))
 
         def callback(m, d):
             measure(d, x)
             d.ctrl[acts] = policy(d.time, x)
+            drag(d)
 
         with control_callback(callback):
             yield
+
+    def apply_rotor_drag(self, d: mujoco.MjData) -> None:
+        """RotorPy's rotor drag (airframe.rotor_drag_into, compiled as the native callback compiles it) at d's state,
+        controls and the model's wind, into d.qfrc_applied's free-joint entries; nothing where the model declares
+        no rotor drag. Called inside the control callback, after the controls are written."""
+        if self.airframe.has_drag:
+            self._rotor_drag_into(d, d.qfrc_applied)
+
+    def _rotor_drag_into(self, d: mujoco.MjData, qfrc: np.ndarray) -> None:
+        af, m = self.airframe, self.model
+        drag_kernel()(d.qvel, af.qvel, d.xmat[af.body], d.ctrl, d.act, m.actuator_gainprm, af.actuators, af.act,
+                      self.ctrl_range[0], self.ctrl_range[1], af.rotors, m.opt.wind, af.drag, qfrc)
+
+    def rotor_wrench(self, d: mujoco.MjData | None = None) -> np.ndarray:
+        """(6,) the rotor drag at d's state and thrusts (default: the plant's MjData) as the free joint's generalized
+        force: the force [N] in the world frame, the moment [N m] about the body's origin in the body frame
+        (airframe.rotor_drag_into); d is left as it was."""
+        out = np.zeros(self.model.nv)
+        if self.airframe.has_drag:
+            self._rotor_drag_into(self.data if d is None else d, out)
+        return out[self.airframe.qvel:self.airframe.qvel + 6].copy()
 
     def step(self) -> None:
         """One mj_step with the external force and torque held; then the crash check."""
@@ -472,13 +532,18 @@ def model_source(scn) -> ModelSource | None:
 
 def _edit(spec: QuadrotorSpec):
     """The MjSpec edit of plant.rotor_time_constant: every rotor a first-order filter of τ (MuJoCo's actuator
-    dynamics: act' = (ctrl − act)/τ, thrust = act)."""
+    dynamics: act' = (ctrl − act)/τ, thrust = act), or with τ = 0 no lag (thrust = ctrl)."""
     tau = spec.rotor_time_constant
 
     def edit(s: mujoco.MjSpec) -> tuple[str, ...]:
         for a in s.actuators:
-            a.dyntype = mujoco.mjtDyn.mjDYN_FILTER
-            a.dynprm[0] = tau
+            if tau == 0:
+                a.dyntype = mujoco.mjtDyn.mjDYN_NONE
+            else:
+                a.dyntype = mujoco.mjtDyn.mjDYN_FILTER
+                a.dynprm[0] = tau
+        if tau == 0:
+            return ("every rotor's lag taken off: thrust = the control (plant.rotor_time_constant = 0)",)
         return (f"every rotor given a first-order lag of {tau:g} s (plant.rotor_time_constant)",)
 
     return edit if tau is not None else None
@@ -505,7 +570,7 @@ def _own_keys(t, fields) -> dict:
     if wind is not None and len(wind) != 3:
         raise t.fail("wind", "3 numbers [m/s] (x, y, z)", list(wind))
     spec = QuadrotorSpec(crash_tilt=t.number("crash_tilt", CRASH_TILT_DEG, gt=0),
-                         rotor_time_constant=t.number("rotor_time_constant", None, gt=0),
+                         rotor_time_constant=t.number("rotor_time_constant", None, ge=0),
                          wind=None if wind is None else (float(wind[0]), float(wind[1]), float(wind[2])))
     if not spec.crash_tilt <= 180:
         raise t.fail("crash_tilt", "an angle in (0, 180] deg", spec.crash_tilt)
@@ -514,9 +579,11 @@ def _own_keys(t, fields) -> dict:
 
 CRASH_TILT = Key("crash_tilt", "number", "deg", CRASH_TILT_DEG, "(0, 180]",
                  "the tilt past which the run ends crashed")
-ROTOR_TIME_CONSTANT = Key("rotor_time_constant", "number", "s", None, "> 0",
-                          "a first-order lag on every rotor's thrust, unknown to the laws (default: none)")
-WIND = Key("wind", "array [x, y, z]", "m/s", None, "3 numbers", "the air's velocity from t = 0 (default: the model's)")
+ROTOR_TIME_CONSTANT = Key("rotor_time_constant", "number", "s", None, ">= 0",
+                          "a first-order lag on every rotor's thrust, unknown to the laws; 0: none (default: the "
+                          "model's, 0.005 s on the bundled quadrotor)")
+WIND = Key("wind", "array [x, y, z]", "m/s", None, "3 numbers",
+           "the air's velocity from t = 0, felt through the rotors' drag (default: the model's opt.wind)")
 
 
 # --- its references -------------------------------------------------------------------
@@ -597,7 +664,8 @@ def _rotor_on_load(t, plant, fields) -> None:
 
 WIND_EVENT = ev.EventKind("wind", _wind, value="none",
                           fields=(ev.EventField("velocity", _vector("velocity"), "the air's velocity [m/s]"),),
-                          doc="sets the wind (MuJoCo's opt.wind) to velocity [m/s] from t on: a gust is two events")
+                          doc="sets the wind (MuJoCo's opt.wind, felt through the rotors' drag) to velocity [m/s] "
+                              "from t on: a gust is two events")
 ROTOR_EFFICIENCY = ev.EventKind("rotor_efficiency", _rotor, fields=(
     ev.EventField("rotor", _rotor_number, "the rotor (1 to 4)"),), on_load=_rotor_on_load,
     doc="rotor's thrust becomes value (0 < value <= 1) times what is commanded, from t on")
@@ -654,7 +722,7 @@ def _event(text: str) -> list[str]:
 #: and the breaking-point study's (study_stressors)
 DISTURBANCES = (
     Disturbance("wind", "m/s", lambda v: [f"plant.wind=[{v!r}, 0.0, 0.0]"], 0.5, 40.0,
-                doc="a steady wind along x (MuJoCo's fluid drag on the fuselage)"),
+                doc="a steady wind along x (felt through RotorPy's rotor drag)"),
     Disturbance("force", "N", lambda v: _event(f"{{t=0.0, kind='external_force', force=[{v!r}, 0.0, 0.0]}}"),
                 0.003, 1.0, doc="a constant force along x on the body (the vehicle weighs 0.29 N)"),
     Disturbance("torque", "N m", lambda v: _event(f"{{t=0.0, kind='external_force', torque=[{v!r}, 0.0, 0.0]}}"),
@@ -721,15 +789,17 @@ def _payload_added(m0: float) -> Callable[[float], list[str]]:
 KIND = register(PlantKind(
     "quadrotor", __name__, frozenset({Form.AIRFRAME}), output_unit="m", control_unit="N", params=PARAM_UNITS,
     default_model="quadrotor", default_law="geometric_adaptive",
-    doc="a Crazyflie-size quadrotor (RotorPy's parameters) with an unknown payload, in MuJoCo's air",
+    doc="a Crazyflie-size quadrotor (RotorPy's parameters, rotor drag and motor lag) with an unknown payload",
     keys=plant_keys.keys(CRASH_TILT, ROTOR_TIME_CONSTANT, WIND, payload=True, default_payload=None),
-    reader=plant_keys.SharedReader(backend=("mujoco", "a free body flown in MuJoCo's air"), body=_own_keys),
+    reader=plant_keys.SharedReader(backend=("mujoco", "a free body flown in MuJoCo with RotorPy's rotor drag"),
+                                   body=_own_keys),
     events={ev.PAYLOAD_MASS: "mujoco", ev.PAYLOAD_SWAP: "mujoco", PAYLOAD_RELEASE: "mujoco",
             ROTOR_EFFICIENCY: "mujoco", WIND_EVENT: "mujoco", EXTERNAL_FORCE: "mujoco"},
     order=lambda plant, law_order: 4, starts_on_reference=True, sections=("quadrotor",),
     # the breaking-point study and the scorecard: the bundled lemniscate with its 10 g payload, its scenario's own
-    # bound on the tail RMS (2 cm: ‖p̃‖'s RMS / √3; the geometric law at the true parameters flies it with 2.2 mm
-    # under σ_p = 1 mm, σ_v = 1 cm/s); a crash fails the run whatever its tail
+    # bound on the tail RMS (2 cm: ‖p̃‖'s RMS / √3; the geometric law at the true parameters flies it with 15.3 mm
+    # without noise, most of it the rotor drag it has no integral action against: 2.2 mm under σ_p = 1 mm, σ_v = 1
+    # cm/s in MuJoCo's former ellipsoid fluid model, before issue 52); a crash fails the run whatever its tail
     tail_bound=0.02, nominal_noise=1e-3,
     stress=StressPlant("quadrotor", "quadrotor_lemniscate", (), noise_signals=("p", "v"),
                        label="the quadrotor: the RMS over x, y and z, ‖p̃‖'s RMS / √3",

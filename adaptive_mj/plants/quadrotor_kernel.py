@@ -5,7 +5,8 @@ adaptive_mj.sim.native_mujoco, builds and drives it from `KERNEL`, this kind's d
 integrator stage and it runs adaptive_mj.sim.stage.control_stage with this kind's pieces:
     _law_stage      x = [p; v; φ; Ω] measured from qpos/qvel (plants.quadrotor.measure_into) plus the step's noise,
                     the stage estimate, the law, the four thrusts clamped into [0, T_max]
-    _apply_control  ctrl of the four rotors
+    _apply_control  ctrl of the four rotors, then RotorPy's rotor drag at the stage's state and thrusts into
+                    qfrc_applied (plants.airframe.rotor_drag_into, as the Python path's callback applies it)
     _record_row     first, at every step, the crash check on the state the last step left (plants.quadrotor
                     .crash_check: a crash stops the chunk's rows there, the kind's termination); then t, the true x
                     (4, 3), the thrusts (4,), s (3,), the reference (5, 3), θ̂
@@ -31,12 +32,16 @@ flight_law = Injected("flight_law")  # laws.flight_kernel.flight_law, compiled
 measure_into = Injected("measure_into")  # plants.quadrotor.measure_into, compiled
 crash_check = Injected("crash_check")  # plants.quadrotor.crash_check, compiled
 l1_update = Injected("l1_update")  # laws.flight_kernel.l1_update, compiled
+rotor_drag_into = Injected("rotor_drag_into")  # plants.airframe.rotor_drag_into, compiled
 
 _i8, _f8 = np.int64, np.float64
 #: this kind's context fields (after sim.native_step.STAGE_CONTEXT and the generic controller's own)
 CONTEXT = (
     # settings
     ("maxrows", _i8), ("qadr", _i8), ("dadr", _i8), ("nq", _i8), ("nv", _i8), ("nu", _i8),
+    # the rotor drag (plants.airframe.rotor_drag_into; drag_on 0: the model declares none): the body's id, the
+    # MjData/MjModel sizes its arrays are read with
+    ("drag_on", _i8), ("body", _i8), ("na", _i8), ("nbody", _i8), ("gain_w", _i8),
     # the crash check (plants.quadrotor.crash_check): its settings, the airborne flag, and a crash found (code > 0
     # at row crash_row, with its value, time and speed)
     ("cos_tilt", _f8), ("clearance", _f8), ("z0", _f8), ("airborne", _i8), ("crash_code", _i8), ("crash_row", _i8),
@@ -47,6 +52,8 @@ CONTEXT = (
     ("R", _i8), ("F", _i8), ("tmp", _i8), ("u", _i8), ("s", _i8),
     # L1 augmentation's filters (P[P_L1] != 0): the predictor, the estimate, the last step's measured x and thrusts
     ("A", _i8), ("z_hat", _i8), ("sigma", _i8), ("x_prev", _i8), ("u_prev", _i8),
+    # the rotor drag's: each rotor's activation address, the hubs (4, 3), [k_eta, k_d, k_z], the wind (3,)
+    ("actadr", _i8), ("rotors", _i8), ("drag", _i8), ("wind", _i8),
 )
 
 
@@ -100,7 +107,8 @@ def _law_stage(ctx, io, stage, row, theta, prev, lower, upper):
 
 
 def _apply_control(ctx, io, row, u):
-    """This shape's "apply": the four thrusts into their actuators' ctrl."""
+    """This shape's "apply": the four thrusts into their actuators' ctrl; then the rotor drag at this stage into
+    qfrc_applied (the Python path's QuadrotorPlant.apply_rotor_drag)."""
     base, mbase, off = io
     ctrl = carray(fptr(pointer_at(base, off.ctrl)), ctx.nu)
     act = carray(iptr(ctx.act), 4)
@@ -109,6 +117,14 @@ def _apply_control(ctx, io, row, u):
         ctrl[act[i]] = u[i]
         if ctx.stage == 0:  # the step's applied thrusts, for L1's update at the next step
             u_prev[i] = u[i]
+    if ctx.drag_on != 0:
+        rotor_drag_into(carray(fptr(pointer_at(base, off.qvel)), ctx.nv), ctx.dadr,
+                        carray(fptr(pointer_at(base, off.xmat)), ctx.nbody * 9)[ctx.body * 9:ctx.body * 9 + 9],
+                        ctrl, carray(fptr(pointer_at(base, off.act)), max(ctx.na, 1)),
+                        carray(fptr(pointer_at(mbase, off.actuator_gainprm)), (ctx.nu, ctx.gain_w)), act,
+                        carray(iptr(ctx.actadr), 4), carray(fptr(ctx.lo), 4), carray(fptr(ctx.hi), 4),
+                        carray(fptr(ctx.rotors), (4, 3)), carray(fptr(ctx.wind), 3), carray(fptr(ctx.drag), 3),
+                        carray(fptr(pointer_at(base, off.qfrc_applied)), ctx.nv))
 
 
 
@@ -151,6 +167,7 @@ def _record_row(ctx, io, row, u, theta):
 
 def variant(plant, law) -> KernelVariant:
     """The one callback variant: the flight laws and L1 filters (their gains are run data, in P)."""
+    from adaptive_mj.plants import airframe
     from adaptive_mj.plants import quadrotor as quad
 
     def pieces(common: dict[str, Any], tag: str, inline) -> dict[str, Any]:
@@ -162,14 +179,15 @@ def variant(plant, law) -> KernelVariant:
                                  "l1_update": jit_tree(flight_kernel.l1_update, numba.njit, tag=tag, inner=inline),
                                  "measure_into": jit_tree(quad.measure_into, inline, tag=tag),
                                  "crash_check": jit_tree(quad.crash_check, inline, tag=tag)}
+        drag: dict[str, Any] = {"rotor_drag_into": jit_tree(airframe.rotor_drag_into, inline, tag=tag)}
         return {"law_stage": jit_tree(_law_stage, numba.njit, tag=tag, **common, **shape),
-                "apply_control": jit_tree(_apply_control, inline, tag=tag, **common),
+                "apply_control": jit_tree(_apply_control, inline, tag=tag, **common, **drag),
                 "record_row": jit_tree(_record_row, inline, tag=tag, **common, **shape)}
 
     return KernelVariant(
         mem_key=("callback",),
         key_functions=(_law_stage, _apply_control, _record_row, _columns, flight_kernel.flight_law,
-                       flight_kernel.l1_update, quad.measure_into, quad.crash_check),
+                       flight_kernel.l1_update, quad.measure_into, quad.crash_check, airframe.rotor_drag_into),
         key_extra=("flight",), pieces=pieces,
         what="the quadrotor control callback (the flight laws and L1 filters)", kind="quadrotor callback")
 
@@ -204,20 +222,25 @@ def setup(plant, law, control, sensors, max_rows: int) -> KernelRun:
         "F": np.zeros(3), "tmp": np.zeros(flight_kernel.TMP_SIZE), "u": np.zeros(4), "s": np.zeros(3),
         "A": f64(p["A"]), "z_hat": np.zeros(6), "sigma": np.zeros(6), "x_prev": np.zeros((4, 3)),
         "u_prev": np.zeros(4),
+        "actadr": np.ascontiguousarray(plant.airframe.act, dtype=np.int64),
+        "rotors": f64(plant.airframe.rotors), "drag": f64(plant.airframe.drag), "wind": f64(model.opt.wind),
     }
     fields = {"maxrows": rows, "qadr": plant.airframe.qpos, "dadr": plant.airframe.qvel, "nq": model.nq,
               "nv": model.nv, "nu": model.nu, "cos_tilt": plant.cos_tilt, "clearance": plant.clearance,
-              "z0": plant._z0, "airborne": int(plant._airborne)}
+              "z0": plant._z0, "airborne": int(plant._airborne), "drag_on": int(plant.airframe.has_drag),
+              "body": plant.airframe.body, "na": model.na, "nbody": model.nbody,
+              "gain_w": model.actuator_gainprm.shape[1]}
     return KernelRun(buffers, fields, None, m=4, rows=RowShapes((4, 3), (4,), (3,), (5, 3), nth), ref_order=4,
                      s_width=3)
 
 
 def prepare(controller, rows: int, noise, t, refs) -> None:
-    """The chunk's references and noise into the run's buffers, and the crash check's clearance (an event may have
-    changed it: a payload released)."""
+    """The chunk's references and noise into the run's buffers, the wind and the crash check's clearance (an event
+    may have changed them: a wind event, a payload released)."""
     plant, b = controller.plant, controller.buffers
     b["ref"][: rows * controller.nst] = refs
     b["noise"][:rows] = 0.0 if noise is None else np.asarray(noise, dtype=float).reshape(rows, 4, 3)
+    b["wind"][:] = plant.model.opt.wind  # a wind event's, between chunks (the Python path reads opt.wind itself)
     controller.context[0]["clearance"] = plant.clearance
 
 

@@ -13,6 +13,50 @@ _FIELDS = ("t", "x", "u", "s", "ref", "theta_hat", "theta", "V")
 REGRESSOR_BEFORE = ("slotine_li", "computed_torque", "pd_gravity")
 
 
+def _flight_gains_before_rotor_drag(scn, logged) -> list[str]:
+    """A quadrotor log written before issue 52 (its embedded model declares no rotor drag, <numeric name="k_eta">,
+    and flies in MuJoCo's ellipsoid fluid: the bundled model of then): the overrides that give its flight law the
+    position gains it had by default then (laws.flight.former_gain_overrides), for the keys its scenario and
+    overrides left to the default. The model it embeds already gives the air and the rotors of then."""
+    import tomllib
+
+    from adaptive_mj.laws.flight import former_gain_overrides
+
+    source = logged.model_source
+    if scn.plant.kind != "quadrotor" or source is None or 'name="k_eta"' in source \
+            or 'fluidshape="ellipsoid"' not in source:
+        return []
+    set_keys = set(tomllib.loads(logged.scenario_text).get("law", {}))
+    for o in logged.overrides:
+        name, _, value = o.partition("=")
+        name = name.strip()
+        if name.startswith("law."):
+            set_keys.add(name[4:].split(".")[0])
+        elif name == "law":  # the whole table replaced: its keys
+            set_keys |= set(tomllib.loads(f"law = {value}")["law"])
+    return former_gain_overrides(scn.law.kind, set_keys)
+
+
+def _rerun_scenario(logged):
+    """The scenario the re-run flies: the log's text, overrides and seed, plus what keeps an older log's run as it
+    was (a law's evaluation, a flight law's former gains)."""
+    header = logged.header
+
+    def load(extra):
+        return sc.loads(logged.scenario_text, where=f"{header.get('scenario_source', 'log')} (from the log)",
+                        default_name=header["scenario_name"], overrides=[*logged.overrides, *extra],
+                        seed=int(header["seed"]))
+
+    scn = load([])
+    extra = []
+    if "law_evaluation" not in header and scn.law.kind in REGRESSOR_BEFORE:
+        # written before the O(n) Slotine–Li (laws.slotine_li, law.evaluation): that run formed Y whole, and
+        # the O(n) form's numbers differ from it in the last bits, so the re-run forms Y whole too
+        extra.append("law.evaluation='regressor'")
+    extra += _flight_gains_before_rotor_drag(scn, logged)
+    return load(extra) if extra else scn
+
+
 def verify(logged) -> tuple[bool, str]:
     """(identical?, one-line message). Compares every logged row with the re-run's same step."""
     header = logged.header
@@ -33,15 +77,7 @@ def verify(logged) -> tuple[bool, str]:
             note += (f"; note: the installed {what} plugin {plugin['name']!r} ({inst.distribution} {inst.version}, "
                      f"source {inst.source_sha256[:12]}) differs from the log's ({plugin['distribution']} "
                      f"{plugin['version']}, source {plugin['source_sha256'][:12]})")
-    scn = sc.loads(logged.scenario_text, where=f"{header.get('scenario_source', 'log')} (from the log)",
-                   default_name=header["scenario_name"], overrides=list(logged.overrides),
-                   seed=int(header["seed"]))
-    if "law_evaluation" not in header and scn.law.kind in REGRESSOR_BEFORE:
-        # written before the O(n) Slotine–Li (laws.slotine_li, law.evaluation): that run formed Y whole, and
-        # the O(n) form's numbers differ from it in the last bits, so the re-run forms Y whole too
-        scn = sc.loads(logged.scenario_text, where=f"{header.get('scenario_source', 'log')} (from the log)",
-                       default_name=header["scenario_name"],
-                       overrides=[*logged.overrides, "law.evaluation='regressor'"], seed=int(header["seed"]))
+    scn = _rerun_scenario(logged)
     source = None
     if logged.model_source is not None:
         source = ModelSource(logged.model_source, dict(logged.model_assets))

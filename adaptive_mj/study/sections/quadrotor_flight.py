@@ -129,8 +129,8 @@ def _tasks(res, out: Path) -> tuple[str, list[dict]]:
     figure = _save(fig, out, "quadrotor-lemniscate")
     tasks = "\n".join(f"- `{name}`: {what}" for name, what in TASKS)
     text = (f"**The plant** (`models/quadrotor.xml`): a Crazyflie 2.x as RotorPy models it (30 g, four rotors of "
-            f"0.144 N, the thrust-to-weight 1.95), a free body in MuJoCo's air (ellipsoid fluid drag: `opt.wind` is "
-            f"a real wind), the payload attached under it by MuJoCo's attach. The laws: the SE(3) geometric "
+            f"0.144 N, the thrust-to-weight 1.95), a free body with RotorPy's rotor drag (`opt.wind` is a real wind) "
+            f"and motor lag, the payload attached under it by MuJoCo's attach. The laws: the SE(3) geometric "
             f"controller at the bare vehicle's mass and inertia (Lee, Leok & McClamroch 2010), the same with the "
             f"lecture's sliding adaptive law on the translational dynamics (m̂ and a force d̂), and with L1 "
             f"augmentation (predictor, piecewise-constant adaptation, low-pass; Wu et al. 2023); all compiled in "
