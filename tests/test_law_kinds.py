@@ -285,3 +285,10 @@ def test_a_new_law_kind_lands_by_its_own_module_alone(tmp_path, monkeypatch):
     assert result.summary["status"].value == "ok" and result.summary["steps"] == 50
     assert "the law ToyPD" in result.summary["preflight"]["note"]  # the toy's law object is what ran
     assert np.all(np.isfinite(result.trajectory.u))
+
+
+def test_every_built_in_kind_has_its_place_in_the_order():
+    """The docs' tables list the kinds in ORDER; a kind missing there would be listed in the order the modules
+    happened to be imported (a test importing the quadrotor first moved it ahead of process control)."""
+    assert set(kinds.built_in()) <= set(kinds.ORDER)
+    assert set(plant_kinds.built_in()) <= set(plant_kinds.ORDER)

@@ -203,7 +203,7 @@ _SCANNED = False
 
 #: the order the built-in kinds are listed in (a kind missing here comes last, in the order it registers)
 ORDER = ("sliding_adaptive", "first_order_adaptive", "fixed_nominal", "robust_sliding", "mrac", "slotine_li",
-         "computed_torque", "pd_gravity")
+         "computed_torque", "pd_gravity", "geometric", "geometric_adaptive", "l1_geometric")
 
 
 def register(kind: LawKind) -> LawKind:

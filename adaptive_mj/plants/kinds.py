@@ -236,7 +236,7 @@ def built_in() -> dict[str, PlantKind]:
 
 
 #: the order the built-in kinds are listed in (a kind missing here comes last): the lecture's order
-ORDER = ("heave", "arm", "first_order", "manipulator", "ship", "linear", "wing_rock")
+ORDER = ("heave", "arm", "first_order", "manipulator", "ship", "linear", "wing_rock", "process", "quadrotor")
 
 
 #: the order [[events]] kinds are listed in (`events[i].kind must be one of ...`); a kind's own event kind
