@@ -35,12 +35,12 @@ from adaptive_mj import notes
 
 PREFIX = "adaptive-mj: "
 
-#: [s of CPU] a cold compile of each kind, measured (`adaptive-mj warmup --quick --jobs 2` with an empty cache,
-#: numba 0.68.1, 2026-12-07; the MuJoCo callbacks and the projection re-measured variant by variant after issue 51's
-#: item 4, bullet 1, the analytic chunks after analytic_step compiled the control stage once, at load 8-12;
-#: docs/PERFORMANCE.md): the figure said where this machine has none of its own yet
-TYPICAL_CPU: dict[str, float] = {"1-DOF callback": 7.5, "arm callback": 24.0, "quadrotor callback": 12.5,
-                                 "projection": 3.5, "linear MRAC chunk": 10.0, "twin chunk": 12.0}
+#: [s of CPU] a cold compile of each kind, measured one bundled scenario at a time with an empty cache (numba 0.68.1,
+#: 2026-12-07, after numba_util.shared_inline_copies; heave_tracking, ur5e_drift with the consistent projection,
+#: quadrotor_lemniscate, mrac_time_delay, lecture_heave; load 3-6; docs/PERFORMANCE.md): the figure said where this
+#: machine has none of its own yet
+TYPICAL_CPU: dict[str, float] = {"1-DOF callback": 3.0, "arm callback": 15.0, "quadrotor callback": 8.5,
+                                 "projection": 2.7, "linear MRAC chunk": 4.2, "twin chunk": 4.3}
 
 #: what this process compiled: (what, seconds), in order (adaptive_mj.study.warmup reports them)
 COMPILED: list[tuple[str, float]] = []
