@@ -429,6 +429,14 @@ class QuadrotorPlant(ModelClock, BodyEdits):
                 f"{1000 * lift / g:.4g} g in all: it cannot hover, whatever the law (a payload below "
                 f"{max(0.0, lift / g - (m - self._payload_mass())):.3g} kg could: plant.payload_mass)"]
 
+    def rotor_lag(self) -> float:
+        """[s] the rotors' first-order lag τ_m as the compiled model has it (the largest of the four actuators'
+        filter time constants, dynprm[0] of dyntype "filter"; 0 for rotors without dynamics): the pre-flight
+        check's attitude loop (adaptive_mj.sim.preflight.attitude_margins)."""
+        m, acts = self.model, self.airframe.actuators
+        lags = [float(m.actuator_dynprm[a, 0]) for a in acts if m.actuator_dyntype[a] == mujoco.mjtDyn.mjDYN_FILTER]
+        return max(lags, default=0.0)
+
     def _payload_mass(self) -> float:
         """[kg] the mass below the airframe's own body (its payload's)."""
         return float(self.true_theta()[0] - self.model.body_mass[self.body])
