@@ -291,7 +291,9 @@ def _print_summary(summary: dict, *, as_json: bool, log: Path | None = None, not
         print("  estimates: " + ", ".join(parts))
     pre = summary.get("preflight") or {}
     if pre.get("checked") and not pre.get("ok"):
-        print(f"  pre-flight: μh = {pre['figure']:.3g} > {pre['limit']:.3g} ({pre['scheme']})"
+        figure = (f"a delay of {1e3 * pre['figure']:.3g} ms >= the delay margin {1e3 * pre['limit']:.3g} ms"
+                  if pre.get("measure") == "delay" else f"μh = {pre['figure']:.3g} > {pre['limit']:.3g}")
+        print(f"  pre-flight: {figure} ({pre['scheme']})"
               + (f" on {pre['joint']}" if pre.get("joint") else ""))
     for w in summary.get("warnings") or ():
         print(f"  warning: {w}")

@@ -130,7 +130,11 @@ class SuccessSpec:
     line, the run goes on), "refuse" (`run --strict`: no run) or "record" (the run goes on, the check's result in
     its summary only: a study's runs, which are judged by their outcome whatever the law). physical: the run
     fails when the final estimate of a body's ten standard parameters is no possible body (a negative mass, a
-    pseudo-inertia that is not positive semidefinite: report.metrics.body_identification)."""
+    pseudo-inertia that is not positive semidefinite: report.metrics.body_identification). tail_saturation: the
+    largest fraction of the tail's rows in which any actuator may sit at a limit; oscillation [rad/s]: the largest
+    sustained oscillation of the body rate over the tail (report.metrics.rate_oscillation; a plant with a body rate,
+    the quadrotor); None: the plant kind's own (PlantKind.tail_saturation, .oscillation; the quadrotor's 0.2 and
+    1 rad/s), not judged where it declares none."""
 
     tail_rms: float | None = None
     tail_fraction: float = 0.05
@@ -139,6 +143,8 @@ class SuccessSpec:
     saturation: float = 0.2
     preflight: str = "warn"
     physical: bool = False
+    tail_saturation: float | None = None
+    oscillation: float | None = None
 
 
 PREFLIGHT_ACTIONS = ("warn", "refuse", "record")

@@ -34,6 +34,11 @@ CASES = {
                                                           FORCES, "simulation.duration=4"]),
     "l1, rotor loss": ("quadrotor_rotor_loss", ["law=l1_geometric", "simulation.duration=3",
                                                 "events=[{t=1.0, kind='rotor_efficiency', rotor=3, value=0.7}]"]),
+    "yaw-last past the one-rotor limit": ("quadrotor_rotor_loss", [
+        "simulation.duration=3", "events=[{t=1.0, kind='rotor_efficiency', rotor=1, value=0.45}]"]),
+    "exact-clip past the one-rotor limit": ("quadrotor_rotor_loss", [
+        "law.allocation='exact_clip'", "simulation.duration=3",
+        "events=[{t=1.0, kind='rotor_efficiency', rotor=1, value=0.45}]"]),
     "crash mid-chunk": ("quadrotor_lemniscate", ["plant.payload_mass=0.05", "simulation.duration=5"]),
     "crash under sampled control": ("quadrotor_lemniscate", ["plant.payload_mass=0.05", "simulation.duration=5",
                                                              "control.period=0.01"]),

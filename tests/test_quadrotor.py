@@ -180,6 +180,7 @@ def test_the_scalar_kernel_is_the_geometric_and_adaptive_laws_written_with_numpy
         for mode in (fk.MODE_GEOMETRIC, fk.MODE_ADAPTIVE):
             P = law.P.copy()
             P[fk.P_MODE], P[fk.P_KR], P[fk.P_KW] = mode, gains.kR, gains.kW
+            P[fk.P_ALLOC] = fk.ALLOC_EXACT_CLIP  # the exact inverse, compared before any clamp
             P[fk.P_KX:fk.P_KX + 3], P[fk.P_KV:fk.P_KV + 3] = gains.kx, gains.kv
             P[fk.P_C:fk.P_C + 3], P[fk.P_K:fk.P_K + 3] = [1.6, 1.7, 1.8], [0.12, 0.11, 0.27]
             u, s, rate = _kernel(x, ref, th, P, law.G, law.Ainv, np.zeros(6))

@@ -2,7 +2,9 @@
 adaptive form (the lecture's sliding adaptive law on the translational dynamics: mass and a disturbance force),
 and L1 adaptive augmentation, each evaluated on the loop's state x (4, 3) = [p; v; φ; Ω] and reference (5, 3) =
 [p_d, p_d', p_d'', p_d''', p_d''''] (adaptive_mj.plants.quadrotor), returning the four rotor thrusts [N] through
-the airframe's allocation, unclipped (the loop clamps them into [0, T_max]: the applied thrusts are logged).
+the airframe's allocation (law.allocation: "yaw_last", by default, gives up yaw before thrust, roll and pitch where
+a rotor would saturate; "exact_clip" inverts exactly; flight_kernel.allocate), then the loop clamps them into
+[0, T_max] (the applied thrusts are logged).
 
 θ (13,) = [m, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz, dx, dy, dz, tx, ty, tz] as the plant names it: a law's nominal model is
 θ̂; the adaptive law moves m̂, d̂ and the moment τ̂ (Goodarzi, Lee & Lee 2015's Δ̂_R; the inertia stays at its
@@ -96,6 +98,7 @@ class FlightLaw:
     dead_zone: DeadZone | None = None
     modification: Modification | None = None
     l1: bool = False
+    allocation: str = "yaw_last"  # ALLOCATIONS: how thrust and moments become rotor thrusts (flight_kernel.allocate)
 
     def __post_init__(self):
         self.names = tuple(self.airframe.names)
@@ -110,6 +113,8 @@ class FlightLaw:
         P[fk.P_DZ_ON_S] = 1.0 if dz is None or dz.on.value == "s" else 0.0
         P[fk.P_ADAPT], P[fk.P_L1], P[fk.P_CR] = float(self.adapt), float(self.l1), self.c_R
         P[fk.P_ADAPT_J] = float(self.adapt_inertia)
+        P[fk.P_ALLOC] = ALLOCATIONS[self.allocation]
+        P[fk.P_TMAX:fk.P_TMAX + 4] = np.asarray(self.airframe.thrust_max, dtype=float)
         G = np.zeros((4, n))
         G[0] = self.gamma
         mod = self.modification
@@ -227,6 +232,13 @@ class L1GeometricLaw(FlightLaw):
 
 
 # --- the law kinds: keys, readers, builders -----------------------------------------------
+#: law.allocation -> P[P_ALLOC] (flight_kernel.allocate). "yaw_last" is the default: the flight stacks in use give yaw
+#: the lowest priority when a rotor saturates (PX4's ControlAllocationSequentialDesaturation with airmode off, its
+#: default: roll and pitch desaturated first, yaw mixed into what is left; ArduPilot's AP_MotorsMatrix
+#: output_armed_stabilizing limits yaw to the headroom roll and pitch leave), as Mueller & D'Andrea (ICRA 2014) give
+#: up yaw to keep flying. RotorPy (and AdaptiveQuadBench on it) inverts exactly and clips the motor speeds:
+#: "exact_clip", this project's allocation before issue 52.
+ALLOCATIONS = {"exact_clip": fk.ALLOC_EXACT_CLIP, "yaw_last": fk.ALLOC_YAW_LAST}
 GAMMA_J_DEFAULT = 1e4  # measured on the lemniscate: docs/THEORY.md, "The inertia"
 # RotorPy's SE3Control position gains (kp_pos = (6.5, 6.5, 15) 1/s², kd_pos = (4, 4, 9) 1/s; quadrotor_control.py at
 # 9b760b8) times its Crazyflie's 0.03 kg: per axis x, y, z
@@ -257,6 +269,10 @@ GAMMA_J = Key("gamma_j", "number", "rad² kg⁻¹ m⁻² s⁻²", GAMMA_J_DEFAUL
 C_R = Key("c_r", "number", "1/s", 5.0, "> 0", "the attitude surface's slope: s_R = Omega + c_r e_R")
 A_S = Key("a_s", "number", "1/s", -5.0, "< 0", "the L1 state predictor's pole")
 W_C = Key("w_c", "number", "rad/s", 5.0, "> 0", "the L1 low-pass filter's cut-off")
+ALLOCATION = Key("allocation", "string", "", "yaw_last", "one of 'yaw_last', 'exact_clip'",
+                 "how thrust and moments become rotor thrusts where a rotor would saturate: 'yaw_last' reduces the "
+                 "yaw moment to keep the thrust, roll and pitch (PX4, ArduPilot); 'exact_clip' inverts exactly and "
+                 "clips each rotor (RotorPy)")
 
 ATTITUDE_KEYS = (KR, KW)
 
@@ -279,6 +295,8 @@ def _read(own: tuple[Key, ...], *, adaptive: bool):
         for key in own:
             if key.type == "boolean":
                 params[key.name] = t.boolean(key.name, key.default)
+            elif key is ALLOCATION:
+                params[key.name] = t.string(key.name, key.default, choices=tuple(ALLOCATIONS))
             elif key in PER_AXIS:
                 params[key.name] = _per_axis(t, key)
             elif key.name == "a_s":  # the predictor's pole: < 0
@@ -335,7 +353,7 @@ def _slope(gains: geo.Gains) -> np.ndarray:
 def _build_geometric(ctx: BuildContext):
     p = ctx.law.params or {}
     gains = _gains(p)
-    return GeometricLaw(ctx.airframe(), gains, _slope(gains))
+    return GeometricLaw(ctx.airframe(), gains, _slope(gains), allocation=p.get("allocation", ALLOCATION.default))
 
 
 def _build_adaptive(ctx: BuildContext):
@@ -350,13 +368,15 @@ def _build_adaptive(ctx: BuildContext):
         gamma[J_SLICE] = p["gamma_j"]
     return GeometricAdaptiveLaw(af, _gains(p), np.array(p["lambda"], dtype=float), gamma=gamma,
                                 k=np.array(p["k"], dtype=float), dead_zone=ctx.dead_zone(),
-                                modification=ctx.modification, c_R=p["c_r"], adapt_inertia=inertia)
+                                modification=ctx.modification, c_R=p["c_r"], adapt_inertia=inertia,
+                                allocation=p.get("allocation", ALLOCATION.default))
 
 
 def _build_l1(ctx: BuildContext):
     p = ctx.law.params or {}
     gains = _gains(p)
-    return L1GeometricLaw(ctx.airframe(), gains, _slope(gains), a_s=p["a_s"], w_c=p["w_c"])
+    return L1GeometricLaw(ctx.airframe(), gains, _slope(gains), a_s=p["a_s"], w_c=p["w_c"],
+                          allocation=p.get("allocation", ALLOCATION.default))
 
 
 def _keys(own: tuple[Key, ...], adaptive: bool) -> tuple[Key, ...]:
@@ -364,9 +384,9 @@ def _keys(own: tuple[Key, ...], adaptive: bool) -> tuple[Key, ...]:
             *shared.ROBUST)
 
 
-GEOMETRIC_OWN = (KX, KV, KR, KW)
-ADAPTIVE_OWN = (LAMBDA, K, GAMMA_M, GAMMA_D, GAMMA_T, C_R, KR, KW, ADAPT_INERTIA, GAMMA_J)
-L1_OWN = (KX, KV, KR, KW, A_S, W_C)
+GEOMETRIC_OWN = (KX, KV, KR, KW, ALLOCATION)
+ADAPTIVE_OWN = (LAMBDA, K, GAMMA_M, GAMMA_D, GAMMA_T, C_R, KR, KW, ADAPT_INERTIA, GAMMA_J, ALLOCATION)
+L1_OWN = (KX, KV, KR, KW, A_S, W_C, ALLOCATION)
 
 #: these law kinds, registered (adaptive_mj.laws.kinds): law.kind = "geometric", "geometric_adaptive", "l1_geometric"
 GEOMETRIC = register(LawKind(

@@ -10,9 +10,10 @@ flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
   P          the law's numbers by index (the P_* constants below)
   G (4, 10)  rows γ (the adaptation stiffnesses: θ̂' = regressor·s/γ), θ₀, the projection's lower and upper bounds
              (laws.common.modify_rate: σ- and e-modification, the box's tangent cone)
-  Ainv (4, 4)  the inverse of the airframe's allocation: thrusts = Ainv @ [f, M]
+  Ainv (4, 4)  the inverse of the airframe's allocation: thrusts = Ainv @ [f, M] (then `allocate`, P_ALLOC)
   aug (6,)   the L1 filtered estimate C σ̂ = [acceleration (3) m/s², angular acceleration (3) rad/s²] (zeros: none)
-  u (4,)     out: the rotor thrusts [N], unclipped
+  u (4,)     out: the rotor thrusts [N], before the loop's clamp into [0, T_max]: the allocation's exact inverse,
+             or under ALLOC_YAW_LAST with the yaw moment reduced where a rotor would leave [0, T_max] (`allocate`)
   s (3,)     out: s = e_v + c e_x [m/s] (c per axis)
   rate (13,) out: θ̂' (zero but for m, d and τ under the adaptive law, and Ĵ's six entries with law.adapt_inertia)
 """
@@ -29,9 +30,12 @@ P_ADAPT_J = 13  # the adaptive law adapts the inertia (law.adapt_inertia): the S
 # per axis x, y, z (three slots each, P[P_KX + i]): the position and velocity gains k_x, k_v [N/m, N s/m], the
 # surface's slope c [1/s] (s = e_v + c e_x) and the adaptive law's gain k on s [N s/m]
 P_KX, P_KV, P_C, P_K = 14, 17, 20, 23
-P_SIZE = 26
+# the allocation (`allocate`): its mode, and each rotor's upper thrust limit T_max [N] (four slots, P[P_TMAX + i])
+P_ALLOC, P_TMAX = 26, 27
+P_SIZE = 31
 TMP_SIZE = 24  # the scratch tmp's length (flight_law, l1_update; the native callback's buffer)
 MODE_GEOMETRIC, MODE_ADAPTIVE = 0.0, 1.0
+ALLOC_EXACT_CLIP, ALLOC_YAW_LAST = 0.0, 1.0  # P[P_ALLOC]: laws.flight.ALLOCATIONS' "exact_clip", "yaw_last"
 
 
 def rodrigues(phi, R):
@@ -234,8 +238,49 @@ def flight_law(x, r, th, P, G, Ainv, aug, R, F, tmp, u, s, rate):
         tmp[0], tmp[1], tmp[2] = aug[3], aug[4], aug[5]
         inertia_times(th, tmp, F)
         M0, M1, M2 = M0 - F[0], M1 - F[1], M2 - F[2]
+    allocate(Ainv, f, M0, M1, M2, P, u)
+
+
+def allocate(Ainv, f, M0, M1, M2, P, u):
+    """u (4,) the rotor thrusts [N] for the collective thrust f [N] and body moments M0, M1, M2 [N m], Ainv (4, 4) the
+    allocation's inverse, by the mode P[P_ALLOC]:
+
+    ALLOC_EXACT_CLIP  u = Ainv [f, M], the exact inverse; the loop then clamps each rotor into [0, T_max] (what
+                      RotorPy's vehicle does with its motor speeds), losing thrust, roll, pitch and yaw alike.
+    ALLOC_YAW_LAST    the yaw moment gives way first (PX4's multicopter allocation with airmode off,
+                      ControlAllocationSequentialDesaturation::mixAirmodeDisabled; Mueller & D'Andrea, ICRA 2014:
+                      roll and pitch before yaw). Every rotor's thrust is affine in the share k of the yaw moment
+                      kept, u_i(k) = a_i + k b_i (a_i = Ainv[i, :3] [f, M0, M1], b_i = Ainv[i, 3] M2); where the
+                      exact inverse (k = 1) leaves a rotor outside [0, T_max_i], k is the largest in [0, 1] such that
+                      no rotor ends further outside its box than it is at k = 0: per rotor in closed form,
+                      k <= (T_max_i − a_i)/b_i for b_i > 0 and k <= −a_i/b_i for b_i < 0, each bound floored at 0.
+                      With every a_i inside its box, the collective thrust and the roll and pitch moments are then
+                      delivered exactly, and as much of the yaw moment as fits; what is left outside (thrust or
+                      roll/pitch beyond the rotors even without yaw) the loop's clamp clips. Where the exact inverse
+                      fits, u is its bits.
+    Lower limit 0 (a rotor pushes only); T_max_i = P[P_TMAX + i] [N], the model's ctrlrange."""
+    out = False
     for i in range(4):
         u[i] = Ainv[i, 0] * f + Ainv[i, 1] * M0 + Ainv[i, 2] * M1 + Ainv[i, 3] * M2
+        if not (0.0 <= u[i] <= P[P_TMAX + i]):
+            out = True
+    if not out or P[P_ALLOC] != ALLOC_YAW_LAST:
+        return
+    k = 1.0
+    for i in range(4):
+        a = Ainv[i, 0] * f + Ainv[i, 1] * M0 + Ainv[i, 2] * M1
+        b = Ainv[i, 3] * M2
+        if b > 0.0:
+            lim = (P[P_TMAX + i] - a) / b
+        elif b < 0.0:
+            lim = -a / b
+        else:
+            lim = 1.0
+        lim = max(lim, 0.0)
+        if lim < k:
+            k = lim
+    for i in range(4):
+        u[i] = (Ainv[i, 0] * f + Ainv[i, 1] * M0 + Ainv[i, 2] * M1) + k * (Ainv[i, 3] * M2)
 
 
 def l1_update(x, u, th, P, A, a_s, w_c, h, z_hat, sigma, filt, R, tmp):

@@ -223,7 +223,8 @@ class LogHeader:
     state_names: tuple[str, ...] = ()  # format 6: a name per row of x where they are not y's derivatives (else ())
     encoding: str = "cdr"  # the rows' encoding (ENCODINGS): "cdr" writes format 8 (/row), "json" format 6
     # a Slotine–Li law's evaluation of Y π̂ and Yᵀ s, "recursive" (O(n)) or "regressor" (Y whole); "" for other
-    # laws. Written since the O(n) form; a log without it ran the regressor form (runs.verify re-runs it so)
+    # laws. Written since the O(n) form; a log without it ran the regressor form (runs.verify re-runs it so). A flight
+    # law's allocation ("yaw_last", "exact_clip"), written since issue 52's; a quadrotor log with "" ran "exact_clip"
     law_evaluation: str = ""
 
     @property

@@ -222,6 +222,8 @@ def _limits_meta(header: dict) -> dict:
     if header.get("joint_limits") is not None:
         out["joint_limits"] = [[-math.inf if lo is None else lo, math.inf if hi is None else hi]
                                for lo, hi in header["joint_limits"]]
+    if header.get("state_names"):  # format 6: the oscillation metric's rows (report.metrics.rate_oscillation)
+        out["state_names"] = tuple(header["state_names"])
     return out
 
 

@@ -145,6 +145,11 @@ class PlantKind:
     # stress study (σ of ẏ is 10 σ_y per second); None: not in the stress study
     tail_bound: float | None = None
     nominal_noise: float | None = None
+    # the stability criteria of its runs' verdict where the scenario's [success] leaves them unset (SuccessSpec
+    # .tail_saturation, .oscillation; adaptive_mj.setup.success): the largest fraction of the tail's rows with any
+    # actuator at a limit, and the largest sustained oscillation of the body rate [rad/s]; None: not judged
+    tail_saturation: float | None = None
+    oscillation: float | None = None
     origin: str = "built in"
     # what a scenario may say of it: its plant.* keys (shared ones too, as this kind reads them), the reader
     # (None: no built-in reader, a plant plugin's keys are read from its plugin); [[events]] kinds it accepts

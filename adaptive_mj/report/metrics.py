@@ -65,6 +65,9 @@ def metrics(traj: Trajectory) -> dict:
                 e["tail"] = {k: _spread(v) for k, v in spread[body].items() if k not in ("com_undefined", "impossible")}
             out["identification"] = ident
     out.update(saturation_metrics(traj))
+    osc = rate_oscillation(traj)
+    if osc is not None:
+        out["rate_oscillation_tail"] = osc
     return out
 
 
@@ -166,16 +169,70 @@ def saturation_fraction(traj: Trajectory) -> np.ndarray | None:
     return at.mean(axis=0)
 
 
+def saturated_rows(traj: Trajectory) -> np.ndarray | None:
+    """(N,) whether any actuator's applied control sits at its limit in each row (saturation_fraction's test),
+    None without limits on record."""
+    rng = traj.meta.get("ctrl_range")
+    if rng is None or len(traj) == 0:
+        return None
+    lo, hi = (np.atleast_1d(np.asarray(b, dtype=float)) for b in rng)
+    u = np.asarray(traj.u, dtype=float).reshape(len(traj.t), -1)
+    tol_lo, tol_hi = 1e-9 * np.maximum(1.0, np.abs(lo)), 1e-9 * np.maximum(1.0, np.abs(hi))
+    return np.any((u <= lo + tol_lo) | (u >= hi - tol_hi), axis=1)
+
+
 def saturation_metrics(traj: Trajectory) -> dict:
     """saturation_fraction: the largest fraction of the run any actuator spent at its limit;
-    for m joints also per joint. Empty without limits on record."""
+    for m joints also per joint; saturation_fraction_tail: the fraction of the tail's rows (tail_mask) in which any
+    actuator sits at a limit (success.tail_saturation's figure). Empty without limits on record."""
     frac = saturation_fraction(traj)
     if frac is None:
         return {}
     out: dict = {"saturation_fraction": float(frac.max())}
     if traj.joint_names:
         out["saturation_fraction_per_joint"] = {j: float(f) for j, f in zip(traj.actuators, frac, strict=True)}
+    rows, tail = saturated_rows(traj), tail_mask(traj)
+    if rows is not None and tail.any():
+        out["saturation_fraction_tail"] = float(rows[tail].mean())
     return out
+
+
+OSCILLATION_MIN_HZ = 1.0  # [Hz] spectral lines below this are the manoeuvre's, not an oscillation's
+OSCILLATION_MIN_ROWS = 16  # a tail with fewer rows has no spectrum to speak of
+
+
+def rate_oscillation(traj: Trajectory) -> dict | None:
+    """The body rate's sustained oscillation over the tail (success.oscillation's figure), for a run whose state
+    has a row named "omega" (traj.meta["state_names"]: a quadrotor's Ω (3,) [rad/s], body frame): per axis, the
+    tail's samples with their least-squares line removed, Hann-windowed, and their largest spectral line at or
+    above OSCILLATION_MIN_HZ read as a sinusoid's amplitude, A = 2 |X_k| / Σ w. Returns {"amplitude" [rad/s],
+    "frequency" [Hz], "axis" (0, 1, 2: body x, y, z)} of the axis with the largest A; None without such a row,
+    with fewer than OSCILLATION_MIN_ROWS tail rows or a non-finite tail. A steady spin (a constant Ω_z) and a
+    drift (a ramp) are removed by the line; the figure-eight's own rates (0.16 and 0.32 Hz) lie below the band;
+    a limit cycle of the attitude loop (near its crossover, 7.5 Hz on the bundled vehicle) does not."""
+    names = tuple(traj.meta.get("state_names") or ())
+    if "omega" not in names or len(traj) == 0:
+        return None
+    tail = tail_mask(traj)
+    t = np.asarray(traj.t[tail], dtype=float)
+    w = np.asarray(traj.x[tail, names.index("omega")], dtype=float).reshape(len(t), -1)
+    if len(t) < OSCILLATION_MIN_ROWS or not np.all(np.isfinite(w)):
+        return None
+    dt = traj.meta.get("dt", 0.0) * traj.meta.get("log_every", 1)
+    if not dt > 0:
+        return None
+    tc = t - t.mean()
+    slope = (tc @ (w - w.mean(axis=0))) / (tc @ tc)
+    resid = w - w.mean(axis=0) - np.outer(tc, slope)
+    win = np.hanning(len(t))
+    spec = np.abs(np.fft.rfft(resid * win[:, None], axis=0)) * 2.0 / win.sum()
+    freq = np.fft.rfftfreq(len(t), dt)
+    band = freq >= OSCILLATION_MIN_HZ
+    if not band.any():
+        return None
+    sub = spec[band]
+    k, axis = np.unravel_index(int(np.argmax(sub)), sub.shape)
+    return {"amplitude": float(sub[k, axis]), "frequency": float(freq[band][k]), "axis": int(axis)}
 
 
 def joint_metrics(traj: Trajectory) -> dict:

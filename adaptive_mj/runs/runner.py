@@ -148,7 +148,12 @@ def log_header(scn: Scenario, setup: Setup):
 
 
 def law_evaluation(law) -> str:
-    """How a Slotine–Li law evaluates Y π̂ and Yᵀ s ("recursive": O(n), "regressor": Y whole), "" for another law."""
+    """How a Slotine–Li law evaluates Y π̂ and Yᵀ s ("recursive": O(n), "regressor": Y whole), a flight law's
+    allocation (law.allocation: "yaw_last" or "exact_clip"; written since issue 52's allocation), "" for another
+    law."""
+    allocation = getattr(law, "allocation", None)
+    if isinstance(allocation, str):
+        return allocation
     recursive = getattr(law, "recursive", None)
     return "" if recursive is None else ("recursive" if recursive else "regressor")
 
@@ -402,7 +407,7 @@ def verdict(scn: Scenario, traj: Trajectory, crit: Criteria, pre: preflight.Pref
         missed = judge(result, crit, unit=units.output_unit(scn.plant.kind))
         if missed:
             if not pre.ok:
-                missed.append(f"the pre-flight check had warned: μh = {pre.figure:.3g} > {pre.limit:.3g}"
+                missed.append(f"the pre-flight check had warned: {pre.figure_text()}"
                               + (f" on {pre.joint}" if pre.joint else ""))
             if pre.gravity:
                 missed.append("the pre-flight check had warned: gravity alone at the reference needs more than the "

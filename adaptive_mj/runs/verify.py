@@ -37,6 +37,14 @@ def _flight_gains_before_rotor_drag(scn, logged) -> list[str]:
     return former_gain_overrides(scn.law.kind, set_keys)
 
 
+def _flight_kinds() -> set[str]:
+    """The flight law kinds (laws.flight's): a quadrotor log of one without a law_evaluation header (its
+    allocation) ran "exact_clip"."""
+    from adaptive_mj.laws import flight
+
+    return {k.name for k in (flight.GEOMETRIC, flight.GEOMETRIC_ADAPTIVE, flight.L1_GEOMETRIC)}
+
+
 def _rerun_scenario(logged):
     """The scenario the re-run flies: the log's text, overrides and seed, plus what keeps an older log's run as it
     was (a law's evaluation, a flight law's former gains)."""
@@ -54,6 +62,9 @@ def _rerun_scenario(logged):
         # the O(n) form's numbers differ from it in the last bits, so the re-run forms Y whole too
         extra.append("law.evaluation='regressor'")
     extra += _flight_gains_before_rotor_drag(scn, logged)
+    if scn.plant.kind == "quadrotor" and not header.get("law_evaluation") and scn.law.kind in _flight_kinds():
+        # written before law.allocation (issue 52): the flight laws inverted exactly and clipped each rotor
+        extra.append("law.allocation='exact_clip'")
     return load(extra) if extra else scn
 
 

@@ -460,9 +460,13 @@ def _success(t: _Table) -> SuccessSpec:
                        param_error=param_error,
                        saturation=t.number("saturation", d.saturation, ge=0),
                        preflight=t.string("preflight", d.preflight, choices=PREFLIGHT_ACTIONS),
-                       physical=t.boolean("physical", d.physical))
+                       physical=t.boolean("physical", d.physical),
+                       tail_saturation=t.number("tail_saturation", d.tail_saturation, ge=0),
+                       oscillation=t.number("oscillation", d.oscillation, gt=0, allow_inf=True))
     if spec.saturation > 1:
         raise t.fail("saturation", "a fraction of the run's time in [0, 1]", spec.saturation)
+    if spec.tail_saturation is not None and spec.tail_saturation > 1:
+        raise t.fail("tail_saturation", "a fraction of the tail's rows in [0, 1]", spec.tail_saturation)
     t.finish()
     return spec
 

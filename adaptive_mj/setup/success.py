@@ -26,18 +26,23 @@ REFERENCE_SAMPLES = 2001  # reference evaluations over [0, duration] for its hal
 class Criteria:
     """tail_rms: (m,) bound per joint on the tail RMS tracking error [m or rad] (m = 1 for a 1-DOF
     plant); tail_rule: how it was set (said in the summary); param_error: name -> bound on the final
-    |θ̂ - θ| / |θ|; saturation: the largest fraction of the run an actuator may spend at its limit."""
+    |θ̂ - θ| / |θ|; saturation: the largest fraction of the run an actuator may spend at its limit;
+    tail_saturation: the largest fraction of the tail's rows with any actuator at a limit (1: not judged);
+    oscillation [rad/s]: the largest sustained oscillation of the body rate over the tail (inf: not judged)."""
 
     tail_rms: tuple[float, ...]
     tail_rule: str
     param_error: dict[str, float] = field(default_factory=dict)
     saturation: float = 1.0
     physical: bool = False
+    tail_saturation: float = 1.0
+    oscillation: float = math.inf
 
     def describe(self) -> dict:
-        """The criteria as JSON-ready data (the summary's "success")."""
+        """The criteria as JSON-ready data (the summary's "success"; an unjudged oscillation bound is null)."""
         return {"tail_rms": list(self.tail_rms), "tail_rule": self.tail_rule,
-                "param_error": dict(self.param_error), "saturation": self.saturation, "physical": self.physical}
+                "param_error": dict(self.param_error), "saturation": self.saturation, "physical": self.physical,
+                "tail_saturation": self.tail_saturation, "oscillation": self.oscillation}
 
 
 def reference_rows(reference, ts: np.ndarray, order: int) -> np.ndarray:
@@ -118,8 +123,19 @@ def criteria(scn: Scenario, reference, order: int, param_names: tuple[str, ...])
         params = {n: float(spec.param_error) for n in param_names}
     else:
         params = {}
+    kind = _plant_kind(scn.plant.kind)
+    tail_sat = spec.tail_saturation if spec.tail_saturation is not None else getattr(kind, "tail_saturation", None)
+    osc = spec.oscillation if spec.oscillation is not None else getattr(kind, "oscillation", None)
     return Criteria(tail_rms=tail, tail_rule=rule, param_error=params, saturation=spec.saturation,
-                    physical=spec.physical)
+                    physical=spec.physical, tail_saturation=1.0 if tail_sat is None else float(tail_sat),
+                    oscillation=math.inf if osc is None else float(osc))
+
+
+def _plant_kind(name: str):
+    """The built-in plant kind `name` (its stability criteria's defaults), or None (a plugin's)."""
+    from adaptive_mj.plants import kinds
+
+    return kinds.built_in().get(name)
 
 
 def _relative_error(estimate: float | None, truth: float | None) -> float:
@@ -153,12 +169,32 @@ def judge(summary: dict, c: Criteria, *, unit: str = "") -> list[str]:
             where = f" on {joint}" if joint else ""
             missed.append(f"time at the actuator limit{where} {100 * frac:.3g} % > {100 * c.saturation:.3g} % "
                           "(success.saturation)")
+    missed += unstable(m, c.tail_saturation, c.oscillation)
     if c.physical:
         for body, e in (m.get("identification") or {}).items():
             if e.get("impossible"):
                 missed.append(f"the final estimate of body {body} is no possible body: {e['impossible']} "
                               "(success.physical)")
     return missed
+
+
+def unstable(metrics: dict, tail_saturation: float | None, oscillation: float | None) -> list[str]:
+    """The stability criteria a finished run missed (judge's, and the studies' failure rule: study.job.passes):
+    the fraction of the tail's rows with any actuator at a limit (metrics["saturation_fraction_tail"]) above
+    tail_saturation, the body rate's sustained oscillation over the tail (metrics["rate_oscillation_tail"]
+    ["amplitude"], report.metrics.rate_oscillation) above oscillation [rad/s]. A bound of None (or 1, inf) is not
+    judged, nor a figure the run does not have."""
+    out = []
+    share = metrics.get("saturation_fraction_tail")
+    if share is not None and tail_saturation is not None and share > tail_saturation:
+        out.append(f"time at an actuator limit over the tail {100 * share:.4g} % > {100 * tail_saturation:.3g} % "
+                   "(success.tail_saturation)")
+    osc = metrics.get("rate_oscillation_tail") or {}
+    amp = osc.get("amplitude")
+    if amp is not None and oscillation is not None and amp > oscillation:
+        out.append(f"a sustained oscillation of the body rate over the tail, {amp:.3g} rad/s at {osc['frequency']:.3g}"
+                   f" Hz about body {'xyz'[int(osc['axis'])]} > {oscillation:.3g} rad/s (success.oscillation)")
+    return out
 
 
 def _show(v: float | None) -> str:

@@ -286,6 +286,9 @@ def limits_meta(plant: Plant) -> dict:
     limits = plant.joint_limits
     if limits is not None and np.isfinite(limits).any():
         out["joint_limits"] = np.asarray(limits, dtype=float).tolist()
+    states = tuple(getattr(plant, "state_names", ()) or ())
+    if states:  # rows of x that are not y's derivatives (a quadrotor's p, v, phi, omega): the oscillation metric's
+        out["state_names"] = states
     return out
 
 

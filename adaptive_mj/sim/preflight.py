@@ -12,6 +12,12 @@ leading coefficient, both read from the compiled model. One step of length h map
   one-stage integrator):
   with a delay of D whole periods:                 z^(D+1) - z^D + μh = 0, stable while
                                                    μh < 2 sin(π / (2(2D + 1))).
+A flight law's attitude loop with a control delay is checked by its delay margin instead (that first-order bound
+passed 14 steps of 2 ms on the bundled quadrotor, whose margin is 23 ms; issue 52): the loop
+L(s) = (k_Ω s + k_R) / (J s²) · 1/(τ_m s + 1) about each principal axis of the true inertia J, with the rotors' lag
+τ_m from the compiled model, has its crossover ω_c (|L(jω_c)| = 1, found numerically: |L| falls monotonically) and
+phase margin PM = π + ∠L(jω_c); its delay margin is PM / ω_c [s]. The run's delay is D·dt plus half a control
+period (the zero-order hold's equivalent delay); at or past the smallest margin over the axes the check fails.
 The check evaluates the worst μ along the reference (64 samples over the run) against that limit.
 Past it, no tuning of the adaptation can help: every step overshoots, torques saturate and the
 estimates wind up. Derivation: docs/THEORY.md, "Pre-flight check".
@@ -61,15 +67,31 @@ class Preflight:
     linearised: str = ""
     gravity: str = ""  # an arm: the line saying gravity alone at the reference needs more than the motors have
     following: str = ""  # an arm: the line saying following the reference needs far more than the motors have
+    # "rate": figure = μh against the step's limit; "delay": figure = the loop's delay [s] against its delay margin
+    # [s] (a flight law's attitude loop with a control delay: attitude_margins), rate = the crossover [rad/s]
+    measure: str = "rate"
+    phase_margin: float = 0.0  # [deg] with measure "delay": the attitude loop's phase margin at its crossover
 
     @property
     def ok(self) -> bool:
         return not self.checked or self.figure < self.limit
 
+    def figure_text(self) -> str:
+        """The figure against its limit, in words: "μh = … > …" or "a delay of … ms ≥ the delay margin … ms"."""
+        if self.measure == "delay":
+            return (f"a delay of {1e3 * self.figure:.3g} ms {'>=' if self.figure >= self.limit else '<'} the attitude "
+                    f"loop's delay margin {1e3 * self.limit:.3g} ms")
+        return f"μh = {self.figure:.3g} {'>' if self.figure >= self.limit else '<'} {self.limit:.3g}"
+
     def line(self) -> str:
         """The one-line warning (empty when ok)."""
         if self.ok:
             return ""
+        if self.measure == "delay":
+            return (f"pre-flight: {self.joint}: the loop's crossover ω_c = {self.rate:.4g} rad/s with a phase margin "
+                    f"of {self.phase_margin:.3g} deg gives a delay margin of {1e3 * self.limit:.3g} ms "
+                    f"({self.scheme}); the run's delay of {1e3 * self.figure:.3g} ms is past it: the attitude loop "
+                    "cannot be stable. Fixes: " + "; or ".join(self.fixes))
         where = "" if not self.joint else (f"{self.joint}: " if self.joint.startswith("attitude")
                                              else f"joint {self.joint}: ")
         return (f"pre-flight: {where}the loop's fastest mode μ = {self.rate:.4g} 1/s gives μh = {self.figure:.3g} "
@@ -79,7 +101,8 @@ class Preflight:
 
     def describe(self) -> dict:
         """JSON-ready (the summary's "preflight")."""
-        return {"checked": self.checked, "ok": self.ok, "figure": self.figure, "limit": self.limit,
+        return {"checked": self.checked, "ok": self.ok, "measure": self.measure, "figure": self.figure,
+                "limit": self.limit, "phase_margin_deg": self.phase_margin,
                 "rate": self.rate, "step": self.step, "scheme": self.scheme, "joint": self.joint,
                 "fixes": list(self.fixes), "reference_outside_range": list(self.outside), "note": self.note,
                 "plant": list(self.plant_lines), "gravity": self.gravity}
@@ -199,6 +222,10 @@ def check(plant: Plant, law: Law, reference, *, duration: float, timing: Control
     elif isinstance(feedback, SurfaceFeedback) and has_form(plant):
         found = _one_dof_check(plant, feedback, h, limit)
     elif isinstance(feedback, AirframeFeedback) and hasattr(plant, "airframe"):
+        if timing.delay:
+            dt = timing.period / max(1, timing.steps)
+            return _attitude_delay_check(plant, feedback, timing.delay * dt + 0.5 * timing.period, timing, outside,
+                                         gravity_line(plant, reference, duration, order))
         found = _attitude_check(plant, feedback, h, limit)
     lines = getattr(plant, "preflight_lines", None)
     plant_lines = tuple(lines()) if lines is not None else ()
@@ -290,6 +317,58 @@ def _attitude_check(plant: Plant, feedback: AirframeFeedback, h: float, limit: f
              f"a timestep or control.period <= {0.9 * limit / rate:.3g} s")
     return {"rate": rate, "joint": f"attitude (about the principal axis of inertia {axis})",
             "fixes": fixes if rate * h >= limit else ()}
+
+
+def loop_margins(J: float, kR: float, kW: float, tau: float = 0.0) -> tuple[float, float, float]:
+    """(ω_c [rad/s], PM [rad], delay margin [s]) of the attitude loop about one axis: the plant 1/(J s²) (J [kg m²])
+    under the PD moment k_R + k_Ω s (k_R [N m/rad], k_Ω [N m s/rad]) through a rotor lag 1/(τ s + 1) (τ [s], 0:
+    none), L(s) = (k_Ω s + k_R)/(J s² (τ s + 1)). |L(jω)| falls monotonically in ω, so its crossover is found by
+    bisection on log ω (to 1e-12 relative); PM = atan2(k_Ω ω_c, k_R) − atan(τ ω_c) (π + ∠L), delay margin PM/ω_c."""
+    def gain(w: float) -> float:
+        return math.hypot(kW * w, kR) / (J * w * w * math.hypot(1.0, tau * w))
+
+    lo, hi = 1e-6, 1e9
+    for _ in range(200):
+        mid = math.sqrt(lo * hi)
+        if gain(mid) > 1.0:
+            lo = mid
+        else:
+            hi = mid
+        if hi / lo - 1.0 < 1e-12:
+            break
+    wc = math.sqrt(lo * hi)
+    pm = math.atan2(kW * wc, kR) - math.atan(tau * wc)
+    return wc, pm, pm / wc
+
+
+def attitude_margins(plant: Plant, feedback: AirframeFeedback) -> list[tuple[float, float, float, float]]:
+    """(J [kg m²], ω_c [rad/s], PM [rad], delay margin [s]) about each principal axis of the plant's true inertia
+    (θ's Jxx .. Jyz, from the compiled model), with its rotors' lag τ_m (plant.rotor_lag(), 0 where it has none)
+    and the law's k_R, k_Ω: loop_margins."""
+    th = np.asarray(plant.true_theta(), dtype=float)
+    xx, yy, zz, xy, xz, yz = th[1:7]
+    J = np.linalg.eigvalsh(np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]))
+    lag = getattr(plant, "rotor_lag", None)
+    tau = float(lag()) if lag is not None else 0.0
+    return [(float(j), *loop_margins(float(j), feedback.kR, feedback.kW, tau)) for j in J]
+
+
+def _attitude_delay_check(plant: Plant, feedback: AirframeFeedback, delay: float, timing: ControlTiming,
+                          outside: tuple[str, ...], gravity: str) -> Preflight:
+    """The pre-flight of a flight law's run with a control delay [s] (the steps' and half the hold's): the delay
+    against the attitude loop's smallest delay margin over the principal axes (attitude_margins)."""
+    margins = attitude_margins(plant, feedback)
+    J, wc, pm, margin = min(margins, key=lambda row: row[3])
+    dt = timing.period / max(1, timing.steps)
+    lines = getattr(plant, "preflight_lines", None)
+    fixes = (f"simulation.control_delay <= {max(0, math.ceil((margin - 0.5 * timing.period) / dt) - 1)} steps",
+             f"law.kR, law.kW lower (a slower attitude loop: crossover now {wc:.3g} rad/s)")
+    return Preflight(checked=True, figure=delay, limit=margin, rate=wc, step=dt,
+                     scheme="the attitude loop L = (k_Ω s + k_R)/(J s² (τ_m s + 1))",
+                     joint=f"attitude (about the principal axis of inertia {J:.3g} kg m²)",
+                     fixes=fixes if delay >= margin else (), outside=outside,
+                     plant_lines=tuple(lines()) if lines is not None else (), gravity=gravity, measure="delay",
+                     phase_margin=math.degrees(pm))
 
 
 def _outside_range(plant: Plant, reference, duration: float, order: int) -> tuple[str, ...]:

@@ -1,7 +1,9 @@
 """The quadrotor's measurements (issue 33): each flight law on each task, and how much of each disturbance and of
 a control delay it takes before the vehicle fails, as AdaptiveQuadBench (arXiv 2510.03471) measures its
 controllers: a run *fails* when it crashes, diverges, or its position error ‖p_d − p‖ exceeds MAX_ERROR at any
-time (their "unstable if the maximum error exceeds 1 m"); a disturbance's *when2fail* is the smallest intensity at
+time (their "unstable if the maximum error exceeds 1 m"), and, stricter than theirs, when it misses the quadrotor's
+stability criteria (its tail saturated, its body rate oscillating: success.tail_saturation, success.oscillation;
+issue 52); a disturbance's *when2fail* is the smallest intensity at
 which every seed fails (their success rate reaching 0 %), its *margin* the largest at which every seed succeeds;
 the *delay margin* is the margin of a control delay (theirs: a sweep from 0 to 0.5 s in 0.01 s steps).
 
@@ -49,9 +51,10 @@ DELAY = Disturbance("delay", "s", lambda v: [f"simulation.control_delay={int(rou
 
 
 def succeeded(r: RunOutcome) -> bool:
-    """AdaptiveQuadBench's success: the run completed without a crash and its position error stayed within
-    MAX_ERROR (a run its scenario's own [success] tail bound calls failed still succeeds here): study.job's
-    `passes` with that bound, named for the searches' run_passes."""
+    """AdaptiveQuadBench's success, and the stability criteria: the run completed without a crash, its position
+    error stayed within MAX_ERROR (a run its scenario's own [success] tail bound calls failed still succeeds here)
+    and it met its stability criteria (not saturated over its tail, not oscillating): study.job's `passes` with
+    that bound, named for the searches' run_passes."""
     return passes(r, max_error=MAX_ERROR)
 
 

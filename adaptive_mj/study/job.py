@@ -123,6 +123,16 @@ class RunOutcome:
         return _finite_or_inf(next((metrics[k] for k in TAIL_METRICS if metrics.get(k) is not None), None))
 
     @property
+    def unstable(self) -> list[str]:
+        """The stability criteria the run missed (setup.success.unstable on its summary's metrics, against the
+        bounds its summary's `success` records): [] when it met them, or has no summary or no such bounds."""
+        from adaptive_mj.setup.success import unstable
+
+        summary = self.summary or {}
+        crit = summary.get("success") or {}
+        return unstable(summary.get("metrics") or {}, crit.get("tail_saturation"), crit.get("oscillation"))
+
+    @property
     def max_position_error(self) -> float:
         """The largest position error ‖p_d − p‖ over the run [m] (the flight_metrics analysis, a quadrotor's); inf
         where the run has no such analysis or its figure is not finite."""
@@ -153,7 +163,8 @@ def _finite_or_inf(value: float | None) -> float:
     return v if math.isfinite(v) else math.inf
 
 
-def passes(result: RunOutcome, *, tail_bound: float | None = None, max_error: float | None = None) -> bool:
+def passes(result: RunOutcome, *, tail_bound: float | None = None, max_error: float | None = None,
+           stable: bool = True) -> bool:
     """Whether a study's run passes, the one predicate every study's pass or fail goes through (the breaking
     points of the stress study, the scorecard and the control-rate section by a tail bound; the quadrotor's flight
     margins by a position-error bound; the bench's quadrotor tasks): it completed (ok or failed: it ran to its
@@ -161,10 +172,13 @@ def passes(result: RunOutcome, *, tail_bound: float | None = None, max_error: fl
     in error) and each bound given holds: its tail RMS tracking error at most tail_bound [m or rad]
     (RunOutcome.tail_error), its largest position error at most max_error [m] (RunOutcome.max_position_error).
     None: that bound is not asked. A crash fails whatever its figures: the tail of a run cut short is not the tail
-    of the run."""
+    of the run. stable: the run must also meet its stability criteria (RunOutcome.unstable: its tail saturated
+    more than success.tail_saturation, or its body rate oscillating past success.oscillation; the quadrotor's by
+    default), whatever its [success] verdict says of the rest."""
     return (result.completed and not result.crashed
             and (tail_bound is None or result.tail_error <= tail_bound)
-            and (max_error is None or result.max_position_error <= max_error))
+            and (max_error is None or result.max_position_error <= max_error)
+            and not (stable and result.unstable))
 
 
 def decimate(traj: Trajectory, every: int) -> Trajectory:
