@@ -13,13 +13,19 @@ warm bench. CPU seconds (user + system, the command's and its workers') are prin
 on a loaded machine they are the figures to compare. The machine's load is printed beside the figures
 (os.getloadavg before and after each case): on a shared machine the figures are only comparable within one invocation.
 
-Usage: python benchmarks/cold_start.py [--bench] [--only run,ur5e_plugin,bench_quick,bench] [--json FILE]
+--compile-pairs: each kind's cold compile alone (one bundled scenario per kind, a fresh process and an empty cache
+each), with numba's inliner as it comes (ADAPTIVE_MJ_SHARED_INLINE_COPIES=0) and with numba_util.shared_inline_copies
+(=1), one after the other: the CPU seconds compile_note says for each variant, and their ratio.
+
+Usage: python benchmarks/cold_start.py [--bench] [--only run,ur5e_plugin,bench_quick,bench] [--compile-pairs]
+       [--json FILE]
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import re
 import resource
 import subprocess
 import sys
@@ -65,6 +71,28 @@ def timed(args: list[str], env: dict, out: Path) -> tuple[float, float]:
     return took, cpu
 
 
+#: one bundled scenario per compiled kind (run long enough to take the compiled path), for --compile-pairs
+PAIRS = {"1-DOF callback": ["heave_tracking"],
+         "arm callback": ["ur5e_payload_swap", "--set", "simulation.duration=0.5", "--set", "events=[]"],
+         "quadrotor callback": ["quadrotor_lemniscate", "--set", "simulation.duration=0.5"],
+         "linear MRAC chunk": ["mrac_time_delay"],
+         "twin chunk": ["lecture_heave"]}
+COMPILED = re.compile(r"^adaptive-mj: compiled (?P<what>.+) in (?P<wall>[0-9.]+) s \((?P<cpu>[0-9.]+) s of CPU\)")
+
+
+def compile_pair(name: str) -> dict:
+    """{shared: {what: CPU seconds}} of one kind's scenario compiled cold, without (0) and with (1) shared copies."""
+    out: dict = {}
+    for shared in ("0", "1"):
+        with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as logs:
+            env = dict(os.environ, NUMBA_CACHE_DIR=cache, ADAPTIVE_MJ_LOGS=logs, ADAPTIVE_MJ_COMPILE_NOTES="1",
+                       ADAPTIVE_MJ_SHARED_INLINE_COPIES=shared)
+            cmd = [sys.executable, "-m", "adaptive_mj", "run", *PAIRS[name], "-o", str(Path(logs) / "x.mcap")]
+            done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+            out[shared] = {m["what"]: float(m["cpu"]) for m in map(COMPILED.match, done.stderr.splitlines()) if m}
+    return out
+
+
 def cold_warm(name: str) -> dict:
     with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as logs:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache, ADAPTIVE_MJ_LOGS=logs)
@@ -82,7 +110,22 @@ def main() -> None:
     ap.add_argument("--bench", action="store_true", help="also `bench --quick` and `bench` (minutes)")
     ap.add_argument("--only", default="", help="comma-separated cases: " + ", ".join(CASES))
     ap.add_argument("--json", default="", help="also write the figures to this file")
+    ap.add_argument("--compile-pairs", action="store_true",
+                    help="each kind's cold compile with numba's inliner as it comes and with shared inline copies")
     a = ap.parse_args()
+    if a.compile_pairs:
+        print(f"{'variant':<100} {'CPU as numba':>12} {'CPU shared':>10} {'ratio':>6}  load (1 min)")
+        pairs = {}
+        for kind in PAIRS:
+            pair = compile_pair(kind)
+            pairs[kind] = pair
+            for what, alone in pair["0"].items():
+                shared = pair["1"].get(what, float("nan"))
+                print(f"{what[:100]:<100} {alone:12.1f} {shared:10.1f} {shared / alone:6.2f}  {os.getloadavg()[0]:.2f}",
+                      flush=True)
+        if a.json:
+            Path(a.json).write_text(json.dumps({"compile_pairs": pairs}, indent=1) + "\n")
+        return
     names = [n for n in a.only.split(",") if n] or ["run", "ur5e_plugin"] + (["bench_quick", "bench"] if a.bench
                                                                            else [])
     unknown = [n for n in names if n not in CASES]
