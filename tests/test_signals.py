@@ -200,7 +200,7 @@ _COMPILING_STUDY = textwrap.dedent("""
     from adaptive_mj.sim import loop
     from adaptive_mj.cli import main
 
-    parallel._prewarm = lambda jobs: None
+    parallel._prewarm = lambda jobs, n_jobs=1: None
     markers, spin_s = Path(sys.argv[1]), float(sys.argv[2])
     if spin_s > 0:
         import numba
@@ -641,3 +641,64 @@ def test_a_stop_in_the_loop_body_between_two_results_stops_the_workers_before_it
         for _ in gen:
             raise Interrupted(signal.SIGINT)
     assert info.value.note == "1 of 2 runs had finished; the run(s) in progress closed their logs as 'interrupted'"
+
+
+# The bench's parent compiles its scenarios' controllers side by side in n_jobs forked processes before it forks
+# the run workers (parallel._compile_side_by_side). Here each of those processes is a minute deep in one compiled
+# call (as in a long LLVM pass), not in the compile itself.
+_COMPILING_SIDE_BY_SIDE = textwrap.dedent("""
+    import math, os, sys, time
+    from pathlib import Path
+    import numba
+    from adaptive_mj.study import parallel
+    from adaptive_mj.cli import main
+
+    markers, spin_s = Path(sys.argv[1]), float(sys.argv[2])
+
+    @numba.njit(cache=False)
+    def spin(n):
+        x = 0.0
+        for i in range(n):
+            x = math.sin(x + 1e-9 * i)
+        return x
+
+    spin(10)
+    t0 = time.perf_counter()
+    spin(2_000_000)
+    n = int(2_000_000 * spin_s / max(time.perf_counter() - t0, 1e-6))
+
+    def spinning(job):
+        (markers / str(os.getpid())).touch()
+        spin(n)
+
+    parallel._compile_native = spinning  # in the compiling processes only: the parent's own pass loads
+    parallel._prewarm = lambda jobs, n_jobs=1: parallel._compile_side_by_side(parallel._distinct(jobs), n_jobs)
+    sys.exit(main(sys.argv[3:]))
+""")
+
+
+def test_sigterm_while_the_bench_compiles_side_by_side_ends_it_within_seconds(tmp_path):
+    """Two scenario files (bench --quick's nth_order section), two compiling processes, each deep in a native call
+    when the parent gets SIGTERM: the parent gives them parallel.STOP_GRACE s, kills them and exits 143 within
+    seconds, leaving no process and no log (no run had started)."""
+    from adaptive_mj.study.parallel import STOP_GRACE
+
+    markers = tmp_path / "markers"
+    markers.mkdir()
+    env = dict(os.environ, MUJOCO_GL="egl", NUMBA_CACHE_DIR=str(tmp_path / "numba_cache"))
+    proc = subprocess.Popen([sys.executable, "-c", _COMPILING_SIDE_BY_SIDE, str(markers), "120", "bench", "--quick",
+                             "--only", "nth_order", "--jobs", "2", "-o", str(tmp_path / "bench")],
+                            cwd=REPO, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    wait_for(lambda: len(list(markers.iterdir())) == 2, proc, timeout=300, what="both processes to be in the call")
+    compiling = children(proc.pid)
+    assert {int(m.name) for m in markers.iterdir()} <= compiling
+    t0 = time.monotonic()
+    os.kill(proc.pid, signal.SIGTERM)
+    out, err = proc.communicate(timeout=100)
+    took = time.monotonic() - t0
+    assert proc.returncode == 143, err
+    assert "Traceback" not in err, err
+    assert took < STOP_GRACE + 15.0, f"{took:.1f} s from SIGTERM to exit"
+    assert_gone(compiling)
+    assert not list((tmp_path / "bench").rglob("*.mcap"))

@@ -526,7 +526,7 @@ def _fake_jobs(monkeypatch, fake_run_job, folder: Path, *, n: int, crash: int):
     from adaptive_mj.study import job, parallel
 
     monkeypatch.setattr(job, "run_job", fake_run_job)
-    monkeypatch.setattr(parallel, "_prewarm", lambda jobs: None)
+    monkeypatch.setattr(parallel, "_prewarm", lambda jobs, n_jobs=1: None)
     return [parallel.RunSpec(Path("unused.toml"), log=folder / f"{k}.mcap", tag="crash" if k == crash else f"run{k}")
             for k in range(n)]
 

@@ -286,7 +286,7 @@ def _iter_local_pool(jobs: Sequence[RunSpec], n_jobs: int, *, retries: int = 3,
     and are run again, one at a time in a pool of one worker, so that a further death is blamed on
     its own run alone. Each started run is charged an attempt per death it was in; after `retries`
     more attempts it is recorded as an error."""
-    ctx = _worker_context(jobs)
+    ctx = _worker_context(jobs, n_jobs)
     finished = 0
     attempts = [0] * len(jobs)
     queue = deque(range(len(jobs)))
@@ -379,20 +379,32 @@ def _put_back_lost(lost: list[int], jobs: Sequence[RunSpec], attempts: list[int]
                                                         f"{attempts[i] + 1} times)")
 
 
-def _worker_context(jobs: Sequence[RunSpec]):
+def _worker_context(jobs: Sequence[RunSpec], n_jobs: int = 1):
     """Fork workers from a parent that has compiled the jobs' native callbacks (numba,
     ~2.5 s and ~100 MB each time) so no worker compiles again; spawn where fork is missing.
     Forking is safe here: no control callback is installed between runs, and the
     compiled callback's buffers are module globals at the same addresses in the child."""
     if "fork" not in mp.get_all_start_methods():
         return mp.get_context("spawn")
-    _prewarm(jobs)
+    _prewarm(jobs, n_jobs)
     return mp.get_context("fork")
 
 
-def _prewarm(jobs: Sequence[RunSpec]) -> None:
-    """Compile the native controller of each distinct scenario file among the jobs (in this process): the 1-DOF,
-    arm and quadrotor callbacks and the analytic plants' compiled loops (loop.compile_native)."""
+def _distinct(jobs: Sequence[RunSpec]) -> list[RunSpec]:
+    """The first job of each distinct scenario file among the jobs, in order."""
+    seen: set = set()
+    out = []
+    for job in jobs:
+        if job.scenario not in seen:
+            seen.add(job.scenario)
+            out.append(job)
+    return out
+
+
+def _compile_native(job: RunSpec) -> None:
+    """Compile (or load from numba's disk cache) the native controller of `job`'s scenario in this process: the
+    1-DOF, arm and quadrotor callbacks and the analytic plants' compiled loops (loop.compile_native). Only a head
+    start: a job that cannot be set up or compiled is left to its worker, which reports what is wrong."""
     import contextlib
 
     from adaptive_mj.setup import scenario as sc
@@ -400,19 +412,41 @@ def _prewarm(jobs: Sequence[RunSpec]) -> None:
     from adaptive_mj.sim.compile_note import CompileLines
     from adaptive_mj.sim.loop import compile_native
 
-    seen = set()
-    for job in jobs:
-        if job.scenario in seen:
-            continue
-        seen.add(job.scenario)
-        try:
-            setup = build(sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed))
-            # a compile is said (sim.compile_note); the rest, a plugin's "could not be compiled" too, the worker says
-            with contextlib.redirect_stderr(CompileLines(sys.stderr)):
-                compile_native(setup.plant, setup.law, setup.reference, setup.theta_hat0)
-        except Exception as exc:  # noqa: BLE001 (only a head start: the worker runs the job and reports what is wrong)
-            interrupt.reraise_stop(exc)  # a stop signal that came while numba compiled, wrapped by Python
-            continue
+    try:
+        setup = build(sc.load(job.scenario, overrides=list(job.overrides), seed=job.seed))
+        # a compile is said (sim.compile_note); the rest, a plugin's "could not be compiled" too, the worker says
+        with contextlib.redirect_stderr(CompileLines(sys.stderr)):
+            compile_native(setup.plant, setup.law, setup.reference, setup.theta_hat0)
+    except Exception as exc:  # noqa: BLE001 (only a head start: the worker runs the job and reports what is wrong)
+        interrupt.reraise_stop(exc)  # a stop signal that came while numba compiled, wrapped by Python
+
+
+def _prewarm(jobs: Sequence[RunSpec], n_jobs: int = 1) -> None:
+    """Compile the native controller of each distinct scenario file among the jobs, then load them all in this
+    process (the workers forked from it inherit them). With n_jobs > 1 and more than one of them, they are first
+    compiled into numba's disk cache by n_jobs processes side by side (_compile_side_by_side: a cold bench's
+    compiles took one core while the other waited), and loading them here is a fraction of a second each; where
+    they are in that cache already, those processes only load them too."""
+    distinct = _distinct(jobs)
+    if n_jobs > 1 and len(distinct) > 1:
+        _compile_side_by_side(distinct, n_jobs)
+    for job in distinct:
+        _compile_native(job)
+
+
+def _compile_side_by_side(distinct: list[RunSpec], n_jobs: int) -> None:
+    """_compile_native of each job in a pool of n_jobs forked processes (they fill numba's disk cache; what they
+    compile dies with them). A stop signal stops them at once (_stop_workers) and is raised here."""
+    with _stop_signals_blocked():  # the first submits fork the workers
+        pool = cf.ProcessPoolExecutor(max_workers=min(n_jobs, len(distinct)), mp_context=mp.get_context("fork"),
+                                      initializer=_init_worker, initargs=(os.getpid(),))
+        futures = [pool.submit(_compile_native, job) for job in distinct]
+    try:
+        cf.wait(futures)
+    except BaseException:
+        _stop_workers(pool)
+        raise
+    pool.shutdown(wait=True)
 
 
 PLAIN_PROGRESS_EVERY = 5.0  # s between progress lines when stderr is not a terminal
