@@ -86,7 +86,7 @@ EQUIVALENT: dict[tuple[str, str, str], str] = {
         "only reached when separable(a, b): b.hi = a.lo there would need a.hi < b.lo <= b.hi = a.lo",
     ("stats", "paired_difference", "math.isfinite(x) and math.isfinite(y) → math.isfinite(x) or math.isfinite(y)"):
         "x − y is not finite when either is not, and estimate() leaves non-finite values out",
-    ("stats", "paired_difference", "True → False"):
+    ("stats", "paired_difference", "strict=True → strict=False"):
         "zip's strict: the lengths are checked (ValueError) just before",
     ("stats", "paired_ranks", "j == i or not has[j] → j == i and (not has[j])"):
         "a law against itself differs by 0 on every seed, and one with no value pairs on no seed: neither differs",
@@ -98,15 +98,42 @@ EQUIVALENT: dict[tuple[str, str, str], str] = {
         "only reached when differs(d): d.hi = 0 there would need d.lo > 0 >= d.lo",
     ("stats", "separated_pairs", "i + 1 → i"):
         "adds the pairs (i, i): a law against itself differs by 0 on every seed, never separable",
-    ("score", "rank_laws", "True → False"):
+    ("score", "rank_laws", "strict=True → strict=False"):
         "zip's strict: paired_ranks gives one rank per law it is given",
     ("score_card", "_order.key", "1.0 → 2.0"):
         "S lies in [0, 1]: any key below 0 for a law with no S sorts it after every law with one",
-    ("score_card", "leaderboard", "True → False"):
+    ("score_card", "leaderboard", "strict=True → strict=False"):
         "zip's strict: the cells are built one per column",
-    ("score_card", "margins_table", "True → False"):
+    ("score_card", "margins_table", "strict=True → strict=False"):
         "zip's strict (twice): a stressor's margins and first fails are per seed, and the cells one per column",
+    ("breaking_point", "_Batches.run", "strict=True → strict=False"):
+        "zip's strict: run_jobs gives one outcome per job",
+    ("breaking_point", "_Batches.evaluate", "strict=True → strict=False"):
+        "zip's strict: one chunk of outcomes per (search, value) asked for",
+    ("breaking_point", "_Batches.complete_first_fails", "len(ev.tails) < self.seeds → len(ev.tails) <= self.seeds"):
+        "a first fail already run on every seed asks for an empty range of seeds: no run, no change",
+    ("breaking_point", "_Batches.complete_first_fails", "strict=True → strict=False"):
+        "zip's strict: one chunk of outcomes per first fail asked for",
+    ("breaking_point", "search_all", "strict=True → strict=False"):
+        "zip's strict: one Evaluation per (search, value) asked for",
+    ("stress", "preflight_text", "strict=True → strict=False"):
+        "zip's strict: an Evaluation's predictions and tails are per seed",
+    ("breaking_point", "_Batches.__init__", "seeds > 1 → seeds >= 1"):
+        "screening one seed skips nothing: a value's other seeds are none",
 }
+_INTEGER_CLAMP = ("_midpoints stops an integer search at a bracket of width <= 1; in a wider one with whole ends "
+                  "round(mid) lies strictly inside (linear: within 1/2 of a middle >= 1 from each end; geometric: "
+                  "sqrt(lo hi) >= 3.16 lo >= lo + 1 and <= hi / 3.16), so this clamp is never reached; a search "
+                  "with non-whole ends on an integer stressor is not made by any study")
+_STEP_CLAMP = ("_midpoints stops a stepped search at a bracket of one step; in a wider one the middle's whole step "
+               "lies strictly inside (linear: (n_lo + n_hi) / 2; geometric from lo >= one step: sqrt(n_lo n_hi) >= "
+               "3.16 n_lo >= n_lo + 1 and <= n_hi / 3.16), so this clamp is never reached")
+EQUIVALENT.update({("breaking_point", "_mid", text): _INTEGER_CLAMP for text in (
+    "v <= lo → v < lo", "lo + 1 → lo - 1", "lo + 1 → lo", "v >= hi → v > hi", "hi - 1 → hi + 1", "hi - 1 → hi",
+    "1 → 2")})
+EQUIVALENT.update({("breaking_point", "_mid", text): _STEP_CLAMP for text in (
+    "lo / st.step → lo * st.step", "n_hi - 1 → n_hi + 1", "n_hi - 1 → n_hi", "n_lo + 1 → n_lo - 1",
+    "n_lo + 1 → n_lo")})
 
 
 # ----------------------------------------------------------------------------------------------- the mutants
@@ -222,15 +249,17 @@ def _candidates(node: ast.AST) -> list[tuple[str, object, ast.AST]]:
 
 def mutants(tree: ast.Module, functions: tuple[str, ...] | None) -> list[Mutant]:
     """Every mutant of `tree` inside `functions` (module docstring), in source order."""
-    names, skip = _qualnames(tree), _skipped(tree)
+    names, skip, parents = _qualnames(tree), _skipped(tree), _parents(tree)
     out: list[Mutant] = []
     for index, node in enumerate(ast.walk(tree)):
         where = names.get(id(node), "<module>")
         if id(node) in skip or not _selected(where, functions):
             continue
+        parent = parents.get(id(node), (None, "", None))[0]
+        name = f"{parent.arg}=" if isinstance(parent, ast.keyword) else ""  # a keyword argument: named
         for kind, arg, after in _candidates(node):
             out.append(Mutant(index, kind, arg, getattr(node, "lineno", 0), where,
-                              f"{ast.unparse(node)} → {ast.unparse(after)}"))
+                              f"{name}{ast.unparse(node)} → {name}{ast.unparse(after)}"))
     out.sort(key=lambda m: (m.line, m.index))
     return out
 
