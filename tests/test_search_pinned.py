@@ -281,6 +281,7 @@ def test_a_margin_s_place_in_its_range():
     assert pos(0.0, 10.0, 4.0) == pytest.approx(0.4)
     assert pos(2.0, 12.0, 4.5) == pytest.approx(0.25)
     assert pos(1.0, 100.0, 10.0) == pytest.approx(0.5)  # two decades: geometric
+    assert pos(2.0, 200.0, 20.0) == pytest.approx(0.5)  # log(20 / 2) / log(200 / 2)
     assert pos(1.0, 10.0, 10 ** 0.25) == pytest.approx(0.25)  # exactly a decade: geometric
     assert pos(1.0, 9.0, 3.0) == pytest.approx(0.25)  # less than a decade: linear
 
@@ -368,6 +369,7 @@ def test_the_flight_grids_by_hand():
     assert flight.grid(Disturbance("d", "", lambda v: [], 1.0, 100.0), 3) == pytest.approx([1.0, 10.0, 100.0])
     assert flight.grid(Disturbance("d", "", lambda v: [], 1.0, 10.0), 3) == pytest.approx([1.0, 10 ** 0.5, 10.0])
     assert flight.grid(Disturbance("d", "", lambda v: [], 1.0, 9.0), 3) == [1.0, 5.0, 9.0]
+    assert flight.grid(Disturbance("d", "", lambda v: [], 2.0, 18.0), 3) == [2.0, 10.0, 18.0]  # 9x: even
     assert flight.grid(Disturbance("d", "s", lambda v: [], 0.0, 0.01, step=0.002), 4) == pytest.approx(
         [0.0, 0.004, 0.006, 0.01])  # 0, 1/3, 2/3 and 1 of 5 steps, rounded to whole steps
 

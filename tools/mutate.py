@@ -34,7 +34,7 @@ import os
 import signal
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -78,8 +78,10 @@ MODULES: dict[str, Target] = {
     "pseudo_inertia": Target("adaptive_mj/laws/pseudo_inertia.py", ("tests/test_projection_pinned.py",)),
 }
 
-#: (module key, qualified function, mutation) -> why no test should kill it. Keep each reason checkable.
-EQUIVALENT: dict[tuple[str, str, str], str] = {
+#: (module key, qualified function, mutation[, the mutated line's source, stripped]) -> why no test should kill it
+#: (the line where the same mutation text occurs on several lines of one function, not all of them equivalent).
+#: Keep each reason checkable.
+EQUIVALENT: dict[tuple[str, ...], str] = {
     ("stats", "ranks", "b.lo > a.hi → b.lo >= a.hi"):
         "only reached when separable(a, b): b.lo = a.hi there would need b.hi < a.lo <= a.hi = b.lo",
     ("stats", "ranks", "b.hi < a.lo → b.hi <= a.lo"):
@@ -118,6 +120,10 @@ EQUIVALENT: dict[tuple[str, str, str], str] = {
         "zip's strict: one Evaluation per (search, value) asked for",
     ("stress", "preflight_text", "strict=True → strict=False"):
         "zip's strict: an Evaluation's predictions and tails are per seed",
+    ("flight_study", "Search.margin", "v > lo → v >= lo"):
+        "lo is a value where every seed succeeded, so it is never among the failing values compared with it",
+    ("flight_study", "Search.when2fail", "v < hi → v <= hi"):
+        "hi is a value where every seed failed, so it is never among the succeeding values compared with it",
     ("breaking_point", "_Batches.__init__", "seeds > 1 → seeds >= 1"):
         "screening one seed skips nothing: a value's other seeds are none",
 }
@@ -131,6 +137,38 @@ _STEP_CLAMP = ("_midpoints stops a stepped search at a bracket of one step; in a
 EQUIVALENT.update({("breaking_point", "_mid", text): _INTEGER_CLAMP for text in (
     "v <= lo → v < lo", "lo + 1 → lo - 1", "lo + 1 → lo", "v >= hi → v > hi", "hi - 1 → hi + 1", "hi - 1 → hi",
     "1 → 2")})
+_SCRATCH = "a scratch array made larger than it needs: only its first entries are written and read"
+EQUIVALENT.update({("pseudo_inertia", where, text, line): _SCRATCH for where, text, line in (
+    ("symmetric_eigen", "4 → 5", "B = np.empty((4, 4))"),
+    ("smallest_eigenvalue", "4 → 5", "w, V = np.empty(4), np.empty((4, 4))"),
+    ("psd_part", "4 → 5", "w, V = np.empty(4), np.empty((4, 4))"),
+    ("objective_gradient", "10 → 11", "r = np.empty(10)"),
+    ("project_body", "4 → 5", "J = np.empty((4, 4))"),
+    ("project_body", "10 → 11", "target = np.empty(start + 10)"),
+    ("project_body", "10 → 11", "work = np.empty(start + 10)"),
+    ("project_body", "4 → 5", "X, X_prev, Y, G, step = np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)), "
+                              "np.empty((4, 4)), np.empty((4, 4))"))})
+_TOLERANCE = ("the Jacobi sweeps' stopping threshold moved within rounding (or made absolute, the same for "
+              "matrices of order one): the same decomposition to 1e-15 and no more than the 30 rotations "
+              "tests/test_projection_pinned.py allows (checked by hand); only a threshold nobody chose differs")
+EQUIVALENT.update({("pseudo_inertia", "symmetric_eigen", text, line): _TOLERANCE for text, line in (
+    ("0.0 → 1.0", "scale = 0.0"),
+    ("B[i, i] * B[i, i] → B[i, i] / B[i, i]", "scale += B[i, i] * B[i, i]"),
+    ("0.0 → 1.0", "if off == 0.0 or off <= 1e-36 * scale:"),
+    ("off <= 1e-36 * scale → off < 1e-36 * scale", "if off == 0.0 or off <= 1e-36 * scale:"),
+    ("1e-36 * scale → 1e-36 / scale", "if off == 0.0 or off <= 1e-36 * scale:"),
+    ("1e-36 → 2e-36", "if off == 0.0 or off <= 1e-36 * scale:"))})
+EQUIVALENT.update({
+    ("pseudo_inertia", "symmetric_eigen", "60 → 61"): "a 61st sweep is never reached: it converges in about 5",
+    ("pseudo_inertia", "symmetric_eigen", "n - 1 → n + 1"): "the extra p have an empty range of q > p",
+    ("pseudo_inertia", "symmetric_eigen", "n - 1 → n"): "the extra p has an empty range of q > p",
+    ("pseudo_inertia", "symmetric_eigen", "theta >= 0.0 → theta > 0.0"):
+        "at theta = 0 (equal diagonal entries) t = +1 and t = -1 both zero the entry (a rotation by +45 or -45 "
+        "degrees): the same eigenvalues, the eigenvectors' signs aside",
+    ("pseudo_inertia", "psd_part", "w[k] > 0.0 → w[k] >= 0.0"): "adds the eigenvalue-0 terms, each exactly 0",
+    ("pseudo_inertia", "project_body", "moved <= STEP_TOLERANCE * STEP_TOLERANCE * size → moved < STEP_TOLERANCE "
+     "* STEP_TOLERANCE * size"): "a step exactly at the tolerance: one more iteration of a converged iterate",
+})
 EQUIVALENT.update({("breaking_point", "_mid", text): _STEP_CLAMP for text in (
     "lo / st.step → lo * st.step", "n_hi - 1 → n_hi + 1", "n_hi - 1 → n_hi", "n_lo + 1 → n_lo - 1",
     "n_lo + 1 → n_lo")})
@@ -206,7 +244,8 @@ def _selected(where: str, functions: tuple[str, ...] | None) -> bool:
     return any(where == f or where.startswith(f + ".") for f in functions)
 
 
-def _number(value: object) -> object:
+def _number(value: object) -> bool | int | float:
+    """A number tweaked: True/False swapped, an int + 1, 0.0 -> 1.0, any other float doubled."""
     if isinstance(value, bool):
         return not value
     if isinstance(value, int):
@@ -359,15 +398,27 @@ def _run_child(name: str, path: Path, code, tests: tuple[str, ...], timeout: flo
         finally:
             os._exit(rc)
     deadline = time.monotonic() + timeout
-    while True:
-        done, status = os.waitpid(pid, os.WNOHANG)
-        if done:
-            return "survived" if os.waitstatus_to_exitcode(status) == 0 else "killed"
-        if time.monotonic() > deadline:
-            os.killpg(pid, signal.SIGKILL)  # the child's own process group (setsid): it and what it started
-            os.waitpid(pid, 0)
-            return "timeout"
-        time.sleep(0.02)
+    try:
+        while True:
+            done, status = os.waitpid(pid, os.WNOHANG)
+            if done:
+                return "survived" if os.waitstatus_to_exitcode(status) == 0 else "killed"
+            if time.monotonic() > deadline:
+                _stop(pid)
+                return "timeout"
+            time.sleep(0.02)
+    except BaseException:  # interrupted (Ctrl-C, SIGTERM): the child goes too, then the error goes on
+        _stop(pid)
+        raise
+
+
+def _stop(pid: int) -> None:
+    """Kill the child's own process group (setsid: it and what it started) and reap it."""
+    try:
+        os.killpg(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+    except (ProcessLookupError, ChildProcessError):
+        pass
 
 
 def _module_name(path: str) -> str:
@@ -377,7 +428,9 @@ def _module_name(path: str) -> str:
 def run_module(key: str, *, timeout: float | None, listing: bool, verbose: bool) -> dict:
     target = MODULES[key]
     path = ROOT / target.path
-    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    source = path.read_text(encoding="utf-8")
+    lines = source.splitlines()
+    tree = ast.parse(source, filename=str(path))
     found = mutants(tree, target.functions)
     if listing:
         for m in found:
@@ -400,7 +453,8 @@ def run_module(key: str, *, timeout: float | None, listing: bool, verbose: bool)
     for n, m in enumerate(found, start=1):
         code = compile(apply(tree, m), str(path), "exec", dont_inherit=True)
         verdict = _run_child(name, path, code, tests, limit, None)
-        why = EQUIVALENT.get((key, m.where, m.text))
+        why = EQUIVALENT.get((key, m.where, m.text, lines[m.line - 1].strip())) or EQUIVALENT.get((key, m.where,
+                                                                                                  m.text))
         if verdict == "survived" and why is not None:
             verdict = "equivalent"
         counts[verdict] += 1
@@ -425,12 +479,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--list", action="store_true", help="list the mutants, run nothing")
     parser.add_argument("--timeout", type=float, default=None,
                         help="seconds per mutant (default: 4 x the unmutated tests' time, at least 20)")
+    parser.add_argument("--functions", default=None,
+                        help="comma-separated qualified names: mutate only these (default: MODULES' choice)")
     parser.add_argument("-v", "--verbose", action="store_true", help="print every mutant's verdict")
     args = parser.parse_args(argv)
     keys = list(MODULES) if args.all else args.modules
     unknown = [k for k in keys if k not in MODULES]
     if unknown or not keys:
         parser.error(f"expected modules among {', '.join(MODULES)} (or --all), got {unknown or 'none'}")
+    if args.functions:
+        for k in keys:
+            MODULES[k] = replace(MODULES[k], functions=tuple(args.functions.split(",")))
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # a kill ends the current child too (_run_child)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     os.environ.setdefault("ADAPTIVE_MJ_COMPILE_NOTES", "0")
     sys.path.insert(0, str(ROOT))
