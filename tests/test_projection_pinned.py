@@ -269,6 +269,7 @@ def test_the_projection_s_kkt_conditions_with_a_finite_difference_gradient():
                 d = (_objective(X + h * E, target, gamma) - _objective(X - h * E, target, gamma)) / (2 * h)
                 G[i, j] = G[j, i] = d if i == j else d / 2
         scale = np.linalg.norm(G)
+        assert scale > 1e-6 and np.sum(gamma * (theta - target) ** 2) <= np.sum(gamma * target**2)
         assert np.linalg.eigvalsh(G)[0] >= -1e-6 * scale
         assert abs(np.sum(G * X)) <= 1e-6 * scale * np.linalg.norm(X)
 
@@ -334,6 +335,7 @@ def test_sixty_iterations_reach_the_optimum_with_equal_weights(monkeypatch):
         pi.pseudo_inertia(theta, 0, X)
         G = _fd_gradient(X, target, gamma)
         scale = np.linalg.norm(G)
+        assert scale > 1e-6 and np.sum(gamma * (theta - target) ** 2) <= np.sum(gamma * target**2)
         assert np.linalg.eigvalsh(G)[0] >= -1e-8 * scale
         assert abs(np.sum(G * X)) <= 1e-8 * scale * np.linalg.norm(X)
     assert moved >= 10
@@ -394,7 +396,7 @@ def test_every_body_of_a_record_gets_its_own_step_momentum_and_weights(monkeypat
     conditions (finite-difference gradient in its own metric), so each read its own L, β and γ."""
     monkeypatch.setattr(pi, "MAX_ITERATIONS", 60)
     rng = np.random.default_rng(71)
-    g1, g2 = np.full(10, 0.2), np.full(10, 3.0)
+    g1, g2 = np.full(10, 3.0), np.full(10, 0.2)  # L = 12 at index 1, L = 0.8 at index 13: neither is its start
     t1, t2 = rng.normal(0.0, 1.0, 10), rng.normal(0.0, 1.0, 10)
     t1[0] = t2[0] = -0.5  # negative masses: both move
     theta = np.concatenate(([7.0], t1, [8.0, 9.0], t2))
@@ -402,9 +404,12 @@ def test_every_body_of_a_record_gets_its_own_step_momentum_and_weights(monkeypat
     pi.project_bodies(theta, np.concatenate((np.zeros(theta.size), record)), theta.size)
     assert (theta[0], theta[11], theta[12]) == (7.0, 8.0, 9.0)
     for start, target, gamma in ((1, t1, g1), (13, t2, g2)):
+        moved = theta[start:start + 10] - target
+        assert np.sum(gamma * moved**2) <= np.sum(gamma * target**2)  # no farther than the body 0 (J = 0 ⪰ 0)
         X = np.empty((4, 4))
         pi.pseudo_inertia(theta, start, X)
         G = _fd_gradient(X, target, gamma)
         scale = np.linalg.norm(G)
+        assert scale > 1e-3  # the target is no body: the gradient at the optimum is not 0
         assert np.linalg.eigvalsh(G)[0] >= -1e-8 * scale
         assert abs(np.sum(G * X)) <= 1e-8 * scale * np.linalg.norm(X)
