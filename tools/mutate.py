@@ -33,6 +33,7 @@ import importlib.util
 import os
 import signal
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -458,12 +459,13 @@ def run_module(key: str, *, timeout: float | None, listing: bool, verbose: bool)
     name = _module_name(target.path)
     tests = tuple(str(ROOT / t) for t in target.tests)
     t0 = time.monotonic()
-    base = _run_child(name, path, None, tests, 600.0, ROOT / f".mutate-{key}-baseline.log")
+    log = Path(tempfile.gettempdir()) / f"mutate-{key}-baseline.log"
+    base = _run_child(name, path, None, tests, 600.0, log)
     took = time.monotonic() - t0
     if base != "survived":
-        print(f"{key}: its tests fail without any mutant (see .mutate-{key}-baseline.log); not run", flush=True)
+        print(f"{key}: its tests fail without any mutant (their output: {log}); not run", flush=True)
         return {"error": True}
-    (ROOT / f".mutate-{key}-baseline.log").unlink()
+    log.unlink()
     limit = timeout if timeout is not None else max(20.0, 4.0 * took)
     print(f"{key}: {len(found)} mutants of {target.path}, tests {', '.join(target.tests)} "
           f"({took:.1f} s unmutated; {limit:.0f} s limit each)", flush=True)
