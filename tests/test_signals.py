@@ -165,9 +165,25 @@ def test_sigterm_to_bench_closes_every_log_and_leaves_no_worker(tmp_path):
     proc = start("bench", "--quick", "--jobs", "2", "-o", out_dir)
     logs = out_dir / "logs"
 
+    def open_sizes() -> dict:
+        """The sizes of the logs not closed yet (no MCAP footer) [bytes]."""
+        out = {}
+        for p in logs.glob("*.mcap"):
+            try:
+                data = p.read_bytes()
+            except OSError:
+                continue
+            if not data.endswith(b"\x89MCAP0\r\n"):
+                out[p] = len(data)
+        return out
+
     def a_log_is_being_written() -> bool:
-        return any(p.stat().st_size > 20_000 and not p.read_bytes().endswith(b"\x89MCAP0\r\n")
-                   for p in logs.glob("*.mcap"))
+        """A log past its header that is still growing: its run is under way now, so the signal lands in a run (a
+        log merely open and large could be about to close, and a signal between runs closes none as interrupted)."""
+        before = open_sizes()
+        time.sleep(0.05)
+        after = open_sizes()
+        return any(size > 20_000 and after.get(p, 0) > size for p, size in before.items())
 
     # a cold numba cache: the workers compile the bench's callbacks first (minutes on a loaded 2-core machine)
     wait_for(a_log_is_being_written, proc, timeout=600, what="a worker to be writing a log")
@@ -188,23 +204,14 @@ def test_sigterm_to_bench_closes_every_log_and_leaves_no_worker(tmp_path):
     assert not (out_dir / "report.md").exists()  # no report made of an interrupted bench
 
 
-# A study whose workers compile: the parent does not compile their callbacks first (parallel._prewarm off, as
-# where fork is missing or a job's variant is not among the parent's), and numba's cache is empty (the test's
-# NUMBA_CACHE_DIR). With SPIN set, each worker first spends about a minute in one compiled call before it
-# compiles (an LLVM pass as long as that: no Python signal handler can run until it returns), having touched
-# <MARKERS>/<pid> so the test knows it is there.
-_COMPILING_STUDY = textwrap.dedent("""
-    import math, os, sys, time
-    from pathlib import Path
-    from adaptive_mj.study import parallel
-    from adaptive_mj.sim import loop
-    from adaptive_mj.cli import main
+# One compiled call of about spin_s seconds: spinner(spin_s) compiles it in the process that calls it and returns it
+# (in the call, as in an LLVM pass that long, no Python signal handler can run until it returns).
+_SPIN = textwrap.dedent("""
+    import math, time
+    import numba
 
-    parallel._prewarm = lambda jobs, n_jobs=1: None
-    markers, spin_s = Path(sys.argv[1]), float(sys.argv[2])
-    if spin_s > 0:
-        import numba
 
+    def spinner(spin_s):
         @numba.njit(cache=False)
         def spin(n):
             x = 0.0
@@ -212,26 +219,36 @@ _COMPILING_STUDY = textwrap.dedent("""
                 x = math.sin(x + 1e-9 * i)
             return x
 
-        spin(10)  # compiled here, in the parent
+        spin(10)  # compiled here
         t0 = time.perf_counter()
         spin(2_000_000)
         n = int(2_000_000 * spin_s / max(time.perf_counter() - t0, 1e-6))
-        native_controller = loop._native_controller
+        return lambda: spin(n)
+""")
 
-        def spinning_native_controller(*args, **kwargs):
-            (markers / str(os.getpid())).touch()
-            spin(n)
-            return native_controller(*args, **kwargs)
+# A study whose workers compile: the parent does not compile their callbacks first (parallel._prewarm off, as
+# where fork is missing or a job's variant is not among the parent's), and numba's cache is empty (the test's
+# NUMBA_CACHE_DIR). With SPIN set, each worker first spends about a minute in one compiled call before it
+# compiles (an LLVM pass as long as that: no Python signal handler can run until it returns), having touched
+# <MARKERS>/<pid> so the test knows it is there.
+_COMPILING_STUDY = _SPIN + textwrap.dedent("""
+    import os, sys
+    from pathlib import Path
+    from adaptive_mj.study import parallel
+    from adaptive_mj.sim import loop
+    from adaptive_mj.cli import main
 
-        loop._native_controller = spinning_native_controller
-    else:
-        native_controller = loop._native_controller
+    parallel._prewarm = lambda jobs, n_jobs=1: None
+    markers, spin_s = Path(sys.argv[1]), float(sys.argv[2])
+    native_controller = loop._native_controller
+    in_the_call = spinner(spin_s) if spin_s > 0 else (lambda: None)  # compiled in the parent
 
-        def marked_native_controller(*args, **kwargs):
-            (markers / str(os.getpid())).touch()
-            return native_controller(*args, **kwargs)
+    def marked_native_controller(*args, **kwargs):
+        (markers / str(os.getpid())).touch()
+        in_the_call()
+        return native_controller(*args, **kwargs)
 
-        loop._native_controller = marked_native_controller
+    loop._native_controller = marked_native_controller
     sys.exit(main(sys.argv[3:]))
 """)
 
@@ -646,30 +663,18 @@ def test_a_stop_in_the_loop_body_between_two_results_stops_the_workers_before_it
 # The bench's parent compiles its scenarios' controllers side by side in n_jobs forked processes before it forks
 # the run workers (parallel._compile_side_by_side). Here each of those processes is a minute deep in one compiled
 # call (as in a long LLVM pass), not in the compile itself.
-_COMPILING_SIDE_BY_SIDE = textwrap.dedent("""
-    import math, os, sys, time
+_COMPILING_SIDE_BY_SIDE = _SPIN + textwrap.dedent("""
+    import os, sys
     from pathlib import Path
-    import numba
     from adaptive_mj.study import parallel
     from adaptive_mj.cli import main
 
     markers, spin_s = Path(sys.argv[1]), float(sys.argv[2])
-
-    @numba.njit(cache=False)
-    def spin(n):
-        x = 0.0
-        for i in range(n):
-            x = math.sin(x + 1e-9 * i)
-        return x
-
-    spin(10)
-    t0 = time.perf_counter()
-    spin(2_000_000)
-    n = int(2_000_000 * spin_s / max(time.perf_counter() - t0, 1e-6))
+    in_the_call = spinner(spin_s)
 
     def spinning(job):
         (markers / str(os.getpid())).touch()
-        spin(n)
+        in_the_call()
 
     parallel._compile_native = spinning  # in the compiling processes only: the parent's own pass loads
     parallel._prewarm = lambda jobs, n_jobs=1: parallel._compile_side_by_side(parallel._distinct(jobs), n_jobs)

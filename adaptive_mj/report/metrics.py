@@ -155,30 +155,31 @@ def _impossible(mass: float, lowest: float, possible: bool) -> str:
     return ""
 
 
-def saturation_fraction(traj: Trajectory) -> np.ndarray | None:
-    """(m,) fraction of the rows in which each actuator's applied control sits at its limit
-    (within 1e-9 relative), from traj.meta["ctrl_range"] = (lo, hi) in control units; None when
-    the run has no limits on record (logs before format 5)."""
+def _at_limits(traj: Trajectory) -> np.ndarray | None:
+    """(N, m) whether each actuator's applied control sits at its limit in each row (within 1e-9 relative), from
+    traj.meta["ctrl_range"] = (lo, hi) in control units; None when the run has no limits on record (logs before
+    format 5)."""
     rng = traj.meta.get("ctrl_range")
     if rng is None or len(traj) == 0:
         return None
     lo, hi = (np.atleast_1d(np.asarray(b, dtype=float)) for b in rng)
     u = np.asarray(traj.u, dtype=float).reshape(len(traj.t), -1)
     tol_lo, tol_hi = 1e-9 * np.maximum(1.0, np.abs(lo)), 1e-9 * np.maximum(1.0, np.abs(hi))
-    at = (u <= lo + tol_lo) | (u >= hi - tol_hi)
-    return at.mean(axis=0)
+    return (u <= lo + tol_lo) | (u >= hi - tol_hi)
+
+
+def saturation_fraction(traj: Trajectory) -> np.ndarray | None:
+    """(m,) fraction of the rows in which each actuator's applied control sits at its limit (_at_limits); None
+    when the run has no limits on record (logs before format 5)."""
+    at = _at_limits(traj)
+    return None if at is None else at.mean(axis=0)
 
 
 def saturated_rows(traj: Trajectory) -> np.ndarray | None:
-    """(N,) whether any actuator's applied control sits at its limit in each row (saturation_fraction's test),
-    None without limits on record."""
-    rng = traj.meta.get("ctrl_range")
-    if rng is None or len(traj) == 0:
-        return None
-    lo, hi = (np.atleast_1d(np.asarray(b, dtype=float)) for b in rng)
-    u = np.asarray(traj.u, dtype=float).reshape(len(traj.t), -1)
-    tol_lo, tol_hi = 1e-9 * np.maximum(1.0, np.abs(lo)), 1e-9 * np.maximum(1.0, np.abs(hi))
-    return np.any((u <= lo + tol_lo) | (u >= hi - tol_hi), axis=1)
+    """(N,) whether any actuator's applied control sits at its limit in each row (_at_limits), None without limits
+    on record."""
+    at = _at_limits(traj)
+    return None if at is None else np.any(at, axis=1)
 
 
 def saturation_metrics(traj: Trajectory) -> dict:
