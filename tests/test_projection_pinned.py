@@ -260,14 +260,7 @@ def test_the_projection_s_kkt_conditions_with_a_finite_difference_gradient():
             continue
         X = np.empty((4, 4))
         pi.pseudo_inertia(theta, 0, X)
-        G = np.zeros((4, 4))
-        h = 1e-6
-        for i in range(4):
-            for j in range(i, 4):
-                E = np.zeros((4, 4))
-                E[i, j] = E[j, i] = 1.0
-                d = (_objective(X + h * E, target, gamma) - _objective(X - h * E, target, gamma)) / (2 * h)
-                G[i, j] = G[j, i] = d if i == j else d / 2
+        G = _fd_gradient(X, target, gamma)
         scale = np.linalg.norm(G)
         assert scale > 1e-6 and np.sum(gamma * (theta - target) ** 2) <= np.sum(gamma * target**2)
         assert np.linalg.eigvalsh(G)[0] >= -1e-6 * scale

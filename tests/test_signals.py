@@ -264,18 +264,24 @@ def start_compiling_sweep(tmp_path: Path, spin_s: float) -> tuple[subprocess.Pop
     return proc, out_dir / "logs", markers
 
 
+def sigterm_when_marked(proc: subprocess.Popen, markers: Path, *, what: str, timeout: float):
+    """Wait until two processes of proc have touched <markers>/<pid> (each is one of proc's children), SIGTERM
+    proc alone, and wait for it: (those children's pids, stdout, stderr, seconds from the signal to the exit)."""
+    wait_for(lambda: len(list(markers.iterdir())) == 2, proc, timeout=300, what=what)
+    pids = children(proc.pid)
+    assert {int(m.name) for m in markers.iterdir()} <= pids
+    t0 = time.monotonic()
+    os.kill(proc.pid, signal.SIGTERM)
+    out, err = proc.communicate(timeout=timeout)
+    return pids, out, err, time.monotonic() - t0
+
+
 def test_sigterm_while_the_workers_compile_ends_the_sweep_within_seconds(tmp_path):
     """The signal comes while both workers compile their first run's callback from an empty numba cache: the sweep
     ends within seconds, every log closed as 'interrupted' (or, for a worker that had to be killed, named as
     unfinished), no worker left."""
     proc, logs, markers = start_compiling_sweep(tmp_path, spin_s=0.0)
-    wait_for(lambda: len(list(markers.iterdir())) == 2, proc, timeout=300, what="both workers to start compiling")
-    workers = children(proc.pid)
-    assert {int(m.name) for m in markers.iterdir()} <= workers
-    t0 = time.monotonic()
-    os.kill(proc.pid, signal.SIGTERM)
-    out, err = proc.communicate(timeout=60)
-    took = time.monotonic() - t0
+    workers, out, err, took = sigterm_when_marked(proc, markers, what="both workers to start compiling", timeout=60)
     assert proc.returncode == 143, err
     assert "Traceback" not in err
     last = err.strip().splitlines()[-1]
@@ -298,12 +304,7 @@ def test_the_parent_does_not_wait_for_a_worker_deep_in_a_native_call(tmp_path):
     from adaptive_mj.study.parallel import STOP_GRACE
 
     proc, logs, markers = start_compiling_sweep(tmp_path, spin_s=120.0)
-    wait_for(lambda: len(list(markers.iterdir())) == 2, proc, timeout=300, what="both workers to be in the call")
-    workers = children(proc.pid)
-    t0 = time.monotonic()
-    os.kill(proc.pid, signal.SIGTERM)
-    out, err = proc.communicate(timeout=100)
-    took = time.monotonic() - t0
+    workers, out, err, took = sigterm_when_marked(proc, markers, what="both workers to be in the call", timeout=100)
     assert proc.returncode == 143, err
     assert STOP_GRACE <= took < 15.0, f"{took:.1f} s from SIGTERM to exit"  # a minute, had it waited
     last = err.strip().splitlines()[-1]
@@ -695,13 +696,8 @@ def test_sigterm_while_the_bench_compiles_side_by_side_ends_it_within_seconds(tm
                              "--only", "nth_order", "--jobs", "2", "-o", str(tmp_path / "bench")],
                             cwd=REPO, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
-    wait_for(lambda: len(list(markers.iterdir())) == 2, proc, timeout=300, what="both processes to be in the call")
-    compiling = children(proc.pid)
-    assert {int(m.name) for m in markers.iterdir()} <= compiling
-    t0 = time.monotonic()
-    os.kill(proc.pid, signal.SIGTERM)
-    out, err = proc.communicate(timeout=100)
-    took = time.monotonic() - t0
+    compiling, out, err, took = sigterm_when_marked(proc, markers, what="both processes to be in the call",
+                                                    timeout=100)
     assert proc.returncode == 143, err
     assert "Traceback" not in err, err
     assert took < STOP_GRACE + 15.0, f"{took:.1f} s from SIGTERM to exit"
