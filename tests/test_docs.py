@@ -150,3 +150,24 @@ def test_scenarios_md_says_noise_and_disturbance_work_on_manipulators_and_they_d
     assert b.status == "ok"
     assert any("noise.std" in o for o in b.overrides) and any("disturbance" in o for o in b.overrides)
     assert np.max(np.abs(a.trajectory.x - b.trajectory.x)) > 1e-6  # they act on the arm
+
+
+def test_the_guide_points_at_results_sections_that_exist_and_types_no_run_figure():
+    """docs/GUIDE.md says where each study's figures are (docs/RESULTS.md, written by the bench) instead of typing
+    them (issue 53): every `RESULTS.md, "SECTION"` it names is a section heading of that page, which the bench
+    writes from its runs' sections; figures once typed there from runs (a drift time, a tail error, a
+    margin) are gone from it, and the card it links is a file the score command wrote."""
+    guide = (REPO / "docs" / "GUIDE.md").read_text()
+    results = (REPO / "docs" / "RESULTS.md").read_text()
+    headings = set(re.findall(r"^## (.+)$", results, re.M))
+    cited = {name for run in re.findall(r'RESULTS\.md, ("[^"]+"(?:(?:, | to )"[^"]+")*)', guide)
+             for name in re.findall(r'"([^"]+)"', run)}
+    assert len(cited) >= 8, cited
+    assert cited <= headings, sorted(cited - headings)
+    for typed in ("101.53", "3.59 at t", "0.0198 rad", "21.8 cm", "0.93 cm", "6.1 m/s", "1.18·10⁵", "256 MB",
+                  "0.934 [0.908"):
+        assert typed not in guide, typed
+    card = (REPO / "docs" / "cards" / "emod-heave" / "scorecard.md").read_text()
+    assert card.startswith("# adaptive-mj scorecard: `emod` against the baselines")
+    assert "](cards/emod-heave/scorecard.md)" in guide and all(
+        (REPO / "docs" / "cards" / "emod-heave" / png).is_file() for png in re.findall(r"\]\(([^)]+\.png)\)", card))
