@@ -46,6 +46,20 @@ if __name__ == "__main__":
         show_on_stderr()
 
     g = {**globals(), "numba": numba, "types": types}
+    if "--load-only" in sys.argv:  # as a study's parent: load what the cache holds, compile nothing
+        from adaptive_mj.sim.compile_note import NotInCache, loading_only
+
+        out = []
+        for make, key, what, kind, arg in ((factory, 7, "a test cfunc", "test cfunc", None),
+                                           (lazy_factory, 9, "a test njit", "test njit", 2.0)):
+            try:
+                with loading_only():
+                    fn = unique_factory(make, g, key, what=what, kind=kind)(key)
+                    out.append(str(fn.ctypes(1.0) if arg is None else fn(arg)))
+            except NotInCache as exc:
+                out.append(f"not-in-cache:{exc}")
+        print("|".join(out))
+        sys.exit(0)
     f = unique_factory(factory, g, 7, what="a test cfunc", kind="test cfunc")(7)
     lazy = unique_factory(lazy_factory, g, 9, what="a test njit", kind="test njit")(9)
     print(f.ctypes(1.0), lazy(2.0))
@@ -90,6 +104,26 @@ def test_a_compile_is_said_with_its_time_and_a_cache_load_is_not(tmp_path, monke
     assert compile_note.expectation("another", "test cfunc").startswith("about ")
     # TYPICAL_CPU["1-DOF callback"], the documented figure
     assert compile_note.expectation("another", "1-DOF callback").startswith("typically 3 s of CPU")
+
+
+def test_loading_only_compiles_nothing_and_loads_what_the_cache_holds(tmp_path):
+    """compile_note.loading_only (a study's parent, which leaves compiles to its workers): with an empty cache the
+    cfunc and the njit each raise NotInCache naming the variant, and nothing is compiled or said; once a run has
+    compiled them, the same block loads both and gives their values."""
+    script = tmp_path / "factories.py"
+    script.write_text(FACTORY)
+
+    def load_only():
+        return subprocess.run([sys.executable, str(script), "--load-only"], env=_env(tmp_path / "cache"),
+                              capture_output=True, text=True, timeout=300, check=True)
+
+    cold = load_only()
+    assert cold.stdout.strip() == "not-in-cache:a test cfunc|not-in-cache:a test njit", cold.stdout
+    assert _said(cold.stderr) == [] and not list((tmp_path / "cache").rglob("*.nbi"))
+    subprocess.run([sys.executable, str(script)], env=_env(tmp_path / "cache"), capture_output=True, text=True,
+                   timeout=300, check=True)
+    warm = load_only()
+    assert warm.stdout.strip() == "8.0|18.0" and _said(warm.stderr) == []
 
 
 BROKEN = '''

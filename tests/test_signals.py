@@ -661,32 +661,36 @@ def test_a_stop_in_the_loop_body_between_two_results_stops_the_workers_before_it
     assert info.value.note == "1 of 2 runs had finished; the run(s) in progress closed their logs as 'interrupted'"
 
 
-# The bench's parent compiles its scenarios' controllers side by side in n_jobs forked processes before it forks
-# the run workers (parallel._compile_side_by_side). Here each of those processes is a minute deep in one compiled
-# call (as in a long LLVM pass), not in the compile itself.
+# A cold bench: its parent loads only what numba's cache holds (parallel._prewarm, compile_note.loading_only), and
+# the first run of each scenario file compiles its controller in a worker while the other worker compiles another
+# file's (parallel._Held). Here each worker is a minute deep in one compiled call (as in a long LLVM pass) at the
+# start of that compile; the parent's own pass does not spin.
 _COMPILING_SIDE_BY_SIDE = _SPIN + textwrap.dedent("""
     import os, sys
     from pathlib import Path
-    from adaptive_mj.study import parallel
+    from adaptive_mj.sim import loop
     from adaptive_mj.cli import main
 
-    markers, spin_s = Path(sys.argv[1]), float(sys.argv[2])
+    markers, spin_s, parent = Path(sys.argv[1]), float(sys.argv[2]), os.getpid()
     in_the_call = spinner(spin_s)
+    native_controller = loop._native_controller
 
-    def spinning(job):
-        (markers / str(os.getpid())).touch()
-        in_the_call()
+    def spinning(*args, **kwargs):
+        if os.getpid() != parent:
+            (markers / str(os.getpid())).touch()
+            in_the_call()
+        return native_controller(*args, **kwargs)
 
-    parallel._compile_native = spinning  # in the compiling processes only: the parent's own pass loads
-    parallel._prewarm = lambda jobs, n_jobs=1: parallel._compile_side_by_side(parallel._distinct(jobs), n_jobs)
+    loop._native_controller = spinning
     sys.exit(main(sys.argv[3:]))
 """)
 
 
-def test_sigterm_while_the_bench_compiles_side_by_side_ends_it_within_seconds(tmp_path):
-    """Two scenario files (bench --quick's nth_order section), two compiling processes, each deep in a native call
-    when the parent gets SIGTERM: the parent gives them parallel.STOP_GRACE s, kills them and exits 143 within
-    seconds, leaving no process and no log (no run had started)."""
+def test_sigterm_while_a_cold_bench_s_workers_compile_side_by_side_ends_it_within_seconds(tmp_path):
+    """Two scenario files (bench --quick's nth_order section), an empty numba cache: each worker compiles one file's
+    controller (their other runs held back), each deep in a native call when the parent gets SIGTERM. The parent
+    gives them parallel.STOP_GRACE s, kills them and exits 143 within seconds, with no process left and every log
+    either closed as 'interrupted' or named as unfinished."""
     from adaptive_mj.study.parallel import STOP_GRACE
 
     markers = tmp_path / "markers"
@@ -696,10 +700,16 @@ def test_sigterm_while_the_bench_compiles_side_by_side_ends_it_within_seconds(tm
                              "--only", "nth_order", "--jobs", "2", "-o", str(tmp_path / "bench")],
                             cwd=REPO, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
-    compiling, out, err, took = sigterm_when_marked(proc, markers, what="both processes to be in the call",
+    compiling, out, err, took = sigterm_when_marked(proc, markers, what="both workers to be in the call",
                                                     timeout=100)
     assert proc.returncode == 143, err
     assert "Traceback" not in err, err
     assert took < STOP_GRACE + 15.0, f"{took:.1f} s from SIGTERM to exit"
     assert_gone(compiling)
-    assert not list((tmp_path / "bench").rglob("*.mcap"))
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("adaptive-mj: interrupted by SIGTERM; 0 of "), last
+    for path in (tmp_path / "bench").rglob("*.mcap"):
+        if str(path) in last:  # a worker killed after the grace period: named, and read as truncated
+            assert read_log(path).status == "truncated"
+        else:
+            assert closed_status(path)["status"] == "interrupted"

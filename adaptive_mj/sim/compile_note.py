@@ -52,7 +52,13 @@ class VariantBusy(BaseException):
     that no `except Exception` on its way (a plugin's fallback to the Python callback) takes it for a failure."""
 
 
-_WAIT = {"wait": True}
+class NotInCache(BaseException):
+    """A variant this process needs is not in numba's disk cache, and it was told to load only (`loading_only()`:
+    a study's parent, which leaves the compiles to its workers, overlapped with other runs). A BaseException, as
+    VariantBusy is."""
+
+
+_WAIT = {"wait": True, "load_only": False}
 
 
 @contextlib.contextmanager
@@ -65,6 +71,18 @@ def waiting(wait: bool) -> Iterator[None]:
         yield
     finally:
         _WAIT["wait"] = before
+
+
+@contextlib.contextmanager
+def loading_only() -> Iterator[None]:
+    """In the block, a variant found in numba's disk cache is loaded as always, and one that would have to compile
+    raises NotInCache instead (nothing is compiled)."""
+    before = _WAIT["load_only"]
+    _WAIT["load_only"] = True
+    try:
+        yield
+    finally:
+        _WAIT["load_only"] = before
 
 
 def state_dir() -> Path:
@@ -229,6 +247,8 @@ def compile_said(build: Callable[[], Any], pyfunc: Callable, sig, *, what: str, 
             _done(what, variant, kind, seconds, time.process_time() - c0,
                   " (numba's cache could not be read beforehand, so this was not said before)")
         return out
+    if _WAIT["load_only"]:
+        raise NotInCache(what)
     with _variant_lock(variant, what):
         if in_disk_cache(pyfunc, sig):  # another process compiled it while this one waited
             return build()
@@ -257,7 +277,7 @@ class _FirstCallSaid:
         try:
             return compile_said(lambda: self.dispatcher(*args), self.pyfunc, None, what=self.what, kind=self.kind,
                                 variant=self.variant)
-        except VariantBusy:
+        except (VariantBusy, NotInCache):
             self.first = True  # not compiled: the next call asks again
             raise
 

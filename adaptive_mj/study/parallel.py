@@ -15,8 +15,10 @@ raises errors.Interrupted there, so the run's log is closed with status
 exit, kills any still running (one deep in a native call, such as an LLVM pass of
 numba's compiler, runs no Python handler until the call returns) and re-raises;
 the message names any log a killed worker left unfinished. Workers are started
-(forked, after the parent compiled the native callbacks; spawned where fork is
-missing) with both signals blocked until their handlers are in place, so no signal
+(forked, after the parent loaded the native callbacks it found in numba's cache;
+spawned where fork is missing; a callback not in the cache is compiled by the
+first run that needs it, in a worker, while the others run other scenarios)
+with both signals blocked until their handlers are in place, so no signal
 can kill one half set up. A worker whose parent died (SIGKILL, a crash) sees it
 within PARENT_POLL_S (a thread of its own): it closes the log of its run as
 "interrupted" and exits, and exits at once between runs.
@@ -286,30 +288,31 @@ def _iter_local_pool(jobs: Sequence[RunSpec], n_jobs: int, *, retries: int = 3,
     and are run again, one at a time in a pool of one worker, so that a further death is blamed on
     its own run alone. Each started run is charged an attempt per death it was in; after `retries`
     more attempts it is recorded as an error."""
-    ctx = _worker_context(jobs, n_jobs)
+    ctx, ready = _worker_context(jobs, n_jobs)
     finished = 0
     attempts = [0] * len(jobs)
     queue = deque(range(len(jobs)))
+    held = _Held(queue, jobs, ready)  # the queue, with runs that wait for their file's compile held back
     suspects: deque[int] = deque()  # in flight when a worker died: run alone next
 
-    while queue or suspects:
+    while held or suspects:
         alone = bool(suspects)
-        source, width = (suspects, 1) if alone else (queue, n_jobs)
+        width = 1 if alone else n_jobs
         lost: list[int] = []
         with cf.ProcessPoolExecutor(max_workers=width, mp_context=ctx, initializer=_init_worker,
                                     initargs=(os.getpid(),)) as pool:
             futures: dict[cf.Future, int] = {}
             try:
-                while source or futures:
-                    with _stop_signals_blocked():  # the first submits spawn the workers
-                        while source and len(futures) < (1 if alone else WINDOW_PER_WORKER * n_jobs):
-                            i = source.popleft()
-                            try:
-                                futures[pool.submit(_run_in_pool_worker, jobs[i])] = i
-                            except BrokenProcessPool:  # a worker died since the last wait
-                                source.appendleft(i)
-                                break
+                while (suspects if alone else held) or futures:
+                    if alone:
+                        _fill(pool, futures, jobs, lambda: suspects.popleft() if suspects else None,
+                              suspects.appendleft, 1)
+                    else:
+                        _fill(pool, futures, jobs, held.next, held.put_back, WINDOW_PER_WORKER * n_jobs)
                     if not futures:
+                        if not alone and held.compiler:  # nothing in flight compiles: no run may wait for it
+                            held.release()
+                            continue
                         break
                     done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
                     for fut in done:
@@ -318,17 +321,20 @@ def _iter_local_pool(jobs: Sequence[RunSpec], n_jobs: int, *, retries: int = 3,
                             lost.append(i)
                             continue
                         result = _take(fut, jobs[i])
+                        held.finished(i)
                         finished += 1
                         yield i, result
                     if lost:  # the pool is broken: what it still holds is lost too, unless it finished
                         for fut, i in futures.items():
                             if fut.done() and fut.exception() is None:
                                 result = _take(fut, jobs[i])
+                                held.finished(i)
                                 finished += 1
                                 yield i, result
                             else:
                                 lost.append(i)
                         futures.clear()
+                        held.release()
                         break
             except (KeyboardInterrupt, GeneratorExit) as exc:  # a signal, or the caller stopped reading
                 in_flight = [jobs[i] for fut, i in futures.items() if not fut.done()]
@@ -342,6 +348,22 @@ def _iter_local_pool(jobs: Sequence[RunSpec], n_jobs: int, *, retries: int = 3,
         for i, result in _put_back_lost(lost, jobs, attempts, retries, queue, suspects, on_retry):
             finished += 1
             yield i, result
+
+
+def _fill(pool: cf.ProcessPoolExecutor, futures: dict[cf.Future, int], jobs: Sequence[RunSpec],
+          take: Callable[[], int | None], put_back: Callable[[int], None], limit: int) -> None:
+    """Submit the runs take() gives (indices into `jobs`) until `limit` are in flight or it gives None; one that
+    cannot be submitted (a worker died since the last wait: the pool is broken) is put back."""
+    with _stop_signals_blocked():  # the first submits spawn the workers
+        while len(futures) < limit:
+            i = take()
+            if i is None:
+                return
+            try:
+                futures[pool.submit(_run_in_pool_worker, jobs[i])] = i
+            except BrokenProcessPool:
+                put_back(i)
+                return
 
 
 def _take(fut: cf.Future, job: RunSpec) -> RunOutcome:
@@ -380,14 +402,15 @@ def _put_back_lost(lost: list[int], jobs: Sequence[RunSpec], attempts: list[int]
 
 
 def _worker_context(jobs: Sequence[RunSpec], n_jobs: int = 1):
-    """Fork workers from a parent that has compiled the jobs' native callbacks (numba,
-    ~2.5 s and ~100 MB each time) so no worker compiles again; spawn where fork is missing.
-    Forking is safe here: no control callback is installed between runs, and the
-    compiled callback's buffers are module globals at the same addresses in the child."""
+    """(the context to start workers with, the scenario files whose native controllers the workers inherit (None:
+    unknown, every job may go at once)). Workers are forked from a parent that has loaded the jobs' native
+    callbacks (_prewarm), so that no worker loads or compiles them again; spawned where fork is missing. Forking is
+    safe here: no control callback is installed between runs, and the compiled callback's buffers are module
+    globals at the same addresses in the child."""
     if "fork" not in mp.get_all_start_methods():
-        return mp.get_context("spawn")
-    _prewarm(jobs, n_jobs)
-    return mp.get_context("fork")
+        return mp.get_context("spawn"), None
+    ready = _prewarm(jobs, n_jobs)
+    return mp.get_context("fork"), ready
 
 
 def _distinct(jobs: Sequence[RunSpec]) -> list[RunSpec]:
@@ -421,32 +444,83 @@ def _compile_native(job: RunSpec) -> None:
         interrupt.reraise_stop(exc)  # a stop signal that came while numba compiled, wrapped by Python
 
 
-def _prewarm(jobs: Sequence[RunSpec], n_jobs: int = 1) -> None:
-    """Compile the native controller of each distinct scenario file among the jobs, then load them all in this
-    process (the workers forked from it inherit them). With n_jobs > 1 and more than one of them, they are first
-    compiled into numba's disk cache by n_jobs processes side by side (_compile_side_by_side: a cold bench's
-    compiles took one core while the other waited), and loading them here is a fraction of a second each; where
-    they are in that cache already, those processes only load them too."""
-    distinct = _distinct(jobs)
-    if n_jobs > 1 and len(distinct) > 1:
-        _compile_side_by_side(distinct, n_jobs)
-    for job in distinct:
-        _compile_native(job)
+def _prewarm(jobs: Sequence[RunSpec], n_jobs: int = 1) -> set[Path] | None:
+    """Load, in this process, the native controller of each distinct scenario file among the jobs (the workers
+    forked from it inherit them); the files whose controllers it has.
+
+    With one worker it compiles what is not in numba's disk cache too (every file is then ready). With n_jobs > 1
+    it only loads (compile_note.loading_only): a file whose controller would have to compile is left out, and its
+    first run compiles it in a worker while the other workers run other files' runs (_iter_local_pool holds that
+    file's further runs back until then). Compiling here first would take one core while the others waited."""
+    from adaptive_mj.sim import compile_note
+
+    ready: set[Path] = set()
+    for job in _distinct(jobs):
+        if n_jobs <= 1:
+            _compile_native(job)
+            ready.add(job.scenario)
+            continue
+        try:
+            with compile_note.loading_only():
+                _compile_native(job)
+        except compile_note.NotInCache:
+            continue
+        ready.add(job.scenario)
+    return ready
 
 
-def _compile_side_by_side(distinct: list[RunSpec], n_jobs: int) -> None:
-    """_compile_native of each job in a pool of n_jobs forked processes (they fill numba's disk cache; what they
-    compile dies with them). A stop signal stops them at once (_stop_workers) and is raised here."""
-    with _stop_signals_blocked():  # the first submits fork the workers
-        pool = cf.ProcessPoolExecutor(max_workers=min(n_jobs, len(distinct)), mp_context=mp.get_context("fork"),
-                                      initializer=_init_worker, initargs=(os.getpid(),))
-        futures = [pool.submit(_compile_native, job) for job in distinct]
-    try:
-        cf.wait(futures)
-    except BaseException:
-        _stop_workers(pool)
-        raise
-    pool.shutdown(wait=True)
+class _Held:
+    """The run queue of a pool whose workers compile: a run whose scenario file's controller is neither inherited
+    (`ready`) nor compiled yet waits while that file's first run (which compiles it) is in flight, so that no two
+    workers compile one controller and none waits for another's compile while runs of other files are left.
+    ready None: every run goes in order (nothing known)."""
+
+    def __init__(self, order: deque[int], jobs: Sequence[RunSpec], ready: set[Path] | None):
+        self.order, self.jobs, self.ready = order, jobs, ready
+        self.compiler: dict[Path, int] = {}  # file -> its run in flight that compiles it
+        self.waiting: dict[Path, list[int]] = {}  # file -> its other runs, in order
+
+    def __bool__(self) -> bool:
+        return bool(self.order) or any(self.waiting.values())
+
+    def next(self) -> int | None:
+        """The next run to submit, or None while every run left waits for a compile in flight."""
+        while self.order:
+            i = self.order.popleft()
+            key = self.jobs[i].scenario
+            if self.ready is None or key in self.ready:
+                return i
+            if key in self.compiler:
+                self.waiting.setdefault(key, []).append(i)
+                continue
+            self.compiler[key] = i
+            return i
+        return None
+
+    def _free(self, key: Path) -> None:
+        del self.compiler[key]
+        self.order.extendleft(reversed(self.waiting.pop(key, [])))
+
+    def put_back(self, i: int) -> None:
+        """A run that was taken but not submitted (the pool broke): first again, before its file's waiting runs."""
+        key = self.jobs[i].scenario
+        if self.compiler.get(key) == i:
+            self._free(key)
+        self.order.appendleft(i)
+
+    def finished(self, i: int) -> None:
+        """Run i came back (whatever its status): if it was its file's compiling run, the controller is in numba's
+        cache now (or cannot compile, which every run says), and the file's waiting runs go first, in order."""
+        key = self.jobs[i].scenario
+        if self.ready is not None and self.compiler.get(key) == i:
+            self.ready.add(key)
+            self._free(key)
+
+    def release(self) -> None:
+        """The pool broke: its compiling runs are lost (and put back by the caller); their files' waiting runs go
+        back to the queue, and each file's next run compiles it."""
+        for key in list(self.compiler):
+            self._free(key)
 
 
 PLAIN_PROGRESS_EVERY = 5.0  # s between progress lines when stderr is not a terminal
