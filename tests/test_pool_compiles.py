@@ -78,3 +78,9 @@ def test_held_runs_keep_their_order_and_go_back_when_the_pool_breaks():
     assert held.next() == 5 and held.next() is None and not held.order
     held.finished(4)  # a ready file's run: nothing changes
     assert held.compiler == {Path("b"): 5}
+    more = parallel._Held(deque(range(4)), [RunSpec(Path(n)) for n in ("a", "a", "a", "b")], set())
+    assert [more.next(), more.next(), more.next()] == [0, 3, None]
+    assert more.spare() == 1  # for a worker that would idle: a's first waiting run
+    more.finished(1)  # a spare run of a came back: a is compiled (it waited for the compile), 2 goes next
+    assert more.next() == 2 and more.compiler == {Path("b"): 3}
+    assert more.spare() is None and not more

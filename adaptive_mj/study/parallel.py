@@ -309,6 +309,7 @@ def _iter_local_pool(jobs: Sequence[RunSpec], n_jobs: int, *, retries: int = 3,
                               suspects.appendleft, 1)
                     else:
                         _fill(pool, futures, jobs, held.next, held.put_back, WINDOW_PER_WORKER * n_jobs)
+                        _fill(pool, futures, jobs, held.spare, held.put_back, n_jobs)  # no worker idles
                     if not futures:
                         if not alone and held.compiler:  # nothing in flight compiles: no run may wait for it
                             held.release()
@@ -497,6 +498,15 @@ class _Held:
             return i
         return None
 
+    def spare(self) -> int | None:
+        """A waiting run for a worker that would otherwise idle (nothing else is left): the first waiting run of
+        the file whose compile started first. It waits in its worker for that compile (compile_note's lock) and
+        then loads it, rather than waiting here for the compiling run's whole run to end."""
+        for key in self.compiler:
+            if self.waiting.get(key):
+                return self.waiting[key].pop(0)
+        return None
+
     def _free(self, key: Path) -> None:
         del self.compiler[key]
         self.order.extendleft(reversed(self.waiting.pop(key, [])))
@@ -509,10 +519,10 @@ class _Held:
         self.order.appendleft(i)
 
     def finished(self, i: int) -> None:
-        """Run i came back (whatever its status): if it was its file's compiling run, the controller is in numba's
-        cache now (or cannot compile, which every run says), and the file's waiting runs go first, in order."""
+        """Run i came back (whatever its status): its file's controller is in numba's cache now (or cannot compile,
+        which every run says), and the file's waiting runs go first, in order."""
         key = self.jobs[i].scenario
-        if self.ready is not None and self.compiler.get(key) == i:
+        if self.ready is not None and key in self.compiler:  # its compiling run, or a spare one that waited for it
             self.ready.add(key)
             self._free(key)
 
