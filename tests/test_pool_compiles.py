@@ -40,11 +40,11 @@ def _times(tmp_path: Path, jobs: list[RunSpec]) -> dict[str, dict]:
 @pytest.mark.parametrize("unknown", [False, True])
 def test_a_file_s_runs_wait_for_its_first_run_s_compile_while_another_file_runs(tmp_path, monkeypatch, unknown):
     """Six runs of two files (a0 a1 a2 b0 b1 b2) on two workers, with nothing in the parent's cache: a0 and b0
-    (each compiling its file) run side by side, a1 and a2 start only after a0 ended, b1 and b2 after b0; every run
-    is yielded once. Where the parent knows nothing (fork missing, or a test that turns the head start off:
-    ready None) they go in order, a1 beside a0."""
+    (each compiling its file's controller) run side by side, a1 and a2 start only after a0 ended, b1 and b2 after
+    b0; every run is yielded once. Where the parent knows nothing (fork missing, or a test that turns the head
+    start off: _prewarm gives None) they go in order, a1 beside a0."""
     monkeypatch.setattr(parallel, "_run_in_pool_worker", _fake_run)
-    monkeypatch.setattr(parallel, "_prewarm", (lambda jobs, n_jobs=1: set()) if not unknown else
+    monkeypatch.setattr(parallel, "_prewarm", (lambda jobs, n_jobs=1: lambda job: job.scenario) if not unknown else
                         (lambda jobs, n_jobs=1: None))
     jobs = _jobs(tmp_path)
     got = sorted(i for i, _ in parallel._iter_local_pool(jobs, 2))
@@ -61,11 +61,12 @@ def test_a_file_s_runs_wait_for_its_first_run_s_compile_while_another_file_runs(
 
 
 def test_held_runs_keep_their_order_and_go_back_when_the_pool_breaks():
-    """_Held by hand: the first run of a file not ready is its compiler, the file's later runs wait (in order) and
-    come first once it is back; a run put back before its file's waiting runs; a broken pool (release) frees every
-    file, so its next run compiles it."""
+    """_Held by hand, each file standing for its controller (c's loaded): the first run of a controller still to
+    compile compiles it, its later runs wait (in order) and come first once it is back; a run put back goes before
+    the runs that wait for it; a broken pool (release) frees every controller, so its next run compiles it; a spare
+    run for an idle worker, and its return frees its controller."""
     jobs = [RunSpec(Path(n)) for n in ("a", "a", "b", "a", "c", "b")]
-    held = parallel._Held(deque(range(6)), jobs, {Path("c")})
+    held = parallel._Held(deque(range(6)), jobs, lambda job: None if job.scenario == Path("c") else job.scenario)
     assert held.next() == 0  # a's compiler
     assert held.next() == 2  # b's compiler; 1 waits
     assert held.next() == 4  # c is ready; 3 and 5 wait
@@ -78,7 +79,7 @@ def test_held_runs_keep_their_order_and_go_back_when_the_pool_breaks():
     assert held.next() == 5 and held.next() is None and not held.order
     held.finished(4)  # a ready file's run: nothing changes
     assert held.compiler == {Path("b"): 5}
-    more = parallel._Held(deque(range(4)), [RunSpec(Path(n)) for n in ("a", "a", "a", "b")], set())
+    more = parallel._Held(deque(range(4)), [RunSpec(Path(n)) for n in ("a", "a", "a", "b")], lambda job: job.scenario)
     assert [more.next(), more.next(), more.next()] == [0, 3, None]
     assert more.spare() == 1  # for a worker that would idle: a's first waiting run
     more.finished(1)  # a spare run of a came back: a is compiled (it waited for the compile), 2 goes next

@@ -54,8 +54,12 @@ class VariantBusy(BaseException):
 
 class NotInCache(BaseException):
     """A variant this process needs is not in numba's disk cache, and it was told to load only (`loading_only()`:
-    a study's parent, which leaves the compiles to its workers, overlapped with other runs). A BaseException, as
-    VariantBusy is."""
+    a study's parent, which leaves the compiles to its workers, overlapped with other runs). Its text is what the
+    variant is; `variant` names it (the same for every run that needs it). A BaseException, as VariantBusy is."""
+
+    def __init__(self, what: str, variant: str = ""):
+        super().__init__(what)
+        self.variant = (what, variant)
 
 
 _WAIT = {"wait": True, "load_only": False}
@@ -248,7 +252,7 @@ def compile_said(build: Callable[[], Any], pyfunc: Callable, sig, *, what: str, 
                   " (numba's cache could not be read beforehand, so this was not said before)")
         return out
     if _WAIT["load_only"]:
-        raise NotInCache(what)
+        raise NotInCache(what, variant)
     with _variant_lock(variant, what):
         if in_disk_cache(pyfunc, sig):  # another process compiled it while this one waited
             return build()

@@ -288,11 +288,11 @@ def _iter_local_pool(jobs: Sequence[RunSpec], n_jobs: int, *, retries: int = 3,
     and are run again, one at a time in a pool of one worker, so that a further death is blamed on
     its own run alone. Each started run is charged an attempt per death it was in; after `retries`
     more attempts it is recorded as an error."""
-    ctx, ready = _worker_context(jobs, n_jobs)
+    ctx, pending = _worker_context(jobs, n_jobs)
     finished = 0
     attempts = [0] * len(jobs)
     queue = deque(range(len(jobs)))
-    held = _Held(queue, jobs, ready)  # the queue, with runs that wait for their file's compile held back
+    held = _Held(queue, jobs, pending)  # the queue, with runs that wait for a compile held back
     suspects: deque[int] = deque()  # in flight when a worker died: run alone next
 
     while held or suspects:
@@ -403,26 +403,14 @@ def _put_back_lost(lost: list[int], jobs: Sequence[RunSpec], attempts: list[int]
 
 
 def _worker_context(jobs: Sequence[RunSpec], n_jobs: int = 1):
-    """(the context to start workers with, the scenario files whose native controllers the workers inherit (None:
+    """(the context to start workers with, _prewarm's function giving a job's controller still to compile (None:
     unknown, every job may go at once)). Workers are forked from a parent that has loaded the jobs' native
     callbacks (_prewarm), so that no worker loads or compiles them again; spawned where fork is missing. Forking is
     safe here: no control callback is installed between runs, and the compiled callback's buffers are module
     globals at the same addresses in the child."""
     if "fork" not in mp.get_all_start_methods():
         return mp.get_context("spawn"), None
-    ready = _prewarm(jobs, n_jobs)
-    return mp.get_context("fork"), ready
-
-
-def _distinct(jobs: Sequence[RunSpec]) -> list[RunSpec]:
-    """The first job of each distinct scenario file among the jobs, in order."""
-    seen: set = set()
-    out = []
-    for job in jobs:
-        if job.scenario not in seen:
-            seen.add(job.scenario)
-            out.append(job)
-    return out
+    return mp.get_context("fork"), _prewarm(jobs, n_jobs)
 
 
 def _compile_native(job: RunSpec) -> None:
@@ -445,51 +433,72 @@ def _compile_native(job: RunSpec) -> None:
         interrupt.reraise_stop(exc)  # a stop signal that came while numba compiled, wrapped by Python
 
 
-def _prewarm(jobs: Sequence[RunSpec], n_jobs: int = 1) -> set[Path] | None:
-    """Load, in this process, the native controller of each distinct scenario file among the jobs (the workers
-    forked from it inherit them); the files whose controllers it has.
+#: the overrides that may change which compiled controller a run takes (its law, plant model, control mode): runs
+#: of one scenario file that differ in no other override are probed once for it (_prewarm); a hint for scheduling
+#: only (two runs that share a controller wait for one compile under compile_note's lock whatever it says)
+VARIANT_KEYS = ("law", "law.kind", "law.projection", "plant.kind", "plant.model", "control.mode")
 
-    With one worker it compiles what is not in numba's disk cache too (every file is then ready). With n_jobs > 1
-    it only loads (compile_note.loading_only): a file whose controller would have to compile is left out, and its
-    first run compiles it in a worker while the other workers run other files' runs (_iter_local_pool holds that
-    file's further runs back until then). Compiling here first would take one core while the others waited."""
+
+def _hint(job: RunSpec) -> tuple:
+    """(scenario file, the overrides among VARIANT_KEYS): runs with the same hint take the same controller."""
+    return job.scenario, tuple(o for o in job.overrides if o.split("=", 1)[0].strip() in VARIANT_KEYS)
+
+
+def _prewarm(jobs: Sequence[RunSpec], n_jobs: int = 1) -> Callable[[RunSpec], object] | None:
+    """Load, in this process, the native controllers the jobs take (the workers forked from it inherit them), one
+    job per _hint; a function giving a job's controller that is still to compile (None: loaded here).
+
+    With one worker it compiles what is not in numba's disk cache too (nothing is then left to compile). With
+    n_jobs > 1 it only loads (compile_note.loading_only): a controller that would have to compile is left to the
+    first run that takes it, in a worker, while the other workers run runs whose controllers are loaded or compile
+    others (_iter_local_pool holds back the runs that need it until then). Compiling here first would take one core
+    while the others waited."""
     from adaptive_mj.sim import compile_note
 
-    ready: set[Path] = set()
-    for job in _distinct(jobs):
+    pending: dict[tuple, object] = {}
+    seen: set[tuple] = set()
+    for job in jobs:
+        hint = _hint(job)
+        if hint in seen:
+            continue
+        seen.add(hint)
         if n_jobs <= 1:
             _compile_native(job)
-            ready.add(job.scenario)
             continue
         try:
             with compile_note.loading_only():
                 _compile_native(job)
-        except compile_note.NotInCache:
-            continue
-        ready.add(job.scenario)
-    return ready
+        except compile_note.NotInCache as exc:
+            pending[hint] = exc.variant
+    return lambda job: pending.get(_hint(job))
 
 
 class _Held:
-    """The run queue of a pool whose workers compile: a run whose scenario file's controller is neither inherited
-    (`ready`) nor compiled yet waits while that file's first run (which compiles it) is in flight, so that no two
-    workers compile one controller and none waits for another's compile while runs of other files are left.
-    ready None: every run goes in order (nothing known)."""
+    """The run queue of a pool whose workers compile: a run whose controller is still to compile (`pending(job)`,
+    from _prewarm; None: loaded) waits while the first run that takes it (which compiles it) is in flight, so that
+    no two workers compile one controller and none waits for another's compile while other runs are left.
+    pending None: every run goes in order (nothing known)."""
 
-    def __init__(self, order: deque[int], jobs: Sequence[RunSpec], ready: set[Path] | None):
-        self.order, self.jobs, self.ready = order, jobs, ready
-        self.compiler: dict[Path, int] = {}  # file -> its run in flight that compiles it
-        self.waiting: dict[Path, list[int]] = {}  # file -> its other runs, in order
+    def __init__(self, order: deque[int], jobs: Sequence[RunSpec], pending: Callable[[RunSpec], object] | None):
+        self.order, self.jobs = order, jobs
+        self.pending = pending or (lambda job: None)
+        self.done: set = set()  # controllers compiled since
+        self.compiler: dict = {}  # controller -> its run in flight that compiles it
+        self.waiting: dict = {}  # controller -> the other runs that take it, in order
 
     def __bool__(self) -> bool:
         return bool(self.order) or any(self.waiting.values())
+
+    def _key(self, i: int):
+        key = self.pending(self.jobs[i])
+        return None if key in self.done else key
 
     def next(self) -> int | None:
         """The next run to submit, or None while every run left waits for a compile in flight."""
         while self.order:
             i = self.order.popleft()
-            key = self.jobs[i].scenario
-            if self.ready is None or key in self.ready:
+            key = self._key(i)
+            if key is None:
                 return i
             if key in self.compiler:
                 self.waiting.setdefault(key, []).append(i)
@@ -500,35 +509,36 @@ class _Held:
 
     def spare(self) -> int | None:
         """A waiting run for a worker that would otherwise idle (nothing else is left): the first waiting run of
-        the file whose compile started first. It waits in its worker for that compile (compile_note's lock) and
-        then loads it, rather than waiting here for the compiling run's whole run to end."""
+        the controller whose compile started first. It waits in its worker for that compile (compile_note's lock)
+        and then loads it, rather than waiting here for the compiling run's whole run to end."""
         for key in self.compiler:
             if self.waiting.get(key):
                 return self.waiting[key].pop(0)
         return None
 
-    def _free(self, key: Path) -> None:
+    def _free(self, key) -> None:
         del self.compiler[key]
         self.order.extendleft(reversed(self.waiting.pop(key, [])))
 
     def put_back(self, i: int) -> None:
-        """A run that was taken but not submitted (the pool broke): first again, before its file's waiting runs."""
-        key = self.jobs[i].scenario
-        if self.compiler.get(key) == i:
+        """A run that was taken but not submitted (the pool broke): first again, before the runs that waited for
+        it."""
+        key = self._key(i)
+        if key is not None and self.compiler.get(key) == i:
             self._free(key)
         self.order.appendleft(i)
 
     def finished(self, i: int) -> None:
-        """Run i came back (whatever its status): its file's controller is in numba's cache now (or cannot compile,
-        which every run says), and the file's waiting runs go first, in order."""
-        key = self.jobs[i].scenario
-        if self.ready is not None and key in self.compiler:  # its compiling run, or a spare one that waited for it
-            self.ready.add(key)
+        """Run i came back (whatever its status): its controller is in numba's cache now (or cannot compile, which
+        every run says), and the runs that waited for it go first, in order."""
+        key = self._key(i)
+        if key is not None and key in self.compiler:  # its compiling run, or a spare one that waited for it
+            self.done.add(key)
             self._free(key)
 
     def release(self) -> None:
-        """The pool broke: its compiling runs are lost (and put back by the caller); their files' waiting runs go
-        back to the queue, and each file's next run compiles it."""
+        """The pool broke: its compiling runs are lost (and put back by the caller); the runs that waited for them
+        go back to the queue, and the next run of each compiles it."""
         for key in list(self.compiler):
             self._free(key)
 
