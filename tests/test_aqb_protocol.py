@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import tomllib
 
 import mujoco
 import numpy as np
@@ -173,3 +174,23 @@ def test_a_drawn_payload_switched_on_within_a_second_is_carried():
     # acceleration g m/(M + m) from the switch to the end would (½ a τ²)
     fall = 0.5 * 9.81 * 0.5 * (1.0 - d.toggles[0]) ** 2
     assert float(np.max(np.linalg.norm(tr.y_tilde, axis=1))) < fall
+
+
+def test_no_drawn_primitive_reaches_the_ground():
+    """The task's primitive starts at rest at reference.center; the lowest point any goal in AdaptiveQuadBench's box
+    can reach is the start minus 2 × max_t Σ|basis(t)| (z is linear in the goal's position, velocity and
+    acceleration, each in [−2, 2]), the basis quintics solved by hand from their end conditions (each at t = T one of
+    p, v, a equal to 1, the others 0; at rest at t = 0): clear of the ground by more than the vehicle's size."""
+    task = flight.sc.SCENARIOS_DIR / f"{flight.PROTOCOL_TASK}.toml"
+    center = tomllib.loads(task.read_text())["reference"]["center"]
+    t, T = np.linspace(0.0, T_TRAJ, 5001), T_TRAJ
+    s = t / T  # the minimum-jerk quintic with one end condition at 1, the others 0 (start at rest)
+    p_basis = 10 * s**3 - 15 * s**4 + 6 * s**5
+    v_basis = T * (-4 * s**3 + 7 * s**4 - 3 * s**5)
+    a_basis = T**2 * (0.5 * s**3 - s**4 + 0.5 * s**5)
+    lowest = center[2] - 2.0 * float(np.max(np.abs(p_basis) + np.abs(v_basis) + np.abs(a_basis)))
+    assert lowest > 0.3  # [m]: the 0.33 m vehicle's half-span and a tracking error
+    # the reference is these quintics: goal position along x, velocity along y, acceleration along z
+    ref = MotionPrimitive(center=(0.0, 0.0, 0.0), position=(1.0, 0.0, 0.0), velocity=(0.0, 1.0, 0.0),
+                          acceleration=(0.0, 0.0, 1.0), duration=T)(t, 0)[0]
+    np.testing.assert_allclose(ref, np.stack([p_basis, v_basis, a_basis], axis=1), atol=1e-9)

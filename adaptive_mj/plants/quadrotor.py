@@ -625,7 +625,7 @@ def read_reference(t):
 
     kind = t.string("kind", choices=REFERENCE_KINDS)
     if kind == "motion_primitive":
-        params = {"center": t.numbers("center", (0.0, 0.0, 3.0), length=3),
+        params = {"center": t.numbers("center", (0.0, 0.0, 5.0), length=3),
                   **{k: t.numbers(k, (0.0, 0.0, 0.0), length=3) for k in ("position", "velocity", "acceleration")},
                   "duration": t.number("duration", 5.0, gt=0)}
         t.finish()

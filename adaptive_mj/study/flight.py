@@ -327,8 +327,8 @@ class AQBProtocol:
         "Dz298/rotorpy; force_on = False at the start, payload attached while force or torque is on)",
         "the payload: a point mass on the vehicle (event payload_point), its weight acting through MuJoCo's dynamics "
         "rather than as the fork's constant world-frame torque r × m g",
-        "the trajectory starts at rest 3 m up (reference.center of the task), not at the origin, to keep the ground "
-        "plane out of reach of a goal 2 m down",
+        "the trajectory starts at rest 5 m up (reference.center of the task), not at the origin: AdaptiveQuadBench has "
+        "no ground, and a primitive within its ranges dips at most 4.40 m below its start",
         "seeds: a numpy Generator per seed (not the global numpy seed), the trajectory and the disturbance's "
         "direction and timing drawn from two streams of it, the same at every intensity (AdaptiveQuadBench keeps the "
         "trajectories and redraws the disturbance at each intensity); so numbers differ from AdaptiveQuadBench's draws",
