@@ -194,3 +194,11 @@ def test_no_drawn_primitive_reaches_the_ground():
     ref = MotionPrimitive(center=(0.0, 0.0, 0.0), position=(1.0, 0.0, 0.0), velocity=(0.0, 1.0, 0.0),
                           acceleration=(0.0, 0.0, 1.0), duration=T)(t, 0)[0]
     np.testing.assert_allclose(ref, np.stack([p_basis, v_basis, a_basis], axis=1), atol=1e-9)
+
+
+def test_a_point_payload_on_a_cable_is_refused_before_the_run():
+    from adaptive_mj.errors import ScenarioError
+
+    with pytest.raises(ScenarioError, match="payload_point makes a rigid payload a point mass"):
+        run_scenario(flight.PROTOCOL_TASK, set=["plant.payload='quad_cable'", "simulation.duration=0.1",
+                                                "events=[{t=0.0, kind='payload_point', value=0.1, offset=[0, 0, 0]}]"])

@@ -718,6 +718,16 @@ def _payload_point_on_load(t, plant, fields) -> None:
         raise t.fail("value", "a mass >= 0 [kg]", v)
 
 
+def _point_check(scn, e, plant, source) -> None:
+    """The payload exists and is rigid (a point mass on a body hanging on a joint would not be where it says)."""
+    from adaptive_mj.errors import ScenarioError
+
+    ev.payload_body_check(scn, e, plant, source)
+    if plant.jointed(e.body):
+        raise ScenarioError(f"{scn.source}: events: payload_point makes a rigid payload a point mass, and {e.body!r} "
+                            f"hangs on a joint (plant.payload = {scn.plant.payload!r}): attach a rigid one (quad_box)")
+
+
 WIND_EVENT = ev.EventKind("wind", _wind, value="none",
                           fields=(ev.EventField("velocity", _vector("velocity"), "the air's velocity [m/s]"),),
                           doc="sets the wind (MuJoCo's opt.wind, felt through the rotors' drag) to velocity [m/s] "
@@ -727,7 +737,7 @@ ROTOR_EFFICIENCY = ev.EventKind("rotor_efficiency", _rotor, fields=(
     doc="rotor's thrust becomes value (0 < value <= 2) times what is commanded, from t on")
 PAYLOAD_POINT = ev.EventKind("payload_point", _payload_point, value="any", fields=(
     ev.BODY, ev.EventField("offset", _vector("offset"), "[m] (x, y, z) from the vehicle's centre of mass, body frame")),
-    on_load=_payload_point_on_load, on_build=ev.payload_body_check,
+    on_load=_payload_point_on_load, on_build=_point_check,
     doc="makes the payload body a point mass of value [kg] (>= 0; 0: detached) at offset [m] from the vehicle's "
         "centre of mass (body frame) from t on: AdaptiveQuadBench's payload (aqb/config/randomization_config.py)")
 EXTERNAL_FORCE = ev.EventKind("external_force", _force, value="none", fields=(
