@@ -507,3 +507,67 @@ def _smoothstep_derivatives(order: int) -> list:
     while len(_DERIVATIVES) <= order:
         _DERIVATIVES.append(_SMOOTHSTEP if not _DERIVATIVES else _DERIVATIVES[-1].deriv())
     return _DERIVATIVES
+
+
+@dataclass(frozen=True)
+class MotionPrimitive:
+    """A flying body's position reference p_d(t) (3,) [m]: AdaptiveQuadBench's random motion primitive
+    (valmik/AdaptiveQuadBench, aqb/config/randomization_config.py, create_trajectories: RotorPy's RapidTrajectory,
+    Mueller, Hehn & D'Andrea, "A computationally efficient motion primitive for quadrocopter trajectory
+    generation", IEEE T-RO 31(6), 2015). It starts at rest at `center` [m] (zero velocity and acceleration) and
+    reaches center + position [m] with velocity [m/s] and acceleration [m/s²] (each (3,), world frame) at
+    t = duration [s]: per axis the quintic minimising the integral of the squared jerk between those ends,
+
+        p(t) = γ t³/6 + β t⁴/24 + α t⁵/120, with (Δp, Δv, Δa) = (position, velocity, acceleration), T = duration:
+        α = (60 T² Δa − 360 T Δv + 720 Δp)/T⁵,  β = (−24 T³ Δa + 168 T² Δv − 360 T Δp)/T⁵,
+        γ = (3 T⁴ Δa − 24 T³ Δv + 60 T² Δp)/T⁵.
+
+    Before t = 0 it rests at center; after `duration` it goes on at the end's acceleration (p(T) + v(T) τ + a(T) τ²/2,
+    τ = t − T: continuous up to the acceleration; AdaptiveQuadBench's runs end at T). Called as ref(t, order) ->
+    (order+1, 3) for scalar t, (order+1, N, 3) for N times; every derivative exact."""
+
+    center: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    acceleration: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    duration: float = 5.0
+
+    def __post_init__(self):
+        for name in ("center", "position", "velocity", "acceleration"):
+            if len(tuple(getattr(self, name))) != 3:
+                raise ValueError(f"{name} is a vector (x, y, z)")
+        if not self.duration > 0:
+            raise ValueError("duration must be > 0")
+
+    def coefficients(self) -> np.ndarray:
+        """(6, 3): the quintic's coefficients c_k of t^k per axis (c_0 = center, c_1 = c_2 = 0)."""
+        T = float(self.duration)
+        dp, dv, da = (np.asarray(v, dtype=float) for v in (self.position, self.velocity, self.acceleration))
+        alpha = (60 * T**2 * da - 360 * T * dv + 720 * dp) / T**5
+        beta = (-24 * T**3 * da + 168 * T**2 * dv - 360 * T * dp) / T**5
+        gamma = (3 * T**4 * da - 24 * T**3 * dv + 60 * T**2 * dp) / T**5
+        c = np.zeros((6, 3))
+        c[0] = self.center
+        c[3], c[4], c[5] = gamma / 6.0, beta / 24.0, alpha / 120.0
+        return c
+
+    def __call__(self, t, order: int) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        T = float(self.duration)
+        c = self.coefficients()
+        polys = [np.polynomial.Polynomial(c[:, i]) for i in range(3)]
+        s = np.clip(t, 0.0, T)  # on the primitive (and at rest before it)
+        out = np.zeros((order + 1,) + t.shape + (3,))
+        for i, p in enumerate(polys):
+            d = [p.deriv(k) if k else p for k in range(3)]  # p, p', p'' at T: the extension past it
+            end = [float(q(T)) for q in d]
+            tau = np.maximum(t - T, 0.0)
+            after = t > T
+            for k in range(order + 1):
+                on = (p.deriv(k) if k else p)(s)
+                if k:
+                    on = np.where(t < 0.0, 0.0, on)
+                ext = ([end[0] + end[1] * tau + 0.5 * end[2] * tau**2, end[1] + end[2] * tau,
+                        np.full(t.shape, end[2])][k] if k < 3 else np.zeros(t.shape))
+                out[k, ..., i] = np.where(after, ext, on)
+        return out

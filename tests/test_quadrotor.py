@@ -217,8 +217,8 @@ def test_the_scalar_l1_update_is_laws_l1_step():
 
 
 @pytest.mark.parametrize("override, words", [
-    ("events=[{t=1, kind='rotor_efficiency', rotor=1, value=1.5}]",
-     "events[0].value must be a thrust factor in (0, 1]"),
+    ("events=[{t=1, kind='rotor_efficiency', rotor=1, value=2.5}]",
+     "events[0].value must be a thrust factor in (0, 2]"),
     ("events=[{t=1, kind='rotor_efficiency', rotor=5, value=0.5}]", "events[0].rotor must be a rotor number 1 to 4"),
     ("plant.wind=[1.0, 2.0]", "plant.wind must be"),
     ("reference.kind='cosine'", "reference.kind must be one of 'hover', 'lemniscate'"),

@@ -509,6 +509,20 @@ class QuadrotorPlant(ModelClock, BodyEdits):
         m = self.model
         return any(int(m.body_jntnum[b]) > 0 for b in subtree_bodies(m, self.body_id(name)))
 
+    def set_payload_point(self, name: str, mass: float, offset) -> None:
+        """The rigid payload body `name` becomes a point mass `mass` [kg] (0: none) at `offset` (3,) [m] from the
+        vehicle's centre of mass in the vehicle's body frame (the payload body hangs on the vehicle's body, unrotated,
+        as plant.payload attaches it); its geoms stay as they are."""
+        m, b = self.model, self.body_id(name)
+        root, at, pos = self.body_id(BODY), b, np.zeros(3)  # the payload body's origin in the vehicle's frame
+        while at != root:
+            if at == 0 or int(m.body_jntnum[at]) > 0 or not np.allclose(m.body_quat[at], (1.0, 0.0, 0.0, 0.0)):
+                raise ModelError(f"{self.where}: a point payload needs body {name!r} fixed, unrotated, on {BODY!r}")
+            pos += m.body_pos[at]
+            at = int(m.body_parentid[at])
+        ipos = np.asarray(offset, dtype=float) + m.body_ipos[root] - pos
+        self.set_body_inertial(name, mass=float(mass), ipos=ipos, iquat=(1.0, 0.0, 0.0, 0.0), inertia=(0.0, 0.0, 0.0))
+
     def scale_rotor(self, rotor: int, factor: float) -> None:
         """Rotor `rotor` (1 to 4) gives `factor` times the thrust commanded (a damaged propeller, a weak motor)."""
         a = int(self.airframe.actuators[rotor - 1])
@@ -597,16 +611,25 @@ WIND = Key("wind", "array [x, y, z]", "m/s", None, "3 numbers",
 
 
 # --- its references -------------------------------------------------------------------
-REFERENCE_KINDS = ("hover", "lemniscate")
+REFERENCE_KINDS = ("hover", "lemniscate", "motion_primitive")
 
 
 def read_reference(t):
     """[reference] of a quadrotor: kind "hover" (center [m]; from start [m] over rise_time [s] when start is given:
     a take-off) or "lemniscate" (the same, plus amplitude A [m], omega [rad/s], t0 [s]: the figure-eight x = A
-    sin(ω(t − t0)), y = (A/2) sin(2ω(t − t0)) about center from t0 on); adaptive_mj.reference.Flight."""
+    sin(ω(t − t0)), y = (A/2) sin(2ω(t − t0)) about center from t0 on); adaptive_mj.reference.Flight. Kind
+    "motion_primitive": AdaptiveQuadBench's random motion primitive (adaptive_mj.reference.MotionPrimitive), from
+    rest at center [m] to center + position [m] with velocity [m/s] and acceleration [m/s²] at duration [s];
+    adaptive_mj.study.flight draws them from a seed."""
     from adaptive_mj.specs import ReferenceSpec
 
     kind = t.string("kind", choices=REFERENCE_KINDS)
+    if kind == "motion_primitive":
+        params = {"center": t.numbers("center", (0.0, 0.0, 5.0), length=3),
+                  **{k: t.numbers(k, (0.0, 0.0, 0.0), length=3) for k in ("position", "velocity", "acceleration")},
+                  "duration": t.number("duration", 5.0, gt=0)}
+        t.finish()
+        return ReferenceSpec(kind=kind, params=params)
     params = {"center": t.numbers("center", (0.0, 0.0, 1.0), length=3), "start": t.numbers("start", None, length=3),
               "rise_time": t.number("rise_time", 2.0, gt=0)}
     if kind == "lemniscate":
@@ -617,10 +640,14 @@ def read_reference(t):
 
 
 def build_reference(spec):
-    """The Flight reference of a [reference] read by read_reference."""
-    from adaptive_mj.reference import Flight
+    """The Flight (or MotionPrimitive) reference of a [reference] read by read_reference."""
+    from adaptive_mj.reference import Flight, MotionPrimitive
 
     p = spec.params
+    if spec.kind == "motion_primitive":
+        return MotionPrimitive(center=tuple(p["center"]), position=tuple(p["position"]),
+                               velocity=tuple(p["velocity"]), acceleration=tuple(p["acceleration"]),
+                               duration=p["duration"])
     return Flight(center=tuple(p["center"]), amplitude=p.get("amplitude", 0.0), omega=p.get("omega", 1.0),
                   start=None if p["start"] is None else tuple(p["start"]), rise_time=p["rise_time"],
                   t0=p.get("t0", 0.0))
@@ -665,11 +692,40 @@ def _rotor_number(t) -> int:
     return r
 
 
+#: the largest rotor efficiency an event may set: AdaptiveQuadBench draws each rotor's efficiency 1 ± U(0, I), I
+#: capped at 0.6 (aqb/config/randomization_config.py at ee7df29, l. 174-176 and 276): a rotor up to 1.6 times as strong
+ROTOR_EFFICIENCY_MAX = 2.0
+
+
 def _rotor_on_load(t, plant, fields) -> None:
-    """A rotor's efficiency is a factor in (0, 1] (a weakened rotor; the value rule has checked > 0)."""
+    """A rotor's efficiency is a factor in (0, ROTOR_EFFICIENCY_MAX] (below 1 a weakened rotor, above a stronger one;
+    the value rule has checked > 0)."""
     v = t.data.get("value")
-    if isinstance(v, (int, float)) and v > 1:
-        raise t.fail("value", "a thrust factor in (0, 1] (a weakened rotor)", v)
+    if isinstance(v, (int, float)) and v > ROTOR_EFFICIENCY_MAX:
+        raise t.fail("value", f"a thrust factor in (0, {ROTOR_EFFICIENCY_MAX:g}] (below 1 a weakened rotor)", v)
+
+
+def _payload_point(e, scn, source) -> ev.Event:
+    off = e.params["offset"]
+    return ev.Event(e.t, f"payload point mass {e.value:g} kg at {list(off)} m",
+                    lambda plant: plant.set_payload_point(e.body, e.value, off))
+
+
+def _payload_point_on_load(t, plant, fields) -> None:
+    """The mass is >= 0 [kg] (0: the payload detached; the value rule "any" has read a number)."""
+    v = t.data.get("value")
+    if isinstance(v, (int, float)) and v < 0:
+        raise t.fail("value", "a mass >= 0 [kg]", v)
+
+
+def _point_check(scn, e, plant, source) -> None:
+    """The payload exists and is rigid (a point mass on a body hanging on a joint would not be where it says)."""
+    from adaptive_mj.errors import ScenarioError
+
+    ev.payload_body_check(scn, e, plant, source)
+    if plant.jointed(e.body):
+        raise ScenarioError(f"{scn.source}: events: payload_point makes a rigid payload a point mass, and {e.body!r} "
+                            f"hangs on a joint (plant.payload = {scn.plant.payload!r}): attach a rigid one (quad_box)")
 
 
 WIND_EVENT = ev.EventKind("wind", _wind, value="none",
@@ -678,7 +734,12 @@ WIND_EVENT = ev.EventKind("wind", _wind, value="none",
                               "from t on: a gust is two events")
 ROTOR_EFFICIENCY = ev.EventKind("rotor_efficiency", _rotor, fields=(
     ev.EventField("rotor", _rotor_number, "the rotor (1 to 4)"),), on_load=_rotor_on_load,
-    doc="rotor's thrust becomes value (0 < value <= 1) times what is commanded, from t on")
+    doc="rotor's thrust becomes value (0 < value <= 2) times what is commanded, from t on")
+PAYLOAD_POINT = ev.EventKind("payload_point", _payload_point, value="any", fields=(
+    ev.BODY, ev.EventField("offset", _vector("offset"), "[m] (x, y, z) from the vehicle's centre of mass, body frame")),
+    on_load=_payload_point_on_load, on_build=_point_check,
+    doc="makes the payload body a point mass of value [kg] (>= 0; 0: detached) at offset [m] from the vehicle's "
+        "centre of mass (body frame) from t on: AdaptiveQuadBench's payload (aqb/config/randomization_config.py)")
 EXTERNAL_FORCE = ev.EventKind("external_force", _force, value="none", fields=(
     ev.EventField("force", _vector("force"), "[N] (x, y, z), world frame"),
     ev.EventField("torque", _vector("torque"), "[N m] (x, y, z), world frame")),
@@ -804,7 +865,7 @@ KIND = register(PlantKind(
     reader=plant_keys.SharedReader(backend=("mujoco", "a free body flown in MuJoCo with RotorPy's rotor drag"),
                                    body=_own_keys),
     events={ev.PAYLOAD_MASS: "mujoco", ev.PAYLOAD_SWAP: "mujoco", PAYLOAD_RELEASE: "mujoco",
-            ROTOR_EFFICIENCY: "mujoco", WIND_EVENT: "mujoco", EXTERNAL_FORCE: "mujoco"},
+            ROTOR_EFFICIENCY: "mujoco", WIND_EVENT: "mujoco", EXTERNAL_FORCE: "mujoco", PAYLOAD_POINT: "mujoco"},
     order=lambda plant, law_order: 4, starts_on_reference=True, sections=("quadrotor",),
     # the breaking-point study and the scorecard: the bundled lemniscate with its 10 g payload, its scenario's own
     # bound on the tail RMS (2 cm: ‖p̃‖'s RMS / √3; the geometric law at the true parameters flies it with 15.3 mm

@@ -25,6 +25,16 @@ control delay past its linearised limit) is run like any other and judged by its
 bisection (`margins`: lo and hi, then `steps` rounds, every search's runs in one parallel batch per round) or on
 a fixed grid (`grid_jobs`, `grid_results`: one batch; the bench's section). Every run is logged (MCAP) under the
 folder given.
+
+AdaptiveQuadBench's protocol itself (issue 52, item 5): its randomisation ranges declared once (AQB, an AQBProtocol:
+every figure cited to its file and lines at ee7df29, and what this suite does differently, AQB.ours); a seeded
+sampler (draw_task: a numpy Generator per seed draws a random motion primitive's goal and the disturbance's
+direction, switch times, rotor factors and payload offset) whose TaskDraw.overrides() set up the scenario
+PROTOCOL_TASK (AdaptiveQuadBench's vehicle on a 5 s motion primitive); protocol_jobs / protocol_results run and
+judge its trials per law, axis (AXES) and intensity (protocol_levels: 0 to 10 by 1), success_curves and
+plot_success_curves give the share of seeds that succeed at each intensity, as its paper plots them, and
+protocol_output is the study's output (format PROTOCOL_FORMAT) with the ranges recorded (AQB.record()).
+benchmarks/aqb_protocol.py runs it.
 """
 from __future__ import annotations
 
@@ -220,3 +230,345 @@ def as_rows(found: list[Search]) -> list[dict]:
                     "margin": m_lo, "margin_first_fail": m_hi, "when2fail": w_hi, "when2fail_last_success": w_lo,
                     "success_rate": {repr(v): s.success_rate(v) for v in sorted(s.evaluations)}})
     return out
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# AdaptiveQuadBench's protocol (issue 52, item 5): its randomisation ranges, declared once, and a seeded sampler that
+# turns (seed, axis, intensity) into a task of the scenario PROTOCOL_TASK
+
+#: where every range below is read: github.com/valmik/AdaptiveQuadBench at this commit
+AQB_COMMIT = "ee7df29"
+AQB_RANDOMIZATION = "aqb/config/randomization_config.py"
+
+
+@dataclass(frozen=True)
+class Cited:
+    """One figure of AdaptiveQuadBench's protocol: its value (a number, or (lo, hi) for a range), its unit, the
+    file and lines at AQB_COMMIT it is read from, and what it is."""
+
+    value: float | tuple[float, float]
+    unit: str
+    source: str
+    doc: str
+
+    @property
+    def range(self) -> tuple[float, float]:
+        """(lo, hi) of a range (a ValueError for a single number)."""
+        if not isinstance(self.value, tuple):
+            raise ValueError(f"{self.doc}: a number, not a range")
+        return self.value
+
+    @property
+    def number(self) -> float:
+        """A single number's value (a ValueError for a range)."""
+        if isinstance(self.value, tuple):
+            raise ValueError(f"{self.doc}: a range, not a number")
+        return float(self.value)
+
+    def record(self) -> dict:
+        v = self.value
+        return {"value": list(v) if isinstance(v, tuple) else v, "unit": self.unit,
+                "source": f"valmik/AdaptiveQuadBench@{AQB_COMMIT}:{self.source}", "doc": self.doc}
+
+
+def _r(lines: str) -> str:
+    return f"{AQB_RANDOMIZATION}:{lines}"
+
+
+@dataclass(frozen=True)
+class AQBProtocol:
+    """AdaptiveQuadBench's randomisation of a trial (valmik/AdaptiveQuadBench at ee7df29), every figure cited to its
+    file and lines; the one declaration the sampler (draw_task) reads and the study's output records (record()).
+    An axis's intensity I is AdaptiveQuadBench's (when2fail raises it from 0 in steps of 1 up to 10): wind I m/s,
+    force (I, I, I) N, torque (I, I, I) N m, every rotor's efficiency 1 + U(−c, c) with c = min(I, cap), a payload
+    of min(I, cap) times the vehicle's mass. What we do differently is in `ours`."""
+
+    vehicle_mass: Cited = Cited(0.826, "kg", "aqb/quad_param/quadrotor.py:7", "the vehicle's mass ('mass')")
+    arm_length: Cited = Cited(0.166, "m", "aqb/quad_param/quadrotor.py:3,14", "the arm d ('arm_length')")
+    # the random motion primitive (create_trajectories): from rest at the origin, goal drawn per axis
+    trajectory_position: Cited = Cited((-2.0, 2.0), "m", _r("79,224"), "goal position, U(lo, hi) per axis")
+    trajectory_velocity: Cited = Cited((-2.0, 2.0), "m/s", _r("80,225"), "goal velocity, U(lo, hi) per axis")
+    trajectory_acceleration: Cited = Cited((-2.0, 2.0), "m/s²", _r("81,226"), "goal acceleration, U(lo, hi) per axis")
+    trajectory_time: Cited = Cited(5.0, "s", _r("82,231"), "the primitive's duration (and the run's)")
+    # the axes
+    wind_speed: Cited = Cited(1.0, "m/s per unit intensity", _r("152-155,254"), "the mean wind's speed: I")
+    wind_direction: Cited = Cited((-1.0, 1.0), "", _r("255-256"),
+                                  "U(lo, hi) per axis, normalised: the mean wind's direction")
+    wind_sigma: Cited = Cited((30.0, 60.0), "", _r("77,258"),
+                              "DrydenGust's sig_wind per axis, U(lo, hi): the gust's turbulence (not modelled here)")
+    force: Cited = Cited(1.0, "N per unit intensity", _r("157-160,318"),
+                         "each world axis's force: U(I, I) = I, i.e. (F, F, F)")
+    torque: Cited = Cited(1.0, "N m per unit intensity", _r("162-165,320"),
+                          "each world axis's torque: U(I, I) = I, i.e. (τ, τ, τ)")
+    rotor_efficiency_cap: Cited = Cited(0.6, "", _r("172-176,276"),
+                                        "each rotor's efficiency 1 + U(−c, c), c = min(I, cap)")
+    payload_mass_cap: Cited = Cited(2.0, "× vehicle mass", _r("178-181,303-304"),
+                                    "the payload's mass min(I, cap) times the vehicle's")
+    payload_offset: Cited = Cited((-0.2, 0.2), "× arm length", _r("78,306-307"),
+                                  "the payload's centre of mass, U(lo, hi) per body axis times the arm")
+    toggles: Cited = Cited((1.0, 4.0), "", _r("347"), "how many times the force, torque or payload is switched")
+    toggle_window: Cited = Cited((0.5, 4.5), "s", _r("323,356"),
+                                 "each switch time U(lo, hi): min_toggle_interval to t_final − min_toggle_interval")
+    toggle_gap: Cited = Cited(0.5, "s", _r("323,358"),
+                              "the least time between switches (a time drawn closer is redrawn, at most 100 tries; "
+                              "after 100 failures no more switches)")
+    intensity_step: Cited = Cited(1.0, "", "aqb/experiments/config_manager.py:61", "when2fail's intensity step")
+    max_intensity: Cited = Cited(10.0, "", "aqb/experiments/config_manager.py:59", "when2fail's largest intensity")
+    success_rms: Cited = Cited(AQB_RMS_BOUND, "m", "aqb/experiments/experiment_runner.py:277",
+                               "a trial succeeds when its RMS position error is below this (no crash check)")
+
+    #: what this suite does where AdaptiveQuadBench differs or cannot be followed (recorded beside the figures)
+    ours: tuple[str, ...] = (
+        "wind: a steady wind of AdaptiveQuadBench's mean speed and direction (plant.wind, felt through RotorPy's rotor "
+        "drag); its Dryden turbulence (rotorpy DrydenGust, sig_wind) is not modelled, so wind_sigma is recorded and "
+        "not applied",
+        "switching: off at t = 0, on at the first switch time, off at the next and so on, the payload switched with "
+        "the force and torque, as the simulate() of the RotorPy fork AdaptiveQuadBench pins (its submodule "
+        "Dz298/rotorpy; force_on = False at the start, payload attached while force or torque is on)",
+        "the payload: a point mass on the vehicle (event payload_point), its weight acting through MuJoCo's dynamics "
+        "rather than as the fork's constant world-frame torque r × m g",
+        "the trajectory starts at rest 5 m up (reference.center of the task), not at the origin: AdaptiveQuadBench has "
+        "no ground, and a primitive within its ranges dips at most 4.40 m below its start",
+        "seeds: a numpy Generator per seed (not the global numpy seed), the trajectory and the disturbance's "
+        "direction and timing drawn from two streams of it, the same at every intensity (AdaptiveQuadBench keeps the "
+        "trajectories and redraws the disturbance at each intensity); so numbers differ from AdaptiveQuadBench's draws",
+        "a run ends at a crash (a tilt past plant.crash_tilt, or the ground), where AdaptiveQuadBench's ends only past "
+        "20 m/s or 100 rad/s (its RotorPy fork's safety_exit; it has no ground) and its cost ignores how it ended: "
+        "under the rule 'aqb' the RMS covers the rows before the end, so a vehicle lost early passes (every crashed "
+        "trial of the torque axis at 1 and 5 N m did, 10 seeds, the geometric law); the rule 'ours' fails it",
+    )
+
+    def record(self) -> dict:
+        """Every figure with its unit, source and meaning, and `ours`: JSON-ready, for the study's output."""
+        from dataclasses import fields
+
+        out: dict = {f.name: getattr(self, f.name).record() for f in fields(self) if f.name != "ours"}
+        out["ours"] = list(self.ours)
+        return out
+
+
+AQB = AQBProtocol()
+#: the protocol's task: AdaptiveQuadBench's vehicle on a motion primitive, each law at AdaptiveQuadBench's gains
+PROTOCOL_TASK = "quadrotor_aqb_random"
+#: each flight law at AdaptiveQuadBench's geometric gains (aqb/controller/geometric_control.py at ee7df29,
+#: GeoControl.__init__'s last self.k: k_x = (5, 5, 10) N/m, k_v = (4, 4, 8) N s/m, k_R = 0.3 N m/rad, k_W = 0.03
+#: N m s/rad; the adaptive law's surface lambda = k_x/k_v, k = k_v), as overrides of PROTOCOL_TASK (whose own law is
+#: the adaptive one at these gains): a law swap, then its gains
+_AQB_GEOMETRIC = ("law.kx=[5.0, 5.0, 10.0]", "law.kv=[4.0, 4.0, 8.0]", "law.kR=0.3", "law.kW=0.03")
+PROTOCOL_GAINS: dict[str, tuple[str, ...]] = {
+    "geometric": ("law=geometric", *_AQB_GEOMETRIC), "l1_geometric": ("law=l1_geometric", *_AQB_GEOMETRIC),
+    "geometric_adaptive": ("law=geometric_adaptive", "law.lambda=[1.25, 1.25, 1.25]", "law.k=[4.0, 4.0, 8.0]",
+                           "law.kR=0.3", "law.kW=0.03")}
+#: AdaptiveQuadBench's disturbance axes, each with its intensity's unit
+AXES = {"wind": "m/s", "force": "N", "torque": "N m", "rotor_efficiency": "", "payload": "× vehicle mass"}
+
+
+@dataclass(frozen=True)
+class TaskDraw:
+    """One seed's task on one axis at one intensity (draw_task): the motion primitive's goal (3,) each, relative
+    to its start [m, m/s, m/s²]; the switch times [s]; the wind's direction (3,) (unit); the four rotors'
+    efficiency factors (4,); the payload's mass [kg] and offset (3,) [m]. Only what the axis uses is applied."""
+
+    seed: int
+    axis: str
+    intensity: float
+    position: tuple[float, float, float]
+    velocity: tuple[float, float, float]
+    acceleration: tuple[float, float, float]
+    toggles: tuple[float, ...]
+    wind_direction: tuple[float, float, float]
+    rotor_factors: tuple[float, float, float, float]
+    payload_mass: float
+    payload_offset: tuple[float, float, float]
+
+    def overrides(self, protocol: AQBProtocol = AQB, *, until: float | None = None) -> tuple[str, ...]:
+        """The scenario overrides (--set expressions) of this task on PROTOCOL_TASK: the reference's goal, and the
+        axis's disturbance at this intensity; until: a shorter run's duration [s], the switches after it left out."""
+        out = [f"reference.position={list(self.position)!r}", f"reference.velocity={list(self.velocity)!r}",
+               f"reference.acceleration={list(self.acceleration)!r}"]
+        i = self.intensity
+        events: list[str] = []
+        if self.axis == "wind":
+            out.append(f"plant.wind={[i * protocol.wind_speed.number * d for d in self.wind_direction]!r}")
+        elif self.axis in ("force", "torque"):
+            per = i * getattr(protocol, self.axis).number
+            for k, t in enumerate(self.toggles):
+                v = per if k % 2 == 0 else -per  # on at the odd switches (from off at t = 0)
+                events.append(f"{{t={t!r}, kind='external_force', {self.axis}=[{v!r}, {v!r}, {v!r}]}}")
+        elif self.axis == "rotor_efficiency":
+            events += [f"{{t=0.0, kind='rotor_efficiency', rotor={r + 1}, value={f!r}}}"
+                       for r, f in enumerate(self.rotor_factors)]
+        elif self.axis == "payload":
+            out.append("plant.payload='quad_box'")
+            off = list(self.payload_offset)
+            events.append(f"{{t=0.0, kind='payload_point', value=0.0, offset={off!r}}}")
+            events += [f"{{t={t!r}, kind='payload_point', value={self.payload_mass if k % 2 == 0 else 0.0!r}, "
+                       f"offset={off!r}}}" for k, t in enumerate(self.toggles)]
+        if until is not None:
+            events = [e for e in events if float(e[3:e.index(",")]) <= until]
+        if events:
+            out.append(f"events=[{', '.join(events)}]")
+        return tuple(out)
+
+    def as_dict(self) -> dict:
+        from dataclasses import asdict
+
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+def _toggle_times(rng: np.random.Generator, p: AQBProtocol) -> tuple[float, ...]:
+    """AdaptiveQuadBench's create_disturbance_toggle_times with our generator: 1 to 4 switch times in the window, at
+    least the gap apart (a candidate too close is redrawn, at most 100 times; then no more switches), sorted."""
+    lo_n, hi_n = p.toggles.range
+    w_lo, w_hi = p.toggle_window.range
+    gap = p.toggle_gap.number
+    times: list[float] = []
+    for _ in range(int(rng.integers(int(lo_n), int(hi_n) + 1))):
+        for _ in range(100):
+            c = float(rng.uniform(w_lo, w_hi))
+            if not times or min(abs(c - t) for t in times) >= gap:
+                times.append(c)
+                break
+        else:
+            break
+    return tuple(sorted(times))
+
+
+def draw_task(seed: int, axis: str, intensity: float, protocol: AQBProtocol = AQB) -> TaskDraw:
+    """Seed `seed`'s task on `axis` (AXES) at `intensity` (AdaptiveQuadBench's I, >= 0), drawn from the ranges of
+    `protocol`: the motion primitive's goal from one stream of numpy's Generator for the seed, the disturbance's
+    direction, switch times, rotor factors and payload offset from another. Both streams depend on the seed only,
+    so a seed's trajectory and the disturbance's direction and timing are the same at every intensity and on every
+    axis; the intensity scales the magnitude (rotor efficiency: c = min(I, cap) times a factor drawn in [−1, 1];
+    payload mass: min(I, cap) times the vehicle's mass). Same seed, same draw."""
+    if axis not in AXES:
+        raise ValueError(f"unknown axis {axis!r}; expected one of {', '.join(AXES)}")
+    if not intensity >= 0:
+        raise ValueError("intensity must be >= 0")
+    traj, dist = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+    p = protocol
+    goal = [tuple(float(x) for x in traj.uniform(*r.range, size=3))
+            for r in (p.trajectory_position, p.trajectory_velocity, p.trajectory_acceleration)]
+    toggles = _toggle_times(dist, p)
+    d = dist.uniform(*p.wind_direction.range, size=3)
+    direction = tuple(float(x) for x in d / np.linalg.norm(d))
+    c = min(float(intensity), p.rotor_efficiency_cap.number)
+    factors = tuple(float(1.0 + c * u) for u in dist.uniform(-1.0, 1.0, size=4))
+    ratio = min(float(intensity), p.payload_mass_cap.number)
+    offset = tuple(float(x) * p.arm_length.number for x in dist.uniform(*p.payload_offset.range, size=3))
+    return TaskDraw(seed, axis, float(intensity), goal[0], goal[1], goal[2], toggles, direction,  # type: ignore[arg-type]
+                    factors, ratio * p.vehicle_mass.number, offset)  # type: ignore[arg-type]
+
+
+#: the format of protocol_output's object (a new key or a changed meaning bumps it; readers check it)
+PROTOCOL_FORMAT = 1
+
+
+def protocol_levels(protocol: AQBProtocol = AQB) -> list[float]:
+    """AdaptiveQuadBench's when2fail intensities: 0 to max_intensity in steps of intensity_step (0, 1, ..., 10)."""
+    step, top = protocol.intensity_step.number, protocol.max_intensity.number
+    return [round(k * step, 12) for k in range(int(math.floor(top / step + 1e-9)) + 1)]
+
+
+def _protocol_name(law: str, axis: str, v: float) -> str:
+    return f"aqb-{law}-{axis}={v:.6g}"
+
+
+def protocol_jobs(laws: Sequence[str], axes: Sequence[str], levels: Sequence[float], seeds: int, logs: Path,
+                  extra: Sequence[str] = (), protocol: AQBProtocol = AQB) -> list[RunSpec]:
+    """AdaptiveQuadBench's trials on PROTOCOL_TASK (one batch): per law, axis, intensity and seed k the task
+    draw_task(k, axis, intensity) draws, the law at AdaptiveQuadBench's gains (PROTOCOL_GAINS), logged at 20 Hz
+    under logs; `extra` overrides go after the gains (e.g. a shorter simulation.duration for tests)."""
+    return [RunSpec(sc.SCENARIOS_DIR / f"{PROTOCOL_TASK}.toml",
+                    overrides=(RECORD_PREFLIGHT, "log.rate_hz=20", *PROTOCOL_GAINS[law], *extra,
+                               *draw_task(k, axis, v, protocol).overrides(protocol)),
+                    seed=k, log=logs / f"{_protocol_name(law, axis, v)}-seed{k}.mcap",
+                    tag=f"{_protocol_name(law, axis, v)} seed {k}", extras=("flight_metrics",), keep_trajectory=False,
+                    expect="measured")
+            for law in laws for axis in axes for v in levels for k in range(seeds)]
+
+
+def protocol_axis(axis: str, levels: Sequence[float]) -> Disturbance:
+    """An axis of AdaptiveQuadBench's protocol as a Disturbance (for Search, table and as_rows): its unit and the
+    range of the levels run; its overrides are draw_task's, per seed, so this one has none."""
+    return Disturbance(axis, AXES[axis], lambda v: [], float(min(levels)), float(max(levels)),
+                       doc=f"AdaptiveQuadBench's {axis} axis (study.flight.AQB)")
+
+
+def protocol_results(laws: Sequence[str], axes: Sequence[str], levels: Sequence[float], seeds: int,
+                     results: dict[str, RunOutcome], *, rule: str = "aqb") -> list[Search]:
+    """Per (law, axis) a Search whose evaluations are each intensity's per-seed success by RULES[rule], read from
+    the protocol_jobs' results by tag (a missing run fails)."""
+    judge = rule_of(rule)
+    found = []
+    for axis in axes:
+        d = protocol_axis(axis, levels)
+        for law in laws:
+            s = Search(law, d)
+            for v in levels:
+                tags = [f"{_protocol_name(law, axis, v)} seed {k}" for k in range(seeds)]
+                s.evaluations[float(v)] = [judge(results[t]) if t in results else False for t in tags]
+            found.append(s)
+    return found
+
+
+def success_curves(found: Sequence[Search]) -> list[dict]:
+    """AdaptiveQuadBench's plot as data: per (law, axis), the intensities (ascending) and at each the share of
+    seeds that succeeded (0 to 1), with the number of seeds."""
+    return [{"law": s.law, "axis": s.disturbance.name, "unit": s.disturbance.unit,
+             "intensity": sorted(s.evaluations), "success_rate": [s.success_rate(v) for v in sorted(s.evaluations)],
+             "seeds": len(next(iter(s.evaluations.values()))) if s.evaluations else 0} for s in found]
+
+
+def plot_success_curves(curves: Sequence[dict], path: Path, *, title: str = "") -> Path:
+    """The success-rate curves (success_curves) as a PNG at path: a panel per axis, a line per law, success [%]
+    against intensity, as AdaptiveQuadBench's paper plots when2fail."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    axes = list(dict.fromkeys(c["axis"] for c in curves))
+    fig, panels = plt.subplots(1, len(axes), figsize=(3.6 * len(axes), 3.2), squeeze=False, constrained_layout=True)
+    for ax, name in zip(panels[0], axes, strict=True):
+        for c in (c for c in curves if c["axis"] == name):
+            ax.plot(c["intensity"], [100 * r for r in c["success_rate"]], marker="o", ms=3,
+                    label=LAW_LABEL.get(c["law"], c["law"]))
+        unit = next(c["unit"] for c in curves if c["axis"] == name)
+        ax.set_xlabel(f"intensity [{unit}]" if unit else "intensity")
+        ax.set_ylabel("success [%]")
+        ax.set_ylim(-5, 105)
+        ax.set_title(name, fontsize=9)
+    panels[0][0].legend(fontsize=7)
+    if title:
+        fig.suptitle(title, fontsize=9)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def protocol_output(by_rule: dict[str, list[Search]], *, seeds: int, levels: Sequence[float],
+                    protocol: AQBProtocol = AQB) -> dict:
+    """The protocol study's output (JSON-ready; format PROTOCOL_FORMAT): the randomisation it drew from
+    (protocol.record(), every range with its source), the task, the seeds and levels, and per failure rule its
+    rows (as_rows) and success-rate curves (success_curves)."""
+    return {"format": PROTOCOL_FORMAT, "protocol": "AdaptiveQuadBench", "task": PROTOCOL_TASK,
+            "randomization": protocol.record(), "seeds": seeds, "levels": list(levels),
+            "rules": {rule: {"rows": as_rows(found), "curves": success_curves(found)}
+                      for rule, found in by_rule.items()}}
+
+
+def protocol_text(protocol: AQBProtocol = AQB) -> str:
+    """The randomisation as a markdown list (each figure, its unit and source), then where this suite differs."""
+    from dataclasses import fields
+
+    lines = []
+    for f in fields(protocol):
+        if f.name == "ours":
+            continue
+        r = getattr(protocol, f.name).record()
+        v = r["value"]
+        lines.append(f"- {f.name}: {v if not isinstance(v, list) else tuple(v)} {r['unit']} — {r['doc']} "
+                     f"(`{r['source']}`)")
+    return "\n".join(lines + [f"- ours: {o}" for o in protocol.ours])

@@ -156,4 +156,7 @@ def _margins_text(found, levels: int, seeds: int) -> str:
             f"*when2fail*: the smallest at which every seed failed (in brackets the last one where one survived): "
             f"the brackets are the resolution. `python benchmarks/flight_margins.py` bisects them to a finer "
             f"resolution.\n\n" + "\n".join(f"- {d.name}: {d.doc}" for d in (*flight.DISTURBANCES, flight.DELAY))
-            + "\n\n" + flight.table(found).to_markdown())
+            + "\n\n" + flight.table(found).to_markdown()
+            + "\n\nAdaptiveQuadBench's own protocol (its vehicle, random motion primitives, its randomisation: "
+              "`python benchmarks/aqb_protocol.py` runs it) draws each trial from these ranges (`flight.AQB`):\n\n"
+            + flight.protocol_text())
