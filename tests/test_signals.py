@@ -387,6 +387,39 @@ def test_a_stop_raised_inside_a_weakref_callback_is_raised_again_in_the_main_cod
     assert interrupt.requested() is None
 
 
+def test_a_redelivery_that_lands_while_the_hook_still_runs_is_raised_by_the_next(monkeypatch, capfd):
+    """The dropped stop's redelivery can land while interrupt's unraisable hook is still starting the thread that
+    sends it (seen under load: the thread's start waited, the handler ran inside the hook, and its Interrupted was
+    dropped there too, so a SIGTERM was lost). Here that delivery is made to land inside the hook: it is not raised
+    there, and the next one raises it in the main code."""
+    import threading
+
+    from adaptive_mj.errors import Interrupted
+    from adaptive_mj.sim.interrupt import stop_on_signals
+
+    start = threading.Timer.start
+
+    def start_late(self):
+        signal.raise_signal(signal.SIGTERM)  # the handler runs now, inside the hook
+        start(self)
+
+    monkeypatch.setattr(threading.Timer, "start", start_late)
+
+    class Thing:
+        pass
+
+    t0 = time.monotonic()
+    with pytest.raises(Interrupted) as info, stop_on_signals():
+        thing = Thing()
+        ref = weakref.ref(thing, lambda r: signal.raise_signal(signal.SIGTERM))
+        del thing
+        while time.monotonic() - t0 < 5.0:
+            pass
+    assert info.value.signum == signal.SIGTERM and time.monotonic() - t0 < 2.0
+    assert ref() is None
+    assert "Exception ignored" not in capfd.readouterr().err
+
+
 # The pool of the test below, for its forked worker to reach the result pipe's write end.
 _POOL: list = []
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 import signal
 import sys
 import threading
+import time
 from contextlib import contextmanager
 from typing import Callable, Iterable, TypedDict
 
@@ -97,7 +98,8 @@ def reraise_stop(exc: BaseException) -> None:
 def _handler(signum, frame) -> None:
     if _state["signum"] is None:  # a second signal while stopping changes nothing (the first was raised already)
         _state["signum"] = signum
-    _raise_if_due()
+    if not _in_hook(frame):  # raised inside the hook, it would be dropped too: the next delivery raises it
+        _raise_if_due()
     if not _state["armed"] and _unarmed:
         _unarmed[0](signum)
 
@@ -115,10 +117,28 @@ def _redeliver_dropped(unraisable) -> None:
     _previous_unraisablehook(unraisable)
 
 
+#: deliveries at most of one dropped stop (REDELIVER_S apart): one that lands while the hook still runs is skipped
+REDELIVER_TRIES = 100
+
+
+def _in_hook(frame) -> bool:
+    """Whether `frame` (where a signal handler interrupted the main thread) runs inside _redeliver_dropped."""
+    while frame is not None:
+        if frame.f_code is _redeliver_dropped.__code__:
+            return True
+        frame = frame.f_back
+    return False
+
+
 def _deliver_again(signum: int) -> None:
-    """The signal again, to the main thread, while it is still due (not raised since, nor the stop over)."""
-    if _state["signum"] == signum and not _state["raised"]:
+    """The signal again, to the main thread, every REDELIVER_S while it is still due (not raised since, nor the
+    stop over, nor the block that raises it left): a delivery that lands while _redeliver_dropped is still
+    starting this thread (seen under load) is not raised there, and the next one raises it in the main code."""
+    for _ in range(REDELIVER_TRIES):
+        if not (_state["signum"] == signum and not _state["raised"] and _state["armed"]):
+            return
         signal.pthread_kill(threading.main_thread().ident or 0, signum)  # the main thread has an ident once started
+        time.sleep(REDELIVER_S)
 
 
 _previous_unraisablehook = sys.unraisablehook
