@@ -197,3 +197,27 @@ def test_the_delay_test_raises_each_trajectory_s_delay_until_it_fails(monkeypatc
     assert max(v for _, v in asked) == 0.05  # the last trajectory's first failure: then every one has failed
     assert len(asked) == sum(range(2, 7))  # trajectory j is run at 0 .. its failure: j + 2 delays
     assert {s.airframe for s in found["aqb"]} == {"crazyflie"}
+
+
+def test_the_rule_aqb_flies_its_runs_on_as_aqb_s_do(monkeypatch):
+    """The rule "aqb"'s bisection runs (flight.RULE_RUNS): no tilt ends one and the task starts out of a free fall's
+    reach of the ground over the run (AdaptiveQuadBench has no ground, and RotorPy's runs go on); the rule "ours"'s
+    runs are the task's own; the two go under different labels (no run shared between different overrides)."""
+    from adaptive_mj.study import breaking_point
+
+    seen = []
+
+    def search_all(probes, **kw):
+        seen.extend(probes)
+        return [breaking_point.Margin(p, None, None) for p in probes]
+
+    monkeypatch.setattr(breaking_point, "search_all", search_all)
+    found = flight.searches(["geometric"], airframe="aqb")[:1]
+    out = flight.margins_by_rule(found, rules=("ours", "aqb"), seeds=1, steps=0, logs=sc.SCENARIOS_DIR)
+    assert set(out) == {"ours", "aqb"} and [len(v) for v in out.values()] == [1, 1]
+    ours, aqb = seen[0], seen[2]
+    assert (ours.label, aqb.label) == ("aqb-geometric", "aqb-geometric-aqb-runs")
+    for probe, lifted in ((ours, False), (aqb, True)):
+        scn = sc.load(probe.scenario, overrides=probe.overrides)
+        z, tilt = scn.reference.params["center"][2], scn.plant.kind_spec.crash_tilt
+        assert (z > 0.5 * 9.81 * flight.RUN_SECONDS ** 2, tilt == 180.0) == (lifted, lifted)

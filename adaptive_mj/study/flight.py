@@ -13,7 +13,9 @@ What fails a run is a named rule (RULES; `margins`, `grid_results` take rule=):
   "aqb": AdaptiveQuadBench's own success rule for its disturbance trials: the RMS of ‖p_d − p‖ over the run below
          AQB_RMS_BOUND = 5 m (aqb/experiments/experiment_runner.py, `(df['pos_tracking_error'] < 5).mean()`, the
          error being parallel_data_collection.compute_cost's sqrt(mean ‖x − x_des‖²) over the trajectory), with
-         no crash check. Here a crash ends the run, so a crashed run's RMS covers the rows before it.
+         no crash check. Its bisection runs fly as AdaptiveQuadBench's go on (RULE_RUNS: no tilt ends a run, the
+         task AQB_RULE_HEIGHT up, out of the ground's reach); a run that still ends early (diverged) is judged on
+         the rows before its end. The protocol's trials (protocol_jobs) keep the 80 deg crash check (AQB.ours).
 
 The disturbances are the quadrotor kind's (adaptive_mj.plants.quadrotor.DISTURBANCES, which its breaking-point row
 raises too); the delay is this study's (DELAY). The runs: the bundled lemniscate (A = 0.5 m, ω = 1 rad/s at 1 m)
@@ -91,6 +93,18 @@ def aqb_succeeded(r: RunOutcome) -> bool:
 
 #: the named failure rules of the searches: rule name -> run_passes (RunOutcome -> success)
 RULES: dict[str, Callable[[RunOutcome], bool]] = {"ours": succeeded, "aqb": aqb_succeeded}
+
+
+#: [m] the height of the rule "aqb"'s runs (RULE_RUNS): a free fall from rest over the whole run, ½ g T², does not
+#: reach the ground plane (AdaptiveQuadBench has none)
+AQB_RULE_HEIGHT = math.ceil(0.5 * 9.81 * RUN_SECONDS ** 2)
+#: what each failure rule's bisection runs add (margins_by_rule): the rule "aqb" flies its runs as AdaptiveQuadBench's
+#: RotorPy runs go on, no tilt ending one (plant.crash_tilt = 180 deg) and the task AQB_RULE_HEIGHT up, so a vehicle
+#: that is lost flies on and its RMS error grows, where with the 80 deg crash check, or the ground 1 m below, its run
+#: ends with the rows before it well within 5 m (measured: every law on both airframes then "passed" the top of
+#: every range). Rules with the same overrides share their runs.
+RULE_RUNS: dict[str, tuple[str, ...]] = {
+    "ours": (), "aqb": ("plant.crash_tilt=180.0", f"reference.center=[0.0, 0.0, {float(AQB_RULE_HEIGHT)!r}]")}
 
 
 def rule_of(name: str) -> Callable[[RunOutcome], bool]:
@@ -177,18 +191,23 @@ def margins(found: list[Search], *, seeds: int, steps: int, logs: Path, n_jobs: 
 def margins_by_rule(found: list[Search], *, rules: Sequence[str], seeds: int, steps: int, logs: Path,
                     n_jobs: int = 1, backend: Backend | None = None,
                     extra: Sequence[str] = ()) -> dict[str, list[Search]]:
-    """`margins` under each failure rule of `rules` at once: {rule: a copy of `found` with its evaluations}. The
-    bisections run in lockstep and share every run they both ask for (one run per label, intensity and seed), so
-    two rules cost the runs of their union, not twice."""
+    """`margins` under each failure rule of `rules` at once: {rule: a copy of `found` with its evaluations}. Each
+    rule's runs add its RULE_RUNS; the bisections run in lockstep, and rules with the same RULE_RUNS share every run
+    they both ask for (one run per label, intensity and seed)."""
     from dataclasses import replace as copy
 
     from adaptive_mj.study.breaking_point import Search as Probe, search_all
 
     judges = {rule: rule_of(rule) for rule in rules}
     out = {rule: [copy(s, evaluations={}) for s in found] for rule in rules}
-    probes = [Probe(VEHICLES[s.airframe].task, _label(s), (*BASE, *extra, *VEHICLES[s.airframe].law(s.law)),
+
+    def label(s: Search, rule: str) -> str:  # runs of other overrides go under another label
+        return _label(s) + (f"-{rule}-runs" if RULE_RUNS[rule] else "")
+
+    probes = [Probe(VEHICLES[s.airframe].task, label(s, rule),
+                    (*BASE, *RULE_RUNS[rule], *extra, *VEHICLES[s.airframe].law(s.law)),
                     stressor(s.disturbance), math.inf, rule=kind, run_passes=judge, extras=("flight_metrics",))
-              for judge in judges.values() for s in found for kind in ("all", "any")]
+              for rule, judge in judges.items() for s in found for kind in ("all", "any")]
     done = search_all(probes, seeds=seeds, steps=steps, logs=logs, n_jobs=n_jobs, backend=backend,
                       keep_trajectory=False)
     for r, rule in enumerate(rules):
@@ -211,7 +230,8 @@ def grid(d: Disturbance, levels: int) -> list[float]:
 
 
 def grid_jobs(found: list[Search], levels: int, seeds: int, logs: Path, extra: Sequence[str] = ()) -> list[RunSpec]:
-    """Every search's runs on its grid (one batch: the bench's section)."""
+    """Every search's runs on its grid (one batch: the bench's section), as the rule "ours" flies them (for the rule
+    "aqb" as its bisection flies them, add RULE_RUNS["aqb"] to `extra`)."""
     return [j for s in found for v in grid(s.disturbance, levels) for j in _jobs(s, v, seeds, logs, extra)]
 
 
