@@ -17,10 +17,16 @@ What fails a run is a named rule (RULES; `margins`, `grid_results` take rule=):
          task AQB_RULE_HEIGHT up, out of the ground's reach); a run that still ends early (diverged) is judged on
          the rows before its end. The protocol's trials (protocol_jobs) keep the 80 deg crash check (AQB.ours).
 
-The disturbances are the quadrotor kind's (adaptive_mj.plants.quadrotor.DISTURBANCES, which its breaking-point row
-raises too); the delay is this study's (DELAY). The runs: the bundled lemniscate (A = 0.5 m, ω = 1 rad/s at 1 m)
-without its payload, RUN_SECONDS long (their 5 s), with small measurement noise (NOISE, a seed per run), the
-disturbance from t = 0 (a rotor's loss from 1 s).
+Each search flies one airframe (VEHICLES, Search.airframe): the bundled Crazyflie on its lemniscate at the laws'
+default gains (RotorPy's), or AdaptiveQuadBench's 0.826 kg vehicle on its lemniscate (quadrotor_aqb_lemniscate) at
+AdaptiveQuadBench's gains (PROTOCOL_GAINS). The disturbances are the quadrotor kind's (adaptive_mj.plants.quadrotor.
+DISTURBANCES, which its breaking-point row raises too), declared on the Crazyflie; on another airframe each range is
+scaled by the ratio of one quantity of the two compiled models (SCALES, VehicleSize: the weight, the spare lift, one
+rotor's roll authority). The delay is this study's (DELAY); AdaptiveQuadBench's own delay test (AQBDelayTest,
+AQB_DELAY_TEST: 10 ms steps up to 0.5 s until a trajectory's largest error passes 1 m, over a hover, a circle and 3
+rapid trajectories per seed) is `delay_test`, judged by DELAY_RULES. The runs: the airframe's lemniscate (A = 0.5
+m, ω = 1 rad/s at 1 m) without a payload, RUN_SECONDS long (their 5 s), with small measurement noise (NOISE, a seed
+per run), the disturbance from t = 0 (a rotor's loss from 1 s).
 A run the pre-flight check finds unstable by construction (adaptive_mj.sim.preflight: the attitude loop with a
 control delay past its linearised limit) is run like any other and judged by its outcome, as in every study
 (job.RECORD_PREFLIGHT). Two searches per (law, disturbance): by
