@@ -50,7 +50,7 @@ def test_the_ranges_come_from_one_declaration_with_their_sources():
 def test_the_study_output_records_the_ranges_and_is_json():
     found = flight.protocol_results(["geometric"], ["wind"], [0.0, 1.0], 2, {}, rule="aqb")
     out = json.loads(json.dumps(flight.protocol_output({"aqb": found}, seeds=2, levels=[0.0, 1.0])))
-    assert out["format"] == 1 and out["randomization"]["payload_mass_cap"]["value"] == PAYLOAD_CAP
+    assert out["format"] == 2 and out["randomization"]["payload_mass_cap"]["value"] == PAYLOAD_CAP
     assert out["randomization"]["toggle_window"]["source"].endswith("randomization_config.py:323,356")
     assert out["rules"]["aqb"]["curves"][0]["success_rate"] == [0.0, 0.0]  # no runs: every seed fails
     text = flight.protocol_text()

@@ -116,10 +116,10 @@ def test_off_by_default_and_the_stiffness_and_lyapunov_follow_the_key():
 
 
 def test_the_lemniscate_with_the_rigid_payload_flies_with_the_inertia_adapted():
-    """Measured (docs/THEORY.md, "The inertia", measured under MuJoCo's former fluid model; re-measured here with
-    RotorPy's rotor drag and motor lag, issue 52): with the default γ_j the run is ok and tracks as the law without
-    it does (‖p̃‖'s tail RMS 20.4 mm either way, most of it the rotor drag's velocity-proportional force, which the
-    law's constant d̂ cannot follow; 4.2 mm under the fluid model), Ĵ stays bounded and positive definite and moves
+    """Measured (docs/THEORY.md, "The inertia", re-measured with RotorPy's rotor drag and motor lag, issue 52): with
+    the default γ_j the run is ok and tracks as the law without it does (‖p̃‖'s RMS after 2 s 19.6 mm, 19.7 mm
+    without it, most of it the rotor drag's velocity-proportional force, which the law's constant d̂ cannot follow;
+    4.2 mm under MuJoCo's former fluid model), Ĵ stays bounded and positive definite and moves
     slowly (10.7 % in 20 s); it is not identified on this trajectory: Ĵxx rises toward the truth while Ĵyy does
     not, the roll-correlated part of a moment the model leaves out."""
     res = run_scenario("quadrotor_lemniscate", set=["law.adapt_inertia=true"])

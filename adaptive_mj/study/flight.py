@@ -13,12 +13,20 @@ What fails a run is a named rule (RULES; `margins`, `grid_results` take rule=):
   "aqb": AdaptiveQuadBench's own success rule for its disturbance trials: the RMS of ‖p_d − p‖ over the run below
          AQB_RMS_BOUND = 5 m (aqb/experiments/experiment_runner.py, `(df['pos_tracking_error'] < 5).mean()`, the
          error being parallel_data_collection.compute_cost's sqrt(mean ‖x − x_des‖²) over the trajectory), with
-         no crash check. Here a crash ends the run, so a crashed run's RMS covers the rows before it.
+         no crash check. Its bisection runs fly as AdaptiveQuadBench's go on (RULE_RUNS: no tilt ends a run, the
+         task AQB_RULE_HEIGHT up, out of the ground's reach); a run that still ends early (diverged) is judged on
+         the rows before its end. The protocol's trials (protocol_jobs) keep the 80 deg crash check (AQB.ours).
 
-The disturbances are the quadrotor kind's (adaptive_mj.plants.quadrotor.DISTURBANCES, which its breaking-point row
-raises too); the delay is this study's (DELAY). The runs: the bundled lemniscate (A = 0.5 m, ω = 1 rad/s at 1 m)
-without its payload, RUN_SECONDS long (their 5 s), with small measurement noise (NOISE, a seed per run), the
-disturbance from t = 0 (a rotor's loss from 1 s).
+Each search flies one airframe (VEHICLES, Search.airframe): the bundled Crazyflie on its lemniscate at the laws'
+default gains (RotorPy's), or AdaptiveQuadBench's 0.826 kg vehicle on its lemniscate (quadrotor_aqb_lemniscate) at
+AdaptiveQuadBench's gains (PROTOCOL_GAINS). The disturbances are the quadrotor kind's (adaptive_mj.plants.quadrotor.
+DISTURBANCES, which its breaking-point row raises too), declared on the Crazyflie; on another airframe each range is
+scaled by the ratio of one quantity of the two compiled models (SCALES, VehicleSize: the weight, the spare lift, one
+rotor's roll authority). The delay is this study's (DELAY); AdaptiveQuadBench's own delay test (AQBDelayTest,
+AQB_DELAY_TEST: 10 ms steps up to 0.5 s until a trajectory's largest error passes 1 m, over a hover, a circle and 3
+rapid trajectories per seed) is `delay_test`, judged by DELAY_RULES. The runs: the airframe's lemniscate (A = 0.5
+m, ω = 1 rad/s at 1 m) without a payload, RUN_SECONDS long (their 5 s), with small measurement noise (NOISE, a seed
+per run), the disturbance from t = 0 (a rotor's loss from 1 s).
 A run the pre-flight check finds unstable by construction (adaptive_mj.sim.preflight: the attitude loop with a
 control delay past its linearised limit) is run like any other and judged by its outcome, as in every study
 (job.RECORD_PREFLIGHT). Two searches per (law, disturbance): by
@@ -38,8 +46,9 @@ benchmarks/aqb_protocol.py runs it.
 """
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -92,6 +101,18 @@ def aqb_succeeded(r: RunOutcome) -> bool:
 RULES: dict[str, Callable[[RunOutcome], bool]] = {"ours": succeeded, "aqb": aqb_succeeded}
 
 
+#: [m] the height of the rule "aqb"'s runs (RULE_RUNS): a free fall from rest over the whole run, ½ g T², does not
+#: reach the ground plane (AdaptiveQuadBench has none)
+AQB_RULE_HEIGHT = math.ceil(0.5 * 9.81 * RUN_SECONDS ** 2)
+#: what each failure rule's bisection runs add (margins_by_rule): the rule "aqb" flies its runs as AdaptiveQuadBench's
+#: RotorPy runs go on, no tilt ending one (plant.crash_tilt = 180 deg) and the task AQB_RULE_HEIGHT up, so a vehicle
+#: that is lost flies on and its RMS error grows, where with the 80 deg crash check, or the ground 1 m below, its run
+#: ends with the rows before it well within 5 m (measured: every law on both airframes then "passed" the top of
+#: every range). Rules with the same overrides share their runs.
+RULE_RUNS: dict[str, tuple[str, ...]] = {
+    "ours": (), "aqb": ("plant.crash_tilt=180.0", f"reference.center=[0.0, 0.0, {float(AQB_RULE_HEIGHT)!r}]")}
+
+
 def rule_of(name: str) -> Callable[[RunOutcome], bool]:
     """RULES[name], or a ValueError naming the rules."""
     if name not in RULES:
@@ -101,11 +122,12 @@ def rule_of(name: str) -> Callable[[RunOutcome], bool]:
 
 @dataclass
 class Search:
-    """One (law, disturbance) search: its evaluations {intensity: [success per seed]}."""
+    """One (law, disturbance) search on one airframe (VEHICLES): its evaluations {intensity: [success per seed]}."""
 
     law: str
     disturbance: Disturbance
     evaluations: dict[float, list[bool]] = field(default_factory=dict)
+    airframe: str = "crazyflie"  # a key of VEHICLES: the vehicle, its task and its gains
 
     def margin(self) -> tuple[float | None, float | None]:
         """(largest intensity with every seed succeeding, the smallest above it where some failed) (None: none)."""
@@ -125,18 +147,34 @@ class Search:
         return float(np.mean(self.evaluations[v]))
 
 
+def _label(s: Search) -> str:
+    """The search's runs' label: the law (the Crazyflie: the names of issue 33), else airframe-law."""
+    return s.law if s.airframe == "crazyflie" else f"{s.airframe}-{s.law}"
+
+
+def _name(s: Search, v: float) -> str:
+    return f"{_label(s)}-{s.disturbance.name.replace(' ', '_')}={v:.6g}"
+
+
 def _jobs(s: Search, v: float, seeds: int, logs: Path, extra: Sequence[str]) -> list[RunSpec]:
-    d = s.disturbance
-    name = f"{s.law}-{d.name.replace(' ', '_')}={v:.6g}"
-    return [RunSpec(sc.SCENARIOS_DIR / f"{TASK}.toml",
-                overrides=(RECORD_PREFLIGHT, *BASE, *extra, f"law={s.law}", *d.overrides(v)),
+    d, vehicle = s.disturbance, VEHICLES[s.airframe]
+    name = _name(s, v)
+    return [RunSpec(vehicle.task,
+                overrides=(RECORD_PREFLIGHT, *BASE, *extra, *vehicle.law(s.law), *d.overrides(v)),
                 seed=k, log=logs / f"{name}-seed{k}.mcap", tag=f"{name} seed {k}", extras=("flight_metrics",),
                 keep_trajectory=False, expect="measured")  # a probe of a margin: its verdict is the measurement
             for k in range(seeds)]
 
 
-def searches(laws: Sequence[str] = LAWS, disturbances: Sequence[Disturbance] = (*DISTURBANCES, DELAY)) -> list[Search]:
-    return [Search(law, d) for d in disturbances for law in laws]
+def searches(laws: Sequence[str] = LAWS, disturbances: Sequence[Disturbance] | None = None, *,
+             airframe: str = "crazyflie") -> list[Search]:
+    """Per disturbance and law a Search on `airframe` (a key of VEHICLES); disturbances: by default the
+    airframe's (Vehicle.disturbances: the Crazyflie's DISTURBANCES scaled to the vehicle) and the delay DELAY."""
+    if airframe not in VEHICLES:
+        raise ValueError(f"unknown airframe {airframe!r}; expected one of {', '.join(VEHICLES)}")
+    if disturbances is None:
+        disturbances = (*VEHICLES[airframe].disturbances(), DELAY)
+    return [Search(law, d, airframe=airframe) for d in disturbances for law in laws]
 
 
 def stressor(d: Disturbance) -> Stressor:
@@ -150,21 +188,41 @@ def margins(found: list[Search], *, seeds: int, steps: int, logs: Path, n_jobs: 
     (adaptive_mj.study.breaking_point.search_all, the one bisection of every study): per (law, disturbance) a
     search of rule "all" (the margin) and one of rule "any" (when2fail: its first_fail), both judging a run by
     the failure rule RULES[rule] and sharing the runs they both ask for; the range's ends, then `steps` rounds.
-    Each Search's evaluations are then every intensity tried, with each seed's success."""
+    Each Search's evaluations are then every intensity tried, with each seed's success. Each search runs on its
+    airframe's task at its gains (VEHICLES[s.airframe])."""
+    return margins_by_rule(found, rules=(rule,), seeds=seeds, steps=steps, logs=logs, n_jobs=n_jobs,
+                           backend=backend, extra=extra)[rule]
+
+
+def margins_by_rule(found: list[Search], *, rules: Sequence[str], seeds: int, steps: int, logs: Path,
+                    n_jobs: int = 1, backend: Backend | None = None,
+                    extra: Sequence[str] = ()) -> dict[str, list[Search]]:
+    """`margins` under each failure rule of `rules` at once: {rule: a copy of `found` with its evaluations}. Each
+    rule's runs add its RULE_RUNS; the bisections run in lockstep, and rules with the same RULE_RUNS share every run
+    they both ask for (one run per label, intensity and seed)."""
+    from dataclasses import replace as copy
+
     from adaptive_mj.study.breaking_point import Search as Probe, search_all
 
-    judge = rule_of(rule)
-    task = sc.SCENARIOS_DIR / f"{TASK}.toml"
-    probes = [Probe(task, s.law, (*BASE, *extra, f"law={s.law}"), stressor(s.disturbance), math.inf, rule=kind,
-                    run_passes=judge, extras=("flight_metrics",))
-              for s in found for kind in ("all", "any")]
+    judges = {rule: rule_of(rule) for rule in rules}
+    out = {rule: [copy(s, evaluations={}) for s in found] for rule in rules}
+
+    def label(s: Search, rule: str) -> str:  # runs of other overrides go under another label
+        return _label(s) + (f"-{rule}-runs" if RULE_RUNS[rule] else "")
+
+    probes = [Probe(VEHICLES[s.airframe].task, label(s, rule),
+                    (*BASE, *RULE_RUNS[rule], *extra, *VEHICLES[s.airframe].law(s.law)),
+                    stressor(s.disturbance), math.inf, rule=kind, run_passes=judge, extras=("flight_metrics",))
+              for rule, judge in judges.items() for s in found for kind in ("all", "any")]
     done = search_all(probes, seeds=seeds, steps=steps, logs=logs, n_jobs=n_jobs, backend=backend,
                       keep_trajectory=False)
-    for n, s in enumerate(found):
-        for m in done[2 * n:2 * n + 2]:
-            for ev in m.evaluations:
-                s.evaluations[ev.value] = [math.isfinite(t) for t in ev.tails]
-    return found
+    for r, rule in enumerate(rules):
+        for n, s in enumerate(out[rule]):
+            first = 2 * (r * len(found) + n)
+            for m in done[first:first + 2]:
+                for ev in m.evaluations:
+                    s.evaluations[ev.value] = [math.isfinite(t) for t in ev.tails]
+    return out
 
 
 def grid(d: Disturbance, levels: int) -> list[float]:
@@ -178,7 +236,8 @@ def grid(d: Disturbance, levels: int) -> list[float]:
 
 
 def grid_jobs(found: list[Search], levels: int, seeds: int, logs: Path, extra: Sequence[str] = ()) -> list[RunSpec]:
-    """Every search's runs on its grid (one batch: the bench's section)."""
+    """Every search's runs on its grid (one batch: the bench's section), as the rule "ours" flies them (for the rule
+    "aqb" as its bisection flies them, add RULE_RUNS["aqb"] to `extra`)."""
     return [j for s in found for v in grid(s.disturbance, levels) for j in _jobs(s, v, seeds, logs, extra)]
 
 
@@ -188,7 +247,7 @@ def grid_results(found: list[Search], levels: int, seeds: int, results: dict[str
     succeeded = rule_of(rule)
     for s in found:
         for v in grid(s.disturbance, levels):
-            name = f"{s.law}-{s.disturbance.name.replace(' ', '_')}={v:.6g}"
+            name = _name(s, v)
             s.evaluations[v] = [succeeded(results[f"{name} seed {k}"]) if f"{name} seed {k}" in results else False
                                 for k in range(seeds)]
     return found
@@ -208,25 +267,31 @@ def bracket_text(d: Disturbance, lo: float | None, hi: float | None, *, upper: b
 
 def table(found: list[Search], laws: Sequence[str] = LAWS) -> Table:
     """Per disturbance, each law's margin (every seed succeeds) and when2fail (every seed fails), each with the
-    nearest evaluated value on its other side (the resolution); its to_markdown() is the report's table."""
-    by = {(s.law, s.disturbance.name): s for s in found}
+    nearest evaluated value on its other side (the resolution); its to_markdown() is the report's table. Searches
+    on more than one airframe: a row per airframe and disturbance, with an airframe column."""
+    by = {(s.airframe, s.law, s.disturbance.name): s for s in found}
+    frames = list(dict.fromkeys(s.airframe for s in found))
     rows = []
-    for name in dict.fromkeys(s.disturbance.name for s in found):
-        row: dict[str, str] = {"disturbance": name}
+    for frame, name in dict.fromkeys((s.airframe, s.disturbance.name) for s in found):
+        row: dict[str, str] = {"airframe": frame} if len(frames) > 1 else {}
+        row["disturbance"] = name
         for law in laws:
-            s = by[(law, name)]
+            s = by[(frame, law, name)]
             row[LAW_LABEL.get(law, law)] = (f"margin {bracket_text(s.disturbance, *s.margin(), upper=False)}; "
                                             f"when2fail {bracket_text(s.disturbance, *s.when2fail(), upper=True)}")
         rows.append(row)
-    return Table.of(rows, ["disturbance", *(LAW_LABEL.get(law, law) for law in laws)])
+    head = ["airframe"] if len(frames) > 1 else []
+    return Table.of(rows, [*head, "disturbance", *(LAW_LABEL.get(law, law) for law in laws)])
 
 
 def as_rows(found: list[Search]) -> list[dict]:
-    """JSON-ready rows: law, disturbance, unit, margin and when2fail brackets, every evaluation's success rate."""
+    """JSON-ready rows: airframe, law, disturbance, unit, its range searched [lo, hi], margin and when2fail
+    brackets, every evaluation's success rate."""
     out = []
     for s in found:
         (m_lo, m_hi), (w_lo, w_hi) = s.margin(), s.when2fail()
-        out.append({"law": s.law, "disturbance": s.disturbance.name, "unit": s.disturbance.unit,
+        out.append({"airframe": s.airframe, "law": s.law, "disturbance": s.disturbance.name,
+                    "unit": s.disturbance.unit, "range": [s.disturbance.lo, s.disturbance.hi],
                     "margin": m_lo, "margin_first_fail": m_hi, "when2fail": w_hi, "when2fail_last_success": w_lo,
                     "success_rate": {repr(v): s.success_rate(v) for v in sorted(s.evaluations)}})
     return out
@@ -363,6 +428,310 @@ PROTOCOL_GAINS: dict[str, tuple[str, ...]] = {
 AXES = {"wind": "m/s", "force": "N", "torque": "N m", "rotor_efficiency": "", "payload": "× vehicle mass"}
 
 
+# --------------------------------------------------------------------------------------------------------------------
+# The flight study on both airframes (issue 52, item 5): the Crazyflie's task and AdaptiveQuadBench's vehicle's, each
+# at its own gains, the disturbances' ranges scaled from the Crazyflie's by the compiled models
+
+#: what each disturbance's range scales with from the Crazyflie's (plants.quadrotor.DISTURBANCES, declared on the
+#: bundled Crazyflie) to another airframe: the ratio of this quantity of the two compiled models (VehicleSize);
+#: None: the same range on every airframe
+SCALES: dict[str, str | None] = {"wind": None, "force": "weight", "torque": "roll authority", "payload": "spare lift",
+                                 "rotor loss": None}
+
+
+@dataclass(frozen=True)
+class VehicleSize:
+    """The quantities a disturbance's range scales with (SCALES), from a compiled model (the task's plant without a
+    payload): weight m g [N]; spare lift (Σ T_max − m g)/g [kg], the payload the rotors could just hold; roll
+    authority max_i T_max,i |y_i| [N m], the largest torque one rotor puts about the body's x axis."""
+
+    mass: float  # [kg]
+    weight: float  # [N]
+    spare_lift: float  # [kg]
+    roll_authority: float  # [N m]
+
+    def of(self, quantity: str) -> float:
+        return {"weight": self.weight, "spare lift": self.spare_lift, "roll authority": self.roll_authority}[quantity]
+
+
+#: the unit of each scaled quantity
+SCALE_UNITS = {"weight": "N", "spare lift": "kg", "roll authority": "N m"}
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """One airframe of the flight study: name (a key of VEHICLES), scenario (its task: a file under scenarios/,
+    whose plant.model is the vehicle; run without its payload, BASE), gains: per law the overrides that swap the
+    law in at this vehicle's gains (None: `law=NAME` at the law's defaults, RotorPy's Crazyflie gains)."""
+
+    name: str
+    scenario: str
+    gains: dict[str, tuple[str, ...]] | None = None
+    doc: str = ""
+
+    @property
+    def task(self) -> Path:
+        return sc.SCENARIOS_DIR / f"{self.scenario}.toml"
+
+    def law(self, law: str) -> tuple[str, ...]:
+        """The overrides that fly `law` on this vehicle (a law swap, then its gains)."""
+        return (f"law={law}",) if self.gains is None else self.gains[law]
+
+    def size(self) -> VehicleSize:
+        """The vehicle's VehicleSize, from its task's compiled model without a payload."""
+        return _size(str(sc.load(self.task, overrides=("plant.payload='none'",)).plant.model))
+
+    def disturbances(self) -> tuple[Disturbance, ...]:
+        """plants.quadrotor.DISTURBANCES with each range scaled by SCALES from the Crazyflie's compiled model to
+        this vehicle's (the Crazyflie's: unchanged)."""
+        base = VEHICLES["crazyflie"]
+        if self.name == base.name:
+            return DISTURBANCES
+        mine, ref = self.size(), base.size()
+        out = []
+        for d in DISTURBANCES:
+            q = SCALES[d.name]
+            if q is None:
+                out.append(d)
+                continue
+            r = mine.of(q) / ref.of(q)
+            out.append(replace(d, lo=d.lo * r, hi=d.hi * r,
+                               doc=f"the Crazyflie's range ({d.lo:.3g} to {d.hi:.3g} {d.unit}) × {r:.4g}, the ratio "
+                                   f"of the vehicles' {q} ({mine.of(q):.4g} to {ref.of(q):.4g} {SCALE_UNITS[q]})"))
+        return tuple(out)
+
+
+@functools.cache
+def _size(model: str) -> VehicleSize:
+    """VehicleSize of the quadrotor MJCF at `model` (a path), compiled."""
+    from adaptive_mj.plants import quadrotor
+
+    plant = quadrotor.load(model)
+    frame, g = plant.airframe, float(-plant.model.opt.gravity[2])
+    return VehicleSize(mass=frame.mass, weight=frame.mass * g,
+                       spare_lift=(float(frame.thrust_max.sum()) - frame.mass * g) / g,
+                       roll_authority=float(np.max(frame.thrust_max * np.abs(frame.rotors[:, 1]))))
+
+
+#: the flight study's airframes: the bundled Crazyflie on its lemniscate at RotorPy's gains (the laws' defaults),
+#: and AdaptiveQuadBench's 0.826 kg vehicle on its lemniscate at AdaptiveQuadBench's gains (PROTOCOL_GAINS)
+VEHICLES: dict[str, Vehicle] = {
+    "crazyflie": Vehicle("crazyflie", TASK, None, "RotorPy's Crazyflie 2.x (models/quadrotor.xml, 30 g)"),
+    "aqb": Vehicle("aqb", "quadrotor_aqb_lemniscate", PROTOCOL_GAINS,
+                   "AdaptiveQuadBench's quadrotor (models/quadrotor_aqb.xml, 0.826 kg) at its geometric gains"),
+}
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# AdaptiveQuadBench's delay test, as it defines it (aqb/experiments/experiment_runner.py:311-352 at ee7df29, calling
+# aqb/utils/delay_analysis.py's compute_delay_margin and generate_random_trajectories)
+
+_RUNNER = "aqb/experiments/experiment_runner.py"
+_DELAY = "aqb/utils/delay_analysis.py"
+
+
+@dataclass(frozen=True)
+class AQBDelayTest:
+    """AdaptiveQuadBench's delay test, every figure cited at AQB_COMMIT: per controller and trajectory, the control
+    delay is raised from `start` by `step` until a 5 s run's largest position error exceeds `bound` (no crash
+    check: RotorPy runs on with terminate=False); the trajectory's delay margin is that delay less one step (`stop`
+    if none fails). Its trajectories: a hover, a circle, and rapid (motion-primitive) ones whose goals widen with a
+    difficulty (i + 1)/(n − 2). What this suite does differently is in `ours`."""
+
+    start: Cited = Cited(0.0, "s", f"{_RUNNER}:347", "the first delay (initial_delay)")
+    step: Cited = Cited(0.01, "s", f"{_RUNNER}:349", "the delay's step (delay_step)")
+    stop: Cited = Cited(0.5, "s", f"{_RUNNER}:348", "the largest delay tried (max_delay)")
+    duration: Cited = Cited(5.0, "s", f"{_RUNNER}:350", "each run's length (test_duration)")
+    bound: Cited = Cited(1.0, "m", f"{_RUNNER}:351; {_DELAY}:205-220",
+                         "unstable when max_t ‖x − x_des‖ exceeds this (position_threshold)")
+    trajectories: Cited = Cited(5.0, "", f"{_RUNNER}:321-322; {_DELAY}:89-98",
+                                "how many trajectories: a hover, a circle and n − 2 rapid ones")
+    circle_radius: Cited = Cited(2.0, "m", f"{_DELAY}:94", "CircularTraj(center=(−2, 0, 0), radius=2)")
+    circle_frequency: Cited = Cited(0.2, "Hz", "rotorpy/trajectories/circular_traj.py:12 (spencerfolk/rotorpy)",
+                                    "CircularTraj's default freq (AdaptiveQuadBench passes none)")
+    rapid_position: Cited = Cited((2.0, 2.0), "m", f"{_DELAY}:110-112",
+                                  "goal position U(−r, r) per axis, r = lo + hi·difficulty, z made positive")
+    rapid_velocity: Cited = Cited((1.0, 2.0), "m/s", f"{_DELAY}:115-116",
+                                  "goal velocity U(−r, r), r = lo + hi·difficulty")
+    rapid_acceleration: Cited = Cited((0.5, 1.5), "m/s²", f"{_DELAY}:119-120",
+                                      "goal acceleration U(−r, r), r = lo + hi·difficulty")
+    sim_rate: Cited = Cited(100.0, "Hz", f"{_DELAY}:182", "RotorPy's simulation (and control) rate")
+
+    ours: tuple[str, ...] = (
+        "the delay: whole physics steps of 2 ms (simulation.control_delay), 10 ms = 5 steps; AdaptiveQuadBench "
+        "simulates and controls at 100 Hz, so its 10 ms step is one control period",
+        "the circle: a lemniscate (x = A sin ωt, y = (A/2) sin 2ωt) of A = the circle's radius at ω = 2π·0.2 rad/s: "
+        "this suite's references have no circle",
+        "the trajectories start at rest 5 m up (as PROTOCOL_TASK; AdaptiveQuadBench has no ground), on the reference",
+        "the rapid trajectories' goals: drawn per seed from a numpy Generator (AdaptiveQuadBench: the global numpy "
+        "state), the same at every delay",
+        "each run starts afresh (AdaptiveQuadBench reuses one controller object across the delays of a trajectory, "
+        "so an adaptive law carries its estimates over)",
+        "no tilt ends a run (plant.crash_tilt = DELAY_TEST_CRASH_TILT = 180 deg), as RotorPy's runs go on "
+        "(terminate=False): a vehicle that tumbles flies on and its error grows past the bound, where a crash at the "
+        "default 80 deg would end the run with the rows before it within 1 m (measured: every law on the Crazyflie "
+        "'passed' 0.3 s of delay so). A run still ends at the ground (5 m below the start) or if it diverges, and "
+        "is judged over the rows before; the rule 'ours' here sees no tilt crash, only its error and stability",
+    )
+
+    def levels(self) -> list[float]:
+        """The delays tried [s]: start, start + step, ... up to stop (0, 0.01, ..., 0.5)."""
+        lo, step, hi = self.start.number, self.step.number, self.stop.number
+        return [round(lo + k * step, 12) for k in range(int(math.floor((hi - lo) / step + 1e-9)) + 1)]
+
+    def rapid_goals(self, seed: int) -> list[tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]]:
+        """The n − 2 rapid trajectories' goals (position [m], velocity [m/s], acceleration [m/s²], each (3,)) of
+        seed `seed`: the i-th at difficulty (i + 1)/(n − 2), each range ±(lo + hi·difficulty) per axis, the goal's
+        z made positive, drawn from numpy's Generator for the seed."""
+        rng = np.random.default_rng(np.random.SeedSequence(seed))
+        n = int(self.trajectories.number) - 2
+        out = []
+        for i in range(n):
+            d = (i + 1) / n
+            p, v, a = ((r.range[0] + r.range[1] * d) for r in (self.rapid_position, self.rapid_velocity,
+                                                                self.rapid_acceleration))
+            pos, vel, acc = rng.uniform(-p, p, size=3), rng.uniform(-v, v, size=3), rng.uniform(-a, a, size=3)
+            pos[2] = abs(pos[2])
+            out.append(tuple(tuple(float(x) for x in g) for g in (pos, vel, acc)))
+        return out  # type: ignore[return-value]
+
+    def references(self, seed: int, center: Sequence[float] = (0.0, 0.0, 5.0)) -> list[tuple[str, str]]:
+        """(name, the `reference={...}` override) of each of the test's trajectories for seed `seed`, starting at
+        `center` [m]: hover, circle (a lemniscate: `ours`), rapid1 .. rapid(n − 2)."""
+        c = [float(x) for x in center]
+        omega = 2 * math.pi * self.circle_frequency.number
+        out = [("hover", f"reference={{kind='hover', center={c!r}}}"),
+               ("circle", f"reference={{kind='lemniscate', center={c!r}, amplitude={self.circle_radius.number!r}, "
+                          f"omega={omega!r}}}")]
+        dur = self.duration.number
+        for i, (p, v, a) in enumerate(self.rapid_goals(seed)):
+            out.append((f"rapid{i + 1}", f"reference={{kind='motion_primitive', center={c!r}, position={list(p)!r}, "
+                                         f"velocity={list(v)!r}, acceleration={list(a)!r}, duration={dur!r}}}"))
+        return out
+
+    def record(self) -> dict:
+        from dataclasses import fields
+
+        out: dict = {f.name: getattr(self, f.name).record() for f in fields(self) if f.name != "ours"}
+        out["ours"] = list(self.ours)
+        return out
+
+
+AQB_DELAY_TEST = AQBDelayTest()
+
+#: the delay test's axis (a Disturbance for Search, table and as_rows): a control delay [s] in AQB_DELAY_TEST's steps
+AQB_DELAY = Disturbance("delay (AQB test)", "s",
+                        lambda v: [f"simulation.control_delay={int(round(v / DT))}"], AQB_DELAY_TEST.start.number,
+                        AQB_DELAY_TEST.stop.number, step=AQB_DELAY_TEST.step.number,
+                        doc="AdaptiveQuadBench's delay test: raised by 10 ms until a trajectory's largest position "
+                            "error passes 1 m, over a hover, a circle and 3 rapid trajectories per seed")
+
+
+def aqb_delay_succeeded(r: RunOutcome) -> bool:
+    """AdaptiveQuadBench's delay test's rule: the largest position error over the run [m] (flight_metrics'
+    max_error) at most AQB_DELAY_TEST.bound, whether or not the run crashed (its rows before the end); a run
+    without that figure, or with a non-finite one, fails."""
+    if r.status not in (*COMPLETED, Status.CRASHED):
+        return False
+    e = (r.extras.get("flight_metrics") or {}).get("max_error")
+    return e is not None and math.isfinite(e) and e <= AQB_DELAY_TEST.bound.number
+
+
+#: the delay test's failure rules, by the names of RULES: "aqb" its own bound (no crash check), "ours" as RULES
+DELAY_RULES: dict[str, Callable[[RunOutcome], bool]] = {"aqb": aqb_delay_succeeded, "ours": succeeded}
+
+
+#: [deg] the delay test's runs' plant.crash_tilt: no tilt ends them (AQBDelayTest.ours)
+DELAY_TEST_CRASH_TILT = 180.0
+
+
+def _delay_name(airframe: str, law: str, traj: str, v: float) -> str:
+    return f"{airframe}-{law}-aqbdelay-{traj}={v:.6g}"
+
+
+def delay_jobs(airframe: str, law: str, v: float, seeds: Sequence[int], logs: Path, extra: Sequence[str] = (),
+               test: AQBDelayTest = AQB_DELAY_TEST) -> list[RunSpec]:
+    """The delay test's runs of `law` on `airframe`'s task at delay v [s]: per seed k, each of the test's
+    trajectories (test.references(k)), test.duration long, without a payload, no tilt ending the run
+    (DELAY_TEST_CRASH_TILT), noise seed k."""
+    vehicle = VEHICLES[airframe]
+    base = ("plant.payload='none'", f"plant.crash_tilt={DELAY_TEST_CRASH_TILT!r}",
+            f"simulation.duration={test.duration.number!r}", "log.rate_hz=20", NOISE)
+    return [RunSpec(vehicle.task, overrides=(RECORD_PREFLIGHT, *base, *extra, *vehicle.law(law), ref,
+                                             *AQB_DELAY.overrides(v)),
+                    seed=k, log=logs / f"{_delay_name(airframe, law, name, v)}-seed{k}.mcap",
+                    tag=f"{_delay_name(airframe, law, name, v)} seed {k}", extras=("flight_metrics",),
+                    keep_trajectory=False, expect="measured")
+            for k in seeds for name, ref in test.references(k)]
+
+
+def scan_results(levels: Sequence[float], outcomes: dict[float, list[RunOutcome | None]],
+                 judge: Callable[[RunOutcome], bool]) -> dict[float, list[bool]]:
+    """AdaptiveQuadBench's scan, judged: outcomes {delay: [run per (seed, trajectory), None where not run]} ->
+    {delay: [success]}: a column succeeds at a delay when `judge` passes its run there and at every delay below
+    (the scan stops at a trajectory's first instability: every delay above it fails)."""
+    n = len(outcomes[levels[0]])
+    alive = [True] * n
+    out: dict[float, list[bool]] = {}
+    for v in levels:
+        row = outcomes.get(v, [None] * n)
+        alive = [a and r is not None and judge(r) for a, r in zip(alive, row, strict=True)]
+        out[float(v)] = list(alive)
+    return out
+
+
+def scan_margins(s: Search, step: float) -> list[float]:
+    """Each column's (seed, trajectory's) delay margin as AdaptiveQuadBench gives it (compute_delay_margin): the
+    first delay that failed less one step, or the largest delay tried where none failed [s]."""
+    levels = sorted(s.evaluations)
+    cols = len(s.evaluations[levels[0]])
+    out = []
+    for j in range(cols):
+        first = next((v for v in levels if not s.evaluations[v][j]), None)
+        out.append(levels[-1] if first is None else round(first - step, 12))
+    return out
+
+
+def delay_test(laws: Sequence[str] = LAWS, *, airframe: str, seeds: int, logs: Path, n_jobs: int = 1,
+               backend: Backend | None = None, extra: Sequence[str] = (), rules: Sequence[str] = ("aqb", "ours"),
+               test: AQBDelayTest = AQB_DELAY_TEST) -> dict[str, list[Search]]:
+    """AdaptiveQuadBench's delay test (AQBDelayTest) of each law on `airframe`: the delay raised through
+    test.levels(), each level one batch of the runs (law, seed, trajectory) still passing under some rule of
+    `rules` (DELAY_RULES); {rule: a Search per law on the axis AQB_DELAY, its evaluations {delay: [success per
+    (seed, trajectory)]} after scan_results}. Its margin is the largest delay every trajectory of every seed
+    passed, its when2fail the smallest at which all had failed; scan_margins gives each trajectory's."""
+    from adaptive_mj.study.parallel import run_jobs
+
+    judges = [DELAY_RULES[r] for r in rules]
+    levels = test.levels()
+    runs: dict[str, dict[float, list[RunOutcome | None]]] = {law: {} for law in laws}
+    alive = {law: None for law in laws}  # type: dict[str, list[bool] | None]
+    for v in levels:
+        batch: list[tuple[str, list[RunSpec]]] = []
+        for law in laws:
+            jobs = delay_jobs(airframe, law, v, range(seeds), logs, extra, test)
+            keep = alive[law] or [True] * len(jobs)
+            batch.append((law, [j for j, a in zip(jobs, keep, strict=True) if a]))
+        flat = [j for _, js in batch for j in js]
+        if not flat:
+            break
+        done = iter(run_jobs(flat, n_jobs=n_jobs, backend=backend))
+        for law, _ in batch:
+            keep = alive[law] or [True] * (seeds * int(test.trajectories.number))
+            row = [next(done) if a else None for a in keep]
+            runs[law][v] = row
+            alive[law] = [a and r is not None and any(j(r) for j in judges) for a, r in zip(keep, row, strict=True)]
+    out: dict[str, list[Search]] = {}
+    for rule, judge in zip(rules, judges, strict=True):
+        out[rule] = []
+        for law in laws:
+            s = Search(law, AQB_DELAY, airframe=airframe)
+            tried = [v for v in levels if v in runs[law]]
+            s.evaluations = scan_results(tried, runs[law], judge)
+            out[rule].append(s)
+    return out
+
+
 @dataclass(frozen=True)
 class TaskDraw:
     """One seed's task on one axis at one intensity (draw_task): the motion primitive's goal (3,) each, relative
@@ -460,8 +829,9 @@ def draw_task(seed: int, axis: str, intensity: float, protocol: AQBProtocol = AQ
                     factors, ratio * p.vehicle_mass.number, offset)  # type: ignore[arg-type]
 
 
-#: the format of protocol_output's object (a new key or a changed meaning bumps it; readers check it)
-PROTOCOL_FORMAT = 1
+#: the format of protocol_output's object (a new key or a changed meaning bumps it; readers check it). 2: each row
+#: (as_rows) names its airframe ("aqb") and the range searched
+PROTOCOL_FORMAT = 2
 
 
 def protocol_levels(protocol: AQBProtocol = AQB) -> list[float]:
@@ -504,7 +874,7 @@ def protocol_results(laws: Sequence[str], axes: Sequence[str], levels: Sequence[
     for axis in axes:
         d = protocol_axis(axis, levels)
         for law in laws:
-            s = Search(law, d)
+            s = Search(law, d, airframe="aqb")
             for v in levels:
                 tags = [f"{_protocol_name(law, axis, v)} seed {k}" for k in range(seeds)]
                 s.evaluations[float(v)] = [judge(results[t]) if t in results else False for t in tags]
