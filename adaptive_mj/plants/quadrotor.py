@@ -860,7 +860,8 @@ def _payload_added(m0: float) -> Callable[[float], list[str]]:
 KIND = register(PlantKind(
     "quadrotor", __name__, frozenset({Form.AIRFRAME}), output_unit="m", control_unit="N", params=PARAM_UNITS,
     default_model="quadrotor", default_law="geometric_adaptive",
-    doc="a Crazyflie-size quadrotor (RotorPy's parameters, rotor drag and motor lag) with an unknown payload",
+    doc=("a quadrotor, RotorPy's Crazyflie or AdaptiveQuadBench's 0.826 kg vehicle (rotor drag, motor lag), with an "
+         "unknown payload"),
     keys=plant_keys.keys(CRASH_TILT, ROTOR_TIME_CONSTANT, WIND, payload=True, default_payload=None),
     reader=plant_keys.SharedReader(backend=("mujoco", "a free body flown in MuJoCo with RotorPy's rotor drag"),
                                    body=_own_keys),
