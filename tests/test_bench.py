@@ -221,3 +221,27 @@ def test_the_bench_s_progress_counts_runs_not_ok_and_of_them_the_unexpected_not_
     for expect, status in (("ok", "ok"), ("fail", "diverged"), ("measured", "failed"), ("ok", "failed")):
         update(RunOutcome(RunSpec(Path("x.toml"), tag=f"{expect}-{status}", expect=expect), status, None))
     assert stream.getvalue().startswith("4/4 runs done, not ok 3 (1 unexpected), ")
+
+
+def test_the_breaking_point_study_s_probes_are_measurements_so_its_progress_says_not_ok():
+    """The newcomer's bench printed "failed 546" through its breaking-point study, whose probes are meant to find
+    where each law fails: every probe is declared a measurement (RunSpec.expect "measured"), so the progress line
+    counts them "not ok N (0 unexpected)"."""
+    import io
+    from pathlib import Path
+
+    from adaptive_mj.study import breaking_point as bp
+    from adaptive_mj.study.parallel import RunOutcome, progress_printer
+    from adaptive_mj.study.stress import BENCH_SETTINGS, study
+
+    searches = study(composite=False, duration=BENCH_SETTINGS["duration"], plant_laws=BENCH_SETTINGS["plant_laws"],
+                     plant_names=BENCH_SETTINGS["plant_names"])[:3]
+    batches = bp._Batches(searches, [], seeds=2, logs=Path("logs"), n_jobs=1, backend=None, on_done=None,
+                          keep_trajectory=False, screen=False)
+    jobs = [job for i, s in enumerate(searches) for job in batches.jobs_for(i, s.stressor.hi, range(2))]
+    assert len(jobs) == 6 and {job.expect for job in jobs} == {"measured"}
+    stream = io.StringIO()
+    update = progress_printer(len(jobs), stream=stream, clock=lambda: 0.0)
+    for job in jobs:
+        update(RunOutcome(job, "failed", None))
+    assert stream.getvalue().startswith("6/6 runs done, not ok 6 (0 unexpected), "), stream.getvalue()

@@ -216,7 +216,7 @@ class _Batches:
         return [RunSpec(s.scenario, overrides=(RECORD_PREFLIGHT, *s.overrides, *s.stressor.overrides(value)), seed=k,
                     log=self.logs / safe / f"{_file_name(s.stressor.name)}={text}-seed{k}.mcap",
                     tag=f"{s.label} {s.stressor.name}={text} seed {k}", keep_trajectory=self.keep_trajectory,
-                    extras=s.extras)
+                    extras=s.extras, expect="measured")  # a probe of a margin: its verdict is the measurement
                 for k in which]
 
     def run(self, batch: list[tuple[int, float, range]]) -> list[list[RunOutcome]]:
