@@ -84,11 +84,13 @@ def test_modify_rate_leaks_toward_theta0_by_sigma_plus_nu_s():
 
 def test_modify_rate_stops_a_rate_that_leaves_the_box_and_keeps_one_that_enters_it():
     """At (or past) the lower bound a falling rate is 0 and a rising one kept; at the upper bound the mirror; inside
-    every rate is kept."""
+    every rate is kept (rates of 0.5 and 2 in size: a threshold other than 0 shows)."""
     lo, hi = [0.0, 0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0, 1.0]
-    got = _modify([-1.0, 1.0, 1.0, -1.0, -1.0], [0.0, 0.0, 1.0, 1.0, 0.5], 0.0, 0.0, 0.0, [0.0] * 5, [1.0] * 5, lo,
+    got = _modify([-0.5, 0.5, 0.5, -0.5, -2.0], [0.0, 0.0, 1.0, 1.0, 0.5], 0.0, 0.0, 0.0, [0.0] * 5, [1.0] * 5, lo,
                   hi)
-    assert got.tolist() == [0.0, 1.0, 0.0, -1.0, -1.0]
+    assert got.tolist() == [0.0, 0.5, 0.0, -0.5, -2.0]
+    got = _modify([-2.0, 2.0], [0.0, 1.0], 0.0, 0.0, 0.0, [0.0] * 2, [1.0] * 2, [0.0, 0.0], [1.0, 1.0])
+    assert got.tolist() == [0.0, 0.0]
     got = _modify([-1.0, 1.0], [-0.5, 1.5], 0.0, 0.0, 0.0, [0.0] * 2, [1.0] * 2, [0.0, 0.0], [1.0, 1.0])
     assert got.tolist() == [0.0, 0.0]
 

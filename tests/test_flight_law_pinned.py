@@ -120,6 +120,8 @@ def _reference(x, r, th, P, G, aug):
     w = r[2] - c * ev + G_ACC * E3
     F = m * w - d - k * s if adaptive else -kx * ex - kv * ev + m * G_ACC * E3 + m * r[2]
     f = F @ R[:, 2]
+    if not np.sqrt(F @ F) > 1e-12:  # no force asked: R_d level (F taken as e₃, ‖F‖ = 1), f = 0 as asked
+        F = E3.copy()
     Rd = _desired(F)
     eR = 0.5 * _vee(Rd.T @ R - R.T @ Rd)
     Wd = _omega_d(F, m * r[3])
@@ -247,6 +249,23 @@ def test_no_force_asked_flies_level():
     np.testing.assert_allclose(A @ u, [0.0, -1e-4, 2e-4, -3e-4], rtol=1e-12, atol=1e-18)
 
 
+@pytest.mark.parametrize("law", ["geometric", "adaptive_inertia"])
+def test_no_force_asked_at_a_tilted_turning_state(law):
+    """F = 0 exactly (the reference in free fall, on it; m̂ p̈_d cancels gravity) while tilted, turning and with a
+    jerk and snap: f = 0 and R_d level (b₃d = e₃, ‖F‖ taken as 1 for Ω_d), against the reference."""
+    P = _params(fk.MODE_GEOMETRIC) if law == "geometric" else _params(fk.MODE_ADAPTIVE, adapt=1.0, adapt_j=1.0)
+    th = np.array([0.03, 1.5e-5, 1.6e-5, 2.9e-5, 1e-6, -2e-6, 1.5e-6, 0.0, 0.0, 0.0, 1e-4, -2e-4, 3e-4])
+    x = np.array([[0.0, 0.0, 1.0], [0.3, -0.2, 0.1], [0.3, -0.2, 0.4], [1.0, -2.0, 0.5]])
+    r = np.array([[0.0, 0.0, 1.0], [0.3, -0.2, 0.1], [0.0, 0.0, -G_ACC], [0.5, -1.0, 2.0], [3.0, 1.0, -2.0]])
+    if law != "geometric":  # F = m̂ w − d̂ − k s with s = 0 and w = p̈_d + g e₃ = 0
+        r[2] = [0.0, 0.0, -G_ACC]
+    u, s, _ = _run(x, r, th, P, _gains())
+    u_ref, _, _ = _reference(x, r, th, P, _gains(), np.zeros(6))
+    assert s.tolist() == [0.0, 0.0, 0.0]
+    np.testing.assert_allclose(u, u_ref, rtol=1e-7, atol=1e-14)
+    assert (A @ u)[0] == pytest.approx(0.0, abs=1e-15)
+
+
 def test_a_force_along_the_heading_keeps_b2_on_e2():
     """F along e₁ (p̈_d = (5, 0, −g)): b₃ = e₁ leaves b₃ × e₁ = 0; b₂ = e₂ then, b₁ = e₂ × e₁ = −e₃, and at R = I
     e_R = ½ vee(R_dᵀ − R_d) = (0, −1, 0): M = (0, k_R, 0), f = F·e₃ = 0."""
@@ -260,15 +279,18 @@ def test_a_force_along_the_heading_keeps_b2_on_e2():
 @pytest.mark.parametrize("on_s", [1.0, 0.0])
 def test_a_closed_dead_zone_stops_every_rate_and_an_open_one_at_its_edge_adapts(on_s):
     """The dead-zone on ‖s‖ (or on ‖e_x‖): below its width no estimate moves (rates exactly 0, the inertia's too);
-    at the width exactly it adapts. e_x = (0.3, 0, 0.4) (‖e_x‖ = 0.5), e_v = 0 (s = (0.48, 0, 0.72),
-    ‖s‖ = 0.865332...)."""
-    x = np.array([[0.3, 0.0, 1.4], [0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.5, 0.0, 0.0]])
-    r = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.5, 0.0, 0.0]])
+    from the width on (exactly at it included) it adapts. Numbers exact in binary: p − p_d = (1.25, −0.5, 1.5) −
+    (1, −1, 1) = (0.25, 0.5, 0.5) (‖e_x‖ = 0.75), v = v_d (e_v = 0), c = 2 on every axis: s = (0.5, 1, 1),
+    ‖s‖ = 1.5."""
+    x = np.array([[1.25, -0.5, 1.5], [0.3, -0.2, 0.1], [0.1, 0.0, 0.0], [0.5, 0.0, 0.0]])
+    r = np.array([[1.0, -1.0, 1.0], [0.3, -0.2, 0.1], [0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.5, 0.0, 0.0]])
     th = np.array([0.03, 1.43e-5, 1.43e-5, 2.86e-5, 0, 0, 0, 0, 0, 0, 0, 0, 0])
-    signal = math.sqrt(0.48 ** 2 + 0.72 ** 2) if on_s else 0.5
-    for width, adapts in ((signal * (1 + 1e-9), False), (signal * (1 - 1e-12), True)):
+    signal = 1.5 if on_s else 0.75
+    for width, adapts in ((signal * (1 + 1e-12), False), (signal, True), (signal * (1 - 1e-12), True)):
         P = _params(fk.MODE_ADAPTIVE, adapt=1.0, adapt_j=1.0, dz_width=width, dz_on_s=on_s)
-        _, _, rate = _run(x, r, th, P, _gains())
+        P[fk.P_C:fk.P_C + 3] = 2.0
+        _, s, rate = _run(x, r, th, P, _gains())
+        assert s.tolist() == [0.5, 1.0, 1.0]
         if adapts:
             assert rate[0] != 0.0 and np.all(rate[1:4] != 0.0) and np.all(rate[10:13] != 0.0)
         else:
@@ -376,10 +398,104 @@ def test_yaw_last_with_a_rotor_already_outside_drops_the_yaw_and_no_yaw_keeps_it
                                atol=1e-15)
 
 
+def _yaw_last_reference(Ainv, f, M, tmax):
+    """The yaw-last rule solved by bisection rather than in closed form: the largest k in [0, 1] such that the yaw's
+    share k pushes no rotor of u(k) = Ainv [f, M0, M1, 0] + k Ainv[:, 3] M2 past the limit it moves toward (a rotor
+    the yaw raises stays at or below T_max_i, one it lowers at or above 0; one already past that limit: k = 0); the
+    exact inverse where it fits in [0, T_max_i]. (This is the allocation's closed form; its docstring's looser
+    "no rotor further outside than at k = 0" would let a rotor below 0 rise past T_max by as much.)"""
+    a = Ainv[:, :3] @ np.array([f, M[0], M[1]])
+    b = Ainv[:, 3] * M[2]
+    exact = Ainv @ np.array([f, *M])
+    if np.all((exact >= 0.0) & (exact <= tmax)):
+        return exact
+
+    def allowed(k):
+        u = a + k * b
+        return bool(np.all(((b <= 0) | (u <= tmax)) & ((b >= 0) | (u >= 0.0))))
+
+    lo, hi = 0.0, 1.0
+    if allowed(1.0):
+        lo = 1.0
+    elif allowed(0.0):
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            if mid in (lo, hi):
+                break
+            lo, hi = (mid, hi) if allowed(mid) else (lo, mid)
+    return a + lo * b
+
+
+def test_yaw_last_against_the_rule_at_random_commands():
+    """Random allocations (one with a rotor the yaw does not move: a zero in its yaw column), per-rotor limits and
+    commands (a negative collective thrust among them): the closed form against the bisection, and the exact
+    inverse under ALLOC_EXACT_CLIP. P's other entries hold numbers unlike any T_max (a limit read from the wrong
+    slot shows)."""
+    rng = np.random.default_rng(54)
+    cases = 0
+    for n in range(300):
+        Ainv = rng.normal(0.0, 1.0, (4, 4))
+        if n % 3 == 0:
+            Ainv[rng.integers(4), 3] = 0.0
+        tmax = rng.uniform(0.5, 2.0, 4)
+        f, M = rng.normal(1.0, 1.5), rng.normal(0.0, 1.0, 3)
+        P = _params(fk.MODE_GEOMETRIC, alloc=fk.ALLOC_YAW_LAST)
+        P[:fk.P_TMAX] = np.where(P[:fk.P_TMAX] == fk.ALLOC_YAW_LAST, P[:fk.P_TMAX], 7.0 + np.arange(fk.P_TMAX))
+        P[fk.P_TMAX:fk.P_TMAX + 4] = tmax
+        u = np.full(4, np.nan)
+        fk.allocate(Ainv, f, *M, P, u)
+        np.testing.assert_allclose(u, _yaw_last_reference(Ainv, f, M, tmax), rtol=1e-9, atol=1e-12)
+        P[fk.P_ALLOC] = fk.ALLOC_EXACT_CLIP
+        fk.allocate(Ainv, f, *M, P, u)
+        np.testing.assert_allclose(u, Ainv @ np.array([f, *M]), rtol=1e-12, atol=1e-15)
+        cases += 0.0 < _k_of(Ainv, f, M, tmax) < 1.0
+    assert cases > 30  # the yaw cut partly, often
+
+
+def _k_of(Ainv, f, M, tmax):
+    a = Ainv[:, :3] @ np.array([f, M[0], M[1]])
+    b = Ainv[:, 3] * M[2]
+    u = _yaw_last_reference(Ainv, f, M, tmax)
+    i = int(np.argmax(np.abs(b)))
+    return (u[i] - a[i]) / b[i] if b[i] != 0 else 1.0
+
+
+def test_yaw_last_with_every_rotor_below_zero_drops_the_yaw():
+    """f = −0.4 (a_i = −0.1, below 0 for every rotor) and M_z = 0.1: the yaw would push half the rotors further
+    below: k = 0, u = −0.1 each (the loop clamps them)."""
+    np.testing.assert_allclose(_allocate(-0.4, (0.0, 0.0, 0.1), fk.ALLOC_YAW_LAST), [-0.1] * 4, rtol=1e-14)
+
+
+def test_yaw_last_keeps_the_whole_yaw_where_it_only_lifts_a_rotor_below_zero():
+    """f = 2, M = (1.2, 1.2, −0.1): a = (f + y M0 − x M1)/4 = (0.5, −0.1, 0.5, 1.1), b = 0.5 dir M2 = (−0.05, 0.05,
+    −0.05, 0.05): rotor 2 is below 0 and the yaw lifts it (its bound (2 + 0.1)/0.05 = 42), the others' bounds are
+    10, 42, 10 and (2 − 1.1)/0.05 = 18: k = 1, u = the exact inverse (0.45, −0.05, 0.45, 1.15), not a larger share."""
+    np.testing.assert_allclose(_allocate(2.0, (1.2, 1.2, -0.1), fk.ALLOC_YAW_LAST), [0.45, -0.05, 0.45, 1.15],
+                               rtol=1e-14)
+
+
+def test_yaw_last_with_a_rotor_the_yaw_does_not_move():
+    """Rotor 1's yaw column 0 and its thrust a = 2.5 above T_max 2: the yaw cannot make it worse (its bound is 1);
+    the others' bounds (1.9 each) leave the whole yaw: u = Ainv [f, M]."""
+    Ainv = AINV.copy()
+    Ainv[0, 3] = 0.0
+    P = _params(fk.MODE_GEOMETRIC, alloc=fk.ALLOC_YAW_LAST)
+    P[fk.P_TMAX:fk.P_TMAX + 4] = 2.0
+    u = np.full(4, np.nan)
+    # a = (2.5, 0.1, 0.1, 0.1)·... by hand: f = 2.8, M0 = 2.4, M1 = −2.4 give a = (f + y M0 − x M1)/4 =
+    # (2.8 + 2.4 + 2.4, 2.8 − 2.4 + 2.4, 2.8 − 2.4 − 2.4, 2.8 + 2.4 − 2.4)/4 = (1.9, 0.7, −0.5, 0.7); M2 = 0.1:
+    # b = 0.05 dir = (0 (rotor 1's column), −0.05, 0.05, −0.05): rotor 3 below 0 and moving up, rotors 2 and 4 inside
+    # (bounds 0.7/0.05 = 14): k = 1
+    fk.allocate(Ainv, 2.8, 2.4, -2.4, 0.1, P, u)
+    np.testing.assert_allclose(u, [1.9, 0.65, -0.45, 0.65], rtol=1e-14)
+    fk.allocate(Ainv, 4.0, 2.4, -2.4, 0.1, P, u)  # a = (2.2, 1.0, −0.2, 1.0): rotor 1 above, k = 1 still
+    np.testing.assert_allclose(u, [2.2, 0.95, -0.15, 0.95], rtol=1e-14)
+
+
 # --- L1's update ---------------------------------------------------------------------------------------------
 
 
-def _l1_reference(x, u, th, a_s, w_c, h, z_hat, filt):
+def _l1_reference(x, u, th, a_s, w_c, h, z_hat, filt, A=A):
     """The piecewise-constant adaptation law (Hovakimyan & Cao 2010, §3.3) for ż = known + σ, the predictor
     ż_hat = known + σ̂ + a_s (ẑ − z): σ̂ = −Φ⁻¹ e^{a_s T} z̃ with Φ = (e^{a_s T} − 1)/a_s; the predictor advanced by
     one Euler step h; the low-pass C(s) = w_c/(s + w_c) discretised exactly: filt += (1 − e^{−w_c h})(σ̂ − filt).
@@ -399,15 +515,17 @@ def _l1_reference(x, u, th, a_s, w_c, h, z_hat, filt):
 
 
 def test_the_l1_update_is_the_piecewise_constant_law():
+    """At random states with a random allocation (distinct entries: each rotor's column and each row read)."""
     rng = np.random.default_rng(11)
     P = _params(fk.MODE_GEOMETRIC, l1=1.0)
     for _ in range(5):
         x, _, th = _case(rng)
         u = rng.uniform(0.05, 0.1, 4)
+        A_l1 = np.vstack([rng.uniform(0.8, 1.2, 4), rng.normal(0.0, 0.05, (3, 4))])
         z_hat, filt = rng.normal(0, 0.5, 6), rng.normal(0, 0.5, 6)
-        z_ref, s_ref, f_ref = _l1_reference(x, u, th, -5.0, 7.0, 0.002, z_hat, filt)
+        z_ref, s_ref, f_ref = _l1_reference(x, u, th, -5.0, 7.0, 0.002, z_hat, filt, A_l1)
         sigma = np.full(6, np.nan)
-        fk.l1_update(x, u, th, P, A, -5.0, 7.0, 0.002, z_hat, sigma, filt, np.full((3, 3), np.nan),
+        fk.l1_update(x, u, th, P, A_l1, -5.0, 7.0, 0.002, z_hat, sigma, filt, np.full((3, 3), np.nan),
                      np.full(fk.TMP_SIZE, np.nan))
         np.testing.assert_allclose(z_hat, z_ref, rtol=1e-11, atol=1e-14)
         np.testing.assert_allclose(sigma, s_ref, rtol=1e-9, atol=1e-12)

@@ -32,6 +32,20 @@ H = 0.002  # [s] the model's time step
 COS80 = math.cos(math.radians(80.0))
 
 
+def _jointed():
+    """The bundled quadrotor after a body on a slide joint of its own (declared first): the free joint's qpos at 1 to
+    7 of 8, its qvel at 1 to 6 of 7 (addresses read as the airframe's, not as 0)."""
+    xml = quad.MODEL_PATH.read_text(encoding="utf-8").replace("<worldbody>", """<worldbody>
+    <body name="slider" pos="1 1 0.5"><joint name="slide" type="slide" axis="1 0 0"/>
+      <geom size="0.01" mass="0.1" contype="0" conaffinity="0"/></body>""", 1)
+    plant = quad.QuadrotorPlant(mujoco.MjModel.from_xml_string(xml))
+    assert (plant.airframe.qpos, plant.airframe.qvel, plant.model.nq, plant.model.nv) == (1, 1, 8, 7)
+    return plant
+
+
+MODELS = {"bundled": quad.load, "after a slide joint": _jointed}
+
+
 def _ground(t, speed, z):
     """The reason a ground crash gives (t [s], speed [m/s], z [m]), typed as the crash check documents it."""
     return f"crashed at t = {t:.4g} s: hit the ground at {speed:.3g} m/s (its centre {z:.3g} m up)"
@@ -131,13 +145,26 @@ def test_the_rotation_vector_of_quaternions_by_hand():
     half = math.radians(200.0) / 2
     np.testing.assert_allclose(quad.rotation_vector(np.array([math.cos(half), 0.0, math.sin(half), 0.0])),
                                [0.0, -math.radians(160.0), 0.0], rtol=1e-13)
+    # half a turn exactly (w = 0: angle 2 atan2(1, 0) = π) stays +π; an axis part below 1e-15 reads as no rotation,
+    # from 1e-15 on it is 2 x it (the angle of a small rotation)
+    np.testing.assert_allclose(quad.rotation_vector(np.array([0.0, 1.0, 0.0, 0.0])), [math.pi, 0.0, 0.0],
+                               rtol=1e-15)
     assert np.array_equal(quad.rotation_vector(np.array([1.0, 1e-16, 0.0, 0.0])), [0.0, 0.0, 0.0])
-    np.testing.assert_allclose(quad.rotation_vector(np.array([1.0, 1e-10, 0.0, 0.0])), [2e-10, 0.0, 0.0],
-                               rtol=1e-9)
+    for small in (1e-15, 1.5e-15, 1e-10):
+        np.testing.assert_allclose(quad.rotation_vector(np.array([1.0, small, 0.0, 0.0])), [2 * small, 0.0, 0.0],
+                                   rtol=1e-9)
 
 
 def test_the_state_is_read_from_the_free_joint_s_own_addresses():
-    """qpos/qvel with the free joint not first (qadr 2, dadr 1): x = [p; v; φ; Ω]."""
+    """qpos/qvel with the free joint not first (qadr 2, dadr 1): x = [p; v; φ; Ω]; φ of a quaternion with four
+    different components against scipy's."""
+    from scipy.spatial.transform import Rotation
+
+    q = np.array([1.0, 2.0, 3.0, 4.0]) / math.sqrt(30.0)
+    x = np.full((4, 3), np.nan)
+    quad.measure_into(np.array([9.0, 9.0, 1.0, 2.0, 3.0, *q, 9.0, 8.0, 7.0]), np.arange(8.0), 2, 1, x)
+    np.testing.assert_allclose(x[2], Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_rotvec(), rtol=1e-13)
+    np.testing.assert_array_equal(x[[0, 1, 3]], [[1.0, 2.0, 3.0], [1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
     s = math.sqrt(0.5)
     qpos = np.array([9.0, 9.0, 1.0, 2.0, 3.0, s, 0.0, 0.0, s, 9.0])
     qvel = np.array([9.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 9.0])
@@ -145,6 +172,10 @@ def test_the_state_is_read_from_the_free_joint_s_own_addresses():
     quad.measure_into(qpos, qvel, 2, 1, x)
     np.testing.assert_allclose(x, [[1.0, 2.0, 3.0], [0.1, 0.2, 0.3], [0.0, 0.0, math.pi / 2], [0.4, 0.5, 0.6]],
                                rtol=1e-14)
+    qpos[5:9] = [1.0, 0.0, 0.0, 0.0]  # no rotation: φ written as zeros over what x held
+    x[:] = np.nan
+    quad.measure_into(qpos, qvel, 2, 1, x)
+    assert np.array_equal(x[2], [0.0, 0.0, 0.0])
 
 
 # --- the events, where they act ---------------------------------------------------------------------------------
@@ -238,22 +269,39 @@ def test_a_vehicle_that_never_rose_5_cm_is_no_crash():
     assert plant.termination() is None
 
 
-def test_a_vehicle_that_starts_in_the_air_and_falls_has_crashed():
+@pytest.mark.parametrize("model", MODELS)
+def test_a_vehicle_that_starts_in_the_air_and_falls_has_crashed(model):
     """From the model's start (0.1 m > 0.0145 + 0.05: airborne from the first step), moving at (0.3, −0.4, 0) m/s with
-    no thrust: it falls and hits the ground at the first step that ends at or below the clearance, at the speed it
-    has then (its horizontal speed included)."""
-    plant = quad.load()
-    plant.set_state(np.array([[0.0, 0.0, 0.1], [0.3, -0.4, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
-    d = plant.data
-    expected = None
+    no thrust: it falls (no horizontal force: it keeps (0.3, −0.4)) and hits the ground at the first step that ends
+    at or below the clearance, at the speed it has then: about √(0.25 + 2 g (0.1 − z)) by hand."""
+    plant = MODELS[model]()
+    plant.set_state(np.array([[0.2, -0.3, 0.1], [0.3, -0.4, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
+    d, a, dv = plant.data, plant.airframe.qpos, plant.airframe.qvel
+    expected, before = None, None
     for _ in range(150):
         d.ctrl[:] = 0.0
         plant.step()
-        if expected is None and d.qpos[2] <= CLEARANCE:
-            expected = (float(d.time), float(np.linalg.norm(d.qvel[:3])), float(d.qpos[2]))
-    assert expected is not None and expected[1] > 0.6
+        if expected is None and d.qpos[a + 2] <= CLEARANCE:
+            expected = (float(d.time), float(np.linalg.norm(d.qvel[dv:dv + 3])), float(d.qpos[a + 2]))
+            # the step before, in free fall still (the ground's contact acts within the crash's step)
+            z_before, v_before = before
+            np.testing.assert_allclose(v_before[:2], [0.3, -0.4], rtol=1e-9)
+            assert np.linalg.norm(v_before) == pytest.approx(math.sqrt(0.25 + 2 * 9.81 * (0.1 - z_before)), rel=1e-3)
+        before = (float(d.qpos[a + 2]), d.qvel[dv:dv + 3].copy())
+    assert expected is not None
     t, speed, z = expected
     assert plant.termination() == _ground(t, speed, z)
+
+
+def test_a_vehicle_dropped_from_exactly_5_cm_above_its_rest_is_not_airborne():
+    """Starting at the clearance + 0.05 m exactly is not above it: not airborne, and with no thrust it lands
+    without a crash."""
+    plant = quad.load()
+    _level(plant, plant.clearance + 0.05)
+    for _ in range(200):
+        plant.data.ctrl[:] = 0.0
+        plant.step()
+    assert float(plant.data.qpos[2]) < CLEARANCE and plant.termination() is None
 
 
 @pytest.mark.parametrize("steps, crash", [(30, False), (40, True)])
@@ -272,15 +320,24 @@ def test_a_hop_counts_as_airborne_from_5_cm_above_its_start(steps, crash):
     assert ("hit the ground" in (plant.termination() or "")) is crash
 
 
-def test_a_tilt_past_the_bound_ends_the_run_and_the_first_crash_is_kept():
-    plant = quad.load()
-    plant.set_state(np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [math.radians(85.0), 0.0, 0.0], [0.0, 0.0, 0.0]]))
+@pytest.mark.parametrize("model", MODELS)
+def test_a_tilt_past_the_bound_ends_the_run_and_the_first_crash_is_kept(model):
+    """φ = (1.3, −0.8, 0.9) rad (every quaternion component non-zero), at p = (0.2, −0.3, 1): body z tilted by
+    acos(R[2, 2]) of scipy's rotation, 83.7°, past 80°: a crash at the first step, its text kept after."""
+    from scipy.spatial.transform import Rotation
+
+    phi = np.array([1.3, -0.8, 0.9])
+    tilt = math.degrees(math.acos(Rotation.from_rotvec(phi).as_matrix()[2, 2]))
+    assert 82.0 < tilt < 86.0
+    plant = MODELS[model]()
+    plant.set_state(np.array([[0.2, -0.3, 1.0], [0.0, 0.0, 0.0], phi, [0.0, 0.0, 0.0]]))
     plant.step()
-    assert plant.termination() == "crashed at t = 0.002 s: tilted 85.0 deg, past plant.crash_tilt = 80 deg"
+    text = f"crashed at t = 0.002 s: tilted {tilt:.1f} deg, past plant.crash_tilt = 80 deg"
+    assert plant.termination() == text
     plant.step()
-    assert plant.termination() == "crashed at t = 0.002 s: tilted 85.0 deg, past plant.crash_tilt = 80 deg"
+    assert plant.termination() == text
     upright = quad.load(crash_tilt=90.0)
-    upright.set_state(np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [math.radians(85.0), 0.0, 0.0], [0.0, 0.0, 0.0]]))
+    upright.set_state(np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], phi, [0.0, 0.0, 0.0]]))
     upright.step()
     assert upright.termination() is None
 
