@@ -39,11 +39,13 @@ AINV = A.T @ np.diag([0.25, 0.25, 0.25, 1.0])
 
 
 def _inertia(th):
+    """(3, 3) Ĵ [kg m²] from θ̂ (13,)'s Jxx, Jyy, Jzz, Jxy, Jxz, Jyz."""
     xx, yy, zz, xy, xz, yz = th[1:7]
     return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
 
 
 def _vee(S):
+    """(3,) the vector of a skew (3, 3) matrix."""
     return np.array([S[2, 1], S[0, 2], S[1, 0]])
 
 
@@ -64,6 +66,8 @@ def _omega_d(F, F_dot):
 
 def _params(mode, *, adapt=0.0, adapt_j=0.0, l1=0.0, dz_width=0.0, dz_on_s=1.0, sigma=0.0, emod=0.0,
             alloc=fk.ALLOC_EXACT_CLIP):
+    """P (P_SIZE,): the law's numbers by the kernel's layout: k_R 7.8e-3 N m/rad, k_Ω 6.7e-4 N m s/rad, g 9.81 m/s²,
+    a_s −5 1/s, w_c 5 rad/s, c_R 2.5 1/s, per-axis k_x [N/m], k_v [N s/m], c [1/s], k [N s/m], T_max [N]."""
     P = np.zeros(fk.P_SIZE)
     P[fk.P_MODE], P[fk.P_KR], P[fk.P_KW], P[fk.P_G] = mode, 7.8e-3, 6.7e-4, G_ACC
     P[fk.P_DZ_WIDTH], P[fk.P_DZ_ON_S], P[fk.P_SIGMA], P[fk.P_EMOD] = dz_width, dz_on_s, sigma, emod
@@ -89,8 +93,9 @@ def _gains(theta0=None, lower=None, upper=None):
 
 
 def _case(rng):
-    """A state off the reference (tilted, turning), a reference with every derivative non-zero, estimates with
-    products of inertia, a force and a moment."""
+    """(x (4, 3), r (5, 3), θ̂ (13,)): a state off the reference (tilted, turning) [m, m/s, rad, rad/s], a reference
+    with every derivative non-zero [m, m/s, ..., m/s⁴], estimates with products of inertia, a force [N] and a moment
+    [N m]."""
     x = np.vstack([rng.normal(0, 0.2, 3) + [0, 0, 1], rng.normal(0, 0.5, 3), rng.normal(0, 0.3, 3),
                    rng.normal(0, 2.0, 3)])
     r = np.vstack([[0.1, -0.2, 1.1], rng.normal(0, 0.5, 3), rng.normal(0, 1.0, 3), rng.normal(0, 2.0, 3),
@@ -101,6 +106,8 @@ def _case(rng):
 
 
 def _run(x, r, th, P, G, aug=None, rate0=None):
+    """(u (4,) [N], s (3,) [m/s], θ̂' (13,)) of flight_law with the hand allocation's inverse; scratch filled with
+    NaN (a value read before it is written shows); aug (6,) [m/s², rad/s²] the L1 estimate (None: zeros)."""
     u, s = np.full(4, np.nan), np.full(3, np.nan)
     rate = np.full(13, np.nan) if rate0 is None else rate0
     fk.flight_law(x, r, th, P, G, AINV, np.zeros(6) if aug is None else aug, np.full((3, 3), np.nan),
@@ -274,16 +281,23 @@ def test_a_force_along_the_heading_keeps_b2_on_e2():
     th = np.array([0.03, 1.43e-5, 1.43e-5, 2.86e-5, 0, 0, 0, 0, 0, 0, 0, 0, 0])
     u, _, _ = _run(x, r, th, _params(fk.MODE_GEOMETRIC), _gains())
     np.testing.assert_allclose(A @ u, [0.0, 0.0, 7.8e-3, 0.0], rtol=1e-12, atol=1e-15)
+    # with a jerk (0, 5, 0) m/s³: Ḟ = m (0, 5, 0), ḃ₃ = Ḟ/‖F‖ = (0, 1, 0) (‖F‖ = 5 m), ċ = ḃ₃ × e₁ = (0, 0, −1), and
+    # with ‖b₃ × e₁‖ taken as 1: ḃ₂ = ċ − (b₂·ċ) b₂ = (0, 0, −1), ḃ₁ = ḃ₂ × b₃ + b₂ × ḃ₃ = (0, −1, 0);
+    # Ω_d = (b₃·ḃ₂, b₁·ḃ₃, b₂·ḃ₁) = (0, 0, −1), R_d Ω_d = −b₃ = (−1, 0, 0): e_Ω = (1, 0, 0), M = (−k_Ω, k_R, 0)
+    r[3] = [0.0, 5.0, 0.0]
+    u, _, _ = _run(x, r, th, _params(fk.MODE_GEOMETRIC), _gains())
+    np.testing.assert_allclose(A @ u, [0.0, -6.7e-4, 7.8e-3, 0.0], rtol=1e-12, atol=1e-15)
 
 
+@pytest.mark.parametrize("p_y, p_dy", [(-0.5, -1.0), (1.5, 1.0)])
 @pytest.mark.parametrize("on_s", [1.0, 0.0])
-def test_a_closed_dead_zone_stops_every_rate_and_an_open_one_at_its_edge_adapts(on_s):
+def test_a_closed_dead_zone_stops_every_rate_and_an_open_one_at_its_edge_adapts(on_s, p_y, p_dy):
     """The dead-zone on ‖s‖ (or on ‖e_x‖): below its width no estimate moves (rates exactly 0, the inertia's too);
-    from the width on (exactly at it included) it adapts. Numbers exact in binary: p − p_d = (1.25, −0.5, 1.5) −
-    (1, −1, 1) = (0.25, 0.5, 0.5) (‖e_x‖ = 0.75), v = v_d (e_v = 0), c = 2 on every axis: s = (0.5, 1, 1),
+    from the width on (exactly at it included) it adapts. Numbers exact in binary: p − p_d = (1.25, p_y, 1.5) −
+    (1, p_dy, 1) = (0.25, 0.5, 0.5) (‖e_x‖ = 0.75), v = v_d (e_v = 0), c = 2 on every axis: s = (0.5, 1, 1),
     ‖s‖ = 1.5."""
-    x = np.array([[1.25, -0.5, 1.5], [0.3, -0.2, 0.1], [0.1, 0.0, 0.0], [0.5, 0.0, 0.0]])
-    r = np.array([[1.0, -1.0, 1.0], [0.3, -0.2, 0.1], [0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.5, 0.0, 0.0]])
+    x = np.array([[1.25, p_y, 1.5], [0.3, -0.2, 0.1], [0.1, 0.0, 0.0], [0.5, 0.0, 0.0]])
+    r = np.array([[1.0, p_dy, 1.0], [0.3, -0.2, 0.1], [0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.5, 0.0, 0.0]])
     th = np.array([0.03, 1.43e-5, 1.43e-5, 2.86e-5, 0, 0, 0, 0, 0, 0, 0, 0, 0])
     signal = 1.5 if on_s else 0.75
     for width, adapts in ((signal * (1 + 1e-12), False), (signal, True), (signal * (1 - 1e-12), True)):
@@ -351,6 +365,7 @@ def test_the_inertia_times_a_vector_by_hand():
 
 
 def _allocate(f, M, mode, tmax=2.0):
+    """(4,) thrusts [N] of allocate with the hand allocation's inverse for f [N], M (3,) [N m], every T_max = tmax."""
     P = _params(fk.MODE_GEOMETRIC, alloc=mode)
     P[fk.P_TMAX:fk.P_TMAX + 4] = tmax
     u = np.full(4, np.nan)
@@ -453,6 +468,7 @@ def test_yaw_last_against_the_rule_at_random_commands():
 
 
 def _k_of(Ainv, f, M, tmax):
+    """The reference's yaw share k (dimensionless) for Ainv (4, 4), f [N], M (3,) [N m], tmax (4,) [N]."""
     a = Ainv[:, :3] @ np.array([f, M[0], M[1]])
     b = Ainv[:, 3] * M[2]
     u = _yaw_last_reference(Ainv, f, M, tmax)
@@ -472,6 +488,17 @@ def test_yaw_last_keeps_the_whole_yaw_where_it_only_lifts_a_rotor_below_zero():
     10, 42, 10 and (2 − 1.1)/0.05 = 18: k = 1, u = the exact inverse (0.45, −0.05, 0.45, 1.15), not a larger share."""
     np.testing.assert_allclose(_allocate(2.0, (1.2, 1.2, -0.1), fk.ALLOC_YAW_LAST), [0.45, -0.05, 0.45, 1.15],
                                rtol=1e-14)
+
+
+def test_yaw_last_reads_each_rotor_s_own_limit():
+    """T_max = (2, 1, 2, 2); f = 4, M = (−1, 0, −0.5): u = (0.5, 1.5, 1, 1), only rotor 2 outside, above its own 1 N
+    (inside rotor 1's 2 N). a = (0.75, 1.25, 1.25, 0.75), b = −0.25 dir = (−0.25, 0.25, −0.25, 0.25): rotor 2's
+    bound (1 − 1.25)/0.25 < 0: k = 0, u = a."""
+    P = _params(fk.MODE_GEOMETRIC, alloc=fk.ALLOC_YAW_LAST)
+    P[fk.P_TMAX:fk.P_TMAX + 4] = [2.0, 1.0, 2.0, 2.0]
+    u = np.full(4, np.nan)
+    fk.allocate(AINV, 4.0, -1.0, 0.0, -0.5, P, u)
+    np.testing.assert_allclose(u, [0.75, 1.25, 1.25, 0.75], rtol=1e-15)
 
 
 def test_yaw_last_with_a_rotor_the_yaw_does_not_move():

@@ -33,13 +33,18 @@ COS80 = math.cos(math.radians(80.0))
 
 
 def _jointed():
-    """The bundled quadrotor after a body on a slide joint of its own (declared first): the free joint's qpos at 1 to
-    7 of 8, its qvel at 1 to 6 of 7 (addresses read as the airframe's, not as 0)."""
-    xml = quad.MODEL_PATH.read_text(encoding="utf-8").replace("<worldbody>", """<worldbody>
-    <body name="slider" pos="1 1 0.5"><joint name="slide" type="slide" axis="1 0 0"/>
-      <geom size="0.01" mass="0.1" contype="0" conaffinity="0"/></body>""", 1)
+    """The bundled quadrotor between two bodies on slide joints of their own (declared before and after it): the
+    free joint's qpos at 1 to 7 of 9, its qvel at 1 to 6 of 8 (addresses read as the airframe's, not as 0, and
+    slices that end where the free joint's do)."""
+    def slider(name):
+        return (f'<body name="{name}" pos="1 1 0.5"><joint name="{name}" type="slide" axis="1 0 0"/>'
+                '<geom size="0.01" mass="0.1" contype="0" conaffinity="0"/></body>')
+
+    xml = quad.MODEL_PATH.read_text(encoding="utf-8")
+    xml = xml.replace("<worldbody>", "<worldbody>" + slider("before"), 1).replace(
+        "</worldbody>", slider("after") + "</worldbody>", 1)
     plant = quad.QuadrotorPlant(mujoco.MjModel.from_xml_string(xml))
-    assert (plant.airframe.qpos, plant.airframe.qvel, plant.model.nq, plant.model.nv) == (1, 1, 8, 7)
+    assert (plant.airframe.qpos, plant.airframe.qvel, plant.model.nq, plant.model.nv) == (1, 1, 9, 8)
     return plant
 
 
@@ -52,6 +57,7 @@ def _ground(t, speed, z):
 
 
 def _level(plant, z=1.0):
+    """The plant level and at rest at height z [m] above the origin (set_state: the rotors trimmed to the weight)."""
     plant.set_state(np.array([[0.0, 0.0, z], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
 
 
@@ -346,8 +352,10 @@ def test_a_tilt_past_the_bound_ends_the_run_and_the_first_crash_is_kept(model):
 
 
 def _drag(qvel, dadr, R, ctrl, act, gain, acts, actadr, rotors, wind, coeffs, nv=None):
-    """rotor_drag_into with a (3, 3) R given as MjData.xmat's row-major (9,); qfrc starts at NaN where it writes and
-    7 elsewhere, so the rest must be left alone."""
+    """qfrc (nv,) [N, N m] of rotor_drag_into for qvel (nv,) [m/s, rad/s] with the free joint at dadr, R (3, 3)
+    body-to-world (passed as MjData.xmat's row-major (9,)), ctrl (4,) and act [N], one gain for every actuator, acts
+    (4,), actadr (4,), rotors (4, 3) [m], wind (3,) [m/s], coeffs [k_eta, k_d, k_z]; [lo, hi] = [0, 0.5] N. qfrc
+    starts at NaN where it writes and 7 elsewhere, so the rest must be left alone."""
     qfrc = np.full(len(qvel) if nv is None else nv, 7.0)
     qfrc[dadr:dadr + 6] = np.nan
     gainprm = np.zeros((len(ctrl), 10))
