@@ -312,9 +312,8 @@ def test_a_closed_dead_zone_stops_every_rate_and_an_open_one_at_its_edge_adapts(
 
 
 def test_the_box_stops_a_rate_that_leaves_it():
-    """m̂ at its lower bound with m̂' < 0, d̂_x at its upper bound with d̂_x' > 0: both rates 0, the rest as they were
-    (the adaptive law at hover with a heavier vehicle than m̂: the vehicle sinks, s_z < 0, m̂' = −s_z g/γ_m > 0 ...
-    here the signs are set by e_x)."""
+    """m̂ at its lower bound with m̂' < 0, d̂_x at its upper bound with d̂_x' > 0: both rates 0, the rest as they were.
+    e_x = (0.2, 0, 0.1) m at rest, c = (1.6, ·, 1.8): s = (0.32, 0, 0.18) m/s, w = g e₃."""
     x = np.array([[0.2, 0.0, 1.1], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
     r = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
     th = np.array([0.03, 1.43e-5, 1.43e-5, 2.86e-5, 0, 0, 0, 0.01, 0, 0, 0, 0, 0])
