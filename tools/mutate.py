@@ -77,6 +77,24 @@ MODULES: dict[str, Target] = {
     # the physically consistent projection (pure numpy; the MuJoCo runs of tests/test_consistent_projection.py are
     # left to the suite)
     "pseudo_inertia": Target("adaptive_mj/laws/pseudo_inertia.py", ("tests/test_projection_pinned.py",)),
+    # the flight plant's crash check, attitude measurement and events (where they act: the actuators, xfrc_applied)
+    "quadrotor": Target("adaptive_mj/plants/quadrotor.py", ("tests/test_flight_pinned.py",),
+                        ("rotvec_into", "measure_into", "rotation_vector", "crash_check", "crash_text", "_rotor",
+                         "_force", "QuadrotorPlant.set_state", "QuadrotorPlant.step", "QuadrotorPlant._check_crash",
+                         "QuadrotorPlant.scale_rotor", "QuadrotorPlant.add_force")),
+    # RotorPy's rotor drag (as plain Python) and the allocation's clipped inverse
+    "airframe": Target("adaptive_mj/plants/airframe.py", ("tests/test_flight_pinned.py",),
+                       ("Airframe.has_drag", "Airframe.thrusts", "rotor_drag_into")),
+    # the flight laws' kernel, in two runs (about 900 and 700 mutants): the law itself (geometric, geometric adaptive,
+    # the adapted inertia, L1's thrust and moment terms, the logged s) and its helpers (the rotation, the inertia's
+    # regressor and rates, the dead-zone, the allocation, L1's update)
+    "flight_law": Target("adaptive_mj/laws/flight_kernel.py", ("tests/test_flight_law_pinned.py",), ("flight_law",)),
+    "flight_kernel": Target("adaptive_mj/laws/flight_kernel.py", ("tests/test_flight_law_pinned.py",),
+                            ("rodrigues", "inertia_times", "inertia_regressor", "inertia_rate", "translation_rates",
+                             "allocate", "l1_update")),
+    # the estimate's clip into its box, the leakage and the box's tangent cone, the dead-zone's boundary
+    "common": Target("adaptive_mj/laws/common.py", ("tests/test_common_pinned.py",),
+                     ("clip_into", "modify_rate", "dead_zone_open")),
 }
 
 #: (module key, qualified function, mutation[, the mutated line's source, stripped]) -> why no test should kill it
@@ -189,6 +207,84 @@ EQUIVALENT.update({
      "pseudo_inertia fills J[i, j] (N,) for every row at once"):
         "numpy's reshape (2.x, the pinned 2.4) infers any negative size: -2 reads as -1",
 })
+# --- the flight plant and the flight laws' kernel
+EQUIVALENT.update({
+    ("airframe", "rotor_drag_into", "thrust > 0.0 → thrust >= 0.0"):
+        "at zero thrust the other branch gives ω = √(0/k_eta) = 0 too",
+    ("common", "modify_rate", "rate[i] < 0.0 → rate[i] <= 0.0"): "sets a zero rate to zero",
+    ("common", "modify_rate", "rate[i] > 0.0 → rate[i] >= 0.0"): "sets a zero rate to zero",
+    ("common", "clip_into", "theta[i] < lower[i] → theta[i] <= lower[i]"): "sets an estimate on its bound to it",
+    ("common", "clip_into", "theta[i] > upper[i] → theta[i] >= upper[i]"): "sets an estimate on its bound to it",
+    ("flight_kernel", "l1_update", "9 → 10"): "a scratch slice made one longer: inertia_times writes its first three",
+    ("flight_kernel", "l1_update", "1.0 → 2.0"):
+        "the stand-in for estimates the builder refuses (m̂ = 0 or a singular Ĵ: plants.quadrotor.estimate_problem): "
+        "any finite number keeps the step finite (tested); its value is behaviour nobody relies on",
+    ("flight_kernel", "allocate", "lim < k → lim <= k"): "k = lim either way",
+    ("flight_kernel", "allocate", "1.0 → 2.0", "lim = 1.0"):
+        "k starts at 1: a bound of 1 or 2 for a rotor the yaw does not move leaves the minimum as it is",
+})
+_THRESHOLD = ("a threshold against division by (nearly) zero moved within rounding: at |φ| (or ‖F‖, ‖b₃ × e₁‖) of "
+              "1e-12 to 2e-12 the two branches agree to far below a double's rounding, and no input lands there")
+EQUIVALENT.update({("flight_kernel", "rodrigues", text): _THRESHOLD for text in (
+    "angle < 1e-12 → angle <= 1e-12", "1e-12 → 2e-12")})
+EQUIVALENT.update({("flight_law", "flight_law", text, "F[0], F[1], F[2], nF = 0.0, 0.0, 1.0, 1.0"):
+                   "one of F's entries left as it was, not zeroed: they are all within 1e-12 of 0 (b₃d moves by under "
+                   "1e-12), or one is NaN, when f and so every thrust is NaN either way (the run's own checks end it)"
+                   for text in ("0 → 1", "1 → 2")})
+EQUIVALENT.update({("flight_law", "flight_law", text): _THRESHOLD for text in (
+    "nF > 1e-12 → nF >= 1e-12", "1e-12 → 2e-12", "n2 > 1e-12 → n2 >= 1e-12")})
+_FITS = ("only the flag 'a rotor is outside its box' changes, and only for a command that fits (or one flagged "
+         "anyway): the yaw-last loop then finds every bound >= 1, so k = 1, and sums the same terms in the same order "
+         "(the same u to rounding)")
+EQUIVALENT.update({("flight_kernel", "allocate", text, line): _FITS for text, line in (
+    ("False → True", "out = False"),
+    ("0.0 <= u[i] <= P[P_TMAX + i] → 0.0 < u[i] <= P[P_TMAX + i]", "if not (0.0 <= u[i] <= P[P_TMAX + i]):"),
+    ("0.0 <= u[i] <= P[P_TMAX + i] → 0.0 <= u[i] < P[P_TMAX + i]", "if not (0.0 <= u[i] <= P[P_TMAX + i]):"),
+    ("0.0 → 1.0", "if not (0.0 <= u[i] <= P[P_TMAX + i]):"))})
+_ZERO = ("a term with a factor b₂d's (or ḃ₂d's, b̈₂d's) x component, b20 (d20, f20): 0 by construction (b₂d = b₃d × e₁ "
+         "/ ‖·‖ is orthogonal to e₁), so its sign, presence or a division of 0 by it changes nothing")
+_ALONG = ("nn, the component along b₃d of b̈₃d (along b₂d of b̈₂d), cancels from Ω̇_d: b̈₃d enters it only as b₁d·b̈₃d, "
+          "through c̈ (whose part along c ∥ b₂d the next nn removes) and through b₂d × b̈₃d in b̈₁d (read only as "
+          "b₂d·b̈₁d: b₂d·(b₂d × b₃d) = 0); b̈₂d enters only as b₃d·b̈₂d and b̈₂d × b₃d in b̈₁d (read as b₂d·b̈₁d): "
+          "b₃d·b₂d = b₂d·(b₂d × b₃d) = 0")
+_F10 = "f10, b̈₁d's x component, is read only as b20 * f10 with b20 = 0 (b₂d ⊥ e₁)"
+_SCRATCH_VIEW = ("a scratch view made one longer at its end (tmp[12:16], ...): its fourth entry is never read or "
+                 "written through it (jw's stops at tmp's end, 24)")
+EQUIVALENT.update({
+    ("flight_law", "flight_law", "3 → 4", "for a in range(3):"):
+        "an extra row a = 3 of E = R_dᵀR writes tmp[12:15], scratch that only the inertia branch uses, after "
+        "writing it",
+})
+EQUIVALENT.update({("flight_law", "flight_law", text, "sR, Wr, ar, jw = tmp[12:15], tmp[15:18], tmp[18:21], "
+                    "tmp[21:24]"): _SCRATCH_VIEW for text in ("15 → 16", "18 → 19", "21 → 22", "24 → 25")})
+_B1 = "b10, b11, b12 = b21 * b32 - b22 * b31, b22 * b30 - b20 * b32, b20 * b31 - b21 * b30"
+_D11 = "d11 = (d22 * b30 - d20 * b32) + (b22 * d30 - b20 * d32)"
+_O_RATE = "o0 = b10 * wd0 + b20 * wd1 + b30 * wd2  # R_d Ω_d, world frame"
+_F11 = "f11 = (f22 * b30 - f20 * b32) + 2.0 * (d22 * d30 - d20 * d32) + (b22 * f30 - b20 * f32)"
+_F12 = "f12 = (f20 * b31 - f21 * b30) + 2.0 * (d20 * d31 - d21 * d30) + (b20 * f31 - b21 * f30)"
+_A2 = "a2 = (d20 * d10 + d21 * d11 + d22 * d12) + (b20 * f10 + b21 * f11 + b22 * f12)"
+_O_ACC = "o0 = b10 * a0 + b20 * a1 + b30 * a2  # R_d Ω̇_d, world frame"
+EQUIVALENT.update({("flight_law", "flight_law", text, line): _ZERO for text, line in (
+    ("b22 * b30 - b20 * b32 → b22 * b30 + b20 * b32", _B1), ("b22 * b30 - b20 * b32 → b22 * b30", _B1),
+    ("d22 * b30 - d20 * b32 → d22 * b30 + d20 * b32", _D11), ("d22 * b30 - d20 * b32 → d22 * b30", _D11),
+    ("b22 * d30 - b20 * d32 → b22 * d30 + b20 * d32", _D11), ("b22 * d30 - b20 * d32 → b22 * d30", _D11),
+    ("b10 * wd0 + b20 * wd1 → b10 * wd0 - b20 * wd1", _O_RATE), ("b10 * wd0 + b20 * wd1 → b10 * wd0", _O_RATE),
+    ("b22 * f30 - b20 * f32 → b22 * f30 + b20 * f32", _F11), ("b22 * f30 - b20 * f32 → b22 * f30", _F11),
+    ("f22 * b30 - f20 * b32 → f22 * b30 + f20 * b32", _F11), ("f22 * b30 - f20 * b32 → f22 * b30", _F11),
+    ("b20 * f32 → b20 / f32", _F11), ("f20 * b32 → f20 / b32", _F11),
+    ("d22 * d30 - d20 * d32 → d22 * d30 + d20 * d32", _F11), ("d22 * d30 - d20 * d32 → d22 * d30", _F11),
+    ("b20 * f31 → b20 / f31", _F12), ("d20 * d31 → d20 / d31", _F12), ("b20 * f10 → b20 / f10", _A2),
+    ("b10 * a0 + b20 * a1 → b10 * a0 - b20 * a1", _O_ACC), ("b10 * a0 + b20 * a1 → b10 * a0", _O_ACC),
+    ("b20 * a1 → b20 / a1", _O_ACC))})
+#: (module key, qualified function, the line's source, stripped) -> why no mutant of that line should be killed: the
+#: line's value is never read where it would matter (every mutant of it is equivalent)
+EQUIVALENT_LINES: dict[tuple[str, str, str], str] = {
+    ("flight_law", "flight_law", "nn = (d30 * Fd0 + d31 * Fd1 + d32 * Fd2) + (b30 * Fs0 + b31 * Fs1 + b32 * Fs2)"):
+        _ALONG,
+    ("flight_law", "flight_law", "nn = (d21 * c1 + d22 * c2) + (b21 * g1 + b22 * g2)"): _ALONG,
+    ("flight_law", "flight_law",
+     "f10 = (f21 * b32 - f22 * b31) + 2.0 * (d21 * d32 - d22 * d31) + (b21 * f32 - b22 * f31)"): _F10,
+}
 EQUIVALENT.update({("breaking_point", "_mid", text): _STEP_CLAMP for text in (
     "lo / st.step → lo * st.step", "n_hi - 1 → n_hi + 1", "n_hi - 1 → n_hi", "n_lo + 1 → n_lo - 1",
     "n_lo + 1 → n_lo")})
@@ -474,8 +570,9 @@ def run_module(key: str, *, timeout: float | None, listing: bool, verbose: bool)
     for n, m in enumerate(found, start=1):
         code = compile(apply(tree, m), str(path), "exec", dont_inherit=True)
         verdict = _run_child(name, path, code, tests, limit, None)
-        why = EQUIVALENT.get((key, m.where, m.text, lines[m.line - 1].strip())) or EQUIVALENT.get((key, m.where,
-                                                                                                  m.text))
+        line = lines[m.line - 1].strip()
+        why = (EQUIVALENT.get((key, m.where, m.text, line)) or EQUIVALENT.get((key, m.where, m.text))
+               or EQUIVALENT_LINES.get((key, m.where, line)))
         if verdict == "survived" and why is not None:
             verdict = "equivalent"
         counts[verdict] += 1
@@ -516,7 +613,8 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("ADAPTIVE_MJ_COMPILE_NOTES", "0")
     sys.path.insert(0, str(ROOT))
     if not args.list:
-        for heavy in ("numpy", "scipy.stats", "mujoco", "numba", "pytest", "matplotlib"):
+        for heavy in ("numpy", "scipy.stats", "scipy.spatial.transform", "mujoco", "numba", "pytest", "matplotlib",
+                      "hypothesis"):  # hypothesis: its pytest plugin, loaded by every run, imports it (1 s)
             try:  # once here, not once per mutant
                 importlib.import_module(heavy)
             except ImportError:
