@@ -252,7 +252,8 @@ def allocate(Ainv, f, M0, M1, M2, P, u):
                       roll and pitch before yaw). Every rotor's thrust is affine in the share k of the yaw moment
                       kept, u_i(k) = a_i + k b_i (a_i = Ainv[i, :3] [f, M0, M1], b_i = Ainv[i, 3] M2); where the
                       exact inverse (k = 1) leaves a rotor outside [0, T_max_i], k is the largest in [0, 1] such that
-                      no rotor ends further outside its box than it is at k = 0: per rotor in closed form,
+                      no rotor that the yaw moment pushes up ends above T_max_i, nor one it pushes down below 0 (a
+                      rotor already past that limit at k = 0 gives k = 0): per rotor in closed form,
                       k <= (T_max_i − a_i)/b_i for b_i > 0 and k <= −a_i/b_i for b_i < 0, each bound floored at 0.
                       With every a_i inside its box, the collective thrust and the roll and pitch moments are then
                       delivered exactly, and as much of the yaw moment as fits; what is left outside (thrust or
