@@ -74,6 +74,13 @@ MODULES: dict[str, Target] = {
     # the quadrotor's margin and when2fail over hand-filled evaluations, and its grid
     "flight_study": Target("adaptive_mj/study/flight.py", SEARCH_TESTS,
                            ("Search", "grid", "bracket_text", "grid_results")),
+    # AdaptiveQuadBench's protocol and the flight study on both airframes (issue 52): the seeded draw, the delay
+    # test's scan, the success curves and the vehicles' ranges, over hand-filled outcomes (no run flies)
+    "flight_protocol": Target("adaptive_mj/study/flight.py",
+                              ("tests/test_aqb_protocol.py", "tests/test_flight_airframes.py"),
+                              ("aqb_succeeded", "aqb_delay_succeeded", "scan_results", "scan_margins", "_toggle_times",
+                               "draw_task", "TaskDraw", "protocol_levels", "success_curves", "_size", "Vehicle",
+                               "VehicleSize", "AQBDelayTest", "AQBProtocol")),
     # the physically consistent projection (pure numpy; the MuJoCo runs of tests/test_consistent_projection.py are
     # left to the suite)
     "pseudo_inertia": Target("adaptive_mj/laws/pseudo_inertia.py", ("tests/test_projection_pinned.py",)),
