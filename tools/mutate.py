@@ -77,7 +77,8 @@ MODULES: dict[str, Target] = {
     # AdaptiveQuadBench's protocol and the flight study on both airframes (issue 52): the seeded draw, the delay
     # test's scan, the success curves and the vehicles' ranges, over hand-filled outcomes (no run flies)
     "flight_protocol": Target("adaptive_mj/study/flight.py",
-                              ("tests/test_aqb_protocol.py", "tests/test_flight_airframes.py"),
+                              ("tests/test_flight_protocol_pinned.py", "tests/test_aqb_protocol.py",
+                               "tests/test_flight_airframes.py"),
                               ("aqb_succeeded", "aqb_delay_succeeded", "scan_results", "scan_margins", "_toggle_times",
                                "draw_task", "TaskDraw", "protocol_levels", "success_curves", "_size", "Vehicle",
                                "VehicleSize", "AQBDelayTest", "AQBProtocol")),
@@ -285,6 +286,27 @@ EQUIVALENT.update({("flight_law", "flight_law", text, line): _ZERO for text, lin
     ("b20 * a1 → b20 / a1", _O_ACC))})
 #: (module key, qualified function, the line's source, stripped) -> why no mutant of that line should be killed: the
 #: line's value is never read where it would matter (every mutant of it is equivalent)
+EQUIVALENT.update({
+    ("flight_protocol", "draw_task", "1.0 + c * u → 1.0 - c * u"):
+        "u is U(−1, 1): 1 − c u has the distribution AdaptiveQuadBench states (1 + U(−c, c)); only a seed's value "
+        "moves",
+    ("flight_protocol", "AQBDelayTest.levels", "12 → 13"):
+        "rounding k·step to 12 or 13 decimals gives the same float for every level of a 10 ms grid",
+    ("flight_protocol", "_toggle_times", "100 → 101"):
+        "one more redraw of a switch time too close to another: the 100th is reached with probability ~0",
+    ("flight_protocol", "_toggle_times",
+     "min((abs(c - t) for t in times)) >= gap → min((abs(c - t) for t in times)) > gap"):
+        "a continuous draw lands exactly one gap from another switch with probability 0",
+    ("flight_protocol", "scan_results", "0 → 1"):
+        "the columns' count read from the second level instead of the first: every level has the same columns",
+    ("flight_protocol", "scan_results", "strict=True → strict=False"):
+        "zip's strict: every row has the columns' count by construction (delay_test fills each level)",
+    ("flight_protocol", "scan_margins", "0 → 1"):
+        "the columns' count read from the second level instead of the first: every level has the same columns",
+    ("flight_protocol", "scan_margins", "12 → 13"):
+        "rounding first − step to 12 or 13 decimals gives the same float on a 10 ms grid",
+})
+
 EQUIVALENT_LINES: dict[tuple[str, str, str], str] = {
     ("flight_law", "flight_law", "nn = (d30 * Fd0 + d31 * Fd1 + d32 * Fd2) + (b30 * Fs0 + b31 * Fs1 + b32 * Fs2)"):
         _ALONG,
