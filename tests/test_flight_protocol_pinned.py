@@ -140,3 +140,28 @@ def test_a_task_s_overrides_scale_the_axis_and_name_every_rotor():
     assert f"t={t0!r}" in kept[-1]
     rotors = flight.draw_task(2, "rotor_efficiency", 0.5).overrides()
     assert [f"rotor={r}" in rotors[-1] for r in (1, 2, 3, 4)] == [True] * 4 and "rotor=0" not in rotors[-1]
+
+
+def test_the_when2fail_intensities_from_their_step_and_top():
+    assert flight.protocol_levels() == [float(k) for k in range(11)]  # 0, 1, ..., 10 (config_manager.py:59-61)
+    fine = replace(flight.AQB, intensity_step=replace(flight.AQB.intensity_step, value=0.1),
+                   max_intensity=replace(flight.AQB.max_intensity, value=0.3))
+    assert flight.protocol_levels(fine) == [0.0, 0.1, 0.2, 0.3]  # 0.3/0.1 is 2.9999999999999996 in floats
+    half = replace(flight.AQB, intensity_step=replace(flight.AQB.intensity_step, value=0.5),
+                   max_intensity=replace(flight.AQB.max_intensity, value=2.0))
+    assert flight.protocol_levels(half) == [0.0, 0.5, 1.0, 1.5, 2.0]
+
+
+def test_a_draw_s_goal_is_the_first_stream_s_position_velocity_and_acceleration():
+    """The motion primitive's goal: the seed's first spawned stream, U(−2, 2) per axis for position, then velocity,
+    then acceleration (randomization_config.py:79-81)."""
+    for seed in (0, 5):
+        traj = np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[0])
+        pos, vel, acc = (tuple(float(x) for x in traj.uniform(-2.0, 2.0, size=3)) for _ in range(3))
+        task = flight.draw_task(seed, "wind", 1.0)
+        assert (task.position, task.velocity, task.acceleration) == (pos, vel, acc)
+
+
+def test_a_search_with_no_runs_yet_has_an_empty_curve_of_no_seeds():
+    (curve,) = flight.success_curves(flight.searches()[:1])
+    assert curve["intensity"] == [] and curve["success_rate"] == [] and curve["seeds"] == 0
